@@ -1,0 +1,27 @@
+"""mechdsl: an equation-based modelling language for holonomic rigid-body mechanics.
+
+Python API::
+
+    import mechdsl
+    m = mechdsl.load("models/pendulum.mech")          # or mechdsl.loads(text)
+    r = m.simulate(5.0, rtol=1e-8, atol=1e-10)
+    r.t, r.q, r.qd, r["x"]
+"""
+from .diagnostics import Diagnostic, MechError, Span, UsageError
+
+__version__ = "0.1.0"
+
+
+def load(path, model=None, scene=None, **kw):
+    from .api import load as _load
+
+    return _load(path, model=model, scene=scene, **kw)
+
+
+def loads(text, model=None, scene=None, filename="<string>", **kw):
+    from .api import loads as _loads
+
+    return _loads(text, model=model, scene=scene, filename=filename, **kw)
+
+
+__all__ = ["load", "loads", "Diagnostic", "MechError", "Span", "UsageError", "__version__"]

@@ -1,0 +1,76 @@
+"""The ``mech`` command line.  Exit codes: 0 ok, 1 model/simulation error, 2 usage error.
+
+Never shows a Python traceback for bad input: user errors are Diagnostics; an internal
+error prints a short report asking for a bug report (with the traceback only under
+MECHDSL_DEBUG=1).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from .diagnostics import InternalError, MechError, UsageError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # usage errors: exit 2, no traceback
+        self.print_usage(sys.stderr)
+        print(f"mech: error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+    from .commands import COMMANDS
+
+    ap = _Parser(prog="mech", description="mechdsl: equation-based modelling of rigid-body mechanics")
+    ap.add_argument("--version", action="version", version=f"mechdsl {__version__}")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in COMMANDS:
+        try:
+            mod = importlib.import_module(f".commands.{name}", __package__)
+        except ModuleNotFoundError as e:
+            if e.name and e.name.endswith(f"commands.{name}"):
+                continue  # command not built (yet)
+            raise
+        p = mod.add_parser(sub)
+        p.set_defaults(_run=mod.run)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        ap = build_parser()
+        args = ap.parse_args(argv)
+        if not getattr(args, "_run", None):
+            ap.print_help(sys.stderr)
+            return 2
+        return int(args._run(args) or 0)
+    except SystemExit as e:
+        return int(e.code) if isinstance(e.code, int) else (0 if e.code is None else 2)
+    except UsageError as e:
+        print(f"mech: error: {e}", file=sys.stderr)
+        return 2
+    except MechError as e:
+        from .report import print_diagnostics
+
+        print_diagnostics(e.diagnostics)
+        return 1
+    except KeyboardInterrupt:
+        print("mech: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except (InternalError, Exception) as e:  # a bug in mechdsl, not in the model
+        if os.environ.get("MECHDSL_DEBUG"):
+            raise
+        print(f"mech: internal error: {type(e).__name__}: {e}\n"
+              "  this is a bug in mechdsl; rerun with MECHDSL_DEBUG=1 for the traceback and report it",
+              file=sys.stderr)
+        return 3
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

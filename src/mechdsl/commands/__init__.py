@@ -1,0 +1,6 @@
+"""CLI subcommands: one module per command, each with ``add_parser(sub)`` and ``run(args)``.
+
+``COMMANDS`` lists the module names in the order ``mech --help`` shows them.  A module
+that fails to import (an optional part missing) is left out of the CLI with a note.
+"""
+COMMANDS = ["check", "compile", "simulate", "equations", "equilibrium", "linearize", "bench"]

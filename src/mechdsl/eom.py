@@ -1,0 +1,110 @@
+"""The equations of motion ("eom" IR): what ``derive`` hands to ``formulate``/``generate``.
+
+All quantities are CasADi SX expressions in the symbols q, qd (column vectors in coordinate
+order), t (scalar) and p (the real parameters in ``model.real_parameters`` order):
+
+    M(q, t, p) qdd = bias(q, qd, t, p)          (Lagrange's equations)
+    g(q, t, p) = 0                              (holonomic constraints, possibly empty)
+
+with bias = Q - dD/dqd + dT/dq - dV/dq - d/dq(dT/dqd) qd - d/dt(dT/dqd).  Constrained models
+add -G^T lambda to the right-hand side, G = dg/dq.
+
+``qdd`` is the explicit forward dynamics when a recursive O(N) route produced it (tree of
+components); otherwise None and ``M``/``bias`` are solved numerically.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from . import ir
+
+
+@dataclass
+class EOM:
+    name: str
+    coords: tuple[str, ...]
+    params: tuple[str, ...]
+    param_values: np.ndarray
+    q: object
+    qd: object
+    t: object
+    p: object
+    T: object
+    V: object
+    D: object
+    Q: object                      # non-conservative generalized forces other than -dD/dqd
+    M: object
+    bias: object
+    qdd: object | None = None      # explicit forward dynamics (recursive route), or None
+    g: object | None = None        # constraint residuals (m,), or None
+    constraint_names: tuple[str, ...] = ()
+    outputs: dict[str, object] = field(default_factory=dict)
+    q0: object | None = None       # start values as SX in p (n,)
+    qd0: object | None = None
+    fixed_q: tuple[bool, ...] = ()
+    fixed_qd: tuple[bool, ...] = ()
+    route: str = "lagrange"        # 'aba' | 'lagrange' | 'crba'
+    model: ir.Model | None = None
+    point_position: Callable[[str], object] | None = None   # point name -> SX (3,) in q, t, p
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n(self) -> int:
+        return len(self.coords)
+
+    @property
+    def m(self) -> int:
+        return 0 if self.g is None else int(self.g.numel())
+
+    @property
+    def energy(self):
+        return self.T + self.V
+
+    def start(self, p: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Numeric start values (q0, qd0) for parameter vector p (default: model values)."""
+        import casadi as ca
+
+        pv = self.param_values if p is None else np.asarray(p, float)
+        f = ca.Function("start", [self.p], [self.q0, self.qd0])
+        a, b = f(pv)
+        return np.array(a, float).ravel(), np.array(b, float).ravel()
+
+
+def lagrange_terms(T, V, D, Q, q, qd, t):
+    """M and bias of Lagrange's equations by automatic differentiation (CasADi SX)."""
+    import casadi as ca
+
+    dT_dqd = ca.gradient(T, qd)
+    M = ca.jacobian(dT_dqd, qd)
+    M = 0.5 * (M + M.T)
+    bias = (Q - ca.gradient(D, qd) + ca.gradient(T, q) - ca.gradient(V, q)
+            - ca.mtimes(ca.jacobian(dT_dqd, q), qd) - ca.jacobian(dT_dqd, t))
+    return ca.simplify(M) if M.numel() <= 16 else M, bias
+
+
+def from_lagrangian(name, coords, params, param_values, q, qd, t, p, T, V, D=None, Q=None, g=None,
+                    q0=None, qd0=None, outputs=None, constraint_names=None, **kw) -> EOM:
+    """Build an EOM from T, V, D, Q given as SX (the equation-layer route).
+
+    Convenient for tests of formulations and analyses: write T and V in CasADi directly.
+    """
+    import casadi as ca
+
+    n = len(coords)
+    D = ca.SX(0) if D is None else D
+    Q = ca.SX.zeros(n) if Q is None else Q
+    M, bias = lagrange_terms(T, V, D, Q, q, qd, t)
+    if g is not None and g.numel() == 0:
+        g = None
+    m = 0 if g is None else g.numel()
+    return EOM(name=name, coords=tuple(coords), params=tuple(params),
+               param_values=np.asarray(param_values, float), q=q, qd=qd, t=t, p=p,
+               T=T, V=V, D=D, Q=Q, M=M, bias=bias, g=g,
+               constraint_names=tuple(constraint_names or (f"g{i + 1}" for i in range(m))),
+               outputs=dict(outputs or {}),
+               q0=ca.SX.zeros(n) if q0 is None else ca.SX(q0),
+               qd0=ca.SX.zeros(n) if qd0 is None else ca.SX(qd0),
+               fixed_q=(True,) * n, fixed_qd=(True,) * n, **kw)

@@ -1,0 +1,447 @@
+"""The resolved model ("model" IR): what ``analyze`` hands to ``derive``.
+
+A flat, fully resolved description of one model: no `extends`, no arrays, no `for` loops,
+no modifiers left.  Every name is a flat string (``link[2].b``, ``q[3]``, ``j1.phi``).
+Vector and matrix quantities are tuples of scalar expressions (a vector is a 3-tuple, a
+matrix a 3-tuple of 3-tuples), so every :class:`Expr` is a scalar.
+
+Expressions are small frozen dataclasses.  Leaves refer to the model's parameters
+(:class:`Param`), generalized coordinates (:class:`Coord`), their speeds (:class:`Speed`,
+i.e. ``der(q)``) and :class:`Time`.  Kinematic queries (:class:`PointPos`, ...) and
+energies (:class:`EnergyRef`) are leaves that ``derive`` replaces by the expressions it
+computes.  Translators to CasADi and sympy live in :mod:`mechdsl.exprs`.
+
+Conventions (documented in docs/language.md):
+- world frame: x right, y up, z out of the plane; gravity is whatever Gravity says.
+- every body has a body frame; ``com`` is the centre of mass in body coordinates and
+  ``inertia`` the inertia tensor about the centre of mass in body axes.
+- a joint places a joint frame on the parent (at ``parent`` point, parent body axes) and one
+  on the child (at ``child`` point, child body axes).  At zero joint variables the two joint
+  frames coincide; the joint's motion is the child joint frame relative to the parent one.
+  ``axis`` is a unit vector in those (coinciding) axes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Union
+
+from .diagnostics import Span
+
+# --------------------------------------------------------------------------- expressions
+
+
+@dataclass(frozen=True)
+class Expr:
+    pass
+
+
+@dataclass(frozen=True)
+class Const(Expr):
+    value: float
+
+
+@dataclass(frozen=True)
+class Param(Expr):
+    name: str
+
+
+@dataclass(frozen=True)
+class Coord(Expr):
+    name: str
+
+
+@dataclass(frozen=True)
+class Speed(Expr):
+    """der(coordinate)."""
+
+    name: str
+
+
+@dataclass(frozen=True)
+class Time(Expr):
+    pass
+
+
+@dataclass(frozen=True)
+class Op(Expr):
+    """An operation on scalar arguments.
+
+    op is one of: add sub mul div pow neg (arithmetic); lt le gt ge eq ne and or not
+    (logic, 1.0/0.0); if (cond, a, b); and the math functions sin cos tan asin acos atan
+    atan2 sinh cosh tanh exp log log10 sqrt abs sign min max floor ceil.
+    """
+
+    op: str
+    args: tuple[Expr, ...]
+
+
+@dataclass(frozen=True)
+class TimeDer(Expr):
+    """der(expr) of an expression in coordinates and time (not speeds): total derivative."""
+
+    expr: Expr
+
+
+@dataclass(frozen=True)
+class PointPos(Expr):
+    """Component i (0, 1, 2) of a point's position in world coordinates."""
+
+    point: str
+    i: int
+
+
+@dataclass(frozen=True)
+class PointVel(Expr):
+    """Component i of a point's absolute velocity in world coordinates."""
+
+    point: str
+    i: int
+
+
+@dataclass(frozen=True)
+class BodyRot(Expr):
+    """Entry (i, j) of a body's rotation matrix (body axes -> world axes)."""
+
+    body: str
+    i: int
+    j: int
+
+
+@dataclass(frozen=True)
+class BodyOmega(Expr):
+    """Component i of a body's angular velocity in world coordinates."""
+
+    body: str
+    i: int
+
+
+@dataclass(frozen=True)
+class EnergyRef(Expr):
+    """kind: 'kinetic' | 'potential' | 'dissipation' | 'energy' (T + V)."""
+
+    kind: str
+
+
+@dataclass(frozen=True)
+class ReactionRef(Expr):
+    """Reaction of a joint on its child, in the child joint frame.
+
+    what: 'force' | 'torque'; i: component.  Computed only when an output asks for it.
+    """
+
+    joint: str
+    what: str
+    i: int
+
+
+Vec3 = tuple[Expr, Expr, Expr]
+Mat3 = tuple[Vec3, Vec3, Vec3]
+
+ZERO = Const(0.0)
+ONE = Const(1.0)
+
+# --------------------------------------------------------------------------- declarations
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    value: float                     # numeric default (after evaluating the binding)
+    binding: Expr | None = None      # expression in other Params (dependent parameter)
+    unit: str | None = None
+    doc: str = ""
+    integer: bool = False            # Integer parameters are structural: already substituted
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Coordinate:
+    name: str
+    start: Expr = ZERO               # in Params only
+    speed: Expr = ZERO               # start value of der(name), in Params only
+    fixed: bool = True               # start value fixed for consistent initialization
+    speed_fixed: bool = True
+    unit: str | None = None
+    doc: str = ""
+    owner: str | None = None         # joint that declared it, if any
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Body:
+    name: str
+    kind: str                        # 'point' | 'rigid' | 'frame' (massless) | 'world'
+    mass: Expr = ZERO
+    com: Vec3 = (ZERO, ZERO, ZERO)
+    inertia: Mat3 = ((ZERO,) * 3,) * 3
+    shape: str = ""                  # 'rod' | 'disk' | 'cylinder' | 'sphere' | 'box' | '' (for drawing)
+    shape_size: tuple[Expr, ...] = ()  # rod: (L,), disk: (R,), cylinder: (R, L), sphere: (R,), box: (lx, ly, lz)
+    axis: Vec3 = (ONE, ZERO, ZERO)   # symmetry axis of the shape, body coordinates
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Point:
+    """A point fixed on a body (or on 'world'), position r in body coordinates."""
+
+    name: str
+    body: str
+    r: Vec3 = (ZERO, ZERO, ZERO)
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class JointVar:
+    """One joint variable.
+
+    role: the joint's name for it ('phi', 's', 'x', 'y', 'z', 'theta', 'psi', ...).
+    motion: its value as an expression: ``Coord(c)`` when bound one-to-one to coordinate c
+    (then ``coordinate == c``), a function of Time and Params when prescribed (rheonomic),
+    or a general expression of coordinates and time.
+    """
+
+    role: str
+    motion: Expr
+    coordinate: str | None = None
+
+    @property
+    def prescribed(self) -> bool:
+        from .exprs import depends_on_state  # local import: exprs imports ir
+
+        return self.coordinate is None and not depends_on_state(self.motion)
+
+
+@dataclass(frozen=True)
+class Joint:
+    """kind: revolute prismatic cylindrical spherical planar free fixed frame.
+
+    variables in the joint's canonical order:
+      revolute (phi) | prismatic (s) | cylindrical (phi, s) | planar (x, y, phi)
+      spherical: Euler angles (phi, theta, psi) in `sequence` (e.g. 'zyx', 'zxz')
+      free: (x, y, z, phi, theta, psi); for a point-mass child only (x, y, z)
+      fixed: () | frame: () with `frame_r` (Vec3 of t) and `frame_R` (Mat3 of t)
+    For planar joints the plane is normal to ``axis``; its in-plane axes are ``plane_axes``.
+    options: 'sequence' (Euler sequence), 'parametrization' ('euler' | 'quaternion').
+    """
+
+    name: str
+    kind: str
+    parent: str                      # point name
+    child: str                       # point name
+    parent_body: str
+    child_body: str
+    axis: Vec3 = (ZERO, ZERO, ONE)
+    variables: tuple[JointVar, ...] = ()
+    plane_axes: tuple[Vec3, Vec3] | None = None
+    frame_r: Vec3 | None = None
+    frame_R: Mat3 | None = None
+    options: tuple[tuple[str, str], ...] = ()
+    closes_loop: bool = False        # set by topology: this joint is a cut joint
+    span: Span = field(default_factory=Span)
+
+    def option(self, key: str, default: str = "") -> str:
+        return dict(self.options).get(key, default)
+
+
+# --------------------------------------------------------------------------- forces and terms
+
+
+@dataclass(frozen=True)
+class Gravity:
+    name: str
+    g: Vec3
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class SpringDamper:
+    """A linear spring and/or damper between points a and b (force along the line).
+
+    Spring potential k/2 (l - l0)^2; damper force -c dl/dt along the line (Rayleigh
+    dissipation c/2 (dl/dt)^2).  kind: 'spring' | 'damper' | 'spring-damper'.
+    """
+
+    name: str
+    kind: str
+    a: str
+    b: str
+    k: Expr = ZERO
+    c: Expr = ZERO
+    l0: Expr = ZERO
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class AppliedForce:
+    """Force F applied at a point; F given in world axes or in the axes of body `frame`."""
+
+    name: str
+    point: str
+    F: Vec3
+    frame: str = "world"
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class AppliedTorque:
+    name: str
+    body: str
+    tau: Vec3
+    frame: str = "world"
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class GeneralizedForce:
+    name: str
+    coordinate: str
+    Q: Expr
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Gravitation:
+    """Mutual Newtonian gravitation between every pair of `bodies` (at their mass centres)."""
+
+    name: str
+    bodies: tuple[str, ...]
+    G: Expr
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Term:
+    """An equation-layer term.  kind: 'kinetic' | 'potential' | 'dissipation'.
+
+    Also used for the component `Potential` (kind 'potential').
+    """
+
+    kind: str
+    expr: Expr
+    name: str = ""
+    span: Span = field(default_factory=Span)
+
+
+Force = Union[Gravity, SpringDamper, AppliedForce, AppliedTorque, GeneralizedForce, Gravitation]
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """An explicit holonomic constraint residual(q, t) = 0."""
+
+    name: str
+    residual: Expr
+    doc: str = ""
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Loop:
+    """A kinematic loop closed by the cut joint `joint` (bodies along the loop, in order)."""
+
+    name: str
+    joint: str
+    bodies: tuple[str, ...]
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Output:
+    name: str
+    expr: Expr
+    unit: str | None = None
+    doc: str = ""
+    span: Span = field(default_factory=Span)
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A unilateral contact (issue 6).  Fields are kept generic until impacts land."""
+
+    name: str
+    kind: str
+    fields: tuple[tuple[str, object], ...] = ()
+    span: Span = field(default_factory=Span)
+
+    def get(self, key: str, default=None):
+        return dict(self.fields).get(key, default)
+
+
+@dataclass(frozen=True)
+class Model:
+    name: str
+    doc: str = ""
+    parameters: tuple[Parameter, ...] = ()
+    coordinates: tuple[Coordinate, ...] = ()
+    bodies: tuple[Body, ...] = ()        # excludes the world
+    points: tuple[Point, ...] = ()       # includes every body origin (named as the body) and 'world'
+    joints: tuple[Joint, ...] = ()
+    forces: tuple[Force, ...] = ()
+    terms: tuple[Term, ...] = ()
+    constraints: tuple[Constraint, ...] = ()
+    loops: tuple[Loop, ...] = ()
+    outputs: tuple[Output, ...] = ()
+    contacts: tuple[Contact, ...] = ()
+    span: Span = field(default_factory=Span)
+
+    # -- lookups -------------------------------------------------------------------
+    def parameter(self, name: str) -> Parameter:
+        return _find(self.parameters, name)
+
+    def coordinate(self, name: str) -> Coordinate:
+        return _find(self.coordinates, name)
+
+    def body(self, name: str) -> Body:
+        return _find(self.bodies, name)
+
+    def point(self, name: str) -> Point:
+        return _find(self.points, name)
+
+    def joint(self, name: str) -> Joint:
+        return _find(self.joints, name)
+
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.coordinates)
+
+    @property
+    def real_parameters(self) -> tuple[Parameter, ...]:
+        """The entries of the parameter vector p, in order."""
+        return tuple(p for p in self.parameters if not p.integer)
+
+    @property
+    def tree_joints(self) -> tuple[Joint, ...]:
+        return tuple(j for j in self.joints if not j.closes_loop)
+
+    @property
+    def is_tree(self) -> bool:
+        return not self.loops and not self.constraints
+
+    @property
+    def has_components(self) -> bool:
+        return bool(self.bodies)
+
+
+def _find(items, name):
+    for it in items:
+        if it.name == name:
+            return it
+    raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A named experiment: the model (with overrides already applied) and settings.
+
+    settings keys (all optional): stop_time, start_time, rtol, atol, method, points,
+    outputs (tuple of names), formulation, dt, and any later issue's own keys.
+    """
+
+    name: str
+    model: Model
+    doc: str = ""
+    settings: tuple[tuple[str, object], ...] = ()
+    span: Span = field(default_factory=Span)
+
+    def get(self, key: str, default=None):
+        return dict(self.settings).get(key, default)

@@ -1,0 +1,162 @@
+"""Simulation results (a contract relied upon by users and other tools).
+
+``r.t`` (n_t,), ``r.q`` and ``r.qd`` (n_t, n) in coordinate order, ``r.coordinates`` the
+names, ``r[name]`` any recorded signal (a coordinate, ``der(name)``, an output, an energy,
+an invariant, a drift measure), ``r.to_csv(path)``, ``r.stats`` (steps, RHS evaluations,
+wall time, ...), ``r.success``/``r.message``/``r.failure`` and ``r.events``.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .fileio import write_atomic
+
+
+@dataclass
+class Failure:
+    """Why and where a run stopped early."""
+
+    time: float
+    cause: str
+    detail: str = ""
+
+    def __str__(self) -> str:
+        return f"simulation failed at t = {self.time:.6g}: {self.cause}" + (f" ({self.detail})" if self.detail else "")
+
+
+@dataclass
+class Result:
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    coordinates: tuple[str, ...]
+    signals: dict[str, np.ndarray] = field(default_factory=dict)   # outputs, energies, invariants, drift
+    stats: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)         # model, options, method and why, versions
+    events: list[dict[str, Any]] = field(default_factory=list)
+    failure: Failure | None = None
+
+    # -- access -----------------------------------------------------------------------
+    @property
+    def success(self) -> bool:
+        return self.failure is None
+
+    @property
+    def message(self) -> str:
+        return "ok" if self.failure is None else str(self.failure)
+
+    @property
+    def columns(self) -> list[str]:
+        return (["time"] + list(self.coordinates) + [f"der({c})" for c in self.coordinates]
+                + list(self.signals))
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name in ("time", "t"):
+            return self.t
+        key = self._resolve(name)
+        if key is None:
+            raise KeyError(f"no signal named {name!r}; recorded: {', '.join(self.columns)}")
+        kind, idx = key
+        if kind == "q":
+            return self.q[:, idx]
+        if kind == "qd":
+            return self.qd[:, idx]
+        return self.signals[idx]
+
+    def __contains__(self, name: str) -> bool:
+        return name in ("time", "t") or self._resolve(name) is not None
+
+    def _resolve(self, name: str):
+        for cand in _aliases(name):
+            if cand in self.coordinates:
+                return "q", self.coordinates.index(cand)
+            m = re.fullmatch(r"der\((.+)\)", cand)
+            if m:
+                for inner in _aliases(m.group(1)):
+                    if inner in self.coordinates:
+                        return "qd", self.coordinates.index(inner)
+            if cand in self.signals:
+                return "s", cand
+        # q1 -> q[1] style aliases for array coordinates
+        for c in self.coordinates:
+            if _plain(c) == name:
+                return "q", self.coordinates.index(c)
+            if f"der({_plain(c)})" == name:
+                return "qd", self.coordinates.index(c)
+        for s in self.signals:
+            if _plain(s) == name:
+                return "s", s
+        return None
+
+    # -- output -----------------------------------------------------------------------
+    def table(self) -> np.ndarray:
+        cols = [self.t[:, None], self.q, self.qd] + [np.asarray(v, float).reshape(len(self.t), -1)
+                                                     for v in self.signals.values()]
+        return np.hstack(cols) if len(self.t) else np.zeros((0, len(self.columns)))
+
+    def to_csv_text(self) -> str:
+        lines = [",".join(_csv_name(c) for c in self.columns)]
+        for row in self.table():
+            lines.append(",".join(_fmt(v) for v in row))
+        return "\n".join(lines) + "\n"
+
+    def to_csv(self, path, sidecar: bool = True, overwrite: bool = True) -> None:
+        """Write the CSV (atomically) and, by default, a JSON sidecar next to it."""
+        write_atomic(path, self.to_csv_text(), overwrite=overwrite)
+        if sidecar:
+            write_atomic(str(path) + ".json" if not str(path).endswith(".csv") else str(path)[:-4] + ".json",
+                         self.to_json_text(), overwrite=overwrite)
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "metadata": self.metadata,
+            "stats": self.stats,
+            "success": self.success,
+            "failure": None if self.failure is None else {"time": self.failure.time, "cause": self.failure.cause,
+                                                          "detail": self.failure.detail},
+            "columns": self.columns,
+            "events": self.events,
+        }
+
+    def to_json_text(self) -> str:
+        return json.dumps(_jsonable(self.summary()), indent=2, sort_keys=True) + "\n"
+
+
+def _csv_name(c: str) -> str:
+    return f'"{c}"' if "," in c or '"' in c else c
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _plain(name: str) -> str:
+    return re.sub(r"\[(\d+)\]", r"\1", name).replace(".", "_")
+
+
+def _aliases(name: str):
+    yield name
+    m = re.fullmatch(r"([A-Za-z_]\w*)(\d+)", name)
+    if m:
+        yield f"{m.group(1)}[{m.group(2)}]"
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, float) and not np.isfinite(x):
+        return str(x)
+    return x
