@@ -19,6 +19,20 @@ Conventions (documented in docs/language.md):
   on the child (at ``child`` point, child body axes).  At zero joint variables the two joint
   frames coincide; the joint's motion is the child joint frame relative to the parent one.
   ``axis`` is a unit vector in those (coinciding) axes.
+  With (R_j, p_j) the joint's relative rotation and translation, the child body's pose is
+      R_child = R_parent R_j,   o_child = o_parent + R_parent (r_P + p_j) - R_child r_C
+  where r_P is the parent point in parent body coordinates and r_C the child point in
+  child body coordinates.  Per kind:
+      revolute     R_j = rot(axis, phi),            p_j = 0
+      prismatic    R_j = I,                         p_j = s axis
+      cylindrical  R_j = rot(axis, phi),            p_j = s axis
+      planar       R_j = rot(axis, phi),            p_j = x e1 + y e2   (plane_axes = (e1, e2))
+      spherical    R_j = Euler(sequence; phi, theta, psi), intrinsic: 'zyx' -> Rz(phi) Ry(theta) Rx(psi)
+                   or a unit quaternion (option parametrization = 'quaternion', variables q0..q3)
+      free         p_j = (x, y, z) in parent axes, R_j as spherical
+      fixed        R_j = I, p_j = 0
+      frame        R_j = frame_R(t), p_j = frame_r(t)     (a prescribed moving frame)
+  A point-mass child has no rotational freedom: free keeps (x, y, z), planar keeps (x, y).
 """
 from __future__ import annotations
 
