@@ -115,6 +115,8 @@ def mul(a: Expr, b: Expr) -> Expr:
 def div(a: Expr, b: Expr) -> Expr:
     if is_const(b, 1.0):
         return a
+    if isinstance(a, Const) and isinstance(b, Const) and b.value != 0.0:
+        return Const(a.value / b.value)
     if is_const(a, 0.0) and not is_const(b, 0.0):
         return Const(0.0)
     return Op("div", (a, b))

@@ -166,6 +166,7 @@ class Parameter:
     doc: str = ""
     integer: bool = False            # Integer parameters are structural: already substituted
     span: Span = field(default_factory=Span)
+    input: bool = False              # declared `input`: a parameter that linearization may treat as an input
 
 
 @dataclass(frozen=True)
