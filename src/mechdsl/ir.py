@@ -251,7 +251,8 @@ class Joint:
     frame_r: Vec3 | None = None
     frame_R: Mat3 | None = None
     options: tuple[tuple[str, str], ...] = ()
-    closes_loop: bool = False        # set by topology: this joint is a cut joint
+    closes_loop: bool = False        # set by topology: a cut joint; its variables are then () and its
+                                     # loop-closure constraint removes only the joint's free directions
     span: Span = field(default_factory=Span)
 
     def option(self, key: str, default: str = "") -> str:

@@ -17,6 +17,7 @@ from . import ast
 from .diagnostics import Diagnostic, InternalError, MechError, Span
 
 MAX_NESTING = 200          # brackets deep
+MAX_DEPTH = 600            # syntax tree depth (long operator chains)
 MAX_FILE_BYTES = 20_000_000
 
 KEYWORDS = {
@@ -120,7 +121,20 @@ def parse(text: str, filename: str = "<input>") -> ast.File:
         raise InternalError(f"AST construction failed: {e.orig_exc!r}") from e.orig_exc
     if builder.problems:
         raise MechError(builder.problems)
+    _check_depth(result)
     return result
+
+
+def _check_depth(root: ast.Node) -> None:
+    """Reject syntax trees deeper than MAX_DEPTH (e.g. sums of thousands of terms) with E104."""
+    stack = [(root, 1)]
+    while stack:
+        node, d = stack.pop()
+        if d > MAX_DEPTH:
+            raise MechError(Diagnostic("E104", f"expression is too deeply nested (more than {MAX_DEPTH} levels)",
+                                       node.span, "split it with intermediate `Real` variables, or use sum() "
+                                                  "over an array"))
+        stack.extend((c, d + 1) for c in node.child_nodes())
 
 
 def _only_comments(text: str) -> bool:

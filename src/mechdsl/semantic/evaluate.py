@@ -296,11 +296,13 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
         return _filled(args[0], [count(a, "a size") for a in args[1:]])
     if name == "sum":
         need(1)
-        items = V.flatten(args[0]) if isinstance(args[0], Arr) else [args[0]]
-        acc: Val = V.const(0.0)
-        for it in items:
-            acc = V.add(acc, it)
-        return acc
+        items: list[Val] = list(V.flatten(args[0])) if isinstance(args[0], Arr) else [args[0]]
+        if not items:
+            return V.const(0.0)
+        while len(items) > 1:  # balanced: long sums stay shallow
+            items = [V.add(items[i], items[i + 1]) if i + 1 < len(items) else items[i]
+                     for i in range(0, len(items), 2)]
+        return items[0]
     if name == "skew":
         need(1)
         if V.shape_of(args[0]) != (3,):

@@ -70,7 +70,22 @@ def check_model(model: ir.Model, diags: DiagnosticBag) -> ir.Model:
             diags.error("E501", f"body '{body.name}' is not connected to the world", body.span,
                         f"attach it with a joint, or make it free: Free f(child = {body.name});")
     cut_names = {j.name for j in cut}
-    joints = tuple(dataclasses.replace(j, closes_loop=True) if j.name in cut_names else j for j in model.joints)
+    dropped: set[str] = set()
+    joints = []
+    for j in model.joints:
+        if j.name in cut_names:
+            for v in j.variables:
+                if v.coordinate is None or v.coordinate != f"{j.name}.{v.role}":
+                    diags.error("E507", f"joint '{j.name}' closes a loop: its variable '{v.role}' is fixed by the "
+                                        f"loop and cannot be bound to '{X.to_text(v.motion)}'", j.span,
+                                "leave the loop-closing joint's variables unset, or close the loop at another joint")
+                else:
+                    dropped.add(v.coordinate)
+            j = dataclasses.replace(j, closes_loop=True, variables=())
+        joints.append(j)
+    joints = tuple(joints)
+    coords = tuple(c for c in model.coordinates if c.name not in dropped)
+    model = dataclasses.replace(model, coordinates=coords)
     loops = tuple(ir.Loop(f"loop{k + 1}", j.name, loop_path(tree, j), j.span) for k, j in enumerate(cut))
     if not model.coordinates:
         diags.error("E506", f"model '{model.name}' has no coordinates (no degrees of freedom)", model.span,
