@@ -33,10 +33,11 @@ class RunFailure(Exception):
 
 
 class Run:
-    def __init__(self, system, opts, grid: np.ndarray, method_cls: str):
+    def __init__(self, system, opts, grid: np.ndarray, method_cls: str, progress=None):
         self.s, self.o = system, opts
         self.grid = np.asarray(grid, float)
         self.method_cls = method_cls
+        self.progress = progress
         n, k = system.n, system.k
         self.closed = [False] * k
         self.fix_sel: dict[int, list[int]] = {}
@@ -44,6 +45,7 @@ class Run:
         self.events: list[dict] = []
         self.out_y = np.full((len(self.grid), 2 * n), np.nan)
         self.out_force = np.zeros((len(self.grid), k))
+        self.out_lam = np.zeros((len(self.grid), system.m))
         self.gi = 0
         self.stats = {"steps": 0, "rejected_steps": 0, "restarts": 0, "projections": 0, "events": 0,
                       "root_evaluations": 0}
@@ -84,9 +86,13 @@ class Run:
     # ------------------------------------------------------------------ output
     def _store(self, gi: int, t: float, y: np.ndarray) -> None:
         self.out_y[gi] = y
-        if any(self.closed):
-            for i, lam in self._lam_closed(t, y[:self.n], y[self.n:]).items():
-                self.out_force[gi, i] = lam
+        if self.active:
+            _, lam = self.s.accel(t, y[:self.n], y[self.n:], self.active)
+            for j, r in enumerate(self.active):
+                if r < self.s.m:
+                    self.out_lam[gi, r] = -lam[j]          # EOM convention: M q'' = bias - g_q^T lam
+                elif r < self.s.m + self.s.k:
+                    self.out_force[gi, r - self.s.m] = lam[j]
 
     def emit(self, sol, t_hi: float, inclusive: bool) -> None:
         g = self.grid
@@ -316,6 +322,31 @@ class Run:
                       "speed_after": _one(list(A[rows] @ sol.qd + ct[rows]))})
         return self.handle(t, q, sol.qd)
 
+    def consistent_start(self, t, q, qd):
+        """Start values on the model's constraints: positions, then velocities, moving only the
+        coordinates whose start values are not fixed (all of them if every one is fixed)."""
+        s = self.s
+        rows = s.independent(t, q, s.model_rows)
+        if not rows:
+            return q, qd
+        eom = s.eom
+        free_q = [i for i, f in enumerate(eom.fixed_q or (True,) * s.n) if not f] or list(range(s.n))
+        free_v = [i for i, f in enumerate(eom.fixed_qd or (True,) * s.n) if not f] or list(range(s.n))
+        q, qd = np.array(q, float), np.array(qd, float)
+        for _ in range(50):
+            c, A, _ = s.pos(t, q)
+            c = c[rows]
+            if np.max(np.abs(c)) <= 1e-3 * self.o.offset:
+                break
+            q[free_q] -= np.linalg.lstsq(A[rows][:, free_q], c, rcond=None)[0]
+        else:
+            raise RunFailure(t, "inconsistent start values", "the constraints cannot be satisfied by the "
+                             "coordinates whose start values are not fixed")
+        _, A, ct, _ = s.cons(t, q, qd)
+        r = A[rows] @ qd + ct[rows]
+        qd[free_v] -= np.linalg.lstsq(A[rows][:, free_v], r, rcond=None)[0]
+        return q, qd
+
     # ------------------------------------------------------------------ the loop
     def run(self, t0: float, t_end: float, q: np.ndarray, qd: np.ndarray):
         s, o = self.s, self.o
@@ -327,6 +358,7 @@ class Run:
             if tf <= t0:
                 q, qd = self.fixate(t0, q, qd, j)
                 fixed.add(j)
+        q, qd = self.consistent_start(t, q, qd)
         q, qd = self.handle(t, q, qd)
         y = np.concatenate([q, qd])
         while t < t_end:
@@ -342,6 +374,8 @@ class Run:
                     raise RunFailure(solver.t, "integrator failed", str(msg))
                 self.stats["steps"] += 1
                 ta, tb = solver.t_old, solver.t
+                if self.progress is not None:
+                    self.progress(tb, t_end)
                 sol = solver.dense_output()
                 ev = self.find_event(sol, ta, tb)
                 if ev is not None:

@@ -13,24 +13,30 @@ from .run import Run, RunFailure
 from .stepper import resolve_method
 from .system import ContactSystem
 
-# options of the ODE simulator that make no difference here (accepted so that the simulator can
-# pass its options through unchanged)
-_PASSED_THROUGH = ("formulation", "dt", "reactions", "compiled")
+# options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
+# the simulator can pass its options through unchanged
+_PASSED_THROUGH = ("formulation", "dt", "reactions", "compiled", "max_steps", "integrator_options",
+                   "singularity_threshold", "functions")
 DEFAULT_POINTS = 501
+ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
 
 
 def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_start: float = 0.0,
                            rtol: float = 1e-8, atol: float = 1e-10, method: str | None = "auto",
-                           points: int | None = None, outputs=None, p=None, q0=None, qd0=None,
-                           fixations=(), rest_speed: float = 1e-3, impact_order: str = "simultaneous",
-                           gap_tol: float | None = None, event_offset: float | None = None,
-                           max_events: int = 100000, max_step: float | None = None, samples: int = 4,
-                           **passed) -> R.Result:
+                           points: int | None = None, outputs=None, x0=None, p=None, progress=None,
+                           q0=None, qd0=None, fixations=(), rest_speed: float | None = None,
+                           impact_order: str | None = None, gap_tol: float | None = None,
+                           event_offset: float | None = None, max_events: int = 100000,
+                           max_step: float | None = None, samples: int = 4, **passed) -> R.Result:
     """Simulate eom with unilateral contacts from t_start to t_end; output on a uniform grid.
 
     contacts: ``ir.Contact`` / ``ContactGap`` / ``Fixation`` objects (default: the model's);
-    fixations: more :class:`Fixation` objects.  See docs/contacts.md for the options.
-    The events (impacts, contacts closing and releasing, fixations) are in ``result.events``.
+    fixations: more :class:`Fixation` objects.  x0 ([q; qd] or {name: value, "der(name)": value})
+    and p (vector or {name: value}) as for ``mechdsl.simulate.simulate``; q0/qd0 override the
+    start values directly.  progress: a callable(t, t_end) called after every step.
+    rest_speed (m/s, default 1e-3), impact_order ("simultaneous" | "sequential"): see
+    docs/contacts.md.  The events (impacts, contacts closing and releasing, fixations) are
+    in ``result.events``.
     """
     for k in passed:
         if k not in _PASSED_THROUGH:
@@ -38,21 +44,27 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     if t_end is None:
         raise UsageError("give t_end")
     t_end, t_start = float(t_end), float(t_start)
-    if not t_end > t_start:
+    if not (np.isfinite(t_end) and np.isfinite(t_start) and t_end > t_start):
         raise UsageError(f"t_end ({t_end}) must be after the start time ({t_start})")
     npts = DEFAULT_POINTS if points is None else int(points)
     if npts < 2:
         raise UsageError("points must be at least 2")
+    rest_speed = 1e-3 if rest_speed is None else float(rest_speed)
+    impact_order = impact_order or "simultaneous"
     opts = ContactOptions(rtol=float(rtol), atol=float(atol), rest_speed=float(rest_speed),
                           impact_order=impact_order, gap_tol=gap_tol, event_offset=event_offset,
                           max_events=int(max_events), max_step=max_step, samples=int(samples))
     method_cls, note = resolve_method(method)
     gaps, fixes = contact_gaps(eom, contacts)
     fixes = fixes + list(fixations)
-    pv = eom.param_values if p is None else np.asarray(p, float)
-    qs, qds = eom.start(pv)
-    qs = qs if q0 is None else np.asarray(q0, float)
-    qds = qds if qd0 is None else np.asarray(qd0, float)
+    pv = parameter_vector(eom, p)
+    xs = start_vector(eom, x0, pv)
+    qs, qds = xs[:eom.n], xs[eom.n:]
+    if q0 is not None:
+        qs = np.asarray(q0, float).ravel()
+    if qd0 is not None:
+        qds = np.asarray(qd0, float).ravel()
+    out_names = output_names(eom, gaps, outputs)
     system = ContactSystem(eom, gaps, fixes, pv)
     gap0 = system.gap(t_start, qs)
     for g, v in zip(gaps, gap0):
@@ -61,7 +73,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                        g.span or _no_span(),
                                        "change the start values so that every gap is >= 0"))
     grid = np.linspace(t_start, t_end, npts)
-    run = Run(system, opts, grid, method_cls)
+    run = Run(system, opts, grid, method_cls, progress=progress if callable(progress) else None)
     wall = _time.perf_counter()
     failure = None
     try:
@@ -74,7 +86,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     n = eom.n
     res = R.Result(t=grid[:m].copy(), q=Y[:, :n].copy(), qd=Y[:, n:].copy(), coordinates=tuple(eom.coords),
                    events=run.events, failure=failure)
-    res.signals = _signals(eom, system, grid[:m], Y, run.out_force[:m], outputs)
+    res.signals = _signals(eom, system, grid[:m], Y, run.out_force[:m], run.out_lam[:m], out_names)
     res.stats = dict(run.stats, rhs_evaluations=system.n_rhs, wall_time=wall, events=len(run.events),
                      impacts=sum(1 for e in run.events if e["kind"] == "impact"))
     res.metadata = {"model": eom.name, "method": method_cls.lower(), "method_requested": method or "auto",
@@ -89,49 +101,91 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     return res
 
 
+def output_names(eom, gaps, outputs) -> list[str]:
+    """The EOM outputs to record (all by default); unknown names are usage errors."""
+    if outputs is None:
+        return list(eom.outputs)
+    want = [outputs] if isinstance(outputs, str) else [str(o) for o in outputs]
+    extra = [f"{g.name}.{w}" for g in gaps for w in ("gap", "force")]
+    known = set(eom.outputs) | set(ENERGY_NAMES) | set(extra) | set(eom.coords) | {f"der({c})" for c in eom.coords}
+    unknown = [w for w in want if w not in known]
+    if unknown:
+        raise UsageError(f"'{unknown[0]}' is not an output of {eom.name}; outputs: "
+                         + ", ".join(list(eom.outputs) + list(ENERGY_NAMES) + extra))
+    return [w for w in want if w in eom.outputs]
+
+
+def parameter_vector(eom, p) -> np.ndarray:
+    base = np.array(eom.param_values, float).ravel()
+    if p is None:
+        return base
+    if isinstance(p, dict):
+        out = base.copy()
+        for k, v in p.items():
+            if k not in eom.params:
+                raise UsageError(f"'{k}' is not a parameter of {eom.name}")
+            out[list(eom.params).index(k)] = float(v)
+        return out
+    arr = np.array(p, float).ravel()
+    if arr.size != base.size:
+        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters")
+    return arr
+
+
+def start_vector(eom, x0, pv) -> np.ndarray:
+    q0, qd0 = eom.start(pv)
+    base = np.r_[q0, qd0]
+    if x0 is None:
+        out = base
+    elif isinstance(x0, dict):
+        out = base.copy()
+        for k, v in x0.items():
+            name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+            if name not in eom.coords:
+                raise UsageError(f"'{name}' is not a coordinate of {eom.name}")
+            out[list(eom.coords).index(name) + (eom.n if speed else 0)] = float(v)
+    else:
+        out = np.array(x0, float).ravel()
+        if out.size != 2 * eom.n:
+            raise UsageError(f"x0 has {out.size} entries; expected {2 * eom.n} (coordinates then their speeds)")
+    if not np.isfinite(out).all():
+        raise UsageError("start values are not finite")
+    return out
+
+
 def _no_span():
     from ..diagnostics import Span
 
     return Span()
 
 
-def _signals(eom, system, t, Y, force, outputs) -> dict[str, np.ndarray]:
+def _signals(eom, system, t, Y, force, lam, out_names) -> dict[str, np.ndarray]:
+    """Outputs, energies, invariants and each contact's gap and normal force at the grid points."""
     import casadi as ca
 
     n, N = eom.n, len(t)
-    want = None if outputs is None else [str(o) for o in outputs]
-    names, exprs = [], []
-    avail = dict(eom.outputs)
-    avail.update({"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V})
-    for g in system.gaps:
-        avail[f"{g.name}.gap"] = ca.SX(g.gap)
+    contact_sig = {f"{g.name}.gap": ca.SX(g.gap) for g in system.gaps}
     forced = {f"{g.name}.force": i for i, g in enumerate(system.gaps)}
-    if want is None:
-        order = list(avail) + list(forced)
-    else:
-        coord_like = set(eom.coords) | {f"der({c})" for c in eom.coords}
-        unknown = [w for w in want if w not in avail and w not in forced and w not in coord_like]
-        if unknown:
-            raise UsageError(f"no output named '{unknown[0]}'; available: " + ", ".join(list(avail) + list(forced)))
-        order = [w for w in want if w in avail or w in forced]
-    for name in order:
-        if name in avail:
-            names.append(name)
-            exprs.append(ca.reshape(ca.SX(avail[name]), -1, 1))
+    exprs = {name: eom.outputs[name] for name in out_names}
+    exprs.update({"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V})
+    exprs.update(dict(getattr(eom, "invariants", None) or {}))
+    exprs.update(contact_sig)
+    lam_sym = getattr(eom, "lam", None)
+    ins = [eom.t, eom.q, eom.qd, eom.p] + ([lam_sym] if lam_sym is not None else [])
     out: dict[str, np.ndarray] = {}
-    if exprs and N:
-        f = ca.Function("signals", [eom.t, eom.q, eom.qd, eom.p], [ca.vertcat(*exprs)])
-        vals = np.array(f.map(N)(t.reshape(1, -1), Y[:, :n].T, Y[:, n:].T,
-                                 np.repeat(system.p.reshape(-1, 1), N, 1)), float)
+    cols = [ca.reshape(ca.SX(e), -1, 1) for e in exprs.values()]
+    if cols:
+        f = ca.Function("signals", ins, [ca.vertcat(*cols)])
+        args = [t.reshape(1, -1), Y[:, :n].T, Y[:, n:].T, np.repeat(system.p.reshape(-1, 1), N, 1)]
+        if lam_sym is not None:
+            args.append(lam.T if lam.shape[1] == int(lam_sym.numel()) else np.zeros((int(lam_sym.numel()), N)))
+        vals = np.array(f.map(N)(*args), float) if N else np.zeros((sum(int(c.numel()) for c in cols), 0))
         row = 0
-        for name, e in zip(names, exprs):
-            k = int(e.numel())
+        for name, c in zip(exprs, cols):
+            k = int(c.numel())
             v = vals[row:row + k].T
             out[name] = v[:, 0] if k == 1 else v
             row += k
-    elif exprs:
-        out.update({name: np.zeros(0) for name in names})
-    for name in order:
-        if name in forced:
-            out[name] = force[:, forced[name]].copy()
-    return {name: out[name] for name in order if name in out}
+    for name, i in forced.items():
+        out[name] = force[:, i].copy()
+    return out

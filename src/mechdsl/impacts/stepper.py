@@ -11,9 +11,11 @@ from ..diagnostics import UsageError
 
 SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
                  "lsoda": "LSODA"}
-# names of the ODE simulator's methods that have a close scipy counterpart
-ALIASES = {"auto": "dop853", "erk": "dop853", "rk": "dop853", "cvodes": "bdf", "idas": "bdf",
-           "rosenbrock": "radau", "collocation": "radau"}
+# the ODE simulator's method names (mechdsl.integrators) -> the closest one-step solver here
+ALIASES = {"auto": "dop853", "erk": "dop853", "cvodes-adams": "dop853", "rk": "dop853",
+           "cvodes": "bdf", "cvodes-bdf": "bdf", "idas": "bdf", "rosenbrock": "radau", "collocation": "radau",
+           **{f"scipy-{k}": k for k in SCIPY_METHODS}}
+SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre")
 
 
 def resolve_method(method: str | None) -> tuple[str, str]:
@@ -23,11 +25,14 @@ def resolve_method(method: str | None) -> tuple[str, str]:
         return SCIPY_METHODS[name], ""
     if name in ALIASES:
         target = ALIASES[name]
-        note = "" if name == "auto" else (f"method '{method}' is stepped as '{target}' for event location "
+        note = "" if name == "auto" or name.startswith("scipy-") else (f"method '{method}' is stepped as '{target}' for event location "
                                           "(models with contacts run on scipy's one-step solvers)")
         return SCIPY_METHODS[target], note
+    if name in SYMPLECTIC:
+        raise UsageError(f"the symplectic method '{method}' cannot step over impacts; "
+                         "use a method with error control (e.g. auto, dop853, radau)")
     raise UsageError(f"unknown method '{method}' for a model with contacts; methods: "
-                     + ", ".join(["auto", *SCIPY_METHODS]))
+                     + ", ".join(["auto", *SCIPY_METHODS, *ALIASES]))
 
 
 def make_solver(cls_name: str, fun, t0: float, y0, t_bound: float, rtol: float, atol: float,
