@@ -25,8 +25,10 @@ def resolve_method(method: str | None) -> tuple[str, str]:
         return SCIPY_METHODS[name], ""
     if name in ALIASES:
         target = ALIASES[name]
-        note = "" if name == "auto" or name.startswith("scipy-") else (f"method '{method}' is stepped as '{target}' for event location "
-                                          "(models with contacts run on scipy's one-step solvers)")
+        note = ""
+        if name != "auto" and not name.startswith("scipy-"):
+            note = (f"method '{method}' is stepped as '{target}' for event location "
+                    "(models with contacts run on scipy's one-step solvers)")
         return SCIPY_METHODS[target], note
     if name in SYMPLECTIC:
         raise UsageError(f"the symplectic method '{method}' cannot step over impacts; "

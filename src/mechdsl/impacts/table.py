@@ -24,7 +24,8 @@ def events_table(events: list[dict], max_rows: int = 20) -> str:
              + f"); total energy change {dE:.6g}"]
     head = ["time", "event", "contact", "impulse", "energy change", "normal speed -/+"]
     rows = []
-    shown = events if len(events) <= max_rows else events[:max_rows // 2] + [None] + events[-(max_rows - max_rows // 2):]
+    half = max_rows // 2
+    shown = events if len(events) <= max_rows else events[:half] + [None] + events[-(max_rows - half):]
     for e in shown:
         if e is None:
             rows.append(["...", f"({len(events) - max_rows} more)", "", "", "", ""])
