@@ -150,3 +150,18 @@ def ball_height(t, h0, e, g, n_max=200):
         v = e * speeds[k]
         out.append(v * s - 0.5 * g * s ** 2)
     return np.array(out)
+
+
+def stack(r=0.1, h=1.0, g=9.81, m=1.0, e=1.0):
+    """Two balls on a vertical line: the lower one rests on the floor, the upper one is dropped
+    onto it from height h (centre distance 2r + h)."""
+    q, qd, t, p = _sym(2, 3)
+    pts = {"b1": ca.vertcat(0, q[0], 0), "b2": ca.vertcat(0, q[1], 0), "world": ca.SX.zeros(3)}
+    eom = from_lagrangian("Stack", ["y1", "y2"], ["m", "g", "r"], [m, g, r], q, qd, t, p,
+                          T=0.5 * p[0] * ca.sumsqr(qd), V=p[0] * p[1] * (q[0] + q[1]),
+                          q0=[r, 3 * r + h], qd0=[0.0, 0.0], point_position=lambda n: pts[n])
+    floor = ir.Contact("floor", "plane", (("point", "b1"), ("radius", ir.Param("r")), ("surface", "plane"),
+                                          ("normal", (C(0), C(1), C(0))), ("e", C(e))))
+    touch = ir.Contact("touch", "point", (("point", "b2"), ("radius", ir.Param("r")), ("surface", "point"),
+                                          ("center", "b1"), ("surface_radius", ir.Param("r")), ("e", C(e))))
+    return eom, [floor, touch]

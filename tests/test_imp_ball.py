@@ -96,3 +96,23 @@ def test_elastic_ball_keeps_energy():
     assert [e["time"] for e in imp] == pytest.approx([T1 * (2 * k + 1) for k in range(len(imp))], abs=1e-8)
     assert np.max(np.abs(r["energy"] - G * H0)) < 1e-8
     assert all(abs(e["energy_change"]) < 1e-12 for e in imp)
+
+
+def test_rising_floor_rheonomic_gap():
+    """A floor rising at constant speed w (gap = y - w t, an equation-layer gap in time):
+    the impact law acts on the relative normal speed, v+ - w = -e (v- - w)."""
+    from mechdsl import ir
+
+    w = 0.5
+    eom, _ = ball(H0, E, G)
+    gap = ir.Op("sub", (ir.Coord("y"), ir.Op("mul", (ir.Const(w), ir.Time()))))
+    floor = ir.Contact("floor", "gap", (("gap", gap), ("e", ir.Param("e"))))
+    r = simulate_with_contacts(eom, [floor], 0.6, points=2, rtol=1e-10, atol=1e-12)
+    ev = [e for e in r.events if e["kind"] == "impact"][0]
+    t1 = (-w + np.sqrt(w * w + 2 * G * H0)) / G          # H0 - g t^2/2 = w t
+    assert ev["time"] == pytest.approx(t1, abs=1e-9)
+    v_minus = -G * t1
+    assert ev["speed_before"] == pytest.approx(v_minus - w, rel=1e-9)
+    v_plus = w - E * (v_minus - w)
+    dt = 0.6 - t1
+    assert r.q[-1, 0] == pytest.approx(H0 - G * t1 ** 2 / 2 + v_plus * dt - G * dt ** 2 / 2, abs=1e-9)

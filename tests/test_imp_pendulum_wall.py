@@ -74,3 +74,18 @@ def test_pendulum_wall_constrained_model():
     check(r)
     # the constraint holds throughout (projection after events and when drift exceeds 100 atol)
     assert np.max(np.abs(r.q[:, 0] ** 2 + r.q[:, 1] ** 2 - L ** 2)) < 1e-8
+
+
+def test_pendulum_comes_to_rest_leaning_on_wall():
+    """Wall at theta_w = -0.2 (left of the bottom): gravity presses the bob against it.  The
+    impacts accumulate (Zeno); below rest_speed the contact becomes persistent, and the bob
+    rests on the wall with normal force m g tan(theta_w)."""
+    thw = -0.2
+    eom = pendulum(L, G, 1.0, -1.0, omega0=3.0)
+    r = simulate_with_contacts(eom, [wall(L * np.sin(thw), 0.5)], 8.0, points=5, rtol=1e-10, atol=1e-12)
+    assert r.success, r.message
+    kinds = [e["kind"] for e in r.events]
+    assert kinds[-1] == "close" and kinds.count("close") == 1 and "release" not in kinds
+    assert r.q[-1, 0] == pytest.approx(thw, abs=1e-10)
+    assert r.qd[-1, 0] == pytest.approx(0.0, abs=1e-10)
+    assert r["wall.force"][-1] == pytest.approx(G * np.tan(-thw), rel=1e-8)

@@ -364,6 +364,7 @@ class Run:
         while t < t_end:
             pending = [(tf, j) for tf, j in fix_times if j not in fixed]
             t_stop = min([t_end] + [tf for tf, _ in pending])
+            pending_times = {tf for tf, _ in pending}
             solver = make_solver(self.method_cls, s.rhs(list(self.active)), t, y, t_stop, o.rtol, o.atol,
                                  o.max_step)
             self.stats["restarts"] += 1
@@ -386,7 +387,8 @@ class Run:
                     y = np.concatenate([q, qd])
                     restart = True
                     break
-                self.emit(sol, tb, inclusive=True)
+                # a grid point at a fixation time shows the state after it (as at impacts)
+                self.emit(sol, tb, inclusive=not (tb >= t_stop and t_stop in pending_times))
                 t, y = tb, solver.y.copy()
                 if self.active:
                     dq, dv = s.drift(t, y[:n], y[n:], self.active)
