@@ -165,3 +165,27 @@ def stack(r=0.1, h=1.0, g=9.81, m=1.0, e=1.0):
     touch = ir.Contact("touch", "point", (("point", "b2"), ("radius", ir.Param("r")), ("surface", "point"),
                                           ("center", "b1"), ("surface_radius", ir.Param("r")), ("e", C(e))))
     return eom, [floor, touch]
+
+
+def pendulum_swing_time(th_a, th_b, amp, L, g):
+    """Time for a pendulum of amplitude amp to swing from th_a to th_b (monotonic part, |th| <= amp)."""
+    from scipy.special import ellipkinc
+
+    k = np.sin(amp / 2)
+    phi = lambda th: np.arcsin(np.clip(np.sin(th / 2) / k, -1, 1))  # noqa: E731
+    return np.sqrt(L / g) * abs(ellipkinc(phi(th_b), k * k) - ellipkinc(phi(th_a), k * k))
+
+
+def pendulum_wall_impacts(n, L, g, th0, thw, e):
+    """Closed form of a pendulum released at rest from th0 < thw against a wall at thw:
+    the first n impact times and the angular speeds just before them."""
+    amp = abs(th0)
+    t = pendulum_swing_time(th0, thw, amp, L, g)
+    times, omegas = [], []
+    for _ in range(n):
+        w = np.sqrt(2 * g / L * (np.cos(thw) - np.cos(amp)))
+        times.append(t)
+        omegas.append(w)
+        amp = np.arccos(np.cos(thw) - L * (e * w) ** 2 / (2 * g))   # rebound with e w: new amplitude
+        t += 2 * pendulum_swing_time(thw, -amp, amp, L, g)
+    return np.array(times), np.array(omegas)

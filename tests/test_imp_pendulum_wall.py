@@ -2,40 +2,16 @@
 from the elliptic-integral closed form; the same in Cartesian coordinates with a constraint (DAE)."""
 import numpy as np
 import pytest
-from scipy.special import ellipkinc
-
-from imp_models import cartesian_pendulum, pendulum, wall
+from imp_models import cartesian_pendulum, pendulum, pendulum_wall_impacts, wall
 from mechdsl.impacts import simulate_with_contacts
 
 L, G, TH0, THW, E = 1.0, 9.81, -1.0, 0.3, 0.7
 XW = L * np.sin(THW)
 
 
-def time_between(th_a, th_b, amp):
-    """Time for a pendulum of amplitude amp to swing from th_a to th_b (monotonic part, |th| <= amp)."""
-    k = np.sin(amp / 2)
-    phi = lambda th: np.arcsin(np.clip(np.sin(th / 2) / k, -1, 1))  # noqa: E731
-    return np.sqrt(L / G) * abs(ellipkinc(phi(th_b), k * k) - ellipkinc(phi(th_a), k * k))
-
-
-def omega_at(th, amp):
-    return np.sqrt(2 * G / L * (np.cos(th) - np.cos(amp)))
-
-
 def closed_form_impacts(n):
-    """Impact times and angular speeds just before each impact."""
-    amp = abs(TH0)
-    t = time_between(TH0, THW, amp)
-    times, omegas = [], []
-    for _ in range(n):
-        w = omega_at(THW, amp)
-        times.append(t)
-        omegas.append(w)
-        # rebound with e*w: new amplitude on the other side, back to the wall
-        w2 = E * w
-        amp = np.arccos(np.cos(THW) - L * w2 ** 2 / (2 * G))
-        t += 2 * (time_between(THW, -amp, amp))
-    return np.array(times), np.array(omegas)
+    """Impact times and angular speeds just before each impact (elliptic integrals)."""
+    return pendulum_wall_impacts(n, L, G, TH0, THW, E)
 
 
 def check(r, omega_index=0, scale=1.0):

@@ -146,6 +146,19 @@ class Run:
         yb = np.asarray(sol(b), float).reshape(-1, 1)
         _, Vb = self.event_matrix(np.array([b]), yb)
         trig = [lab for lab, v in zip(labels, Vb[:, 0]) if v <= 0] or [labels[int(np.argmin(Vb[:, 0]))]]
+        # the offset only makes detection robust; the impact itself is located where the gap
+        # reaches zero (from the positive side), when that root is bracketed
+        gaps = [i for kind, i in trig if kind == "impact"]
+        if gaps and len(gaps) == len(trig):
+            def raw(t):
+                y = np.asarray(sol(t), float).reshape(-1, 1)
+                return float(np.min(self.s.gaps_at(np.array([t]), y[:self.n])[gaps, 0]))
+
+            lo = ts[j - 1]
+            r_lo = raw(lo)
+            if r_lo > 0:
+                a, _, nev = bracket_root(raw, lo, b, r_lo, raw(b), xtol)
+                self.stats["root_evaluations"] += nev + 2
         return a, np.asarray(sol(a), float).ravel(), trig
 
     def _count_event(self, t: float) -> None:
@@ -365,8 +378,9 @@ class Run:
             pending = [(tf, j) for tf, j in fix_times if j not in fixed]
             t_stop = min([t_end] + [tf for tf, _ in pending])
             pending_times = {tf for tf, _ in pending}
-            solver = make_solver(self.method_cls, s.rhs(list(self.active)), t, y, t_stop, o.rtol, o.atol,
-                                 o.max_step)
+            rows = list(self.active)
+            jac = s.jacobian(rows) if self.method_cls in ("Radau", "BDF", "LSODA") else None
+            solver = make_solver(self.method_cls, s.rhs(rows), t, y, t_stop, o.rtol, o.atol, o.max_step, jac=jac)
             self.stats["restarts"] += 1
             restart = False
             while solver.status == "running":

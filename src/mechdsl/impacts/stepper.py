@@ -38,7 +38,7 @@ def resolve_method(method: str | None) -> tuple[str, str]:
 
 
 def make_solver(cls_name: str, fun, t0: float, y0, t_bound: float, rtol: float, atol: float,
-                max_step: float | None = None, first_step: float | None = None):
+                max_step: float | None = None, first_step: float | None = None, jac=None):
     import numpy as np
     from scipy import integrate
 
@@ -48,4 +48,6 @@ def make_solver(cls_name: str, fun, t0: float, y0, t_bound: float, rtol: float, 
         kw["max_step"] = max_step
     if first_step is not None and first_step < (t_bound - t0):
         kw["first_step"] = first_step
+    if jac is not None and cls_name in ("Radau", "BDF", "LSODA"):
+        kw["jac"] = jac
     return cls(fun, t0, np.asarray(y0, float), t_bound, rtol=rtol, atol=atol, **kw)

@@ -62,6 +62,8 @@ class ContactSystem:
             raise MechError(Diagnostic("E702", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
         self.anchor = np.zeros(self.n_rows)
         self._gap_maps: dict[int, object] = {}
+        self._f_jac = None
+        self._jac_unavailable = False
         self.n_rhs = 0
 
     # ------------------------------------------------------------------ row bookkeeping
@@ -136,6 +138,30 @@ class ContactSystem:
             return np.concatenate([y[n:], qdd])
 
         return f
+
+    def jacobian(self, rows):
+        """d(rhs)/dy for implicit methods: analytic (CasADi) in free flight when the forward
+        dynamics are cheap to differentiate (explicit q'' or up to 12 coordinates), else None
+        (the solver then differences)."""
+        if rows or self._jac_unavailable:
+            return None
+        if self._f_jac is None:
+            import casadi as ca
+
+            eom = self.eom
+            if eom.qdd is None and self.n > 12:
+                self._jac_unavailable = True
+                return None
+            qdd = eom.qdd if eom.qdd is not None else ca.solve(eom.M, eom.bias)
+            y = ca.vertcat(eom.q, eom.qd)
+            J = ca.jacobian(ca.vertcat(eom.qd, qdd), y)
+            self._f_jac = FastFunction(ca.Function("rhs_jacobian", [eom.t, eom.q, eom.qd, eom.p], [J]))
+        n, f = self.n, self._f_jac
+
+        def jac(t, y):
+            return f(t, y[:n], y[n:], self.p)[0].reshape(2 * n, 2 * n)
+
+        return jac
 
     def multipliers(self, t, q, qd, rows) -> np.ndarray:
         return self.accel(t, q, qd, rows)[1]
