@@ -50,6 +50,12 @@ class EOM:
     model: ir.Model | None = None
     point_position: Callable[[str], object] | None = None   # point name -> SX (3,) in q, t, p
     notes: list[str] = field(default_factory=list)
+    point_velocity: Callable[[str], object] | None = None   # point name -> SX (3,) in q, qd, t, p
+    # scalars in q (and t, p) that vanish where a parametrization is singular (Euler-angle gimbal
+    # lock), by name "<joint>.gimbal"; a simulator reports when a run comes near zero.
+    singularity_monitors: dict[str, object] = field(default_factory=dict)
+    # drift measures that stay 0 in exact arithmetic ("<joint>.quaternion_norm" = |q| - 1)
+    invariants: dict[str, object] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
