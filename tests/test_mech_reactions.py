@@ -132,12 +132,14 @@ def test_multipliers_are_the_reactions():
            point("A.p", "A", (0.0, 0.1, 0.0)))
     grav = (ir.Gravity("g", v3(0, -9.81, 0)),)
     roles = ("x", "y", "z", "phi", "theta", "psi")
+    outs = tuple(ir.Output(f"{w[0]}{i}", ir.ReactionRef("j", w, i)) for w in ("force", "torque") for i in range(3))
+    cut_outs = tuple(ir.Output(f"{j}.{w[0]}{i}", ir.ReactionRef(j, w, i))
+                     for j in ("cut", "f") for w in ("force", "torque") for i in range(3))
     free = ir.Model("Free", coordinates=tuple(ir.Coordinate(f"f.{r}") for r in roles), bodies=(rod,), points=pts,
                     joints=(ir.Joint("f", "free", "anchor", "A.p", "world", "A",
                                      variables=tuple(coord_var(r, f"f.{r}") for r in roles)),
                             ir.Joint("cut", "revolute", "anchor", "A.p", "world", "A", axis=v3(0, 0, 1), closes_loop=True)),
-                    forces=grav, loops=(ir.Loop("L", "cut", ("A",)),))
-    outs = tuple(ir.Output(f"{w[0]}{i}", ir.ReactionRef("j", w, i)) for w in ("force", "torque") for i in range(3))
+                    forces=grav, loops=(ir.Loop("L", "cut", ("A",)),), outputs=cut_outs)
     tree = ir.Model("Tree", coordinates=(ir.Coordinate("phi"),), bodies=(rod,), points=pts,
                     joints=(ir.Joint("j", "revolute", "anchor", "A.p", "world", "A", axis=v3(0, 0, 1),
                                      variables=(coord_var("phi", "phi"),)),),
@@ -164,13 +166,34 @@ def test_multipliers_are_the_reactions():
         assert [lam["cut.fx"], lam["cut.fy"], lam["cut.fz"]] == pytest.approx(list(F), abs=1e-10)
         assert [lam["cut.tx"], lam["cut.ty"]] == pytest.approx(list(Tq[:2]), abs=1e-10)
         assert abs(Tq[2]) < 1e-12
+        # reaction outputs of the constrained model are SX in EOM.lam: the cut joint's in its
+        # child frame equals the tree's; the free joint carries nothing
+        ro = ca.Function("ro", [ef.q, ef.qd, ef.p, ef.lam], [ca.vertcat(*ef.outputs.values())])
+        v = np.array(ro(q, qd, ef.param_values, sol[6:])).ravel()
+        assert np.allclose(v[:6], r, atol=1e-10)
+        assert np.abs(v[6:]).max() < 1e-10
 
 
-def test_reaction_in_constrained_model_is_a_diagnostic():
-    model = cut_model("revolute")
-    model = ir.Model(model.name, coordinates=model.coordinates, bodies=model.bodies, points=model.points,
-                     joints=model.joints, forces=model.forces, loops=model.loops,
-                     outputs=(ir.Output("r", ir.ReactionRef("jA", "force", 0)),))
+def test_reaction_in_model_with_explicit_constraint_is_a_diagnostic():
+    model, _, _ = pendulum()
+    model = dataclasses.replace(model, constraints=(ir.Constraint("c", ir.Op("sub", (ir.Coord("phi"), const(0.1)))),))
     with pytest.raises(MechError) as ex:
         derive(model)
     assert ex.value.first.code == "E651"
+
+
+def test_four_bar_reaction_output_uses_multipliers():
+    e = load_model("four_bar").eom
+    assert e.lam is not None and e.lam.numel() == len(e.constraint_names) == 5
+    assert list(e.constraint_names) == ["close.fx", "close.fy", "close.fz", "close.tx", "close.ty"]
+    F = ca.vertcat(*[e.outputs[k] for k in e.outputs if k.startswith("F_close")])
+    assert ca.depends_on(F, e.lam)
+
+
+def load_model(name):
+    import os
+
+    import mechdsl
+
+    path = os.path.join(os.path.dirname(__file__), "..", "models", f"{name}.mech")
+    return mechdsl.load(path)

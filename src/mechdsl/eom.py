@@ -56,6 +56,9 @@ class EOM:
     singularity_monitors: dict[str, object] = field(default_factory=dict)
     # drift measures that stay 0 in exact arithmetic ("<joint>.quaternion_norm" = |q| - 1)
     invariants: dict[str, object] = field(default_factory=dict)
+    # multipliers of the constraints (DAE models): an SX symbol (m,) that outputs and
+    # `reactions` may depend on; the DAE simulator substitutes the computed multipliers.
+    lam: object | None = None
 
     @property
     def n(self) -> int:

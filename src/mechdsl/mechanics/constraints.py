@@ -57,8 +57,36 @@ def basis(a: ca.SX):
     return (e1, e2, e3), ("1", "2", "3")
 
 
-def loop_closures(model: ir.Model, tree: Tree, kin) -> tuple[list, list[str]]:
-    res, names = [], []
+class Closure:
+    """The equations of one cut joint and the directions of their multipliers."""
+
+    def __init__(self, joint: ir.Joint):
+        self.joint = joint
+        self.rows: list[tuple[int, str, ca.SX]] = []   # (row in g, 'f' | 't', unit direction in parent joint frame)
+
+    def loads(self, kin, lam) -> tuple[ca.SX, ca.SX]:
+        """(force, torque) on the child, world axes, as SX in lam (the parent gets the opposite)."""
+        R_P = kin.body_rot(self.joint.parent_body)
+        F, T = ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
+        for row, what, e in self.rows:
+            if what == "f":
+                F = F + lam[row] * e
+            else:
+                T = T + lam[row] * e
+        return ca.mtimes(R_P, F), ca.mtimes(R_P, T)
+
+
+def loop_closures(model: ir.Model, tree: Tree, kin, offset: int = 0) -> tuple[list, list[str], list[Closure]]:
+    """Residuals, names and per-joint multiplier directions; rows are numbered from `offset`."""
+    res, names, closures = [], [], []
+    E3 = ca.SX.eye(3)
+
+    def add(cl, exprs_, nm, what, dirs):
+        for x, n_, d in zip(exprs_, nm, dirs):
+            cl.rows.append((offset + len(res), what, d))
+            res.append(x)
+            names.append(n_)
+
     for joint in model.joints:
         if not joint.closes_loop:
             continue
@@ -68,39 +96,35 @@ def loop_closures(model: ir.Model, tree: Tree, kin) -> tuple[list, list[str]]:
         child_point = joint.child_body != "world" and model.body(joint.child_body).kind == "point"
         kind = J.kind_of(joint)
         jn = joint.name
+        clo = Closure(joint)
+        closures.append(clo)
+        xyz = [E3[:, i] for i in range(3)]
         if joint.variables or joint.kind == "frame":
             E, p = _joint_motion(tree, joint, kind.elements(joint, child_point))
             g = p - d
-            res += [g[i] for i in range(3)]
-            names += [f"{jn}.f{c}" for c in LETTERS]
+            add(clo, [g[i] for i in range(3)], [f"{jn}.f{c}" for c in LETTERS], "f", xyz)
             if not child_point:
                 gt = -vee(ca.mtimes(R_rel, E.T))
-                res += [gt[i] for i in range(3)]
-                names += [f"{jn}.t{c}" for c in LETTERS]
+                add(clo, [gt[i] for i in range(3)], [f"{jn}.t{c}" for c in LETTERS], "t", xyz)
             continue
         cl = kind.closure
         a = tree.unit(joint.axis)
         (e1, e2, e3), ln = basis(a)
         if cl.translation == "all":
-            res += [-d[i] for i in range(3)]
-            names += [f"{jn}.f{c}" for c in LETTERS]
+            add(clo, [-d[i] for i in range(3)], [f"{jn}.f{c}" for c in LETTERS], "f", xyz)
         elif cl.translation == "perp":
-            res += [-ca.dot(e1, d), -ca.dot(e2, d)]
-            names += [f"{jn}.f{ln[0]}", f"{jn}.f{ln[1]}"]
+            add(clo, [-ca.dot(e1, d), -ca.dot(e2, d)], [f"{jn}.f{ln[0]}", f"{jn}.f{ln[1]}"], "f", [e1, e2])
         elif cl.translation == "normal":
-            res += [-ca.dot(e3, d)]
-            names += [f"{jn}.f{ln[2]}"]
+            add(clo, [-ca.dot(e3, d)], [f"{jn}.f{ln[2]}"], "f", [e3])
         if child_point:
             continue
         if cl.rotation == "full":
             gt = -vee(R_rel)
-            res += [gt[i] for i in range(3)]
-            names += [f"{jn}.t{c}" for c in LETTERS]
+            add(clo, [gt[i] for i in range(3)], [f"{jn}.t{c}" for c in LETTERS], "t", xyz)
         elif cl.rotation == "axis":
             ra = ca.mtimes(R_rel, e3)
-            res += [ca.dot(ra, e2), -ca.dot(ra, e1)]
-            names += [f"{jn}.t{ln[0]}", f"{jn}.t{ln[1]}"]
-    return res, names
+            add(clo, [ca.dot(ra, e2), -ca.dot(ra, e1)], [f"{jn}.t{ln[0]}", f"{jn}.t{ln[1]}"], "t", [e1, e2])
+    return res, names, closures
 
 
 def _joint_motion(tree: Tree, joint: ir.Joint, elements) -> tuple[ca.SX, ca.SX]:

@@ -109,11 +109,14 @@ class _Deriver:
         for c in model.constraints:
             g_list.append(_guard(lambda c=c: env.translate(c.residual)))
             g_names.append(c.name)
-        lr, ln = loop_closures(model, tree, kin)
+        self.n_explicit = len(g_list)
+        lr, ln, self.closures = loop_closures(model, tree, kin, offset=len(g_list))
         g_list += lr
         g_names += ln
         self.constrained = bool(g_list)
         g = ca.vertcat(*[ca.SX(x) for x in g_list]) if g_list else None
+        self.g = g
+        self.lam = ca.SX.sym("lam", len(g_list)) if g_list else None
 
         outputs = {o.name: _guard(lambda o=o: ca.SX(env.translate(o.expr))) for o in model.outputs}
         e0 = self.env0
@@ -133,7 +136,7 @@ class _Deriver:
             fixed_q=tuple(c.fixed for c in model.coordinates),
             fixed_qd=tuple(c.speed_fixed for c in model.coordinates),
             route=route, model=model, point_position=kin.point_pos, point_velocity=kin.point_vel,
-            singularity_monitors=monitors, invariants=invariants, notes=notes)
+            singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam)
 
     # -- energies ---------------------------------------------------------------------
     def _kinetic_tree(self):
@@ -197,8 +200,9 @@ class _Deriver:
             M, bias = M + Mt, bias + bt
         return self._regularize(M, bias)
 
-    def _aba(self):
-        tree, q, qd = self.tree, self.q, self.qd
+    def _tau(self):
+        """Joint-space forces of the q-space forces Q_extra: tau = H^T Q (H = d qd / d nu)."""
+        tree, q = self.tree, self.q
         Qx = self.loads.Q_extra(self.env)
         tau = ca.SX.zeros(len(tree.dofs), 1)
         for lk in tree.links:
@@ -211,7 +215,12 @@ class _Deriver:
             else:
                 for k in lk.dofs:
                     tau[k] = Qx[tree.dofs[k].var.coord]
-        nud, self.acc = dynamics.aba(tree, self.kin, self.fext, tau)
+        return tau
+
+    def _aba(self):
+        tree, q, qd = self.tree, self.q, self.qd
+        self.tau = self._tau()
+        nud, self.acc = dynamics.aba(tree, self.kin, self.fext, self.tau)
         self.nud = nud
         qdd = ca.SX.zeros(self.n, 1)
         gam = None
@@ -262,26 +271,56 @@ class _Deriver:
 
     # -- reactions --------------------------------------------------------------------
     def _reaction(self, ref: ir.ReactionRef):
+        """Reaction outputs: RNEA after the forward dynamics.  In constrained models the loop
+        closures' multipliers act as loads (SX in EOM.lam, which the DAE solver substitutes)
+        and a cut joint's reaction is its multipliers turned into the child joint frame."""
         if not hasattr(self, "_reactions"):
-            if self.constrained:
-                raise MechError(Diagnostic("E651", f"reaction of joint '{ref.joint}' in a model with constraints",
-                                           help="reactions are computed for tree models in minimal coordinates only"))
-            if self.qdd is not None:
-                nud = self.nud
-            elif self.n <= SMALL_SOLVE:
-                B, gam = self._Bgamma()
-                M, bias = self._tmt() if self.route == "crba" else (self.M, self.bias)
-                nud = ca.mtimes(B, ca.solve(M, bias)) + gam
-            else:
-                raise MechError(Diagnostic("E650", f"reaction of joint '{ref.joint}' needs the explicit "
-                                                   f"forward dynamics, not available on route '{self.route}'"))
-            self._reactions = dynamics.joint_reactions(self.tree, self.kin, self.fext, nud)
+            self._reactions = self._all_reactions(ref)
         if ref.joint not in self._reactions:
-            raise MechError(Diagnostic("E652", f"no tree joint '{ref.joint}' for a reaction output"))
+            raise MechError(Diagnostic("E652", f"no joint '{ref.joint}' for a reaction output"))
         n, f = self._reactions[ref.joint]
         if ref.what not in ("force", "torque") or not 0 <= ref.i < 3:
             raise MechError(Diagnostic("E653", f"bad reaction component {ref.what}[{ref.i + 1}]"))
         return (f if ref.what == "force" else n)[ref.i]
+
+    def _all_reactions(self, ref) -> dict:
+        tree, kin = self.tree, self.kin
+        fext = dict(self.fext)
+        out = {}
+        if self.constrained:
+            if self.n_explicit:
+                raise MechError(Diagnostic("E651", f"reaction of joint '{ref.joint}' in a model with explicit "
+                                                   "constraint equations",
+                                           help="reactions are available for trees and for loops closed by joints"))
+            loads = []
+            for clo in self.closures:
+                F, T = clo.loads(kin, self.lam)
+                j = clo.joint
+                ic, rc = tree.point_in_link(j.child)
+                ip, rp = tree.point_in_link(j.parent)
+                loads += [(ic, rc, F, T), (ip, rp, -F, -T)]
+                Rc = kin.body_rot(j.child_body)
+                out[j.name] = (ca.mtimes(Rc.T, T), ca.mtimes(Rc.T, F))
+            for i, r, F, T in loads:
+                if i < 0:
+                    continue
+                n, f = tpl.point_force()(kin.R[i], r, F)
+                n = n + ca.mtimes(kin.R[i].T, T)
+                a = fext.get(i)
+                fext[i] = (n, f) if a is None else (a[0] + n, a[1] + f)
+        if self.route == "aba":
+            nud = dynamics.aba(tree, kin, fext, self.tau)[0] if self.constrained else self.nud
+        elif self.n <= SMALL_SOLVE:
+            B, gam = self._Bgamma()
+            M, bias = self._tmt() if self.route == "crba" else (self.M, self.bias)
+            if self.constrained:
+                bias = bias - ca.mtimes(ca.jacobian(self.g, self.q).T, self.lam)
+            nud = ca.mtimes(B, ca.solve(M, bias)) + gam
+        else:
+            raise MechError(Diagnostic("E650", f"reaction of joint '{ref.joint}' needs the explicit "
+                                               f"forward dynamics, not available on route '{self.route}'"))
+        out.update(dynamics.joint_reactions(tree, kin, fext, nud))
+        return out
 
     # -- checks and notes -------------------------------------------------------------
     def _check_inertia(self, loads: Loads):
