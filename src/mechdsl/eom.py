@@ -64,6 +64,19 @@ class EOM:
     def n(self) -> int:
         return len(self.coords)
 
+    def replace(self, **changes) -> "EOM":
+        """A shallow copy with some fields changed.  Unlike dataclasses.replace it does not
+        touch the other fields, so fields that derive computes on first access (M and bias
+        on the 'aba' route, whose O(N^2) CRBA a simulation does not need) stay lazy."""
+        import copy
+
+        new = copy.copy(self)
+        for k, v in changes.items():
+            if k not in self.__dataclass_fields__:
+                raise TypeError(f"EOM has no field {k!r}")
+            setattr(new, k, v)
+        return new
+
     @property
     def m(self) -> int:
         return 0 if self.g is None else int(self.g.numel())

@@ -354,10 +354,16 @@ class _Deriver:
 
 
 class _Lazy:
-    """A field computed on first access (see LazyEOM)."""
+    """A field computed on first access (see LazyEOM); the value is shared by copies."""
 
-    def __init__(self, fn, index=None):
-        self.fn, self.index = fn, index
+    def __init__(self, fn):
+        self.fn = fn
+        self.value = None
+
+    def get(self):
+        if self.value is None:
+            self.value = self.fn()
+        return self.value
 
 
 class LazyEOM(eom_mod.EOM):
@@ -369,7 +375,7 @@ class LazyEOM(eom_mod.EOM):
             d = object.__getattribute__(self, "__dict__")
             v = d.get(name)
             if isinstance(v, _Lazy):
-                r = v.fn()
+                r = v.get()
                 if name in ("M", "bias") and isinstance(r, tuple):
                     d["M"], d["bias"] = r
                 else:

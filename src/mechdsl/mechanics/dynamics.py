@@ -111,44 +111,51 @@ def rnea(tree: Tree, kin: Kinematics, fext: dict, nud=None) -> tuple[ca.SX, list
 
 
 def crba(tree: Tree) -> ca.SX:
-    """Joint-space mass matrix by composite rigid bodies (symmetric by construction)."""
+    """Joint-space mass matrix by composite rigid bodies (symmetric by construction).
+
+    One sweep from the leaves: a link's composite inertia times its motion subspace gives the
+    force columns of its own speeds; the columns of its whole subtree travel to the parent
+    together (one 3 x K transform per link, so O(N) Python calls), and the link's block row
+    of M is S_i^T times those columns."""
     links = tree.links
+    nv = len(tree.dofs)
     Ic = [(lk.I.A, lk.I.B, lk.I.C) for lk in links]
     for lk in reversed(links):
         if lk.parent >= 0:
             Ap, Bp, Cp = tpl.inertia_up()(lk.E, lk.r, *Ic[lk.index])
             a, b, c = Ic[lk.parent]
             Ic[lk.parent] = (a + Ap, b + Bp, c + Cp)
-    nv = len(tree.dofs)
-    entries: dict[tuple[int, int], object] = {}
-    for lk in links:
-        if not lk.dofs:
+    M = ca.SX(nv, nv)
+    sub: list = [None] * len(links)           # (Fw, Fv, columns) of the subtree, link coordinates
+    children = tree.children()
+    for lk in reversed(links):
+        i = lk.index
+        Fw, Fv, cols = [], [], []
+        if lk.dofs:
+            fw, fv, _ = tpl.crba_col(lk.k)(*Ic[i], lk.S_w, lk.S_v)
+            Fw.append(fw)
+            Fv.append(fv)
+            cols += lk.dofs
+        for c in children[i]:
+            if sub[c] is not None:
+                Fw.append(sub[c][0])
+                Fv.append(sub[c][1])
+                cols += sub[c][2]
+                sub[c] = None
+        if not cols:
             continue
-        Fw, Fv, blk = tpl.crba_col(lk.k)(*Ic[lk.index], lk.S_w, lk.S_v)
-        _put(entries, lk.dofs, lk.dofs, blk)
-        j = lk
-        while j.parent >= 0:
-            Fw, Fv = tpl.force_up(lk.k)(j.E, j.r, Fw, Fv)
-            j = links[j.parent]
-            if j.dofs:
-                blk = tpl.project(j.k, lk.k)(j.S_w, j.S_v, Fw, Fv)
-                _put(entries, j.dofs, lk.dofs, blk)
-                _put(entries, lk.dofs, j.dofs, blk.T)
-    if not entries:
-        return ca.SX(nv, nv)
-    keys = sorted(entries)
-    rows = [r for r, _ in keys]
-    cols = [c for _, c in keys]
-    sp = ca.Sparsity.triplet(nv, nv, rows, cols)
-    # triplet() orders nonzeros column-major
-    order = sorted(range(len(keys)), key=lambda a: (cols[a], rows[a]))
-    return ca.SX(sp, ca.vertcat(*[entries[keys[a]] for a in order]))
-
-
-def _put(entries, rows, cols, blk):
-    for a, r in enumerate(rows):
-        for b, c in enumerate(cols):
-            entries[(r, c)] = blk[a, b]
+        Fw, Fv = ca.horzcat(*Fw), ca.horzcat(*Fv)
+        if lk.dofs:
+            blk = ca.mtimes(lk.S_w.T, Fw) + ca.mtimes(lk.S_v.T, Fv)
+            M[lk.dofs, cols] = blk
+            M[cols, lk.dofs] = blk.T
+        if lk.parent >= 0:
+            Fv2 = ca.mtimes(lk.E, Fv)
+            Fw2 = ca.mtimes(lk.E, Fw)
+            if not all(lk.r[j].is_zero() for j in range(3)):
+                Fw2 = Fw2 + ca.mtimes(ca.SX(ca.skew(lk.r)), Fv2)
+            sub[i] = (Fw2, Fv2, cols)
+    return M
 
 
 def joint_reactions(tree: Tree, kin: Kinematics, fext: dict, nud) -> dict[str, tuple]:
