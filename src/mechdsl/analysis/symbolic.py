@@ -330,3 +330,113 @@ def _simp(e):
     if sp.count_ops(e) <= 120:
         return sp.simplify(e)
     return sp.expand(e)
+
+
+# --------------------------------------------------------------------------- printing
+
+
+def simplify_small(e, angles=(), limit: int = 80):
+    """A short readable form: the shorter of e and its trig normal form (:func:`trig_normal`),
+    then sympy.simplify when that is small."""
+    import sympy as sp
+
+    try:
+        best = e
+        if e.atoms(sp.sin, sp.cos):
+            cand = trig_normal(e, angles)
+            if sp.count_ops(cand) < sp.count_ops(best):
+                best = cand
+        if sp.count_ops(best) <= limit:
+            cand = sp.simplify(best)
+            if sp.count_ops(cand) <= sp.count_ops(best):
+                best = cand
+        return best
+    except Exception:  # pragma: no cover - sympy could not handle it; keep the expression
+        return e
+
+
+def trig_normal(e, angles=(), max_ops: int = 100000):
+    """Normal form of e as a polynomial in sin(x), cos(x) of the angle symbols x.
+
+    sin and cos of sums are expanded; every polynomial in s = sin x, c = cos x is reduced modulo
+    s^2 + c^2 - 1 (these polynomials form a Groebner basis, so the remainder is unique and is 0
+    exactly when e vanishes identically).  Rational expressions are treated as numerator /
+    denominator.  Of the two reductions (eliminate s^2 or c^2) the shorter is returned.
+    Expressions that are not polynomial in sin/cos, or too large, are returned expanded.
+    """
+    import sympy as sp
+
+    try:
+        if sp.count_ops(e) > max_ops:
+            return e
+        e = sp.expand_trig(e)
+        atoms = sorted({f.args[0] for f in e.atoms(sp.sin, sp.cos)} | set(),
+                       key=sp.default_sort_key)
+        if not atoms:
+            return sp.expand(e)
+        best = None
+        for elim_sin in (True, False):
+            try:        # polynomial in sin/cos with coefficients in everything else
+                cand = _reduce_trig(e, atoms, elim_sin)
+            except sp.PolynomialError:      # sin/cos in a denominator: numerator / denominator
+                num, den = sp.fraction(sp.together(e))
+                cand = _reduce_trig(num, atoms, elim_sin) / _reduce_trig(den, atoms, elim_sin)
+            if best is None or sp.count_ops(cand) < sp.count_ops(best):
+                best = cand
+        return best
+    except (sp.PolynomialError, sp.polys.polyerrors.PolificationFailed, RecursionError, TypeError):
+        return e
+
+
+def _reduce_trig(e, angles, elim_sin: bool):
+    import sympy as sp
+
+    s = [sp.Dummy(f"s{i}") for i in range(len(angles))]
+    c = [sp.Dummy(f"c{i}") for i in range(len(angles))]
+    rep = {}
+    for a, si, ci in zip(angles, s, c):
+        rep[sp.sin(a)] = si
+        rep[sp.cos(a)] = ci
+    x = sp.expand(e).xreplace(rep)
+    gens = (s + c) if elim_sin else (c + s)
+    basis = [si ** 2 + ci ** 2 - 1 for si, ci in zip(s, c)]
+    if x == 0:
+        return sp.Integer(0)
+    _, r = sp.reduced(x, basis, *gens, order="lex")
+    back = {si: sp.sin(a) for si, a in zip(s, angles)}
+    back.update({ci: sp.cos(a) for ci, a in zip(c, angles)})
+    return sp.expand(r.xreplace(back))
+
+
+def text(e) -> str:
+    """mechdsl-style text of a sympy expression (``^`` for powers)."""
+    import sympy as sp
+
+    return sp.sstr(e, order="none").replace("**", "^")
+
+
+def latex(e, lg: "SymbolicLagrangian | None" = None, extra: dict | None = None) -> str:
+    """LaTeX with der(x) printed as a dot and the momenta as p_x."""
+    import sympy as sp
+
+    names = {}
+    if lg is not None:
+        for c, s, sd in zip(lg.coords, lg.q, lg.qd):
+            names[s] = _latex_name(c)
+            names[sd] = r"\dot{" + _latex_name(c) + "}"
+        names[lg.t] = "t"
+    names.update(extra or {})
+    return sp.latex(e, symbol_names=names)
+
+
+def _latex_name(name: str) -> str:
+    import re
+
+    greek = {"alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "iota", "kappa",
+             "lambda", "mu", "nu", "xi", "pi", "rho", "sigma", "tau", "upsilon", "phi", "chi", "psi",
+             "omega", "Gamma", "Delta", "Theta", "Lambda", "Xi", "Pi", "Sigma", "Phi", "Psi", "Omega"}
+    m = re.fullmatch(r"([A-Za-z]+)_?(\d*)", name)
+    if m:
+        base = "\\" + m.group(1) if m.group(1) in greek else m.group(1)
+        return base + (f"_{{{m.group(2)}}}" if m.group(2) else "")
+    return r"\mathrm{" + name.replace("_", r"\_") + "}"
