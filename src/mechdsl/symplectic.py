@@ -32,16 +32,19 @@ METHODS = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rk4")
 SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre")
 CHUNK = 2000                  # steps a mapaccum call
 MAX_POINTS = 20001            # recorded points unless ``points`` asks otherwise
-_IGNORED = ("rtol", "atol", "tolerance", "max_step", "first_step")
+# options of the adaptive solvers that do not apply to a fixed step (noted in the metadata)
+_IGNORED = ("rtol", "atol", "tolerance", "max_step", "first_step", "formulation", "compiled", "reactions")
 
 
 def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: float | None = None, *,
                         t0: float = 0.0, p=None, q0=None, qd0=None, points: int | None = None,
-                        newton_tol: float = 1e-12, max_newton: int = 30, **opts) -> Result:
+                        newton_tol: float = 1e-12, max_newton: int = 30, outputs=None, t_start=None,
+                        **opts) -> Result:
     """Integrate ``eom`` from t0 to t_end with a fixed step (at most ``dt``).
 
     p: parameter overrides (dict or vector); q0/qd0: start values (default: the model's);
-    points: number of recorded points (default: every step, at most 20001).  Tolerance
+    points: number of recorded points (default: every step, at most 20001); outputs: names of
+    the model outputs to record (default: all); t_start: alias of t0.  Tolerance
     options of the adaptive solvers (rtol, atol) do not apply and are noted in the metadata.
     Returns a Result whose signals hold the energy T + V, the Hamiltonian H, the canonical
     momenta p_<coordinate>, the first integrals and the model outputs at every recorded point.
@@ -57,7 +60,8 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     unknown = sorted(k for k in opts if k not in _IGNORED)
     if unknown:
         raise UsageError(f"unknown option(s) for the fixed-step integrators: {', '.join(unknown)}")
-    t0, t_end = float(t0), float(t_end)
+    t0 = float(t_start) if t_start is not None else float(t0)
+    t_end = float(t_end)
     if not (math.isfinite(t_end) and t_end > t0):
         raise UsageError(f"stop time {t_end} must be after the start time {t0}")
     notes = []
@@ -138,7 +142,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     q = S[:n].T
     pm = S[n:2 * n].T
     qd = _map(ham.function("qd"), [q.T, pm.T, t[None, :], pv]).T
-    signals = _signals(eom, ham, q, qd, pm, t, pv)
+    signals = _signals(eom, ham, q, qd, pm, t, pv, outputs)
     wall = _time.perf_counter() - wall0
     stats = {"steps": int(done), "dt": h, "points": int(len(t)), "wall_time": wall,
              "implicit": evals_per_step is None}
@@ -174,7 +178,7 @@ def _map(f, args):
     return np.array(out, float).reshape(-1, N)
 
 
-def _signals(eom, ham, q, qd, pm, t, pv) -> dict[str, np.ndarray]:
+def _signals(eom, ham, q, qd, pm, t, pv, outputs=None) -> dict[str, np.ndarray]:
     import casadi as ca
 
     from .analysis.integrals import integral_signals
@@ -189,8 +193,13 @@ def _signals(eom, ham, q, qd, pm, t, pv) -> dict[str, np.ndarray]:
         if k not in names:
             names.append(k)
             exprs.append(v)
+    wanted = None if outputs is None else set(outputs)
+    if wanted is not None:
+        missing = sorted(wanted - set(eom.outputs or {}))
+        if missing:
+            raise UsageError(f"no output named {', '.join(missing)}; outputs: {', '.join(eom.outputs or {})}")
     for k, v in (eom.outputs or {}).items():
-        if k not in names:
+        if (wanted is None or k in wanted) and k not in names:
             names.append(k)
             exprs.append(v)
     f = ca.Function("sig", args, [ca.vertcat(*[ca.SX(e) for e in exprs])])

@@ -100,6 +100,7 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
 
     inputs: names of parameters or coordinates (a unit generalized force on that coordinate,
     also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
+    None: the parameters the model declares ``input``; () for none.
     """
     require_ode(eom, "linearization")
     from .equilibrium import Equilibrium, equilibria
@@ -143,6 +144,8 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
                          "through this state at this instant (frozen time, reference acceleration "
                          "included in K)")
     A = first_order(M, C, K)
+    if inputs is None:
+        inputs = declared_inputs(eom)
     names, Bq = _inputs(eom, inputs, q, qd, t, pv)
     B = np.vstack([np.zeros((n, Bq.shape[1])), np.linalg.solve(M, Bq)]) if n else np.zeros((0, Bq.shape[1]))
     return Linearization(coords=tuple(eom.coords), M=M, C=C, K=K, A=A, B=B, Bq=Bq, inputs=names,
@@ -206,6 +209,14 @@ def _integrate(eom, q0, qd0, pv, T):
         raise MechError(Diagnostic("E704", f"could not reach t = {T} from the start values: {sol.message}"))
     x = sol.y[:, -1]
     return x[:n], x[n:]
+
+
+def declared_inputs(eom) -> list[str]:
+    """The parameters declared `input` in the model (empty without a model)."""
+    model = getattr(eom, "model", None)
+    if model is None:
+        return []
+    return [p.name for p in model.real_parameters if getattr(p, "input", False) and p.name in eom.params]
 
 
 def _inputs(eom, inputs, q, qd, t, pv):
