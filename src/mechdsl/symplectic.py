@@ -193,11 +193,7 @@ def _signals(eom, ham, q, qd, pm, t, pv, outputs=None) -> dict[str, np.ndarray]:
         if k not in names:
             names.append(k)
             exprs.append(v)
-    wanted = None if outputs is None else set(outputs)
-    if wanted is not None:
-        missing = sorted(wanted - set(eom.outputs or {}))
-        if missing:
-            raise UsageError(f"no output named {', '.join(missing)}; outputs: {', '.join(eom.outputs or {})}")
+    wanted = None if outputs is None else set(outputs)     # other names (coordinates...) are recorded anyway
     for k, v in (eom.outputs or {}).items():
         if (wanted is None or k in wanted) and k not in names:
             names.append(k)

@@ -178,6 +178,7 @@ class Structure:
     angle_unit: tuple[bool, ...]     # declared unit rad
     symmetry: np.ndarray             # (n, k) orthonormal directions the equations are invariant along
     force_scale: float               # typical size of the generalized forces
+    stiffness_scale: float = 0.0     # typical size of d bias/dq
     quadratic_T: bool = True
     notes: list[str] = field(default_factory=list)
 
@@ -239,12 +240,14 @@ def structure(eom, p=None) -> Structure:
     rest = [r for r in rest if np.isfinite(r)]
     force_scale = float(np.median(rest)) if rest else 0.0
 
+    stiff = [float(np.max(np.abs(o[9]), initial=0.0)) for _, o in rows]
     periodic = tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale) for k in range(n))
     angle_unit = _declared_angles(eom)
     quad = _quadratic_T(pt, pv, pr, L_scale)
     st = Structure(n=n, autonomous=auto, lagrangian_time_free=lag_tf, has_T1=has_T1, has_T0=has_T0,
                    time_in_T=t_in_T, conservative=cons, periodic=periodic, angle_unit=angle_unit,
-                   symmetry=N, force_scale=force_scale, quadratic_T=quad)
+                   symmetry=N, force_scale=force_scale, stiffness_scale=float(np.median(stiff)),
+                   quadratic_T=quad)
     return st
 
 

@@ -153,7 +153,12 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         for i in range(n):
             if st.periodic[i]:
                 qs[i] = wrap_angle(qs[i])
-        if not any(_same(qs, f_[0], st.periodic) for f_ in found):
+        for i, f_ in enumerate(found):
+            if _same(qs, f_[0], st.periodic) or _joined(F, q0, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic):
+                if resid < f_[2]:
+                    found[i] = (qs, x[n:].copy(), resid)
+                break
+        else:
             found.append((qs, x[n:].copy(), resid))
 
     found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
@@ -166,6 +171,21 @@ def _same(a: np.ndarray, b: np.ndarray, periodic) -> bool:
         if per:
             d = wrap_angle(d)
         if abs(d) > 1e-6 * (1.0 + abs(x)):
+            return False
+    return True
+
+
+def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic) -> bool:
+    """Two nearby solutions of one degenerate equilibrium (slow convergence at a multiple root):
+    the residual stays below tol along the segment between them."""
+    d = np.array([wrap_angle(x - y) if per else x - y for x, y, per in zip(a, b, periodic)])
+    if np.max(np.abs(d), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(a), initial=0.0)):
+        return False
+    n = len(a)
+    for s in (0.25, 0.5, 0.75):
+        w = np.concatenate([b + s * d, alpha_b + s * (alpha_a - alpha_b)])
+        r = dense(F(w, q0, pv)).ravel()[:n]
+        if not np.all(np.isfinite(r)) or np.max(np.abs(r), initial=0.0) > tol:
             return False
     return True
 
@@ -187,7 +207,7 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes) -> Equilibrium:
         kind = "relative"
     Ksym = sym(Kr)
     heig = np.sort(np.linalg.eigvalsh(Ksym)) if Kr.size else np.zeros(0)
-    kscale = max(np.max(np.abs(K), initial=0.0), 1e-300)
+    kscale = max(np.max(np.abs(K), initial=0.0), st.stiffness_scale, 1e-300)
     circulatory = np.max(np.abs(K - K.T), initial=0.0) > 1e-7 * kscale
     A = reduced_first_order(M, C, K, N)
     lam = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)

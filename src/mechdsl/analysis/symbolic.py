@@ -222,9 +222,13 @@ def from_model(model) -> SymbolicLagrangian:
             return sum(sp.diff(inner, a) * b for a, b in zip(q, qd)) + sp.diff(inner, t)
         raise NotImplementedError(f"{type(n).__name__} in an equation-layer model")
 
+    def conv(expr):      # folded constants arrive as Floats (1/2 -> 0.5): back to exact numbers
+        e = to_sympy(expr, leaf)
+        return e.xreplace({f: exact_number(float(f)) for f in e.atoms(sp.Float)})
+
     T = V = D = sp.Integer(0)
     for term in model.terms:
-        e = to_sympy(term.expr, leaf)
+        e = conv(term.expr)
         if term.kind == "kinetic":
             T += e
         elif term.kind == "potential":
@@ -233,7 +237,7 @@ def from_model(model) -> SymbolicLagrangian:
             D += e
     Q = [sp.Integer(0)] * len(q)
     for f in model.forces:
-        Q[coords.index(f.coordinate)] += to_sympy(f.Q, leaf)
+        Q[coords.index(f.coordinate)] += conv(f.Q)
     return SymbolicLagrangian(tuple(coords), params, q, qd, t, p, T, V, D, Q, "ir")
 
 
