@@ -148,6 +148,17 @@ def integral_signals(eom, p=None) -> dict[str, object]:
     return {fi.name: fi.sx for fi in first_integrals(eom, p)}
 
 
+def describe_integrals(eom, p=None, expressions: bool = False) -> list[str]:
+    """Lines for ``mech check`` / ``mech equations``: one per first integral (name, kind, why)."""
+    out = []
+    for fi in first_integrals(eom, p):
+        line = f"{fi.name} ({fi.kind}): {fi.note}"
+        if expressions:
+            line += f"\n      {fi.name} = {fi.expression}"
+        out.append(line)
+    return out
+
+
 def _combination(w, coords) -> str:
     parts_ = []
     for v, c in zip(w, coords):

@@ -311,7 +311,8 @@ def symbolic_linearization(eom, q, qd, t, acc=None, inputs=(), exact: bool = Tru
     state[lg.t] = conv(t)
 
     def at(Mx):
-        return sp.Matrix(Mx.shape[0], Mx.shape[1], lambda i, j: _simp(Mx[i, j].subs(state)))
+        simp = _simp if exact else (lambda e: e)
+        return sp.Matrix(Mx.shape[0], Mx.shape[1], lambda i, j: simp(Mx[i, j].subs(state)))
 
     M = at(E.jacobian(qdd))
     C = at(E.jacobian(lg.qd))
