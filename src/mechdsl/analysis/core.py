@@ -192,8 +192,18 @@ class Structure:
 
 
 def structure(eom, p=None) -> Structure:
-    """Classify the system numerically at deterministic random states (see module doc)."""
+    """Classify the system numerically at deterministic random states (see module doc).
+
+    Cached on the EOM per parameter vector."""
     pv = param_vector(eom, p)
+    cache = eom.__dict__.setdefault("_analysis_cache", {})
+    key = ("structure", pv.tobytes())
+    if key not in cache:
+        cache[key] = _structure(eom, pv)
+    return cache[key]
+
+
+def _structure(eom, pv) -> Structure:
     pt = parts(eom)
     n = eom.n
     pr = Probe.states(n)
@@ -216,11 +226,10 @@ def structure(eom, p=None) -> Structure:
     L_scale = max(scale_of(5), 1e-300)
     bias_scale = max(scale_of(7), 1e-300)
     M_scale = max(scale_of(8), 1e-300)
-    qd_scale = 1.0
     lag_tf = _zero_or_sym(pt.L, eom.t) or bool(vanishes(col(0), L_scale))
     auto = (_zero_or_sym(eom.bias, eom.t) or bool(vanishes(col(1), bias_scale))) and \
         (_zero_or_sym(eom.M, eom.t) or bool(vanishes(col(2), M_scale)))
-    has_T1 = not (_is_structural_zero(pt.b) or bool(vanishes(col(3), L_scale / qd_scale)))
+    has_T1 = not (_is_structural_zero(pt.b) or bool(vanishes(col(3), L_scale)))
     has_T0 = not (_is_structural_zero(pt.T0) or bool(vanishes(col(4), L_scale)))
     t_in_T = not _zero_or_sym(eom.T, eom.t)
     if t_in_T:
@@ -258,7 +267,6 @@ def _zero_or_sym(expr, var) -> bool:
 
 
 def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: float) -> bool:
-    f = pt.fn("M_bias")
     shift = np.zeros(pt.n)
     shift[k] = 2 * math.pi
     diffs = []
@@ -266,7 +274,6 @@ def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: floa
         M1, b1 = pt.M_bias(pr.q[i], pr.qd[i], pr.t[i], pv)
         M2, b2 = pt.M_bias(pr.q[i] + shift, pr.qd[i], pr.t[i], pv)
         diffs.append(np.concatenate([(b1 - b2) / bias_scale, ((M1 - M2) / M_scale).ravel()]))
-    del f
     return bool(vanishes(diffs, 1.0, rel=1e-8))
 
 
@@ -359,12 +366,3 @@ def _rref_cols(B: np.ndarray) -> np.ndarray:
 def wrap_angle(x: float) -> float:
     """Angle in (-pi, pi]."""
     return math.pi - ((math.pi - x) % (2 * math.pi))
-
-
-def nice_number(v: float) -> float:
-    """Round values within 1e-12 (relative) of a small rational to it (clean tables, signs)."""
-    if not math.isfinite(v):
-        return v
-    if abs(v) < 1e-14:
-        return 0.0
-    return v

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from .core import dense, param_vector, parts, require_ode, structure, wrap_angle
+from .core import dense, param_vector, require_ode, structure, wrap_angle
 from .matrices import complement, reduced_first_order, second_order, sym
 
 MAX_GUESSES = 256
