@@ -39,10 +39,12 @@ _IGNORED = ("rtol", "atol", "tolerance", "max_step", "first_step", "formulation"
 def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: float | None = None, *,
                         t0: float = 0.0, p=None, q0=None, qd0=None, points: int | None = None,
                         newton_tol: float = 1e-12, max_newton: int = 30, outputs=None, t_start=None,
-                        **opts) -> Result:
+                        x0=None, progress=None, **opts) -> Result:
     """Integrate ``eom`` from t0 to t_end with a fixed step (at most ``dt``).
 
-    p: parameter overrides (dict or vector); q0/qd0: start values (default: the model's);
+    p: parameter overrides (dict or vector); q0/qd0: start values (default: the model's), or
+    x0: the full state [q; qd] or a dict {coordinate: value, "der(coordinate)": value}
+    (as mechdsl.simulate); progress: a callable(t, t_end) called after every chunk of steps;
     points: number of recorded points (default: every step, at most 20001); outputs: names of
     the model outputs to record (default: all); t_start: alias of t0.  Tolerance
     options of the adaptive solvers (rtol, atol) do not apply and are noted in the metadata.
@@ -78,7 +80,14 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     pv = param_vector(eom, p)
     ham = hamiltonian(eom, pv)
     n = eom.n
-    qs, qds = eom.start(pv)
+    out_names = _output_names(eom, outputs)
+    if x0 is not None:
+        from .simulate import start_vector
+
+        xs = start_vector(eom, x0, pv)
+        qs, qds = xs[:n], xs[n:]
+    else:
+        qs, qds = eom.start(pv)
     qs = qs if q0 is None else np.asarray(q0, float).ravel()
     qds = qds if qd0 is None else np.asarray(qd0, float).ravel()
     if qs.size != n or qds.size != n:
@@ -135,6 +144,8 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
             break
         x = X[:, -1]
         done += k
+        if callable(progress):
+            progress(t0 + done * h, t_end)
 
     S = np.array(rec_states).T                     # (2n + extra, npts)
     t = t0 + np.array(rec_idx, float) * h
@@ -142,7 +153,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     q = S[:n].T
     pm = S[n:2 * n].T
     qd = _map(ham.function("qd"), [q.T, pm.T, t[None, :], pv]).T
-    signals = _signals(eom, ham, q, qd, pm, t, pv, outputs)
+    signals = _signals(eom, ham, q, qd, pm, t, pv, out_names)
     wall = _time.perf_counter() - wall0
     stats = {"steps": int(done), "dt": h, "points": int(len(t)), "wall_time": wall,
              "implicit": evals_per_step is None}
@@ -157,8 +168,16 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
            "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
            "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
            "rk4": "classical Runge-Kutta (explicit, order 4, not symplectic)"}[method]
-    meta = {"model": eom.name, "method": method, "why": why, "dt": h, "symplectic": method in SYMPLECTIC,
-            "separable": ham.separable, "canonical_variables": True, "notes": notes + list(ham.notes)}
+    stats.update(_energy_drift(signals))
+    meta = {"model": eom.name, "route": getattr(eom, "route", ""), "coordinates": list(eom.coords),
+            "method": method, "method_reason": "requested", "why": why, "dt": h,
+            "symplectic": method in SYMPLECTIC, "separable": ham.separable, "canonical_variables": True,
+            "notes": notes + list(ham.notes), "warnings": [],
+            "options": {"t_start": t0, "t_end": t_end, "dt": h, "method": method, "points": int(len(t)),
+                        "outputs": list(out_names), "newton_tolerance": newton_tol,
+                        "parameters": dict(zip(eom.params, map(float, pv))),
+                        "start": {**dict(zip(eom.coords, map(float, qs))),
+                                  **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}}
     return Result(t=t, q=q, qd=qd, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=meta, failure=failure)
 
@@ -178,34 +197,64 @@ def _map(f, args):
     return np.array(out, float).reshape(-1, N)
 
 
-def _signals(eom, ham, q, qd, pm, t, pv, outputs=None) -> dict[str, np.ndarray]:
+def _output_names(eom, outputs) -> tuple[str, ...]:
+    """Model outputs to record (names of coordinates and energies are recorded anyway)."""
+    if outputs is None:
+        return tuple(eom.outputs or ())
+    if isinstance(outputs, str):
+        outputs = [outputs]
+    known = set(eom.coords) | {f"der({c})" for c in eom.coords} | {"energy", "kinetic_energy", "potential_energy"}
+    names = []
+    for o in outputs:
+        if o in (eom.outputs or {}):
+            if o not in names:
+                names.append(o)
+        elif o not in known:
+            from .diagnostics import did_you_mean
+
+            hint = did_you_mean(o, list(eom.outputs or ()) + sorted(known))
+            raise UsageError(f"'{o}' is not an output of {eom.name}" + (f"; {hint}" if hint else ""))
+    return tuple(names)
+
+
+def _signals(eom, ham, q, qd, pm, t, pv, out_names) -> dict[str, np.ndarray]:
+    """The simulator's signals (outputs, energies, singularity monitors: mechdsl.simulate's
+    compute_signals, so both kinds of Result look alike), then H, the canonical momenta
+    p_<coordinate> and the first integrals."""
     import casadi as ca
 
     from .analysis.integrals import integral_signals
+    from .codegen import casadi_functions
+    from .simulate import compute_signals
 
-    sig: dict[str, np.ndarray] = {}
     if len(t) == 0:
-        return sig
-    args = [eom.q, eom.qd, eom.t, eom.p]
-    names, exprs = ["energy"], [eom.T + eom.V]
-    Hf = ham.function("H")
-    for k, v in integral_signals(eom, pv).items():
-        if k not in names:
-            names.append(k)
-            exprs.append(v)
-    wanted = None if outputs is None else set(outputs)     # other names (coordinates...) are recorded anyway
-    for k, v in (eom.outputs or {}).items():
-        if (wanted is None or k in wanted) and k not in names:
-            names.append(k)
-            exprs.append(v)
-    f = ca.Function("sig", args, [ca.vertcat(*[ca.SX(e) for e in exprs])])
-    vals = _map(f, [q.T, qd.T, t[None, :], pv])
-    for i, k in enumerate(names):
-        sig[k] = vals[i]
-    sig["H"] = _map(Hf, [q.T, pm.T, t[None, :], pv])[0]
+        return {}
+    post = casadi_functions(eom, names=("energy", "outputs", "singularity"), outputs=out_names)
+    sig = compute_signals(eom, post, t, np.hstack([q, qd]), pv, out_names)
+    sig["H"] = _map(ham.function("H"), [q.T, pm.T, t[None, :], pv])[0]
     for i, c in enumerate(eom.coords):
-        sig.setdefault(f"p_{c}", pm[:, i].copy())
+        sig[f"p_{c}"] = pm[:, i].copy()
+    extra = {k: v for k, v in integral_signals(eom, pv).items() if k not in sig or k == "energy"}
+    extra.pop("energy", None)          # the same T + V as the simulator's "energy"
+    if extra:
+        f = ca.Function("fi", [eom.q, eom.qd, eom.t, eom.p], [ca.vertcat(*[ca.SX(v) for v in extra.values()])])
+        vals = _map(f, [q.T, qd.T, t[None, :], pv])
+        for i, k in enumerate(extra):
+            sig[k] = vals[i]
     return sig
+
+
+def _energy_drift(signals) -> dict:
+    E = signals.get("energy")
+    if E is None or len(E) == 0 or not np.isfinite(E).all():
+        return {}
+    dE = float(np.abs(E - E[0]).max())
+    scale = max(abs(float(E[0])), float(np.abs(signals.get("kinetic_energy", E)).max()),
+                float(np.abs(signals.get("potential_energy", E)).max()), 1e-300)
+    out = {"energy_drift": dE, "energy_drift_relative": dE / scale}
+    if "H" in signals and np.isfinite(signals["H"]).all():
+        out["hamiltonian_drift"] = float(np.abs(signals["H"] - signals["H"][0]).max())
+    return out
 
 
 # --------------------------------------------------------------------------- step functions

@@ -117,10 +117,12 @@ class Parts:
 def parts(eom) -> Parts:
     """The Parts of an EOM, built once and kept on the EOM instance."""
     cache = eom.__dict__.setdefault("_analysis_cache", {})
-    pt = cache.get("parts")
+    # EOM.replace copies share this dict: key by the symbolic content, not by the object
+    key = ("parts",) + tuple(id(x) for x in (eom.T, eom.V, eom.D, eom.Q, eom.q, eom.qd, eom.t, eom.p))
+    pt = cache.get(key)
     if pt is None:
         pt = Parts(eom)
-        cache["parts"] = pt
+        cache[key] = pt
     return pt
 
 
@@ -197,7 +199,7 @@ def structure(eom, p=None) -> Structure:
     Cached on the EOM per parameter vector."""
     pv = param_vector(eom, p)
     cache = eom.__dict__.setdefault("_analysis_cache", {})
-    key = ("structure", pv.tobytes())
+    key = ("structure", pv.tobytes(), id(parts(eom)))
     if key not in cache:
         cache[key] = _structure(eom, pv)
     return cache[key]
