@@ -170,14 +170,16 @@ def format_hamiltonian(model, latex: bool = False) -> str:
     pname = (lambda c: _latex(P[lg.coords.index(c)], lg, P)) if latex else (lambda c: _momentum_name(c, lg))
     lines = []
     if small:
-        det = simplify_small(sp.factor(Msym.det()), lg.q)
+        det = simplify_small(Msym.det(), lg.q)
+        fdet = sp.factor(det)
+        det = fdet if sp.count_ops(fdet) <= sp.count_ops(det) else det
         small = det != 0
     if small:
         adj = Msym.adjugate().applyfunc(lambda e: simplify_small(e, lg.q))
         dp = sp.Matrix(P) - bsym
-        qd_sol = [simplify_small(sp.expand(e), lg.q) / det for e in adj * dp]
+        qd_sol = [_compact(simplify_small(sp.expand(e), lg.q) / det) for e in adj * dp]
         sub = dict(zip(lg.qd, qd_sol))
-        H = (simplify_small(sp.expand((dp.T * adj * dp)[0, 0]), lg.q) / (2 * det)
+        H = (_compact(simplify_small(sp.expand((dp.T * adj * dp)[0, 0]), lg.q) / (2 * det))
              + simplify_small(lg.V - T0, lg.q))
         dLdq = [simplify_small(sp.diff(L, qi), lg.q) for qi in lg.q]
         pdot = [(a + Qi).xreplace(sub) for a, Qi in zip(dLdq, Qtot)]
@@ -220,6 +222,17 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         out += [f"    {k.ljust(w)} = {v}" for k, v in items]
     out.append(f"  note: {note}")
     return "\n".join(out) + "\n"
+
+
+def _compact(e):
+    """The shorter of e and its factored form (cancels common factors of a fraction)."""
+    import sympy as sp
+
+    try:
+        f = sp.factor(e)
+    except Exception:  # pragma: no cover - sympy could not factor; keep e
+        return e
+    return f if sp.count_ops(f) < sp.count_ops(e) else e
 
 
 def _momentum_name(c: str, lg) -> str:
