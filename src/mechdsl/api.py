@@ -192,7 +192,7 @@ class Model:
                 if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
                     _EOM_CACHE.pop(next(iter(_EOM_CACHE)))
                 _EOM_CACHE[key] = base
-            self._eom = dataclasses.replace(base, param_values=self.parameter_values, model=self.model)
+            self._eom = base.replace(param_values=self.parameter_values, model=self.model)   # keeps lazy fields lazy
         return self._eom
 
     def casadi(self, compiled: bool = False) -> dict:
