@@ -4,13 +4,11 @@ import numpy as np
 import pytest
 from scipy.special import ellipk
 
+import mechdsl
 from conftest import MODELS
 from imp_models import ball_closed_form
-
-pytest.importorskip("mechdsl.mechanics", reason="needs the mechanics (derive) from the tree-simulation issue")
-
-import mechdsl  # noqa: E402
-from mechdsl.impacts import simulate_with_contacts  # noqa: E402
+from mechdsl.cli import main as mech
+from mechdsl.impacts import simulate_with_contacts
 
 G = 9.81
 
@@ -110,3 +108,30 @@ def test_caught_rod_loses_a_quarter():
     T0 = 0.5 * 2 * 2 ** 2
     assert ev["energy_change"] == pytest.approx(-T0 / 4, rel=1e-10)
     assert r["der(fly.phi)"][-1] == pytest.approx(3 * 2 / 2, rel=1e-8)
+
+
+def test_model_simulate_dispatches_to_contacts():
+    """Model.simulate (and mechdsl.simulate.simulate) route models with contacts here, with the
+    scene's contact settings."""
+    m = mechdsl.load(MODELS / "newtons_cradle.mech", scene="Cradle3")
+    r = m.simulate(0.5)
+    assert r.metadata["simulator"] == "mechdsl.impacts"
+    assert r.metadata["options"]["impact_order"] == "sequential"
+    assert [e["contact"] for e in r.events if e["kind"] == "impact"] == ["touch[1]", "touch[2]"]
+    r = m.simulate(0.5, impact_order="simultaneous")
+    assert [e["contact"] for e in r.events if e["kind"] == "impact"] == ["touch[1], touch[2]"]
+
+
+def test_cli_prints_events(capsys, tmp_path):
+    out = tmp_path / "ball.csv"
+    rc = mech(["simulate", str(MODELS / "bouncing_ball.mech"), "--t-end", "2", "-o", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0
+    assert "events: 3 (3 impact floor); total energy change" in text
+    assert "0.451523641  impact  floor" in text
+    import json
+
+    side = json.loads((tmp_path / "ball.json").read_text())
+    assert [e["kind"] for e in side["events"]] == ["impact"] * 3
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[:3] == ["time", "drop.s", "der(drop.s)"] and "floor.force" in header

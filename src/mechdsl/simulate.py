@@ -40,6 +40,11 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     methods), integrator_options (dict passed to the back end), singularity_threshold.
     """
     method = str(method or "auto").lower()
+    if eom.model is not None and eom.model.contacts:      # unilateral contacts, fixations (docs/contacts.md)
+        from .impacts import simulate_with_contacts
+
+        return simulate_with_contacts(eom, None, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method,
+                                      points=points, outputs=outputs, x0=x0, p=p, progress=progress, **opts)
     if eom.g is not None:
         return _dispatch("mechdsl.dae", "simulate_dae", "constrained models (DAE)", eom, t_end,
                          t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,

@@ -66,6 +66,8 @@ def run(args) -> int:
         opts["dt"] = _first(args.dt, settings.get("dt"))
     if args.compiled:
         opts["compiled"] = True
+    if eom.model is not None and eom.model.contacts:     # scene settings of contacts (docs/contacts.md)
+        opts.update({k: settings[k] for k in ("rest_speed", "impact_order") if settings.get(k) is not None})
     from ..simulate import simulate
 
     progress = (not args.no_progress) and sys.stderr.isatty()
@@ -86,6 +88,10 @@ def run(args) -> int:
         plot_result(r, args.plot, overwrite=args.force)
         written.append(args.plot)
     print(summary(r, written))
+    if r.events:
+        from ..impacts import print_events
+
+        print_events(r)
     return 0 if r.success else 1
 
 

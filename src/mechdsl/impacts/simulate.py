@@ -87,18 +87,56 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     res = R.Result(t=grid[:m].copy(), q=Y[:, :n].copy(), qd=Y[:, n:].copy(), coordinates=tuple(eom.coords),
                    events=run.events, failure=failure)
     res.signals = _signals(eom, system, grid[:m], Y, run.out_force[:m], run.out_lam[:m], out_names)
-    res.stats = dict(run.stats, rhs_evaluations=system.n_rhs, wall_time=wall, events=len(run.events),
+    res.stats = dict(run.stats, rhs_evals=system.n_rhs, points=m, wall_time=wall, events=len(run.events),
                      impacts=sum(1 for e in run.events if e["kind"] == "impact"))
-    res.metadata = {"model": eom.name, "method": method_cls.lower(), "method_requested": method or "auto",
-                    "rtol": opts.rtol, "atol": opts.atol, "t_start": t_start, "t_end": t_end, "points": npts,
-                    "contacts": [g.name for g in gaps], "fixations": [f.label for f in fixes],
-                    "impact_order": opts.impact_order, "rest_speed": opts.rest_speed, "gap_tol": opts.touch,
-                    "event_offset": opts.offset, "simulator": "mechdsl.impacts"}
-    if note:
-        res.metadata["method_note"] = note
-    if gaps and eom.point_position is None and any(g.kind != "gap" for g in gaps):
-        res.metadata["note"] = "contacts given as gap expressions"
+    conservative = _conservative(eom)
+    if conservative and m:
+        res.stats.update(_drift_between_events(res, run.events))
+    reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+    res.metadata = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords), "warnings": [],
+                    "method": method_cls.lower(), "method_reason": reason, "conservative": conservative,
+                    "simulator": "mechdsl.impacts",
+                    "options": {"t_start": t_start, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol,
+                                "points": npts, "method": method or "auto", "outputs": list(out_names),
+                                "impact_order": opts.impact_order, "rest_speed": opts.rest_speed,
+                                "gap_tol": opts.touch, "event_offset": opts.offset,
+                                "parameters": dict(zip(eom.params, map(float, pv))),
+                                "start": {**dict(zip(eom.coords, map(float, qs))),
+                                          **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}},
+                    "contacts": [g.name for g in gaps], "fixations": [f.label for f in fixes]}
+    try:
+        from ..simulate import versions
+
+        res.metadata["versions"] = versions()
+    except ImportError:  # pragma: no cover - the ODE simulator is part of mechdsl
+        pass
     return res
+
+
+def _conservative(eom) -> bool:
+    """No dissipation, no other generalized forces, no explicit time (impacts aside)."""
+    import casadi as ca
+
+    try:
+        return bool(ca.SX(eom.D).is_zero() and ca.SX(eom.Q).is_zero()
+                    and not ca.depends_on(ca.vertcat(ca.SX(eom.T), ca.SX(eom.V)), eom.t))
+    except Exception:  # noqa: BLE001 -- a non-SX energy: make no claim
+        return False
+
+
+def _drift_between_events(res, events) -> dict:
+    """Energy drift of the integration alone: E(t) - E(0) minus the changes at the events up to t."""
+    E = res.signals.get("energy")
+    if E is None or not len(E) or not np.isfinite(E).all():
+        return {}
+    times = np.array([e["time"] for e in events])
+    jumps = np.cumsum([float(e.get("energy_change", 0.0)) for e in events])
+    k = np.searchsorted(times, res.t, side="right")
+    expected = E[0] + np.where(k > 0, jumps[np.maximum(k - 1, 0)] if len(jumps) else 0.0, 0.0)
+    dE = float(np.max(np.abs(E - expected)))
+    scale = max(abs(float(E[0])), float(np.max(np.abs(res.signals["kinetic_energy"]))),
+                float(np.max(np.abs(res.signals["potential_energy"]))), 1e-300)
+    return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
 def output_names(eom, gaps, outputs) -> list[str]:
@@ -183,8 +221,10 @@ def _signals(eom, system, t, Y, force, lam, out_names) -> dict[str, np.ndarray]:
         row = 0
         for name, c in zip(exprs, cols):
             k = int(c.numel())
-            v = vals[row:row + k].T
-            out[name] = v[:, 0] if k == 1 else v
+            if k == 1:
+                out[name] = vals[row]
+            else:
+                out.update({f"{name}[{i + 1}]": vals[row + i] for i in range(k)})
             row += k
     for name, i in forced.items():
         out[name] = force[:, i].copy()
