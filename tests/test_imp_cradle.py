@@ -94,3 +94,22 @@ def test_inelastic_cradle_loses_the_closed_form_energy():
     W = 2 / (M * L ** 2) * L ** 2          # G = L [-1, 1] at the bottom, M = m L^2 I
     assert ev["energy_change"] == pytest.approx(-(1 - 0.25) / 2 * u ** 2 / W, rel=1e-9)
     assert ev["speed_after"] == pytest.approx(-0.5 * u, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_sequential_cradle_keeps_swinging_for_20_seconds():
+    """Long run (slow): 5 balls, e = 1, pairwise impacts.  Every half period of a pendulum of
+    the release amplitude, N - 1 impacts pass the momentum through the chain; energy is kept."""
+    N = 5
+    eom, contacts = cradle(N, L=L, g=G, m=M, theta0=TH0, e=1.0)
+    quarter = np.sqrt(L / G) * ellipk(np.sin(-TH0 / 2) ** 2)
+    r = simulate_with_contacts(eom, contacts, 20.0, points=2001, rtol=1e-10, atol=1e-12, impact_order="sequential")
+    assert r.success, r.message
+    imp = [e for e in r.events if e["kind"] == "impact"]
+    groups = int((20.0 - quarter) // (2 * quarter)) + 1
+    assert len(imp) == groups * (N - 1)
+    times = np.array([e["time"] for e in imp]).reshape(groups, N - 1)
+    assert times == pytest.approx(np.repeat(quarter + 2 * quarter * np.arange(groups), N - 1).reshape(groups, N - 1),
+                                  abs=1e-7)
+    assert np.max(np.abs(r["energy"] - r["energy"][0])) < 1e-8
+    assert np.max(np.abs(r.q)) <= -TH0 + 1e-8

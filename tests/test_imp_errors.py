@@ -78,3 +78,45 @@ def test_events_table():
     buf = io.StringIO()
     print_events(r, file=buf)
     assert buf.getvalue() == events_table(r.events)
+
+
+def test_gap_functions_from_ir():
+    """Gap, Jacobian and normal speed of a sphere contact, against the geometry by hand."""
+    import casadi as ca
+
+    from imp_models import cradle
+    from mechdsl.impacts import contact_gaps, gap_jacobian
+
+    eom, contacts = cradle(2, L=1.0, r=0.05, theta0=-0.3)
+    (cg,), fixes = contact_gaps(eom, contacts)
+    assert fixes == [] and cg.name == "c1" and cg.kind == "point"
+    G, u = gap_jacobian(eom, cg)
+    f = ca.Function("f", [eom.q, eom.qd, eom.t, eom.p], [cg.gap, G, u])
+    th = np.array([-0.2, 0.1])
+    w = np.array([1.0, -0.5])
+    gap, Gv, uv = (np.array(x, float).ravel() for x in f(th, w, 0.0, eom.param_values))
+    x1 = np.array([np.sin(th[0]), -np.cos(th[0])])
+    x2 = np.array([0.1 + np.sin(th[1]), -np.cos(th[1])])
+    d = np.linalg.norm(x2 - x1)
+    assert gap[0] == pytest.approx(d - 0.1)
+    n = (x2 - x1) / d
+    dx1 = np.array([np.cos(th[0]), np.sin(th[0])])
+    dx2 = np.array([np.cos(th[1]), np.sin(th[1])])
+    assert Gv == pytest.approx([-n @ dx1, n @ dx2])
+    assert uv[0] == pytest.approx(-n @ dx1 * w[0] + n @ dx2 * w[1])
+
+
+def test_singular_mass_matrix_is_a_failure_not_a_traceback():
+    """A mass matrix that becomes singular (m(y) = y, reaching 0 at the floor): the run stops
+    with a failure naming the cause, and keeps the points before it."""
+    import casadi as ca
+
+    from mechdsl.eom import from_lagrangian
+
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    eom = from_lagrangian("Odd", ["y"], [], [], q, qd, t, p, T=0.5 * (q[0] - 0.5) * qd[0] ** 2, V=9.81 * q[0],
+                          q0=[1.0], qd0=[0.0], point_position=lambda n: ca.vertcat(0, q[0], 0))
+    floor = ir.Contact("floor", "gap", (("gap", ir.Coord("y")), ("e", ir.Const(0.5))))
+    r = simulate_with_contacts(eom, [floor], 2.0, points=21)
+    assert not r.success
+    assert r.failure.time < 2.0 and len(r.t) < 21

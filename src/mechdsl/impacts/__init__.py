@@ -9,12 +9,13 @@ accelerations, projection), impact_map (Lagrange's impact equations, any number 
 contacts), rootfind and run (event location on dense output and the hybrid loop),
 stepper (scipy one-step solvers), table (events summary).  Design: docs/internals/impacts.md.
 """
-from .gaps import ContactGap, Fixation, contact_gaps, gap_from_ir
+from .gaps import ContactGap, Fixation, contact_gaps, gap_from_ir, gap_jacobian
 from .impact_map import ImpactError, ImpactSolution, solve_impact
 from .simulate import simulate_with_contacts
 from .table import events_table, print_events
 
-__all__ = ["simulate_with_contacts", "ContactGap", "Fixation", "contact_gaps", "gap_from_ir", "solve_impact",
+__all__ = ["simulate_with_contacts", "ContactGap", "Fixation", "contact_gaps", "gap_from_ir", "gap_jacobian",
+           "solve_impact",
            "ImpactSolution", "ImpactError", "events_table", "print_events", "has_contacts"]
 
 

@@ -168,3 +168,12 @@ def param_env(eom) -> dict[str, float]:
     env = {p.name: p.value for p in eom.model.parameters} if eom.model is not None else {}
     env.update({n: float(v) for n, v in zip(eom.params, eom.param_values)})
     return env
+
+
+def gap_jacobian(eom, contact: ContactGap):
+    """G = d(gap)/dq (a 1 x n row) and the normal speed u = G q' + d(gap)/dt, as SX in q, qd, t, p."""
+    import casadi as ca
+
+    g = ca.SX(contact.gap)
+    G = ca.jacobian(g, eom.q)
+    return G, ca.mtimes(G, eom.qd) + ca.jacobian(g, eom.t)

@@ -38,6 +38,7 @@ class Run:
         self.grid = np.asarray(grid, float)
         self.method_cls = method_cls
         self.progress = progress
+        self.t_now = math.nan              # time reached (for failure reports)
         n, k = system.n, system.k
         self.closed = [False] * k
         self.fix_sel: dict[int, list[int]] = {}
@@ -367,6 +368,7 @@ class Run:
         fix_times = sorted((f.time, j) for j, f in enumerate(s.fixations))
         fixed = set()
         t = t0
+        self.t_now = t0
         for tf, j in fix_times:
             if tf <= t0:
                 q, qd = self.fixate(t0, q, qd, j)
@@ -389,6 +391,7 @@ class Run:
                     raise RunFailure(solver.t, "integrator failed", str(msg))
                 self.stats["steps"] += 1
                 ta, tb = solver.t_old, solver.t
+                self.t_now = ta
                 if self.progress is not None:
                     self.progress(tb, t_end)
                 sol = solver.dense_output()

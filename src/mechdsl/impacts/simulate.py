@@ -80,6 +80,9 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
         run.run(t_start, t_end, qs, qds)
     except RunFailure as f:
         failure = R.Failure(time=float(f.time), cause=f.cause, detail=f.detail)
+    except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as ex:
+        failure = R.Failure(time=float(run.t_now), cause="numerical failure",
+                            detail=f"{type(ex).__name__}: {ex} (a singular mass matrix or constraint Jacobian?)")
     wall = _time.perf_counter() - wall
     m = run.gi
     Y = run.out_y[:m]
