@@ -388,7 +388,8 @@ class Run:
             while solver.status == "running":
                 msg = solver.step()
                 if solver.status == "failed":
-                    raise RunFailure(solver.t, "integrator failed", str(msg))
+                    where = ", ".join(f"{c} = {v:.6g}" for c, v in zip(s.eom.coords, solver.y[:n]))
+                    raise RunFailure(solver.t, "integrator failed", f"{msg}; at {where}")
                 self.stats["steps"] += 1
                 ta, tb = solver.t_old, solver.t
                 self.t_now = ta
