@@ -173,7 +173,7 @@ class Run:
         else:
             t0, cnt = t, 1
         self._burst = (t0, cnt)
-        if cnt > 50 * (self.s.k + len(self.s.fixations) + 1):
+        if cnt > 200 * (self.s.k + len(self.s.fixations) + 1):
             raise RunFailure(t, "events do not settle at one instant",
                              f"{cnt} events at t = {t:.12g}; contacts may be contradictory")
 
