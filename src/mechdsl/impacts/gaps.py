@@ -83,7 +83,7 @@ def contact_gaps(eom, contacts=None) -> tuple[list[ContactGap], list[Fixation]]:
     names = [g.name for g in gaps] + [f.label for f in fixes]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise MechError(Diagnostic("E702", f"contact name '{dup[0]}' is used twice"))
+        raise MechError(Diagnostic("E862", f"contact name '{dup[0]}' is used twice"))
     return gaps, fixes
 
 
@@ -105,7 +105,7 @@ def _query(eom):
 
 def point_position(eom, name: str):
     if eom.point_position is None:
-        raise MechError(Diagnostic("E702", f"the equations of '{eom.name}' carry no point kinematics, so a contact "
+        raise MechError(Diagnostic("E862", f"the equations of '{eom.name}' carry no point kinematics, so a contact "
                                            f"cannot refer to the point '{name}'",
                                    help="give the contact a gap expression instead: Contact c(gap = ..., e = ...)"))
     return eom.point_position(name)
@@ -127,15 +127,15 @@ def gap_from_ir(eom, c: ir.Contact) -> ContactGap:
     if c.get("gap") is not None:
         expr = c.get("gap")
         if X.has_speed(expr):
-            raise MechError(Diagnostic("E702", f"the gap of contact '{c.name}' may depend on coordinates and time, "
+            raise MechError(Diagnostic("E862", f"the gap of contact '{c.name}' may depend on coordinates and time, "
                                                "not on speeds", span))
         return ContactGap(name=c.name, gap=tr(expr), e=e, kind="gap", span=span)
     if surface not in SURFACES:
-        raise MechError(Diagnostic("E702", f"contact '{c.name}': unknown surface '{surface}'", span,
+        raise MechError(Diagnostic("E862", f"contact '{c.name}': unknown surface '{surface}'", span,
                                    "surfaces: " + ", ".join(SURFACES)))
     point = _value(c, "point")
     if point is None:
-        raise MechError(Diagnostic("E702", f"contact '{c.name}' needs a point (or a gap expression)", span))
+        raise MechError(Diagnostic("E862", f"contact '{c.name}' needs a point (or a gap expression)", span))
     xp = point_position(eom, point)
     r = tr(_value(c, "radius", 0.0))
     if surface == "plane":

@@ -69,7 +69,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     gap0 = system.gap(t_start, qs)
     for g, v in zip(gaps, gap0):
         if v < -opts.touch:
-            raise MechError(Diagnostic("E701", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
+            raise MechError(Diagnostic("E861", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
                                        g.span or _no_span(),
                                        "change the start values so that every gap is >= 0"))
     grid = np.linspace(t_start, t_end, npts)

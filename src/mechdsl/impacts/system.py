@@ -59,7 +59,7 @@ class ContactSystem:
             from ..diagnostics import Diagnostic, MechError
 
             bad = [g.name for g, e in zip(self.gaps, self.e) if not 0 <= e <= 1]
-            raise MechError(Diagnostic("E702", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
+            raise MechError(Diagnostic("E862", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
         self.anchor = np.zeros(self.n_rows)
         self._gap_maps: dict[int, object] = {}
         self._f_jac = None
