@@ -157,3 +157,19 @@ def test_missing_compiler_falls_back_with_a_note(monkeypatch, tmp_path):
     r = simulate(e, 1.0, compiled=True, points=3)
     assert r.success and r.metadata["options"]["compiled"] is False
     assert any("compiled code unavailable" in w for w in r.metadata["warnings"])
+
+
+def test_bound_fast_function_equals_plain_calls():
+    e = chain(2)
+    f = casadi_functions(e)
+    rhs = FastFunction(f["ode"]).bind(p=e.param_values)
+    jac = FastFunction(f["ode_jacobian"]).bind(p=e.param_values)
+    for _ in range(3):
+        x = RNG.uniform(-2, 2, 4)
+        a = rhs(0.5, x)
+        b = rhs(0.7, x + 1)
+        np.testing.assert_array_equal(a, np.array(f["ode"](0.5, x, e.param_values)).ravel())
+        np.testing.assert_array_equal(b, np.array(f["ode"](0.7, x + 1, e.param_values)).ravel())
+        np.testing.assert_array_equal(jac(0.5, x), np.array(f["ode_jacobian"](0.5, x, e.param_values)))
+    with pytest.raises(KeyError):
+        FastFunction(f["ode"]).bind(q=1)

@@ -291,52 +291,72 @@ def compile_functions(funcs, tag: str = "model"):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode'), compile, load.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
-    The library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags;
-    it is written to a temporary name and renamed into place (safe under concurrency).
+    The Functions and the Jacobians go into two translation units, each optimized by its own
+    size (``cflags_for``) and compiled in parallel, then linked into one shared library.  The
+    library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
+    built in a temporary folder and renamed into place (safe under concurrency).
     """
     ca = _ca()
     cc = find_compiler()
     if cc is None:
         return None, ("no C compiler found (looked for $CC, gcc, cc, clang); "
                       "using the CasADi virtual machine instead of compiled code"), None
-    cg = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
+    units = []
+    main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
     for f in funcs:
-        cg.add(f)
-        if f.name() == "ode":
-            cg.add(f.jacobian())
-    code = cg.dump()
-    flags = cflags_for(len(code))
+        main.add(f)
+    units.append(main.dump())
+    jacs = [f.jacobian() for f in funcs if f.name() == "ode"]
+    if jacs:
+        jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
+        for j in jacs:
+            jg.add(j)
+        units.append(jg.dump())
+    flags = [cflags_for(len(code)) for code in units]
     try:
         version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
         version = version.splitlines()[0] if version else cc
     except (OSError, subprocess.SubprocessError):
         version = cc
-    digest = hashlib.sha256("\n".join([code, " ".join(flags), version, ca.__version__]).encode()).hexdigest()[:24]
+    key = "\n".join([*units, repr(flags), version, ca.__version__])
+    digest = hashlib.sha256(key.encode()).hexdigest()[:24]
     d = cache_dir()
     lib = d / f"{digest}.so"
-    note = None
-    if not lib.exists():
+    size_kb = sum(len(c) for c in units) // 1000
+    if lib.exists():
+        note = f"loaded compiled model from cache {lib}"
+    else:
         try:
             d.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
-                src = Path(tmp) / "mechdsl_model.c"
-                src.write_text(code)
+                procs, objs = [], []
+                for i, (code, fl) in enumerate(zip(units, flags)):
+                    src = Path(tmp) / f"unit{i}.c"
+                    src.write_text(code)
+                    obj = Path(tmp) / f"unit{i}.o"
+                    objs.append(obj)
+                    procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", str(src), "-o", str(obj)],
+                                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+                errors = []
+                for pr in procs:
+                    out, err = pr.communicate()
+                    if pr.returncode != 0:
+                        errors.append((err or out).strip())
                 out = Path(tmp) / "lib.so"
-                r = subprocess.run([cc, *flags, "-fPIC", "-shared", str(src), "-o", str(out), "-lm"],
-                                   capture_output=True, text=True)
-                if r.returncode != 0:
-                    tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
-                    return None, (f"C compilation failed ({cc} {' '.join(flags)}): {' | '.join(tail)}; "
-                                  "using the CasADi virtual machine"), None
+                if not errors:
+                    r = subprocess.run([cc, "-shared", *map(str, objs), "-o", str(out), "-lm"],
+                                       capture_output=True, text=True)
+                    if r.returncode != 0:
+                        errors.append((r.stderr or r.stdout).strip())
+                if errors:
+                    tail = " | ".join(errors[0].splitlines()[-3:])
+                    return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
                 os.replace(out, lib)
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
-        note = f"compiled {len(code) // 1000} kB of C with {Path(cc).name} {' '.join(flags)} into {lib}"
-    else:
-        note = f"loaded compiled model from cache {lib}"
-    loaded = {}
-    for f in funcs:
-        loaded[f.name()] = ca.external(f.name(), str(lib))
+        note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
+                f"({', '.join(' '.join(f) for f in flags)}) into {lib}")
+    loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     return loaded, note, str(lib)
 
 
@@ -372,6 +392,44 @@ class FastFunction:
             self._buf.set_res(i, memoryview(r))
         self._views = [r if s[1] == 1 else r.reshape(s[1], s[0]).T for r, s in zip(self._res, self._shapes)]
         self._single = len(self._res) == 1
+
+    def bind(self, **fixed):
+        """A faster callable of the remaining inputs, with ``fixed`` inputs (by name) set once.
+
+        E.g. ``rhs = FastFunction(f["ode"]).bind(p=p)`` gives ``rhs(t, x)`` for scipy.  The
+        closure shares this object's buffers: do not mix it with direct calls.
+        """
+        names = self.function.name_in()
+        for k, v in fixed.items():
+            if k not in names:
+                raise KeyError(f"{self.function.name()} has no input {k!r} (inputs: {', '.join(names)})")
+            self._args[names.index(k)][:] = v
+        free = [self._args[i] for i, n in enumerate(names) if n not in fixed]
+        ev = self._eval
+        views = self._views
+        copy = self.copy
+        if self._single and len(free) == 2 and free[0].size == 1:
+            a0, a1 = free
+            out = views[0]
+            copyto = np.copyto
+
+            def call2(u, v):
+                a0[0] = u
+                copyto(a1, v)
+                ev()
+                return out.copy() if copy else out
+            call2.owner = self   # keeps the FunctionBuffer (and its memory) alive
+            return call2
+
+        def call(*args):
+            for dst, a in zip(free, args):
+                dst[:] = a
+            ev()
+            if self._single:
+                return views[0].copy() if copy else views[0]
+            return tuple(v.copy() for v in views) if copy else tuple(views)
+        call.owner = self
+        return call
 
     def __call__(self, *args):
         for dst, a in zip(self._args, args):

@@ -143,8 +143,11 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
     buf.set_res(0, memoryview(X))
     box: dict[str, Any] = {}
 
+    keep = (buf, X, xin, pin, integ)  # alive while the worker runs, even if the caller is interrupted
+
     def work():
         try:
+            assert keep
             ev()
         except Exception as e:  # noqa: BLE001 - reported as a failure, never raised
             box["error"] = str(e)

@@ -277,9 +277,9 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]
 def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1):
     backend = I.METHODS[method][0]
     if backend == "scipy":
-        rhs = FastFunction(funcs["ode"])
-        jacf = FastFunction(funcs["ode_jacobian"])
-        run = I.run_scipy(method, lambda t, y: rhs(t, y, pv), lambda t, y: jacf(t, y, pv), grid, xs,
+        rhs = FastFunction(funcs["ode"]).bind(p=pv)
+        jacf = FastFunction(funcs["ode_jacobian"]).bind(p=pv)
+        run = I.run_scipy(method, rhs, jacf, grid, xs,
                           rtol, atol, max_steps, bar, extra, hmin=min_step(t0, t1))
         return run, None
     fixed = None
