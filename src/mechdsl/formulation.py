@@ -1,0 +1,48 @@
+"""Which formulation a model compiles to, and why (``mech check`` prints this)."""
+from __future__ import annotations
+
+from . import exprs as X
+from . import ir
+from .semantic.topology import counts
+
+DEFAULT_DAE_FORMULATION = "projection"
+
+
+def recursive_ok(model: ir.Model) -> bool:
+    """True when the recursive O(N) route applies: a tree of components whose joint variables are
+    coordinates or functions of time, and no equation-layer kinetic terms."""
+    if not model.bodies or any(t.kind == "kinetic" for t in model.terms):
+        return False
+    for j in model.joints:
+        for v in j.variables:
+            if v.coordinate is None and X.depends_on_state(v.motion):
+                return False
+    return True
+
+
+def kind(model: ir.Model) -> str:
+    """'ode' for trees without constraints, 'dae' otherwise."""
+    return "ode" if not model.loops and not model.constraints else "dae"
+
+
+def describe(model: ir.Model) -> str:
+    c = counts(model)
+    parts = []
+    if c["bodies"]:
+        parts.append(f"{c['bodies']} bod{'y' if c['bodies'] == 1 else 'ies'}")
+    if c["joints"]:
+        parts.append(f"{c['joints']} joint{'s' * (c['joints'] != 1)}")
+    parts.append(f"{c['coordinates']} coordinate{'s' * (c['coordinates'] != 1)}")
+    if kind(model) == "ode":
+        topo = "tree" if model.bodies else "equation layer"
+        how = ("recursive articulated-body algorithm" if recursive_ok(model)
+               else "Lagrange's equations by automatic differentiation")
+        return f"{model.name}: {', '.join(parts)}, {topo} -> ODE in minimal coordinates ({how})"
+    why = []
+    if model.loops:
+        why.append(f"{len(model.loops)} loop{'s' * (len(model.loops) != 1)} "
+                   f"(closed by {', '.join(lp.joint for lp in model.loops)})")
+    if model.constraints:
+        why.append(f"{len(model.constraints)} explicit constraint{'s' * (len(model.constraints) != 1)}")
+    return (f"{model.name}: {', '.join(parts)}, {' and '.join(why)}, {c['constraints']} constraint equations "
+            f"-> DAE with multipliers (index reduced; default formulation: {DEFAULT_DAE_FORMULATION})")
