@@ -12,6 +12,7 @@ a Function is built the first time it is asked for.  Names, inputs and outputs:
     constraints    (t, x, p) -> g, gdot         only when EOM.g exists
     start          (p) -> q0, qd0
     singularity    (t, x, p) -> one per EOM.singularity_monitors entry (when there are any)
+    invariants     (t, x, p) -> one per EOM.invariants entry (when there are any)
 
 Forward dynamics: EOM.qdd when the recursive route produced it; otherwise M qdd = bias is
 solved NUMERICALLY at every call by CasADi's sparse Householder QR linear solver ('qr'),
@@ -43,7 +44,7 @@ import numpy as np
 from .diagnostics import Diagnostic, MechError
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
-            "start", "singularity")
+            "start", "singularity", "invariants")
 LINSOL = "qr"          # sparse Householder QR: backward stable, code-generatable
 
 
@@ -149,6 +150,9 @@ def _build(eom, name, outputs):
     if name == "singularity":
         mons = dict(singularity_monitors(eom))
         return _function("singularity", txp, [ca.SX(v) for v in mons.values()], ["t", "x", "p"], list(mons))
+    if name == "invariants":
+        inv = dict(eom.invariants)
+        return _function("invariants", txp, [ca.SX(v) for v in inv.values()], ["t", "x", "p"], list(inv))
     raise KeyError(name)
 
 
@@ -167,6 +171,8 @@ def available(eom) -> tuple[str, ...]:
         names.append("constraints")
     if singularity_monitors(eom):
         names.append("singularity")
+    if getattr(eom, "invariants", None):
+        names.append("invariants")
     return tuple(n for n in STANDARD if n in names)
 
 
@@ -234,6 +240,10 @@ class FunctionSet(Mapping):
             self._cache["ode_jacobian"] = jacobian_of(loaded["ode"])
 
 
+_STRUCTURE = ("q", "qd", "t", "p", "T", "V", "D", "Q", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
+              "singularity_monitors", "invariants")
+
+
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
 
@@ -241,7 +251,10 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -
     ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached on
     the EOM object, so asking twice costs nothing.
     """
-    key = (bool(compiled), None if names is None else tuple(sorted(names)),
+    # EOM.replace makes shallow copies that share this cache: the key includes the identity of
+    # every field the Functions are built from (raw, so lazily derived fields are not forced)
+    fields = tuple(id(eom.__dict__.get(f)) for f in _STRUCTURE)
+    key = (fields, bool(compiled), None if names is None else tuple(sorted(names)),
            None if outputs is None else tuple(outputs))
     cache = eom.__dict__.setdefault("_mechdsl_function_sets", {})
     if key not in cache:

@@ -25,7 +25,8 @@ DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
-KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions")
+KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions",
+              "formulation", "reactions")   # the last two concern constrained models (mechdsl.dae)
 
 
 def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", points=None, outputs=None,
@@ -68,6 +69,9 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     grid = np.linspace(t0, t1, npts)
     meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
                             "warnings": [], "notes": list(getattr(funcs, "notes", []))}
+    for key in ("formulation", "reactions"):
+        if opts.get(key) not in (None, False, "ode", "auto"):
+            meta["notes"].append(f"{key} = {opts[key]!r} applies to constrained models only; ignored for this ODE")
     if compiled and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
 
@@ -452,6 +456,10 @@ def compute_signals(eom, post, t, X, pv, out_names) -> dict[str, np.ndarray]:
         g, gd = mapped(casadi_functions(eom, names=("constraints",))["constraints"])
         for i, cn in enumerate(eom.constraint_names):
             sig[f"residual({cn})"] = g[i].reshape(-1)
+    if getattr(eom, "invariants", None):
+        f = casadi_functions(eom, names=("invariants",))["invariants"]
+        for name, val in zip(f.name_out(), mapped(f)):
+            sig[name] = np.asarray(val, float).reshape(-1)
     if singularity_monitors(eom):
         f = post["singularity"]
         for name, val in zip(f.name_out(), mapped(f)):
@@ -488,9 +496,14 @@ def _energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
-def is_conservative(eom) -> bool:
+def is_conservative(eom) -> bool | None:
+    """D = 0, Q = 0 and T, V independent of time; None when unknown without forcing a lazily
+    derived field (the recursive route builds Q only on request)."""
     import casadi as ca
 
+    raw = eom.__dict__.get("Q")
+    if raw is not None and hasattr(raw, "get") and getattr(raw, "value", 0) is None:
+        return None
     try:
         D, Q = ca.SX(eom.D), ca.SX(eom.Q)
         return bool(D.is_zero() and Q.is_zero()

@@ -106,7 +106,8 @@ def summary(r, written=()) -> str:
     if parts:
         lines.append("statistics: " + ", ".join(parts))
     if "energy_drift" in s:
-        kind = "drift" if m.get("conservative") else "change (the model is not conservative)"
+        cons = m.get("conservative")
+        kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
         lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
                      f"(relative {s['energy_drift_relative']:.3g})")
     for w in m.get("warnings", []):
