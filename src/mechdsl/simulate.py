@@ -85,7 +85,8 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     extra = dict(opts.get("integrator_options") or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     try:
-        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1)
+        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1,
+                          meta["notes"])
     finally:
         bar.close()
     if fixed is not None:
@@ -278,7 +279,7 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
 
 
-def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1):
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes):
     backend = I.METHODS[method][0]
     if backend == "scipy":
         rhs = FastFunction(funcs["ode"]).bind(p=pv)
@@ -292,7 +293,7 @@ def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom
         steps, why = fixed_step_count(method, funcs, xs, pv, t0, t1, rtol, dt)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
-        raise UsageError(f"dt applies to the fixed-step methods ({', '.join(I.FIXED_STEP)}), not to {method}")
+        meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
     opts = I.casadi_options(method, rtol, atol, max_steps, steps, extra, hmin=min_step(t0, t1))
     try:
         run = I.run_casadi(method, funcs["ode"], grid, xs, pv, opts, bar)
