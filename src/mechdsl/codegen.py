@@ -20,8 +20,8 @@ wrapped around the SX expressions of M and bias in an MX Function.  Symbolic eli
 SX (``casadi.solve`` on SX) is used only for one coordinate (a division).  See
 docs/internals/numerics.md for the measurements behind this choice.
 
-``compiled=True`` generates C for the requested Functions (plus the Jacobian of ``ode``,
-which the integrators and ``ode_jacobian`` use), compiles it with the system C compiler into
+``compiled=True`` generates C for the requested Functions (plus the Jacobian of ``ode`` when
+``ode_jacobian`` is requested: implicit integrators need it), compiles it with the system C compiler into
 a shared library cached by the hash of the code, and loads it with ``casadi.external``.
 Without a compiler the virtual-machine Functions are returned and ``.notes`` says why.
 
@@ -226,7 +226,7 @@ class FunctionSet(Mapping):
         funcs = [_build(self.eom, n, self.outputs) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
             funcs.append(build_ode(self.eom))
-        loaded, note, lib = compile_functions(funcs, tag=self.eom.name)
+        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names)
         if note:
             self.notes.append(note)
         if loaded is None:
@@ -300,8 +300,8 @@ def cflags_for(code_size: int) -> list[str]:
     return ["-O0"]
 
 
-def compile_functions(funcs, tag: str = "model"):
-    """Generate C for ``funcs`` (+ the Jacobian of any 'ode'), compile, load.
+def compile_functions(funcs, tag: str = "model", jacobian: bool = True):
+    """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -319,7 +319,7 @@ def compile_functions(funcs, tag: str = "model"):
     for f in funcs:
         main.add(f)
     units.append(main.dump())
-    jacs = [f.jacobian() for f in funcs if f.name() == "ode"]
+    jacs = [f.jacobian() for f in funcs if f.name() == "ode"] if jacobian else []
     if jacs:
         jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
         for j in jacs:

@@ -31,8 +31,9 @@ import numpy as np
 METHODS: dict[str, tuple[str, str, dict, str]] = {
     "cvodes-bdf": ("casadi", "cvodes", {"linear_multistep_method": "bdf"},
                    "CVODES variable-order BDF (stiff), Newton with a dense Jacobian"),
-    "cvodes-adams": ("casadi", "cvodes", {"linear_multistep_method": "adams"},
-                     "CVODES variable-order Adams-Moulton (non-stiff, up to order 12)"),
+    "cvodes-adams": ("casadi", "cvodes", {"linear_multistep_method": "adams",
+                                          "nonlinear_solver_iteration": "functional"},
+                     "CVODES variable-order Adams-Moulton (non-stiff, up to order 12), functional iteration"),
     "cvodes": ("casadi", "cvodes", {"linear_multistep_method": "bdf"}, "alias of cvodes-bdf"),
     "idas": ("casadi", "idas", {}, "IDAS variable-order BDF on the ODE as an implicit DAE"),
     "erk": ("casadi", "erk", {}, "adaptive explicit Runge-Kutta 5(4) (Dormand-Prince type)"),
@@ -46,6 +47,9 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
     "scipy-lsoda": ("scipy", "LSODA", {}, "scipy LSODA (automatic Adams/BDF switching)"),
 }
 SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre")
+# methods that never evaluate the Jacobian of the right-hand side (compiled code can omit it;
+# CVODES asks for derivatives when it is set up, even with functional iteration)
+NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853")
 FIXED_STEP = ("rk", "collocation")
 # order of accuracy used to pick a fixed step from the tolerance (h * omega = 0.5 * rtol^(1/order))
 FIXED_ORDER = {"rk": 4, "collocation": 5}

@@ -64,23 +64,31 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     xs = start_vector(eom, x0, pv)
     out_names = _check_outputs(eom, outputs)
     compiled = bool(opts.get("compiled", False))
-    funcs = opts.get("functions") or casadi_functions(eom, compiled=compiled, names=("ode", "ode_jacobian"))
+    vm = casadi_functions(eom, names=("ode", "ode_jacobian"))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
     meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
-                            "warnings": [], "notes": list(getattr(funcs, "notes", []))}
+                            "warnings": [], "notes": []}
+    if method == "auto":
+        method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol)
+        meta["auto"] = info
+    else:
+        reason = "requested"
+    meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    if opts.get("functions") is not None:
+        funcs = opts["functions"]
+    elif compiled:
+        funcs = casadi_functions(eom, compiled=True,
+                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
+        funcs["ode"]  # compile now (notes below)
+    else:
+        funcs = vm
+    meta["notes"] += list(getattr(funcs, "notes", []))
     for key in ("formulation", "reactions"):
         if opts.get(key) not in (None, False, "ode", "auto"):
             meta["notes"].append(f"{key} = {opts[key]!r} applies to constrained models only; ignored for this ODE")
     if compiled and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
-
-    if method == "auto":
-        method, reason, info = choose_method(eom, funcs, xs, pv, t0, t1, rtol)
-        meta["auto"] = info
-    else:
-        reason = "requested"
-    meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
     max_steps = int(opts.get("max_steps") or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(opts.get("integrator_options") or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
@@ -283,14 +291,15 @@ def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom
     backend = I.METHODS[method][0]
     if backend == "scipy":
         rhs = FastFunction(funcs["ode"]).bind(p=pv)
-        jacf = FastFunction(funcs["ode_jacobian"]).bind(p=pv)
+        jacf = None if method in I.NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(p=pv)
         run = I.run_scipy(method, rhs, jacf, grid, xs,
                           rtol, atol, max_steps, bar, extra, hmin=min_step(t0, t1))
         return run, None
     fixed = None
     steps = None
     if method in I.FIXED_STEP:
-        steps, why = fixed_step_count(method, funcs, xs, pv, t0, t1, rtol, dt)
+        steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
+                                      xs, pv, t0, t1, rtol, dt)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
         meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
