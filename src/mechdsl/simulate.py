@@ -512,8 +512,8 @@ def is_conservative(eom) -> bool | None:
     import casadi as ca
 
     raw = eom.__dict__.get("Q")
-    if raw is not None and hasattr(raw, "get") and getattr(raw, "value", 0) is None:
-        return None
+    if raw is not None and hasattr(raw, "get") and getattr(raw, "value", 0) is None and eom.n > 30:
+        return None     # not built yet, and building it is not cheap for large models
     try:
         D, Q = ca.SX(eom.D), ca.SX(eom.Q)
         return bool(D.is_zero() and Q.is_zero()
