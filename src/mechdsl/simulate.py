@@ -69,6 +69,8 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     grid = np.linspace(t0, t1, npts)
     meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
                             "warnings": [], "notes": []}
+    if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
+        return _no_state_result(eom, post, grid, pv, out_names, meta, wall0)
     if method == "auto":
         method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol)
         meta["auto"] = info
@@ -126,6 +128,17 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     n = eom.n
     return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
                   stats=stats, metadata=meta, failure=failure)
+
+
+def _no_state_result(eom, post, grid, pv, out_names, meta, wall0) -> Result:
+    X = np.zeros((len(grid), 0))
+    signals = compute_signals(eom, post, grid, X, pv, out_names)
+    meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
+                versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
+                                              "points": len(grid), "outputs": list(out_names),
+                                              "parameters": dict(zip(eom.params, map(float, pv)))})
+    stats = {"steps": 0, "points": len(grid), "wall_time": time.perf_counter() - wall0}
+    return Result(t=grid.copy(), q=X, qd=X.copy(), coordinates=(), signals=signals, stats=stats, metadata=meta)
 
 
 # --------------------------------------------------------------------------- dispatch and inputs
