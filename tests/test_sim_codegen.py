@@ -1,6 +1,8 @@
 """CasADi Functions built from an EOM: names, numbers, laziness, compiled code, fast calls."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -173,3 +175,32 @@ def test_bound_fast_function_equals_plain_calls():
         np.testing.assert_array_equal(jac(0.5, x), np.array(f["ode_jacobian"](0.5, x, e.param_values)))
     with pytest.raises(KeyError):
         FastFunction(f["ode"]).bind(q=1)
+
+
+def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
+    import threading
+
+    from mechdsl.codegen import _build
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    if find_compiler() is None:
+        assert compile_functions([_build(pendulum(), "energy", None)])[0] is None
+        return
+    e = pendulum()
+    results = []
+
+    def work():
+        results.append(compile_functions([_build(e, "energy", None), _build(e, "ode", None)], jacobian=False))
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    libs = {lib for _, _, lib in results}
+    assert len(libs) == 1 and all(loaded is not None for loaded, _, _ in results)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [Path(next(iter(libs))).name]   # no debris
+    x = np.array([0.3, -0.2])
+    for loaded, _, _ in results:
+        np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, e.param_values)),
+                                      np.array(casadi_functions(e)["ode"](0.0, x, e.param_values)))
