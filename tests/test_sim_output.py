@@ -60,8 +60,12 @@ def test_existing_output_is_not_overwritten_without_permission(tmp_path):
     r = simulate(pendulum(), 1.0, points=3)
     out = tmp_path / "p.csv"
     r.to_csv(out)
+    r.to_csv(out, overwrite=False)          # mechdsl's own output may be replaced by a rerun
+    mine = tmp_path / "mine.csv"
+    mine.write_text("time,mine\n0,1\n")     # a file the user wrote is not
     with pytest.raises(UsageError, match="exists"):
-        r.to_csv(out, overwrite=False)
+        r.to_csv(mine, overwrite=False)
+    assert mine.read_text() == "time,mine\n0,1\n"
 
 
 @pytest.mark.parametrize("suffix,magic", [(".png", b"\x89PNG"), (".svg", b"<?xml")])

@@ -57,7 +57,8 @@ def plot_result(result, path, *, overwrite: bool = True, title: str | None = Non
     fig.tight_layout()
     tmp, final = atomic_target(path, overwrite=overwrite)
     try:
-        meta = {".png": {"Software": None}, ".svg": {"Date": None}, ".pdf": {"CreationDate": None}}[suffix]
+        meta = {".png": {"Software": "mechdsl"}, ".svg": {"Date": None, "Creator": "mechdsl"},
+                ".pdf": {"CreationDate": None, "Creator": "mechdsl"}}[suffix]
         fig.savefig(tmp, dpi=110, format=suffix[1:], metadata=meta)
     except BaseException:
         tmp.unlink(missing_ok=True)

@@ -60,6 +60,13 @@ def _extra_lines(m) -> list[str]:
     out = []
     for lp in m.model.loops:
         out.append(f"    {lp.name}: closed by joint {lp.joint}: {' -> '.join(lp.bodies)}")
+    if not m.model.loops and not m.model.constraints:
+        try:
+            from ..analysis.integrals import describe_integrals
+
+            out += ["    first integral " + s for s in describe_integrals(m.eom)]
+        except MechError:
+            pass
     return out
 
 
