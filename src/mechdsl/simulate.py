@@ -153,6 +153,18 @@ def _dispatch(module, func, what, eom, t_end, **kw):
         raise
     if not hasattr(mod, func):
         raise UsageError(f"{what} cannot be simulated: {module}.{func} is missing")
+    if kw.get("progress") is True:   # the helpers take a callable(t, t_end): drive our bar with it
+        try:
+            t0 = float(kw.get("t_start") or 0.0)
+            bar = I.Progress(True, t0, float(t_end), label=f"{eom.name} ({kw.get('method', '')})")
+        except (TypeError, ValueError):
+            bar = None
+        if bar is not None:
+            kw["progress"] = lambda t, t1: bar.update(float(t))
+            try:
+                return getattr(mod, func)(eom, t_end, **kw)
+            finally:
+                bar.close()
     return getattr(mod, func)(eom, t_end, **kw)
 
 
