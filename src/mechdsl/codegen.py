@@ -240,7 +240,7 @@ class FunctionSet(Mapping):
             self._cache["ode_jacobian"] = jacobian_of(loaded["ode"])
 
 
-_STRUCTURE = ("q", "qd", "t", "p", "T", "V", "D", "Q", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
+_STRUCTURE = ("q", "qd", "t", "p", "T", "V", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
               "singularity_monitors", "invariants")
 
 
@@ -284,6 +284,9 @@ def find_compiler() -> str | None:
     return None
 
 
+JAC_MAX_CODE = 1_000_000   # above this, compile the forward derivative of ode instead of its Jacobian
+
+
 def cflags_for(code_size: int) -> list[str]:
     """Optimization level by size: gcc time grows much faster than linearly with function size.
 
@@ -319,12 +322,21 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True):
     for f in funcs:
         main.add(f)
     units.append(main.dump())
-    jacs = [f.jacobian() for f in funcs if f.name() == "ode"] if jacobian else []
-    if jacs:
+    odes = [f for f in funcs if f.name() == "ode"] if jacobian else []
+    jac_kind = None
+    if odes:
         jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
-        for j in jacs:
-            jg.add(j)
-        units.append(jg.dump())
+        jg.add(odes[0].jacobian())
+        code = jg.dump()
+        jac_kind = "jacobian"
+        if len(code) > JAC_MAX_CODE:
+            # a huge Jacobian compiles for minutes and, at -O0, runs slower than the virtual
+            # machine: generate the forward derivative instead (CasADi assembles J by sweeps)
+            jg = ca.CodeGenerator("mechdsl_fwd.c", {"with_header": False, "verbose": False})
+            jg.add(odes[0].forward(1))
+            code = jg.dump()
+            jac_kind = "forward derivative"
+        units.append(code)
     flags = [cflags_for(len(code)) for code in units]
     try:
         version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
@@ -368,7 +380,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True):
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
-                f"({', '.join(' '.join(f) for f in flags)}) into {lib}")
+                f"({', '.join(' '.join(f) for f in flags)}) into {lib}"
+                + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     return loaded, note, str(lib)
 
