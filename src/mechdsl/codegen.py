@@ -248,18 +248,28 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
 
     names: restrict to these Functions (default: all that apply); outputs: restrict the
-    ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached on
-    the EOM object, so asking twice costs nothing.
+    ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
+    (per EOM structure), so asking twice costs nothing.
     """
-    # EOM.replace makes shallow copies that share this cache: the key includes the identity of
-    # every field the Functions are built from (raw, so lazily derived fields are not forced)
-    fields = tuple(id(eom.__dict__.get(f)) for f in _STRUCTURE)
-    key = (fields, bool(compiled), None if names is None else tuple(sorted(names)),
+    # keyed by the identity of every field the Functions are built from (raw __dict__ entries,
+    # so lazily derived fields are not forced): copies made by EOM.replace (other parameter
+    # values) share Functions, compiled libraries and the integrators built on them
+    objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
+    key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
            None if outputs is None else tuple(outputs))
-    cache = eom.__dict__.setdefault("_mechdsl_function_sets", {})
-    if key not in cache:
-        cache[key] = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs)
-    return cache[key]
+    hit = _SETS.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
+        _SETS[key] = _SETS.pop(key)            # most recently used last
+        return hit[1]
+    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs)
+    if len(_SETS) >= _SETS_MAX:
+        _SETS.pop(next(iter(_SETS)))
+    _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique
+    return fs
+
+
+_SETS: dict = {}
+_SETS_MAX = 64
 
 
 # --------------------------------------------------------------------------- C code generation
