@@ -112,6 +112,8 @@ def summary(r, written=()) -> str:
                      f"(relative {s['energy_drift_relative']:.3g})")
     for w in m.get("warnings", []):
         lines.append(f"warning: {w}")
+    for n in m.get("notes", []):
+        lines.append(f"note: {n}")
     if r.failure is not None:
         f = r.failure
         lines.append(f"FAILED at t = {f.time:.10g}: {f.cause}" + (f" ({f.detail})" if f.detail else ""))
