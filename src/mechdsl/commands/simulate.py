@@ -112,11 +112,14 @@ def summary(r, written=()) -> str:
     if parts:
         lines.append("statistics: " + ", ".join(parts))
     if "energy_drift" in s:
-        kind = "drift" if m.get("conservative") else "change (the model is not conservative)"
+        cons = m.get("conservative")
+        kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
         lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
                      f"(relative {s['energy_drift_relative']:.3g})")
     for w in m.get("warnings", []):
         lines.append(f"warning: {w}")
+    for n in m.get("notes", []):
+        lines.append(f"note: {n}")
     if r.failure is not None:
         f = r.failure
         lines.append(f"FAILED at t = {f.time:.10g}: {f.cause}" + (f" ({f.detail})" if f.detail else ""))
