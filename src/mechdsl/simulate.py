@@ -118,6 +118,7 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
     stats.update(_energy_drift(signals))
+    stats.update(_integral_drift(signals, eom))
     stats["raw"] = run.stats
     if run.messages.strip():
         meta["integrator_messages"] = _dedup(run.messages)
@@ -500,6 +501,8 @@ def compute_signals(eom, post, t, X, pv, out_names) -> dict[str, np.ndarray]:
         f = casadi_functions(eom, names=("invariants",))["invariants"]
         for name, val in zip(f.name_out(), mapped(f)):
             sig[name] = np.asarray(val, float).reshape(-1)
+    for name, val in _first_integrals(eom, t, X, pv).items():
+        sig.setdefault(name, val)
     if singularity_monitors(eom):
         f = post["singularity"]
         for name, val in zip(f.name_out(), mapped(f)):
@@ -524,6 +527,46 @@ def _singularity_report(eom, signals, t, meta, threshold):
                 f"(Euler/Cardan angles lose a degree of freedom there; accuracy degrades; a quaternion "
                 f"parametrization avoids this)")
     meta["singularity"] = report
+
+
+MAX_INTEGRAL_SEARCH = 20   # coordinates: beyond this the search costs more than a typical run
+
+
+def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
+    """Values of the model's first integrals (cyclic momenta, Jacobi integral) on the samples,
+    so their drift measures the integrator.  The search is cached on the EOM."""
+    import casadi as ca
+
+    cache = eom.__dict__.setdefault("_integral_function", {})
+    if "f" not in cache:
+        cache["f"] = None
+        if eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts:
+            try:
+                from .analysis.integrals import integral_signals
+
+                sig = integral_signals(eom, pv)
+            except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
+                sig = {}
+            if sig:
+                x = ca.vertcat(eom.q, eom.qd)
+                cache["f"] = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()),
+                                         ["t", "x", "p"], list(sig))
+    f = cache["f"]
+    if f is None or len(t) == 0:
+        return {}
+    res = f.map(len(t))(t.reshape(1, -1), X.T, np.asarray(pv, float).reshape(-1, 1))
+    res = res if isinstance(res, (list, tuple)) else [res]
+    return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
+
+
+def _integral_drift(signals, eom) -> dict:
+    f = eom.__dict__.get("_integral_function", {}).get("f")
+    out = {}
+    for name in (f.name_out() if f is not None else []):
+        v = signals.get(name)
+        if v is not None and len(v) and np.isfinite(v).all():
+            out[name] = float(np.abs(v - v[0]).max())
+    return {"first_integral_drift": out} if out else {}
 
 
 def _energy_drift(signals) -> dict:

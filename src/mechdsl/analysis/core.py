@@ -309,7 +309,8 @@ def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
     n = J.shape[1]
     if J.size == 0 or not np.any(J):
         return np.eye(n)
-    _, s, vt = np.linalg.svd(J)
+    # thin SVD when J is tall (probes stack many rows): the full U would cost O(rows^2)
+    _, s, vt = np.linalg.svd(J, full_matrices=J.shape[0] < n)
     rank = int(np.sum(s > rel * s[0]))
     N = vt[rank:].T.copy()
     return canonical_basis(N)
