@@ -2,6 +2,8 @@
 hoop against its analytic equation of motion."""
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -215,3 +217,22 @@ def test_pure_equation_layer():
     E, xdot = val(o, [0.3], [1.0], e.param_values)
     assert E == pytest.approx(0.5 * 4 - 9.81 * 2 * np.cos(0.3))
     assert xdot == pytest.approx(2 * np.cos(0.3))
+
+
+def test_components_mixed_with_an_equation_layer_coordinate():
+    """A rod pendulum (coordinate theta) and an equation-layer mass x (T = M/2 x'^2) coupled by
+    the potential k/2 (x - rod.b.x)^2 written with a point position."""
+    m, L, g, Mx, k = 1.2, 0.9, 9.81, 0.5, 7.0
+    base = rod_pendulum()
+    x, xd = ir.Coord("x"), ir.Speed("x")
+    gap = ir.Op("sub", (x, ir.PointPos("rod.b", 0)))
+    model = dataclasses.replace(
+        base, coordinates=base.coordinates + (ir.Coordinate("x"),),
+        terms=(ir.Term("kinetic", mul(const(Mx / 2), mul(xd, xd))), ir.Term("potential", mul(const(k / 2), mul(gap, gap)))))
+    e = derive(model)
+    assert e.route == "crba"
+    f = qdd_fn(e)
+    for th, X in [(0.3, 0.1), (-1.2, 0.8)]:
+        s = X - L * np.sin(th)
+        exact = [(-m * g * L / 2 * np.sin(th) + k * s * L * np.cos(th)) / (m * L ** 2 / 3), -k * s / Mx]
+        assert np.allclose(val(f, [th, X], [0.4, -0.3], 0.0, e.param_values), exact, rtol=1e-12)
