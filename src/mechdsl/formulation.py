@@ -26,6 +26,18 @@ def kind(model: ir.Model) -> str:
 
 
 def describe(model: ir.Model) -> str:
+    text = _describe(model)
+    contacts = [k for k in model.contacts if k.kind != "fix"]
+    fixes = [k for k in model.contacts if k.kind == "fix"]
+    if contacts:
+        text += (f"; {len(contacts)} unilateral contact{'s' * (len(contacts) != 1)} "
+                 f"(event-driven impacts, Newton's restitution law)")
+    if fixes:
+        text += f"; {len(fixes)} fixation{'s' * (len(fixes) != 1)} (impulsive constraints)"
+    return text
+
+
+def _describe(model: ir.Model) -> str:
     c = counts(model)
     parts = []
     if c["bodies"]:

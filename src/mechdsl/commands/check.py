@@ -64,7 +64,8 @@ def _extra_lines(m) -> list[str]:
         try:
             from ..analysis.integrals import describe_integrals
 
-            out += ["    first integral " + s for s in describe_integrals(m.eom)]
+            note = " (between impacts)" if m.model.contacts else ""
+            out += [f"    first integral{note} " + s for s in describe_integrals(m.eom)]
         except MechError:
             pass
     return out
