@@ -229,7 +229,7 @@ class Tree:
         for el in elements:
             parent = self._add_element(parent, joint, el, r_pre)
             r_pre = z3()
-        link = self.links[-1] if elements else self.links[-1]
+        link = self.links[-1]          # the child joint frame
         link.body = body
         r_C = self.vec(cp.r)
         self.body_link[body.name] = link.index
