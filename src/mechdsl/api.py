@@ -235,10 +235,17 @@ class Model:
 
         return first_integrals(self.eom)
 
-    def summary(self) -> str:
+    def summary(self, derive: bool = False) -> str:
+        """Counts and formulation; derive=True asks the mechanics which route it takes."""
         from .formulation import describe
 
-        return describe(self.model)
+        route = None
+        if derive:
+            try:
+                route = self.eom.route
+            except MechError:
+                route = None
+        return describe(self.model, route)
 
 
 # ---------------------------------------------------------------------------- helpers

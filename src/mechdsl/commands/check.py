@@ -44,7 +44,7 @@ def run(args) -> int:
                     settings = ", ".join(f"{k} = {_fmt(v)}" for k, v in m.scene.settings)
                     lines.append(f"  scene {name} -> {m.name}" + (f" ({settings})" if settings else ""))
                 else:
-                    lines.append("  " + m.summary())
+                    lines.append("  " + m.summary(derive=True))
                     lines += _extra_lines(m)
             if not args.quiet:
                 print(f"{path}: ok")
