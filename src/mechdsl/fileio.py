@@ -37,7 +37,10 @@ def is_own_output(p: Path) -> bool:
     try:
         if p.suffix == ".csv":
             side = p.with_suffix(".json")
-            return side.is_file() and _has_marker(side) and p.read_bytes()[:5] == b"time,"
+            if not (side.is_file() and _has_marker(side)):
+                return False
+            # a results CSV starts with "time,"; a table (mech bench) is named in its sidecar
+            return p.read_bytes()[:5] == b"time," or f'"table": "{p.name}"'.encode() in side.read_bytes()[:65536]
         return _has_marker(p)
     except OSError:
         return False

@@ -1,0 +1,348 @@
+"""The benchmark loop: every variant over the tolerance sweep, measured against a reference.
+
+    setup = Setup.from_model(mechdsl.load(path, scene=...), t_end=..., points=...)
+    res = run_bench(setup, variants=parse_variants("erk,cvodes-bdf"), tolerances=[1e-4, 1e-8])
+
+Each (variant, tolerance) is one Row.  A run that fails is a Row with status "failed" (its
+cause and time in ``message``), a combination the simulator refuses (e.g. a formulation on
+an ODE model) a Row with status "n/a", an exception a Row with status "error", and a
+tolerance left out because the previous one of the same variant exceeded the time budget a
+Row with status "skipped": nothing is dropped.
+"""
+from __future__ import annotations
+
+import math
+import platform
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ..diagnostics import MechError, UsageError
+from . import measure, reference as R
+from .spec import SYMPLECTIC_ORDER, Variant, parse_variant
+from .timing import TIMER, timed
+
+DEFAULT_POINTS = 101
+DEFAULT_BUDGET = 30.0      # CPU seconds: a run longer than this ends the variant's sweep
+
+
+@dataclass(kw_only=True)
+class Setup:
+    """The model and everything fixed across the runs of a benchmark."""
+
+    eom: Any
+    t_end: float
+    t_start: float = 0.0
+    points: int = DEFAULT_POINTS
+    p: Any = None                      # parameter vector or {name: value}
+    x0: Any = None                     # start overrides ({name: value}) or full state
+    compiled: bool = False
+    name: str = ""
+    scene: str | None = None
+    source: str | None = None
+    default_formulation: str | None = None     # the scene's formulation (constrained models)
+
+    @classmethod
+    def from_model(cls, model, *, t_end=None, t_start=None, points=None, x0=None, compiled=False,
+                   source=None) -> "Setup":
+        """From a mechdsl.api.Model (scene settings fill what is not given)."""
+        s = dict(getattr(model, "scene_settings", None) or {})
+        t_end = t_end if t_end is not None else s.get("stop_time")
+        if t_end is None:
+            raise UsageError("give the end time (--t-end): the model has no scene stop_time")
+        return cls(eom=model.eom, t_end=float(t_end),
+                   t_start=float(t_start if t_start is not None else s.get("start_time", 0.0)),
+                   points=int(points or s.get("points") or DEFAULT_POINTS), p=model.parameter_values, x0=x0,
+                   compiled=bool(compiled or s.get("compiled", False)), name=model.name,
+                   scene=getattr(getattr(model, "scene", None), "name", None), source=source,
+                   default_formulation=s.get("formulation"))
+
+    @property
+    def constrained(self) -> bool:
+        return self.eom.g is not None
+
+
+@dataclass(kw_only=True)
+class Row:
+    label: str
+    method: str
+    formulation: str | None = None
+    tolerance: float | None = None
+    dt: float | None = None
+    status: str = "ok"                 # ok | failed | n/a | error | skipped
+    message: str = ""
+    cpu: float | None = None           # best CPU time [s]
+    cpu_runs: tuple[float, ...] = ()
+    cpu_warmup: float | None = None
+    err_final: float | None = None
+    err_l2: float | None = None
+    invariants: dict[str, float] = field(default_factory=dict)
+    steps: int | None = None
+    rhs_evals: int | None = None
+    t_reached: float | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+@dataclass(kw_only=True)
+class BenchResult:
+    setup: Setup
+    columns: tuple[str, ...]
+    reference: R.Reference
+    rows: list[Row]
+    tolerances: tuple[float, ...]
+    repeats: int
+    kind: str                          # ode | stiff | dae
+    timer: str = TIMER
+    machine: dict[str, Any] = field(default_factory=dict)
+
+    def variants(self) -> list[str]:
+        seen: list[str] = []
+        for r in self.rows:
+            if r.label not in seen:
+                seen.append(r.label)
+        return seen
+
+    def rows_of(self, label: str) -> list[Row]:
+        return [r for r in self.rows if r.label == label]
+
+
+# --------------------------------------------------------------------------- columns
+
+
+def compare_columns(eom, compare) -> tuple[str, ...]:
+    """'positions' (the coordinates), 'states' (and their speeds) or a list of names."""
+    if compare in (None, "positions"):
+        return tuple(eom.coords)
+    if compare == "states":
+        return tuple(eom.coords) + tuple(f"der({c})" for c in eom.coords)
+    names = [c.strip() for c in (compare.split(",") if isinstance(compare, str) else compare) if c.strip()]
+    if not names:
+        raise UsageError("--compare needs 'positions', 'states' or a list of names")
+    return tuple(names)
+
+
+def _outputs_for(eom, columns) -> tuple[str, ...]:
+    return tuple(c for c in columns if c in eom.outputs)
+
+
+# --------------------------------------------------------------------------- one run
+
+
+def classify_setup(setup: Setup) -> str:
+    eom = setup.eom
+    if eom.g is not None:
+        return "dae"
+    if eom.n == 0:
+        return "ode"
+    from ..codegen import casadi_functions
+    from ..simulate import choose_method, parameter_vector, start_vector
+
+    pv = parameter_vector(eom, setup.p)
+    xs = start_vector(eom, setup.x0, pv)
+    method, _, _ = choose_method(eom, casadi_functions(eom, names=("ode", "ode_jacobian")), xs, pv,
+                                 setup.t_start, setup.t_end, 1e-8)
+    return "stiff" if method == "cvodes-bdf" else "ode"
+
+
+def symplectic_dt(setup: Setup, method: str, tol: float, points: int) -> float:
+    """Fixed step of a symplectic method at tolerance ``tol``: the rule the simulator uses for
+    its fixed-step methods, h omega = 0.5 tol^(1/order) (docs/simulate.md), with the
+    method's order; then shortened so that a whole number of steps falls in every output
+    interval (the recorded times are then the output grid)."""
+    from ..codegen import casadi_functions
+    from ..simulate import fixed_step_count, parameter_vector, start_vector
+
+    order = SYMPLECTIC_ORDER[method]
+    eom = setup.eom
+    pv = parameter_vector(eom, setup.p)
+    xs = start_vector(eom, setup.x0, pv)
+    # fixed_step_count's rule is for order 4 ("rk"): tol^(4/order) gives h omega = 0.5 tol^(1/order)
+    steps, _ = fixed_step_count("rk", casadi_functions(eom, names=("ode", "ode_jacobian")), xs, pv,
+                                setup.t_start, setup.t_end, tol ** (4.0 / order), None)
+    per = max(1, math.ceil(steps / (points - 1)))
+    return (setup.t_end - setup.t_start) / (per * (points - 1))
+
+
+def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: int, outputs, dt=None):
+    from ..simulate import simulate
+
+    kw = variant.kwargs
+    if variant.formulation is None and setup.constrained and setup.default_formulation:
+        kw["formulation"] = setup.default_formulation
+    if dt is not None:
+        kw["dt"] = dt
+    if setup.compiled:
+        kw["compiled"] = True
+    tol = 1e-8 if tol is None else tol
+    return simulate(setup.eom, setup.t_end, t_start=setup.t_start, rtol=tol, atol=tol, method=variant.method,
+                    points=points, outputs=outputs, x0=setup.x0, p=setup.p, **kw)
+
+
+def _stat(st: dict, *keys):
+    for k in keys:
+        v = st.get(k)
+        if v is not None:
+            try:
+                return int(v)
+            except (TypeError, ValueError):
+                return None
+    return None
+
+
+def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Reference, columns,
+                repeats: int, conservative) -> Row:
+    row = Row(label=variant.label, method=variant.method, formulation=variant.formulation, tolerance=tol)
+    outputs = _outputs_for(setup.eom, columns)
+    dt = variant.fixed_dt
+    if variant.formulation is not None and not setup.constrained:
+        row.status = "n/a"
+        row.message = f"formulation {variant.formulation!r}: the model has no constraints (formulations apply to DAEs)"
+        return row
+    try:
+        if dt is None and variant.method in SYMPLECTIC_ORDER:
+            dt = symplectic_dt(setup, variant.method, tol, points)
+        row.dt = dt
+
+        def once():
+            return simulate_variant(setup, variant, tol, points, outputs, dt)
+
+        tm = timed(once, repeats, ok=lambda r: r.success)
+    except UsageError as e:
+        row.status, row.message = "n/a", str(e)
+        return row
+    except MechError as e:
+        row.status, row.message = "error", str(e)
+        return row
+    except Exception as e:  # noqa: BLE001 - a benchmark reports, it does not crash
+        row.status, row.message = "error", f"{type(e).__name__}: {e}"
+        return row
+    r = tm.result
+    row.cpu, row.cpu_runs, row.cpu_warmup = tm.best, tm.runs, tm.warmup
+    st = r.stats or {}
+    row.steps = _stat(st, "steps")
+    row.rhs_evals = _stat(st, "rhs_evals", "rhs_evaluations")
+    if row.dt is None and (r.metadata or {}).get("fixed_steps"):
+        n = r.metadata["fixed_steps"].get("target_steps")
+        row.dt = (setup.t_end - setup.t_start) / n if n else None
+    row.t_reached = float(r.t[-1]) if len(r.t) else None
+    row.invariants = measure.invariants(r, conservative)
+    if not r.success:
+        row.status = "failed"
+        row.message = f"t = {r.failure.time:.6g}: {r.failure.cause}" + (f" ({r.failure.detail})" if r.failure.detail
+                                                                        else "")
+        return row
+    if len(r.t) != points:
+        row.status, row.message = "error", f"the run returned {len(r.t)} output points, not {points}"
+        return row
+    try:
+        Y = measure.extract(r, columns, rows_idx)
+    except KeyError as e:
+        row.status, row.message = "error", str(e)
+        return row
+    Rv = np.column_stack([ref.values[c] for c in columns])
+    e = measure.errors(Y, Rv, measure.component_scales(ref.values, columns))
+    row.err_final, row.err_l2 = e["final"], e["l2"]
+    return row
+
+
+# --------------------------------------------------------------------------- the sweep
+
+
+def make_reference(setup: Setup, reference, columns, tolerances, kind, reference_methods=None,
+                   log: Callable[[str], None] | None = None) -> tuple[R.Reference, int, np.ndarray]:
+    """The reference, the number of output points and the reference rows' grid indices."""
+    if reference not in (None, "auto"):
+        ref = reference if isinstance(reference, R.Reference) else R.read_csv(reference)
+        R.check_columns(ref, columns)
+        T = float(ref.t[-1])
+        if abs(T - setup.t_end) > 1e-9 * max(1.0, abs(T)):
+            raise UsageError(f"the reference ends at t = {T:g}, the benchmark at {setup.t_end:g} (set --t-end {T:g})")
+        points, idx = ref.grid_points(setup.t_start)
+        return ref, points, idx
+    labels = tuple(reference_methods or R.auto_pair(kind))
+    if len(labels) != 2:
+        raise UsageError("--reference-methods takes two methods: the reference and its check")
+    tol = R.reference_tolerance(tolerances)
+    points = setup.points
+    idx = np.arange(points)
+    outputs = _outputs_for(setup.eom, columns)
+    results, cpu = [], []
+    for lab in labels:
+        v = parse_variant(lab)
+        if log:
+            log(f"reference: {lab} at tolerance {tol:g}")
+        from .timing import cpu_call
+
+        dt = v.fixed_dt
+        if dt is None and v.method in SYMPLECTIC_ORDER:
+            dt = symplectic_dt(setup, v.method, tol, points)
+        c, r = cpu_call(lambda: simulate_variant(setup, v, tol, points, outputs, dt))
+        results.append(r)
+        cpu.append(c)
+    ref = R.from_runs(results[0], results[1], columns, idx, labels, tol, cpu)
+    return ref, points, idx
+
+
+def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="auto", reference_methods=None,
+              compare="positions", repeats: int = 3, budget: float = DEFAULT_BUDGET,
+              log: Callable[[str], None] | None = None) -> BenchResult:
+    from ..simulate import is_conservative
+
+    if repeats < 1:
+        raise UsageError("repeats must be at least 1")
+    tolerances = tuple(sorted(set(float(t) for t in tolerances), reverse=True))
+    columns = compare_columns(setup.eom, compare)
+    kind = classify_setup(setup)
+    ref, points, idx = make_reference(setup, reference, columns, tolerances, kind, reference_methods, log)
+    conservative = is_conservative(setup.eom)
+    rows: list[Row] = []
+    for v in variants:
+        sweep = [None] if v.fixed_dt is not None else list(tolerances)
+        over: Row | None = None
+        for tol in sweep:
+            if over is not None:
+                rows.append(Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol,
+                                status="skipped",
+                                message=f"the run at tolerance {over.tolerance:g} took {over.cpu:.3g} s of CPU "
+                                        f"(budget {budget:g} s)"))
+                continue
+            row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative)
+            rows.append(row)
+            if log:
+                log(one_line(row))
+            if row.cpu is not None and row.cpu > budget:
+                over = row
+            if row.status == "n/a":        # the combination does not exist: one row says so
+                break
+    return BenchResult(setup=setup, columns=columns, reference=ref, rows=rows, tolerances=tolerances,
+                       repeats=repeats, kind=kind, machine=machine())
+
+
+def one_line(row: Row) -> str:
+    tol = "-" if row.tolerance is None else f"{row.tolerance:.0e}"
+    if row.ok:
+        return (f"{row.label} tol={tol}: {row.cpu * 1e3:.3g} ms, error final {row.err_final:.2e}, "
+                f"L2 {row.err_l2:.2e}")
+    return f"{row.label} tol={tol}: {row.status}" + (f" ({row.message})" if row.message else "")
+
+
+def machine() -> dict[str, Any]:
+    import os
+
+    from ..simulate import versions
+
+    return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(), "load_average": _load(), "versions": versions()}
+
+
+def _load():
+    import os
+
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None

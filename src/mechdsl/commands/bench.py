@@ -1,0 +1,112 @@
+"""``mech bench FILE``: work-precision benchmark of a model (docs/performance.md)."""
+from __future__ import annotations
+
+import sys
+
+from ..diagnostics import UsageError
+
+HELP = "speed against accuracy: run methods over a tolerance sweep, measure errors and CPU time, draw the chart"
+
+
+def add_parser(sub):
+    from ..bench.runner import DEFAULT_BUDGET
+    from ..bench.spec import DEFAULT_TOLERANCES
+    from .simulate import _number_arg
+
+    p = sub.add_parser("bench", help=HELP, description=HELP)
+    p.add_argument("file", metavar="FILE", help=".mech file")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--model", metavar="M", help="model to benchmark (default: the file's main model)")
+    g.add_argument("--scene", metavar="S", help="scene to benchmark (model, overrides, stop time, points)")
+    p.add_argument("--methods", action="append", default=[], metavar="LIST",
+                   help="comma-separated method specifications: erk, cvodes-bdf, scipy-dop853, stormer-verlet, "
+                        "rk[dt=0.01]; for constrained models FORMULATION+METHOD, e.g. projection+cvodes-bdf "
+                        "(default: a set that fits the model)")
+    p.add_argument("--formulations", action="append", default=[], metavar="LIST",
+                   help="formulations (constrained models) combined with every method that names none")
+    p.add_argument("--tolerances", metavar="SPEC", default=None,
+                   help=f"'1e-2,1e-4', '1e-2..1e-12' (half decades) or '1e-2..1e-12/4' (default {DEFAULT_TOLERANCES}); "
+                        "rtol = atol = tolerance")
+    p.add_argument("--reference", metavar="auto|FILE", default="auto",
+                   help="reference solution: a CSV in the format of mech simulate -o, or auto (two high-accuracy "
+                        "runs with different methods; their difference estimates its accuracy)")
+    p.add_argument("--reference-methods", metavar="A,B", help="methods of the automatic reference and its check")
+    p.add_argument("--compare", metavar="WHAT", default="positions",
+                   help="compared columns: positions (coordinates, default), states (and speeds) or a list of names")
+    p.add_argument("--repeats", type=int, default=3, metavar="K", help="timed runs after the warm-up (default 3)")
+    p.add_argument("--budget", type=_number_arg, default=DEFAULT_BUDGET, metavar="S",
+                   help=f"CPU seconds: a run longer than this ends its method's sweep (default {DEFAULT_BUDGET:g})")
+    p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time)")
+    p.add_argument("--points", type=int, metavar="N", help="output points (default: scene points, else 101)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override a parameter (m=2) or a start value (theta.start=pi/4, theta.speed=0)")
+    p.add_argument("--compiled", action="store_true", help="generated and compiled C code for every method")
+    p.add_argument("-o", "--output", metavar="DIR", help="write bench.csv, bench.json, work_precision.png/.svg here")
+    p.add_argument("--no-chart", action="store_true", help="write no chart")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    return p
+
+
+def default_methods(kind: str) -> list[str]:
+    from ..bench.spec import DEFAULT_ODE_METHODS
+
+    if kind == "stiff":
+        return ["cvodes-bdf", "rosenbrock", "scipy-radau", "erk"]
+    if kind == "dae":
+        try:
+            from ..dae import FORMULATIONS
+        except ImportError:
+            FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
+        return [f"{f}+auto" for f in FORMULATIONS]
+    return list(DEFAULT_ODE_METHODS)
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    from ..bench import Setup, format_table, parse_tolerances, parse_variants, run_bench, write_chart, write_tables
+    from ..bench.runner import classify_setup
+    from ..fileio import check_writable
+    from .simulate import _apply_params, _start_overrides, parse_sets
+
+    if args.repeats < 1:
+        raise UsageError("--repeats must be at least 1")
+    tolerances = parse_tolerances(args.tolerances)
+    out = Path(args.output) if args.output else None
+    if out is not None:
+        if out.exists() and not out.is_dir():
+            raise UsageError(f"{out} is not a directory (-o takes a directory)")
+        names = ["bench.json", "bench.csv"] + ([] if args.no_chart else ["work_precision.png", "work_precision.svg"])
+        for n in names:
+            check_writable(out / n, overwrite=args.force)
+    params, starts = parse_sets(args.set)
+    from ..api import load
+
+    model = load(args.file, model=args.model, scene=args.scene)
+    model, pdict = _apply_params(model, params)
+    x0 = _start_overrides(model.eom, starts) or None
+    setup = Setup.from_model(model, t_end=args.t_end, points=args.points, x0=x0, compiled=args.compiled,
+                             source=str(args.file))
+    if pdict:
+        setup.p = pdict
+    kind = classify_setup(setup)
+    methods = args.methods or default_methods(kind)
+    variants = parse_variants(methods, args.formulations or None)
+    ref_methods = None
+    if args.reference_methods:
+        from ..bench.spec import split_top
+
+        ref_methods = split_top(args.reference_methods)
+    log = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    res = run_bench(setup, variants=variants, tolerances=tolerances, reference=args.reference,
+                    reference_methods=ref_methods, compare=args.compare, repeats=args.repeats, budget=args.budget,
+                    log=log)
+    print(format_table(res))
+    if out is not None:
+        written = write_tables(res, out, overwrite=args.force)
+        if not args.no_chart:
+            written += write_chart(res, out, overwrite=args.force)
+        for w in written:
+            print(f"wrote {w}")
+    return 0
