@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from ..fileio import write_atomic
+from ..fileio import check_writable, write_atomic
 from . import measure
 from .reference import fmt_accuracy, is_floor
 
@@ -89,6 +89,8 @@ def _default(o):
 def write_tables(res, out_dir, overwrite=False) -> list[Path]:
     d = Path(out_dir)
     csv_p, json_p = d / "bench.csv", d / "bench.json"
+    for p in (csv_p, json_p):          # both checked before either is written
+        check_writable(p, overwrite)
     # the sidecar first: it marks the CSV as mechdsl's output (fileio.is_own_output)
     write_atomic(json_p, to_json_text(res, csv_p.name), overwrite=overwrite)
     write_atomic(csv_p, to_csv_text(res), overwrite=overwrite)

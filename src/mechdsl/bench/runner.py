@@ -122,6 +122,15 @@ def compare_columns(eom, compare) -> tuple[str, ...]:
     names = [c.strip() for c in (compare.split(",") if isinstance(compare, str) else compare) if c.strip()]
     if not names:
         raise UsageError("--compare needs 'positions', 'states' or a list of names")
+    known = (list(eom.coords) + [f"der({c})" for c in eom.coords] + list(eom.outputs)
+             + ["kinetic_energy", "potential_energy", "energy"])
+    for n in names:
+        if n not in known:
+            from ..diagnostics import did_you_mean
+
+            hint = did_you_mean(n, known)
+            raise UsageError(f"cannot compare {n!r}: not a coordinate, speed or output of {eom.name}"
+                             + (f"; {hint}" if hint else ""))
     return tuple(names)
 
 

@@ -1,0 +1,219 @@
+"""mech bench: method specifications, error norms, references, the sweep, the CLI.
+
+The physics check uses the closed-form motion of the pendulum released from the horizontal
+(/work/shared/references/README.md, "Closed forms"): sin(theta/2) = k cd(w t | k^2),
+k = sin(a/2), w = sqrt(g/L).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.special import ellipj
+
+import mechdsl
+from mechdsl.bench import (Setup, parse_tolerances, parse_variant, parse_variants, read_csv, run_bench,
+                           to_csv_text, write_chart, write_tables)
+from mechdsl.bench import measure
+from mechdsl.cli import main
+from mechdsl.diagnostics import UsageError
+
+from conftest import MODELS
+
+PENDULUM = MODELS / "pendulum.mech"
+STIFF = MODELS.parent / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
+T_END = 3.0
+POINTS = 31
+
+
+def exact_theta(t, a=np.pi / 2, g=9.81, L=1.0):
+    k = np.sin(a / 2)
+    sn, cn, dn, _ = ellipj(np.sqrt(g / L) * np.asarray(t), k * k)
+    return 2 * np.arcsin(k * cn / dn)
+
+
+def exact_csv(path, n=POINTS, t_end=T_END):
+    t = np.linspace(0, t_end, n)
+    lines = ["time,theta"] + [f"{float(a)!r},{float(b)!r}" for a, b in zip(t, exact_theta(t))]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def setup():
+    m = mechdsl.load(str(PENDULUM), scene="Swing")
+    return Setup.from_model(m, t_end=T_END, points=POINTS, source=str(PENDULUM))
+
+
+# --------------------------------------------------------------------------- specifications
+
+
+def test_variants_and_formulations():
+    v = parse_variants("erk, projection+cvodes-bdf, rk[dt=0.01], baumgarte[baumgarte=(0 0)]+idas")
+    assert [x.label for x in v] == ["erk", "projection+cvodes-bdf", "rk[dt=0.01]", "baumgarte[baumgarte=(0 0)]+idas"]
+    assert v[1].formulation == "projection" and v[1].method == "cvodes-bdf"
+    assert v[2].fixed_dt == 0.01 and v[2].kwargs == {"dt": 0.01}
+    assert v[3].kwargs == {"baumgarte": (0, 0), "formulation": "baumgarte"}
+    crossed = parse_variants(["cvodes-bdf,ggl+idas"], ["projection,baumgarte"])
+    assert [x.label for x in crossed] == ["projection+cvodes-bdf", "baumgarte+cvodes-bdf", "ggl+idas"]
+
+
+@pytest.mark.parametrize("bad", ["", "erk,erk", "a+b+c", "rk[dt]", "rk[dt=1", "+erk"])
+def test_bad_variants(bad):
+    with pytest.raises(UsageError):
+        parse_variants(bad)
+
+
+def test_tolerances():
+    default = parse_tolerances(None)
+    assert len(default) == 21 and default[0] == 1e-2 and default[-1] == 1e-12
+    assert np.allclose(np.diff(np.log10(default)), -0.5)
+    assert parse_tolerances("1e-4,1e-2,1e-4") == [1e-2, 1e-4]
+    assert parse_tolerances("1e-3..1e-5/1") == [1e-3, 1e-4, 1e-5]
+    assert len(parse_tolerances("1e-2..1e-6/4")) == 17
+    for bad in ("2", "1e-16", "x", "1e-2..y", "1e-2..1e-4/0"):
+        with pytest.raises(UsageError):
+            parse_tolerances(bad)
+
+
+# --------------------------------------------------------------------------- norms
+
+
+def test_error_norms_by_hand():
+    R = np.array([[1.0, -2.0], [2.0, 0.0], [4.0, 1.0]])
+    Y = R + np.array([[0.0, 0.0], [0.4, 0.2], [-0.4, 0.1]])
+    s = measure.component_scales({"a": R[:, 0], "b": R[:, 1]}, ["a", "b"])
+    assert s.tolist() == [4.0, 2.0]
+    e = measure.errors(Y, R, s)
+    assert e["final"] == pytest.approx(0.1)                   # max(0.4/4, 0.1/2)
+    assert e["l2"] == pytest.approx(np.sqrt((0.1 ** 2 + 0.1 ** 2 + 0.1 ** 2 + 0.05 ** 2) / 6))
+    assert measure.component_scales({"z": np.zeros(3)}, ["z"]).tolist() == [1.0]
+
+
+# --------------------------------------------------------------------------- references
+
+
+def test_reference_csv_and_grid(tmp_path):
+    ref = read_csv(exact_csv(tmp_path / "exact.csv"))
+    n, idx = ref.grid_points(0.0)
+    assert n == POINTS and idx.tolist() == list(range(POINTS))
+    # a reference with only its last row: compare the final time on a 2-point grid
+    (tmp_path / "last.csv").write_text(f"time,theta\n{T_END!r},{float(exact_theta(T_END))!r}\n")
+    n, idx = read_csv(tmp_path / "last.csv").grid_points(0.0)
+    assert n == 2 and idx.tolist() == [1]
+    (tmp_path / "uneven.csv").write_text("time,theta\n0,1\n1,1\n3,1\n")
+    with pytest.raises(UsageError):
+        read_csv(tmp_path / "uneven.csv").grid_points(0.0)
+    (tmp_path / "bad.csv").write_text("t,theta\n0,1\n")
+    with pytest.raises(UsageError):
+        read_csv(tmp_path / "bad.csv")
+
+
+def test_simulate_csv_is_a_reference(tmp_path, setup):
+    from mechdsl.simulate import simulate
+
+    r = simulate(setup.eom, T_END, rtol=1e-10, atol=1e-10, points=POINTS)
+    r.to_csv(tmp_path / "run.csv")
+    ref = read_csv(tmp_path / "run.csv")
+    assert np.array_equal(ref.values["theta"], r["theta"]) and "der(theta)" in ref.values
+
+
+def test_errors_against_the_closed_form(tmp_path, setup):
+    res = run_bench(setup, variants=parse_variants("erk,cvodes-bdf"), tolerances=[1e-4, 1e-8],
+                    reference=exact_csv(tmp_path / "exact.csv"), repeats=1)
+    assert [r.status for r in res.rows] == ["ok"] * 4
+    for label in ("erk", "cvodes-bdf"):
+        loose, tight = res.rows_of(label)
+        assert tight.err_final < loose.err_final and tight.err_l2 < loose.err_l2
+        assert tight.err_final < 1e-5 and tight.cpu > 0 and len(tight.cpu_runs) == 1
+    # the error is what it says: recompute erk at 1e-8 by hand
+    from mechdsl.simulate import simulate
+
+    r = simulate(setup.eom, T_END, rtol=1e-8, atol=1e-8, method="erk", points=POINTS)
+    th = exact_theta(r.t)
+    scale = np.abs(th).max()
+    assert res.rows_of("erk")[1].err_final == pytest.approx(abs(r["theta"][-1] - th[-1]) / scale, rel=1e-12)
+    assert res.rows_of("erk")[1].err_l2 == pytest.approx(np.sqrt(np.mean(((r["theta"] - th) / scale) ** 2)), rel=1e-12)
+    assert res.rows_of("erk")[1].invariants["energy"] == pytest.approx(r.stats["energy_drift_relative"])
+
+
+def test_auto_reference_estimates_its_own_accuracy(setup):
+    res = run_bench(setup, variants=parse_variants("erk"), tolerances=[1e-6], repeats=1)
+    ref = res.reference
+    assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == 1e-8
+    true_err = np.abs(ref.values["theta"] - exact_theta(ref.t)).max() / np.abs(exact_theta(ref.t)).max()
+    est = ref.accuracy["final"]
+    assert true_err < 1e-7 and 0 < est < 1e-6
+    # the estimate is of the right order (within a factor 1000 of the true final error)
+    final_true = abs(ref.values["theta"][-1] - exact_theta(T_END)) / np.abs(exact_theta(ref.t)).max()
+    assert final_true < 1e3 * est + 1e-14
+
+
+def test_failures_not_applicable_and_skipped_are_rows(tmp_path, setup):
+    variants = parse_variants("projection+erk,erk,stormer-verlet")
+    res = run_bench(setup, variants=variants, tolerances=[1e-3, 1e-5], reference=exact_csv(tmp_path / "e.csv"),
+                    repeats=1, budget=0.0)
+    by = {(r.label, r.tolerance): r for r in res.rows}
+    assert by[("projection+erk", 1e-3)].status == "n/a" and "constraints" in by[("projection+erk", 1e-3)].message
+    assert by[("erk", 1e-3)].status == "ok" and by[("erk", 1e-5)].status == "skipped"
+    sv = by[("stormer-verlet", 1e-3)]
+    assert sv.status == "ok" and sv.dt is not None and sv.err_final < 1e-2
+    assert len(res.rows) == 5
+    text = to_csv_text(res)
+    assert text.count("\n") == 6 and ",skipped," in text and ",n/a," in text
+
+
+def test_failed_runs_are_shown(tmp_path):
+    """The stiff spring pendulum: fixed-step RK4 with dt = 0.01 blows up (benchmarks/stability)."""
+    m = mechdsl.load(str(STIFF), scene="Swing")
+    st = Setup.from_model(m, t_end=0.2, points=11)
+    res = run_bench(st, variants=parse_variants("rk[dt=0.01],collocation[dt=0.01]"), tolerances=[1e-6], repeats=1)
+    assert res.kind == "stiff" and res.reference.methods == ("rosenbrock", "scipy-radau")
+    failed, ok = res.rows
+    assert failed.status == "failed" and "t = " in failed.message and failed.cpu is not None
+    assert failed.err_final is None and ok.status == "ok" and ok.err_final < 1e-6
+    files = write_chart(res, tmp_path)
+    assert all(p.stat().st_size > 1000 for p in files)
+
+
+def test_outputs_written_atomically_and_rerun(tmp_path, setup):
+    res = run_bench(setup, variants=parse_variants("erk,rk[dt=0.5]"), tolerances=[1e-4],
+                    reference=exact_csv(tmp_path / "e.csv"), repeats=1)
+    out = tmp_path / "out"
+    files = write_tables(res, out) + write_chart(res, out)
+    assert sorted(p.name for p in files) == ["bench.csv", "bench.json", "work_precision.png", "work_precision.svg"]
+    meta = json.loads((out / "bench.json").read_text())
+    assert meta["timer"] == "time.process_time" and meta["rows"][1]["dt"] == 0.5
+    write_tables(res, out)                    # mechdsl's own outputs may be replaced without --force
+    write_chart(res, out)
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "bench.csv").write_text("my data\n")
+    with pytest.raises(UsageError):
+        write_tables(res, tmp_path / "mine")
+    assert (tmp_path / "mine" / "bench.csv").read_text() == "my data\n"
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def test_cli_bench(tmp_path, capsys):
+    out = tmp_path / "o"
+    args = ["bench", str(PENDULUM), "--scene", "Swing", "--t-end", "2", "--points", "21", "--methods", "erk",
+            "--methods", "cvodes-adams", "--tolerances", "1e-3,1e-6", "--repeats", "1", "-o", str(out), "--quiet"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "reference: auto: scipy-dop853" in text and "estimated accuracy" in text
+    assert text.count("erk ") >= 2 and "cvodes-adams" in text and "wrote" in text
+    rows = (out / "bench.csv").read_text().splitlines()
+    assert rows[0].startswith("method,") and len(rows) == 5
+    assert main(args) == 0                    # re-run over its own outputs
+
+
+@pytest.mark.parametrize("extra", [["--tolerances", "3"], ["--methods", "erk+"], ["--repeats", "0"],
+                                   ["--reference", "/nonexistent.csv"], ["--compare", "nosuch"]])
+def test_cli_usage_errors(extra, capsys):
+    args = ["bench", str(PENDULUM), "--scene", "Swing", "--t-end", "1", "--points", "11", "--methods", "erk",
+            "--tolerances", "1e-3", "--repeats", "1", "--quiet", *extra]
+    assert main(args) == 2
+    assert "error" in capsys.readouterr().err
