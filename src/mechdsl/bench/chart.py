@@ -53,10 +53,14 @@ def draw(res, title: str | None = None):
         marker = MARKERS[vi % len(MARKERS)]
         ok = [r for r in rows if r.ok]
         failed = [r for r in rows if r.status == "failed"]
+        groups: dict = {}
         for r in rows:
             if r.status in ("n/a", "error", "skipped"):
-                tol = "" if r.tolerance is None else f" at {r.tolerance:.0e}"
-                notes.append(f"{label}{tol}: {r.status}" + (f" ({_short(r.message)})" if r.message else ""))
+                groups.setdefault((r.status, r.message), []).append(r.tolerance)
+        for (status, msg), tols in groups.items():
+            tt = [t for t in tols if t is not None]
+            where = "" if not tt else (f" at {tt[0]:.0e}" if len(tt) == 1 else f" at {tt[0]:.0e} .. {tt[-1]:.0e}")
+            notes.append(f"{label}{where}: {status}" + (f" ({_short(msg)})" if msg else ""))
         name = label + (f" ({len(failed)} failed)" if failed else "")
         for ax, (key, _) in zip(axes, panels):
             xs = [r.cpu for r in ok]

@@ -137,9 +137,11 @@ def format_table(res) -> str:
                      r.status if r.ok else f"{r.status}: {_short(r.message)}"])
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     out = header_lines(res) + [""]
-    out.append("  ".join(h.ljust(w) if i in (0, 8) else h.rjust(w) for i, (h, w) in enumerate(zip(head, widths))))
+    out.append("  ".join(h.ljust(w) if i in (0, 8) else h.rjust(w)
+                         for i, (h, w) in enumerate(zip(head, widths))).rstrip())
     for b in body:
-        out.append("  ".join(c.ljust(w) if i in (0, 8) else c.rjust(w) for i, (c, w) in enumerate(zip(b, widths))))
+        out.append("  ".join(c.ljust(w) if i in (0, 8) else c.rjust(w)
+                             for i, (c, w) in enumerate(zip(b, widths))).rstrip())
     if any("*" in (b[4] + b[5]) for b in body):
         out.append("* within 3x of the reference's estimated accuracy: not resolved")
     return "\n".join(out).rstrip()
@@ -148,3 +150,49 @@ def format_table(res) -> str:
 def _short(msg: str, n: int = 90) -> str:
     msg = " ".join(msg.split())
     return msg if len(msg) <= n else msg[: n - 3] + "..."
+
+
+# --------------------------------------------------------------------------- who is fastest
+
+
+def fastest(res, label: str, target: float, norm: str = "err_final"):
+    """The cheapest successful run of ``label`` whose error (``norm``: err_final or err_l2)
+    is at most ``target``: the Row, or None when no run of the sweep reached it."""
+    ok = [r for r in res.rows_of(label) if r.ok and getattr(r, norm) is not None and getattr(r, norm) <= target]
+    return min(ok, key=lambda r: r.cpu) if ok else None
+
+
+def fastest_lines(res, targets=(1e-3, 1e-6, 1e-9), norm: str = "err_final") -> list[str]:
+    """Per method: the CPU time of its cheapest run meeting each error target (the IFToMM
+    way of judging a method: the fastest run that is accurate enough), and that time
+    relative to the best method's."""
+    best = {}
+    for tgt in targets:
+        cands = [fastest(res, lab, tgt, norm) for lab in res.variants()]
+        cpus = [r.cpu for r in cands if r is not None]
+        best[tgt] = min(cpus) if cpus else None
+    what = "final-time" if norm == "err_final" else "L2"
+    head = ["method"] + [f"{what} error <= {t:.0e}" for t in targets]
+    body = []
+    for lab in res.variants():
+        cells = [lab]
+        for tgt in targets:
+            r = fastest(res, lab, tgt, norm)
+            if r is None:
+                cells.append("not reached")
+            else:
+                rel = f" (x{r.cpu / best[tgt]:.1f})" if best[tgt] else ""
+                tol = "-" if r.tolerance is None else f"{r.tolerance:.0e}"
+                cells.append(f"{r.cpu * 1e3:.3g} ms at {tol}{rel}")
+        body.append(cells)
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+    out = ["fastest run meeting each error target (CPU time; x = relative to the fastest method):"]
+    out.append("  ".join(h.ljust(w) for h, w in zip(head, widths)).rstrip())
+    out += ["  ".join(c.ljust(w) for c, w in zip(b, widths)).rstrip() for b in body]
+    return out
+
+
+def markdown_table(head: list[str], body: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in body]
+    return "\n".join(lines)

@@ -103,6 +103,10 @@ def run(args) -> int:
                     reference_methods=ref_methods, compare=args.compare, repeats=args.repeats, budget=args.budget,
                     log=log)
     print(format_table(res))
+    from ..bench.report import fastest_lines
+
+    print()
+    print("\n".join(fastest_lines(res)))
     if out is not None:
         written = write_tables(res, out, overwrite=args.force)
         if not args.no_chart:
