@@ -234,9 +234,13 @@ def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Re
     st = r.stats or {}
     row.steps = _stat(st, "steps")
     row.rhs_evals = _stat(st, "rhs_evals", "rhs_evaluations")
-    if row.dt is None and (r.metadata or {}).get("fixed_steps"):
+    if (r.metadata or {}).get("fixed_steps"):
+        # rk/collocation: the plan, not the back end's counter (which CasADi accumulates over
+        # calls of a cached integrator)
         n = r.metadata["fixed_steps"].get("target_steps")
-        row.dt = (setup.t_end - setup.t_start) / n if n else None
+        if n:
+            row.steps = int(n)
+            row.dt = row.dt or (setup.t_end - setup.t_start) / n
     row.t_reached = float(r.t[-1]) if len(r.t) else None
     row.invariants = measure.invariants(r, conservative)
     if not r.success:
