@@ -43,8 +43,12 @@ def invariants(result, conservative=None) -> dict[str, float]:
     st = result.stats or {}
     if conservative is None:
         conservative = (result.metadata or {}).get("conservative")
-    if conservative and "energy_drift_relative" in st:
-        out["energy"] = float(st["energy_drift_relative"])
+    if conservative:
+        e = st.get("energy_drift_relative")
+        if e is None:
+            e = energy_drift_relative(result.signals)
+        if e is not None:
+            out["energy"] = float(e)
     for name, v in (st.get("first_integral_drift") or {}).items():
         if name != "energy":
             out[f"drift({name})"] = float(v)
@@ -55,6 +59,17 @@ def invariants(result, conservative=None) -> dict[str, float]:
         if k.endswith("quaternion_norm"):
             out[k] = _maxabs(result.signals[k])
     return out
+
+
+def energy_drift_relative(signals) -> float | None:
+    """max |E - E(0)| / max(|E(0)|, max T, max |V|) (as mechdsl.simulate records it), for
+    results whose stats lack it."""
+    E = signals.get("energy")
+    if E is None or len(E) == 0 or not np.isfinite(E).all():
+        return None
+    scale = max(abs(float(E[0])), _maxabs(signals.get("kinetic_energy", [])), _maxabs(signals.get("potential_energy", [])),
+                1e-300)
+    return float(np.abs(E - E[0]).max()) / scale
 
 
 def _maxabs(v) -> float:

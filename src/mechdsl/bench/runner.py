@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import platform
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -20,6 +21,7 @@ import numpy as np
 
 from ..diagnostics import MechError, UsageError
 from . import measure, reference as R
+from .index1 import FORMULATION as INDEX1
 from .spec import SYMPLECTIC_ORDER, Variant, parse_variant
 from .timing import TIMER, timed
 
@@ -187,8 +189,16 @@ def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: 
     if setup.compiled:
         kw["compiled"] = True
     tol = 1e-8 if tol is None else tol
-    return simulate(setup.eom, setup.t_end, t_start=setup.t_start, rtol=tol, atol=tol, method=variant.method,
-                    points=points, outputs=outputs, x0=setup.x0, p=setup.p, **kw)
+    common = dict(t_start=setup.t_start, rtol=tol, atol=tol, method=variant.method, points=points, outputs=outputs,
+                  x0=setup.x0, p=setup.p)
+    with warnings.catch_warnings():        # the Result's metadata keeps the simulator's warnings
+        warnings.simplefilter("ignore")
+        if kw.get("formulation") == INDEX1:
+            from .index1 import simulate_index1
+
+            kw.pop("formulation")
+            return simulate_index1(setup.eom, setup.t_end, **common, **kw)
+        return simulate(setup.eom, setup.t_end, **common, **kw)
 
 
 def _stat(st: dict, *keys):

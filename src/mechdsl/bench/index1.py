@@ -1,0 +1,83 @@
+"""A constrained model's index-1 ODE, for ODE methods the DAE layer does not offer.
+
+    M q'' + G^T lambda = bias,   G q'' = gamma - 2 alpha gdot - beta^2 g      (x = [q; q'])
+
+built from ``mechdsl.dae.system.ConstrainedSystem`` (the same equilibrated KKT solve the
+``baumgarte`` formulation integrates) and handed to ``mechdsl.simulate`` as the ``ode``
+Function of the model without constraints, so that any ODE method runs on it: scipy's
+DOP853, erk, rk, ... .  Benchmark-only (formulation ``index1-ode`` of ``mech bench``): the
+drift of g is not controlled unless ``baumgarte = (alpha, beta)`` is given, and nothing
+projects.  Its runs record the constraint residuals ``residual(name)`` like the DAE layer.
+
+Like ``mechdsl.dae``, every call builds its system anew (degrees of freedom, independent
+constraints, the symbolic KKT solve), so a benchmark compares the integration and its
+supervision, not caching.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..diagnostics import UsageError
+
+FORMULATION = "index1-ode"
+
+
+def simulate_index1(eom, t_end, *, method, baumgarte=None, p=None, x0=None, **kw):
+    import casadi as ca
+
+    from ..simulate import parameter_vector, simulate, start_vector
+
+    if eom.g is None:
+        raise UsageError(f"formulation {FORMULATION!r} needs a model with constraints")
+    try:
+        from ..dae.dof import dof_report
+        from ..dae.system import ConstrainedSystem
+    except ImportError:
+        raise UsageError(f"formulation {FORMULATION!r} needs mechdsl.dae, which this build lacks") from None
+    if method not in _ode_methods():
+        raise UsageError(f"formulation {FORMULATION!r} takes an ODE method of mechdsl.simulate, not {method!r}")
+    alpha, beta = (0.0, 0.0) if baumgarte is None else _rates(baumgarte)
+    pv = parameter_vector(eom, p)
+    xs = start_vector(eom, x0, pv)
+    n = eom.n
+    dof = dof_report(eom, xs[:n], float(kw.get("t_start", 0.0) or 0.0), pv)
+    system = ConstrainedSystem.build(eom, pv, dof.independent)
+    S = system.sym
+    qdd = ca.substitute(S["qdd"], ca.vertcat(S["alpha"], S["beta"]), ca.DM([alpha, beta]))
+    x = ca.vertcat(eom.q, eom.qd)
+    ode = ca.Function("ode", [eom.t, x, eom.p], [ca.vertcat(eom.qd, qdd)], ["t", "x", "p"], ["xdot"])
+    funcs = {"ode": ode}
+    if method not in _no_jacobian():
+        funcs["ode_jacobian"] = ca.Function("ode_jacobian", [eom.t, x, eom.p], [ca.jacobian(ode(eom.t, x, eom.p), x)],
+                                            ["t", "x", "p"], ["jac"])
+    free = eom.replace(g=None)
+    free.__dict__["_integral_function"] = {"f": None}   # the free system's symmetries are not the model's
+    r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
+    if len(r.t):
+        g = ca.Function("g", [eom.t, eom.q, eom.p], [eom.g])
+        G = np.array(g.map(len(r.t))(r.t.reshape(1, -1), r.q.T, pv.reshape(-1, 1)), float)
+        for i, name in enumerate(eom.constraint_names):
+            r.signals[f"residual({name})"] = G[i].reshape(-1)
+    r.metadata["formulation"] = FORMULATION
+    r.metadata["baumgarte"] = [alpha, beta]
+    r.metadata["conservative"] = None
+    return r
+
+
+def _rates(b):
+    if isinstance(b, (tuple, list)) and len(b) == 2:
+        return float(b[0]), float(b[1])
+    w = float(b)
+    return w, w
+
+
+def _ode_methods():
+    from ..integrators import METHODS
+
+    return tuple(METHODS)
+
+
+def _no_jacobian():
+    from ..integrators import NO_JACOBIAN
+
+    return NO_JACOBIAN
