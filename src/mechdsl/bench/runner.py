@@ -242,8 +242,8 @@ def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Re
     r = tm.result
     row.cpu, row.cpu_runs, row.cpu_warmup = tm.best, tm.runs, tm.warmup
     st = r.stats or {}
-    row.steps = _stat(st, "steps")
-    row.rhs_evals = _stat(st, "rhs_evals", "rhs_evaluations")
+    row.steps = _stat(st, "steps", "nsteps")
+    row.rhs_evals = _stat(st, "rhs_evals", "rhs_evaluations", "nfevals")
     if (r.metadata or {}).get("fixed_steps"):
         # rk/collocation: the plan, not the back end's counter (which CasADi accumulates over
         # calls of a cached integrator)
