@@ -22,7 +22,10 @@ from ..diagnostics import UsageError
 FORMULATION = "index1-ode"
 
 
-def simulate_index1(eom, t_end, *, method, baumgarte=None, p=None, x0=None, **kw):
+def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independent", p=None, x0=None, **kw):
+    """``constraints``: "independent" (the subset mechdsl.dae keeps: redundant rows dropped)
+    or "all" (every constraint row, as a naive implementation would: with a redundant
+    constraint the KKT matrix is singular)."""
     import casadi as ca
 
     from ..simulate import parameter_vector, simulate, start_vector
@@ -41,7 +44,9 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, p=None, x0=None, **kw
     xs = start_vector(eom, x0, pv)
     n = eom.n
     dof = dof_report(eom, xs[:n], float(kw.get("t_start", 0.0) or 0.0), pv)
-    system = ConstrainedSystem.build(eom, pv, dof.independent)
+    if constraints not in ("independent", "all"):
+        raise UsageError(f"constraints must be 'independent' or 'all' (got {constraints!r})")
+    system = ConstrainedSystem.build(eom, pv, dof.independent if constraints == "independent" else None)
     S = system.sym
     qdd = ca.substitute(S["qdd"], ca.vertcat(S["alpha"], S["beta"]), ca.DM([alpha, beta]))
     x = ca.vertcat(eom.q, eom.qd)
@@ -60,6 +65,7 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, p=None, x0=None, **kw
             r.signals[f"residual({name})"] = G[i].reshape(-1)
     r.metadata["formulation"] = FORMULATION
     r.metadata["baumgarte"] = [alpha, beta]
+    r.metadata["active_constraints"] = [eom.constraint_names[i] for i in system.active]
     r.metadata["conservative"] = None
     return r
 
