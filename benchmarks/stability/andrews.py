@@ -11,6 +11,8 @@ the positions against the Test Set's reference (PSIDE at 1e-14;
 """
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import warnings
 from pathlib import Path
@@ -70,7 +72,7 @@ def run(size: str = "small") -> Case:
         for lab, opts in IDAS_OPTIONS.items():
             o = dict(opts, reltol=tol, abstol=tol, max_num_steps=100_000)
             integ, _ = guarded_idas("index3", dae, x0, z0, pv, 0.0, list(np.linspace(0, T, 31)[1:]), o, force=True)
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):   # IDAS's own messages
                 warnings.simplefilter("ignore")
                 try:
                     res = integ(x0=x0, z0=z0, p=pv)
