@@ -116,9 +116,8 @@ def andrews(quick, figs, tmp):
     return res
 
 
-ANDREWS_METHODS = ("projection+cvodes-bdf,projection+cvodes-adams,ggl+idas,baumgarte+cvodes-bdf,"
-                   "partitioning+cvodes-bdf,projection+scipy-dop853")
-ANDREWS_DOP853 = "projection+scipy-dop853"
+ANDREWS_METHODS = ("ggl+idas,baumgarte+cvodes-bdf,baumgarte+cvodes-adams,projection+cvodes-bdf,"
+                   "projection+cvodes-adams,partitioning+cvodes-adams,index1-ode+scipy-dop853")
 
 
 def andrews_check(res, digits=7):
@@ -214,7 +213,7 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   on the output grid (equally spaced, ending at the stop time; a single row at the stop time
   is allowed), or `auto`: two runs at a tolerance two decades below the tightest of the
   sweep (within [1e-13, 1e-8]) with different methods (non-stiff: `scipy-dop853` and
-  `erk`; stiff: `rosenbrock` and `scipy-radau`; constrained: `projection+cvodes-bdf` and
+  `erk`; stiff: `rosenbrock` and `scipy-radau`; constrained: `projection+cvodes-adams` and
   `ggl+idas`; `--reference-methods A,B` to choose). The first is the reference; the
   difference between the two is printed and drawn as its estimated accuracy, and errors
   within 3x of it are starred: the reference cannot resolve them.

@@ -90,7 +90,7 @@ def auto_pair(kind: str) -> tuple[str, str]:
     """Reference and check methods by kind of model."""
     return {"ode": ("scipy-dop853", "erk"),
             "stiff": ("rosenbrock", "scipy-radau"),
-            "dae": ("projection+cvodes-bdf", "ggl+idas")}[kind]
+            "dae": ("projection+cvodes-adams", "ggl+idas")}[kind]
 
 
 def reference_tolerance(tolerances) -> float:
