@@ -197,7 +197,11 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   `stormer-verlet`, `implicit-midpoint`, `gauss-legendre`, `auto`). For constrained models
   a method is `FORMULATION+METHOD` (`projection+cvodes-bdf`, `ggl+idas`,
   `baumgarte+cvodes-bdf`, `partitioning+cvodes-adams`); `--formulations projection,ggl`
-  combines every method that names no formulation with each formulation. Options in
+  combines every method that names no formulation with each formulation. `index1-ode+METHOD`
+  is the benchmark's own formulation: the constrained model's index-1 ODE (accelerations and
+  multipliers from the augmented system, redundant constraints dropped, no stabilization;
+  `index1-ode[baumgarte=(a b)]` adds it), given to any ODE method, e.g. scipy's DOP853, which
+  `mechdsl.dae` does not offer; like `mechdsl.dae` it builds its system on every run. Options in
   brackets are passed to the simulator by name: `rk[dt=0.01]` (a fixed step: run once,
   not over the sweep), `baumgarte[baumgarte=(0 0)]+cvodes-bdf` (a tuple is written with
   spaces). Defaults: non-stiff models `erk,cvodes-adams,cvodes-bdf,scipy-dop853`; stiff ones
