@@ -50,6 +50,10 @@ class EOM:
     model: ir.Model | None = None
     point_position: Callable[[str], object] | None = None   # point name -> SX (3,) in q, t, p
     notes: list[str] = field(default_factory=list)
+    # multipliers of the constraints (DAE models): an SX symbol (m,) that outputs and
+    # `reactions` may depend on; the DAE simulator substitutes the computed multipliers.
+    lam: object | None = None
+    reactions: dict[str, object] = field(default_factory=dict)   # name -> SX in q, qd, t, p, lam
 
     @property
     def n(self) -> int:

@@ -1,0 +1,258 @@
+"""``simulate_dae``: the segment loop shared by every formulation.
+
+    initialize (consistent start, changes reported)
+    -> count degrees of freedom, drop redundant constraints (independent subset)
+    -> build the formulation's stepper
+    -> advance segment by segment to each output time, after each segment:
+         projection / re-partitioning (the formulation's hook),
+         conditioning check of G (singular configuration -> stop, report the time),
+         drift measurement (||g||, ||G q' + g_t||)
+    -> outputs, multipliers and reactions at the output times -> Result
+
+Chunks.  One integrator call covers up to CHUNK output intervals (the integrator returns
+the states at each output time); a formulation may accept only a prefix (projection does
+when the drift grows).  A chunk that fails is retried one output interval at a time, and
+a failing interval is halved up to MAX_RETRIES times before the run stops with a Failure.
+
+Singular configurations.  At every accepted state the ratio sigma_min / sigma_max of the
+scaled G is computed.  Once it falls below SINGULAR_WATCH and keeps falling, the run
+rewinds to that state and continues in single segments, each ending halfway to the time
+at which the ratio, extrapolated linearly, would reach zero; so a singular configuration
+is approached in geometrically shrinking steps and detected (ratio < singular_tol)
+rather than stepped over.
+"""
+from __future__ import annotations
+
+import time as _time
+import warnings
+
+import numpy as np
+
+from ..diagnostics import UsageError
+from ..result import Failure, Result
+from .dof import dof_report, singular_ratio
+from .init import initialize
+from .options import DaeOptions, parse_options
+from .record import evaluate_signals, select_signals
+from .stepper import StepError
+from .system import ConstrainedSystem
+
+DEFAULT_POINTS = 501
+SINGULAR_WATCH = 0.05      # start shortening segments once sigma ratio is below this
+MAX_RETRIES = 12           # halvings of a failing segment before giving up
+CHUNK = 64                 # most output intervals per integrator call
+
+
+def _param_vector(eom, p) -> np.ndarray:
+    if p is None:
+        return np.array(eom.param_values, float)
+    if isinstance(p, dict):
+        pv = np.array(eom.param_values, float)
+        for k, v in p.items():
+            if k not in eom.params:
+                raise UsageError(f"unknown parameter {k!r}")
+            pv[eom.params.index(k)] = float(v)
+        return pv
+    pv = np.asarray(p, float).ravel()
+    if pv.size != len(eom.params):
+        raise UsageError(f"parameter vector has {pv.size} entries, the model has {len(eom.params)}")
+    return pv
+
+
+def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
+    f = opts.formulation
+    if f == "baumgarte":
+        from .baumgarte import BaumgarteStepper
+
+        return BaumgarteStepper(system, opts, span)
+    if f == "projection":
+        from .projection import ProjectionStepper
+
+        return ProjectionStepper(system, opts, span)
+    if f == "ggl":
+        from .ggl import GGLStepper
+
+        return GGLStepper(system, opts, t0, q0, qd0)
+    if f == "partitioning":
+        from .partitioning import PartitioningStepper
+
+        return PartitioningStepper(system, opts)
+    raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
+
+
+def simulate_dae(eom, t_end, **kw) -> Result:
+    """Simulate a model with constraints (``eom.g``) as a DAE with multipliers.
+
+    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning'),
+    rtol, atol, method ('auto' | 'bdf' | 'adams' for the ODE formulations, 'idas' for ggl),
+    points, t_start, p (vector or {name: value}), reactions (bool), outputs (names),
+    baumgarte (omega or (alpha, beta)), singular_tol, max_interval, drift_bound, max_steps.
+    See docs/constraints.md.
+    """
+    opts, extra = parse_options(kw)
+    if eom.g is None or eom.m == 0:
+        raise UsageError("simulate_dae needs a model with constraints; use mechdsl.simulate for ODEs")
+    wall0 = _time.perf_counter()
+    pv = _param_vector(eom, opts.p)
+    t0 = float(opts.t_start)
+    t_end = float(t_end)
+    if not t_end > t0:
+        raise UsageError(f"stop time {t_end:g} must be after the start time {t0:g}")
+    points = opts.points or DEFAULT_POINTS
+    grid = np.linspace(t0, t_end, points)
+    span = t_end - t0
+    chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
+
+    q0, qd0 = eom.start(pv)
+    init = initialize(eom, q0, qd0, t0, pv)
+    dof = dof_report(eom, init.q, t0, pv)
+    notes: list[str] = []
+    if dof.redundant:
+        notes.append(f"{dof.redundant} redundant constraint(s) dropped: {', '.join(dof.redundant_names)} "
+                     f"(rank of G is {dof.rank} of {dof.constraints}); their multipliers are reported as 0")
+    system = ConstrainedSystem.build(eom, pv, dof.independent)
+    if opts.formulation == "partitioning" and dof.dof == 0:
+        notes.append("no degrees of freedom: partitioning has nothing to integrate; using projection")
+        opts.formulation = "projection"
+    stepper = make_stepper(system, opts, t0, init.q, init.qd, span)
+    stepper.reset(t0, init.q, init.qd)
+
+    T, Qs, QDs, D, VD = [], [], [], [], []
+    events: list[dict] = []
+    failure = None
+    rank = system.m
+
+    def ratio_at(q, t):
+        return singular_ratio(system.scaled_G(q, t), rank)
+
+    def record(t, q, qd):
+        d, v = system.drift(q, qd, t)
+        T.append(t)
+        Qs.append(q.copy())
+        QDs.append(qd.copy())
+        D.append(d)
+        VD.append(v)
+
+    record(t0, stepper.q, stepper.qd)
+    ratio_prev, t_prev = ratio_at(stepper.q, t0), t0
+    min_ratio = ratio_prev
+    h_sing = np.inf
+    k = 1
+    retries = 0
+    h_fail = np.inf
+    chunk = CHUNK
+    tiny = 1e-13 * max(abs(t_end), span)
+    while k < len(grid) and failure is None:
+        single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
+        if single:
+            target = grid[k]
+            h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
+            times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
+        else:
+            K = min(chunk, len(grid) - k)
+            if opts.max_interval:
+                K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
+            times = grid[k:k + K]
+            if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
+                times = np.array([stepper.t + opts.max_interval])
+        saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
+        try:
+            T_acc, Q_acc, QD_acc = stepper.advance(times)
+        except StepError as e:
+            stepper.reset(*saved)
+            if len(times) > 1:          # retry the chunk one output interval at a time
+                chunk = 1
+                continue
+            if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
+                retries += 1
+                continue
+            retries += 1
+            h_fail = (times[-1] - saved[0]) / 2
+            if retries > MAX_RETRIES or h_fail < tiny:
+                r_now = ratio_at(saved[1], saved[0])
+                if r_now < 100 * opts.singular_tol or (r_now < ratio_prev and r_now < SINGULAR_WATCH):
+                    failure = Failure(saved[0], "singular configuration",
+                                      f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
+                                      f"and the {opts.formulation} integrator failed: {e}")
+                else:
+                    failure = Failure(saved[0], f"{opts.formulation} integrator failed", str(e))
+            continue
+        retries = 0
+        h_fail = np.inf
+        if not single:
+            chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
+        elif chunk == 1 and not np.isfinite(h_sing):
+            chunk = 2
+        for i in range(len(T_acc)):
+            t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
+            ratio = ratio_at(q_now, t_now)
+            min_ratio = min(min_ratio, ratio)
+            on_grid = abs(t_now - grid[k]) <= tiny
+            if ratio < opts.singular_tol:
+                events.append({"time": t_now, "kind": "singular",
+                               "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
+                failure = Failure(t_now, "singular configuration",
+                                  f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
+                                  f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
+                                  "determined by the equations (a dead point or change point of the mechanism)")
+                record(t_now, q_now, qd_now)
+                break
+            if ratio < SINGULAR_WATCH and ratio < ratio_prev and t_now > t_prev:
+                slope = (ratio - ratio_prev) / (t_now - t_prev)
+                h_sing = max(0.5 * ratio / -slope, 1e3 * tiny)
+            else:
+                h_sing = np.inf
+            ratio_prev, t_prev = ratio, t_now
+            if on_grid:
+                record(t_now, q_now, qd_now)
+                k += 1
+            if np.isfinite(h_sing) and i < len(T_acc) - 1:
+                # approaching a singular configuration: rewind to here, continue in short segments
+                stepper.reset(t_now, q_now, qd_now)
+                break
+
+    t = np.array(T)
+    Q = np.array(Qs).reshape(len(T), eom.n)
+    QD = np.array(QDs).reshape(len(T), eom.n)
+    LAM = None
+    if need_lam:
+        LAM = np.zeros((len(T), eom.m))
+        for i in range(len(T)):
+            _, lam = system.accel(Q[i], QD[i], t[i])
+            LAM[i, list(system.active)] = lam
+    signals = {"constraint_drift": np.array(D), "velocity_drift": np.array(VD)}
+    signals.update(evaluate_signals(eom, chosen, t, Q, QD, LAM, pv))
+
+    bound = opts.bound
+    max_d = float(np.max(D)) if D else 0.0
+    max_v = float(np.max(VD)) if VD else 0.0
+    drift_ok = max_d <= bound and max_v <= bound
+    stats = dict(stepper.stats)
+    stats.update({"max_constraint_drift": max_d, "max_velocity_drift": max_v, "drift_bound": bound,
+                  "drift_ok": drift_ok, "min_singular_ratio": float(min_ratio),
+                  "wall_time": _time.perf_counter() - wall0})
+    metadata = {"model": eom.name, "formulation": opts.formulation,
+                "formulation_reason": "requested" if (kw.get("formulation") or "auto") != "auto" else
+                "default: index-1 ODE with Baumgarte terms and projection onto both constraint manifolds "
+                "after every segment",
+                "method": _method_name(opts), "rtol": opts.rtol, "atol": opts.atol, "points": points,
+                "t_start": t0, "t_end": t_end, "initialization": init.as_dict(), "dof": dof.as_dict(),
+                "constraints": list(eom.constraint_names), "active_constraints": list(system.names),
+                "notes": notes + stepper.notes}
+    if extra:
+        metadata["extra_options"] = {k: repr(v) for k, v in extra.items()}
+    if not drift_ok:
+        msg = (f"constraint drift exceeded the bound {bound:.1e}: max ||g|| = {max_d:.2e}, "
+               f"max ||G q' + g_t|| = {max_v:.2e} (formulation {opts.formulation}); "
+               "tighten atol or use formulation = \"projection\"")
+        metadata["drift_warning"] = msg
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
+    return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
+                  metadata=metadata, events=events, failure=failure)
+
+
+def _method_name(opts: DaeOptions) -> str:
+    if opts.formulation == "ggl":
+        return "IDAS (variable-order BDF), algebraic variables excluded from the error test"
+    return "CVODES " + ("Adams" if opts.method == "adams" else "BDF")

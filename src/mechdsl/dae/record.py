@@ -1,0 +1,101 @@
+"""What a constrained run records besides q and q': outputs, drift, multipliers, reactions.
+
+Signals (Result.signals):
+- "constraint_drift"  ||g(q, t)||_inf over all constraints (redundant ones included)
+- "velocity_drift"    ||G q' + g_t||_inf
+- the model's outputs (EOM.outputs) that need no multipliers
+- only when asked (option ``reactions=True``, or named in ``outputs``):
+  "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one), and
+  reaction outputs: entries of ``EOM.reactions`` (name -> SX in q, q', t, p and EOM.lam),
+  outputs that depend on ``EOM.lam``, and for constraint names of the form
+  "<joint>.force[i]" / "<joint>.torque[i]" (the convention of cut joints, whose
+  multipliers are the reaction components in the joint frame) the signal of that name.
+
+The multipliers are computed from the consistent state at each output time (augmented
+system at acceleration level), the same way for every formulation.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from ..diagnostics import UsageError, did_you_mean
+
+REACTION_NAME = re.compile(r"(.+)\.(force|torque)\[(\d)\]")
+
+
+def lam_symbol(eom):
+    import casadi as ca
+
+    lam = getattr(eom, "lam", None)
+    return lam if lam is not None else ca.SX.sym("lam", eom.m)
+
+
+def depends_on(expr, sym) -> bool:
+    import casadi as ca
+
+    if sym is None or sym.numel() == 0:
+        return False
+    return bool(ca.depends_on(ca.SX(expr), sym))
+
+
+def reaction_sources(eom) -> dict[str, object]:
+    """name -> SX in (q, qd, t, p, lam) for every reaction/multiplier signal of the model."""
+    lam = lam_symbol(eom)
+    out = {}
+    for i, name in enumerate(eom.constraint_names):
+        out[f"lambda[{name}]"] = lam[i]
+        if REACTION_NAME.fullmatch(name):
+            out[name] = lam[i]
+    for name, expr in (getattr(eom, "reactions", None) or {}).items():
+        out[name] = expr
+    for name, expr in eom.outputs.items():
+        if depends_on(expr, lam):
+            out[name] = expr
+    return out
+
+
+def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
+    """The signal expressions to record and whether multipliers are needed."""
+    lam = lam_symbol(eom)
+    plain = {k: v for k, v in eom.outputs.items() if not depends_on(v, lam)}
+    react = reaction_sources(eom)
+    if outputs is None:
+        chosen = dict(plain)
+        if reactions:
+            chosen.update(react)
+        return chosen, bool(reactions)
+    chosen = {}
+    for name in outputs:
+        if name in plain:
+            chosen[name] = plain[name]
+        elif name in react:
+            chosen[name] = react[name]
+        elif name in eom.coords or name.startswith("der(") or name in ("constraint_drift", "velocity_drift"):
+            continue   # always recorded
+        else:
+            hint = did_you_mean(name, list(plain) + list(react) + list(eom.coords))
+            raise UsageError(f"no output named {name!r} in model {eom.name}" + (f"; {hint}" if hint else ""))
+    if reactions:
+        chosen.update({k: v for k, v in react.items() if k not in chosen})
+    need = any(depends_on(v, lam) for v in chosen.values())
+    return chosen, need
+
+
+def evaluate_signals(eom, chosen: dict, t, Q, QD, LAM, p) -> dict[str, np.ndarray]:
+    import casadi as ca
+
+    if not chosen:
+        return {}
+    lam = lam_symbol(eom)
+    names = list(chosen)
+    F = ca.Function("signals", [eom.q, eom.qd, eom.t, eom.p, lam], [ca.vertcat(*[ca.SX(chosen[k]) for k in names])])
+    N = len(t)
+    if N == 0:
+        return {k: np.zeros(0) for k in names}
+    Fm = F.map(N)
+    P = np.repeat(np.asarray(p, float).reshape(-1, 1), N, axis=1)
+    L = LAM.T if LAM is not None and LAM.size else np.zeros((eom.m, N))
+    vals = np.array(Fm(Q.T, QD.T, np.asarray(t).reshape(1, -1), P, L), float).reshape(len(names), N)
+    return {k: vals[i] for i, k in enumerate(names)}
