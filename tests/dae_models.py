@@ -161,3 +161,188 @@ def pendulum_exact(t, g=9.81, L=1.0, theta0=np.pi / 2):
     sn, cn, dn, _ = ellipj(np.sqrt(g / L) * np.asarray(t, float), k * k)
     theta = 2 * np.arcsin(k * cn / dn)
     return L * np.sin(theta), -L * np.cos(theta)
+
+
+# --------------------------------------------------------------------------- planar linkages
+
+
+def _rot2(a):
+    return ca.vertcat(ca.cos(a), ca.sin(a))
+
+
+def _rod_energy(m, L, c, phi, q, qd):
+    """Kinetic energy of a uniform planar rod: centre c (SX 2-vector in q), angle phi."""
+    vc = ca.jtimes(c, q, qd)
+    w = ca.jtimes(phi, q, qd)
+    return 0.5 * m * ca.dot(vc, vc) + 0.5 * (m * L**2 / 12) * w**2
+
+
+def four_bar_eom(lengths=(1.0, 1.0, 1.0, 1.0), masses=(1.0, 1.0, 1.0), gravity=9.81, q0=None, qd0=None,
+                 fixed_q=None, fixed_qd=None, name="FourBar"):
+    """Planar four-bar in joint angles (th1 crank, th2 coupler, th3 rocker; world angles).
+
+    Ground pivots A = (0, 0) and D = (d, 0); crank A->B (a), coupler B->C (b), rocker D->C (c).
+    The loop is cut at the joint C between coupler (parent) and rocker (child); its two
+    constraints g = R3^T (C_coupler - C_rocker) are named "jC.force[0]", "jC.force[1]", so
+    their multipliers are the force of the joint on the rocker in the rocker's frame."""
+    a, b, c, d = lengths
+    coords = ("th1", "th2", "th3")
+    params = ("m1", "m2", "m3", "g")
+    q, qd, t, p, P = _syms(coords, params)
+    th1, th2, th3 = q[0], q[1], q[2]
+    B = a * _rot2(th1)
+    C1 = B + b * _rot2(th2)
+    C3 = ca.vertcat(d, 0) + c * _rot2(th3)
+    T = (_rod_energy(P["m1"], a, 0.5 * B, th1, q, qd) + _rod_energy(P["m2"], b, 0.5 * (B + C1), th2, q, qd)
+         + _rod_energy(P["m3"], c, 0.5 * (ca.vertcat(d, 0) + C3), th3, q, qd))
+    V = P["g"] * (P["m1"] * 0.5 * B[1] + P["m2"] * 0.5 * (B[1] + C1[1]) + P["m3"] * 0.5 * C3[1])
+    R3T = ca.horzcat(ca.vertcat(ca.cos(th3), -ca.sin(th3)), ca.vertcat(ca.sin(th3), ca.cos(th3)))
+    g = ca.mtimes(R3T, C1 - C3)
+    e = from_lagrangian(name, coords, params, [*masses, gravity], q, qd, t, p, T, V, g=g, q0=q0, qd0=qd0,
+                        constraint_names=["jC.force[0]", "jC.force[1]"],
+                        outputs={"xB": B[0], "yB": B[1], "xC": C3[0], "yC": C3[1], "energy": T + V})
+    if fixed_q is not None:
+        e.fixed_q = tuple(fixed_q)
+    if fixed_qd is not None:
+        e.fixed_qd = tuple(fixed_qd)
+    return e
+
+
+def crank_rocker_eom():
+    """A Grashof crank-rocker (ground 1, crank 0.4, coupler 1.0, rocker 0.8) under gravity with
+    the crank turning; th2, th3 and their speeds are computed by consistent initialization."""
+    return four_bar_eom(lengths=(0.4, 1.0, 0.8, 1.0), masses=(0.5, 1.0, 0.8), q0=[1.0, 0.3, 1.4],
+                        qd0=[6.0, 0.0, 0.0], fixed_q=(True, False, False), fixed_qd=(True, False, False),
+                        name="CrankRocker")
+
+
+def parallelogram_eom():
+    """IFToMM A02 with N = 1: unit rods, cranks vertical, coupler at y = 1, crank tip moving
+    at 1 m/s in +x; it falls to the flat, singular configuration (all bars on the x axis)."""
+    return four_bar_eom(q0=[np.pi / 2, 0.0, np.pi / 2], qd0=[-1.0, 0.0, -1.0], name="Parallelogram")
+
+
+def parallelogram_singular_time(g=9.81):
+    """Time for the parallelogram above to reach theta = 0 (from energy: (5/6) w^2 + 2 g sin(theta))."""
+    from scipy.integrate import quad
+
+    E = 5 / 6 * 1.0 + 2 * g
+    speed = lambda th: np.sqrt((E - 2 * g * np.sin(th)) * 6 / 5)  # noqa: E731
+    return quad(lambda th: 1 / speed(th), 0, np.pi / 2, epsabs=1e-14, epsrel=1e-14)[0]
+
+
+def slider_crank_eom(r=0.3, l=1.0, masses=(1.0, 2.0, 0.5), gravity=9.81, torque=5.0, q0=None, qd0=None):
+    """Crank (th1, length r, pivot at the origin), connecting rod (th2, length l), slider (s on y = 0).
+
+    The loop is cut at the pin B between the rod (parent) and the slider (child, not rotating):
+    g = (A + l e(th2)) - (s, 0), named "jB.force[0]", "jB.force[1]" (force on the slider, world axes).
+    A constant torque drives the crank."""
+    coords = ("th1", "th2", "s")
+    params = ("m1", "m2", "m3", "g", "tau")
+    q, qd, t, p, P = _syms(coords, params)
+    A = r * _rot2(q[0])
+    B = A + l * _rot2(q[1])
+    T = (_rod_energy(P["m1"], r, 0.5 * A, q[0], q, qd) + _rod_energy(P["m2"], l, 0.5 * (A + B), q[1], q, qd)
+         + 0.5 * P["m3"] * qd[2] ** 2)
+    V = P["g"] * (P["m1"] * 0.5 * A[1] + P["m2"] * 0.5 * (A[1] + B[1]))
+    Q = ca.vertcat(P["tau"], 0, 0)
+    g = B - ca.vertcat(q[2], 0)
+    if q0 is None:
+        th1 = 1.0
+        th2 = -np.arcsin(r * np.sin(th1) / l)
+        q0 = [th1, th2, r * np.cos(th1) + l * np.cos(th2)]
+        qd0 = [2.0, 0.0, 0.0]
+    e = from_lagrangian("SliderCrank", coords, params, [*masses, gravity, torque], q, qd, t, p, T, V, Q=Q, g=g,
+                        q0=q0, qd0=qd0, constraint_names=["jB.force[0]", "jB.force[1]"],
+                        outputs={"xA": A[0], "yA": A[1]})
+    e.fixed_qd = (True, False, False)
+    return e
+
+
+# --------------------------------------------------------------------------- Bricard (IFToMM A04)
+
+BRICARD_POINTS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [1, 1, 1], [0, 1, 1], [0, 0, 1]], float)
+BRICARD_AXES = np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 0]], float)
+
+
+def _rodrigues(axis, angle):
+    k = ca.DM(axis)
+    K = ca.vertcat(ca.horzcat(0, -k[2], k[1]), ca.horzcat(k[2], 0, -k[0]), ca.horzcat(-k[1], k[0], 0))
+    return ca.DM.eye(3) + ca.sin(angle) * K + (1 - ca.cos(angle)) * ca.mtimes(K, K)
+
+
+def bricard_eom(gravity=9.81, speed=1.0):
+    """Orthogonal Bricard linkage: five 1 m, 1 kg rods along the cube path P1..P6, six revolute
+    joints (axes perpendicular to both adjacent rods), the ground link P6-P1.
+
+    Coordinates: the five joint angles from J1 along the chain; the loop is cut at J6
+    (rod 5 to ground): its end must be at P6 (3 equations) and its J6 axis must stay along
+    x (2 equations).  5 coordinates, 5 constraints, but the linkage moves: rank 4, 1 dof.
+    Start: the cube configuration, J1 turning at `speed` rad/s (the other speeds free)."""
+    coords = tuple(f"th{i}" for i in range(1, 6))
+    params = ("g",)
+    q, qd, t, p, P = _syms(coords, params)
+    R = ca.SX.eye(3)
+    o = ca.SX.zeros(3, 1)          # translation of the accumulated rigid motion x -> R x + o
+    T = 0
+    V = 0
+    for k in range(5):
+        Pk = BRICARD_POINTS[k]
+        Rk = _rodrigues(BRICARD_AXES[k], q[k])
+        # compose: x -> R (Rk (x - Pk) + Pk) + o
+        o = ca.mtimes(R, ca.DM(Pk) - ca.mtimes(Rk, ca.DM(Pk))) + o
+        R = ca.mtimes(R, Rk)
+        a0, b0 = BRICARD_POINTS[k], BRICARD_POINTS[k + 1]
+        c = ca.mtimes(R, ca.DM(0.5 * (a0 + b0))) + o
+        vc = ca.jtimes(c, q, qd)
+        Rd = ca.jtimes(R, q, qd)
+        W = ca.mtimes(Rd, R.T)
+        w = ca.vertcat(W[2, 1], W[0, 2], W[1, 0])
+        u = ca.mtimes(R, ca.DM(b0 - a0))
+        Iw = (1.0 / 12) * (w - u * ca.dot(u, w))
+        T = T + 0.5 * ca.dot(vc, vc) + 0.5 * ca.dot(w, Iw)
+        V = V + P["g"] * c[1]
+    end = ca.mtimes(R, ca.DM(BRICARD_POINTS[5])) + o
+    axis6 = ca.mtimes(R, ca.DM(BRICARD_AXES[5]))
+    g = ca.vertcat(end - ca.DM(BRICARD_POINTS[5]), axis6[1], axis6[2])
+    e = from_lagrangian("Bricard", coords, params, [gravity], q, qd, t, p, T, V, g=g,
+                        q0=[0.0] * 5, qd0=[speed, 0, 0, 0, 0],
+                        constraint_names=["j6.x", "j6.y", "j6.z", "j6.axis_y", "j6.axis_z"],
+                        outputs={"energy": T + V})
+    e.fixed_qd = (True, False, False, False, False)
+    return e
+
+
+# --------------------------------------------------------------------------- rheonomic pendulum
+
+
+def rheonomic_pendulum_eom(gravity=9.81, amp=0.2, freq=2.0, theta0=0.8):
+    """Point mass on a rod of prescribed length L(t) = 1 + amp sin(freq t): g = (x^2 + y^2 - L^2)/2."""
+    coords = ("x", "y")
+    params = ("g", "amp", "freq")
+    q, qd, t, p, P = _syms(coords, params)
+    L = 1 + P["amp"] * ca.sin(P["freq"] * t)
+    T = 0.5 * ca.dot(qd, qd)
+    V = P["g"] * q[1]
+    g = 0.5 * (q[0] ** 2 + q[1] ** 2 - L**2)
+    # start on the rod: L(0) = 1, dL/dt(0) = amp*freq (radial speed), at rest tangentially
+    x0, y0 = np.sin(theta0), -np.cos(theta0)
+    e = from_lagrangian("RheonomicPendulum", coords, params, [gravity, amp, freq], q, qd, t, p, T, V, g=g,
+                        q0=[x0, y0], qd0=[0.0, 0.0], constraint_names=["rod"], outputs={"x": q[0], "y": q[1]})
+    e.fixed_qd = (False, False)
+    return e
+
+
+def rheonomic_pendulum_reference(t_out, gravity=9.81, amp=0.2, freq=2.0, theta0=0.8):
+    """Minimal-coordinate solution: r = L(t) prescribed, d/dt(r^2 th') = -g r sin th."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(t, y):
+        th, w = y
+        r = 1 + amp * np.sin(freq * t)
+        rd = amp * freq * np.cos(freq * t)
+        return [w, (-gravity * np.sin(th) - 2 * rd * w) / r]
+
+    sol = solve_ivp(rhs, (0, t_out[-1]), [theta0, 0.0], method="DOP853", rtol=1e-13, atol=1e-13, t_eval=t_out)
+    r = 1 + amp * np.sin(freq * sol.t)
+    return r * np.sin(sol.y[0]), -r * np.cos(sol.y[0])

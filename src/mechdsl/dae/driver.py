@@ -15,7 +15,9 @@ when the drift grows).  A chunk that fails is retried one output interval at a t
 a failing interval is halved up to MAX_RETRIES times before the run stops with a Failure.
 
 Singular configurations.  At every accepted state the ratio sigma_min / sigma_max of the
-scaled G is computed.  Once it falls below SINGULAR_WATCH and keeps falling, the run
+scaled G is computed (at MONITOR_POINTS or more times per run: the output grid is refined
+for the integration by an integer factor).  Once the ratio falls below SINGULAR_WATCH and
+keeps falling, or its linear extrapolation reaches zero within two grid steps, the run
 rewinds to that state and continues in single segments, each ending halfway to the time
 at which the ratio, extrapolated linearly, would reach zero; so a singular configuration
 is approached in geometrically shrinking steps and detected (ratio < singular_tol)
@@ -39,8 +41,10 @@ from .system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
 SINGULAR_WATCH = 0.05      # start shortening segments once sigma ratio is below this
+MONITOR_POINTS = 201       # least number of checks (of drift and conditioning) per run
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
 CHUNK = 64                 # most output intervals per integrator call
+CHUNK_SIZES = (1, 8, 64)   # allowed chunk lengths: one integrator is built per length
 
 
 def _param_vector(eom, p) -> np.ndarray:
@@ -99,7 +103,10 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     if not t_end > t0:
         raise UsageError(f"stop time {t_end:g} must be after the start time {t0:g}")
     points = opts.points or DEFAULT_POINTS
-    grid = np.linspace(t0, t_end, points)
+    # the integration/monitoring grid: the output grid, refined by an integer factor so that
+    # conditioning and drift are checked at MONITOR_POINTS or more times per run
+    refine = max(1, int(np.ceil((MONITOR_POINTS - 1) / (points - 1))))
+    grid = np.linspace(t0, t_end, (points - 1) * refine + 1)
     span = t_end - t0
     chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
 
@@ -111,9 +118,11 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         notes.append(f"{dof.redundant} redundant constraint(s) dropped: {', '.join(dof.redundant_names)} "
                      f"(rank of G is {dof.rank} of {dof.constraints}); their multipliers are reported as 0")
     system = ConstrainedSystem.build(eom, pv, dof.independent)
+    system.fix_row_scale(init.q, t0)
     if opts.formulation == "partitioning" and dof.dof == 0:
         notes.append("no degrees of freedom: partitioning has nothing to integrate; using projection")
         opts.formulation = "projection"
+    method_reason = resolve_method(opts, system, init.q, init.qd, t0, span)
     stepper = make_stepper(system, opts, t0, init.q, init.qd, span)
     stepper.reset(t0, init.q, init.qd)
 
@@ -149,7 +158,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
             times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
         else:
-            K = min(chunk, len(grid) - k)
+            K = max(c for c in CHUNK_SIZES if c <= min(chunk, len(grid) - k))
             if opts.max_interval:
                 K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
             times = grid[k:k + K]
@@ -197,14 +206,15 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                                   "determined by the equations (a dead point or change point of the mechanism)")
                 record(t_now, q_now, qd_now)
                 break
-            if ratio < SINGULAR_WATCH and ratio < ratio_prev and t_now > t_prev:
-                slope = (ratio - ratio_prev) / (t_now - t_prev)
-                h_sing = max(0.5 * ratio / -slope, 1e3 * tiny)
-            else:
-                h_sing = np.inf
+            h_sing = np.inf
+            if ratio < ratio_prev and t_now > t_prev:
+                tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
+                if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
+                    h_sing = max(0.5 * tau, 1e3 * tiny)
             ratio_prev, t_prev = ratio, t_now
             if on_grid:
-                record(t_now, q_now, qd_now)
+                if k % refine == 0:
+                    record(t_now, q_now, qd_now)
                 k += 1
             if np.isfinite(h_sing) and i < len(T_acc) - 1:
                 # approaching a singular configuration: rewind to here, continue in short segments
@@ -235,7 +245,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 "formulation_reason": "requested" if (kw.get("formulation") or "auto") != "auto" else
                 "default: index-1 ODE with Baumgarte terms and projection onto both constraint manifolds "
                 "after every segment",
-                "method": _method_name(opts), "rtol": opts.rtol, "atol": opts.atol, "points": points,
+                "method": _method_name(opts), "method_reason": method_reason, "rtol": opts.rtol, "atol": opts.atol, "points": points,
                 "t_start": t0, "t_end": t_end, "initialization": init.as_dict(), "dof": dof.as_dict(),
                 "constraints": list(eom.constraint_names), "active_constraints": list(system.names),
                 "notes": notes + stepper.notes}
@@ -250,6 +260,29 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
     return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=metadata, events=events, failure=failure)
+
+
+STIFF = 1e4   # an overdamped mode decaying this many times within the run makes 'auto' pick BDF
+
+
+def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
+    """Replace method 'auto' by a concrete one; return why."""
+    if opts.formulation == "ggl":
+        opts.method = "idas"
+        return "IDAS is the solver of the GGL formulation"
+    if opts.method == "cvodes":
+        opts.method = "bdf"
+    if opts.method != "auto":
+        return "requested"
+    ev = system.eigenvalues(q, qd, t0)
+    damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
+    rate = max(damped, default=0.0)
+    if rate * span > STIFF:
+        opts.method = "bdf"
+        return (f"auto: stiff (an overdamped mode decays at {rate:.3g}/s, {rate * span:.3g} times the run "
+                "length); BDF")
+    opts.method = "adams"
+    return f"auto: not stiff (fastest overdamped rate {rate:.3g}/s over a {span:g} s run); Adams"
 
 
 def _method_name(opts: DaeOptions) -> str:

@@ -5,8 +5,8 @@ integrator (CVODES) carries only (u, u'); whenever it needs the right-hand side 
 
   1. solves g(u, v, t) = 0 for v by Newton's method (a CasADi rootfinder inside the RHS,
      warm-started from the quadratic Taylor prediction v_k + v'_k tau + v''_k tau^2 / 2 from
-     the start of the sub-segment; a Newton solve that does not converge makes the RHS
-     NaN, which CVODES answers with a smaller step),
+     the start of the sub-segment; a Newton solve that does not converge is an error of
+     the RHS, which CVODES answers with a smaller step),
   2. solves G_v v' = -(G_u u' + g_t) for v',
   3. computes q'' from the augmented system and returns (u', u''_u).
 
@@ -22,6 +22,9 @@ Sub-segments.  The warm start is only good near the sub-segment start, so the st
 cuts each segment into sub-segments whose length adapts to the Newton contraction rate
 theta = |dv_2| / |dv_1| of two Newton steps from the prediction at the sub-segment end:
 theta is about proportional to tau^3, and the next length is chosen for theta ~ 0.05.
+A sub-segment is redone 4 times shorter when theta > 0.3, when the dependent coordinates
+end far from the prediction (a jump to another assembly branch), or when the condition
+of G_v overshot three times the re-partition level.
 """
 from __future__ import annotations
 
@@ -30,6 +33,10 @@ import numpy as np
 from .dof import dependent_columns
 from .stepper import Stepper, StepError, call_integrator, integrator_options
 from .system import scale_jacobian
+
+
+THETA_TARGET = 0.05   # aimed-for Newton contraction of the warm start at a sub-segment end
+THETA_REJECT = 0.3    # above this the sub-segment is redone shorter (branch-jump risk)
 
 
 def _partition_cond(system, q, t, dep) -> float:
@@ -105,8 +112,7 @@ class PartitioningStepper(Stepper):
         g_uv = ca.substitute(S["g"], ca.vertcat(S["q"], S["t"]), ca.vertcat(qs, ts))
         tol = 1e-4 * self.opts.bound
         rf = ca.rootfinder("dependent", "newton", {"x": vs, "p": ca.vertcat(us, ts, S["p"]), "g": g_uv},
-                           {"abstol": tol, "abstolStep": 1e-15, "max_iter": 30, "error_on_fail": False})
-        resid = ca.Function("resid", [vs, us, ts, S["p"]], [ca.norm_inf(g_uv)])
+                           {"abstol": tol, "abstolStep": 1e-15, "max_iter": 30, "error_on_fail": True})
         # right-hand side in MX (the rootfinder is an implicit function)
         u = ca.MX.sym("u", k)
         ud = ca.MX.sym("ud", k)
@@ -120,7 +126,6 @@ class PartitioningStepper(Stepper):
         t = t0 + s * h
         tau = s * h
         v = rf(vk + vdk * tau + 0.5 * vddk * tau**2, ca.vertcat(u, t, p))
-        ok = resid(v, u, t, p) <= 1e-2 * self.opts.bound
         q = _assemble(n, ind, dep, u, v)
         _, G, gt, _ = self._pieces(q, ca.MX.zeros(n), t, p)
         Gu = G[:, ind]
@@ -129,8 +134,8 @@ class PartitioningStepper(Stepper):
         qd = _assemble(n, ind, dep, ud, vd)
         _, _, _, qdd = self._pieces(q, qd, t, p)
         udd = ca.vertcat(*[qdd[i] for i in ind]) if k else ca.MX.zeros(0, 1)
-        rhs = ca.if_else(ok, h * ca.vertcat(ud, udd), ca.DM.nan(2 * k))
-        dae = {"x": ca.vertcat(u, ud), "t": s, "p": ca.vertcat(p, t0, h, vk, vdk, vddk), "ode": rhs}
+        dae = {"x": ca.vertcat(u, ud), "t": s, "p": ca.vertcat(p, t0, h, vk, vdk, vddk),
+               "ode": h * ca.vertcat(ud, udd)}
         F = ca.integrator("partitioned", "cvodes", dae, 0.0, 1.0, integrator_options(self.opts, "cvodes"))
         recover = ca.Function("recover", [u, ud, s, p, t0, h, vk, vdk, vddk], [q, qd])
         return F, recover
@@ -156,21 +161,32 @@ class PartitioningStepper(Stepper):
             rho = self.system.spectral_radius(self.q, self.qd, self.t)
             self.h_sub = 0.1 / rho if rho > 0 else t1 - self.t
         fails = 0
+        h_min = 1e-12 * max(abs(t1), 1.0)
         while self.t < t1:
             h = min(self.h_sub, t1 - self.t)
-            if t1 - (self.t + h) < 1e-12 * max(abs(t1), 1.0):
+            if t1 - (self.t + h) < h_min:
                 h = t1 - self.t
+            if h < h_min:
+                raise StepError("sub-segments shrank below the time resolution: no partition of the "
+                                "coordinates stays well conditioned here")
+            saved = (self.t, self.q.copy(), self.qd.copy())
             try:
                 theta = self._sub_advance(self.t + h)
+                cond = _partition_cond(self.system, self.q, self.t, self.dep)
+                if theta > THETA_REJECT or cond > 3 * self.opts.repartition_cond * self.cond0:
+                    self.reset(*saved)
+                    raise StepError(f"sub-segment rejected (Newton contraction {theta:.2g}, "
+                                    f"condition of G_v {cond:.3g})")
             except StepError:
                 fails += 1
+                self.stats["rejected_subsegments"] = self.stats.get("rejected_subsegments", 0) + 1
                 self.h_sub = h / 4
-                if fails > 8:
+                if fails > 12:
                     raise
                 continue
             fails = 0
             self.stats["subsegments"] += 1
-            factor = min(3.0, max(0.2, (0.05 / theta) ** (1 / 3) if theta > 0 else 3.0))
+            factor = min(3.0, max(0.2, (THETA_TARGET / theta) ** (1 / 3) if theta > 0 else 3.0))
             truncated = h < self.h_sub
             if not (truncated and factor >= 1):      # a cut-short last piece says little about growth
                 self.h_sub = h * factor
@@ -226,16 +242,27 @@ class PartitioningStepper(Stepper):
 
     def _limit_by_conditioning(self, h: float) -> None:
         """Shorten the next sub-segment when 1/cond(G_v) heads for the re-partition level, so
-        the switch happens near that level instead of long after it."""
+        the switch happens near that level instead of long after it (and long before G_v
+        becomes singular).  The trend is taken from the last sub-segment, or, right after a
+        (re-)partition, from the state moved on along q' for one sub-segment."""
         r = 1.0 / self._cond_now
         r_switch = 1.0 / (self.opts.repartition_cond * self.cond0)
         prev = self._r_prev
         self._r_prev = r
-        if prev is None or r >= prev or h <= 0:
+        if prev is None or h <= 0:
+            h = self.h_sub
+            prev = r
+            r = 1.0 / _partition_cond(self.system, self.q + h * self.qd, self.t + h, self.dep)
+            if r >= prev:
+                return
+            slope = (r - prev) / h
+            r = prev
+        elif r >= prev:
             return
-        slope = (r - prev) / h
+        else:
+            slope = (r - prev) / h
         tau = (r - r_switch) / -slope
-        self.h_sub = min(self.h_sub, max(0.5 * tau, 1e-3 * h))
+        self.h_sub = min(self.h_sub, max(0.5 * tau, 1e-6 * h))
 
     def _check_partition(self) -> None:
         c = _partition_cond(self.system, self.q, self.t, self.dep)

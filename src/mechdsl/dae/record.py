@@ -26,10 +26,12 @@ REACTION_NAME = re.compile(r"(.+)\.(force|torque)\[(\d)\]")
 
 
 def lam_symbol(eom):
+    """The EOM's multiplier symbol (created and stored on the EOM when it has none)."""
     import casadi as ca
 
-    lam = getattr(eom, "lam", None)
-    return lam if lam is not None else ca.SX.sym("lam", eom.m)
+    if getattr(eom, "lam", None) is None:
+        eom.lam = ca.SX.sym("lam", eom.m)
+    return eom.lam
 
 
 def depends_on(expr, sym) -> bool:

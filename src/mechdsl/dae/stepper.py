@@ -10,6 +10,8 @@ integrator per K serves every chunk (cached in :class:`GridIntegrators`).
 """
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -85,13 +87,23 @@ def integrator_options(opts: DaeOptions, plugin: str) -> dict:
 
 
 def call_integrator(F, **args):
-    """Call a CasADi integrator; any failure becomes a StepError with the solver's message."""
+    """Call a CasADi integrator; any failure becomes a StepError with the solver's message.
+
+    CasADi and SUNDIALS print to Python's stdout/stderr while they retry (e.g. a Newton
+    solve inside a right-hand side that did not converge); that is captured here and only
+    its last line is kept, as the detail of a failure."""
+    buf = io.StringIO()
     try:
-        return F(**args)
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+            return F(**args)
     except RuntimeError as e:
-        msg = str(e).strip().splitlines()
-        text = next((ln for ln in msg if "flag" in ln.lower() or "error" in ln.lower()), msg[-1] if msg else "")
-        raise StepError(text.strip()[:300]) from None
+        msg = [ln.strip() for ln in str(e).strip().splitlines() if ln.strip()]
+        solver = [ln for ln in msg if "returned" in ln or "flag" in ln.lower()]
+        printed = [ln.strip() for ln in buf.getvalue().splitlines() if ln.strip().startswith("At t")]
+        text = (solver[-1] if solver else (msg[-1] if msg else "integrator failed"))
+        if printed:
+            text += f"; {printed[-1]}"
+        raise StepError(text[:400]) from None
 
 
 class GridIntegrators:

@@ -66,6 +66,7 @@ class ConstrainedSystem:
     active: tuple[int, ...]
     sym: dict = field(default_factory=dict)
     fn: dict = field(default_factory=dict)
+    row_scale: np.ndarray | None = None     # fixed constraint-row scaling (see fix_row_scale)
 
     # -- construction -------------------------------------------------------------------
     @staticmethod
@@ -143,9 +144,31 @@ class ConstrainedSystem:
         gd = np.array(gd, float).ravel()
         return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0)
 
+    def fix_row_scale(self, q, t) -> None:
+        """Freeze the constraint-row scaling at (q, t) (normally the start).
+
+        Rows normalized afresh at every state would hide a singular configuration in which
+        a constraint's gradient itself vanishes (the parallelogram four-bar at its flat
+        position: one row of G goes to zero); with the scaling frozen it shows."""
+        M = self.M(q, t)
+        GD = self.G(q, t) / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))[None, :]
+        norms = np.linalg.norm(GD, axis=1)
+        self.row_scale = 1.0 / np.where(norms > 0, norms, 1.0)
+
     def scaled_G(self, q, t) -> np.ndarray:
-        """S G D: coordinates scaled by the mass metric, constraint rows normalized."""
-        return scale_jacobian(self.G(q, t), self.M(q, t))
+        """S G D: coordinates scaled by the mass metric, constraint rows scaled by the frozen
+        row scaling (or normalized at (q, t) if none was frozen)."""
+        if self.row_scale is None:
+            return scale_jacobian(self.G(q, t), self.M(q, t))
+        M = self.M(q, t)
+        GD = self.G(q, t) / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))[None, :]
+        return GD * self.row_scale[:, None]
+
+    def eigenvalues(self, q, qd, t) -> np.ndarray:
+        J = np.array(self.fn["ode_jac"](q, qd, t, self.p), float)
+        if not np.all(np.isfinite(J)) or not J.size:
+            return np.zeros(0)
+        return np.linalg.eigvals(J)
 
     def spectral_radius(self, q, qd, t) -> float:
         """Largest |eigenvalue| of the unstabilized index-1 ODE's Jacobian (a rate, 1/s)."""
