@@ -124,32 +124,41 @@ def pendulum_eom(gravity=1.0, x0=(1.0, 0.0), v0=(0.0, 1.0), length=1.0, mass=1.0
 # --------------------------------------------------------------------------- dumbbell
 
 
-def dumbbell_dae(m1=1.0, m2=2.0, length=1.5, gravity=9.81, state=None):
-    """Two point masses in the plane joined by a massless rigid rod (distance constraint)."""
+DUMBBELL = dict(m1=1.0, m2=2.0, L=1.5, g=9.81, k=30.0)
+DUMBBELL_START = dict(x1=0.5, y1=0.0, phi=0.4, vx1=0.0, vy1=1.0, w=2.0)
+
+
+def dumbbell_dae():
+    """Two point masses in the plane joined by a massless rigid rod (distance constraint);
+    mass 1 is tied to the origin by a spring (k), gravity along -y."""
+    d, s0 = DUMBBELL, DUMBBELL_START
     coords = ("x1", "y1", "x2", "y2")
-    params = ("m1", "m2", "L", "g")
+    params = ("m1", "m2", "L", "g", "k")
     q, qd, t, p, P = _syms(coords, params)
     T = 0.5 * P["m1"] * (qd[0] ** 2 + qd[1] ** 2) + 0.5 * P["m2"] * (qd[2] ** 2 + qd[3] ** 2)
-    V = P["g"] * (P["m1"] * q[1] + P["m2"] * q[3])
+    V = P["g"] * (P["m1"] * q[1] + P["m2"] * q[3]) + 0.5 * P["k"] * (q[0] ** 2 + q[1] ** 2)
     g = (q[2] - q[0]) ** 2 + (q[3] - q[1]) ** 2 - P["L"] ** 2
-    q0, qd0 = state
-    return from_lagrangian("DumbbellDAE", coords, params, [m1, m2, length, gravity], q, qd, t, p, T, V,
+    L, ph, w = d["L"], s0["phi"], s0["w"]
+    q0 = [s0["x1"], s0["y1"], s0["x1"] + L * np.cos(ph), s0["y1"] + L * np.sin(ph)]
+    qd0 = [s0["vx1"], s0["vy1"], s0["vx1"] - L * w * np.sin(ph), s0["vy1"] + L * w * np.cos(ph)]
+    return from_lagrangian("DumbbellDAE", coords, params, [d[k] for k in params], q, qd, t, p, T, V,
                            g=g, q0=q0, qd0=qd0, constraint_names=["rod"])
 
 
-def dumbbell_minimal(m1=1.0, m2=2.0, length=1.5, gravity=9.81, state=None):
+def dumbbell_minimal():
     """The same dumbbell in minimal coordinates (x1, y1, phi): mass 2 at x1 + L cos phi, y1 + L sin phi."""
+    d, s0 = DUMBBELL, DUMBBELL_START
     coords = ("x1", "y1", "phi")
-    params = ("m1", "m2", "L", "g")
+    params = ("m1", "m2", "L", "g", "k")
     q, qd, t, p, P = _syms(coords, params)
     x2 = q[0] + P["L"] * ca.cos(q[2])
     y2 = q[1] + P["L"] * ca.sin(q[2])
     v2 = ca.jtimes(ca.vertcat(x2, y2), q, qd)
     T = 0.5 * P["m1"] * (qd[0] ** 2 + qd[1] ** 2) + 0.5 * P["m2"] * ca.dot(v2, v2)
-    V = P["g"] * (P["m1"] * q[1] + P["m2"] * y2)
-    q0, qd0 = state
-    return from_lagrangian("DumbbellMinimal", coords, params, [m1, m2, length, gravity], q, qd, t, p, T, V,
-                           q0=q0, qd0=qd0, outputs={"x2": x2, "y2": y2})
+    V = P["g"] * (P["m1"] * q[1] + P["m2"] * y2) + 0.5 * P["k"] * (q[0] ** 2 + q[1] ** 2)
+    return from_lagrangian("DumbbellMinimal", coords, params, [d[k] for k in params], q, qd, t, p, T, V,
+                           q0=[s0["x1"], s0["y1"], s0["phi"]], qd0=[s0["vx1"], s0["vy1"], s0["w"]],
+                           outputs={"x2": x2, "y2": y2})
 
 
 def pendulum_exact(t, g=9.81, L=1.0, theta0=np.pi / 2):

@@ -185,6 +185,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                                       f"and the {opts.formulation} integrator failed: {e}")
                 else:
                     failure = Failure(saved[0], f"{opts.formulation} integrator failed", str(e))
+                if saved[0] > T[-1]:        # keep the last good state (between output times)
+                    record(*saved)
             continue
         retries = 0
         h_fail = np.inf

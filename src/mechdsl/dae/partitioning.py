@@ -37,6 +37,7 @@ from .system import scale_jacobian
 
 THETA_TARGET = 0.05   # aimed-for Newton contraction of the warm start at a sub-segment end
 THETA_REJECT = 0.3    # above this the sub-segment is redone shorter (branch-jump risk)
+SWITCH_EARLY = 0.7    # re-partition at this fraction of repartition_cond
 
 
 def _partition_cond(system, q, t, dep) -> float:
@@ -268,7 +269,9 @@ class PartitioningStepper(Stepper):
         c = _partition_cond(self.system, self.q, self.t, self.dep)
         self._cond_now = c
         self.stats["max_partition_cond"] = max(self.stats.get("max_partition_cond", 0.0), c)
-        if c > self.opts.repartition_cond * self.cond0:
+        # switch a little before the level the sub-segment limiter aims at (which it only
+        # approaches, halving its distance each time)
+        if c > SWITCH_EARLY * self.opts.repartition_cond * self.cond0:
             self.choose_partition(self.q, self.t, reason=f"condition number of G_v grew to {c:.3g}")
             self._cond_now = self.cond0
             self._r_prev = None
