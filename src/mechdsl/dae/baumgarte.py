@@ -55,7 +55,7 @@ class BaumgarteStepper(Stepper):
         super().__init__(system=system, opts=opts, name="baumgarte")
         self.span = span
         dae = scaled_dae(index1_dae(system))
-        self.F = GridIntegrators("index1", "cvodes", dae, integrator_options(opts, "cvodes"))
+        self.F = GridIntegrators("index1", "cvodes", dae, integrator_options(opts, "cvodes"), self.stats)
         self.user_rates = _user_rates(opts.baumgarte)
         self.rates = (0.0, 0.0)
 

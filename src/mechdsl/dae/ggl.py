@@ -103,7 +103,7 @@ class GGLStepper(Stepper):
         self.index = check_for_idas(dae, np.zeros(2 * system.n), self._z0(t0, q0, qd0),
                                     self._p(t0, 1.0, q0, qd0), 0.0, io, allowed_index=2,
                                     what="the GGL system", force=opts.force_index)
-        self.F = GridIntegrators("ggl", "idas", dae, io)
+        self.F = GridIntegrators("ggl", "idas", dae, io, self.stats)
         self.stats["dae_index"] = self.index
 
     def _z0(self, t, q, qd):

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from .dof import dependent_columns
-from .stepper import Stepper, StepError, call_integrator, integrator_options
+from .stepper import Stepper, StepError, build_timer, call_integrator, integrator_options
 from .system import scale_jacobian
 
 
@@ -90,7 +90,8 @@ class PartitioningStepper(Stepper):
     def _integrator(self):
         key = self.dep
         if key not in self._cache:
-            self._cache[key] = self._make_integrator()
+            with build_timer(self.stats):
+                self._cache[key] = self._make_integrator()
         return self._cache[key]
 
     def _make_integrator(self):

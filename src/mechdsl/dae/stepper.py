@@ -109,17 +109,31 @@ def call_integrator(F, **args):
 class GridIntegrators:
     """CasADi integrators of one DAE on s in [0, 1] with K equal output steps, built on demand."""
 
-    def __init__(self, name: str, plugin: str, dae: dict, opts: dict):
+    def __init__(self, name: str, plugin: str, dae: dict, opts: dict, stats: dict | None = None):
         self.name, self.plugin, self.dae, self.opts = name, plugin, dae, opts
+        self.stats = stats if stats is not None else {}
         self._cache: dict[int, object] = {}
 
     def get(self, K: int):
         if K not in self._cache:
             import casadi as ca
 
-            grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
-            self._cache[K] = ca.integrator(f"{self.name}_{K}", self.plugin, self.dae, 0.0, grid, self.opts)
+            with build_timer(self.stats):
+                grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
+                self._cache[K] = ca.integrator(f"{self.name}_{K}", self.plugin, self.dae, 0.0, grid, self.opts)
         return self._cache[K]
+
+
+@contextlib.contextmanager
+def build_timer(stats: dict):
+    """Accumulate the CPU time spent building integrators into stats['build_cpu_time']."""
+    import time
+
+    c0 = time.process_time()
+    try:
+        yield
+    finally:
+        stats["build_cpu_time"] = stats.get("build_cpu_time", 0.0) + time.process_time() - c0
 
 
 def chunk_span(t0: float, times: np.ndarray) -> tuple[float, int]:

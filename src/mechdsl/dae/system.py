@@ -102,6 +102,7 @@ class ConstrainedSystem:
             "accel": ca.Function("accel", [q, qd, t, pp, alpha, beta], [qdd, lam]),
             "drift_all": ca.Function("drift_all", [q, qd, t, pp], [g_all, gdot_all]),
             "G_all": ca.Function("G_all", [q, t, pp], [G_all]),
+            "monitor": ca.Function("monitor", [q, qd, t, pp], [g_all, gdot_all, G, ca.diag(M)]),
             "ode_jac": ca.Function("ode_jac", [q, qd, t, pp], [ca.jacobian(ca.vertcat(qd, ca.substitute(
                 qdd, ca.vertcat(alpha, beta), ca.DM.zeros(2))), ca.vertcat(q, qd))]),
         }
@@ -143,6 +144,22 @@ class ConstrainedSystem:
         g = np.array(g, float).ravel()
         gd = np.array(gd, float).ravel()
         return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0)
+
+    def monitor(self, q, qd, t) -> tuple[float, float, np.ndarray]:
+        """One evaluation for the driver's checks: (||g||_inf, ||G q' + g_t||_inf) over all
+        constraints, and the scaled Jacobian of the active ones (as :meth:`scaled_G`)."""
+        g, gd, G, dM = self.fn["monitor"](q, qd, t, self.p)
+        g = np.array(g, float).ravel()
+        gd = np.array(gd, float).ravel()
+        G = np.array(G, float).reshape(self.m, self.n)
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.array(dM, float).ravel()), 1e-300))
+        GD = G * d[None, :]
+        if self.row_scale is None:
+            norms = np.linalg.norm(GD, axis=1)
+            Gs = GD / np.where(norms > 0, norms, 1.0)[:, None]
+        else:
+            Gs = GD * self.row_scale[:, None]
+        return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0, Gs)
 
     def fix_row_scale(self, q, t) -> None:
         """Freeze the constraint-row scaling at (q, t) (normally the start).
