@@ -96,7 +96,8 @@ class DiagnosticBag:
     def raise_if_errors(self) -> None:
         errs = self.errors
         if errs:
-            raise MechError(sorted(errs, key=_order))
+            unique = list(dict.fromkeys(errs))  # the same problem found twice is reported once
+            raise MechError(sorted(unique, key=_order))
 
 
 def _order(d: Diagnostic):

@@ -115,6 +115,8 @@ def mul(a: Expr, b: Expr) -> Expr:
 def div(a: Expr, b: Expr) -> Expr:
     if is_const(b, 1.0):
         return a
+    if isinstance(a, Const) and isinstance(b, Const) and b.value != 0.0:
+        return Const(a.value / b.value)
     if is_const(a, 0.0) and not is_const(b, 0.0):
         return Const(0.0)
     return Op("div", (a, b))
@@ -141,10 +143,13 @@ def func(name: str, *args: Expr) -> Expr:
 
 
 def vsum(items) -> Expr:
-    out: Expr = Const(0.0)
-    for it in items:
-        out = add(out, it)
-    return out
+    """Sum as a balanced tree (depth log n: long sums stay shallow)."""
+    items = [i for i in items if not is_const(i, 0.0)]
+    if not items:
+        return Const(0.0)
+    while len(items) > 1:
+        items = [add(items[i], items[i + 1]) if i + 1 < len(items) else items[i] for i in range(0, len(items), 2)]
+    return items[0]
 
 
 # --------------------------------------------------------------------------- canonical text
@@ -410,7 +415,12 @@ def to_sympy(e: Expr, leaf: Callable[[Expr], object]):
     def lf(n):
         if isinstance(n, Const):
             v = n.value
-            return sp.Integer(int(v)) if v == int(v) and abs(v) < 1e15 else sp.Float(v)
+            if v == int(v) and abs(v) < 1e15:
+                return sp.Integer(int(v))
+            from fractions import Fraction
+
+            r = Fraction(v).limit_denominator(1000)   # 0.5 -> 1/2 when it is exactly that float
+            return sp.Rational(r.numerator, r.denominator) if float(r) == v else sp.Float(v)
         return leaf(n)
 
     return _translate(e, lf, _sympy_ops, sp)

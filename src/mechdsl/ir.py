@@ -166,6 +166,7 @@ class Parameter:
     doc: str = ""
     integer: bool = False            # Integer parameters are structural: already substituted
     span: Span = field(default_factory=Span)
+    input: bool = False              # declared `input`: a parameter that linearization may treat as an input
 
 
 @dataclass(frozen=True)
@@ -250,7 +251,8 @@ class Joint:
     frame_r: Vec3 | None = None
     frame_R: Mat3 | None = None
     options: tuple[tuple[str, str], ...] = ()
-    closes_loop: bool = False        # set by topology: this joint is a cut joint
+    closes_loop: bool = False        # set by topology: a cut joint; its variables are then () and its
+                                     # loop-closure constraint removes only the joint's free directions
     span: Span = field(default_factory=Span)
 
     def option(self, key: str, default: str = "") -> str:

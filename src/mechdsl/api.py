@@ -1,0 +1,307 @@
+"""The Python API (a contract relied upon by other tools).
+
+    m = mechdsl.load(path, model=None, scene=None)      # or mechdsl.loads(text)
+    m2 = m.with_params(m=2.0, L=0.5)                     # a new Model; m is unchanged
+    r = m.simulate(10.0, rtol=1e-8, atol=1e-10, method="auto", points=501)
+    fns = m.casadi()                                     # CasADi Functions: "ode", "mass_matrix", "energy", ...
+    m.parameter_values                                   # numeric vector for the "p" input
+
+Phases: parse -> analyze (here) -> derive (mechdsl.mechanics) -> generate/simulate.  Each
+Model caches its derived equations; models that differ only in parameter values share them.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from . import ast, ir
+from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
+from .parser import parse, parse_file
+from .semantic import Program, analyze
+from .semantic.mods import Mod
+
+_EOM_CACHE: dict[Any, Any] = {}
+_EOM_CACHE_MAX = 32
+
+
+def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True) -> Program:
+    f = parse(path_or_text, filename) if is_text else parse_file(path_or_text)
+    return analyze(f, units=units)
+
+
+def load(path, model: str | None = None, scene: str | None = None, units: bool = True) -> "Model":
+    """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis."""
+    return Model._from_program(_program(str(path), False, str(path), units), model, scene)
+
+
+def loads(text: str, model: str | None = None, scene: str | None = None, filename: str = "<string>",
+          units: bool = True) -> "Model":
+    """Load a model from .mech source text."""
+    return Model._from_program(_program(text, True, filename, units), model, scene)
+
+
+def load_model_ir(path, model: str | None = None, scene: str | None = None) -> ir.Model:
+    """The resolved model (ir.Model) of a file: for tools that work on the IR."""
+    return load(path, model=model, scene=scene).model
+
+
+def select_target(program: Program, model: str | None, scene: str | None) -> tuple[str, str]:
+    if model is not None and scene is not None:
+        raise UsageError("give either a model or a scene, not both")
+    if scene is not None:
+        if scene not in program.scene_names():
+            hint = did_you_mean(scene, program.scene_names())
+            raise UsageError(f"no scene named '{scene}' (scenes: {', '.join(program.scene_names()) or 'none'})"
+                             + (f"; {hint}" if hint else ""))
+        return "scene", scene
+    if model is not None:
+        if model not in program.model_names():
+            hint = did_you_mean(model, program.model_names())
+            raise UsageError(f"no model named '{model}' (models: {', '.join(program.model_names())})"
+                             + (f"; {hint}" if hint else ""))
+        return "model", model
+    return program.default_target()
+
+
+class Model:
+    """A resolved model, optionally with a scene's settings, ready to derive and simulate."""
+
+    def __init__(self, program: Program, model: ir.Model, scene: ir.Scene | None = None,
+                 overrides: dict[str, Mod] | None = None, target: tuple[str, str] | None = None):
+        self.program = program
+        self.model = model
+        self.scene = scene
+        self._overrides = overrides or {}
+        self._target = target or (("scene", scene.name) if scene else ("model", model.name))
+        self._eom = None
+
+    @classmethod
+    def _from_program(cls, program: Program, model: str | None, scene: str | None,
+                      overrides: dict[str, Mod] | None = None) -> "Model":
+        kind, name = select_target(program, model, scene)
+        if kind == "scene":
+            sc = program.scene(name, overrides)
+            return cls(program, sc.model, sc, overrides, (kind, name))
+        return cls(program, program.model(name, overrides), None, overrides, (kind, name))
+
+    # ------------------------------------------------------------------ description
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        return self.model.coordinate_names
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Every parameter's numeric value (Real and Integer), by name."""
+        return {p.name: p.value for p in self.model.parameters}
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.model.real_parameters)
+
+    @property
+    def parameter_values(self) -> np.ndarray:
+        """Numeric vector for the CasADi input "p" (Real parameters in declaration order)."""
+        return np.array([p.value for p in self.model.real_parameters], dtype=float)
+
+    @property
+    def scene_settings(self) -> dict[str, Any]:
+        return dict(self.scene.settings) if self.scene else {}
+
+    @property
+    def warnings(self) -> list[Diagnostic]:
+        return list(getattr(self.program, "last_warnings", []))
+
+    def __repr__(self) -> str:
+        scene = f", scene {self.scene.name}" if self.scene else ""
+        return f"<mechdsl.Model {self.name}{scene}: {len(self.coordinates)} coordinates>"
+
+    # ------------------------------------------------------------------ new models
+    def with_params(self, **values) -> "Model":
+        """A new Model with parameter values (and start values, as 'q.start' / 'q.speed') changed.
+
+        Real parameters only change numbers (derived equations are shared); Integer and
+        Boolean parameters and start values re-analyze the model.
+        """
+        if not values:
+            return self
+        by_name = {p.name: p for p in self.model.parameters}
+        coords = set(self.coordinates)
+        real: dict[str, float] = {}
+        structural: dict[str, Mod] = {}
+        for k, v in values.items():
+            if k in by_name and not by_name[k].integer:
+                real[k] = _number(k, v)
+            elif k in by_name or "." in k or k in coords:
+                _add_override(structural, k, v, by_name, coords)
+            else:
+                hint = did_you_mean(k, list(by_name) + [f"{c}.start" for c in coords])
+                raise UsageError(f"'{k}' is not a parameter of {self.name}" + (f"; {hint}" if hint else ""))
+        m: Model = self
+        if structural:
+            ov = _merge_overrides(self._overrides, structural)
+            kind, name = self._target
+            m = Model._from_program(self.program, name if kind == "model" else None,
+                                    name if kind == "scene" else None, ov)
+        if real:
+            m = m._with_real(real)
+        return m
+
+    def _with_real(self, values: dict[str, float]) -> "Model":
+        from .exprs import evaluate
+
+        env: dict[str, float] = {}
+        params = []
+        for p in self.model.parameters:
+            if p.name in values:
+                p = dataclasses.replace(p, value=values[p.name], binding=None)
+            elif p.binding is not None and not p.integer:
+                p = dataclasses.replace(p, value=evaluate(p.binding, env))
+            env[p.name] = p.value
+            params.append(p)
+        model = dataclasses.replace(self.model, parameters=tuple(params))
+        scene = dataclasses.replace(self.scene, model=model) if self.scene else None
+        new = Model(self.program, model, scene, self._overrides, self._target)
+        return new
+
+    def with_settings(self, **settings) -> "Model":
+        """A new Model whose scene settings (stop_time, rtol, method, ...) are updated."""
+        base = self.scene or ir.Scene(f"{self.name}", self.model)
+        merged = dict(base.settings)
+        merged.update({k: v for k, v in settings.items() if v is not None})
+        scene = dataclasses.replace(base, settings=tuple(merged.items()))
+        return Model(self.program, self.model, scene, self._overrides, self._target)
+
+    # ------------------------------------------------------------------ derived forms
+    @property
+    def eom(self):
+        """The equations of motion (mechdsl.eom.EOM), derived once per model structure."""
+        if self._eom is None:
+            key = _structure_key(self.model)
+            base = _EOM_CACHE.get(key)
+            if base is None:
+                from .mechanics import derive
+
+                base = derive(self.model)
+                if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
+                    _EOM_CACHE.pop(next(iter(_EOM_CACHE)))
+                _EOM_CACHE[key] = base
+            self._eom = base.replace(param_values=self.parameter_values, model=self.model)   # keeps lazy fields lazy
+        return self._eom
+
+    def casadi(self, compiled: bool = False) -> dict:
+        """CasADi Functions: at least "ode" (t, x=[q; qd], p -> xdot), "mass_matrix", "energy"."""
+        from .codegen import casadi_functions
+
+        return casadi_functions(self.eom, compiled=compiled)
+
+    def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
+                 method: str | None = None, points: int | None = None, **kw):
+        """Integrate from the start values to t_end; returns a mechdsl.result.Result."""
+        from .simulate import simulate
+
+        s = self.scene_settings
+        t_end = _pick(t_end, s.get("stop_time"), None)
+        if t_end is None:
+            raise UsageError("give t_end (no scene stop_time to default to)")
+        opts = dict(rtol=_pick(rtol, s.get("rtol"), 1e-8), atol=_pick(atol, s.get("atol"), 1e-10),
+                    method=_pick(method, s.get("method"), "auto"), points=_pick(points, s.get("points"), None))
+        keys = ("start_time", "outputs", "formulation", "dt", "reactions", "compiled")
+        if self.model.contacts:
+            keys += ("rest_speed", "impact_order")      # docs/contacts.md
+        for key in keys:
+            if key in s and key not in kw:
+                kw["t_start" if key == "start_time" else key] = s[key]
+        return simulate(self.eom, float(t_end), **opts, **kw)
+
+    def equilibria(self, guesses=None, **kw):
+        from .analysis.equilibrium import equilibria
+
+        return equilibria(self.eom, guesses, **kw)
+
+    def linearize(self, at="equilibrium", **kw):
+        from .analysis.linearize import linearize
+
+        return linearize(self.eom, at, **kw)
+
+    def first_integrals(self):
+        from .analysis.integrals import first_integrals
+
+        return first_integrals(self.eom)
+
+    def summary(self, derive: bool = False) -> str:
+        """Counts and formulation; derive=True asks the mechanics which route it takes."""
+        from .formulation import describe
+
+        route = None
+        if derive:
+            try:
+                route = self.eom.route
+            except MechError:
+                route = None
+        return describe(self.model, route)
+
+
+# ---------------------------------------------------------------------------- helpers
+
+
+def _pick(*vals):
+    for v in vals:
+        if v is not None:
+            return v
+    return None
+
+
+def _number(name: str, v) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise UsageError(f"value of '{name}' must be a number, got {v!r}") from None
+    if not math.isfinite(x):
+        raise UsageError(f"value of '{name}' must be finite")
+    return x
+
+
+def _literal(v) -> ast.Expr:
+    if isinstance(v, bool):
+        return ast.Bool(value=v)
+    x = _number("value", v)
+    if float(x).is_integer() and isinstance(v, int):
+        return ast.Number(value=int(v)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-int(v)))
+    return ast.Number(value=abs(x)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-x))
+
+
+def _add_override(tree: dict[str, Mod], key: str, value, by_name, coords) -> None:
+    parts = key.split(".")
+    if parts[-1] not in ("start", "speed", "fixed") and key not in by_name:
+        if key in coords:
+            parts = parts + ["start"]
+        else:
+            raise UsageError(f"'{key}' is not a parameter or a start value (use NAME.start or NAME.speed)")
+    node_dict = tree
+    for i, part in enumerate(parts):
+        node = node_dict.setdefault(part, Mod())
+        if i == len(parts) - 1:
+            node.value = _literal(value)
+        node_dict = node.sub
+
+
+def _merge_overrides(a: dict[str, Mod], b: dict[str, Mod]) -> dict[str, Mod]:
+    from .semantic.mods import merge_dicts
+
+    return merge_dicts(a, b)
+
+
+def _structure_key(model: ir.Model):
+    """The model without parameter values: equations derived for one serve for all."""
+    params = tuple(dataclasses.replace(p, value=0.0, binding=None, span=Span()) for p in model.parameters)
+    return dataclasses.replace(model, parameters=params, span=Span())
+
+
+__all__ = ["load", "loads", "load_model_ir", "Model", "MechError"]

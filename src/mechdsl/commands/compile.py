@@ -1,0 +1,52 @@
+"""``mech compile FILE --emit ast|model|eom``: dump a named intermediate form (deterministic)."""
+from __future__ import annotations
+
+import sys
+
+from ..diagnostics import UsageError
+from ..fileio import write_atomic
+
+EMITS = ("ast", "source", "model", "eom")
+
+
+def add_parser(sub):
+    p = sub.add_parser("compile", help="dump an intermediate form (ast, source, model, eom)",
+                       description="Run the pipeline up to a phase and print its named intermediate form.")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--emit", choices=EMITS, default="model", help="which form (default: model)")
+    p.add_argument("--model", help="model to compile (default: first scene's model or the last model)")
+    p.add_argument("--scene", help="scene to compile")
+    p.add_argument("--no-spans", action="store_true", help="omit source positions from --emit ast")
+    p.add_argument("-o", "--output", help="write to this file instead of standard output")
+    p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    return p
+
+
+def run(args) -> int:
+    from ..api import Model
+    from ..dump import dump_ast, dump_model
+    from ..parser import parse_file
+    from ..printer import to_source
+    from ..semantic import analyze
+
+    tree = parse_file(args.file)
+    if args.emit == "ast":
+        text = dump_ast(tree, spans=not args.no_spans)
+    elif args.emit == "source":
+        text = to_source(tree)
+    else:
+        program = analyze(tree, units=not args.no_units)
+        m = Model._from_program(program, args.model, args.scene)
+        if args.emit == "model":
+            text = dump_model(m.model)
+        else:
+            from ..dump_eom import dump_eom
+
+            text = dump_eom(m.eom)
+    if args.output:
+        if args.output == args.file:
+            raise UsageError("refusing to overwrite the input file")
+        write_atomic(args.output, text)
+    else:
+        sys.stdout.write(text)
+    return 0

@@ -1,0 +1,496 @@
+"""Phase 1, ``parse``: .mech text -> :class:`ast.File` (or a MechError with coded diagnostics).
+
+The grammar is grammar/mech.lark (shipped inside the wheel as mechdsl/_grammar/mech.lark).
+Syntax errors are turned into labelled diagnostics (E1xx); nothing from lark reaches users.
+"""
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+from lark import Lark, Token, v_args
+from lark.visitors import Transformer_NonRecursive
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
+
+from . import ast
+from .diagnostics import Diagnostic, InternalError, MechError, Span
+
+MAX_NESTING = 200          # brackets deep
+MAX_DEPTH = 600            # syntax tree depth (long operator chains)
+MAX_FILE_BYTES = 20_000_000
+
+KEYWORDS = {
+    "model", "end", "equation", "extends", "parameter", "coordinate", "output", "input", "constant",
+    "each", "kinetic", "potential", "dissipation", "force", "connect", "for", "in", "loop", "scene",
+    "if", "then", "elseif", "else", "or", "and", "not", "true", "false",
+}
+
+_STATEMENT_START = {"end", "equation", "parameter", "coordinate", "output", "input", "constant", "extends",
+                    "connect", "for", "kinetic", "potential", "dissipation", "force", "model", "scene"}
+
+TOKEN_TEXT = {
+    "SEMICOLON": "';'", "COMMA": "','", "LPAR": "'('", "RPAR": "')'", "LSQB": "'['", "RSQB": "']'",
+    "LBRACE": "'{'", "RBRACE": "'}'", "EQUAL": "'='", "COLON": "':'", "DOT": "'.'", "CIRCUMFLEX": "'^'",
+    "NAME": "a name", "NUMBER": "a number", "STRING": "a string", "ADD_OP": "'+' or '-'",
+    "MUL_OP": "'*' or '/'", "REL_OP": "a comparison", "$END": "end of file", "EQUATION": "'equation'",
+}
+
+
+def grammar_path() -> Path:
+    here = Path(__file__).resolve().parent
+    for cand in (here / "_grammar" / "mech.lark", here.parents[1] / "grammar" / "mech.lark"):
+        if cand.is_file():
+            return cand
+    raise InternalError("grammar file mech.lark not found (broken installation)")
+
+
+@lru_cache(maxsize=1)
+def _lark() -> Lark:
+    # cache=True keeps the analysed LALR tables in the temp folder (keyed by the grammar's hash):
+    # a cold start builds them in ~0.4 s, loading them takes ~0.03 s
+    text = grammar_path().read_text(encoding="utf-8")
+    try:
+        return Lark(text, parser="lalr", lexer="basic", propagate_positions=True, maybe_placeholders=True,
+                    cache=True)
+    except OSError:  # an unwritable temp folder: build without the cache
+        return Lark(text, parser="lalr", lexer="basic", propagate_positions=True, maybe_placeholders=True)
+
+
+# ----------------------------------------------------------------------------- reading files
+
+
+def read_source(path: str | os.PathLike) -> tuple[str, str]:
+    """Read a .mech file: (filename as given, text).  Problems are E0xx diagnostics."""
+    name = str(path)
+    p = Path(path)
+    if not p.exists():
+        raise MechError(Diagnostic("E001", f"file not found: {name}", Span(name),
+                                   "check the path; models are .mech files"))
+    if p.is_dir():
+        raise MechError(Diagnostic("E003", f"{name} is a directory, not a .mech file", Span(name),
+                                   f"pass the files inside it, e.g. {name.rstrip('/')}/*.mech"))
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise MechError(Diagnostic("E001", f"cannot read {name}: {e.strerror or e}", Span(name))) from None
+    return name, decode_source(data, name)
+
+
+def decode_source(data: bytes, name: str = "<input>") -> str:
+    if len(data) > MAX_FILE_BYTES:
+        raise MechError(Diagnostic("E005", f"file is too large ({len(data)} bytes)", Span(name),
+                                   f"the limit is {MAX_FILE_BYTES} bytes"))
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        raise MechError(Diagnostic("E002", f"file is not valid UTF-8 (byte 0x{data[e.start]:02x})",
+                                   Span(name, line, col, line, col + 1),
+                                   "save the file as UTF-8 text")) from None
+    if "\x00" in text:
+        i = text.index("\x00")
+        line = text.count("\n", 0, i) + 1
+        col = i - (text.rfind("\n", 0, i) + 1) + 1
+        raise MechError(Diagnostic("E002", "file contains a NUL byte: not a text file",
+                                   Span(name, line, col, line, col + 1), "is this a binary file?"))
+    return text
+
+
+# ----------------------------------------------------------------------------- parsing
+
+
+def parse_file(path: str | os.PathLike) -> ast.File:
+    name, text = read_source(path)
+    return parse(text, name)
+
+
+def parse(text: str, filename: str = "<input>") -> ast.File:
+    from .report import remember_source
+
+    remember_source(filename, text)
+    if not text.strip() or _only_comments(text):
+        raise MechError(Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
+                                   "a file holds one or more `model Name ... end Name;` (and scenes)"))
+    _check_nesting(text, filename)
+    try:
+        tree = _lark().parse(text)
+    except UnexpectedInput as e:
+        raise MechError(_syntax_diagnostic(e, text, filename)) from None
+    builder = _Builder(filename)
+    try:
+        result = builder.transform(tree)
+    except VisitError as e:
+        if isinstance(e.orig_exc, MechError):
+            raise e.orig_exc from None
+        raise InternalError(f"AST construction failed: {e.orig_exc!r}") from e.orig_exc
+    if builder.problems:
+        raise MechError(builder.problems)
+    _check_depth(result)
+    return result
+
+
+def _check_depth(root: ast.Node) -> None:
+    """Reject syntax trees deeper than MAX_DEPTH (e.g. sums of thousands of terms) with E104."""
+    stack = [(root, 1)]
+    while stack:
+        node, d = stack.pop()
+        if d > MAX_DEPTH:
+            raise MechError(Diagnostic("E104", f"expression is too deeply nested (more than {MAX_DEPTH} levels)",
+                                       node.span, "split it with intermediate `Real` variables, or use sum() "
+                                                  "over an array"))
+        stack.extend((c, d + 1) for c in node.child_nodes())
+
+
+def _only_comments(text: str) -> bool:
+    import re
+
+    stripped = re.sub(r"//[^\n]*|/\*.*?\*/", "", text, flags=re.S)
+    return not stripped.strip()
+
+
+def _check_nesting(text: str, filename: str) -> None:
+    """Reject absurd bracket nesting before the parser builds a deep tree (E104)."""
+    depth, line, col = 0, 1, 0
+    i, n = 0, len(text)
+    while i < n:
+        ch = text[i]
+        col += 1
+        if ch == "\n":
+            line, col = line + 1, 0
+        elif ch == '"':
+            j = i + 1
+            while j < n and text[j] != '"':
+                if text[j] == "\\":
+                    j += 1
+                if j < n and text[j] == "\n":
+                    line, col = line + 1, 0
+                j += 1
+            col += j - i
+            i = j
+        elif ch == "/" and text.startswith("//", i):
+            j = text.find("\n", i)
+            i = n if j < 0 else j - 1
+        elif ch == "/" and text.startswith("/*", i):
+            j = text.find("*/", i + 2)
+            j = n if j < 0 else j + 1
+            line += text.count("\n", i, j)
+            i = j
+        elif ch in "([{":
+            depth += 1
+            if depth > MAX_NESTING:
+                raise MechError(Diagnostic(
+                    "E104", f"brackets nested more than {MAX_NESTING} deep",
+                    Span(filename, line, col, line, col + 1),
+                    "split the expression with intermediate `Real` variables"))
+        elif ch in ")]}":
+            depth = max(0, depth - 1)
+        i += 1
+
+
+def _describe(tok: Token) -> str:
+    if tok.type == "$END":
+        return "end of file"
+    return f"'{tok.value}'" if tok.value else TOKEN_TEXT.get(tok.type, tok.type)
+
+
+def _expected_text(expected) -> str:
+    names = sorted({TOKEN_TEXT.get(t, f"'{t.lower()}'" if t.isupper() and t.isalpha() else t) for t in expected})
+    if len(names) > 8:
+        names = names[:8] + ["..."]
+    return ", ".join(names)
+
+
+def _syntax_diagnostic(e: UnexpectedInput, text: str, filename: str) -> Diagnostic:
+    lines = text.splitlines() or [""]
+    line = getattr(e, "line", None) or 1
+    col = getattr(e, "column", None) or 1
+    if line == -1 or col == -1:  # EOF without position
+        line = len(lines)
+        col = len(lines[-1]) + 1
+    if isinstance(e, UnexpectedCharacters):
+        ch = text[e.pos_in_stream] if e.pos_in_stream < len(text) else ""
+        span = Span(filename, line, col, line, col + 1)
+        if ch == '"':
+            return Diagnostic("E108", "unterminated string", span, 'close the string with " on the same line')
+        if ch == "/" and text.startswith("/*", e.pos_in_stream):
+            return Diagnostic("E109", "unterminated comment", span, "close the comment with */")
+        if ch == "'":
+            return Diagnostic("E101", "unexpected character \"'\"", span, 'strings use double quotes: "text"')
+        if ch == ".":
+            return Diagnostic("E106", "malformed number or stray '.'", span,
+                              "numbers look like 1, 0.5, 2e-3; names are joined by single dots")
+        shown = repr(ch) if ch.isprintable() else f"U+{ord(ch):04X}"
+        return Diagnostic("E101", f"unexpected character {shown}", span,
+                          "remove it; names use letters, digits and _")
+    if isinstance(e, (UnexpectedToken, UnexpectedEOF)):
+        tok = getattr(e, "token", None)
+        expected = set(getattr(e, "expected", None) or getattr(e, "accepts", None) or ())
+        if tok is None or tok.type == "$END":
+            return Diagnostic("E103", "unexpected end of file", Span(filename, line, col, line, col + 1),
+                              _eof_hint(text) or f"expected {_expected_text(expected)}")
+        width = max(1, len(str(tok.value)))
+        span = Span(filename, tok.line, tok.column, tok.end_line or tok.line,
+                    tok.end_column or tok.column + width)
+        prev = _previous_token_end(text, tok)
+        if "SEMICOLON" in expected and prev is not None and (prev[0] < tok.line or str(tok.value) in _STATEMENT_START):
+            pl, pc = prev
+            return Diagnostic("E107", "missing ';'", Span(filename, pl, pc, pl, pc + 1),
+                              f"end the statement on line {pl} with ';'")
+        if tok.type != "NAME" and str(tok.value) in KEYWORDS and "NAME" in expected:
+            return Diagnostic("E105", f"'{tok.value}' is a reserved word and cannot be used as a name", span,
+                              f"rename it, e.g. '{tok.value}_'")
+        if tok.type == "EQUAL" and "REL_OP" in expected | {"REL_OP"} and _in_condition(text, tok):
+            return Diagnostic("E102", "unexpected '=' in a condition", span, "compare with '=='")
+        return Diagnostic("E102", f"unexpected {_describe(tok)}", span, f"expected {_expected_text(expected)}")
+    return Diagnostic("E102", "syntax error", Span(filename, line, col, line, col + 1))
+
+
+def _in_condition(text: str, tok: Token) -> bool:
+    start = text.rfind("\n", 0, tok.start_pos) + 1
+    head = text[start:tok.start_pos]
+    return " if " in f" {head}" or "elseif" in head
+
+
+def _previous_token_end(text: str, tok: Token) -> tuple[int, int] | None:
+    """Line and column just after the last non-blank, non-comment character before tok."""
+    i = tok.start_pos - 1
+    while i >= 0:
+        # skip whitespace and line comments going backwards (approximate: strip // comments per line)
+        line_start = text.rfind("\n", 0, i + 1) + 1
+        line_text = text[line_start:i + 1]
+        cut = line_text.find("//")
+        if cut >= 0:
+            line_text = line_text[:cut]
+        stripped = line_text.rstrip()
+        if stripped:
+            line = text.count("\n", 0, line_start) + 1
+            return line, len(stripped) + 1
+        i = line_start - 2
+    return None
+
+
+def _eof_hint(text: str) -> str | None:
+    import re
+
+    opened = re.findall(r"^\s*(model|scene)\s+([A-Za-z_]\w*)", text, flags=re.M)
+    closed = re.findall(r"\bend\s+([A-Za-z_]\w*)\s*;", text)
+    for kind, name in opened:
+        if name not in closed:
+            return f"{kind} '{name}' is not closed: add `end {name};`"
+    return None
+
+
+# ----------------------------------------------------------------------------- tree -> AST
+
+
+def _span(filename: str, meta) -> Span:
+    if getattr(meta, "empty", True):
+        return Span(filename)
+    return Span(filename, meta.line, meta.column, meta.end_line, meta.end_column)
+
+
+def _tok_span(filename: str, tok: Token) -> Span:
+    return Span(filename, tok.line, tok.column, tok.end_line or tok.line,
+                tok.end_column or tok.column + len(str(tok)))
+
+
+def _unescape(raw: str) -> str:
+    body = raw[1:-1]
+    if "\\" not in body:
+        return body
+    out, i = [], 0
+    table = {"n": "\n", "t": "\t", "r": "\r", '"': '"', "\\": "\\", "'": "'", "?": "?",
+             "a": "\a", "b": "\b", "f": "\f", "v": "\v"}
+    while i < len(body):
+        c = body[i]
+        if c == "\\" and i + 1 < len(body):
+            out.append(table.get(body[i + 1], body[i + 1]))
+            i += 2
+        else:
+            out.append(c)
+            i += 1
+    return "".join(out)
+
+
+def _number(text: str) -> int | float:
+    if any(c in text for c in ".eE"):
+        return float(text)
+    return int(text)
+
+
+@v_args(meta=True)
+class _Builder(Transformer_NonRecursive):
+    def __init__(self, filename: str):
+        super().__init__(visit_tokens=False)
+        self.f = filename
+        self.problems: list[Diagnostic] = []
+
+    def S(self, meta) -> Span:
+        return _span(self.f, meta)
+
+    # -- units
+    def start(self, meta, items):
+        return ast.File(items=tuple(items), filename=self.f, span=self.S(meta))
+
+    def _check_end(self, kind, name_tok, end_tok):
+        if str(name_tok) != str(end_tok):
+            self.problems.append(Diagnostic(
+                "E110", f"'end {end_tok}' does not match {kind} '{name_tok}'", _tok_span(self.f, end_tok),
+                f"write `end {name_tok};`"))
+
+    def model(self, meta, items):
+        name, doc, *rest = items
+        end = rest.pop()
+        elements = tuple(x for x in rest if not isinstance(x, list))
+        equations = tuple(e for x in rest if isinstance(x, list) for e in x)
+        self._check_end("model", name, end)
+        return ast.ModelDef(name=str(name), doc=doc, elements=elements, equations=equations,
+                            name_span=_tok_span(self.f, name), span=self.S(meta))
+
+    def equation_section(self, meta, items):
+        return list(items[1:])
+
+    def scene(self, meta, items):
+        name, doc, *rest = items
+        end = rest.pop()
+        self._check_end("scene", name, end)
+        return ast.SceneDef(name=str(name), doc=doc, items=tuple(rest), name_span=_tok_span(self.f, name),
+                            span=self.S(meta))
+
+    def scene_model(self, meta, items):
+        name, mod = items
+        return ast.SceneModel(name=str(name), modification=mod, span=self.S(meta))
+
+    def setting(self, meta, items):
+        name, value = items
+        return ast.Setting(name=str(name), value=value, span=self.S(meta))
+
+    # -- declarations
+    def doc(self, meta, items):
+        return _unescape(str(items[0])) if items and items[0] is not None else None
+
+    def prefix(self, meta, items):
+        return str(items[0])
+
+    def declaration(self, meta, items):
+        prefix, type_tok, name_tok, dims, mod, value, doc = items
+        return ast.Declaration(prefix=prefix, type_name=str(type_tok), name=str(name_tok),
+                               dims=tuple(dims or ()), modification=mod, value=value, doc=doc,
+                               name_span=_tok_span(self.f, name_tok), span=self.S(meta))
+
+    def extends_clause(self, meta, items):
+        name, mod = items
+        return ast.Extends(name=str(name), modification=mod, span=self.S(meta))
+
+    def dims(self, meta, items):
+        return tuple(items)
+
+    def binding(self, meta, items):
+        return items[0]
+
+    def modification(self, meta, items):
+        return tuple(x for x in items if x is not None)
+
+    def dotted_name(self, meta, items):
+        return ".".join(str(t) for t in items)
+
+    def argument(self, meta, items):
+        each, name, mod, value = items
+        return ast.Modifier(name=name, each=each is not None, modification=mod, value=value, span=self.S(meta))
+
+    # -- equations
+    def simple_equation(self, meta, items):
+        lhs, rhs, doc = items
+        return ast.SimpleEquation(lhs=lhs, rhs=rhs, doc=doc, span=self.S(meta))
+
+    def energy_kind(self, meta, items):
+        return str(items[0])
+
+    def energy_equation(self, meta, items):
+        kind, expr, doc = items
+        return ast.EnergyEquation(kind=kind, expr=expr, doc=doc, span=self.S(meta))
+
+    def force_equation(self, meta, items):
+        ref, expr, doc = items
+        return ast.ForceEquation(coordinate=ref, expr=expr, doc=doc, span=self.S(meta))
+
+    def connect_equation(self, meta, items):
+        a, el, b, doc = items
+        return ast.Connect(a=a, element=el, b=b, doc=doc, span=self.S(meta))
+
+    def for_equation(self, meta, items):
+        var, rng, *body = items
+        return ast.ForEquation(var=str(var), range=rng, body=tuple(body), span=self.S(meta))
+
+    def range(self, meta, items):
+        a, b, c = items
+        if c is None:
+            return ast.Range(start=a, stop=b, span=self.S(meta))
+        return ast.Range(start=a, step=b, stop=c, span=self.S(meta))
+
+    # -- expressions
+    def if_expr(self, meta, items):
+        cond, then, *rest = items
+        otherwise = rest.pop()
+        branches = [(cond, then)] + [tuple(b) for b in rest]
+        return ast.IfExpr(branches=tuple(branches), otherwise=otherwise, span=self.S(meta))
+
+    def elseif(self, meta, items):
+        return (items[0], items[1])
+
+    def or_op(self, meta, items):
+        return ast.BinOp(op="or", left=items[0], right=items[1], span=self.S(meta))
+
+    def and_op(self, meta, items):
+        return ast.BinOp(op="and", left=items[0], right=items[1], span=self.S(meta))
+
+    def not_op(self, meta, items):
+        return ast.UnaryOp(op="not", operand=items[0], span=self.S(meta))
+
+    def rel_op(self, meta, items):
+        return ast.BinOp(op=str(items[1]), left=items[0], right=items[2], span=self.S(meta))
+
+    def bin_op(self, meta, items):
+        return ast.BinOp(op=str(items[1]), left=items[0], right=items[2], span=self.S(meta))
+
+    def unary_op(self, meta, items):
+        return ast.UnaryOp(op=str(items[0]), operand=items[1], span=self.S(meta))
+
+    def pow_op(self, meta, items):
+        return ast.BinOp(op="^", left=items[0], right=items[1], span=self.S(meta))
+
+    def number(self, meta, items):
+        return ast.Number(value=_number(str(items[0])), span=self.S(meta))
+
+    def string(self, meta, items):
+        return ast.String(value=_unescape(str(items[0])), span=self.S(meta))
+
+    def true_lit(self, meta, items):
+        return ast.Bool(value=True, span=self.S(meta))
+
+    def false_lit(self, meta, items):
+        return ast.Bool(value=False, span=self.S(meta))
+
+    def call(self, meta, items):
+        func, *args = items
+        return ast.Call(func=func, args=tuple(a for a in args if a is not None), span=self.S(meta))
+
+    def array(self, meta, items):
+        return ast.Array(items=tuple(a for a in items if a is not None), span=self.S(meta))
+
+    def comprehension(self, meta, items):
+        expr, var, rng = items
+        return ast.Comprehension(expr=expr, var=str(var), range=rng, span=self.S(meta))
+
+    def component_ref(self, meta, items):
+        return ast.Ref(parts=tuple(items), span=self.S(meta))
+
+    def ref_part(self, meta, items):
+        name, subs = items
+        return ast.RefPart(name=str(name), subscripts=tuple(subs or ()), span=self.S(meta))
+
+    def subscripts(self, meta, items):
+        return tuple(items)
+

@@ -1,0 +1,216 @@
+"""Phase 2, ``analyze``: AST -> resolved models (:mod:`mechdsl.ir`) and scenes.
+
+``analyze(file)`` checks the file as a whole and returns a :class:`Program`; models and
+scenes are flattened on request (``program.model(name)``, ``program.scene(name)``), so a
+scene compiles only the model it needs.
+"""
+from __future__ import annotations
+
+import math
+
+from .. import ast
+from .. import ir
+from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
+from ..printer import expr as print_expr
+from . import mods as Mods
+from .flatten import Flattener
+
+# scene settings: name -> kind; later phases may register more (extend, never rename)
+SCENE_SETTINGS: dict[str, str] = {
+    "stop_time": "number", "start_time": "number", "tolerance": "number", "rtol": "number", "atol": "number",
+    "method": "string", "points": "integer", "outputs": "names", "formulation": "string", "dt": "number",
+    "reactions": "bool", "compiled": "bool",
+    "rest_speed": "number", "impact_order": "string",     # contacts (docs/contacts.md)
+}
+ENERGY_SIGNALS = ("kinetic_energy", "potential_energy", "energy")
+
+
+class Program:
+    def __init__(self, file: ast.File, units: bool = True):
+        self.file = file
+        self.units = units
+        self._models: dict[str, ast.ModelDef] = {}
+        self._scenes: dict[str, ast.SceneDef] = {}
+        diags = DiagnosticBag()
+        for item in file.items:
+            table = self._models if isinstance(item, ast.ModelDef) else self._scenes
+            other = self._scenes if isinstance(item, ast.ModelDef) else self._models
+            if item.name in table or item.name in other:
+                diags.error("E202", f"'{item.name}' is defined twice in this file", item.name_span,
+                            "models and scenes share one namespace: rename one")
+                continue
+            table[item.name] = item
+        diags.raise_if_errors()
+
+    # ------------------------------------------------------------------ names
+    def model_def(self, name: str) -> ast.ModelDef | None:
+        return self._models.get(name)
+
+    def model_names(self) -> list[str]:
+        return list(self._models)
+
+    def scene_names(self) -> list[str]:
+        return list(self._scenes)
+
+    def default_target(self) -> tuple[str, str]:
+        """('scene', first scene) if the file has scenes, else ('model', last model)."""
+        if self._scenes:
+            return "scene", next(iter(self._scenes))
+        return "model", list(self._models)[-1]
+
+    # ------------------------------------------------------------------ flattening
+    def model(self, name: str, modification: dict | None = None, span: Span | None = None) -> ir.Model:
+        d = self._models.get(name)
+        if d is None:
+            raise MechError(Diagnostic("E206", f"no model named '{name}'", span or Span(self.file.filename),
+                                       did_you_mean(name, self._models) or
+                                       f"models in this file: {', '.join(self._models) or 'none'}"))
+        from . import values
+
+        token = values.UNITS.set(self.units)
+        try:
+            fl = Flattener(self, d, modification)
+            fl.diags.raise_if_errors()
+            model = fl.build()
+        finally:
+            values.UNITS.reset(token)
+        self.last_warnings = fl.diags.warnings
+        return model
+
+    def scene(self, name: str, extra: dict | None = None) -> ir.Scene:
+        s = self._scenes.get(name)
+        if s is None:
+            raise MechError(Diagnostic("E602", f"no scene named '{name}'", Span(self.file.filename),
+                                       did_you_mean(name, self._scenes) or
+                                       f"scenes in this file: {', '.join(self._scenes) or 'none'}"))
+        diags = DiagnosticBag()
+        models = [it for it in s.items if isinstance(it, ast.SceneModel)]
+        if not models:
+            raise MechError(Diagnostic("E603", f"scene '{name}' names no model", s.name_span,
+                                       "add `model ModelName;` to the scene"))
+        if len(models) > 1:
+            raise MechError(Diagnostic("E603", f"scene '{name}' names more than one model", models[1].span,
+                                       "a scene simulates one model"))
+        mm = models[0]
+        mods = Mods.from_ast(mm.modification, diags)
+        diags.raise_if_errors()
+        if extra:
+            mods = Mods.merge_dicts(mods, extra)
+        model = self.model(mm.name, mods, mm.span)
+        settings = self._settings(s, model)
+        return ir.Scene(name, model, s.doc or "", tuple(settings), s.span)
+
+    def _settings(self, s: ast.SceneDef, model: ir.Model) -> list[tuple[str, object]]:
+        diags = DiagnosticBag()
+        out: dict[str, object] = {}
+        values = {p.name: p.value for p in model.parameters}
+        for it in s.items:
+            if not isinstance(it, ast.Setting):
+                continue
+            kind = SCENE_SETTINGS.get(it.name)
+            if kind is None:
+                diags.error("E601", f"unknown scene setting '{it.name}'", it.span,
+                            did_you_mean(it.name, SCENE_SETTINGS) or "settings: " + ", ".join(SCENE_SETTINGS))
+                continue
+            if it.name in out:
+                diags.error("E202", f"setting '{it.name}' is given twice", it.span)
+                continue
+            try:
+                out[it.name] = _setting_value(it, kind, values, model)
+            except MechError as e:
+                diags.extend(e.diagnostics)
+        diags.raise_if_errors()
+        if "tolerance" in out:
+            out.setdefault("rtol", out["tolerance"])
+            out.setdefault("atol", out["tolerance"])
+        return list(out.items())
+
+
+def _setting_value(it: ast.Setting, kind: str, values: dict[str, float], model: ir.Model):
+    from .. import exprs as X
+
+    v = it.value
+
+    def bad(msg, help=None):
+        raise MechError(Diagnostic("E604", msg, v.span, help))
+
+    if kind == "string":
+        if not isinstance(v, ast.String):
+            bad(f"'{it.name}' must be a string", f'{it.name} = "..."')
+        return v.value
+    if kind == "bool":
+        if not isinstance(v, ast.Bool):
+            bad(f"'{it.name}' must be true or false")
+        return v.value
+    if kind == "names":
+        items = v.items if isinstance(v, ast.Array) else (v,)
+        names = []
+        for x in items:
+            if isinstance(x, ast.String):
+                names.append(x.value)
+            elif isinstance(x, (ast.Ref, ast.Call)):
+                names.append(print_expr(x))
+            else:
+                bad(f"'{it.name}' lists names of outputs or coordinates", "e.g. outputs = {x, y, der(theta)};")
+        return tuple(_expand_names(names, model, v.span))
+    # number / integer: a constant expression in literals and parameters
+    try:
+        num = _const_eval(v, values)
+    except (ValueError, KeyError, ZeroDivisionError, OverflowError, TypeError) as ex:
+        bad(f"'{it.name}' must be a number ({ex})")
+    if not math.isfinite(num):
+        bad(f"'{it.name}' must be finite")
+    if kind == "integer":
+        if not float(num).is_integer() or num < 1:
+            bad(f"'{it.name}' must be a positive whole number")
+        return int(num)
+    if it.name in ("rtol", "atol", "tolerance", "dt") and num <= 0:
+        bad(f"'{it.name}' must be positive")
+    return float(num)
+
+
+def _const_eval(e: ast.Expr, values: dict[str, float]) -> float:
+    if isinstance(e, ast.Number):
+        return float(e.value)
+    if isinstance(e, ast.Ref) and e.simple is not None:
+        if e.simple == "pi":
+            return math.pi
+        if e.simple in values:
+            return values[e.simple]
+        raise KeyError(f"'{e.simple}' is not a parameter")
+    if isinstance(e, ast.UnaryOp) and e.op in "+-":
+        x = _const_eval(e.operand, values)
+        return -x if e.op == "-" else x
+    if isinstance(e, ast.BinOp) and e.op in "+-*/^":
+        a, b = _const_eval(e.left, values), _const_eval(e.right, values)
+        return {"+": a + b, "-": a - b, "*": a * b, "/": a / b, "^": a ** b}[e.op]
+    if isinstance(e, ast.Call) and e.func.simple in ("sqrt", "sin", "cos", "exp", "log"):
+        return getattr(math, e.func.simple)(*[_const_eval(a, values) for a in e.args])
+    raise ValueError("use numbers and parameters")
+
+
+def _expand_names(names: list[str], model: ir.Model, span: Span) -> list[str]:
+    known = {o.name for o in model.outputs} | set(model.coordinate_names) | {
+        f"der({c})" for c in model.coordinate_names} | set(ENERGY_SIGNALS)
+    out: list[str] = []
+    diags = DiagnosticBag()
+    for n in names:
+        if n in known:
+            out.append(n)
+            continue
+        prefixed = [k for k in sorted(known) if k.startswith(n + "[")]
+        if prefixed:
+            out += [o.name for o in model.outputs if o.name.startswith(n + "[")] or prefixed
+            continue
+        diags.error("E201", f"'{n}' is not an output or coordinate of model '{model.name}'", span,
+                    did_you_mean(n, known))
+    diags.raise_if_errors()
+    return out
+
+
+def analyze(file: ast.File, units: bool = True) -> Program:
+    """Check the file as a whole; ``units=False`` switches dimensional analysis off."""
+    return Program(file, units)
+
+
+__all__ = ["analyze", "Program", "SCENE_SETTINGS"]

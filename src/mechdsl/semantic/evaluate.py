@@ -1,0 +1,351 @@
+"""Expressions: AST expression -> value (IR expression with shape and unit), in a scope.
+
+The :class:`Evaluator` is a mixin of the flattener: it needs ``lookup(name, span)`` (a
+declared name -> value), ``attribute(value, name, span)`` and ``loop_vars``.
+"""
+from __future__ import annotations
+
+import math
+
+from .. import ast
+from .. import exprs as X
+from .. import ir
+from .. import units as U
+from ..diagnostics import MechError, Diagnostic, Span
+from . import values as V
+from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
+
+BUILTIN_NAMES = {"time", "pi", "world"}
+VECTOR_FUNCS = {"cross", "dot", "norm", "transpose", "identity", "zeros", "ones", "fill", "sum", "skew",
+                "diagonal", "rotation", "size", "normalize"}
+KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_energy", "energy",
+                   "dissipation_function", "reaction_force", "reaction_torque"}
+ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
+
+
+class EvalError(Exception):
+    """A diagnostic raised while evaluating; caught per declaration/equation and collected."""
+
+    def __init__(self, diag: Diagnostic):
+        super().__init__(diag.message)
+        self.diag = diag
+
+
+def fail(code: str, message: str, span: Span, help: str | None = None):
+    raise EvalError(Diagnostic(code, message, span, help))
+
+
+class Evaluator:
+    loop_vars: dict[str, int]
+
+    # provided by the flattener
+    def lookup(self, name: str, span: Span) -> Val:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def attribute(self, value: Val, name: str, span: Span) -> Val:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def known_names(self) -> list[str]:  # pragma: no cover - abstract
+        return []
+
+    def note_warnings(self, items, span: Span) -> None:  # pragma: no cover - abstract
+        pass
+
+    # ------------------------------------------------------------------ entry point
+    def eval(self, e: ast.Expr) -> Val:
+        try:
+            return self._eval(e)
+        except ValError as ve:
+            raise EvalError(Diagnostic(ve.code, ve.message, e.span, ve.help)) from None
+        except RecursionError:
+            raise EvalError(Diagnostic("E104", "expression nested too deeply", e.span,
+                                       "split it with intermediate `Real` variables")) from None
+
+    def _sub(self, e: ast.Expr) -> Val:
+        """Evaluate a sub-expression, attributing value errors (and unit warnings) to its own span."""
+        sink = V.WARNINGS.get()
+        before = len(sink) if sink is not None else 0
+        try:
+            v = self._eval(e)
+            if sink is not None and len(sink) > before:
+                self.note_warnings(sink[before:], e.span)
+                del sink[before:]
+            return v
+        except ValError as ve:
+            raise EvalError(Diagnostic(ve.code, ve.message, e.span, ve.help)) from None
+
+    def _eval(self, e: ast.Expr) -> Val:
+        if isinstance(e, ast.Number):
+            # integers are pure numbers; a decimal literal (0.1, 9.81) may stand for a quantity
+            return V.const(e.value, integer=isinstance(e.value, int), approx=isinstance(e.value, float))
+        if isinstance(e, ast.String):
+            return Str(e.value)
+        if isinstance(e, ast.Bool):
+            return Scalar(ir.Const(1.0 if e.value else 0.0), U.ONE, boolean=True)
+        if isinstance(e, ast.Ref):
+            return self.eval_ref(e)
+        if isinstance(e, ast.BinOp):
+            return self._binop(e)
+        if isinstance(e, ast.UnaryOp):
+            a = self._sub(e.operand)
+            if e.op == "-":
+                return V.neg(a)
+            if e.op == "+":
+                V._check_num(a, "+")
+                return a
+            return V.logic("not", a)
+        if isinstance(e, ast.IfExpr):
+            return self._if(e)
+        if isinstance(e, ast.Array):
+            return Arr(tuple(self._sub(i) for i in e.items))
+        if isinstance(e, ast.Comprehension):
+            out = []
+            for i in self.range_values(e.range):
+                self.loop_vars[e.var] = i
+                try:
+                    out.append(self._sub(e.expr))
+                finally:
+                    del self.loop_vars[e.var]
+            return Arr(tuple(out))
+        if isinstance(e, ast.Call):
+            return self._call(e)
+        raise ValError("E302", f"unexpected expression {type(e).__name__}")
+
+    def _binop(self, e: ast.BinOp) -> Val:
+        if e.op in ("+", "-", "*", "/") and isinstance(e.left, ast.BinOp):
+            # long left-nested chains: evaluate iteratively
+            chain = []
+            node: ast.Expr = e
+            while isinstance(node, ast.BinOp) and node.op in ("+", "-", "*", "/") and len(chain) < 100000:
+                chain.append((node.op, node.right))
+                node = node.left
+            acc = self._sub(node)
+            for op, right in reversed(chain):
+                acc = _ARITH[op](acc, self._sub(right))
+            return acc
+        a, b = self._sub(e.left), self._sub(e.right)
+        if e.op in _ARITH:
+            return _ARITH[e.op](a, b)
+        if e.op == "^":
+            return V.power(a, b)
+        if e.op in ("and", "or"):
+            return V.logic(e.op, a, b)
+        return V.compare(e.op, a, b)
+
+    def _if(self, e: ast.IfExpr) -> Val:
+        # evaluate from the last branch backwards so constant conditions fold
+        result = self._sub(e.otherwise)
+        for cond, val in reversed(e.branches):
+            c = self._sub(cond)
+            if not isinstance(c, Scalar):
+                raise ValError("E301", "an if-condition must be a scalar")
+            if c.const is not None:
+                if c.const:
+                    result = self._sub(val)
+                continue
+            result = V.select(c, self._sub(val), result)
+        return result
+
+    # ------------------------------------------------------------------ references
+    def eval_ref(self, r: ast.Ref) -> Val:
+        first = r.parts[0]
+        val = self.lookup(first.name, first.span)
+        val = self.index(val, first.subscripts, first.span, first.name)
+        for part in r.parts[1:]:
+            val = self.attribute(val, part.name, part.span)
+            val = self.index(val, part.subscripts, part.span, part.name)
+        return val
+
+    def int_value(self, e: ast.Expr, what: str) -> int:
+        v = self._sub(e)
+        if isinstance(v, Scalar) and v.const is not None and float(v.const).is_integer() and (
+                v.integer or isinstance(v.expr, ir.Const)):
+            if not v.integer and not _is_structural(v):
+                fail("E307", f"{what} must be an Integer expression", e.span,
+                     "use Integer parameters, loop variables and integer literals")
+            return int(v.const)
+        fail("E307", f"{what} must be an Integer constant", e.span,
+             "declare the size as `parameter Integer N = ...`")
+        raise AssertionError  # unreachable
+
+    def index(self, val: Val, subs: tuple[ast.Expr, ...], span: Span, name: str) -> Val:
+        for s in subs:
+            k = self.int_value(s, "an index")
+            if not isinstance(val, Arr):
+                fail("E303", f"'{name}' is not an array and cannot be indexed", s.span)
+            if not 1 <= k <= len(val.items):
+                fail("E303", f"index {k} is out of range for '{name}' (1..{len(val.items)})", s.span,
+                     "indices start at 1")
+            val = val.items[k - 1]
+        return val
+
+    def range_values(self, rng: ast.Range) -> list[int]:
+        a = self.int_value(rng.start, "a range bound")
+        b = self.int_value(rng.stop, "a range bound")
+        step = 1 if rng.step is None else self.int_value(rng.step, "a range step")
+        if step == 0:
+            fail("E303", "a range step must not be zero", rng.span)
+        n = (b - a) // step + 1
+        if n > 100_000:
+            fail("E303", f"range {a}:{b} has {n} elements (limit 100000)", rng.span)
+        return list(range(a, b + (1 if step > 0 else -1), step))
+
+    # ------------------------------------------------------------------ calls
+    def _call(self, e: ast.Call) -> Val:
+        name = e.func.dotted
+        if len(e.func.parts) != 1 or e.func.parts[0].subscripts or name not in ALL_FUNCS:
+            from ..diagnostics import did_you_mean
+
+            fail("E213", f"unknown function '{name}'", e.func.span, did_you_mean(name, ALL_FUNCS))
+        if name in ("kinetic_energy", "potential_energy", "energy", "dissipation_function"):
+            if e.args:
+                fail("E304", f"{name}() takes no arguments", e.span)
+            kind = {"kinetic_energy": "kinetic", "potential_energy": "potential", "energy": "energy",
+                    "dissipation_function": "dissipation"}[name]
+            return Scalar(ir.EnergyRef(kind), U.POWER if kind == "dissipation" else U.ENERGY)
+        if name in ("reaction_force", "reaction_torque"):
+            return self._reaction(e, name)
+        if name == "size":
+            return self._size(e)
+        args = [self._sub(a) for a in e.args]
+        if name == "der":
+            if len(args) != 1:
+                fail("E304", "der() takes 1 argument", e.span)
+            return V.map1(args[0], lambda s: _der(s, e.args[0].span))
+        if name in ("position", "velocity"):
+            if len(args) != 1 or not isinstance(args[0], CompRef):
+                fail("E209", f"{name}() takes a point or body", e.span)
+            return self.attribute(args[0], "r" if name == "position" else "v", e.span)
+        if name in X.MATH_FUNCS:
+            return V.apply_func(name, args)
+        return _vector_func(name, args, e)
+
+    def _size(self, e: ast.Call) -> Val:
+        if not 1 <= len(e.args) <= 2:
+            fail("E304", "size() takes an array and optionally a dimension", e.span)
+        v = self._sub(e.args[0])
+        shape = V.shape_of(v)
+        if len(e.args) == 2:
+            k = self.int_value(e.args[1], "a dimension")
+            if not 1 <= k <= len(shape):
+                fail("E303", f"dimension {k} out of range", e.args[1].span)
+            return V.const(shape[k - 1], integer=True)
+        if len(shape) != 1:
+            fail("E304", "size(a) needs a vector; give the dimension: size(a, 1)", e.span)
+        return V.const(shape[0], integer=True)
+
+    def _reaction(self, e: ast.Call, name: str) -> Val:
+        if len(e.args) != 1:
+            fail("E304", f"{name}() takes one joint", e.span)
+        j = self._sub(e.args[0])
+        if not isinstance(j, CompRef) or j.kind != "joint":
+            fail("E209", f"{name}() needs a joint, got {V.describe_shape(j)}", e.args[0].span)
+        what = "force" if name == "reaction_force" else "torque"
+        d = U.FORCE if what == "force" else U.TORQUE
+        return Arr(tuple(Scalar(ir.ReactionRef(j.name, what, i), d) for i in range(3)))
+
+
+def _is_structural(v: Scalar) -> bool:
+    return v.integer
+
+
+def _der(s: Scalar, span: Span) -> Scalar:
+    d = V.dim_div(s.dim, U.TIME) if s.dim is not ANY else None
+    if isinstance(s.expr, ir.Coord):
+        return Scalar(ir.Speed(s.expr.name), d)
+    if X.has_speed(s.expr):
+        fail("E305", "der() of an expression with speeds: accelerations are not available here", span,
+             "der() applies to coordinates and expressions of coordinates and time")
+    if not X.depends_on_state(s.expr) and not X.depends_on_time(s.expr):
+        return Scalar(ir.Const(0.0), d)
+    return Scalar(ir.TimeDer(s.expr), d)
+
+
+_ARITH = {"+": V.add, "-": V.sub, "*": V.mul, "/": V.div}
+
+
+def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
+    def need(n):
+        if len(args) != n:
+            fail("E304", f"{name}() takes {n} argument{'s' if n != 1 else ''}, got {len(args)}", e.span)
+
+    def count(v: Val, what: str) -> int:
+        if isinstance(v, Scalar) and v.const is not None and float(v.const).is_integer() and v.const >= 0:
+            return int(v.const)
+        fail("E307", f"{what} must be a non-negative Integer constant", e.span)
+        raise AssertionError
+
+    if name == "cross":
+        need(2)
+        return V.cross(args[0], args[1])
+    if name == "dot":
+        need(2)
+        return V.dot(args[0], args[1])
+    if name == "norm":
+        need(1)
+        return V.norm(args[0])
+    if name == "normalize":
+        need(1)
+        n = V.norm(args[0])
+        return V.div(args[0], n)
+    if name == "transpose":
+        need(1)
+        return V.transpose(args[0])
+    if name == "identity":
+        need(1)
+        n = count(args[0], "the size")
+        return Arr(tuple(Arr(tuple(V.const(1.0 if i == j else 0.0) for j in range(n))) for i in range(n)))
+    if name in ("zeros", "ones"):
+        if not args:
+            fail("E304", f"{name}() needs a size", e.span)
+        dims = [count(a, "a size") for a in args]
+        return _filled(V.const(0.0 if name == "zeros" else 1.0), dims)
+    if name == "fill":
+        if len(args) < 2:
+            fail("E304", "fill(value, n, ...) needs a value and a size", e.span)
+        return _filled(args[0], [count(a, "a size") for a in args[1:]])
+    if name == "sum":
+        need(1)
+        items: list[Val] = list(V.flatten(args[0])) if isinstance(args[0], Arr) else [args[0]]
+        if not items:
+            return V.const(0.0)
+        while len(items) > 1:  # balanced: long sums stay shallow
+            items = [V.add(items[i], items[i + 1]) if i + 1 < len(items) else items[i]
+                     for i in range(0, len(items), 2)]
+        return items[0]
+    if name == "skew":
+        need(1)
+        if V.shape_of(args[0]) != (3,):
+            fail("E301", "skew() needs a vector of 3", e.span)
+        x, y, z = args[0].items  # type: ignore[union-attr]
+        zero = V.const(0.0)
+        return Arr((Arr((zero, V.neg(z), y)), Arr((z, zero, V.neg(x))), Arr((V.neg(y), x, zero))))
+    if name == "diagonal":
+        need(1)
+        if len(V.shape_of(args[0])) != 1:
+            fail("E301", "diagonal() needs a vector", e.span)
+        items = args[0].items  # type: ignore[union-attr]
+        n = len(items)
+        return Arr(tuple(Arr(tuple(items[i] if i == j else V.const(0.0) for j in range(n))) for i in range(n)))
+    if name == "rotation":
+        need(2)
+        from .components import as_expr, as_vec3, normalized, rodrigues
+
+        axis = normalized(as_vec3(args[0], "the rotation axis"), "the rotation axis")
+        ang = args[1]
+        if isinstance(ang, Scalar):
+            V.require_dimensionless(ang.dim, "a rotation angle", ang.approx)
+        R = rodrigues(axis, as_expr(ang, "the rotation angle"))
+        return Arr(tuple(Arr(tuple(Scalar(c, U.ONE) for c in row)) for row in R))
+    fail("E213", f"unknown function '{name}'", e.span)
+    raise AssertionError
+
+
+def _filled(v: Val, dims: list[int]) -> Val:
+    if not dims:
+        return v
+    inner = _filled(v, dims[1:])
+    return Arr(tuple(inner for _ in range(dims[0])))
+
+
+__all__ = ["Evaluator", "EvalError", "fail", "BUILTIN_NAMES", "ALL_FUNCS", "math"]

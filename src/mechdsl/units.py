@@ -1,0 +1,160 @@
+"""Units: physical dimensions of expressions and parsing of unit strings.
+
+A :class:`Dim` is a vector of rational exponents over (length, mass, time, current,
+temperature, amount, luminosity).  Unit strings are Modelica-style ("m/s2", "kg.m2",
+"N.m/rad") or pint-style ("m/s**2"); common SI strings are read by a small fast path and
+everything else by pint (imported lazily: it costs about half a second to load).
+Values given in non-SI units are converted to SI (the factor is returned with the dimension).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from fractions import Fraction
+from functools import lru_cache
+
+_BASES = ("m", "kg", "s", "A", "K", "mol", "cd")
+
+
+@dataclass(frozen=True)
+class Dim:
+    e: tuple[Fraction, ...] = (Fraction(0),) * 7
+
+    def __mul__(self, o: "Dim") -> "Dim":
+        return Dim(tuple(a + b for a, b in zip(self.e, o.e)))
+
+    def __truediv__(self, o: "Dim") -> "Dim":
+        return Dim(tuple(a - b for a, b in zip(self.e, o.e)))
+
+    def __pow__(self, k) -> "Dim":
+        k = Fraction(k).limit_denominator(1000)
+        return Dim(tuple(a * k for a in self.e))
+
+    @property
+    def dimensionless(self) -> bool:
+        return all(a == 0 for a in self.e)
+
+    def __str__(self) -> str:
+        if self.dimensionless:
+            return "1"
+        num = [_term(b, a) for b, a in zip(_BASES, self.e) if a > 0]
+        den = [_term(b, -a) for b, a in zip(_BASES, self.e) if a < 0]
+        s = ".".join(num) if num else "1"
+        if den:
+            s += "/" + (".".join(den) if len(den) == 1 else "(" + ".".join(den) + ")")
+        return s
+
+
+def _term(base: str, a: Fraction) -> str:
+    if a == 1:
+        return base
+    return f"{base}{a}" if a.denominator == 1 else f"{base}^({a})"
+
+
+def dim(**kw) -> Dim:
+    idx = {b: i for i, b in enumerate(_BASES)}
+    e = [Fraction(0)] * 7
+    for k, v in kw.items():
+        e[idx[k]] = Fraction(v)
+    return Dim(tuple(e))
+
+
+ONE = Dim()
+LENGTH = dim(m=1)
+MASS = dim(kg=1)
+TIME = dim(s=1)
+VELOCITY = dim(m=1, s=-1)
+ACCEL = dim(m=1, s=-2)
+FORCE = dim(kg=1, m=1, s=-2)
+ENERGY = dim(kg=1, m=2, s=-2)
+POWER = dim(kg=1, m=2, s=-3)
+TORQUE = ENERGY
+INERTIA = dim(kg=1, m=2)
+STIFFNESS = dim(kg=1, s=-2)          # N/m
+DAMPING = dim(kg=1, s=-1)            # N.s/m
+GRAV_CONST = dim(m=3, kg=-1, s=-2)
+
+# -- fast path ------------------------------------------------------------------------------
+_PREFIX = {"": 1.0, "k": 1e3, "M": 1e6, "G": 1e9, "m": 1e-3, "u": 1e-6, "n": 1e-9, "c": 1e-2, "d": 1e-1}
+_SYMBOLS: dict[str, tuple[float, Dim]] = {
+    "m": (1.0, LENGTH), "g": (1e-3, MASS), "s": (1.0, TIME), "A": (1.0, dim(A=1)), "K": (1.0, dim(K=1)),
+    "mol": (1.0, dim(mol=1)), "cd": (1.0, dim(cd=1)), "N": (1.0, FORCE), "J": (1.0, ENERGY), "W": (1.0, POWER),
+    "Pa": (1.0, dim(kg=1, m=-1, s=-2)), "Hz": (1.0, dim(s=-1)), "rad": (1.0, ONE), "sr": (1.0, ONE),
+    "min": (60.0, TIME), "h": (3600.0, TIME),
+}
+_NOPREFIX = {"rad", "sr", "min", "h", "deg"}
+_TERM = re.compile(r"^([A-Za-z]+)(-?\d+)?$")
+
+
+def _fast_symbol(sym: str) -> tuple[float, Dim] | None:
+    if sym == "deg":
+        import math
+
+        return math.pi / 180, ONE
+    if sym in _SYMBOLS:
+        return _SYMBOLS[sym]
+    for p, f in _PREFIX.items():
+        if p and sym.startswith(p) and sym[len(p):] in _SYMBOLS and sym[len(p):] not in _NOPREFIX:
+            base_f, d = _SYMBOLS[sym[len(p):]]
+            return f * base_f, d
+    return None
+
+
+def _fast_parse(s: str) -> tuple[float, Dim] | None:
+    s = s.strip()
+    if s in ("", "1"):
+        return 1.0, ONE
+    num, _, den = s.partition("/")
+    if "/" in den or "(" in s or "*" in s or "^" in s:
+        return None
+    factor, d = 1.0, ONE
+    for part, sign in ((num, 1), (den, -1)):
+        if not part:
+            continue
+        for term in part.split("."):
+            if term == "1":
+                continue
+            m = _TERM.match(term)
+            if not m:
+                return None
+            sym = _fast_symbol(m.group(1))
+            if sym is None:
+                return None
+            k = int(m.group(2) or 1) * sign
+            factor *= sym[0] ** k
+            d = d * (sym[1] ** k)
+    return factor, d
+
+
+@lru_cache(maxsize=None)
+def _pint_registry():
+    import pint
+
+    return pint.UnitRegistry()
+
+
+_PINT_DIMS = {"[length]": 0, "[mass]": 1, "[time]": 2, "[current]": 3, "[temperature]": 4,
+              "[substance]": 5, "[luminosity]": 6}
+
+
+@lru_cache(maxsize=None)
+def parse_unit(s: str) -> tuple[float, Dim]:
+    """(factor to SI, dimension) of a unit string; raises ValueError when it is not a unit."""
+    fast = _fast_parse(s)
+    if fast is not None:
+        return fast
+    text = re.sub(r"([A-Za-z])(-?\d+)", r"\1**\2", s).replace(".", "*")
+    try:
+        ureg = _pint_registry()
+        q = ureg.Quantity(1, text)
+        base = q.to_base_units()
+        e = [Fraction(0)] * 7
+        for k, v in q.dimensionality.items():
+            if k not in _PINT_DIMS:
+                raise ValueError(f"unsupported dimension {k}")
+            e[_PINT_DIMS[k]] = Fraction(v).limit_denominator(1000)
+        return float(base.magnitude), Dim(tuple(e))
+    except ValueError:
+        raise
+    except Exception as ex:  # pint raises many kinds; all mean "not a unit"
+        raise ValueError(str(ex)) from None

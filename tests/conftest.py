@@ -1,0 +1,22 @@
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "models"
+REFERENCES = ROOT.parent / "shared" / "references"
+
+# deep recursion guard for pathological inputs is part of the CLI; tests call the library directly
+sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture
+def models_dir() -> Path:
+    return MODELS
+
+
+def model_files():
+    return sorted(MODELS.glob("*.mech"))

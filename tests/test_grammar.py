@@ -1,0 +1,13 @@
+"""The grammar is LALR(1) without conflicts or terminal collisions (lark strict mode)."""
+import lark
+
+from mechdsl.parser import grammar_path
+
+
+def test_grammar_is_strict_lalr():
+    lark.Lark(grammar_path().read_text(), parser="lalr", lexer="basic", strict=True, propagate_positions=True)
+
+
+def test_grammar_is_the_single_definition():
+    # the package loads the repository's grammar (or the copy shipped in the wheel)
+    assert grammar_path().name == "mech.lark"
