@@ -41,7 +41,7 @@ def test_all_fixed_and_inconsistent_is_a_diagnostic_naming_the_constraint():
     with pytest.raises(MechError) as info:
         initialize(e)
     d = info.value.first
-    assert d.code == "E701" and "'rod'" in d.message and "fixed" in d.help
+    assert d.code == "E821" and "'rod'" in d.message and "fixed" in d.help
 
 
 def test_unreachable_start_names_the_constraint():
@@ -49,14 +49,14 @@ def test_unreachable_start_names_the_constraint():
     e.fixed_q = (True, False)
     with pytest.raises(MechError) as info:
         initialize(e)
-    assert info.value.first.code == "E701" and "'rod'" in info.value.first.message
+    assert info.value.first.code == "E821" and "'rod'" in info.value.first.message
 
 
 def test_inconsistent_fixed_speeds_are_a_diagnostic():
     e = pendulum_eom(x0=(1.0, 0.0), v0=(1.0, 0.0))    # radial velocity, both fixed
     with pytest.raises(MechError) as info:
         initialize(e)
-    assert info.value.first.code == "E702" and "'rod'" in info.value.first.message
+    assert info.value.first.code == "E822" and "'rod'" in info.value.first.message
 
 
 def test_loop_closure_from_approximate_start():
@@ -78,4 +78,4 @@ def test_check_report_lines():
     text = "\n".join(lines)
     assert "degrees of freedom: 1" in text and "redundant constraints: 1" in text
     bad = pendulum_eom(x0=(0.6, -0.5))
-    assert any(line.startswith("error[E701]") for line in check_report(bad))
+    assert any(line.startswith("error[E821]") for line in check_report(bad))

@@ -91,7 +91,7 @@ def test_idas_refuses_the_raw_index3_form():
         guarded_idas("raw", raw_index3_dae(s), x0, np.concatenate([a0, lam0]), e.param_values, 0.0, [1.0],
                      {"calc_ic": False}, allowed_index=2, what="the index-3 form")
     d = info.value.first
-    assert d.code == "E703" and "index is 3" in d.message
+    assert d.code == "E823" and "index is 3" in d.message
     # index 2 without suppress_algebraic is refused too; with it, the GGL system passes
     z0 = np.concatenate([a0, lam0, [0.0]])
     with pytest.raises(MechError):

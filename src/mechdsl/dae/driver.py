@@ -30,12 +30,12 @@ import warnings
 
 import numpy as np
 
-from ..diagnostics import UsageError
+from ..diagnostics import UsageError, did_you_mean
 from ..result import Failure, Result
 from .dof import dof_report, singular_ratio
 from .init import initialize
 from .options import DaeOptions, parse_options
-from .record import evaluate_signals, select_signals
+from .record import evaluate_signals, select_signals, skipped_reaction_outputs, standard_signals
 from .stepper import StepError
 from .system import ConstrainedSystem
 
@@ -61,6 +61,36 @@ def _param_vector(eom, p) -> np.ndarray:
     if pv.size != len(eom.params):
         raise UsageError(f"parameter vector has {pv.size} entries, the model has {len(eom.params)}")
     return pv
+
+
+def _start(eom, x0, pv):
+    """Start values with the overrides x0 ([q; qd] or {name | "der(name)": value}) applied;
+    an overridden value counts as fixed for the consistent initialization."""
+    q0, qd0 = eom.start(pv)
+    n = eom.n
+    fq = list(eom.fixed_q) if len(eom.fixed_q) == n else [True] * n
+    fqd = list(eom.fixed_qd) if len(eom.fixed_qd) == n else [True] * n
+    if x0 is None:
+        return q0, qd0, tuple(fq), tuple(fqd)
+    if isinstance(x0, dict):
+        for k, v in x0.items():
+            name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+            if name not in eom.coords:
+                hint = did_you_mean(name, eom.coords)
+                raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
+            i = eom.coords.index(name)
+            if speed:
+                qd0[i], fqd[i] = float(v), True
+            else:
+                q0[i], fq[i] = float(v), True
+    else:
+        x = np.asarray(x0, float).ravel()
+        if x.size != 2 * n:
+            raise UsageError(f"x0 has {x.size} entries; expected {2 * n} (coordinates then their speeds)")
+        q0, qd0 = x[:n].copy(), x[n:].copy()
+    if not (np.all(np.isfinite(q0)) and np.all(np.isfinite(qd0))):
+        raise UsageError("start values are not finite")
+    return q0, qd0, tuple(fq), tuple(fqd)
 
 
 def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
@@ -109,9 +139,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     grid = np.linspace(t0, t_end, (points - 1) * refine + 1)
     span = t_end - t0
     chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
+    from .record import reaction_sources
 
-    q0, qd0 = eom.start(pv)
-    init = initialize(eom, q0, qd0, t0, pv)
+    reaction_names = set(reaction_sources(eom))
+
+    q0, qd0, fixed_q, fixed_qd = _start(eom, opts.x0, pv)
+    init = initialize(eom, q0, qd0, t0, pv, fixed_q=fixed_q, fixed_qd=fixed_qd)
     dof = dof_report(eom, init.q, t0, pv)
     notes: list[str] = []
     if dof.redundant:
@@ -192,6 +225,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             continue
         retries = 0
         h_fail = np.inf
+        if opts.progress is not None:
+            opts.progress(float(T_acc[-1]), t_end)
         if not single:
             chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
         elif chunk == 1 and not np.isfinite(h_sing):
@@ -236,8 +271,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         for i in range(len(T)):
             _, lam = system.accel(Q[i], QD[i], t[i])
             LAM[i, list(system.active)] = lam
-    signals = {"constraint_drift": np.array(D), "velocity_drift": np.array(VD)}
-    signals.update(evaluate_signals(eom, chosen, t, Q, QD, LAM, pv))
+    plain = {k: v for k, v in chosen.items() if k in eom.outputs and k not in reaction_names}
+    signals = evaluate_signals(eom, plain, t, Q, QD, LAM, pv)
+    signals.update(evaluate_signals(eom, standard_signals(eom), t, Q, QD, LAM, pv))
+    signals["constraint_drift"] = np.array(D)
+    signals["velocity_drift"] = np.array(VD)
+    signals.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, Q, QD, LAM, pv))
 
     bound = opts.bound
     max_d = float(np.max(D)) if D else 0.0
@@ -257,12 +296,30 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 "constraints": list(eom.constraint_names), "active_constraints": list(system.names),
                 "notes": notes + stepper.notes}
     if extra:
-        metadata["extra_options"] = {k: repr(v) for k, v in extra.items()}
+        metadata["notes"].append("options without effect on a constrained model: " + ", ".join(sorted(extra)))
+    skipped = skipped_reaction_outputs(eom, chosen)
+    if skipped:
+        metadata["notes"].append("outputs that need the multipliers were not computed (ask with reactions = true "
+                                 "or name them in outputs): " + ", ".join(skipped))
+    metadata["options"] = {"t_start": t0, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol, "points": points,
+                           "formulation": opts.formulation, "method": opts.method, "reactions": bool(opts.reactions),
+                           "outputs": list(opts.outputs) if opts.outputs is not None else None,
+                           "parameters": dict(zip(eom.params, map(float, pv))),
+                           "start": {**dict(zip(eom.coords, map(float, init.q))),
+                                     **{f"der({c})": float(v) for c, v in zip(eom.coords, init.qd)}}}
+    metadata["warnings"] = []
+    try:
+        from ..simulate import versions
+
+        metadata["versions"] = versions()
+    except ImportError:  # pragma: no cover
+        pass
     if not drift_ok:
         msg = (f"constraint drift exceeded the bound {bound:.1e}: max ||g|| = {max_d:.2e}, "
                f"max ||G q' + g_t|| = {max_v:.2e} (formulation {opts.formulation}); "
                "tighten atol or use formulation = \"projection\"")
         metadata["drift_warning"] = msg
+        metadata["warnings"].append(msg)
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
     return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,

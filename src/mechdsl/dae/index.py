@@ -18,7 +18,7 @@ import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
 
-CODE_INDEX = "E703"
+CODE_INDEX = "E823"
 RANK_TOL = 1e-10
 
 
@@ -82,7 +82,7 @@ def refuse_high_index(index: int, allowed: int, what: str) -> None:
 
 def check_for_idas(dae: dict, x0, z0, p0, t0: float, opts: dict, allowed_index: int = 1,
                    what: str = "this DAE", force: bool = False) -> int:
-    """The DAE's index at (x0, z0, p0, t0); a MechError (E703) if IDAS must not get it.
+    """The DAE's index at (x0, z0, p0, t0); a MechError (E823) if IDAS must not get it.
 
     Index 2 is accepted only when ``allowed_index >= 2`` *and* the algebraic variables are
     left out of the error test (option suppress_algebraic).  ``force=True`` skips the

@@ -9,7 +9,7 @@ The start values (q0, q0') come from the model; those marked fixed (``EOM.fixed_
 "As little as possible" is measured in the mass metric (coordinate i weighted by
 sqrt(M_ii)), so the result does not depend on units.  Every changed value is reported
 (:class:`InitReport`); a start the constraints cannot meet raises a MechError that names
-the violated constraints (E701 positions, E702 velocities).
+the violated constraints (E821 positions, E822 velocities).
 
 Feasibility is judged per constraint by its distance to the surface in coordinate space,
 |g_i| / ||dg_i/dq||, against ``tol * (1 + ||q||_inf)`` (default tol = 1e-10).
@@ -23,8 +23,8 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError
 from ..eom import EOM
 
-CODE_POSITION = "E701"
-CODE_VELOCITY = "E702"
+CODE_POSITION = "E821"
+CODE_VELOCITY = "E822"
 
 
 @dataclass
@@ -88,8 +88,9 @@ def _distances(g, G):
 
 
 def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float = 1e-10,
-               max_iter: int = 50) -> InitReport:
-    """Make (q0, q0') consistent with g = 0 and G q' + g_t = 0, holding the fixed values."""
+               max_iter: int = 50, fixed_q=None, fixed_qd=None) -> InitReport:
+    """Make (q0, q0') consistent with g = 0 and G q' + g_t = 0, holding the fixed values
+    (``EOM.fixed_q`` / ``EOM.fixed_qd``, or the flags given here)."""
     pv = eom.param_values if p is None else np.asarray(p, float)
     if q0 is None or qd0 is None:
         a, b = eom.start(pv)
@@ -102,8 +103,8 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
         return InitReport(q=q, qd=qd)
     fg, fG, fgt, fM = _functions(eom)
     names = eom.constraint_names
-    fixed_q = _flags(eom.fixed_q, n)
-    fixed_qd = _flags(eom.fixed_qd, n)
+    fixed_q = _flags(eom.fixed_q if fixed_q is None else fixed_q, n)
+    fixed_qd = _flags(eom.fixed_qd if fixed_qd is None else fixed_qd, n)
     free = [i for i in range(n) if not fixed_q[i]]
     freev = [i for i in range(n) if not fixed_qd[i]]
 

@@ -1,9 +1,11 @@
 """What a constrained run records besides q and q': outputs, drift, multipliers, reactions.
 
-Signals (Result.signals):
+Signals (Result.signals), in this order:
+- the model's outputs (EOM.outputs) that need no multipliers (vector outputs as name[1], ...)
+- "kinetic_energy", "potential_energy", "energy" (as the ODE simulator records them)
+- "residual(<constraint name>)" for every constraint
 - "constraint_drift"  ||g(q, t)||_inf over all constraints (redundant ones included)
 - "velocity_drift"    ||G q' + g_t||_inf
-- the model's outputs (EOM.outputs) that need no multipliers
 - only when asked (option ``reactions=True``, or named in ``outputs``):
   "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one), and
   reaction outputs: entries of ``EOM.reactions`` (name -> SX in q, q', t, p and EOM.lam),
@@ -58,6 +60,12 @@ def reaction_sources(eom) -> dict[str, object]:
     return out
 
 
+def skipped_reaction_outputs(eom, chosen: dict) -> list[str]:
+    """Declared outputs that need the multipliers but were not asked for (for a note)."""
+    lam = lam_symbol(eom)
+    return [k for k, v in eom.outputs.items() if k not in chosen and depends_on(v, lam)]
+
+
 def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
     """The signal expressions to record and whether multipliers are needed."""
     lam = lam_symbol(eom)
@@ -68,13 +76,16 @@ def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
         if reactions:
             chosen.update(react)
         return chosen, bool(reactions)
+    if isinstance(outputs, str):
+        outputs = (outputs,)
     chosen = {}
     for name in outputs:
         if name in plain:
             chosen[name] = plain[name]
         elif name in react:
             chosen[name] = react[name]
-        elif name in eom.coords or name.startswith("der(") or name in ("constraint_drift", "velocity_drift"):
+        elif (name in eom.coords or name.startswith("der(") or name.startswith("residual(")
+              or name in ("constraint_drift", "velocity_drift", "kinetic_energy", "potential_energy", "energy")):
             continue   # always recorded
         else:
             hint = did_you_mean(name, list(plain) + list(react) + list(eom.coords))
@@ -86,18 +97,36 @@ def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
 
 
 def evaluate_signals(eom, chosen: dict, t, Q, QD, LAM, p) -> dict[str, np.ndarray]:
+    """Values of the chosen signals at the recorded states; a vector-valued output `v` becomes
+    the signals v[1], v[2], ... (1-based, as the ODE simulator names them)."""
     import casadi as ca
 
     if not chosen:
         return {}
     lam = lam_symbol(eom)
-    names = list(chosen)
-    F = ca.Function("signals", [eom.q, eom.qd, eom.t, eom.p, lam], [ca.vertcat(*[ca.SX(chosen[k]) for k in names])])
+    names, exprs = [], []
+    for k, v in chosen.items():
+        v = ca.SX(v)
+        if v.numel() == 1:
+            names.append(k)
+        else:
+            names += [f"{k}[{i + 1}]" for i in range(v.numel())]
+        exprs.append(ca.vec(v))
+    F = ca.Function("signals", [eom.q, eom.qd, eom.t, eom.p, lam], [ca.vertcat(*exprs)])
     N = len(t)
     if N == 0:
         return {k: np.zeros(0) for k in names}
-    Fm = F.map(N)
     P = np.repeat(np.asarray(p, float).reshape(-1, 1), N, axis=1)
     L = LAM.T if LAM is not None and LAM.size else np.zeros((eom.m, N))
-    vals = np.array(Fm(Q.T, QD.T, np.asarray(t).reshape(1, -1), P, L), float).reshape(len(names), N)
+    vals = np.array(F.map(N)(Q.T, QD.T, np.asarray(t).reshape(1, -1), P, L), float).reshape(len(names), N)
     return {k: vals[i] for i, k in enumerate(names)}
+
+
+def standard_signals(eom) -> dict[str, object]:
+    """Energies and constraint residuals, recorded in every run."""
+    import casadi as ca
+
+    out = {"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V}
+    for i, name in enumerate(eom.constraint_names):
+        out[f"residual({name})"] = ca.SX(eom.g)[i]
+    return out

@@ -78,7 +78,7 @@ def scaled_dae(dae: dict, extra_p=None) -> dict:
 
 
 def integrator_options(opts: DaeOptions, plugin: str) -> dict:
-    o = {"abstol": opts.atol, "reltol": opts.rtol, "max_num_steps": int(opts.max_steps),
+    o = {"abstol": opts.atol, "reltol": opts.rtol, "max_num_steps": opts.steps,
          "disable_internal_warnings": True}
     if plugin == "cvodes":
         o["linear_multistep_method"] = "adams" if opts.method == "adams" else "bdf"
