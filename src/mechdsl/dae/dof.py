@@ -31,6 +31,7 @@ class DofReport:
     independent: tuple[int, ...] = ()          # indices of a maximal independent subset
     singular_values: tuple[float, ...] = ()    # of the scaled Jacobian, descending
     t: float = 0.0
+    vanishing: tuple[str, ...] = ()            # redundant ones whose gradient is zero here
 
     @property
     def predicted_dof(self) -> int:
@@ -47,6 +48,9 @@ class DofReport:
                        f"the count {self.coordinates} - {self.constraints} = {self.predicted_dof} "
                        f"predicts {self.predicted_dof} degrees of freedom, the rank gives {self.dof}; "
                        "the redundant ones are dropped during simulation")
+            if self.vanishing:
+                out.append(f"  of these, {', '.join(self.vanishing)} have a zero gradient (satisfied whatever the "
+                           "coordinates do nearby, e.g. the out-of-plane conditions of a planar loop)")
         if self.dof < 0:
             out.append("over-constrained: more independent constraints than coordinates")
         return out
@@ -54,7 +58,7 @@ class DofReport:
     def as_dict(self) -> dict:
         return {"coordinates": self.coordinates, "constraints": self.constraints, "rank": self.rank,
                 "dof": self.dof, "redundant": self.redundant, "redundant_names": list(self.redundant_names),
-                "independent": list(self.independent), "t": self.t,
+                "independent": list(self.independent), "t": self.t, "vanishing": list(self.vanishing),
                 "min_singular_ratio": (self.singular_values[self.rank - 1] / self.singular_values[0]
                                        if self.rank and self.singular_values[0] > 0 else None)}
 
@@ -106,9 +110,12 @@ def dof_report(eom: EOM, q=None, t: float = 0.0, p=None, tol: float = RANK_TOL) 
     rank, s = numeric_rank(Gs, tol)
     keep = independent_rows(Gs, rank)
     redundant = tuple(eom.constraint_names[i] for i in range(m) if i not in keep)
+    gnorm = np.linalg.norm(G, axis=1)
+    vanishing = tuple(eom.constraint_names[i] for i in range(m)
+                      if i not in keep and gnorm[i] <= 1e-12 * max(1.0, float(np.max(gnorm))))
     return DofReport(coordinates=n, constraints=m, rank=rank, dof=n - rank, redundant=m - rank,
                      redundant_names=redundant, independent=keep,
-                     singular_values=tuple(float(x) for x in s), t=float(t))
+                     singular_values=tuple(float(x) for x in s), t=float(t), vanishing=vanishing)
 
 
 def singular_ratio(Gs: np.ndarray, rank: int) -> float:

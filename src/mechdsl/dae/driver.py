@@ -35,7 +35,7 @@ from ..result import Failure, Result
 from .dof import dof_report, singular_ratio
 from .init import initialize
 from .options import DaeOptions, parse_options
-from .record import evaluate_signals, select_signals, skipped_reaction_outputs, standard_signals
+from .record import evaluate_signals, select_signals, standard_signals
 from .stepper import StepError
 from .system import ConstrainedSystem
 
@@ -139,9 +139,6 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     grid = np.linspace(t0, t_end, (points - 1) * refine + 1)
     span = t_end - t0
     chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
-    from .record import reaction_sources
-
-    reaction_names = set(reaction_sources(eom))
 
     q0, qd0, fixed_q, fixed_qd = _start(eom, opts.x0, pv)
     init = initialize(eom, q0, qd0, t0, pv, fixed_q=fixed_q, fixed_qd=fixed_qd)
@@ -212,9 +209,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 continue
             retries += 1
             h_fail = (times[-1] - saved[0]) / 2
-            if retries > MAX_RETRIES or h_fail < tiny:
-                r_now = ratio_at(saved[1], saved[0])
-                if r_now < 100 * opts.singular_tol or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
+            r_now = ratio_at(saved[1], saved[0])
+            near_singular = r_now < 100 * opts.singular_tol
+            if retries > MAX_RETRIES or h_fail < tiny or near_singular:
+                # (near a singular configuration, halving the step only makes the solver retry
+                # ever more ill-conditioned systems: stop at once)
+                if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
                     failure = Failure(saved[0], "singular configuration",
                                       f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
                                       f"and the {opts.formulation} integrator failed: {e}")
@@ -238,7 +238,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             min_ratio = min(min_ratio, ratio)
             on_grid = abs(t_now - grid[k]) <= tiny
             if ratio < opts.singular_tol:
-                events.append({"time": t_now, "kind": "singular",
+                events.append({"time": t_now, "kind": "singular", "contact": "-",
                                "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
                 failure = Failure(t_now, "singular configuration",
                                   f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
@@ -271,7 +271,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         for i in range(len(T)):
             _, lam = system.accel(Q[i], QD[i], t[i])
             LAM[i, list(system.active)] = lam
-    plain = {k: v for k, v in chosen.items() if k in eom.outputs and k not in reaction_names}
+    plain = {k: v for k, v in chosen.items() if k in eom.outputs}
     signals = evaluate_signals(eom, plain, t, Q, QD, LAM, pv)
     signals.update(evaluate_signals(eom, standard_signals(eom), t, Q, QD, LAM, pv))
     signals["constraint_drift"] = np.array(D)
@@ -297,10 +297,6 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 "notes": notes + stepper.notes}
     if extra:
         metadata["notes"].append("options without effect on a constrained model: " + ", ".join(sorted(extra)))
-    skipped = skipped_reaction_outputs(eom, chosen)
-    if skipped:
-        metadata["notes"].append("outputs that need the multipliers were not computed (ask with reactions = true "
-                                 "or name them in outputs): " + ", ".join(skipped))
     metadata["options"] = {"t_start": t0, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol, "points": points,
                            "formulation": opts.formulation, "method": opts.method, "reactions": bool(opts.reactions),
                            "outputs": list(opts.outputs) if opts.outputs is not None else None,

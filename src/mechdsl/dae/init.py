@@ -82,6 +82,32 @@ def _flags(flags, n, default=True):
     return flags if len(flags) == n else (default,) * n
 
 
+def constraint_labels(eom: EOM) -> list[str]:
+    """'name' or 'name' (doc) for each constraint: explicit constraint equations of a .mech
+    model are named c1, c2, ... and carry their text or documentation string."""
+    docs = {}
+    if eom.model is not None:
+        docs = {c.name: c.doc for c in eom.model.constraints if c.doc}
+    return [f"'{n}' ({docs[n]})" if n in docs else f"'{n}'" for n in eom.constraint_names]
+
+
+def _span(eom: EOM, index: int):
+    """Source span of constraint `index` (an explicit equation) or of its loop's joint."""
+    from ..diagnostics import Span
+
+    if eom.model is None:
+        return Span()
+    name = eom.constraint_names[index]
+    for c in eom.model.constraints:
+        if c.name == name:
+            return c.span
+    joint = name.split(".")[0]
+    for j in eom.model.joints:
+        if j.name == joint:
+            return j.span
+    return eom.model.span
+
+
 def _distances(g, G):
     norms = np.linalg.norm(G, axis=1)
     return np.abs(g) / np.where(norms > 0, norms, 1.0)
@@ -102,7 +128,7 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
     if m == 0:
         return InitReport(q=q, qd=qd)
     fg, fG, fgt, fM = _functions(eom)
-    names = eom.constraint_names
+    labels = constraint_labels(eom)
     fixed_q = _flags(eom.fixed_q if fixed_q is None else fixed_q, n)
     fixed_qd = _flags(eom.fixed_qd if fixed_qd is None else fixed_qd, n)
     free = [i for i in range(n) if not fixed_q[i]]
@@ -145,7 +171,8 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
         raise MechError(Diagnostic(
             CODE_POSITION,
             "the start values cannot satisfy the constraint" + ("s " if len(bad) > 1 else " ")
-            + ", ".join(f"'{names[i]}' (residual {g[i]:.3g})" for i in bad),
+            + ", ".join(f"{labels[i]} with residual {g[i]:.3g}" for i in bad),
+            span=_span(eom, bad[0]),
             help=("every coordinate in them has a fixed start value; correct the start values or let "
                   "some of them be computed (fixed = false)" if not free else
                   "the coordinates left free (" + ", ".join(eom.coords[i] for i in free) + ") cannot close "
@@ -167,7 +194,8 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
         raise MechError(Diagnostic(
             CODE_VELOCITY,
             "the start speeds violate the velocity form of the constraint" + ("s " if len(badv) > 1 else " ")
-            + ", ".join(f"'{names[i]}' (G q' + g_t = {r[i]:.3g})" for i in badv),
+            + ", ".join(f"{labels[i]} with G q' + g_t = {r[i]:.3g}" for i in badv),
+            span=_span(eom, badv[0]),
             help=("every speed in them has a fixed start value; correct the speeds or let some be computed "
                   "(speed fixed = false)" if not freev else
                   "the speeds left free (" + ", ".join(eom.coords[i] for i in freev) + ") cannot satisfy them")))

@@ -83,7 +83,7 @@ class PartitioningStepper(Stepper):
             self.stats["repartitions"] += 1
         coords = self.system.eom.coords
         if old != dep:
-            self.events.append({"time": float(t), "kind": "partition", "reason": reason,
+            self.events.append({"time": float(t), "kind": "partition", "contact": "-", "reason": reason,
                                 "independent": [coords[i] for i in self.ind],
                                 "dependent": [coords[i] for i in self.dep], "cond": self.cond0})
 

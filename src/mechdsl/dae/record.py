@@ -1,15 +1,15 @@
 """What a constrained run records besides q and q': outputs, drift, multipliers, reactions.
 
 Signals (Result.signals), in this order:
-- the model's outputs (EOM.outputs) that need no multipliers (vector outputs as name[1], ...)
+- the model's outputs (EOM.outputs; vector outputs as name[1], ...), all or those named
 - "kinetic_energy", "potential_energy", "energy" (as the ODE simulator records them)
 - "residual(<constraint name>)" for every constraint
 - "constraint_drift"  ||g(q, t)||_inf over all constraints (redundant ones included)
 - "velocity_drift"    ||G q' + g_t||_inf
 - only when asked (option ``reactions=True``, or named in ``outputs``):
   "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one), and
-  reaction outputs: entries of ``EOM.reactions`` (name -> SX in q, q', t, p and EOM.lam),
-  outputs that depend on ``EOM.lam``, and for constraint names of the form
+  reaction signals: entries of ``EOM.reactions`` (name -> SX in q, q', t, p and EOM.lam),
+  and for constraint names of the form
   "<joint>.force[i]" / "<joint>.torque[i]" (the convention of cut joints, whose
   multipliers are the reaction components in the joint frame) the signal of that name.
 
@@ -54,44 +54,39 @@ def reaction_sources(eom) -> dict[str, object]:
             out[name] = lam[i]
     for name, expr in (getattr(eom, "reactions", None) or {}).items():
         out[name] = expr
-    for name, expr in eom.outputs.items():
-        if depends_on(expr, lam):
-            out[name] = expr
     return out
 
 
-def skipped_reaction_outputs(eom, chosen: dict) -> list[str]:
-    """Declared outputs that need the multipliers but were not asked for (for a note)."""
-    lam = lam_symbol(eom)
-    return [k for k, v in eom.outputs.items() if k not in chosen and depends_on(v, lam)]
-
-
 def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
-    """The signal expressions to record and whether multipliers are needed."""
+    """The signal expressions to record and whether multipliers are needed.
+
+    Declared outputs are recorded as in the ODE simulator (all of them, or those named);
+    one that uses reactions (depends on EOM.lam) is itself the request to compute the
+    multipliers.  The raw multipliers ("lambda[...]"), cut-joint reaction signals and
+    EOM.reactions are recorded only with reactions=True or when named in ``outputs``."""
     lam = lam_symbol(eom)
-    plain = {k: v for k, v in eom.outputs.items() if not depends_on(v, lam)}
     react = reaction_sources(eom)
     if outputs is None:
-        chosen = dict(plain)
+        chosen = dict(eom.outputs)
         if reactions:
-            chosen.update(react)
-        return chosen, bool(reactions)
-    if isinstance(outputs, str):
-        outputs = (outputs,)
-    chosen = {}
-    for name in outputs:
-        if name in plain:
-            chosen[name] = plain[name]
-        elif name in react:
-            chosen[name] = react[name]
-        elif (name in eom.coords or name.startswith("der(") or name.startswith("residual(")
-              or name in ("constraint_drift", "velocity_drift", "kinetic_energy", "potential_energy", "energy")):
-            continue   # always recorded
-        else:
-            hint = did_you_mean(name, list(plain) + list(react) + list(eom.coords))
-            raise UsageError(f"no output named {name!r} in model {eom.name}" + (f"; {hint}" if hint else ""))
-    if reactions:
-        chosen.update({k: v for k, v in react.items() if k not in chosen})
+            chosen.update({k: v for k, v in react.items() if k not in chosen})
+    else:
+        if isinstance(outputs, str):
+            outputs = (outputs,)
+        chosen = {}
+        for name in outputs:
+            if name in eom.outputs:
+                chosen[name] = eom.outputs[name]
+            elif name in react:
+                chosen[name] = react[name]
+            elif (name in eom.coords or name.startswith("der(") or name.startswith("residual(")
+                  or name in ("constraint_drift", "velocity_drift", "kinetic_energy", "potential_energy", "energy")):
+                continue   # always recorded
+            else:
+                hint = did_you_mean(name, list(eom.outputs) + list(react) + list(eom.coords))
+                raise UsageError(f"no output named {name!r} in model {eom.name}" + (f"; {hint}" if hint else ""))
+        if reactions:
+            chosen.update({k: v for k, v in react.items() if k not in chosen})
     need = any(depends_on(v, lam) for v in chosen.values())
     return chosen, need
 
