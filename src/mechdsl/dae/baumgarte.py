@@ -35,9 +35,11 @@ def index1_dae(system) -> dict:
     """The index-1 ODE x = (q, q'), parameters (p, alpha, beta)."""
     import casadi as ca
 
-    S = system.sym
-    return {"x": ca.vertcat(S["q"], S["qd"]), "t": S["t"], "p": ca.vertcat(S["p"], S["alpha"], S["beta"]),
-            "ode": ca.vertcat(S["qd"], S["qdd"])}
+    q, qd, t, p = system.symbols()
+    Sym = type(q)
+    alpha, beta = Sym.sym("alpha"), Sym.sym("beta")
+    qdd, _ = system.fn["accel"](q, qd, t, p, alpha, beta)
+    return {"x": ca.vertcat(q, qd), "t": t, "p": ca.vertcat(p, alpha, beta), "ode": ca.vertcat(qd, qdd)}
 
 
 def automatic_rates(system, q, qd, t, span: float, factor: float = RATE_FACTOR) -> tuple[float, float]:

@@ -68,9 +68,11 @@ class PartitioningStepper(Stepper):
         import casadi as ca
 
         S = self.system.sym
-        return ca.Function("pieces", [S["q"], S["qd"], S["t"], S["p"]],
-                           [S["g"], S["G"], S["gt"], ca.substitute(S["qdd"], ca.vertcat(S["alpha"], S["beta"]),
-                                                                   ca.DM.zeros(2))])
+        geo = ca.Function("geometry", [S["q"], S["t"], S["p"]], [S["g"], S["G"], S["gt"]])
+        q, qd, t, p = (ca.MX.sym(k, *S[k].shape) for k in ("q", "qd", "t", "p"))
+        g, G, gt = geo(q, t, p)
+        qdd, _ = self.system.fn["accel"](q, qd, t, p, 0, 0)
+        return ca.Function("pieces", [q, qd, t, p], [g, G, gt, qdd])
 
     def choose_partition(self, q, t, reason: str = "start") -> None:
         Gs = scale_jacobian(self.system.G(q, t), self.system.M(q, t))

@@ -63,11 +63,12 @@ def scaled_dae(dae: dict, extra_p=None) -> dict:
     The new parameter vector is [p; t0; h; extra_p]."""
     import casadi as ca
 
-    s = ca.SX.sym("s")
-    t0 = ca.SX.sym("t0")
-    h = ca.SX.sym("h")
+    Sym = type(dae["x"])            # SX or MX, as the DAE is built
+    s = Sym.sym("s")
+    t0 = Sym.sym("t0")
+    h = Sym.sym("h")
     t = dae["t"]
-    extra = ca.SX.zeros(0, 1) if extra_p is None else extra_p
+    extra = Sym.zeros(0, 1) if extra_p is None else extra_p
     sub = t0 + s * h
     out = {"x": dae["x"], "t": s, "p": ca.vertcat(dae["p"], t0, h, extra),
            "ode": h * ca.substitute(dae["ode"], t, sub)}

@@ -15,9 +15,9 @@ Linear algebra.  The augmented (KKT) system
     [ M   G^T ] [ q''    ]   [ bias                               ]
     [ G   0   ] [ lambda ] = [ gamma - 2 alpha gdot - beta^2 g    ]
 
-is solved symbolically (CasADi's SX ``solve``: an unpivoted QR) after a symmetric
-equilibration: D = diag(M)^(-1/2) on the coordinates and S = 1/||row of G D|| on the
-constraints.  Without it the unpivoted QR loses up to 8 digits on badly scaled problems
+is solved after a symmetric equilibration: D = diag(M)^(-1/2) on the coordinates and
+S = 1/||row of G D|| on the constraints -- symbolically (CasADi's SX ``solve``, an unpivoted
+QR) up to n + m = SX_KKT_MAX, numerically (sparse QR inside an MX Function) above.  Without it the unpivoted QR loses up to 8 digits on badly scaled problems
 such as Andrews' squeezer (M ~ 1e-5, G ~ 1e-2); with it the result agrees with a pivoted
 dense solve to ~1e-15 (tests/test_dae_system.py).
 """
@@ -36,23 +36,30 @@ def _sx():
     return ca
 
 
-def equilibrated_kkt_solve(M, G, rhs_q, rhs_c):
-    """Symbolic solve of [[M, G^T], [G, 0]] [x; y] = [rhs_q; rhs_c] with equilibration."""
+SX_KKT_MAX = 12   # up to this n + m the augmented system is solved symbolically (SX), above numerically
+
+
+def equilibrated_kkt(M, G, rhs_q, rhs_c):
+    """The equilibrated augmented system: (K, b, d, s) with
+    [[D M D, D G^T S], [S G D, 0]] [y; mu] = [D rhs_q; S rhs_c],  q'' = D y,  lambda = S mu."""
     ca = _sx()
-    n = M.shape[0]
     m = G.shape[0]
     d = 1.0 / ca.sqrt(ca.fabs(ca.diag(M)) + 1e-300)
     D = ca.diag(d)
     Ms = ca.mtimes([D, M, D])
-    if m == 0:
-        y = ca.solve(Ms, d * rhs_q)
-        return d * y, ca.SX.zeros(0, 1)
     GD = ca.mtimes(G, D)
     s = 1.0 / ca.sqrt(ca.sum2(GD * GD) + 1e-300)
-    S = ca.diag(s)
-    Gs = ca.mtimes(S, GD)
+    Gs = ca.mtimes(ca.diag(s), GD)
     K = ca.blockcat([[Ms, Gs.T], [Gs, ca.SX.zeros(m, m)]])
     b = ca.vertcat(d * rhs_q, s * rhs_c)
+    return K, b, d, s
+
+
+def equilibrated_kkt_solve(M, G, rhs_q, rhs_c):
+    """Symbolic solve of [[M, G^T], [G, 0]] [x; y] = [rhs_q; rhs_c] with equilibration."""
+    ca = _sx()
+    n = M.shape[0]
+    K, b, d, s = equilibrated_kkt(M, G, rhs_q, rhs_c)
     x = ca.solve(K, b)
     return d * x[:n], s * x[n:]
 
@@ -67,6 +74,7 @@ class ConstrainedSystem:
     sym: dict = field(default_factory=dict)
     fn: dict = field(default_factory=dict)
     row_scale: np.ndarray | None = None     # fixed constraint-row scaling (see fix_row_scale)
+    route: str = "sx"                       # 'sx' symbolic KKT solve | 'mx' numeric QR per call
 
     # -- construction -------------------------------------------------------------------
     @staticmethod
@@ -90,7 +98,23 @@ class ConstrainedSystem:
         beta = ca.SX.sym("beta")
         M = eom.M
         bias = eom.bias
-        qdd, lam = equilibrated_kkt_solve(M, G, bias, gamma - 2 * alpha * gdot - beta**2 * g)
+        rhs_c = gamma - 2 * alpha * gdot - beta**2 * g
+        n, m = eom.n, len(active)
+        if n + m <= SX_KKT_MAX:
+            route = "sx"
+            qdd, lam = equilibrated_kkt_solve(M, G, bias, rhs_c)
+            accel = ca.Function("accel", [q, qd, t, pp, alpha, beta], [qdd, lam])
+        else:
+            # numeric sparse QR at every call (an MX Function around the SX pieces): symbolic
+            # elimination grows as (n + m)^3 and loses accuracy with size
+            route = "mx"
+            parts = ca.Function("kkt", [q, qd, t, pp, alpha, beta], list(equilibrated_kkt(M, G, bias, rhs_c)))
+            Q, QD, TT, P, A, B = (ca.MX.sym(k, *x.shape) for k, x in
+                                  (("q", q), ("qd", qd), ("t", t), ("p", pp), ("alpha", alpha), ("beta", beta)))
+            K, b, d, sc = parts(Q, QD, TT, P, A, B)
+            x = ca.solve(K, b, "qr")
+            accel = ca.Function("accel", [Q, QD, TT, P, A, B], [d * x[:n], sc * x[n:]])
+            qdd = lam = None
         sym = dict(q=q, qd=qd, t=t, p=pp, g=g, G=G, gt=gt, gdot=gdot, gamma=gamma, M=M, bias=bias,
                    alpha=alpha, beta=beta, qdd=qdd, lam=lam, g_all=g_all, G_all=G_all, gdot_all=gdot_all)
         fn = {
@@ -99,14 +123,20 @@ class ConstrainedSystem:
             "gt": ca.Function("gt", [q, t, pp], [gt]),
             "gdot": ca.Function("gdot", [q, qd, t, pp], [gdot]),
             "M": ca.Function("M", [q, t, pp], [M]),
-            "accel": ca.Function("accel", [q, qd, t, pp, alpha, beta], [qdd, lam]),
+            "accel": accel,
             "drift_all": ca.Function("drift_all", [q, qd, t, pp], [g_all, gdot_all]),
             "G_all": ca.Function("G_all", [q, t, pp], [G_all]),
             "monitor": ca.Function("monitor", [q, qd, t, pp], [g_all, gdot_all, G, ca.diag(M)]),
-            "ode_jac": ca.Function("ode_jac", [q, qd, t, pp], [ca.jacobian(ca.vertcat(qd, ca.substitute(
-                qdd, ca.vertcat(alpha, beta), ca.DM.zeros(2))), ca.vertcat(q, qd))]),
         }
-        return ConstrainedSystem(eom=eom, p=pv, active=active, sym=sym, fn=fn)
+        fn["ode_jac"] = _ode_jacobian(accel, route, q, qd, t, pp)
+        return ConstrainedSystem(eom=eom, p=pv, active=active, sym=sym, fn=fn, route=route)
+
+    def symbols(self):
+        """Fresh symbols (q, qd, t, p) of the kind the accelerations are built on (SX or MX)."""
+        ca = _sx()
+        Sym = ca.SX if self.route == "sx" else ca.MX
+        n = self.n
+        return Sym.sym("q", n), Sym.sym("qd", n), Sym.sym("t"), Sym.sym("p", self.eom.p.numel())
 
     # -- sizes and names ------------------------------------------------------------------
     @property
@@ -193,6 +223,17 @@ class ConstrainedSystem:
         if not np.all(np.isfinite(J)):
             return 0.0
         return float(np.max(np.abs(np.linalg.eigvals(J)))) if J.size else 0.0
+
+
+def _ode_jacobian(accel, route, q, qd, t, pp):
+    """Function (q, qd, t, p) -> d(qd, qdd)/d(q, qd) of the unstabilized index-1 ODE."""
+    ca = _sx()
+    if route == "sx":
+        Q, QD, T, P = q, qd, t, pp
+    else:
+        Q, QD, T, P = ca.MX.sym("q", q.numel()), ca.MX.sym("qd", qd.numel()), ca.MX.sym("t"), ca.MX.sym("p", pp.numel())
+    a, _ = accel(Q, QD, T, P, 0, 0)
+    return ca.Function("ode_jac", [Q, QD, T, P], [ca.jacobian(ca.vertcat(QD, a), ca.vertcat(Q, QD))])
 
 
 def scale_jacobian(G: np.ndarray, M: np.ndarray | None) -> np.ndarray:
