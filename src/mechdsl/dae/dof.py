@@ -10,7 +10,7 @@ earlier constraint); the chosen rows are returned in their original order.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
