@@ -94,7 +94,7 @@ class DiagnosticBag:
         return [d for d in self.items if d.severity == "warning"]
 
     def raise_if_errors(self) -> None:
-        errs = self.errors
+        errs = list(dict.fromkeys(self.errors))  # the same error found twice (e.g. in two passes) once
         if errs:
             raise MechError(sorted(errs, key=_order))
 
