@@ -27,19 +27,20 @@ _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
 
 
-def _program(path_or_text: str, is_text: bool, filename: str) -> Program:
+def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True) -> Program:
     f = parse(path_or_text, filename) if is_text else parse_file(path_or_text)
-    return analyze(f)
+    return analyze(f, units=units)
 
 
-def load(path, model: str | None = None, scene: str | None = None) -> "Model":
-    """Load a model (or a scene of it) from a .mech file."""
-    return Model._from_program(_program(str(path), False, str(path)), model, scene)
+def load(path, model: str | None = None, scene: str | None = None, units: bool = True) -> "Model":
+    """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis."""
+    return Model._from_program(_program(str(path), False, str(path), units), model, scene)
 
 
-def loads(text: str, model: str | None = None, scene: str | None = None, filename: str = "<string>") -> "Model":
+def loads(text: str, model: str | None = None, scene: str | None = None, filename: str = "<string>",
+          units: bool = True) -> "Model":
     """Load a model from .mech source text."""
-    return Model._from_program(_program(text, True, filename), model, scene)
+    return Model._from_program(_program(text, True, filename, units), model, scene)
 
 
 def load_model_ir(path, model: str | None = None, scene: str | None = None) -> ir.Model:
@@ -191,7 +192,7 @@ class Model:
                 if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
                     _EOM_CACHE.pop(next(iter(_EOM_CACHE)))
                 _EOM_CACHE[key] = base
-            self._eom = dataclasses.replace(base, param_values=self.parameter_values, model=self.model)
+            self._eom = base.replace(param_values=self.parameter_values, model=self.model)   # keeps lazy fields lazy
         return self._eom
 
     def casadi(self, compiled: bool = False) -> dict:

@@ -96,7 +96,8 @@ class DiagnosticBag:
     def raise_if_errors(self) -> None:
         errs = list(dict.fromkeys(self.errors))  # the same error found twice (e.g. in two passes) once
         if errs:
-            raise MechError(sorted(errs, key=_order))
+            unique = list(dict.fromkeys(errs))  # the same problem found twice is reported once
+            raise MechError(sorted(unique, key=_order))
 
 
 def _order(d: Diagnostic):

@@ -50,10 +50,32 @@ class EOM:
     model: ir.Model | None = None
     point_position: Callable[[str], object] | None = None   # point name -> SX (3,) in q, t, p
     notes: list[str] = field(default_factory=list)
+    point_velocity: Callable[[str], object] | None = None   # point name -> SX (3,) in q, qd, t, p
+    # scalars in q (and t, p) that vanish where a parametrization is singular (Euler-angle gimbal
+    # lock), by name "<joint>.gimbal"; a simulator reports when a run comes near zero.
+    singularity_monitors: dict[str, object] = field(default_factory=dict)
+    # drift measures that stay 0 in exact arithmetic ("<joint>.quaternion_norm" = |q| - 1)
+    invariants: dict[str, object] = field(default_factory=dict)
+    # multipliers of the constraints (DAE models): an SX symbol (m,) that outputs and
+    # `reactions` may depend on; the DAE simulator substitutes the computed multipliers.
+    lam: object | None = None
 
     @property
     def n(self) -> int:
         return len(self.coords)
+
+    def replace(self, **changes) -> "EOM":
+        """A shallow copy with some fields changed.  Unlike dataclasses.replace it does not
+        touch the other fields, so fields that derive computes on first access (M and bias
+        on the 'aba' route, whose O(N^2) CRBA a simulation does not need) stay lazy."""
+        import copy
+
+        new = copy.copy(self)
+        for k, v in changes.items():
+            if k not in self.__dataclass_fields__:
+                raise TypeError(f"EOM has no field {k!r}")
+            setattr(new, k, v)
+        return new
 
     @property
     def m(self) -> int:

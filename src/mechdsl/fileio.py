@@ -1,8 +1,9 @@
 """Atomic file output: write to a temporary file in the same folder, then rename.
 
 Nothing the user wrote is overwritten unless asked: ``check_writable`` refuses to replace a
-file that mechdsl did not write (a `.mech` source, or any file without our marker) unless
-``overwrite=True``.
+source file ever, and any other existing file that mechdsl did not write itself unless
+``overwrite=True`` (``--force``).  mechdsl's own outputs carry a marker: JSON files a
+"generator" key, plots the "mechdsl" software tag, and a results CSV its JSON sidecar.
 """
 from __future__ import annotations
 
@@ -21,11 +22,31 @@ def check_writable(path: str | os.PathLike, overwrite: bool = True) -> Path:
         raise UsageError(f"refusing to overwrite source file {p} (choose another output name)")
     if p.exists() and p.is_dir():
         raise UsageError(f"{p} is a directory, not a file")
-    if p.exists() and not overwrite:
-        raise UsageError(f"{p} exists (pass --force to replace it)")
+    if p.exists() and not overwrite and not is_own_output(p):
+        raise UsageError(f"{p} exists and was not written by mechdsl (pass --force to replace it)")
     if not p.parent.exists():
         p.parent.mkdir(parents=True, exist_ok=True)
     return p
+
+
+MARKER = b"mechdsl"
+
+
+def is_own_output(p: Path) -> bool:
+    """True for a file mechdsl wrote (so re-running a command may replace it)."""
+    try:
+        if p.suffix == ".csv":
+            side = p.with_suffix(".json")
+            return side.is_file() and _has_marker(side) and p.read_bytes()[:5] == b"time,"
+        return _has_marker(p)
+    except OSError:
+        return False
+
+
+def _has_marker(p: Path) -> bool:
+    with open(p, "rb") as f:
+        head = f.read(65536)
+    return b'"generator": "mechdsl' in head or (p.suffix in (".png", ".svg", ".pdf") and MARKER in head)
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes, overwrite: bool = True) -> Path:

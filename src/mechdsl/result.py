@@ -114,6 +114,7 @@ class Result:
 
     def summary(self) -> dict[str, Any]:
         return {
+            "generator": "mechdsl",
             "metadata": self.metadata,
             "stats": self.stats,
             "success": self.success,

@@ -15,6 +15,7 @@ def add_parser(sub):
     p.add_argument("--model", help="check only this model")
     p.add_argument("--scene", help="check only this scene")
     p.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+    p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
     return p
 
 
@@ -26,7 +27,7 @@ def run(args) -> int:
     status = 0
     for path in args.files:
         try:
-            program = analyze(parse_file(path))
+            program = analyze(parse_file(path), units=not args.no_units)
             targets = []
             if args.scene:
                 targets = [("scene", args.scene)]

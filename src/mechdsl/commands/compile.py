@@ -18,6 +18,7 @@ def add_parser(sub):
     p.add_argument("--scene", help="scene to compile")
     p.add_argument("--no-spans", action="store_true", help="omit source positions from --emit ast")
     p.add_argument("-o", "--output", help="write to this file instead of standard output")
+    p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
     return p
 
 
@@ -34,7 +35,7 @@ def run(args) -> int:
     elif args.emit == "source":
         text = to_source(tree)
     else:
-        program = analyze(tree)
+        program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
         if args.emit == "model":
             text = dump_model(m.model)

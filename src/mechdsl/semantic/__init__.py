@@ -25,8 +25,9 @@ ENERGY_SIGNALS = ("kinetic_energy", "potential_energy", "energy")
 
 
 class Program:
-    def __init__(self, file: ast.File):
+    def __init__(self, file: ast.File, units: bool = True):
         self.file = file
+        self.units = units
         self._models: dict[str, ast.ModelDef] = {}
         self._scenes: dict[str, ast.SceneDef] = {}
         diags = DiagnosticBag()
@@ -63,9 +64,15 @@ class Program:
             raise MechError(Diagnostic("E206", f"no model named '{name}'", span or Span(self.file.filename),
                                        did_you_mean(name, self._models) or
                                        f"models in this file: {', '.join(self._models) or 'none'}"))
-        fl = Flattener(self, d, modification)
-        fl.diags.raise_if_errors()
-        model = fl.build()
+        from . import values
+
+        token = values.UNITS.set(self.units)
+        try:
+            fl = Flattener(self, d, modification)
+            fl.diags.raise_if_errors()
+            model = fl.build()
+        finally:
+            values.UNITS.reset(token)
         self.last_warnings = fl.diags.warnings
         return model
 
@@ -200,8 +207,9 @@ def _expand_names(names: list[tuple[str, Span]], model: ir.Model) -> list[str]:
     return out
 
 
-def analyze(file: ast.File) -> Program:
-    return Program(file)
+def analyze(file: ast.File, units: bool = True) -> Program:
+    """Check the file as a whole; ``units=False`` switches dimensional analysis off."""
+    return Program(file, units)
 
 
 __all__ = ["analyze", "Program", "SCENE_SETTINGS"]

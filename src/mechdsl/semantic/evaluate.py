@@ -48,6 +48,9 @@ class Evaluator:
     def known_names(self) -> list[str]:  # pragma: no cover - abstract
         return []
 
+    def note_warnings(self, items, span: Span) -> None:  # pragma: no cover - abstract
+        pass
+
     # ------------------------------------------------------------------ entry point
     def eval(self, e: ast.Expr) -> Val:
         try:
@@ -59,9 +62,15 @@ class Evaluator:
                                        "split it with intermediate `Real` variables")) from None
 
     def _sub(self, e: ast.Expr) -> Val:
-        """Evaluate a sub-expression, attributing value errors to its own span."""
+        """Evaluate a sub-expression, attributing value errors (and unit warnings) to its own span."""
+        sink = V.WARNINGS.get()
+        before = len(sink) if sink is not None else 0
         try:
-            return self._eval(e)
+            v = self._eval(e)
+            if sink is not None and len(sink) > before:
+                self.note_warnings(sink[before:], e.span)
+                del sink[before:]
+            return v
         except ValError as ve:
             raise EvalError(Diagnostic(ve.code, ve.message, e.span, ve.help)) from None
 
@@ -69,7 +78,8 @@ class Evaluator:
         if isinstance(e, ast.Number):
             if not math.isfinite(e.value):
                 raise ValError("E303", "number is too large", "numbers must be below about 1.8e308")
-            return V.const(e.value, integer=isinstance(e.value, int))
+            # integers are pure numbers; a decimal literal (0.1, 9.81) may stand for a quantity
+            return V.const(e.value, integer=isinstance(e.value, int), approx=isinstance(e.value, float))
         if isinstance(e, ast.String):
             return Str(e.value)
         if isinstance(e, ast.Bool):
@@ -340,7 +350,7 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
         axis = normalized(as_vec3(args[0], "the rotation axis"), "the rotation axis")
         ang = args[1]
         if isinstance(ang, Scalar):
-            V.require_dimensionless(ang.dim, "a rotation angle")
+            V.require_dimensionless(ang.dim, "a rotation angle", ang.approx)
         R = rodrigues(axis, as_expr(ang, "the rotation angle"))
         return Arr(tuple(Arr(tuple(Scalar(c, U.ONE) for c in row)) for row in R))
     fail("E213", f"unknown function '{name}'", e.span, "see docs/language.md for the built-in functions")

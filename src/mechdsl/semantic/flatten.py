@@ -167,6 +167,23 @@ class Flattener(Evaluator):
     def known_names(self) -> list[str]:
         return list(self.entries) + sorted(BUILTIN_NAMES) + list(self.loop_vars)
 
+    # ------------------------------------------------------------------ units
+    def check_dim(self, s: Val, expected: U.Dim, what: str, span: Span) -> None:
+        """A dimension check with its span: an error, or a warning when it rests on a decimal literal."""
+        try:
+            V.check_val_dim(s, expected, what)
+        except ValError as ve:
+            fail(ve.code, ve.message, span, ve.help)
+        sink = V.WARNINGS.get()
+        if sink:
+            self.note_warnings(list(sink), span)
+            sink.clear()
+
+    def note_warnings(self, items, span: Span) -> None:
+        for code, message, help in items:
+            if not any(w.code == code and w.message == message and w.span == span for w in self.diags.warnings):
+                self.diags.warning(code, message, span, help)
+
     def lookup(self, name: str, span: Span) -> Val:
         if name in self.loop_vars:
             return V.const(self.loop_vars[name], integer=True)
@@ -268,16 +285,14 @@ class Flattener(Evaluator):
         if got != want:
             fail("E301", f"parameter '{d.name}' is declared with shape {_shape_text(want)} but its value is "
                          f"{V.describe_shape(val)}", e.mod.value.span,
-                 "use fill(value, n) for arrays" if want and not got else None)
+                 "use fill(value, n) for arrays" if want and not got else
+                 f"give a value of shape {_shape_text(want)}, or change the declared size")
         for s in V.flatten(val) if isinstance(val, Arr) else [val]:
             if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
                 fail("E306", f"parameter '{d.name}' depends on coordinates or time", e.mod.value.span,
                      "parameters are constant; use an `output` or a `Real` variable instead")
             if dim is not None:
-                try:
-                    V.check_dim(s.dim, dim, f"the value of '{d.name}'")
-                except ValError as ve:
-                    fail(ve.code, ve.message, e.mod.value.span, ve.help)
+                self.check_dim(s, dim, f"the value of '{d.name}'", e.mod.value.span)
         structural = d.type_name in ("Integer", "Boolean")
         out_items = []
         for idx, s in _enumerate(val, dims):
@@ -366,10 +381,7 @@ class Flattener(Evaluator):
                 fail("E306", f"the {attr} value may only depend on parameters", m.value.span,
                      "start values are numbers or expressions in parameters")
             if dim is not None and attr in ("start", "speed"):
-                try:
-                    V.check_dim(s.dim, dim, f"the {attr} value")
-                except ValError as ve:
-                    fail(ve.code, ve.message, m.value.span, ve.help)
+                self.check_dim(s, dim, f"the {attr} value", m.value.span)
             out.append(s.expr if factor == 1.0 else X.mul(X.const(factor), s.expr))
         return out
 
@@ -388,14 +400,12 @@ class Flattener(Evaluator):
         if V.shape_of(val) != dims:
             fail("E301", f"'{d.name}' is declared with shape {_shape_text(dims)} but its value is "
                          f"{V.describe_shape(val)}", e.mod.value.span,
-                 f"declare it as {d.type_name} {d.name}[{', '.join(map(str, V.shape_of(val)))}]" if V.shape_of(val) else None)
+                 f"declare it as {d.type_name} {d.name}[{', '.join(map(str, V.shape_of(val)))}]" if V.shape_of(val)
+                 else f"give a value of shape {_shape_text(dims)}")
         flat = V.flatten(val) if dims else [val]
         for s in flat:
             if dim is not None:
-                try:
-                    V.check_dim(s.dim, dim, f"'{d.name}'")
-                except ValError as ve:
-                    fail(ve.code, ve.message, e.mod.value.span, ve.help)
+                self.check_dim(s, dim, f"'{d.name}'", e.mod.value.span)
         if e.kind == "output":
             for (idx, _), s in zip(_enumerate(None, dims) if dims else [((), None)], flat):
                 e.outputs.append(ir.Output(d.name + _suffix(idx), s.expr, unit, d.doc or "", d.name_span))
@@ -505,7 +515,7 @@ class Flattener(Evaluator):
                     fail("E301", f"'{f.name}' of '{inst.name}' must be a scalar, got {V.describe_shape(val)}", span,
                          "give one number or expression")
                 if f.dim is not None:
-                    V.check_dim(val.dim, f.dim, f"'{f.name}' of '{inst.name}'")
+                    self.check_dim(val, f.dim, f"'{f.name}' of '{inst.name}'", span)
             elif f.kind in ("vec3", "mat3"):
                 want = (3,) if f.kind == "vec3" else (3, 3)
                 if not isinstance(val, Arr) or V.shape_of(val) != want:
@@ -514,7 +524,7 @@ class Flattener(Evaluator):
                          "write it as {x, y, z}" if f.kind == "vec3" else "write it as {{..}, {..}, {..}}")
                 if f.dim is not None:
                     for s in V.flatten(val):
-                        V.check_dim(s.dim, f.dim, f"'{f.name}' of '{inst.name}'")
+                        self.check_dim(s, f.dim, f"'{f.name}' of '{inst.name}'", span)
         except ValError as ve:
             fail(ve.code, ve.message, span, ve.help)
 
@@ -589,10 +599,7 @@ class Flattener(Evaluator):
                         fail("E301", f"joint variable '{role}' of '{inst.name}' must be a scalar, "
                                      f"got {V.describe_shape(v)}", m.value.span,
                              f"bind it to a coordinate ({role} = q) or a function of time ({role} = omega*time)")
-                    try:
-                        V.check_dim(v.dim, dim, f"'{role}' of '{inst.name}'")
-                    except ValError as ve:
-                        fail(ve.code, ve.message, m.value.span, ve.help)
+                    self.check_dim(v, dim, f"'{role}' of '{inst.name}'", m.value.span)
                     if X.has_speed(v.expr):
                         fail("E308", f"joint variable '{role}' of '{inst.name}' depends on speeds", m.value.span,
                              "a joint's motion may depend on coordinates and time only")
@@ -705,10 +712,8 @@ class Flattener(Evaluator):
                 fail("E301", f"the {eq.kind} energy must be a scalar, got {V.describe_shape(v)}", eq.expr.span,
                      "for a vector v use dot(v, v)")
             want = U.POWER if eq.kind == "dissipation" else U.ENERGY
-            try:
-                V.check_dim(v.dim, want, f"the {eq.kind} {'function' if eq.kind == 'dissipation' else 'energy'}")
-            except ValError as ve:
-                fail(ve.code, ve.message, eq.expr.span, ve.help)
+            self.check_dim(v, want, f"the {eq.kind} {'function' if eq.kind == 'dissipation' else 'energy'}",
+                           eq.expr.span)
             if eq.kind == "potential" and X.has_speed(v.expr):
                 fail("E308", "the potential energy must not depend on speeds", eq.expr.span,
                      "velocity-dependent forces go into force(q) = ... or the dissipation function")
@@ -726,10 +731,7 @@ class Flattener(Evaluator):
             if not isinstance(q, Scalar):
                 fail("E301", "a generalized force must be a scalar", eq.expr.span, "one equation per coordinate: force(q) = Q;")
             if isinstance(c.dim, U.Dim):
-                try:
-                    V.check_dim(q.dim, U.ENERGY / c.dim, f"the generalized force on {c.expr.name}")
-                except ValError as ve:
-                    fail(ve.code, ve.message, eq.expr.span, ve.help)
+                self.check_dim(q, U.ENERGY / c.dim, f"the generalized force on {c.expr.name}", eq.expr.span)
             self.gen_forces.append(ir.GeneralizedForce(f"force({c.expr.name})", c.expr.name, q.expr, eq.span))
             return
         if isinstance(eq, ast.SimpleEquation):
@@ -773,6 +775,13 @@ class Flattener(Evaluator):
 
     # ================================================================== assembly
     def build(self) -> ir.Model:
+        token = V.WARNINGS.set([])
+        try:
+            return self._build()
+        finally:
+            V.WARNINGS.reset(token)
+
+    def _build(self) -> ir.Model:
         self.run_connects()
         for e in self.entries.values():
             try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import contextvars
 from fractions import Fraction
 
 from .. import exprs as X
@@ -46,6 +47,7 @@ class Scalar(Val):
     dim: object = None           # Dim | None | ANY
     integer: bool = False        # a structural integer constant (loop variable, Integer parameter)
     boolean: bool = False
+    approx: bool = False         # dimension inferred assuming a decimal literal (0.1, 9.81) is unitless
 
     @property
     def const(self) -> float | None:
@@ -79,8 +81,27 @@ class CompRef(Val):
     type_name: str = ""
 
 
-def const(v: float, integer: bool = False) -> Scalar:
-    return Scalar(ir.Const(float(v)), ANY, integer=integer)
+def const(v: float, integer: bool = False, approx: bool = False) -> Scalar:
+    return Scalar(ir.Const(float(v)), ANY, integer=integer, approx=approx)
+
+
+# Unit checking can be switched off (UNITS), and a dimension problem found in an expression
+# whose dimension rests on a decimal literal being unitless is a warning, not an error: it is
+# collected in WARNINGS (code, message, help) by whoever set the sink.
+UNITS: contextvars.ContextVar[bool] = contextvars.ContextVar("mechdsl_units", default=True)
+WARNINGS: contextvars.ContextVar[list | None] = contextvars.ContextVar("mechdsl_unit_warnings", default=None)
+
+
+def _problem(code: str, message: str, help: str | None, approx: bool) -> None:
+    if not UNITS.get():
+        return
+    if approx:
+        sink = WARNINGS.get()
+        if sink is not None:
+            sink.append(("W" + code[1:], message, (help or "") + " (a number in this expression may carry a unit:"
+                                                   " name it as a parameter with a unit)"))
+        return
+    raise ValError(code, message, help)
 
 
 def shape_of(v: Val) -> tuple[int, ...]:
@@ -117,15 +138,16 @@ def dim_text(d) -> str:
 # ----------------------------------------------------------------------------- dimensions
 
 
-def dim_join(a, b, what: str):
+def dim_join(a, b, what: str, approx: bool = False):
     """Dimension of a sum/comparison; error when both known and different."""
     if a is ANY or a is None:
         return b if a is ANY else (b if b not in (ANY,) else None)
     if b is ANY or b is None:
         return a
     if a != b:
-        raise ValError("E401", f"incompatible units in {what}: {a} and {b}",
-                       "both sides of +, -, comparisons and if-branches must have the same unit")
+        _problem("E401", f"incompatible units in {what}: {a} and {b}",
+                 "both sides of +, -, comparisons and if-branches must have the same unit", approx)
+        return None
     return a
 
 
@@ -149,16 +171,22 @@ def dim_div(a, b):
     return a / b
 
 
-def require_dimensionless(d, what: str) -> None:
+def require_dimensionless(d, what: str, approx: bool = False) -> None:
     if isinstance(d, U.Dim) and not d.dimensionless:
-        raise ValError("E403", f"{what} must be dimensionless, got {d}",
-                       "divide by a reference quantity, e.g. sin(x/L)")
+        _problem("E403", f"{what} must be dimensionless, got {d}",
+                 "divide by a reference quantity, e.g. sin(x/L) or sin(w*time)", approx)
 
 
-def check_dim(d, expected: U.Dim, what: str) -> None:
+def check_dim(d, expected: U.Dim, what: str, approx: bool = False) -> None:
     if isinstance(d, U.Dim) and d != expected:
-        raise ValError("E402", f"{what} has unit {d}, expected {expected}",
-                       "check the parameters' units, or the formula")
+        _problem("E402", f"{what} has unit {d}, expected {expected}",
+                 "check the parameters' units, or the formula", approx)
+
+
+def check_val_dim(v: "Val", expected: U.Dim, what: str) -> None:
+    for s in flatten(v) if isinstance(v, Arr) else [v]:
+        if isinstance(s, Scalar):
+            check_dim(s.dim, expected, what, s.approx)
 
 
 # ----------------------------------------------------------------------------- elementwise helpers
@@ -213,23 +241,26 @@ def _check_num(v: Val, op: str) -> None:
 
 def add(a: Val, b: Val) -> Val:
     _check_num(a, "+"), _check_num(b, "+")
-    return elementwise(a, b, lambda x, y: Scalar(X.add(x.expr, y.expr), dim_join(x.dim, y.dim, "a sum"),
-                                                 x.integer and y.integer), "a sum")
+    return elementwise(a, b, lambda x, y: Scalar(X.add(x.expr, y.expr),
+                                                 dim_join(x.dim, y.dim, "a sum", x.approx or y.approx),
+                                                 x.integer and y.integer, approx=x.approx or y.approx), "a sum")
 
 
 def sub(a: Val, b: Val) -> Val:
     _check_num(a, "-"), _check_num(b, "-")
-    return elementwise(a, b, lambda x, y: Scalar(X.sub(x.expr, y.expr), dim_join(x.dim, y.dim, "a difference"),
-                                                 x.integer and y.integer), "a difference")
+    return elementwise(a, b, lambda x, y: Scalar(X.sub(x.expr, y.expr),
+                                                 dim_join(x.dim, y.dim, "a difference", x.approx or y.approx),
+                                                 x.integer and y.integer, approx=x.approx or y.approx), "a difference")
 
 
 def neg(a: Val) -> Val:
     _check_num(a, "-")
-    return map1(a, lambda x: Scalar(X.neg(x.expr), x.dim, x.integer))
+    return map1(a, lambda x: Scalar(X.neg(x.expr), x.dim, x.integer, approx=x.approx))
 
 
 def _smul(x: Scalar, y: Scalar) -> Scalar:
-    return Scalar(X.mul(x.expr, y.expr), dim_mul(x.dim, y.dim), x.integer and y.integer)
+    return Scalar(X.mul(x.expr, y.expr), dim_mul(x.dim, y.dim), x.integer and y.integer,
+                  approx=x.approx or y.approx)
 
 
 def mul(a: Val, b: Val) -> Val:
@@ -269,7 +300,7 @@ def div(a: Val, b: Val) -> Val:
         raise ValError("E303", "division by zero", "check the divisor")
 
     def f(x: Scalar) -> Scalar:
-        return Scalar(X.div(x.expr, b.expr), dim_div(x.dim, b.dim))
+        return Scalar(X.div(x.expr, b.expr), dim_div(x.dim, b.dim), approx=x.approx or b.approx)
 
     return map1(a, f)
 
@@ -277,14 +308,16 @@ def div(a: Val, b: Val) -> Val:
 def power(a: Val, b: Val) -> Val:
     _check_num(a, "^"), _check_num(b, "^")
     b = _scalar(b, "an exponent")
-    require_dimensionless(b.dim, "an exponent")
+    require_dimensionless(b.dim, "an exponent", b.approx)
     a = _scalar(a, "'^' (use element-wise operations for arrays)")
     d = a.dim
     if isinstance(d, U.Dim) and not d.dimensionless:
         if b.const is None:
-            raise ValError("E403", f"a quantity with unit {d} can only be raised to a constant power",
-                           "use a constant exponent, or make the base dimensionless")
-        d = d ** b.const
+            _problem("E403", f"a quantity with unit {d} can only be raised to a constant power",
+                     "use a constant exponent, or make the base dimensionless", a.approx or b.approx)
+            d = None
+        else:
+            d = d ** b.const
     elif d is ANY:
         d = ANY if b.const is not None else U.ONE
     integer = a.integer and b.integer and b.const is not None and b.const >= 0
@@ -297,8 +330,8 @@ def power(a: Val, b: Val) -> Val:
         if isinstance(v, complex):
             raise ValError("E303", f"({X.fmt_num(a.const)})^{X.fmt_num(b.const)} has no real value",
                            "a negative number raised to a fractional power is complex")
-        return Scalar(ir.Const(float(v)), d, integer)
-    return Scalar(X.power(a.expr, b.expr), d, integer)
+        return Scalar(ir.Const(float(v)), d, integer, approx=a.approx or b.approx)
+    return Scalar(X.power(a.expr, b.expr), d, integer, approx=a.approx or b.approx)
 
 
 def dot(a: Val, b: Val) -> Scalar:
@@ -308,7 +341,9 @@ def dot(a: Val, b: Val) -> Scalar:
     out = None
     for x, y in zip(a.items, b.items):
         term = _smul(x, y)
-        out = term if out is None else Scalar(X.add(out.expr, term.expr), dim_join(out.dim, term.dim, "a dot product"))
+        out = term if out is None else Scalar(X.add(out.expr, term.expr),
+                                              dim_join(out.dim, term.dim, "a dot product", out.approx or term.approx),
+                                              approx=out.approx or term.approx)
     return out if out is not None else const(0)
 
 
@@ -320,7 +355,8 @@ def cross(a: Val, b: Val) -> Arr:
 
     def c(i, j):
         p, q = _smul(x[i], y[j]), _smul(x[j], y[i])
-        return Scalar(X.sub(p.expr, q.expr), dim_join(p.dim, q.dim, "a cross product"))
+        return Scalar(X.sub(p.expr, q.expr), dim_join(p.dim, q.dim, "a cross product", p.approx or q.approx),
+                      approx=p.approx or q.approx)
 
     return Arr((c(1, 2), c(2, 0), c(0, 1)))
 
@@ -337,13 +373,13 @@ def norm(a: Val) -> Scalar:
         raise ValError("E301", f"norm needs a vector, got {describe_shape(a)}", "e.g. norm(rod.b.r)")
     s = dot(a, a)
     d = s.dim ** Fraction(1, 2) if isinstance(s.dim, U.Dim) else s.dim
-    return Scalar(X.func("sqrt", s.expr), d)
+    return Scalar(X.func("sqrt", s.expr), d, approx=s.approx)
 
 
 def compare(op: str, a: Val, b: Val) -> Scalar:
     a = _scalar(a, f"'{op}'")
     b = _scalar(b, f"'{op}'")
-    dim_join(a.dim, b.dim, "a comparison")
+    dim_join(a.dim, b.dim, "a comparison", a.approx or b.approx)
     name = {"<": "lt", "<=": "le", ">": "gt", ">=": "ge", "==": "eq", "<>": "ne"}[op]
     if a.const is not None and b.const is not None:
         r = {"lt": a.const < b.const, "le": a.const <= b.const, "gt": a.const > b.const,
@@ -370,7 +406,8 @@ def select(cond: Scalar, a: Val, b: Val) -> Val:
     if cond.const is not None:
         return a if cond.const else b
     return elementwise(a, b, lambda x, y: Scalar(ir.Op("if", (cond.expr, x.expr, y.expr)),
-                                                 dim_join(x.dim, y.dim, "the branches of an if-expression")),
+                                                 dim_join(x.dim, y.dim, "the branches of an if-expression",
+                                                          x.approx or y.approx), approx=x.approx or y.approx),
                        "the branches of an if-expression")
 
 
@@ -386,7 +423,7 @@ def apply_func(name: str, args: list[Val]) -> Val:
             elif name == "sqrt":
                 d = x.dim ** Fraction(1, 2) if isinstance(x.dim, U.Dim) else x.dim
             else:
-                require_dimensionless(x.dim, f"the argument of {name}()")
+                require_dimensionless(x.dim, f"the argument of {name}()", x.approx)
                 d = U.ONE
             if x.const is not None:
                 try:
@@ -394,8 +431,9 @@ def apply_func(name: str, args: list[Val]) -> Val:
                 except (ValueError, OverflowError, ZeroDivisionError):
                     raise ValError("E303", f"{name}({X.fmt_num(x.const)}) is undefined",
                                    f"the argument is outside the domain of {name}() or the result overflows") from None
-                return Scalar(ir.Const(float(v)), d, integer=x.integer and name in ("abs", "sign", "floor", "ceil"))
-            return Scalar(X.func(name, x.expr), d)
+                return Scalar(ir.Const(float(v)), d, integer=x.integer and name in ("abs", "sign", "floor", "ceil"),
+                              approx=x.approx)
+            return Scalar(X.func(name, x.expr), d, approx=x.approx)
 
         return map1(args[0], f)
     if name in X.BINARY_FUNCS:
@@ -403,13 +441,14 @@ def apply_func(name: str, args: list[Val]) -> Val:
             raise ValError("E304", f"{name}() takes 2 arguments, got {len(args)}", f"write {name}(a, b)")
 
         def g(x: Scalar, y: Scalar) -> Scalar:
-            d = dim_join(x.dim, y.dim, f"{name}()")
+            d = dim_join(x.dim, y.dim, f"{name}()", x.approx or y.approx)
             if name == "atan2":
                 d = U.ONE
             if x.const is not None and y.const is not None:
                 v = {"atan2": math.atan2, "min": min, "max": max}[name](x.const, y.const)
-                return Scalar(ir.Const(float(v)), d, integer=x.integer and y.integer and name != "atan2")
-            return Scalar(X.func(name, x.expr, y.expr), d)
+                return Scalar(ir.Const(float(v)), d, integer=x.integer and y.integer and name != "atan2",
+                              approx=x.approx or y.approx)
+            return Scalar(X.func(name, x.expr, y.expr), d, approx=x.approx or y.approx)
 
         return elementwise(args[0], args[1], g, f"{name}()")
     raise ValError("E213", f"unknown function '{name}'", "see docs/language.md for the built-in functions")

@@ -1,0 +1,370 @@
+"""Numeric machinery shared by the analyses (CasADi SX in, numpy out).
+
+Everything here works on an :class:`mechdsl.eom.EOM` (q, qd, t, p as CasADi SX) and never
+needs the model text.  The pieces:
+
+- ``param_vector``: the parameter vector p from the model's values plus overrides;
+- ``Parts``: the speed decomposition T = T2 + T1 + T0 (T2 = 1/2 qd'M qd, T1 = b'qd, T0),
+  the Lagrangian, the total non-conservative force, and cached CasADi Functions;
+- ``Probe``: deterministic random states and "identically zero" tests (a structural check on
+  the SX first, then a numeric check at random states);
+- ``structure``: what kind of system this is (scleronomic, autonomous, angle coordinates,
+  translational symmetry directions of the equations).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+
+SEED = 20240605          # fixed: the analyses are deterministic
+N_PROBE = 8              # random states used by the numeric identity checks
+REL_TOL = 1e-9           # "identically zero" relative to the size of the quantity
+
+
+def param_vector(eom, p=None) -> np.ndarray:
+    """p as a numpy vector: the model's values, or overrides (dict by name, or a full vector)."""
+    base = np.array(eom.param_values, float).ravel().copy()
+    if p is None:
+        return base
+    if isinstance(p, dict):
+        for k, v in p.items():
+            if k not in eom.params:
+                hint = did_you_mean(k, eom.params)
+                raise UsageError(f"unknown parameter {k!r}" + (f"; {hint}" if hint else ""))
+            base[eom.params.index(k)] = float(v)
+        return base
+    arr = np.asarray(p, float).ravel()
+    if arr.shape != base.shape:
+        raise UsageError(f"parameter vector has {arr.size} entries, the model has {base.size}")
+    return arr
+
+
+def require_ode(eom, what: str) -> None:
+    """The analyses work in minimal coordinates; constrained models (DAE) are refused."""
+    if eom.g is not None and eom.g.numel() > 0:
+        raise MechError(Diagnostic(
+            "E701", f"{what} needs a model in independent coordinates; '{eom.name}' has "
+                    f"{eom.g.numel()} holonomic constraint(s) ({', '.join(eom.constraint_names)})",
+            help="describe the mechanism with independent coordinates (a tree of joints), "
+                 "or analyse the constrained model numerically by simulation"))
+
+
+def dense(x) -> np.ndarray:
+    return np.array(x.full() if hasattr(x, "full") else x, float)
+
+
+class Parts:
+    """SX pieces of the Lagrangian and cached CasADi Functions of one EOM."""
+
+    def __init__(self, eom):
+        import casadi as ca
+
+        self.eom = eom
+        n = eom.n
+        self.n = n
+        q, qd, t, p = eom.q, eom.qd, eom.t, eom.p
+        z = ca.SX.zeros(n)
+        self.args = [q, qd, t, p]
+        self.T0 = ca.substitute(eom.T, qd, z)
+        self.b = ca.substitute(ca.gradient(eom.T, qd), qd, z)            # T1 = b'qd
+        self.M = eom.M
+        self.L = eom.T - eom.V
+        self.Qtot = eom.Q - ca.gradient(eom.D, qd) if n else ca.SX.zeros(0)
+        self.Veff = eom.V - self.T0
+        self._fn: dict[str, object] = {}
+
+    # -- cached functions -------------------------------------------------------------
+    def fn(self, name: str):
+        f = self._fn.get(name)
+        if f is None:
+            f = self._build(name)
+            self._fn[name] = f
+        return f
+
+    def _build(self, name: str):
+        import casadi as ca
+
+        e = self.eom
+        q, qd, t, p = self.args
+        a = ca.SX.sym("a", self.n)
+        if name == "M_bias":
+            return ca.Function(name, self.args, [e.M, e.bias])
+        if name == "lin":   # M, bias, dbias/dq, dbias/dqd, d(M a)/dq with a an extra input
+            return ca.Function(name, self.args + [a], [e.M, e.bias, ca.jacobian(e.bias, q),
+                                                       ca.jacobian(e.bias, qd),
+                                                       ca.jacobian(ca.mtimes(e.M, a), q)])
+        if name == "dbias_dp":
+            return ca.Function(name, self.args, [ca.jacobian(e.bias, p)])
+        if name == "probe":  # quantities used by structure(): all functions of (q, qd, t, p)
+            Mv = ca.reshape(e.M, self.n * self.n, 1)
+            return ca.Function(name, self.args, [
+                ca.jacobian(self.L, t), ca.jacobian(e.bias, t), ca.jacobian(Mv, t),
+                self.b, self.T0, e.T, self.Qtot, e.bias, Mv,
+                ca.jacobian(e.bias, q), ca.jacobian(Mv, q), ca.gradient(self.L, q)])
+        if name == "energies":
+            return ca.Function(name, self.args, [e.T, e.V, self.T0, self.b, e.M])
+        raise KeyError(name)
+
+    def M_bias(self, q, qd, t, p):
+        M, b = self.fn("M_bias")(q, qd, t, p)
+        return dense(M), dense(b).ravel()
+
+
+def parts(eom) -> Parts:
+    """The Parts of an EOM, built once and kept on the EOM instance."""
+    cache = eom.__dict__.setdefault("_analysis_cache", {})
+    # EOM.replace copies share this dict: key by the symbolic content, not by the object
+    key = ("parts",) + tuple(id(x) for x in (eom.T, eom.V, eom.D, eom.Q, eom.q, eom.qd, eom.t, eom.p))
+    pt = cache.get(key)
+    if pt is None:
+        pt = Parts(eom)
+        cache[key] = pt
+    return pt
+
+
+# --------------------------------------------------------------------------- probing
+
+
+@dataclass
+class Probe:
+    """Deterministic random states (q, qd, t) at which identities are checked numerically."""
+
+    q: np.ndarray
+    qd: np.ndarray
+    t: np.ndarray
+
+    @staticmethod
+    def states(n: int, count: int = N_PROBE, q_center: np.ndarray | None = None) -> "Probe":
+        rng = np.random.default_rng(SEED)
+        c = np.zeros(n) if q_center is None else np.asarray(q_center, float)
+        q = c + rng.uniform(-1.3, 1.3, (count, n)) + 0.17
+        qd = rng.uniform(-1.1, 1.1, (count, n))
+        t = rng.uniform(0.3, 2.7, count)
+        return Probe(q, qd, t)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def _is_structural_zero(x) -> bool:
+    import casadi as ca
+
+    x = ca.SX(x)
+    return x.nnz() == 0 or all(x.nz[i].is_zero() for i in range(x.nnz()))
+
+
+def vanishes(values: list[np.ndarray], scale: float, rel: float = REL_TOL) -> bool | None:
+    """True when every finite sample is below rel*scale; None when no sample was finite."""
+    finite = [np.asarray(v, float).ravel() for v in values if np.all(np.isfinite(v))]
+    if not finite:
+        return None
+    return all(np.max(np.abs(v), initial=0.0) <= rel * max(scale, 1e-300) for v in finite)
+
+
+@dataclass
+class Structure:
+    """What kind of mechanical system an EOM describes (for the given parameter values)."""
+
+    n: int
+    autonomous: bool                 # the equations of motion do not depend on t
+    lagrangian_time_free: bool       # dL/dt == 0
+    has_T1: bool                     # terms linear in the speeds (gyroscopic / moving frame)
+    has_T0: bool                     # terms without speeds (moving frame: V_eff = V - T0)
+    time_in_T: bool
+    conservative: bool               # no dissipation and no non-conservative force
+    periodic: tuple[bool, ...]       # equations 2 pi-periodic in the coordinate
+    angle_unit: tuple[bool, ...]     # declared unit rad
+    symmetry: np.ndarray             # (n, k) orthonormal directions the equations are invariant along
+    force_scale: float               # typical size of the generalized forces
+    stiffness_scale: float = 0.0     # typical size of d bias/dq
+    quadratic_T: bool = True
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def scleronomic(self) -> bool:
+        return not (self.has_T1 or self.has_T0 or self.time_in_T)
+
+    @property
+    def angles(self) -> tuple[bool, ...]:
+        return tuple(a or b for a, b in zip(self.periodic, self.angle_unit))
+
+
+def structure(eom, p=None) -> Structure:
+    """Classify the system numerically at deterministic random states (see module doc).
+
+    Cached on the EOM per parameter vector."""
+    pv = param_vector(eom, p)
+    cache = eom.__dict__.setdefault("_analysis_cache", {})
+    key = ("structure", pv.tobytes(), id(parts(eom)))
+    if key not in cache:
+        cache[key] = _structure(eom, pv)
+    return cache[key]
+
+
+def _structure(eom, pv) -> Structure:
+    pt = parts(eom)
+    n = eom.n
+    pr = Probe.states(n)
+    f = pt.fn("probe")
+    rows = []
+    for i in range(len(pr)):
+        out = [dense(o) for o in f(pr.q[i], pr.qd[i], pr.t[i], pv)]
+        if all(np.all(np.isfinite(o)) for o in out):
+            rows.append((i, out))
+    if not rows:
+        raise MechError(Diagnostic("E702", f"the equations of '{eom.name}' could not be evaluated "
+                                           "at any probe state (NaN/inf everywhere)"))
+
+    def col(k):
+        return [o[k] for _, o in rows]
+
+    def scale_of(k):
+        return max((float(np.max(np.abs(v), initial=0.0)) for v in col(k)), default=0.0)
+
+    L_scale = max(scale_of(5), 1e-300)
+    bias_scale = max(scale_of(7), 1e-300)
+    M_scale = max(scale_of(8), 1e-300)
+    lag_tf = _zero_or_sym(pt.L, eom.t) or bool(vanishes(col(0), L_scale))
+    auto = (_zero_or_sym(eom.bias, eom.t) or bool(vanishes(col(1), bias_scale))) and \
+        (_zero_or_sym(eom.M, eom.t) or bool(vanishes(col(2), M_scale)))
+    has_T1 = not (_is_structural_zero(pt.b) or bool(vanishes(col(3), L_scale)))
+    has_T0 = not (_is_structural_zero(pt.T0) or bool(vanishes(col(4), L_scale)))
+    t_in_T = not _zero_or_sym(eom.T, eom.t)
+    if t_in_T:
+        import casadi as ca
+
+        fT = ca.Function("dTdt", pt.args, [ca.jacobian(eom.T, eom.t)])
+        t_in_T = not vanishes([dense(fT(pr.q[i], pr.qd[i], pr.t[i], pv)) for i, _ in rows], L_scale)
+    cons = _is_structural_zero(pt.Qtot) or bool(vanishes(col(6), bias_scale))
+
+    # translational symmetry: directions N with d(bias)/dq N == 0 and dM/dq N == 0 everywhere
+    J = np.vstack([np.vstack([o[9] / bias_scale, o[10] / M_scale]) for _, o in rows])
+    N = null_space(J, rel=1e-8) if n else np.zeros((0, 0))
+
+    # rest forces (for tolerances): |bias(q, 0)|
+    fM = pt.fn("M_bias")
+    rest = [np.max(np.abs(fM(pr.q[i], np.zeros(n), pr.t[i], pv)[1].full()), initial=0.0) for i, _ in rows]
+    rest = [r for r in rest if np.isfinite(r)]
+    force_scale = float(np.median(rest)) if rest else 0.0
+
+    stiff = [float(np.max(np.abs(o[9]), initial=0.0)) for _, o in rows]
+    periodic = tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale) for k in range(n))
+    angle_unit = _declared_angles(eom)
+    quad = _quadratic_T(pt, pv, pr, L_scale)
+    st = Structure(n=n, autonomous=auto, lagrangian_time_free=lag_tf, has_T1=has_T1, has_T0=has_T0,
+                   time_in_T=t_in_T, conservative=cons, periodic=periodic, angle_unit=angle_unit,
+                   symmetry=N, force_scale=force_scale, stiffness_scale=float(np.median(stiff)),
+                   quadratic_T=quad)
+    return st
+
+
+def _zero_or_sym(expr, var) -> bool:
+    import casadi as ca
+
+    return not ca.depends_on(ca.SX(expr), var)
+
+
+def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: float) -> bool:
+    shift = np.zeros(pt.n)
+    shift[k] = 2 * math.pi
+    diffs = []
+    for i in range(min(4, len(pr))):
+        M1, b1 = pt.M_bias(pr.q[i], pr.qd[i], pr.t[i], pv)
+        M2, b2 = pt.M_bias(pr.q[i] + shift, pr.qd[i], pr.t[i], pv)
+        diffs.append(np.concatenate([(b1 - b2) / bias_scale, ((M1 - M2) / M_scale).ravel()]))
+    return bool(vanishes(diffs, 1.0, rel=1e-8))
+
+
+def _declared_angles(eom) -> tuple[bool, ...]:
+    model = getattr(eom, "model", None)
+    out = []
+    for c in eom.coords:
+        unit = None
+        if model is not None:
+            try:
+                unit = model.coordinate(c).unit
+            except KeyError:
+                unit = None
+        out.append(bool(unit) and unit.strip().lower() in ("rad", "radian", "radians"))
+    return tuple(out)
+
+
+def _quadratic_T(pt: Parts, pv, pr: Probe, L_scale: float) -> bool:
+    """T == 1/2 qd'M qd + b'qd + T0 at the probe states (mechanical systems always are)."""
+    f = pt.fn("energies")
+    diffs = []
+    for i in range(len(pr)):
+        T, _, T0, b, M = (dense(o) for o in f(pr.q[i], pr.qd[i], pr.t[i], pv))
+        qd = pr.qd[i]
+        diffs.append(np.array([T.item() - (0.5 * qd @ M @ qd + b.ravel() @ qd + T0.item())]))
+    return vanishes(diffs, L_scale, rel=1e-8) is not False
+
+
+def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
+    """Orthonormal basis (columns) of the null space of J, in a deterministic orientation."""
+    n = J.shape[1]
+    if J.size == 0 or not np.any(J):
+        return np.eye(n)
+    _, s, vt = np.linalg.svd(J)
+    rank = int(np.sum(s > rel * s[0]))
+    N = vt[rank:].T.copy()
+    return canonical_basis(N)
+
+
+def canonical_basis(N: np.ndarray) -> np.ndarray:
+    """A deterministic basis of span(N): coordinate axes where they lie in it, then the rest.
+
+    Columns are orthonormal; each is signed so that its largest entry is positive.
+    """
+    n, k = N.shape
+    if k == 0:
+        return N
+    P = N @ N.T
+    cols = []
+    for i in range(n):
+        e = np.zeros(n)
+        e[i] = 1.0
+        if np.linalg.norm(P @ e - e) < 1e-8:
+            cols.append(e)
+    if len(cols) < k:
+        # complement of the axis vectors inside span(N): reduced row echelon form, orthonormalized
+        E = np.array(cols).T if cols else np.zeros((n, 0))
+        R = N - E @ (E.T @ N)
+        u, s, _ = np.linalg.svd(R, full_matrices=False)
+        rest = u[:, : k - len(cols)]
+        rest = _rref_cols(rest)
+        for c in rest.T:
+            for e in cols:
+                c = c - (e @ c) * e
+            c = c / np.linalg.norm(c)
+            j = int(np.argmax(np.abs(c) > 1e-9 * np.max(np.abs(c))))
+            cols.append(c if c[j] > 0 else -c)
+    return np.array(cols).T
+
+
+def _rref_cols(B: np.ndarray) -> np.ndarray:
+    """Columns spanning the same space, in reduced echelon form (deterministic directions)."""
+    A = B.T.copy()
+    r = 0
+    for c in range(A.shape[1]):
+        if r >= A.shape[0]:
+            break
+        piv = r + int(np.argmax(np.abs(A[r:, c])))
+        if abs(A[piv, c]) < 1e-10:
+            continue
+        A[[r, piv]] = A[[piv, r]]
+        A[r] /= A[r, c]
+        for i in range(A.shape[0]):
+            if i != r:
+                A[i] -= A[i, c] * A[r]
+        r += 1
+    return A.T
+
+
+def wrap_angle(x: float) -> float:
+    """Angle in (-pi, pi]."""
+    return math.pi - ((math.pi - x) % (2 * math.pi))

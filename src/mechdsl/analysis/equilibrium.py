@@ -1,0 +1,375 @@
+"""Equilibria and their stability.
+
+At rest (qd = 0) Lagrange's equations read M(q) qdd = bias(q, 0, t) with
+
+    bias(q, 0, t) = Q_nc(q, 0) - d(V - T0)/dq          (autonomous systems)
+
+so one equation covers the three cases of the course:
+
+- scleronomic systems (T = T2): the generalized forces vanish, Q_j = -dV/dq_j + Q_j^nc = 0;
+- steady moving frames (a hoop spinning at a constant rate): T0 != 0 or T1 != 0 but the
+  equations do not depend on t (checked numerically); relative equilibria of V_eff = V - T0;
+- free systems under a constant resultant force: the equations are invariant along some
+  translation directions N (numerically: d bias/dq N = 0 and dM/dq N = 0 at random states).
+  Then we solve bias(q, 0) = M(q) N alpha with the gauge N'(q - q_start) = 0: alpha = 0 is
+  an ordinary equilibrium (neutral along N), alpha != 0 the uniformly accelerated reference
+  motion q(t) = q* + N alpha t^2/2 with the relative equilibrium q* about it.
+
+Solutions come from Levenberg-Marquardt (scipy least_squares with the CasADi Jacobian) started
+at the user's guesses and a deterministic spread (angles on a grid over [-pi, pi)).  Distinct
+solutions are kept (angles compared modulo 2 pi) and classified by the Hessian K of the
+(effective) potential in the directions transverse to N, with the linearized eigenvalues as the
+second witness (Lyapunov's indirect method).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..diagnostics import UsageError, did_you_mean
+from .core import dense, param_vector, require_ode, structure, wrap_angle
+from .matrices import complement, reduced_first_order, second_order, sym
+
+MAX_GUESSES = 256
+GRID_ANGLES = 8          # grid points per angle coordinate over [-pi, pi)
+
+
+@dataclass
+class Equilibrium:
+    """One equilibrium: coordinate values, kind, stability and the eigenvalues that decide it.
+
+    kind: 'static' (scleronomic), 'relative' (steady moving frame, V_eff = V - T0),
+    'accelerated-reference' (relative equilibrium about a uniformly accelerated motion whose
+    acceleration is ``acceleration``).
+    ``hessian_eigenvalues``: eigenvalues of the stiffness K (Hessian of the effective potential)
+    transverse to the symmetry directions (``symmetry_directions``), ascending.
+    """
+
+    coords: tuple[str, ...]
+    q: np.ndarray
+    stable: bool | None
+    hessian_eigenvalues: np.ndarray
+    kind: str = "static"
+    residual: float = 0.0
+    reason: str = ""
+    hessian: np.ndarray | None = None
+    acceleration: np.ndarray | None = None
+    linear_eigenvalues: np.ndarray | None = None
+    symmetry_directions: np.ndarray | None = None
+    t: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def values(self) -> dict[str, float]:
+        return {c: float(v) for c, v in zip(self.coords, self.q)}
+
+    @property
+    def stability(self) -> str:
+        return {True: "stable", False: "unstable", None: "undetermined"}[self.stable]
+
+    def __getitem__(self, name: str) -> float:
+        return self.values[name]
+
+    def to_dict(self) -> dict:
+        d = {"kind": self.kind, "values": self.values, "stable": self.stable,
+             "stability": self.stability, "reason": self.reason,
+             "hessian_eigenvalues": [float(v) for v in self.hessian_eigenvalues],
+             "residual": float(self.residual), "t": float(self.t), "notes": list(self.notes)}
+        if self.hessian is not None:
+            d["hessian"] = self.hessian.tolist()
+        if self.acceleration is not None:
+            d["acceleration"] = {c: float(v) for c, v in zip(self.coords, self.acceleration)}
+        if self.linear_eigenvalues is not None:
+            d["linear_eigenvalues"] = [[float(v.real), float(v.imag)] for v in self.linear_eigenvalues]
+        if self.symmetry_directions is not None and self.symmetry_directions.size:
+            d["symmetry_directions"] = [{c: float(v) for c, v in zip(self.coords, col)}
+                                        for col in self.symmetry_directions.T]
+        return d
+
+
+def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = MAX_GUESSES
+               ) -> list[Equilibrium]:
+    """Distinct equilibria of the model, each classified (see the module docstring).
+
+    guesses: None, a dict {coordinate: value} (missing coordinates take their start values),
+    a list of such dicts, or arrays of shape (n,) / (k, n).  p: parameter overrides.
+    """
+    require_ode(eom, "equilibrium analysis")
+    import casadi as ca
+
+    pv = param_vector(eom, p)
+    n = eom.n
+    st = structure(eom, pv)
+    q0, _ = eom.start(pv)
+    N = st.symmetry
+    k = N.shape[1]
+    angles = st.angles
+    notes = []
+    if not st.autonomous:
+        notes.append(f"the equations depend explicitly on time: equilibrium at t = {t:g} only")
+    if st.force_scale == 0.0:
+        # no force at rest anywhere: every configuration is an equilibrium
+        e = _classify(eom, st, pv, q0, np.zeros(k), t, 0.0, notes + ["no generalized force acts at rest: "
+                                                                     "every configuration is an equilibrium"])
+        return [e]
+
+    # residual in w = (q, alpha): bias(q, 0, t) - M(q) N alpha ; N'(q - q_ref)
+    w = ca.SX.sym("w", n + k)
+    qref = ca.SX.sym("qref", n)
+    qw = w[:n]
+    alpha = w[n:]
+    rest_bias = ca.substitute(eom.bias, eom.qd, ca.SX.zeros(n))
+    r = ca.substitute(rest_bias, eom.q, qw)
+    Mq = ca.substitute(eom.M, eom.q, qw)
+    if k:
+        r = ca.vertcat(r - ca.mtimes(Mq, ca.mtimes(N, alpha)), ca.mtimes(N.T, qw - qref))
+    r = ca.substitute(r, eom.t, ca.SX(float(t)))
+    args = [w, qref, eom.p]
+    F = ca.Function("eq_res", args, [r])
+    JF = ca.Function("eq_jac", args, [ca.jacobian(r, w)])
+
+    scale = max(st.force_scale, 1e-300)
+    tol = 1e-8 * scale
+    found: list[tuple[np.ndarray, np.ndarray, float]] = []
+    for g in _guesses(eom, guesses, q0, st, max_guesses):
+        x0 = np.concatenate([g, np.zeros(k)])
+        try:
+            x = levenberg_marquardt(lambda x: dense(F(x, q0, pv)).ravel() / scale,
+                                    lambda x: dense(JF(x, q0, pv)) / scale, x0)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            continue
+        if x is None:
+            continue
+        res = dense(F(x, q0, pv)).ravel()
+        if not np.all(np.isfinite(res)):
+            continue
+        resid = float(np.max(np.abs(res[:n])))
+        if resid > tol:
+            continue
+        qs = x[:n].copy()
+        for i in range(n):
+            if st.periodic[i]:
+                qs[i] = wrap_angle(qs[i])
+        for i, f_ in enumerate(found):
+            if _same(qs, f_[0], st.periodic) or _joined(F, q0, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic):
+                if resid < f_[2]:
+                    found[i] = (qs, x[n:].copy(), resid)
+                break
+        else:
+            found.append((qs, x[n:].copy(), resid))
+
+    found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
+    return [_classify(eom, st, pv, qs, al, t, resid, list(notes)) for qs, al, resid in found]
+
+
+def _same(a: np.ndarray, b: np.ndarray, periodic) -> bool:
+    for x, y, per in zip(a, b, periodic):
+        d = x - y
+        if per:
+            d = wrap_angle(d)
+        if abs(d) > 1e-6 * (1.0 + abs(x)):
+            return False
+    return True
+
+
+def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic) -> bool:
+    """Two nearby solutions of one degenerate equilibrium (slow convergence at a multiple root):
+    the residual stays below tol along the segment between them."""
+    d = np.array([wrap_angle(x - y) if per else x - y for x, y, per in zip(a, b, periodic)])
+    if np.max(np.abs(d), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(a), initial=0.0)):
+        return False
+    n = len(a)
+    for s in (0.25, 0.5, 0.75):
+        w = np.concatenate([b + s * d, alpha_b + s * (alpha_a - alpha_b)])
+        r = dense(F(w, q0, pv)).ravel()[:n]
+        if not np.all(np.isfinite(r)) or np.max(np.abs(r), initial=0.0) > tol:
+            return False
+    return True
+
+
+def _classify(eom, st, pv, q, alpha, t, resid, notes) -> Equilibrium:
+    n = eom.n
+    N = st.symmetry
+    k = N.shape[1]
+    acc = N @ alpha if k else np.zeros(n)
+    M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
+    P = complement(N)
+    Kr = P.T @ K @ P
+    accel = bool(k) and np.linalg.norm(M @ acc) > 1e-8 * max(st.force_scale, 1e-300)
+    if accel:
+        kind = "accelerated-reference"
+    elif st.scleronomic:
+        kind = "static"
+    else:
+        kind = "relative"
+    Ksym = sym(Kr)
+    heig = np.sort(np.linalg.eigvalsh(Ksym)) if Kr.size else np.zeros(0)
+    kscale = max(np.max(np.abs(K), initial=0.0), st.stiffness_scale, 1e-300)
+    circulatory = np.max(np.abs(K - K.T), initial=0.0) > 1e-7 * kscale
+    A = reduced_first_order(M, C, K, N)
+    lam = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)
+    lam = lam[np.lexsort((lam.imag, lam.real))]
+    lscale = max(1.0, np.max(np.abs(lam), initial=0.0))
+    growth = float(np.max(lam.real, initial=-np.inf)) if lam.size else -np.inf
+    etol = 1e-9 * kscale
+    Csym = sym(C)
+    gyro = np.max(np.abs(C - C.T), initial=0.0) > 1e-9 * max(np.max(np.abs(C), initial=0.0), 1e-300)
+    damping_ok = np.min(np.linalg.eigvalsh(Csym), initial=0.0) >= -1e-9 * max(np.max(np.abs(C), initial=0.0), 1e-300)
+    potential = "V - T0" if st.has_T0 else "V"
+
+    if not st.autonomous:
+        stable, reason = None, "explicitly time-dependent equations: stability is not decided here"
+    elif growth > 1e-6 * lscale:
+        i = int(np.argmax(lam.real))
+        neg = heig[heig < -etol]
+        why = (f"Hessian of {potential} has negative eigenvalue(s) {_fmt_list(neg)}; " if neg.size else "")
+        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(lam[i])} with positive "
+                                       "real part (Lyapunov's indirect method)")
+    elif circulatory:
+        stable, reason = None, ("non-conservative positional (circulatory) forces: the stiffness is not "
+                                "symmetric, Lagrange-Dirichlet does not apply; linear model has no growing mode")
+    elif heig.size and heig[0] > etol and damping_ok:
+        stable, reason = True, (f"Lagrange-Dirichlet: Hessian of {potential} positive definite "
+                                f"(eigenvalues {_fmt_list(heig)})")
+        if k:
+            reason += "; neutral along the symmetry directions"
+    elif heig.size and heig[0] < -etol:
+        stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
+                                f"{_fmt_list(heig[heig < -etol])} but gyroscopic terms keep the linear "
+                                "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
+    elif heig.size == 0:
+        stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
+    else:
+        stable, reason = None, (f"zero eigenvalue(s) of the Hessian of {potential} "
+                                f"({_fmt_list(heig[np.abs(heig) <= etol])}): higher-order terms decide")
+    if gyro and stable is not None:
+        notes = notes + ["gyroscopic terms present (T1 != 0)"]
+    if accel:
+        notes = notes + ["uniformly accelerated reference motion q(t) = q* + a t^2/2 with acceleration a = "
+                         + ", ".join(f"{c}: {v:.6g}" for c, v in zip(eom.coords, acc) if abs(v) > 0)]
+    return Equilibrium(coords=tuple(eom.coords), q=np.asarray(q, float), stable=stable,
+                       hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,
+                       acceleration=acc if k else np.zeros(n), linear_eigenvalues=lam,
+                       symmetry_directions=N if k else None, t=float(t), notes=list(notes))
+
+
+def _fmt_list(v) -> str:
+    return "[" + ", ".join(f"{x:.6g}" for x in v) + "]"
+
+
+def _fmt_c(z: complex) -> str:
+    return f"{z.real:.6g}" if abs(z.imag) < 1e-12 * max(1.0, abs(z)) else f"{z.real:.6g}{z.imag:+.6g}i"
+
+
+def levenberg_marquardt(f, jac, x0, max_iter: int = 200, tol: float = 1e-15):
+    """Minimize |f(x)|^2 (Levenberg-Marquardt with Nielsen's damping update); None if f is not finite."""
+    x = np.asarray(x0, float).copy()
+    with np.errstate(all="ignore"):
+        r = f(x)
+        if not np.all(np.isfinite(r)):
+            return None
+        J = jac(x)
+        A, g = J.T @ J, J.T @ r
+        mu = 1e-3 * max(np.max(np.diag(A), initial=0.0), 1e-12)
+        nu = 2.0
+        cost = r @ r
+        for _ in range(max_iter):
+            if cost <= 1e-32 or np.max(np.abs(g), initial=0.0) <= 1e-30:
+                break
+            step = np.linalg.solve(A + mu * np.eye(len(x)), -g)
+            if not np.all(np.isfinite(step)):
+                return None
+            xn = x + step
+            rn = f(xn)
+            cn = rn @ rn if np.all(np.isfinite(rn)) else np.inf
+            pred = -(step @ g) * 0.5 + 0.5 * mu * (step @ step)     # predicted decrease / 1
+            rho = (cost - cn) / max(pred * 2.0, 1e-300) if np.isfinite(cn) else -1.0
+            if rho > 0:
+                x, r, cost = xn, rn, cn
+                J = jac(x)
+                A, g = J.T @ J, J.T @ r
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                if np.max(np.abs(step), initial=0.0) <= tol * (1.0 + np.max(np.abs(x), initial=0.0)):
+                    break
+            else:
+                mu *= nu
+                nu *= 2.0
+                if mu > 1e30:
+                    break
+    return x
+
+
+# --------------------------------------------------------------------------- starting guesses
+
+
+def parse_guesses(eom, guesses, q0: np.ndarray) -> list[np.ndarray]:
+    """User guesses as full coordinate vectors (missing coordinates from the start values)."""
+    if guesses is None:
+        return []
+    if isinstance(guesses, dict):
+        guesses = [guesses]
+    if isinstance(guesses, np.ndarray):
+        guesses = [guesses] if guesses.ndim == 1 else list(guesses)
+    out = []
+    for g in guesses:
+        if isinstance(g, dict):
+            v = q0.copy()
+            for name, val in g.items():
+                if name not in eom.coords:
+                    hint = did_you_mean(name, eom.coords)
+                    raise UsageError(f"guess for unknown coordinate {name!r}" + (f"; {hint}" if hint else ""))
+                v[eom.coords.index(name)] = float(val)
+            out.append(v)
+        else:
+            v = np.asarray(g, float).ravel()
+            if v.size != eom.n:
+                raise UsageError(f"a guess needs {eom.n} coordinate values, got {v.size}")
+            out.append(v)
+    return out
+
+
+def _guesses(eom, guesses, q0, st, max_guesses):
+    user = parse_guesses(eom, guesses, q0)
+    n = eom.n
+    N = st.symmetry
+    P = N @ N.T if N.size else np.zeros((n, n))
+    axes = []
+    for i in range(n):
+        e = np.zeros(n)
+        e[i] = 1.0
+        along = np.linalg.norm(P @ e - e) < 1e-8       # coordinate is a symmetry direction: pinned
+        if along:
+            axes.append([q0[i]])
+        elif st.angles[i]:
+            axes.append([-math.pi + 2 * math.pi * j / GRID_ANGLES for j in range(GRID_ANGLES)])
+        else:
+            s = max(1.0, abs(q0[i]))
+            axes.append(sorted({q0[i], q0[i] - 0.5 * s, q0[i] + 0.5 * s, q0[i] - 2 * s, q0[i] + 2 * s, 0.0}))
+    size = math.prod(len(a) for a in axes)
+    spread = []
+    if size <= max_guesses:
+        spread = [np.array(c, float) for c in itertools.product(*axes)]
+    else:
+        lo = np.array([min(a) for a in axes])
+        hi = np.array([max(a) for a in axes])
+        for j in range(max_guesses):
+            spread.append(lo + (hi - lo) * _halton(j + 1, n))
+    return user + [q0.copy()] + spread
+
+
+def _halton(i: int, dim: int) -> np.ndarray:
+    primes = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71]
+    out = np.zeros(dim)
+    for d in range(dim):
+        b = primes[d % len(primes)]
+        f, r, k = 1.0, 0.0, i + (d // len(primes)) * 7919
+        while k > 0:
+            f /= b
+            r += f * (k % b)
+            k //= b
+        out[d] = r
+    return out

@@ -1,0 +1,247 @@
+"""The linear model about an equilibrium or a reference state.
+
+``linearize(eom, at=...)`` returns M, C, K (second order), A, B (first order, x = (dq, dq'))
+computed numerically by CasADi AD of the equations of motion (see :mod:`.matrices`), and
+``.symbolic()`` the same M, C, K derived exactly by sympy from T, V, D, Q (see :mod:`.symbolic`).
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from .core import dense, param_vector, parts, require_ode, structure, wrap_angle
+from .matrices import first_order, second_order, skew, sym
+from .modes import Modes, modes_of
+
+
+@dataclass
+class Linearization:
+    coords: tuple[str, ...]
+    M: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    A: np.ndarray
+    B: np.ndarray                    # (2n, m) first-order input matrix
+    Bq: np.ndarray                   # (n, m): M dq'' + C dq' + K dq = Bq du
+    inputs: tuple[str, ...]
+    q: np.ndarray                    # reference state
+    qd: np.ndarray
+    t: float
+    acceleration: np.ndarray         # reference acceleration (0 at an equilibrium)
+    kind: str                        # 'equilibrium' | 'accelerated-reference' | 'state'
+    p: np.ndarray
+    equilibrium: object | None = None
+    notes: list[str] = field(default_factory=list)
+    eom: object | None = field(default=None, repr=False)
+    _modes: Modes | None = field(default=None, repr=False)
+
+    @property
+    def n(self) -> int:
+        return len(self.coords)
+
+    @property
+    def D(self) -> np.ndarray:
+        """Damping: the symmetric part of C."""
+        return sym(self.C)
+
+    @property
+    def G(self) -> np.ndarray:
+        """Gyroscopic matrix: the skew-symmetric part of C."""
+        return skew(self.C)
+
+    @property
+    def values(self) -> dict[str, float]:
+        return {c: float(v) for c, v in zip(self.coords, self.q)}
+
+    def modes(self) -> Modes:
+        if self._modes is None:
+            self._modes = modes_of(self.M, self.C, self.K, self.A, self.coords)
+        return self._modes
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        return self.modes().eigenvalues
+
+    def symbolic(self, exact: bool = True):
+        """M, C, K derived by sympy from T, V, D, Q at this state (see analysis.symbolic)."""
+        from .symbolic import symbolic_linearization
+
+        return symbolic_linearization(self.eom, self.q, self.qd, self.t, self.acceleration,
+                                      inputs=self.inputs, exact=exact)
+
+    def to_dict(self) -> dict:
+        md = self.modes().to_dict()
+        return {"coordinates": list(self.coords), "kind": self.kind, "t": self.t,
+                "state": {"q": self.values, "qd": {c: float(v) for c, v in zip(self.coords, self.qd)}},
+                "acceleration": {c: float(v) for c, v in zip(self.coords, self.acceleration)},
+                "inputs": list(self.inputs), "M": self.M.tolist(), "C": self.C.tolist(), "K": self.K.tolist(),
+                "A": self.A.tolist(), "B": self.B.tolist(), "modes": md["modes"],
+                "eigenvalues": md["eigenvalues"], "notes": list(self.notes),
+                "equilibrium": None if self.equilibrium is None else self.equilibrium.to_dict()}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2) + "\n"
+
+
+def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, guesses=None) -> Linearization:
+    """Linear model of ``eom`` about ``at``:
+
+    - ``"equilibrium"``: the equilibrium nearest to the start values (``guesses`` steer the
+      search; see :func:`equilibria`); an :class:`Equilibrium` object: that one;
+    - ``"t=T"``: the state reached at time T from the start values (integrated with scipy's
+      DOP853, rtol 1e-11), ``"start"``: the start state;
+    - a dict ``{coordinate: value, "der(coordinate)": speed}``: missing coordinates take their
+      start values, missing speeds zero.
+
+    inputs: names of parameters or coordinates (a unit generalized force on that coordinate,
+    also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
+    None: the parameters the model declares ``input``; () for none.
+    """
+    require_ode(eom, "linearization")
+    from .equilibrium import Equilibrium, equilibria
+
+    pv = param_vector(eom, p)
+    n = eom.n
+    q0, qd0 = eom.start(pv)
+    eq = None
+    notes: list[str] = []
+    acc = None
+    if isinstance(at, Equilibrium):
+        eq = at
+    elif isinstance(at, str) and at.strip() == "equilibrium":
+        eqs = equilibria(eom, guesses, t=t, p=pv)
+        if not eqs:
+            raise MechError(Diagnostic("E703", f"no equilibrium of '{eom.name}' was found",
+                                       help="give a starting guess (--guess NAME=VALUE) or linearize "
+                                            "about a state (--at t=0)"))
+        st = structure(eom, pv)
+        eq = min(eqs, key=lambda e: _distance(e.q, q0, st.periodic))
+        if len(eqs) > 1:
+            notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to the start "
+                         "values: " + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+    if eq is not None:
+        q, qd, t, acc = np.asarray(eq.q, float), np.zeros(n), eq.t, eq.acceleration
+        kind = "accelerated-reference" if eq.kind == "accelerated-reference" else "equilibrium"
+    else:
+        q, qd, t = _state(eom, at, q0, qd0, pv, t)
+        kind = "state"
+
+    M, C, K, bias, acc = second_order(eom, q, qd, t, pv, acc=acc)
+    if kind == "state":
+        r = bias - M @ np.zeros(n)
+        st = structure(eom, pv)
+        if np.max(np.abs(qd), initial=0.0) == 0 and np.max(np.abs(r), initial=0.0) <= 1e-8 * max(st.force_scale, 1e-300):
+            kind = "equilibrium"
+            acc = np.zeros(n)
+            M, C, K, bias, acc = second_order(eom, q, qd, t, pv, acc=acc)
+        else:
+            notes.append("not an equilibrium: the linear model describes deviations from the motion "
+                         "through this state at this instant (frozen time, reference acceleration "
+                         "included in K)")
+    A = first_order(M, C, K)
+    if inputs is None:
+        inputs = declared_inputs(eom)
+    names, Bq = _inputs(eom, inputs, q, qd, t, pv)
+    B = np.vstack([np.zeros((n, Bq.shape[1])), np.linalg.solve(M, Bq)]) if n else np.zeros((0, Bq.shape[1]))
+    return Linearization(coords=tuple(eom.coords), M=M, C=C, K=K, A=A, B=B, Bq=Bq, inputs=names,
+                         q=np.asarray(q, float), qd=np.asarray(qd, float), t=float(t),
+                         acceleration=np.asarray(acc, float), kind=kind, p=pv, equilibrium=eq,
+                         notes=notes, eom=eom)
+
+
+def _distance(a, b, periodic) -> float:
+    d = 0.0
+    for x, y, per in zip(a, b, periodic):
+        z = wrap_angle(x - y) if per else x - y
+        d += z * z
+    return d
+
+
+def _state(eom, at, q0, qd0, pv, t):
+    n = eom.n
+    if isinstance(at, dict):
+        q, qd = q0.copy(), np.zeros(n)
+        for name, v in at.items():
+            m = re.fullmatch(r"\s*der\((.+)\)\s*", name)
+            key = m.group(1) if m else name
+            if key not in eom.coords:
+                hint = did_you_mean(key, eom.coords)
+                raise UsageError(f"unknown coordinate {key!r}" + (f"; {hint}" if hint else ""))
+            (qd if m else q)[eom.coords.index(key)] = float(v)
+        return q, qd, t
+    if isinstance(at, str):
+        s = at.strip()
+        if s == "start":
+            return q0, qd0, 0.0
+        m = re.fullmatch(r"t\s*=\s*(.+)", s)
+        if m:
+            try:
+                T = float(m.group(1))
+            except ValueError:
+                raise UsageError(f"--at t=T needs a number, got {m.group(1)!r}") from None
+            return (*_integrate(eom, q0, qd0, pv, T), T)
+    raise UsageError(f"cannot linearize at {at!r}: use 'equilibrium', 't=T', 'start', a dict of "
+                     "coordinate values or an Equilibrium")
+
+
+def _integrate(eom, q0, qd0, pv, T):
+    """State at time T from the start values (independent of the simulator: scipy DOP853)."""
+    if T == 0:
+        return q0, qd0
+    if T < 0 or not math.isfinite(T):
+        raise UsageError(f"t = {T} must be a finite time >= 0")
+    from scipy.integrate import solve_ivp
+
+    pt = parts(eom)
+    n = eom.n
+
+    def f(tt, x):
+        M, b = pt.M_bias(x[:n], x[n:], tt, pv)
+        return np.concatenate([x[n:], np.linalg.solve(M, b)])
+
+    sol = solve_ivp(f, (0.0, T), np.concatenate([q0, qd0]), method="DOP853", rtol=1e-11, atol=1e-12)
+    if not sol.success:
+        raise MechError(Diagnostic("E704", f"could not reach t = {T} from the start values: {sol.message}"))
+    x = sol.y[:, -1]
+    return x[:n], x[n:]
+
+
+def declared_inputs(eom) -> list[str]:
+    """The parameters declared `input` in the model (empty without a model)."""
+    model = getattr(eom, "model", None)
+    if model is None:
+        return []
+    return [p.name for p in model.real_parameters if getattr(p, "input", False) and p.name in eom.params]
+
+
+def _inputs(eom, inputs, q, qd, t, pv):
+    n = eom.n
+    if not inputs:
+        return (), np.zeros((n, 0))
+    if isinstance(inputs, str):
+        inputs = [s for s in re.split(r"[,\s]+", inputs) if s]
+    cols, names = [], []
+    dbp = None
+    for name in inputs:
+        m = re.fullmatch(r"\s*(?:force|Q)\((.+)\)\s*", name)
+        key = m.group(1) if m else name.strip()
+        if key in eom.coords and (m or key not in eom.params):
+            e = np.zeros(n)
+            e[eom.coords.index(key)] = 1.0
+            cols.append(e)
+            names.append(f"force({key})")
+        elif key in eom.params and not m:
+            if dbp is None:
+                dbp = dense(parts(eom).fn("dbias_dp")(q, qd, t, pv))
+            cols.append(dbp[:, eom.params.index(key)])
+            names.append(key)
+        else:
+            hint = did_you_mean(key, list(eom.params) + list(eom.coords))
+            raise UsageError(f"unknown input {name!r}: inputs are parameters or coordinates "
+                             "(a generalized force on them)" + (f"; {hint}" if hint else ""))
+    return tuple(names), np.array(cols).T

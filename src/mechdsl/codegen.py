@@ -1,0 +1,383 @@
+"""CasADi Functions from equations of motion, optional C code generation, fast calls.
+
+``casadi_functions(eom, compiled=False)`` returns a lazy mapping name -> ``casadi.Function``;
+a Function is built the first time it is asked for.  Names, inputs and outputs:
+
+    ode            (t, x, p) -> xdot            x = [q; qd], xdot = [qd; qdd]
+    ode_jacobian   (t, x, p) -> J               d xdot / d x, dense
+    mass_matrix    (q, t, p) -> M
+    bias           (t, x, p) -> bias            M qdd = bias
+    energy         (t, x, p) -> T, V, E
+    outputs        (t, x, p) -> one output per EOM.outputs entry (named as the entry)
+    constraints    (t, x, p) -> g, gdot         only when EOM.g exists
+    start          (p) -> q0, qd0
+    singularity    (t, x, p) -> one per EOM.singularity_monitors entry (when there are any)
+
+Forward dynamics: EOM.qdd when the recursive route produced it; otherwise M qdd = bias is
+solved NUMERICALLY at every call by CasADi's sparse Householder QR linear solver ('qr'),
+wrapped around the SX expressions of M and bias in an MX Function.  Symbolic elimination on
+SX (``casadi.solve`` on SX) is used only for one coordinate (a division).  See
+docs/internals/numerics.md for the measurements behind this choice.
+
+``compiled=True`` generates C for the requested Functions (plus the Jacobian of ``ode``,
+which the integrators and ``ode_jacobian`` use), compiles it with the system C compiler into
+a shared library cached by the hash of the code, and loads it with ``casadi.external``.
+Without a compiler the virtual-machine Functions are returned and ``.notes`` says why.
+
+``FastFunction`` calls a Function through ``Function.buffer()`` (well under a microsecond of
+overhead instead of tens of microseconds for a plain call); use it where Python is in the
+loop.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from .diagnostics import Diagnostic, MechError
+
+STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
+            "start", "singularity")
+LINSOL = "qr"          # sparse Householder QR: backward stable, code-generatable
+
+
+# --------------------------------------------------------------------------- building
+
+
+def _ca():
+    import casadi as ca
+
+    return ca
+
+
+class _Symbols:
+    """SX symbols of an EOM: x = [q; qd] as one input, t, p."""
+
+    def __init__(self, eom):
+        ca = _ca()
+        self.q, self.qd, self.t, self.p = eom.q, eom.qd, eom.t, eom.p
+        self.x = ca.vertcat(eom.q, eom.qd)
+        self.n = eom.n
+
+
+def _function(name, ins, outs, names_in, names_out):
+    ca = _ca()
+    try:  # an output may be named like an input ("x"): allowed, they live in separate schemes
+        return ca.Function(name, ins, outs, names_in, names_out, {"allow_duplicate_io_names": True})
+    except RuntimeError as e:  # free symbols: an expression outside (q, qd, t, p)
+        msg = str(e).strip().splitlines()[-1]
+        raise MechError(Diagnostic("E801", f"cannot build the CasADi Function '{name}': {msg}",
+                                   help="every expression of the equations of motion must depend "
+                                        "only on coordinates, their speeds, time and parameters")) from None
+
+
+def _check_mass_matrix(eom):
+    ca = _ca()
+    M = ca.SX(eom.M)
+    n = eom.n
+    if M.shape != (n, n):
+        raise MechError(Diagnostic("E802", f"mass matrix has shape {M.shape}, expected ({n}, {n})"))
+    if ca.sprank(M.sparsity()) < n:
+        empty = [eom.coords[i] for i in range(n) if M[:, i].nnz() == 0]
+        which = f": {', '.join(empty)} {'has' if len(empty) == 1 else 'have'} no inertia" if empty else ""
+        raise MechError(Diagnostic(
+            "E803", f"the mass matrix of '{eom.name}' is structurally singular{which}",
+            help="every coordinate must appear in the kinetic energy with its speed"))
+
+
+def build_ode(eom):
+    """The ``ode`` Function (t, x, p) -> xdot."""
+    ca = _ca()
+    s = _Symbols(eom)
+    n = eom.n
+    if eom.qdd is not None:
+        xdot = ca.vertcat(s.qd, eom.qdd)
+        return _function("ode", [s.t, s.x, s.p], [xdot], ["t", "x", "p"], ["xdot"])
+    _check_mass_matrix(eom)
+    if n == 1:  # one coordinate: the "solve" is a division, exact in SX
+        xdot = ca.vertcat(s.qd, eom.bias / eom.M)
+        return _function("ode", [s.t, s.x, s.p], [xdot], ["t", "x", "p"], ["xdot"])
+    mb = _function("mass_bias", [s.t, s.x, s.p], [eom.M, eom.bias], ["t", "x", "p"], ["M", "bias"])
+    t = ca.MX.sym("t")
+    x = ca.MX.sym("x", 2 * n)
+    p = ca.MX.sym("p", s.p.numel())
+    M, b = mb(t, x, p)
+    qdd = ca.solve(M, b, LINSOL)
+    return ca.Function("ode", [t, x, p], [ca.vertcat(x[n:], qdd)], ["t", "x", "p"], ["xdot"])
+
+
+def jacobian_of(ode):
+    """Dense d xdot/dx as a Function (t, x, p) -> J, built on ``ode``'s own Jacobian."""
+    ca = _ca()
+    t, x, p = (ca.MX.sym(nm, ode.sparsity_in(i)) for i, nm in enumerate(("t", "x", "p")))
+    jac = ode.jacobian()
+    out = jac(t, x, p, ca.MX(ode.size1_out(0), 0))
+    jx = out[jac.name_out().index("jac_xdot_x")] if isinstance(out, (list, tuple)) else out
+    return ca.Function("ode_jacobian", [t, x, p], [ca.densify(jx)], ["t", "x", "p"], ["J"])
+
+
+def _build(eom, name, outputs):
+    ca = _ca()
+    s = _Symbols(eom)
+    txp = [s.t, s.x, s.p]
+    if name == "ode":
+        return build_ode(eom)
+    if name == "mass_matrix":
+        if ca.depends_on(ca.SX(eom.M), s.qd):
+            return _function("mass_matrix", txp, [eom.M], ["t", "x", "p"], ["M"])
+        return _function("mass_matrix", [s.q, s.t, s.p], [eom.M], ["q", "t", "p"], ["M"])
+    if name == "bias":
+        return _function("bias", txp, [eom.bias], ["t", "x", "p"], ["bias"])
+    if name == "energy":
+        return _function("energy", txp, [eom.T, eom.V, eom.T + eom.V], ["t", "x", "p"], ["T", "V", "E"])
+    if name == "outputs":
+        names = list(eom.outputs) if outputs is None else list(outputs)
+        exprs = [ca.SX(eom.outputs[k]) for k in names]
+        return _function("outputs", txp, exprs, ["t", "x", "p"], names)
+    if name == "constraints":
+        g = ca.SX(eom.g)
+        gdot = ca.jtimes(g, s.q, s.qd) + ca.jacobian(g, s.t)
+        return _function("constraints", txp, [g, gdot], ["t", "x", "p"], ["g", "gdot"])
+    if name == "start":
+        return _function("start", [s.p], [ca.SX(eom.q0), ca.SX(eom.qd0)], ["p"], ["q0", "qd0"])
+    if name == "singularity":
+        mons = dict(singularity_monitors(eom))
+        return _function("singularity", txp, [ca.SX(v) for v in mons.values()], ["t", "x", "p"], list(mons))
+    raise KeyError(name)
+
+
+def singularity_monitors(eom) -> dict:
+    """name -> SX scalar that is 0 at a singular configuration (e.g. cos(theta) for ZYX angles).
+
+    Entries may also be (expr, threshold) pairs; only the expression is used here.
+    """
+    mons = getattr(eom, "singularity_monitors", None) or {}
+    return {k: (v[0] if isinstance(v, tuple) else v) for k, v in mons.items()}
+
+
+def available(eom) -> tuple[str, ...]:
+    names = ["ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "start"]
+    if eom.g is not None:
+        names.append("constraints")
+    if singularity_monitors(eom):
+        names.append("singularity")
+    return tuple(n for n in STANDARD if n in names)
+
+
+class FunctionSet(Mapping):
+    """A lazy mapping name -> casadi.Function for one EOM (see the module docstring).
+
+    ``compiled`` says whether the Functions are native code; ``notes`` explains fallbacks;
+    ``library`` is the path of the shared library when compiled.
+    """
+
+    def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None):
+        self.eom = eom
+        self.outputs = None if outputs is None else tuple(outputs)
+        if self.outputs is not None:
+            unknown = [o for o in self.outputs if o not in eom.outputs]
+            if unknown:
+                raise KeyError(f"unknown output(s): {', '.join(unknown)}")
+        avail = available(eom)
+        self._names = avail if names is None else tuple(n for n in avail if n in names)
+        self.want_compiled = compiled
+        self.compiled = False
+        self.library: str | None = None
+        self.notes: list[str] = []
+        self._cache: dict = {}
+        self._compiled_done = False
+
+    def __getitem__(self, name):
+        if name not in self._names:
+            raise KeyError(f"no Function {name!r}; available: {', '.join(self._names)}")
+        if self.want_compiled and not self._compiled_done:
+            self._compile_all()
+        if name not in self._cache:
+            if name == "ode_jacobian":
+                self._cache[name] = jacobian_of(self["ode"])
+            else:
+                self._cache[name] = _build(self.eom, name, self.outputs)
+        return self._cache[name]
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+    def __repr__(self):
+        kind = "compiled" if self.compiled else "virtual machine"
+        return f"<FunctionSet {self.eom.name!r} ({kind}): {', '.join(self._names)}>"
+
+    def _compile_all(self):
+        self._compiled_done = True
+        funcs = [_build(self.eom, n, self.outputs) for n in self._names if n != "ode_jacobian"]
+        if "ode_jacobian" in self._names and "ode" not in self._names:
+            funcs.append(build_ode(self.eom))
+        loaded, note, lib = compile_functions(funcs, tag=self.eom.name)
+        if note:
+            self.notes.append(note)
+        if loaded is None:
+            return
+        self.compiled = True
+        self.library = lib
+        for f in funcs:
+            if f.name() in self._names:
+                self._cache[f.name()] = loaded[f.name()]
+        if "ode_jacobian" in self._names:
+            self._cache["ode_jacobian"] = jacobian_of(loaded["ode"])
+
+
+def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -> FunctionSet:
+    """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
+
+    names: restrict to these Functions (default: all that apply); outputs: restrict the
+    ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached on
+    the EOM object, so asking twice costs nothing.
+    """
+    key = (bool(compiled), None if names is None else tuple(sorted(names)),
+           None if outputs is None else tuple(outputs))
+    cache = eom.__dict__.setdefault("_mechdsl_function_sets", {})
+    if key not in cache:
+        cache[key] = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs)
+    return cache[key]
+
+
+# --------------------------------------------------------------------------- C code generation
+
+
+def cache_dir() -> Path:
+    d = os.environ.get("MECHDSL_CACHE")
+    if d:
+        return Path(d)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "mechdsl"
+
+
+def find_compiler() -> str | None:
+    for cand in (os.environ.get("CC"), "gcc", "cc", "clang"):
+        if cand:
+            path = shutil.which(cand)
+            if path:
+                return path
+            if os.environ.get("CC") == cand:
+                return None  # an explicit CC that does not exist: do not guess another
+    return None
+
+
+def cflags_for(code_size: int) -> list[str]:
+    """Optimization level by size: gcc time grows much faster than linearly with function size.
+
+    Measured (10-link chain, Lagrange route, ode Jacobian = 1.1 MB of C): -O0 2.9 s,
+    -O1 27 s, -O2 40 s of gcc; run time -O0 3x slower than -O1, -O1 within 15% of -O2.
+    """
+    env = os.environ.get("MECHDSL_CFLAGS")
+    if env:
+        return env.split()
+    if code_size <= 300_000:
+        return ["-O2"]
+    if code_size <= 1_000_000:
+        return ["-O1"]
+    return ["-O0"]
+
+
+def compile_functions(funcs, tag: str = "model"):
+    """Generate C for ``funcs`` (+ the Jacobian of any 'ode'), compile, load.
+
+    Returns (dict name -> external Function or None, note or None, library path or None).
+    The library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags;
+    it is written to a temporary name and renamed into place (safe under concurrency).
+    """
+    ca = _ca()
+    cc = find_compiler()
+    if cc is None:
+        return None, ("no C compiler found (looked for $CC, gcc, cc, clang); "
+                      "using the CasADi virtual machine instead of compiled code"), None
+    cg = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
+    for f in funcs:
+        cg.add(f)
+        if f.name() == "ode":
+            cg.add(f.jacobian())
+    code = cg.dump()
+    flags = cflags_for(len(code))
+    try:
+        version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
+        version = version.splitlines()[0] if version else cc
+    except (OSError, subprocess.SubprocessError):
+        version = cc
+    digest = hashlib.sha256("\n".join([code, " ".join(flags), version, ca.__version__]).encode()).hexdigest()[:24]
+    d = cache_dir()
+    lib = d / f"{digest}.so"
+    note = None
+    if not lib.exists():
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
+                src = Path(tmp) / "mechdsl_model.c"
+                src.write_text(code)
+                out = Path(tmp) / "lib.so"
+                r = subprocess.run([cc, *flags, "-fPIC", "-shared", str(src), "-o", str(out), "-lm"],
+                                   capture_output=True, text=True)
+                if r.returncode != 0:
+                    tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
+                    return None, (f"C compilation failed ({cc} {' '.join(flags)}): {' | '.join(tail)}; "
+                                  "using the CasADi virtual machine"), None
+                os.replace(out, lib)
+        except OSError as e:
+            return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
+        note = f"compiled {len(code) // 1000} kB of C with {Path(cc).name} {' '.join(flags)} into {lib}"
+    else:
+        note = f"loaded compiled model from cache {lib}"
+    loaded = {}
+    for f in funcs:
+        loaded[f.name()] = ca.external(f.name(), str(lib))
+    return loaded, note, str(lib)
+
+
+# --------------------------------------------------------------------------- fast calls
+
+
+class FastFunction:
+    """Call a casadi.Function through ``Function.buffer()`` with preallocated numpy arrays.
+
+    ``ff(*args)`` copies the arguments into the input buffers, evaluates, and returns the
+    outputs as numpy arrays (a vector for a column, a 2-D array for a matrix, dense).  With
+    ``copy=False`` the returned arrays are the internal buffers, overwritten by the next call.
+    Sparse outputs are densified by a thin wrapper Function.
+    """
+
+    def __init__(self, f, copy: bool = True):
+        ca = _ca()
+        if any(not f.sparsity_out(i).is_dense() for i in range(f.n_out())) or \
+                any(not f.sparsity_in(i).is_dense() for i in range(f.n_in())):
+            ins = [ca.MX.sym(f.name_in(i), f.size1_in(i), f.size2_in(i)) for i in range(f.n_in())]
+            outs = f.call([ca.project(a, f.sparsity_in(i)) if not f.sparsity_in(i).is_dense() else a
+                           for i, a in enumerate(ins)])
+            f = ca.Function(f.name() + "_dense", ins, [ca.densify(o) for o in outs], f.name_in(), f.name_out())
+        self.function = f
+        self.copy = copy
+        self._buf, self._eval = f.buffer()
+        self._args = [np.zeros(f.numel_in(i)) for i in range(f.n_in())]
+        self._res = [np.zeros(f.numel_out(i)) for i in range(f.n_out())]
+        self._shapes = [(f.size1_out(i), f.size2_out(i)) for i in range(f.n_out())]
+        for i, a in enumerate(self._args):
+            self._buf.set_arg(i, memoryview(a))
+        for i, r in enumerate(self._res):
+            self._buf.set_res(i, memoryview(r))
+        self._views = [r if s[1] == 1 else r.reshape(s[1], s[0]).T for r, s in zip(self._res, self._shapes)]
+        self._single = len(self._res) == 1
+
+    def __call__(self, *args):
+        for dst, a in zip(self._args, args):
+            dst[:] = a
+        self._eval()
+        if self._single:
+            v = self._views[0]
+            return v.copy() if self.copy else v
+        return tuple(v.copy() for v in self._views) if self.copy else tuple(self._views)

@@ -1,0 +1,32 @@
+"""``mech equations FILE``: Lagrange's equations of a model, as people write them."""
+from __future__ import annotations
+
+
+def add_parser(sub):
+    p = sub.add_parser("equations", help="print the Lagrange equations of a model",
+                       description="Print T, V, D, Q and one Lagrange equation per coordinate, simplified "
+                                   "(sympy). Large models are described by their structure instead.")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--model", help="the model to print (default: the file's main model)")
+    p.add_argument("--scene", help="print the model of this scene (with its overrides)")
+    p.add_argument("--latex", action="store_true", help="print LaTeX (an align environment)")
+    p.add_argument("--hamiltonian", action="store_true", help="print Hamilton's equations instead")
+    return p
+
+
+def run(args) -> int:
+    from ..api import load_model_ir
+
+    model = load_model_ir(args.file, model=args.model, scene=args.scene)
+    if args.hamiltonian:
+        try:
+            from ..analysis.hamilton import format_hamiltonian
+        except ImportError:
+            print("note: Hamilton's equations are not available in this installation (mechdsl.analysis.hamilton)")
+            return 0
+        print(format_hamiltonian(model, latex=args.latex), end="")
+        return 0
+    from ..mechanics.printing import format_equations
+
+    print(format_equations(model, latex=args.latex), end="")
+    return 0

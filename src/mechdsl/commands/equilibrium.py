@@ -1,0 +1,65 @@
+"""``mech equilibrium FILE``: equilibria (static, relative, about an accelerated reference)
+with their stability, as a table; ``-o OUT.json`` writes them."""
+from __future__ import annotations
+
+import json
+
+from ..diagnostics import UsageError
+
+
+def add_parser(sub):
+    p = sub.add_parser("equilibrium", help="find equilibria and classify their stability",
+                       description="Find the equilibria of a model from several starting guesses (yours and a "
+                                   "spread over each coordinate's range) and classify each: stable "
+                                   "(Lagrange-Dirichlet), unstable, or undetermined, with the eigenvalues "
+                                   "that decide.")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--model", help="model to analyse")
+    p.add_argument("--scene", help="scene whose model (and values) to analyse")
+    p.add_argument("--guess", action="append", nargs="+", metavar="NAME=VALUE",
+                   help="a starting guess (coordinates not named keep their start values); repeat "
+                        "--guess for several guesses; values may use pi, e.g. theta=pi/2")
+    p.add_argument("--set", action="append", nargs="+", metavar="NAME=VALUE", help="change parameter values")
+    p.add_argument("--time", type=float, default=0.0, help="time at which to evaluate time-dependent models")
+    p.add_argument("-o", "--output", metavar="OUT.json", help="write the equilibria as JSON")
+    p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    return p
+
+
+def run(args) -> int:
+    from ..analysis.equilibrium import equilibria
+    from ..analysis.tables import assignments, load_model
+    from ..fileio import write_atomic
+
+    if args.output and args.output == args.file:
+        raise UsageError("refusing to overwrite the input file")
+    m = load_model(args)
+    guesses = [assignments(g) for g in (args.guess or [])]
+    eqs = equilibria(m.eom, guesses or None, t=args.time)
+    print(format_equilibria(m.name, m.eom.coords, eqs))
+    if args.output:
+        data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
+                "equilibria": [e.to_dict() for e in eqs]}
+        write_atomic(args.output, json.dumps(data, indent=2) + "\n")
+        print(f"wrote {args.output}")
+    return 0
+
+
+def format_equilibria(name: str, coords, eqs) -> str:
+    from ..analysis.tables import num, table
+
+    if not eqs:
+        return (f"{name}: no equilibrium found (no starting guess converged)\n"
+                "  hint: give a guess with --guess NAME=VALUE")
+    kinds = sorted({e.kind for e in eqs})
+    lines = [f"{name}: {len(eqs)} equilibri{'um' if len(eqs) == 1 else 'a'} ({', '.join(kinds)})"]
+    rows = []
+    for i, e in enumerate(eqs, 1):
+        rows.append([str(i)] + [num(v) for v in e.q] + [e.kind, e.stability,
+                                                        "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
+    lines.append(table(["#"] + list(coords) + ["kind", "stability", "Hessian eigenvalues"], rows))
+    for i, e in enumerate(eqs, 1):
+        lines.append(f"  {i}: {e.reason}")
+        for note in e.notes:
+            lines.append(f"     note: {note}")
+    return "\n".join(lines)

@@ -1,0 +1,125 @@
+"""``mech linearize FILE``: the linear model M, C, K (A, B) about an equilibrium or a state,
+and its modes (frequencies in rad/s and Hz, damping ratios, shapes); JSON, CSV and a plot."""
+from __future__ import annotations
+
+import re
+
+from ..diagnostics import UsageError
+
+
+def add_parser(sub):
+    p = sub.add_parser("linearize", help="linear model and modes about an equilibrium or a state",
+                       description="Linearize the equations of motion: M dq'' + C dq' + K dq = B du; print "
+                                   "M, C, K, the first-order A (and B for inputs) and the modes.")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--model", help="model to analyse")
+    p.add_argument("--scene", help="scene whose model (and values) to analyse")
+    p.add_argument("--at", default="equilibrium",
+                   help="'equilibrium' (nearest to the start values; steer with --guess), 't=T' (the state "
+                        "reached at time T from the start values), 'start', or NAME=VALUE,... (a state; "
+                        "der(NAME)=V for speeds)")
+    p.add_argument("--guess", action="append", nargs="+", metavar="NAME=VALUE",
+                   help="starting guess for --at equilibrium")
+    p.add_argument("--inputs", nargs="+", metavar="NAME",
+                   help="parameters (or coordinates: a generalized force on them) treated as inputs u; "
+                        "default: the model's `input` parameters")
+    p.add_argument("--set", action="append", nargs="+", metavar="NAME=VALUE", help="change parameter values")
+    p.add_argument("--symbolic", action="store_true", help="also print M, C, K derived exactly by sympy")
+    p.add_argument("-o", "--output", metavar="OUT.json", help="write the linear model and modes as JSON")
+    p.add_argument("--csv", metavar="OUT.csv", help="write the modes as CSV")
+    p.add_argument("--plot", metavar="OUT.png", help="draw the mode shapes")
+    p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    return p
+
+
+def run(args) -> int:
+    from ..analysis.linearize import linearize
+    from ..analysis.tables import assignments, load_model
+    from ..fileio import write_atomic
+
+    for out in (args.output, args.csv, args.plot):
+        if out and out == args.file:
+            raise UsageError("refusing to overwrite the input file")
+    m = load_model(args)
+    at = args.at.strip()
+    if "=" in at and not re.fullmatch(r"t\s*=.*", at):
+        at = _state(at)
+    guesses = [assignments(g) for g in (args.guess or [])] or None
+    inputs = None
+    if args.inputs:
+        inputs = [s for item in args.inputs for s in item.split(",") if s.strip()]
+    lin = linearize(m.eom, at=at, inputs=inputs, guesses=guesses)
+    print(format_linearization(m.name, lin))
+    if args.symbolic:
+        print(format_symbolic(lin))
+    if args.output:
+        write_atomic(args.output, lin.to_json())
+        print(f"wrote {args.output}")
+    if args.csv:
+        lin.modes().write_csv(args.csv)
+        print(f"wrote {args.csv}")
+    if args.plot:
+        lin.modes().plot(args.plot, title=f"{m.name}: mode shapes")
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _state(text: str) -> dict:
+    from ..analysis.tables import number
+
+    out = {}
+    for part in [s for s in re.split(r",(?![^(]*\))", text) if s.strip()]:
+        if "=" not in part:
+            raise UsageError(f"--at expects NAME=VALUE,..., got {part!r}")
+        k, v = part.rsplit("=", 1)
+        out[k.strip()] = number(v)
+    return out
+
+
+def format_linearization(name: str, lin) -> str:
+    from ..analysis.tables import matrix, num, table
+
+    c = list(lin.coords)
+    where = {"equilibrium": "about the equilibrium", "accelerated-reference":
+             "about the relative equilibrium of the accelerated reference motion",
+             "state": f"about the state at t = {num(lin.t)}"}[lin.kind]
+    lines = [f"{name}: linear model {where}",
+             "  " + ", ".join(f"{k} = {num(v)}" for k, v in lin.values.items())
+             + ("" if not any(lin.qd) else "; " + ", ".join(f"der({k}) = {num(v)}" for k, v in zip(c, lin.qd)))]
+    if lin.equilibrium is not None:
+        lines.append(f"  stability: {lin.equilibrium.stability} ({lin.equilibrium.reason})")
+    for note in lin.notes:
+        lines.append(f"  note: {note}")
+    lines.append("  M dq'' + C dq' + K dq = B du")
+    lines.append(matrix("M (mass)", lin.M, c, c))
+    lines.append(matrix("C (damping + gyroscopic)", lin.C, c, c))
+    lines.append(matrix("K (stiffness)", lin.K, c, c))
+    if lin.inputs:
+        lines.append(matrix("B (second order, per input)", lin.Bq, c, lin.inputs))
+    x = c + [f"der({k})" for k in c]
+    if len(x) <= 12:
+        lines.append(matrix("A (first order, x = (dq, dq'))", lin.A, x, x))
+        if lin.inputs:
+            lines.append(matrix("B (first order)", lin.B, x, lin.inputs))
+    md = lin.modes()
+    rows = []
+    for j in range(len(md)):
+        s = md.shapes[:, j]
+        rows.append([str(j + 1), md.kinds[j], num(md.frequencies[j]), num(md.hz[j]), num(md.damping_ratios[j]),
+                     num(md.mode_eigenvalues[j])] + [num(v) for v in s])
+    lines.append("  modes:")
+    lines.append(table(["mode", "kind", "w (rad/s)", "f (Hz)", "zeta", "eigenvalue"] + c, rows, "    "))
+    return "\n".join(lines)
+
+
+def format_symbolic(lin) -> str:
+    from ..analysis.symbolic import text
+
+    s = lin.symbolic()
+    out = [f"  symbolic (sympy, from T, V, D, Q via the {s.route} route), at "
+           + ", ".join(f"{k} = {text(v)}" for k, v in s.state.items() if not str(k).startswith("der(")
+                       and str(k) != "time")]
+    for name, Mx in (("M", s.M), ("C", s.C), ("K", s.K)):
+        out.append(f"    {name} = [" + "; ".join(", ".join(text(Mx[i, j]) for j in range(Mx.shape[1]))
+                                          for i in range(Mx.shape[0])) + "]")
+    return "\n".join(out)

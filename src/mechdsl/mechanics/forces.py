@@ -1,0 +1,169 @@
+"""Forces and energies of components and equation-layer terms.
+
+Every component force is both a set of spatial loads on links (used by the recursive
+algorithms) and, where conservative or dissipative, a term of V or D (used for energies and
+by the Lagrange route).  Equation-layer terms and generalized forces act in q-space.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+
+from .. import ir
+from ..diagnostics import Diagnostic, MechError
+from .kinematics import Kinematics
+from . import templates as tpl
+from .tree import z3
+
+
+@dataclass
+class Loads:
+    point_forces: list = field(default_factory=list)     # (link, r in link coords, F world)
+    torques: list = field(default_factory=list)          # (link, tau world)
+    applied: list = field(default_factory=list)          # the subset from AppliedForce/Torque, for EOM.Q
+    V: object = 0                                         # component potential energy
+    D: object = 0                                         # component Rayleigh dissipation
+    Q_gen: object = None                                  # q-space: GeneralizedForce (n,)
+    T_terms: object = 0                                   # equation-layer terms
+    V_terms: object = 0
+    D_terms: object = 0
+
+    def link_forces(self, kin: Kinematics) -> dict[int, tuple]:
+        """External force per link, (n, f) in link coordinates about the link origin."""
+        out: dict[int, tuple] = {}
+        for i, r, F in self.point_forces:
+            if i < 0:
+                continue
+            n, f = tpl.point_force()(kin.R[i], r, F)
+            a = out.get(i)
+            out[i] = (n, f) if a is None else (a[0] + n, a[1] + f)
+        for i, tau in self.torques:
+            if i < 0:
+                continue
+            n = ca.mtimes(kin.R[i].T, tau)
+            a = out.get(i)
+            out[i] = (n, z3()) if a is None else (a[0] + n, a[1])
+        return out
+
+    def Q_extra(self, env):
+        """q-space forces of the equation layer: Q_gen - dV_terms/dq - dD_terms/dqd."""
+        Q = self.Q_gen
+        if not _is_zero(self.V_terms):
+            Q = Q - ca.gradient(self.V_terms, env.q)
+        if not _is_zero(self.D_terms):
+            Q = Q - ca.gradient(self.D_terms, env.qd)
+        return Q
+
+    def Q_applied(self, kin: Kinematics, env):
+        """Generalized forces of applied forces/torques by virtual work, plus Q_gen."""
+        Q = self.Q_gen
+        for kind, i, r, F in self.applied:
+            if i < 0:
+                continue
+            vel = kin.link_vel(i, r) if kind == "force" else ca.mtimes(kin.R[i], kin.w[i])
+            Q = Q + ca.mtimes(ca.jacobian(vel, env.qd).T, F)
+        return Q
+
+
+def _is_zero(x) -> bool:
+    return isinstance(x, (int, float)) and x == 0 or (isinstance(x, ca.SX) and x.is_zero())
+
+
+def build_loads(model: ir.Model, kin: Kinematics, env) -> Loads:
+    tree = kin.tree
+    n = len(env.coords)
+    L = Loads(Q_gen=ca.SX.zeros(n, 1))
+    V, D = ca.SX(0), ca.SX(0)
+
+    def vec(v):
+        return ca.vertcat(*[ca.SX(env.translate(c)) for c in v])
+
+    masses = {}
+    for b in model.bodies:
+        if b.kind in ("point", "rigid"):
+            masses[b.name] = env.translate(b.mass)
+
+    for f in model.forces:
+        if isinstance(f, ir.Gravity):
+            g = vec(f.g)
+            for b in model.bodies:
+                if b.name not in masses:
+                    continue
+                i, c = kin.com_link(b)
+                m = masses[b.name]
+                L.point_forces.append((i, c, m * g))
+                V = V - m * ca.dot(g, kin.link_pos(i, c))
+        elif isinstance(f, ir.SpringDamper):
+            ia, ra = tree.point_in_link(f.a)
+            ib, rb = tree.point_in_link(f.b)
+            d = kin.link_pos(ib, rb) - kin.link_pos(ia, ra)
+            dd = kin.link_vel(ib, rb) - kin.link_vel(ia, ra)
+            k, c, l0 = (env.translate(x) for x in (f.k, f.c, f.l0))
+            l0_zero = isinstance(f.l0, ir.Const) and f.l0.value == 0
+            l = ca.norm_2(d)
+            F = ca.SX.zeros(3, 1)
+            if f.kind in ("spring", "spring-damper") and not _is_zero(ca.SX(k)):
+                F = F - (k * d if l0_zero else k * (l - l0) * d / l)
+                V = V + 0.5 * k * ((ca.dot(d, d) if l0_zero else (l - l0) ** 2))
+            if f.kind in ("damper", "spring-damper") and not _is_zero(ca.SX(c)):
+                ldot = ca.dot(d, dd) / l
+                F = F - c * ldot * d / l
+                D = D + 0.5 * c * ldot ** 2
+            L.point_forces.append((ib, rb, F))
+            L.point_forces.append((ia, ra, -F))
+        elif isinstance(f, ir.Gravitation):
+            G = env.translate(f.G)
+            bodies = [model.body(b) for b in f.bodies]
+            cs = [kin.com_link(b) for b in bodies]
+            pos = [kin.link_pos(i, c) for i, c in cs]
+            for a in range(len(bodies)):
+                for b in range(a + 1, len(bodies)):
+                    ma, mb = masses.get(bodies[a].name, 0), masses.get(bodies[b].name, 0)
+                    d = pos[b] - pos[a]
+                    r = ca.norm_2(d)
+                    F = -G * ma * mb * d / r ** 3          # on b
+                    L.point_forces.append((cs[b][0], cs[b][1], F))
+                    L.point_forces.append((cs[a][0], cs[a][1], -F))
+                    V = V - G * ma * mb / r
+        elif isinstance(f, ir.AppliedForce):
+            i, r = tree.point_in_link(f.point)
+            F = vec(f.F)
+            if f.frame != "world":
+                F = ca.mtimes(kin.body_rot(f.frame), F)
+            L.point_forces.append((i, r, F))
+            L.applied.append(("force", i, r, F))
+        elif isinstance(f, ir.AppliedTorque):
+            i = tree.body_link[f.body]
+            tau = vec(f.tau)
+            if f.frame != "world":
+                tau = ca.mtimes(kin.body_rot(f.frame), tau)
+            L.torques.append((i, tau))
+            L.applied.append(("torque", i, None, tau))
+        elif isinstance(f, ir.GeneralizedForce):
+            try:
+                k = env.coords.index(f.coordinate)
+            except ValueError:
+                raise MechError(Diagnostic("E620", f"generalized force '{f.name}' on unknown coordinate "
+                                                   f"'{f.coordinate}'", f.span)) from None
+            L.Q_gen[k] = L.Q_gen[k] + env.translate(f.Q)
+        else:
+            raise MechError(Diagnostic("E621", f"unsupported force '{getattr(f, 'name', f)}'"))
+    L.V, L.D = V, D
+    return L
+
+
+def add_terms(L: Loads, model: ir.Model, env) -> None:
+    """Equation-layer terms (and the component Potential) into L.T_terms/V_terms/D_terms."""
+    T, V, D = ca.SX(0), ca.SX(0), ca.SX(0)
+    for t in model.terms:
+        e = env.translate(t.expr)
+        if t.kind == "kinetic":
+            T = T + e
+        elif t.kind == "potential":
+            V = V + e
+        elif t.kind == "dissipation":
+            D = D + e
+        else:
+            raise MechError(Diagnostic("E622", f"unknown term kind '{t.kind}'", t.span))
+    L.T_terms, L.V_terms, L.D_terms = T, V, D

@@ -1,0 +1,52 @@
+"""Resolution of the IR's kinematic leaves (PointPos, PointVel, BodyRot, BodyOmega,
+EnergyRef, ReactionRef) to SX, for exprs.CasadiEnv(query=...)."""
+from __future__ import annotations
+
+from typing import Callable
+
+from .. import ir
+from ..diagnostics import Diagnostic, MechError
+from .kinematics import Kinematics
+
+
+class Query:
+    def __init__(self, model: ir.Model, kin: Kinematics):
+        self.model = model
+        self.kin = kin
+        self.energies: dict[str, object] | None = None       # set once T, V, D are known
+        self.reaction: Callable[[ir.ReactionRef], object] | None = None
+        self._bodies = {b.name for b in model.bodies} | {"world"}
+
+    def _point(self, name):
+        if name not in self.kin.tree._points:
+            raise MechError(Diagnostic("E607", f"unknown point '{name}'"))
+        return name
+
+    def _body(self, name):
+        if name not in self._bodies:
+            raise MechError(Diagnostic("E615", f"unknown body '{name}'"))
+        return name
+
+    def __call__(self, n: ir.Expr):
+        k = self.kin
+        if isinstance(n, ir.PointPos):
+            return k.point_pos(self._point(n.point))[n.i]
+        if isinstance(n, ir.PointVel):
+            return k.point_vel(self._point(n.point))[n.i]
+        if isinstance(n, ir.BodyRot):
+            return k.body_rot(self._body(n.body))[n.i, n.j]
+        if isinstance(n, ir.BodyOmega):
+            return k.body_omega(self._body(n.body))[n.i]
+        if isinstance(n, ir.EnergyRef):
+            if self.energies is None:
+                raise MechError(Diagnostic("E623", f"{n.kind} energy used inside a force or energy term",
+                                           help="energies may appear in outputs only"))
+            if n.kind not in self.energies:
+                raise MechError(Diagnostic("E624", f"unknown energy '{n.kind}'"))
+            return self.energies[n.kind]
+        if isinstance(n, ir.ReactionRef):
+            if self.reaction is None:
+                raise MechError(Diagnostic("E625", f"reaction of joint '{n.joint}' used inside a force or term",
+                                           help="reactions may appear in outputs only"))
+            return self.reaction(n)
+        raise MechError(Diagnostic("E626", f"cannot evaluate {type(n).__name__} here"))

@@ -1,0 +1,521 @@
+"""Simulation of equations of motion: ``simulate(eom, t_end, ...) -> Result``.
+
+Minimal-coordinate ODEs are integrated here (CasADi plugins or scipy, see
+:mod:`mechdsl.integrators`); constrained models go to ``mechdsl.dae.simulate_dae`` and the
+symplectic methods to ``mechdsl.symplectic.simulate_symplectic``.  A failed run never
+raises: the Result keeps every output point reached and ``Result.failure`` says when and
+why.  See docs/simulate.md (users) and docs/internals/numerics.md (design).
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import platform
+import time
+from typing import Any
+
+import numpy as np
+
+from . import integrators as I
+from .codegen import FastFunction, casadi_functions, singularity_monitors
+from .diagnostics import UsageError, did_you_mean
+from .result import Failure, Result
+
+DEFAULT_POINTS = 501
+MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
+SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
+ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
+KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions")
+
+
+def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", points=None, outputs=None,
+             x0=None, p=None, progress=None, **opts) -> Result:
+    """Integrate ``eom`` from t_start to t_end and sample it on ``points`` equidistant times.
+
+    x0: full state [q; qd] (array) or a dict of overrides {coordinate: value, "der(c)": value};
+    p: parameter vector or dict of overrides {name: value} (dependent parameters are not
+    re-evaluated: use Model.with_params for that).  outputs: names of EOM.outputs to record
+    (default all).  progress: True shows a bar on stderr for runs longer than 0.5 s, or a
+    callable(t, t_end).  opts: compiled (bool), max_steps (per output interval), dt (fixed-step
+    methods), integrator_options (dict passed to the back end), singularity_threshold.
+    """
+    method = str(method or "auto").lower()
+    if eom.g is not None:
+        return _dispatch("mechdsl.dae", "simulate_dae", "constrained models (DAE)", eom, t_end,
+                         t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
+                         outputs=outputs, x0=x0, p=p, progress=progress, **opts)
+    if method in I.SYMPLECTIC:
+        return _dispatch("mechdsl.symplectic", "simulate_symplectic", f"the symplectic method '{method}'",
+                         eom, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
+                         outputs=outputs, x0=x0, p=p, progress=progress, **opts)
+    wall0 = time.perf_counter()
+    unknown = sorted(set(opts) - set(KNOWN_OPTS))
+    if unknown:
+        hint = did_you_mean(unknown[0], KNOWN_OPTS)
+        raise UsageError(f"unknown simulation option '{unknown[0]}'" + (f"; {hint}" if hint else ""))
+    if method != "auto" and method not in I.METHODS:
+        names = ["auto", *I.METHODS, *I.SYMPLECTIC]
+        hint = did_you_mean(method, names)
+        raise UsageError(f"unknown method '{method}'" + (f"; {hint}" if hint else "")
+                         + f" (methods: {', '.join(names)})")
+    t0, t1, rtol, atol, npts = _check_numbers(t_start, t_end, rtol, atol, points)
+    pv = parameter_vector(eom, p)
+    xs = start_vector(eom, x0, pv)
+    out_names = _check_outputs(eom, outputs)
+    compiled = bool(opts.get("compiled", False))
+    funcs = opts.get("functions") or casadi_functions(eom, compiled=compiled, names=("ode", "ode_jacobian"))
+    post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
+    grid = np.linspace(t0, t1, npts)
+    meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
+                            "warnings": [], "notes": list(getattr(funcs, "notes", []))}
+    if compiled and not getattr(funcs, "compiled", False):
+        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
+
+    if method == "auto":
+        method, reason, info = choose_method(eom, funcs, xs, pv, t0, t1, rtol)
+        meta["auto"] = info
+    else:
+        reason = "requested"
+    meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    max_steps = int(opts.get("max_steps") or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
+    extra = dict(opts.get("integrator_options") or {})
+    bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
+    try:
+        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1)
+    finally:
+        bar.close()
+    if fixed is not None:
+        meta["fixed_steps"] = fixed
+    failure = None
+    if run.error is not None or run.reached < len(grid):
+        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra)
+    n_ok = max(run.reached, 1)
+    X = run.X[:n_ok].copy()
+    X[0] = xs
+    t = grid[:n_ok].copy()
+    signals = compute_signals(eom, post, t, X, pv, out_names)
+    _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold", SINGULARITY_THRESHOLD)))
+    stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
+             "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
+    stats.update(_energy_drift(signals))
+    stats["raw"] = run.stats
+    if run.messages.strip():
+        meta["integrator_messages"] = _dedup(run.messages)
+    meta["conservative"] = is_conservative(eom)
+    meta["options"] = {"t_start": t0, "t_end": t1, "rtol": rtol, "atol": atol, "points": npts,
+                       "method": method, "compiled": bool(getattr(funcs, "compiled", False)),
+                       "max_steps": max_steps, "outputs": list(out_names),
+                       "parameters": dict(zip(eom.params, map(float, pv))),
+                       "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
+                                 **{f"der({c})": float(v) for c, v in zip(eom.coords, xs[eom.n:])}},
+                       **({"integrator_options": extra} if extra else {})}
+    meta["versions"] = versions()
+    n = eom.n
+    return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
+                  stats=stats, metadata=meta, failure=failure)
+
+
+# --------------------------------------------------------------------------- dispatch and inputs
+
+
+def _dispatch(module, func, what, eom, t_end, **kw):
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        if e.name == module:
+            raise UsageError(f"{what} cannot be simulated: module {module} is not available in this installation") from None
+        raise
+    if not hasattr(mod, func):
+        raise UsageError(f"{what} cannot be simulated: {module}.{func} is missing")
+    return getattr(mod, func)(eom, t_end, **kw)
+
+
+def _check_numbers(t_start, t_end, rtol, atol, points):
+    try:
+        t0, t1, rtol, atol = float(t_start), float(t_end), float(rtol), float(atol)
+    except (TypeError, ValueError):
+        raise UsageError("t_start, t_end, rtol and atol must be numbers") from None
+    if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
+        raise UsageError(f"the end time must be a finite number after the start time (got {t0} .. {t1})")
+    if not (0 < rtol < 1) or not (0 < atol < 1) or not math.isfinite(atol):
+        raise UsageError(f"tolerances must lie in (0, 1) (got rtol={rtol}, atol={atol})")
+    if rtol < 1e-14:
+        raise UsageError(f"rtol={rtol} is below what double precision can deliver (use at least 1e-14)")
+    npts = DEFAULT_POINTS if points is None else points
+    if isinstance(npts, float) and npts == int(npts):
+        npts = int(npts)
+    if not isinstance(npts, (int, np.integer)) or isinstance(npts, bool) or npts < 2:
+        raise UsageError(f"points must be an integer >= 2 (the number of output times including both ends); got {points!r}")
+    return t0, t1, rtol, atol, int(npts)
+
+
+def parameter_vector(eom, p) -> np.ndarray:
+    base = np.array(eom.param_values, float).ravel()
+    if p is None:
+        return base
+    if isinstance(p, dict):
+        out = base.copy()
+        for k, v in p.items():
+            if k not in eom.params:
+                hint = did_you_mean(k, eom.params)
+                raise UsageError(f"'{k}' is not a parameter of {eom.name}" + (f"; {hint}" if hint else ""))
+            out[eom.params.index(k)] = float(v)
+        return out
+    arr = np.array(p, float).ravel()
+    if arr.size != base.size:
+        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters ({', '.join(eom.params)})")
+    return arr
+
+
+def start_vector(eom, x0, pv) -> np.ndarray:
+    n = eom.n
+    q0, qd0 = casadi_functions(eom, names=("start",))["start"](pv)
+    base = np.r_[np.array(q0, float).ravel(), np.array(qd0, float).ravel()]
+    if x0 is None:
+        out = base
+    elif isinstance(x0, dict):
+        out = base.copy()
+        for k, v in x0.items():
+            name, speed = k, False
+            if k.startswith("der(") and k.endswith(")"):
+                name, speed = k[4:-1], True
+            if name not in eom.coords:
+                hint = did_you_mean(name, eom.coords)
+                raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
+            out[eom.coords.index(name) + (n if speed else 0)] = float(v)
+    else:
+        out = np.array(x0, float).ravel()
+        if out.size != 2 * n:
+            raise UsageError(f"x0 has {out.size} entries; expected {2 * n} (coordinates then their speeds)")
+    if not np.isfinite(out).all():
+        bad = [(eom.coords + tuple(f"der({c})" for c in eom.coords))[i] for i in np.flatnonzero(~np.isfinite(out))]
+        raise UsageError(f"start values are not finite: {', '.join(bad)}")
+    return out
+
+
+def _check_outputs(eom, outputs) -> tuple[str, ...]:
+    if outputs is None:
+        return tuple(eom.outputs)
+    if isinstance(outputs, str):
+        outputs = [outputs]
+    names = []
+    coordish = set(eom.coords) | {f"der({c})" for c in eom.coords} | set(ENERGY_NAMES)
+    for o in outputs:
+        if o in eom.outputs:
+            if o not in names:
+                names.append(o)
+        elif o not in coordish:
+            hint = did_you_mean(o, list(eom.outputs) + sorted(coordish))
+            raise UsageError(f"'{o}' is not an output of {eom.name}" + (f"; {hint}" if hint else ""))
+    return tuple(names)
+
+
+# --------------------------------------------------------------------------- method choice
+
+
+def choose_method(eom, funcs, x0, pv, t0, t1, rtol) -> tuple[str, str, dict]:
+    """method=auto: stiffness from the Jacobian's eigenvalues at the start, then the tolerance.
+
+    Rules (docs/internals/numerics.md): stiff (a decay rate much faster than the slowest
+    time scale and than the horizon) -> cvodes-bdf; otherwise erk (adaptive explicit
+    Runge-Kutta 5(4)), which beat cvodes-adams, idas and scipy at every tolerance from 1e-4
+    to 1e-12 on the work-precision benchmark.
+    """
+    span = t1 - t0
+    info: dict[str, Any] = {}
+    try:
+        J = FastFunction(funcs["ode_jacobian"])(t0, x0, pv)
+        lam = np.linalg.eigvals(J) if np.isfinite(J).all() else None
+    except Exception:  # noqa: BLE001
+        lam = None
+    if lam is None:
+        return "cvodes-bdf", "the Jacobian at the start is not finite; BDF is the most robust choice", info
+    mag = np.abs(lam)
+    rho = float(mag.max()) if mag.size else 0.0
+    decay = float(max(0.0, (-lam.real).max())) if lam.size else 0.0
+    nonzero = mag[mag > 1e-9 * max(rho, 1.0)]
+    slow = max(1.0 / span, float(nonzero.min()) if nonzero.size else 0.0)
+    ratio = decay / slow
+    info.update(spectral_radius=rho, fastest_decay_rate=decay, slowest_rate=slow, stiffness_ratio=ratio,
+                horizon=span)
+    if ratio > 1e3 and decay * span > 1e2:
+        return ("cvodes-bdf",
+                f"stiff: the fastest mode decays at {decay:.3g}/s, {ratio:.3g} times the slowest rate "
+                f"{slow:.3g}/s (Jacobian eigenvalues at t = {t0:g}); BDF takes steps the explicit methods cannot", info)
+    return ("erk", f"not stiff (stiffness ratio {ratio:.3g} < 1e3 from the Jacobian at t = {t0:g}); the adaptive "
+            f"explicit Runge-Kutta 5(4) needs no Jacobian and was fastest for a given accuracy in "
+            f"benchmarks/integrators.py", info)
+
+
+def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]:
+    """Steps for the fixed-step methods: h = dt, or h * omega = 0.5 rtol^(1/order), omega the
+    fastest rate seen at the start: the spectral radius of the Jacobian, sqrt(max |qdd|) and
+    max |qd| (coordinates in units of order 1), and 2 pi / horizon."""
+    span = t1 - t0
+    if dt is not None:
+        dt = float(dt)
+        if not dt > 0:
+            raise UsageError(f"dt must be positive (got {dt})")
+        return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
+    rho, omega_acc = 0.0, 0.0
+    try:
+        J = FastFunction(funcs["ode_jacobian"])(t0, x0, pv)
+        rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
+        f = FastFunction(funcs["ode"])(t0, x0, pv)
+        n = len(x0) // 2
+        if np.isfinite(f).all():  # time scales of the motion itself: sqrt(|qdd|) and |qd| (units of 1)
+            omega_acc = max(float(np.sqrt(np.abs(f[n:]).max(initial=0.0))), float(np.abs(x0[n:]).max(initial=0.0)))
+    except Exception:  # noqa: BLE001
+        pass
+    omega = max(rho, omega_acc, 2 * math.pi / span)
+    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
+    steps = min(max(1, math.ceil(span / h)), 10_000_000)
+    return steps, (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
+                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+
+
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1):
+    backend = I.METHODS[method][0]
+    if backend == "scipy":
+        rhs = FastFunction(funcs["ode"])
+        jacf = FastFunction(funcs["ode_jacobian"])
+        run = I.run_scipy(method, lambda t, y: rhs(t, y, pv), lambda t, y: jacf(t, y, pv), grid, xs,
+                          rtol, atol, max_steps, bar, extra, hmin=min_step(t0, t1))
+        return run, None
+    fixed = None
+    steps = None
+    if method in I.FIXED_STEP:
+        steps, why = fixed_step_count(method, funcs, xs, pv, t0, t1, rtol, dt)
+        fixed = {"target_steps": steps, "why": why}
+    elif dt is not None:
+        raise UsageError(f"dt applies to the fixed-step methods ({', '.join(I.FIXED_STEP)}), not to {method}")
+    opts = I.casadi_options(method, rtol, atol, max_steps, steps, extra, hmin=min_step(t0, t1))
+    try:
+        run = I.run_casadi(method, funcs["ode"], grid, xs, pv, opts, bar)
+    except RuntimeError as e:  # bad integrator options
+        raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
+    return run, fixed
+
+
+def min_step(t0, t1) -> float:
+    """Steps below this are noise in double precision: the run is declared failed instead."""
+    return 1e-12 * max(t1 - t0, abs(t0), abs(t1))
+
+
+def _counts(method, raw):
+    if I.METHODS[method][0] == "scipy":
+        return dict(raw)
+    return I.casadi_counts(method, raw)
+
+
+# --------------------------------------------------------------------------- failure
+
+
+def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra) -> Failure:
+    """Say when and why a run stopped: locate the failure inside the last output interval
+    (re-integrating it on a fine grid) and look at the state there."""
+    k = max(run.reached - 1, 0)
+    t_last, x_last = float(grid[k]), (run.X[k] if run.reached else xs)
+    t_fail = run.fail_time
+    x_fail = run.fail_state
+    unstable = False
+    if x_fail is None and k + 1 < len(grid) and I.METHODS[method][0] == "casadi":
+        # zoom in: re-integrate the failing interval on finer grids (3 levels of 50 subintervals);
+        # a fixed-step method is checked with the adaptive erk instead
+        zoom = "erk" if method in I.FIXED_STEP else method
+        a, b, xa = t_last, float(grid[k + 1]), x_last
+        hmin = min_step(float(grid[0]), float(grid[-1]))
+        try:
+            opts = I.casadi_options(zoom, rtol, atol, max_steps, None, extra if zoom == method else {}, hmin=hmin)
+            for level in range(3):
+                if b - a <= 100 * hmin:
+                    break
+                fine = np.linspace(a, b, 51)
+                sub = I.run_casadi(zoom, funcs["ode"], fine, xa, pv, opts, I.Progress(False, 0, 1))
+                if sub.error is None:
+                    unstable = level == 0 and zoom != method
+                    break
+                j = max(sub.reached - 1, 0)
+                a, b, xa = float(fine[j]), float(fine[min(j + 1, 50)]), (sub.X[j] if sub.reached else xa)
+                if sub.fail_time is not None and a <= sub.fail_time <= b:
+                    t_fail = sub.fail_time
+            x_fail = xa
+            if t_fail is None or not (t_last <= t_fail <= float(grid[k + 1])):
+                t_fail = b
+        except Exception:  # noqa: BLE001 - diagnosis must not fail the run
+            x_fail = x_last
+    if unstable:
+        return Failure(time=float(grid[k + 1]), cause="fixed step too large",
+                       detail=(f"{method} became unstable between t = {t_last:.10g} and {float(grid[k + 1]):.10g}, "
+                               f"where the adaptive erk integrates without trouble; pass a smaller dt; "
+                               f"integrator: {_short(run.error or '')}"))
+    if x_fail is None:
+        x_fail = x_last
+    if t_fail is None:
+        t_fail = float(grid[min(k + 1, len(grid) - 1)])
+    cause, detail = _classify(eom, post, funcs, run.error or "", x_fail, xs, pv, t_fail)
+    where = f"last output point reached: t = {t_last:.10g}"
+    return Failure(time=float(t_fail), cause=cause, detail=f"{detail}; {where}" if detail else where)
+
+
+def _classify(eom, post, funcs, error, x, x0, pv, t):
+    n = eom.n
+    err = error.upper()
+    if not np.isfinite(x).all():
+        return "non-finite state", f"state became {x[~np.isfinite(x)][0]} (integrator: {_short(error)})"
+    try:
+        mm = FastFunction(post["mass_matrix"])
+        arg = x[:n] if post["mass_matrix"].name_in(0) == "q" else x
+        M = mm(arg, t, pv) if post["mass_matrix"].name_in(0) == "q" else mm(t, arg, pv)
+        M0 = mm(x0[:n], t, pv) if post["mass_matrix"].name_in(0) == "q" else mm(t, x0, pv)
+        M = np.atleast_2d(M)
+        M0 = np.atleast_2d(M0)
+        ev = np.linalg.eigvalsh(0.5 * (M + M.T))
+        ev0 = np.linalg.eigvalsh(0.5 * (M0 + M0.T))
+        scale = max(float(np.abs(ev0).max()), 1e-300)
+        # heuristic: M lost (nearly) all stiffness in some direction compared with the start
+        if not np.isfinite(ev).all() or ev.min() <= 1e-4 * scale or ev.min() <= 1e-10 * max(abs(ev.max()), 1e-300):
+            w, V = np.linalg.eigh(0.5 * (M + M.T))
+            vec = V[:, 0]
+            who = [eom.coords[i] for i in np.argsort(-np.abs(vec))[:3] if abs(vec[i]) > 0.3]
+            return ("singular mass matrix",
+                    f"smallest eigenvalue of M is {ev.min():.3g} (largest at the start {scale:.3g})"
+                    + (f"; coordinates involved: {', '.join(who)}" if who else ""))
+    except Exception:  # noqa: BLE001
+        pass
+    try:
+        f = FastFunction(funcs["ode"])(t, x, pv)
+        if not np.isfinite(f).all():
+            return "non-finite right-hand side", f"accelerations are not finite at t = {t:.6g}"
+    except Exception:  # noqa: BLE001
+        pass
+    big = float(np.abs(x).max())
+    if big > 1e8 * (1.0 + float(np.abs(x0).max())):
+        return "solution blows up", f"|x| reached {big:.3g}; integrator: {_short(error)}"
+    if "TOO_MUCH_WORK" in err or "MAX_NUM_STEPS" in err or "MORE THAN" in err:
+        return "too many steps", (f"the step limit per output interval was reached (raise max_steps, or try a "
+                                  f"stiff method such as cvodes-bdf); integrator: {_short(error)}")
+    if "TOO_MUCH_ACC" in err:
+        return "tolerance too small", f"integrator: {_short(error)}"
+    if "ERR_FAIL" in err or "CONV_FAIL" in err or "STEP SIZE" in err or "MIN_STEP" in err or "LESS THAN SPACING" in err:
+        return "step size too small", f"integrator: {_short(error)}"
+    if "ROOTFINDER" in err:
+        return "step size too large", f"the Newton iteration of the implicit step failed; pass a smaller dt; integrator: {_short(error)}"
+    if "RHSFUNC" in err or "RES_FAIL" in err or "NAN" in err:
+        return "non-finite right-hand side", f"integrator: {_short(error)}"
+    return "integrator failure", _short(error)
+
+
+def _short(error: str) -> str:
+    lines = [ln.strip() for ln in (error or "").strip().splitlines() if ln.strip()]
+    if not lines:
+        return "no message"
+    s = lines[-1]
+    s = s.split(": ", 1)[1] if s.startswith(".../") and ": " in s else s
+    return s[:300]
+
+
+# --------------------------------------------------------------------------- signals
+
+
+def compute_signals(eom, post, t, X, pv, out_names) -> dict[str, np.ndarray]:
+    """Outputs, energies (and constraint residuals / singularity monitors when present)
+    on the sample times: one vectorized (mapped) call per Function."""
+    import casadi as ca
+
+    N = len(t)
+    sig: dict[str, np.ndarray] = {}
+    if N == 0:
+        return sig
+    T = t.reshape(1, N)
+    XT = X.T
+    P = np.asarray(pv, float).reshape(-1, 1)
+
+    def mapped(f):
+        res = f.map(N)(T, XT, P)
+        return [np.array(r, float) for r in (res if isinstance(res, (list, tuple)) else [res])]
+
+    if out_names:
+        f = post["outputs"]
+        for name, val in zip(f.name_out(), mapped(f)):
+            val = np.asarray(val, float)
+            rows = val.shape[0] if val.ndim == 2 else 1
+            if rows == 1:
+                sig[name] = val.reshape(-1)
+            else:
+                for i in range(rows):
+                    sig[f"{name}[{i + 1}]"] = val[i].reshape(-1)
+    e = mapped(post["energy"])
+    for name, val in zip(ENERGY_NAMES, e):
+        sig[name] = np.asarray(val, float).reshape(-1)
+    if eom.g is not None:
+        g, gd = mapped(casadi_functions(eom, names=("constraints",))["constraints"])
+        for i, cn in enumerate(eom.constraint_names):
+            sig[f"residual({cn})"] = g[i].reshape(-1)
+    if singularity_monitors(eom):
+        f = post["singularity"]
+        for name, val in zip(f.name_out(), mapped(f)):
+            sig[f"singularity({name})"] = np.asarray(val, float).reshape(-1)
+    del ca
+    return sig
+
+
+def _singularity_report(eom, signals, t, meta, threshold):
+    mons = getattr(eom, "singularity_monitors", None) or {}
+    if not mons or len(t) == 0:
+        return
+    report = {}
+    for name, spec in mons.items():
+        thr = spec[1] if isinstance(spec, tuple) and len(spec) > 1 else threshold
+        v = np.abs(signals[f"singularity({name})"])
+        i = int(np.argmin(v))
+        report[name] = {"closest": float(v[i]), "time": float(t[i]), "threshold": float(thr)}
+        if v[i] < thr:
+            meta["warnings"].append(
+                f"the run came within {v[i]:.3g} of the singular configuration of {name} at t = {t[i]:.6g} "
+                f"(Euler/Cardan angles lose a degree of freedom there; accuracy degrades; a quaternion "
+                f"parametrization avoids this)")
+    meta["singularity"] = report
+
+
+def _energy_drift(signals) -> dict:
+    E = signals.get("energy")
+    if E is None or len(E) == 0 or not np.isfinite(E).all():
+        return {}
+    dE = float(np.abs(E - E[0]).max())
+    scale = max(abs(float(E[0])), float(np.abs(signals["kinetic_energy"]).max()),
+                float(np.abs(signals["potential_energy"]).max()), 1e-300)
+    return {"energy_drift": dE, "energy_drift_relative": dE / scale}
+
+
+def is_conservative(eom) -> bool:
+    import casadi as ca
+
+    try:
+        D, Q = ca.SX(eom.D), ca.SX(eom.Q)
+        return bool(D.is_zero() and Q.is_zero()
+                    and not ca.depends_on(ca.vertcat(ca.SX(eom.T), ca.SX(eom.V)), eom.t))
+    except Exception:  # noqa: BLE001
+        return False
+
+
+def _dedup(text: str) -> list[str]:
+    seen, out = set(), []
+    for ln in text.splitlines():
+        ln = ln.strip()
+        if ln and ln not in seen:
+            seen.add(ln)
+            out.append(ln)
+        if len(out) >= 20:
+            break
+    return out
+
+
+def versions() -> dict[str, str]:
+    import casadi
+    import scipy
+
+    from . import __version__
+
+    return {"mechdsl": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
+            "scipy": scipy.__version__, "python": platform.python_version()}

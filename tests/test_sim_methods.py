@@ -1,0 +1,142 @@
+"""Every method runs, agrees with a reference, and conserves energy to a tolerance-scaled bound."""
+from __future__ import annotations
+
+import sys
+import types
+
+import numpy as np
+import pytest
+
+from mechdsl.diagnostics import UsageError
+from mechdsl.integrators import METHODS
+from mechdsl.simulate import simulate
+from sim_models import chain, pendulum, stiff_oscillator
+
+ALL = ["auto", *METHODS]
+
+
+@pytest.fixture(scope="module")
+def reference():
+    e = chain(2)
+    r = simulate(e, 2.0, method="scipy-dop853", rtol=1e-13, atol=1e-13, points=21)
+    return e, r
+
+
+@pytest.mark.parametrize("method", ALL)
+def test_every_method_runs_accurately_and_conserves_energy(method, reference):
+    e, ref = reference
+    rtol = 1e-8
+    r = simulate(e, 2.0, method=method, rtol=rtol, atol=rtol * 1e-2, points=21)
+    assert r.success, r.message
+    assert r.t.shape == (21,) and r.q.shape == (21, 2) and r.qd.shape == (21, 2)
+    assert r.metadata["method"] == (method if method != "auto" else r.metadata["method"])
+    assert r.metadata["method"] in METHODS and r.metadata["method_reason"]
+    for key in ("steps", "wall_time"):
+        assert key in r.stats
+    assert r.stats["steps"] > 0
+    # state error against an independent high-accuracy run (scipy DOP853 at 1e-13)
+    err = np.abs(np.c_[r.q, r.qd] - np.c_[ref.q, ref.qd]).max()
+    assert err < 2e3 * rtol, err
+    # energy: a conservative model; drift bounded by a multiple of the tolerance
+    assert r.metadata["conservative"] is True
+    assert r.stats["energy_drift_relative"] < 300 * rtol
+
+
+@pytest.mark.parametrize("method", ["erk", "cvodes-bdf", "scipy-dop853", "rk"])
+def test_energy_drift_scales_with_tolerance(method):
+    e = pendulum()
+    loose = simulate(e, 5.0, method=method, rtol=1e-4, atol=1e-6, points=11)
+    tight = simulate(e, 5.0, method=method, rtol=1e-9, atol=1e-11, points=11)
+    assert tight.stats["energy_drift_relative"] < 1e-2 * loose.stats["energy_drift_relative"]
+    assert tight.stats["energy_drift_relative"] < 300 * 1e-9
+
+
+def test_auto_explains_its_choice():
+    r = simulate(chain(2), 1.0)
+    assert r.metadata["method"] == "erk"
+    assert "not stiff" in r.metadata["method_reason"]
+    assert r.metadata["auto"]["stiffness_ratio"] < 1e3
+    s = simulate(stiff_oscillator(), 1.0)
+    assert s.metadata["method"] == "cvodes-bdf"
+    assert s.metadata["method_reason"].startswith("stiff")
+    assert s.metadata["auto"]["stiffness_ratio"] > 1e3
+
+
+def test_stiff_model_bdf_needs_far_fewer_steps_than_explicit():
+    e = stiff_oscillator()
+    bdf = simulate(e, 2.0, method="cvodes-bdf", rtol=1e-6, atol=1e-8, points=11)
+    erk = simulate(e, 2.0, method="erk", rtol=1e-6, atol=1e-8, points=11)
+    assert bdf.success and erk.success
+    assert bdf.stats["steps"] * 20 < erk.stats["steps"]
+    assert np.abs(bdf.q - erk.q).max() < 1e-4
+
+
+def test_unknown_method_and_options_are_usage_errors():
+    e = pendulum()
+    with pytest.raises(UsageError, match="did you mean 'cvodes-bdf'"):
+        simulate(e, 1.0, method="cvodes-bfd")
+    with pytest.raises(UsageError, match="unknown simulation option"):
+        simulate(e, 1.0, max_step=3)
+    with pytest.raises(UsageError, match="end time"):
+        simulate(e, 0.0)
+    with pytest.raises(UsageError, match="points"):
+        simulate(e, 1.0, points=1)
+    with pytest.raises(UsageError, match="x0 has 3 entries"):
+        simulate(e, 1.0, x0=[1, 2, 3])
+    with pytest.raises(UsageError, match="not a coordinate"):
+        simulate(e, 1.0, x0={"theta2": 1.0})
+    with pytest.raises(UsageError, match="not an output"):
+        simulate(e, 1.0, outputs=["z"])
+    with pytest.raises(UsageError, match="not a parameter"):
+        simulate(e, 1.0, p={"mass": 2})
+    with pytest.raises(UsageError, match="dt applies"):
+        simulate(e, 1.0, method="erk", dt=0.1)
+
+
+def test_overrides_of_start_values_and_parameters():
+    e = pendulum()
+    r = simulate(e, 1.0, x0={"theta": 0.1, "der(theta)": 0.2}, p={"L": 2.0}, points=3)
+    assert r.q[0, 0] == 0.1 and r.qd[0, 0] == 0.2
+    assert r.metadata["options"]["parameters"]["L"] == 2.0
+    assert abs(r["x"][0] - 2.0 * np.sin(0.1)) < 1e-15
+
+
+def test_outputs_selection_and_signals():
+    e = pendulum()
+    r = simulate(e, 1.0, outputs=["y"], points=5)
+    assert list(r.signals) == ["y", "kinetic_energy", "potential_energy", "energy"]
+    np.testing.assert_allclose(r["y"], -np.cos(r["theta"]), atol=1e-15)
+    np.testing.assert_allclose(r["energy"], r["kinetic_energy"] + r["potential_energy"], atol=1e-12)
+
+
+def test_progress_callback_sees_time_advance():
+    seen = []
+    simulate(chain(2), 2.0, method="erk", progress=lambda t, t1: seen.append((t, t1)))
+    simulate(chain(2), 2.0, method="scipy-rk45", progress=lambda t, t1: seen.append((t, t1)))
+    assert seen and seen[-1] == (2.0, 2.0)
+    assert all(t1 == 2.0 and 0 <= t <= 2.0 for t, t1 in seen)
+
+
+def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
+    e = pendulum()
+    calls = []
+    fake = types.ModuleType("mechdsl.symplectic")
+    fake.simulate_symplectic = lambda eom, t_end, **kw: calls.append((eom, t_end, kw)) or "result"
+    monkeypatch.setitem(sys.modules, "mechdsl.symplectic", fake)
+    assert simulate(e, 3.0, method="stormer-verlet", dt=0.01) == "result"
+    assert calls[0][1] == 3.0 and calls[0][2]["method"] == "stormer-verlet" and calls[0][2]["dt"] == 0.01
+    monkeypatch.setitem(sys.modules, "mechdsl.symplectic", None)
+    with pytest.raises(UsageError, match="symplectic"):
+        simulate(e, 1.0, method="gauss-legendre")
+
+    import casadi as ca
+
+    c = pendulum()
+    c.g = ca.SX(c.q[0] ** 2 - 1)  # any constraint routes to the DAE helper
+    dae = types.ModuleType("mechdsl.dae")
+    dae.simulate_dae = lambda eom, t_end, **kw: ("dae", t_end, kw["rtol"])
+    monkeypatch.setitem(sys.modules, "mechdsl.dae", dae)
+    assert simulate(c, 2.0, rtol=1e-7) == ("dae", 2.0, 1e-7)
+    monkeypatch.setitem(sys.modules, "mechdsl.dae", None)
+    with pytest.raises(UsageError, match="constrained"):
+        simulate(c, 1.0)
