@@ -118,6 +118,8 @@ def render(d: Diagnostic, source: str | None = None) -> str:
         lines = source.splitlines()
         if 1 <= s.line <= len(lines):
             text = lines[s.line - 1].expandtabs(4) if "\t" not in lines[s.line - 1] else lines[s.line - 1].replace("\t", " ")
+            # control characters (escape sequences in a damaged file) are not sent to the terminal
+            text = "".join(c if c.isprintable() else "\ufffd" for c in text)
             if len(text) > 200:  # keep the caret line readable for minified input
                 start = max(0, s.col - 80)
                 text = text[start:start + 160]

@@ -73,6 +73,9 @@ def read_source(path: str | os.PathLike) -> tuple[str, str]:
 
 
 def decode_source(data: bytes, name: str = "<input>") -> str:
+    from .report import forget_source
+
+    forget_source(name)  # an older text of the same name must not be shown under these errors
     if len(data) > MAX_FILE_BYTES:
         raise MechError(Diagnostic("E005", f"file is too large ({len(data)} bytes)", Span(name),
                                    f"the limit is {MAX_FILE_BYTES} bytes"))
@@ -80,7 +83,7 @@ def decode_source(data: bytes, name: str = "<input>") -> str:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = data[:e.start].count(b"\n") + 1
-        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        col = len(data[data.rfind(b"\n", 0, e.start) + 1:e.start].decode("utf-8", "replace")) + 1
         raise MechError(Diagnostic("E002", f"file is not valid UTF-8 (byte 0x{data[e.start]:02x})",
                                    Span(name, line, col, line, col + 1),
                                    "save the file as UTF-8 text")) from None
