@@ -115,7 +115,7 @@ def render(d: Diagnostic, source: str | None = None) -> str:
     loc = f"{s.file}:{s.line}:{s.col}" if s.line > 0 else s.file
     out = [f"{loc}: {d.severity}[{d.code}]: {d.message}"]
     if source is not None and s.line > 0:
-        lines = source.splitlines()
+        lines = [ln.rstrip("\r") for ln in source.split("\n")]  # lines as the lexer counts them (\n only)
         if 1 <= s.line <= len(lines):
             text = lines[s.line - 1].expandtabs(4) if "\t" not in lines[s.line - 1] else lines[s.line - 1].replace("\t", " ")
             # control characters (escape sequences in a damaged file) are not sent to the terminal

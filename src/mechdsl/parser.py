@@ -200,7 +200,9 @@ def _expected_text(expected) -> str:
 
 
 def _syntax_diagnostic(e: UnexpectedInput, text: str, filename: str) -> Diagnostic:
-    lines = text.splitlines() or [""]
+    lines = text.split("\n")  # as the lexer counts lines
+    if len(lines) > 1 and lines[-1] == "":
+        lines.pop()
     line = getattr(e, "line", None) or 1
     col = getattr(e, "column", None) or 1
     if line == -1 or col == -1:  # EOF without position

@@ -157,6 +157,8 @@ def _setting_value(it: ast.Setting, kind: str, values: dict[str, float], model: 
         num = _const_eval(v, values)
     except (ValueError, KeyError, ZeroDivisionError, OverflowError, TypeError) as ex:
         bad(f"'{it.name}' must be a number ({ex})", "use numbers, parameters of the model and + - * / ^")
+    if isinstance(num, complex):
+        bad(f"'{it.name}' has no real value", "a negative number raised to a fractional power is complex")
     if not math.isfinite(num):
         bad(f"'{it.name}' must be finite", "check the formula")
     if kind == "integer":

@@ -23,6 +23,9 @@ KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_e
 ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
 
 
+MAX_ITERATIONS = 1_000_000   # loop and comprehension iterations per model, all loops together
+
+
 class EvalError(Exception):
     """A diagnostic raised while evaluating; caught per declaration/equation and collected."""
 
@@ -191,6 +194,11 @@ class Evaluator:
         n = (b - a) // step + 1
         if n > V.MAX_ELEMENTS:
             fail("E303", f"range {a}:{b} has {n} elements (limit {V.MAX_ELEMENTS})", rng.span, "use a shorter range")
+        # nested loops multiply: bound the total work of a model, not only each range
+        self._iterations = getattr(self, "_iterations", 0) + max(n, 0)
+        if self._iterations > MAX_ITERATIONS:
+            fail("E303", f"the loops of this model run more than {MAX_ITERATIONS} times", rng.span,
+                 "use smaller ranges")
         return list(range(a, b + (1 if step > 0 else -1), step))
 
     # ------------------------------------------------------------------ calls

@@ -136,7 +136,8 @@ class Flattener(Evaluator):
             kind = {"parameter": "parameter", "constant": "parameter", "input": "input",
                     "coordinate": "coordinate", "output": "output", None: "variable"}[d.prefix]
             if d.type_name != "Real" and kind in ("coordinate", "input"):
-                self.diags.error("E215", f"a {d.prefix} must be Real, not {d.type_name}", d.span,
+                self.diags.error("E215", f"{'an' if d.prefix == 'input' else 'a'} {d.prefix} must be Real, "
+                                         f"not {d.type_name}", d.span,
                                  f"declare it as {d.prefix} Real {d.name}")
                 return
             if d.type_name != "Real" and kind == "variable":
@@ -334,7 +335,10 @@ class Flattener(Evaluator):
             m = e.mod.sub.get(attr)
             if m is not None and m.value is not None:
                 b = self.eval(m.value)
-                if isinstance(b, Scalar) and b.const is not None and bad(value, b.const):
+                if not (isinstance(b, Scalar) and b.const is not None):
+                    fail("E301", f"'{attr}' of '{e.decl.name}' must be a constant number", m.value.span,
+                         f"e.g. {attr} = 0")
+                if bad(value, b.const):
                     fail("E313", f"parameter '{name}' = {X.fmt_num(value)} is {'below its minimum' if attr == 'min' else 'above its maximum'} {X.fmt_num(b.const)}",
                          (e.mod.value.span if e.mod.value is not None else e.decl.span),
                          f"change the value or the {attr} bound")
@@ -688,6 +692,8 @@ class Flattener(Evaluator):
 
     def _equation(self, eq, connects: bool) -> None:
         if isinstance(eq, ast.ForEquation):
+            if not _has_work(eq, connects):
+                return  # each pass runs only the loops that hold its kind of equation
             if eq.var in self.entries:
                 fail("E202", f"loop variable '{eq.var}' hides the declaration of the same name", eq.span,
                      "rename the loop variable")
@@ -976,9 +982,31 @@ def _pick(val: Val, inst: CompInst, rank: int, each: bool) -> Val:
     if inst.k < 0 or each:
         return val
     n = len(inst.entry.elements)
-    if isinstance(val, Arr) and len(val.items) == n and len(V.shape_of(val)) == rank + 1:
+    if isinstance(val, Arr) and len(val.items) == n and _rank(val) == rank + 1:
         return val.items[inst.k]
     return val
+
+
+def _has_work(eq: ast.ForEquation, connects: bool) -> bool:
+    """Whether a for-loop holds connect(...) equations (connects=True) or other equations."""
+    for item in eq.body:
+        if isinstance(item, ast.ForEquation):
+            if _has_work(item, connects):
+                return True
+        elif isinstance(item, ast.Connect) == connects:
+            return True
+    return False
+
+
+def _rank(val: Val) -> int:
+    """Number of array levels, along the first elements (O(rank), unlike shape_of: once per element)."""
+    r = 0
+    while isinstance(val, Arr):
+        r += 1
+        if not val.items:
+            break
+        val = val.items[0]
+    return r
 
 
 def _constval(e: ir.Expr) -> float:
