@@ -69,3 +69,10 @@ def test_each_problem_is_reported_once(capsys, tmp_path):
     assert main(["check", str(path)]) == 1
     err = capsys.readouterr().err
     assert err.count("error[E201]: undefined name 'M'") == 1
+
+
+def test_huge_axis_components_are_normalized():
+    # found by the fuzzer: |axis| overflowed (OverflowError) for components near 1e308
+    text = (MODELS / "pendulum.mech").read_text().replace("axis = {0, 0, 1}", "axis = {0, 1e308, 1e308}")
+    j = loads(text, model="Pendulum").model.joints[0]
+    assert [c.value for c in j.axis] == pytest.approx([0.0, 2 ** -0.5, 2 ** -0.5])

@@ -209,7 +209,7 @@ C = X.const
 
 def normalized(v: ir.Vec3, what: str) -> ir.Vec3:
     if all(isinstance(c, ir.Const) for c in v):
-        n = math.sqrt(sum(c.value ** 2 for c in v))  # type: ignore[union-attr]
+        n = math.hypot(*(c.value for c in v))  # type: ignore[union-attr]  (no overflow for huge components)
         if n == 0:
             raise ValError("E310", f"{what} must not be the zero vector", "give a direction, e.g. {0, 0, 1}")
         return tuple(C(c.value / n) for c in v)  # type: ignore[union-attr,return-value]

@@ -57,7 +57,11 @@ class Evaluator:
     # ------------------------------------------------------------------ entry point
     def eval(self, e: ast.Expr) -> Val:
         try:
-            return self._eval(e)
+            v = self._eval(e)
+            if not _finite(v):
+                raise ValError("E303", "this value overflows (it is infinite or not a number)",
+                               "check the formula for products and powers of huge numbers")
+            return v
         except ValError as ve:
             raise EvalError(Diagnostic(ve.code, ve.message, e.span, ve.help)) from None
         except RecursionError:
@@ -257,6 +261,14 @@ class Evaluator:
         what = "force" if name == "reaction_force" else "torque"
         d = U.FORCE if what == "force" else U.TORQUE
         return Arr(tuple(Scalar(ir.ReactionRef(j.name, what, i), d) for i in range(3)))
+
+
+def _finite(v: Val) -> bool:
+    if isinstance(v, Scalar):
+        return v.const is None or math.isfinite(v.const)
+    if isinstance(v, Arr):
+        return all(_finite(x) for x in v.items)
+    return True
 
 
 def _is_structural(v: Scalar) -> bool:

@@ -568,7 +568,8 @@ class Flattener(Evaluator):
             if val is None:
                 fail("E219", f"'{inst.name}.{name}' is not set", span, f"give it a value: {name} = ... in the modifiers")
             return val
-        opts = list(cls.points) + [f.name for f in cls.fields] + [r for r, _ in cls.roles]
+        roles = [jv.role for jv in self.joint_vars(inst)] if cls.category == "joint" else []
+        opts = list(cls.points) + [f.name for f in cls.fields] + roles
         if cls.category in ("body", "point", "frame"):
             opts += ["r", "v", "x", "y", "z"] + (["R", "w"] if cls.category != "point" else [])
         fail("E219", f"{cls.name} '{inst.name}' has no attribute '{name}'", span,
