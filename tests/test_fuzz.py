@@ -1,6 +1,6 @@
 """Property tests of the front end's robustness (hypothesis).
 
-The shipped models are mutated (a token deleted, duplicated or swapped with another, a line
+The shipped models and the files of the broken-input corpus are mutated (a token deleted, duplicated or swapped with another, a line
 deleted, a keyword or symbol inserted, the text truncated), and random bytes and random text
 are fed in.  For every input the front end (decode, parse, print, analyze, flatten every model
 and scene, dump) either succeeds or raises MechError whose diagnostics all carry a code E\\d\\d\\d
@@ -23,10 +23,13 @@ from mechdsl.parser import KEYWORDS, decode_source, parse
 from mechdsl.printer import to_source
 from mechdsl.semantic import analyze
 
-from conftest import model_files
+from conftest import ROOT, model_files
 
 FILE = "fuzz.mech"
 MODELS = [p.read_text(encoding="utf-8") for p in model_files()]
+# the broken-input corpus is a second source of seeds: small files that reach many error paths
+CORPUS = [p.read_text(encoding="utf-8") for p in sorted((ROOT / "tests" / "corpus").glob("*.mech"))
+          if p.read_bytes().startswith(b"// expect:") and p.stat().st_size < 4000]
 
 _mode = os.environ.get("MECHDSL_FUZZ", "")
 if _mode == "long":
@@ -60,8 +63,8 @@ def tokens(text: str) -> list[tuple[int, int]]:
 
 
 @st.composite
-def mutated_model(draw) -> str:
-    text = draw(st.sampled_from(MODELS))
+def mutated_model(draw, seeds=MODELS) -> str:
+    text = draw(st.sampled_from(seeds))
     for _ in range(draw(st.integers(1, 3))):
         op = draw(st.sampled_from(["delete", "duplicate", "swap", "delete_line", "insert", "truncate",
                                    "replace_name", "replace_number"]))
@@ -147,6 +150,12 @@ def test_shipped_models_pass():
 @FUZZ
 @given(mutated_model())
 def test_mutated_models(text):
+    front_end(text)
+
+
+@FUZZ
+@given(mutated_model(CORPUS))
+def test_mutated_corpus(text):
     front_end(text)
 
 
