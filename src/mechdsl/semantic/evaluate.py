@@ -23,7 +23,7 @@ KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_e
 ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
 
 
-MAX_ITERATIONS = 1_000_000   # loop and comprehension iterations per model, all loops together
+MAX_ITERATIONS = 200_000   # loop and comprehension iterations per model, all loops together
 
 
 class EvalError(Exception):
