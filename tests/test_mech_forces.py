@@ -2,6 +2,8 @@
 hoop against its analytic equation of motion."""
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -215,3 +217,42 @@ def test_pure_equation_layer():
     E, xdot = val(o, [0.3], [1.0], e.param_values)
     assert E == pytest.approx(0.5 * 4 - 9.81 * 2 * np.cos(0.3))
     assert xdot == pytest.approx(2 * np.cos(0.3))
+
+
+def test_components_mixed_with_an_equation_layer_coordinate():
+    """A rod pendulum (coordinate theta) and an equation-layer mass x (T = M/2 x'^2) coupled by
+    the potential k/2 (x - rod.b.x)^2 written with a point position."""
+    m, L, g, Mx, k = 1.2, 0.9, 9.81, 0.5, 7.0
+    base = rod_pendulum()
+    x, xd = ir.Coord("x"), ir.Speed("x")
+    gap = ir.Op("sub", (x, ir.PointPos("rod.b", 0)))
+    model = dataclasses.replace(
+        base, coordinates=base.coordinates + (ir.Coordinate("x"),),
+        terms=(ir.Term("kinetic", mul(const(Mx / 2), mul(xd, xd))), ir.Term("potential", mul(const(k / 2), mul(gap, gap)))))
+    e = derive(model)
+    assert e.route == "crba"
+    f = qdd_fn(e)
+    for th, X in [(0.3, 0.1), (-1.2, 0.8)]:
+        s = X - L * np.sin(th)
+        exact = [(-m * g * L / 2 * np.sin(th) + k * s * L * np.cos(th)) / (m * L ** 2 / 3), -k * s / Mx]
+        assert np.allclose(val(f, [th, X], [0.4, -0.3], 0.0, e.param_values), exact, rtol=1e-12)
+
+
+def test_one_coordinate_driving_two_joints():
+    """Two equal rods on separate pivots, both turned by the same coordinate (a gear): the
+    pair moves like one rod, and a follower force on one of them counts once."""
+    b1, p1 = rod_body("r1", const(1.2), const(0.9))
+    b2, p2 = rod_body("r2", const(1.2), const(0.9))
+    model = ir.Model("Gear", coordinates=(ir.Coordinate("theta"),), bodies=(b1, b2),
+                     points=(point("world", "world"), point("o2", "world", (2, 0, 0))) + tuple(p1 + p2),
+                     joints=(ir.Joint("j1", "revolute", "world", "r1.a", "world", "r1", axis=v3(0, 0, 1),
+                                      variables=(coord_var("phi", "theta"),)),
+                             ir.Joint("j2", "revolute", "o2", "r2.a", "world", "r2", axis=v3(0, 0, 1),
+                                      variables=(coord_var("phi", "theta"),))),
+                     forces=(ir.Gravity("g", v3(0, -9.81, 0)), ir.AppliedForce("f", "r2.b", v3(0.7, 0, 0), frame="r2")))
+    e = derive(model)
+    assert e.route == "crba"
+    m, L, g = 1.2, 0.9, 9.81
+    for th in (0.3, -2.0):
+        exact = (L * 0.7 - 2 * m * g * L / 2 * np.sin(th)) / (2 * m * L ** 2 / 3)
+        assert val(qdd_fn(e), [th], [1.1], 0.0, e.param_values)[0] == pytest.approx(exact, rel=1e-12)

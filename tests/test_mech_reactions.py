@@ -179,7 +179,7 @@ def test_reaction_in_model_with_explicit_constraint_is_a_diagnostic():
     model = dataclasses.replace(model, constraints=(ir.Constraint("c", ir.Op("sub", (ir.Coord("phi"), const(0.1)))),))
     with pytest.raises(MechError) as ex:
         derive(model)
-    assert ex.value.first.code == "E651"
+    assert ex.value.first.code == "E751"
 
 
 def test_four_bar_reaction_output_uses_multipliers():

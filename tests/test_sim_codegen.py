@@ -1,6 +1,8 @@
 """CasADi Functions built from an EOM: names, numbers, laziness, compiled code, fast calls."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -157,3 +159,48 @@ def test_missing_compiler_falls_back_with_a_note(monkeypatch, tmp_path):
     r = simulate(e, 1.0, compiled=True, points=3)
     assert r.success and r.metadata["options"]["compiled"] is False
     assert any("compiled code unavailable" in w for w in r.metadata["warnings"])
+
+
+def test_bound_fast_function_equals_plain_calls():
+    e = chain(2)
+    f = casadi_functions(e)
+    rhs = FastFunction(f["ode"]).bind(p=e.param_values)
+    jac = FastFunction(f["ode_jacobian"]).bind(p=e.param_values)
+    for _ in range(3):
+        x = RNG.uniform(-2, 2, 4)
+        a = rhs(0.5, x)
+        b = rhs(0.7, x + 1)
+        np.testing.assert_array_equal(a, np.array(f["ode"](0.5, x, e.param_values)).ravel())
+        np.testing.assert_array_equal(b, np.array(f["ode"](0.7, x + 1, e.param_values)).ravel())
+        np.testing.assert_array_equal(jac(0.5, x), np.array(f["ode_jacobian"](0.5, x, e.param_values)))
+    with pytest.raises(KeyError):
+        FastFunction(f["ode"]).bind(q=1)
+
+
+def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
+    import threading
+
+    from mechdsl.codegen import _build
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    if find_compiler() is None:
+        assert compile_functions([_build(pendulum(), "energy", None)])[0] is None
+        return
+    e = pendulum()
+    results = []
+
+    def work():
+        results.append(compile_functions([_build(e, "energy", None), _build(e, "ode", None)], jacobian=False))
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    libs = {lib for _, _, lib in results}
+    assert len(libs) == 1 and all(loaded is not None for loaded, _, _ in results)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [Path(next(iter(libs))).name]   # no debris
+    x = np.array([0.3, -0.2])
+    for loaded, _, _ in results:
+        np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, e.param_values)),
+                                      np.array(casadi_functions(e)["ode"](0.0, x, e.param_values)))

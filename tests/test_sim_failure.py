@@ -70,3 +70,29 @@ def test_non_finite_start_is_a_usage_error_not_a_traceback():
 
     with pytest.raises(UsageError, match="not finite"):
         simulate(chain(2), 1.0, x0={"theta1": float("nan")})
+
+
+def test_non_finite_right_hand_side_at_the_start():
+    import casadi as ca
+
+    from mechdsl import eom as E
+
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    # V = -sqrt(q): the force sqrt'(q) is infinite at q = 0, where the run starts
+    e = E.from_lagrangian("Root", ["q"], [], [], q, qd, t, p, 0.5 * qd[0] ** 2, -ca.sqrt(q[0]))
+    r = simulate(e, 1.0, points=11)
+    assert not r.success and r.failure.time <= 0.1
+    assert r.failure.cause in ("non-finite right-hand side", "non-finite state"), r.failure
+    assert len(r.t) == 1 and r.q[0, 0] == 0.0
+
+
+def test_model_without_coordinates_evaluates_outputs():
+    import casadi as ca
+
+    from mechdsl import eom as E
+
+    q, qd, t, p = ca.SX.sym("q", 0), ca.SX.sym("qd", 0), ca.SX.sym("t"), ca.SX.sym("p", 1)
+    e = E.from_lagrangian("Clock", [], ["w"], [2.0], q, qd, t, p, ca.SX(0), ca.SX(0), outputs={"s": ca.sin(p[0] * t)})
+    r = simulate(e, 1.0, points=5)
+    assert r.success and r.metadata["method"] == "none"
+    np.testing.assert_allclose(r["s"], np.sin(2 * r.t), atol=1e-15)

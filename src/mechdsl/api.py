@@ -212,7 +212,10 @@ class Model:
             raise UsageError("give t_end (no scene stop_time to default to)")
         opts = dict(rtol=_pick(rtol, s.get("rtol"), 1e-8), atol=_pick(atol, s.get("atol"), 1e-10),
                     method=_pick(method, s.get("method"), "auto"), points=_pick(points, s.get("points"), None))
-        for key in ("start_time", "outputs", "formulation", "dt", "reactions", "compiled"):
+        keys = ("start_time", "outputs", "formulation", "dt", "reactions", "compiled")
+        if self.model.contacts:
+            keys += ("rest_speed", "impact_order")      # docs/contacts.md
+        for key in keys:
             if key in s and key not in kw:
                 kw["t_start" if key == "start_time" else key] = s[key]
         return simulate(self.eom, float(t_end), **opts, **kw)
@@ -232,10 +235,17 @@ class Model:
 
         return first_integrals(self.eom)
 
-    def summary(self) -> str:
+    def summary(self, derive: bool = False) -> str:
+        """Counts and formulation; derive=True asks the mechanics which route it takes."""
         from .formulation import describe
 
-        return describe(self.model)
+        route = None
+        if derive:
+            try:
+                route = self.eom.route
+            except MechError:
+                route = None
+        return describe(self.model, route)
 
 
 # ---------------------------------------------------------------------------- helpers

@@ -12,6 +12,7 @@ a Function is built the first time it is asked for.  Names, inputs and outputs:
     constraints    (t, x, p) -> g, gdot         only when EOM.g exists
     start          (p) -> q0, qd0
     singularity    (t, x, p) -> one per EOM.singularity_monitors entry (when there are any)
+    invariants     (t, x, p) -> one per EOM.invariants entry (when there are any)
 
 Forward dynamics: EOM.qdd when the recursive route produced it; otherwise M qdd = bias is
 solved NUMERICALLY at every call by CasADi's sparse Householder QR linear solver ('qr'),
@@ -19,8 +20,8 @@ wrapped around the SX expressions of M and bias in an MX Function.  Symbolic eli
 SX (``casadi.solve`` on SX) is used only for one coordinate (a division).  See
 docs/internals/numerics.md for the measurements behind this choice.
 
-``compiled=True`` generates C for the requested Functions (plus the Jacobian of ``ode``,
-which the integrators and ``ode_jacobian`` use), compiles it with the system C compiler into
+``compiled=True`` generates C for the requested Functions (plus the Jacobian of ``ode`` when
+``ode_jacobian`` is requested: implicit integrators need it), compiles it with the system C compiler into
 a shared library cached by the hash of the code, and loads it with ``casadi.external``.
 Without a compiler the virtual-machine Functions are returned and ``.notes`` says why.
 
@@ -43,7 +44,7 @@ import numpy as np
 from .diagnostics import Diagnostic, MechError
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
-            "start", "singularity")
+            "start", "singularity", "invariants")
 LINSOL = "qr"          # sparse Householder QR: backward stable, code-generatable
 
 
@@ -149,6 +150,9 @@ def _build(eom, name, outputs):
     if name == "singularity":
         mons = dict(singularity_monitors(eom))
         return _function("singularity", txp, [ca.SX(v) for v in mons.values()], ["t", "x", "p"], list(mons))
+    if name == "invariants":
+        inv = dict(eom.invariants)
+        return _function("invariants", txp, [ca.SX(v) for v in inv.values()], ["t", "x", "p"], list(inv))
     raise KeyError(name)
 
 
@@ -167,6 +171,8 @@ def available(eom) -> tuple[str, ...]:
         names.append("constraints")
     if singularity_monitors(eom):
         names.append("singularity")
+    if getattr(eom, "invariants", None):
+        names.append("invariants")
     return tuple(n for n in STANDARD if n in names)
 
 
@@ -220,7 +226,7 @@ class FunctionSet(Mapping):
         funcs = [_build(self.eom, n, self.outputs) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
             funcs.append(build_ode(self.eom))
-        loaded, note, lib = compile_functions(funcs, tag=self.eom.name)
+        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names)
         if note:
             self.notes.append(note)
         if loaded is None:
@@ -234,19 +240,36 @@ class FunctionSet(Mapping):
             self._cache["ode_jacobian"] = jacobian_of(loaded["ode"])
 
 
+_STRUCTURE = ("q", "qd", "t", "p", "T", "V", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
+              "singularity_monitors", "invariants")
+
+
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
 
     names: restrict to these Functions (default: all that apply); outputs: restrict the
-    ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached on
-    the EOM object, so asking twice costs nothing.
+    ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
+    (per EOM structure), so asking twice costs nothing.
     """
-    key = (bool(compiled), None if names is None else tuple(sorted(names)),
+    # keyed by the identity of every field the Functions are built from (raw __dict__ entries,
+    # so lazily derived fields are not forced): copies made by EOM.replace (other parameter
+    # values) share Functions, compiled libraries and the integrators built on them
+    objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
+    key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
            None if outputs is None else tuple(outputs))
-    cache = eom.__dict__.setdefault("_mechdsl_function_sets", {})
-    if key not in cache:
-        cache[key] = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs)
-    return cache[key]
+    hit = _SETS.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
+        _SETS[key] = _SETS.pop(key)            # most recently used last
+        return hit[1]
+    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs)
+    if len(_SETS) >= _SETS_MAX:
+        _SETS.pop(next(iter(_SETS)))
+    _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique
+    return fs
+
+
+_SETS: dict = {}
+_SETS_MAX = 64
 
 
 # --------------------------------------------------------------------------- C code generation
@@ -271,6 +294,9 @@ def find_compiler() -> str | None:
     return None
 
 
+JAC_MAX_CODE = 1_000_000   # above this, compile the forward derivative of ode instead of its Jacobian
+
+
 def cflags_for(code_size: int) -> list[str]:
     """Optimization level by size: gcc time grows much faster than linearly with function size.
 
@@ -287,56 +313,86 @@ def cflags_for(code_size: int) -> list[str]:
     return ["-O0"]
 
 
-def compile_functions(funcs, tag: str = "model"):
-    """Generate C for ``funcs`` (+ the Jacobian of any 'ode'), compile, load.
+def compile_functions(funcs, tag: str = "model", jacobian: bool = True):
+    """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
-    The library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags;
-    it is written to a temporary name and renamed into place (safe under concurrency).
+    The Functions and the Jacobians go into two translation units, each optimized by its own
+    size (``cflags_for``) and compiled in parallel, then linked into one shared library.  The
+    library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
+    built in a temporary folder and renamed into place (safe under concurrency).
     """
     ca = _ca()
     cc = find_compiler()
     if cc is None:
         return None, ("no C compiler found (looked for $CC, gcc, cc, clang); "
                       "using the CasADi virtual machine instead of compiled code"), None
-    cg = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
+    units = []
+    main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
     for f in funcs:
-        cg.add(f)
-        if f.name() == "ode":
-            cg.add(f.jacobian())
-    code = cg.dump()
-    flags = cflags_for(len(code))
+        main.add(f)
+    units.append(main.dump())
+    odes = [f for f in funcs if f.name() == "ode"] if jacobian else []
+    jac_kind = None
+    if odes:
+        jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
+        jg.add(odes[0].jacobian())
+        code = jg.dump()
+        jac_kind = "jacobian"
+        if len(code) > JAC_MAX_CODE:
+            # a huge Jacobian compiles for minutes and, at -O0, runs slower than the virtual
+            # machine: generate the forward derivative instead (CasADi assembles J by sweeps)
+            jg = ca.CodeGenerator("mechdsl_fwd.c", {"with_header": False, "verbose": False})
+            jg.add(odes[0].forward(1))
+            code = jg.dump()
+            jac_kind = "forward derivative"
+        units.append(code)
+    flags = [cflags_for(len(code)) for code in units]
     try:
         version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
         version = version.splitlines()[0] if version else cc
     except (OSError, subprocess.SubprocessError):
         version = cc
-    digest = hashlib.sha256("\n".join([code, " ".join(flags), version, ca.__version__]).encode()).hexdigest()[:24]
+    key = "\n".join([*units, repr(flags), version, ca.__version__])
+    digest = hashlib.sha256(key.encode()).hexdigest()[:24]
     d = cache_dir()
     lib = d / f"{digest}.so"
-    note = None
-    if not lib.exists():
+    size_kb = sum(len(c) for c in units) // 1000
+    if lib.exists():
+        note = f"loaded compiled model from cache {lib}"
+    else:
         try:
             d.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
-                src = Path(tmp) / "mechdsl_model.c"
-                src.write_text(code)
+                procs, objs = [], []
+                for i, (code, fl) in enumerate(zip(units, flags)):
+                    src = Path(tmp) / f"unit{i}.c"
+                    src.write_text(code)
+                    obj = Path(tmp) / f"unit{i}.o"
+                    objs.append(obj)
+                    procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", str(src), "-o", str(obj)],
+                                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+                errors = []
+                for pr in procs:
+                    out, err = pr.communicate()
+                    if pr.returncode != 0:
+                        errors.append((err or out).strip())
                 out = Path(tmp) / "lib.so"
-                r = subprocess.run([cc, *flags, "-fPIC", "-shared", str(src), "-o", str(out), "-lm"],
-                                   capture_output=True, text=True)
-                if r.returncode != 0:
-                    tail = (r.stderr or r.stdout).strip().splitlines()[-3:]
-                    return None, (f"C compilation failed ({cc} {' '.join(flags)}): {' | '.join(tail)}; "
-                                  "using the CasADi virtual machine"), None
+                if not errors:
+                    r = subprocess.run([cc, "-shared", *map(str, objs), "-o", str(out), "-lm"],
+                                       capture_output=True, text=True)
+                    if r.returncode != 0:
+                        errors.append((r.stderr or r.stdout).strip())
+                if errors:
+                    tail = " | ".join(errors[0].splitlines()[-3:])
+                    return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
                 os.replace(out, lib)
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
-        note = f"compiled {len(code) // 1000} kB of C with {Path(cc).name} {' '.join(flags)} into {lib}"
-    else:
-        note = f"loaded compiled model from cache {lib}"
-    loaded = {}
-    for f in funcs:
-        loaded[f.name()] = ca.external(f.name(), str(lib))
+        note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
+                f"({', '.join(' '.join(f) for f in flags)}) into {lib}"
+                + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
+    loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     return loaded, note, str(lib)
 
 
@@ -372,6 +428,44 @@ class FastFunction:
             self._buf.set_res(i, memoryview(r))
         self._views = [r if s[1] == 1 else r.reshape(s[1], s[0]).T for r, s in zip(self._res, self._shapes)]
         self._single = len(self._res) == 1
+
+    def bind(self, **fixed):
+        """A faster callable of the remaining inputs, with ``fixed`` inputs (by name) set once.
+
+        E.g. ``rhs = FastFunction(f["ode"]).bind(p=p)`` gives ``rhs(t, x)`` for scipy.  The
+        closure shares this object's buffers: do not mix it with direct calls.
+        """
+        names = self.function.name_in()
+        for k, v in fixed.items():
+            if k not in names:
+                raise KeyError(f"{self.function.name()} has no input {k!r} (inputs: {', '.join(names)})")
+            self._args[names.index(k)][:] = v
+        free = [self._args[i] for i, n in enumerate(names) if n not in fixed]
+        ev = self._eval
+        views = self._views
+        copy = self.copy
+        if self._single and len(free) == 2 and free[0].size == 1:
+            a0, a1 = free
+            out = views[0]
+            copyto = np.copyto
+
+            def call2(u, v):
+                a0[0] = u
+                copyto(a1, v)
+                ev()
+                return out.copy() if copy else out
+            call2.owner = self   # keeps the FunctionBuffer (and its memory) alive
+            return call2
+
+        def call(*args):
+            for dst, a in zip(free, args):
+                dst[:] = a
+            ev()
+            if self._single:
+                return views[0].copy() if copy else views[0]
+            return tuple(v.copy() for v in views) if copy else tuple(views)
+        call.owner = self
+        return call
 
     def __call__(self, *args):
         for dst, a in zip(self._args, args):

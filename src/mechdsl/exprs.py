@@ -415,7 +415,12 @@ def to_sympy(e: Expr, leaf: Callable[[Expr], object]):
     def lf(n):
         if isinstance(n, Const):
             v = n.value
-            return sp.Integer(int(v)) if v == int(v) and abs(v) < 1e15 else sp.Float(v)
+            if v == int(v) and abs(v) < 1e15:
+                return sp.Integer(int(v))
+            from fractions import Fraction
+
+            r = Fraction(v).limit_denominator(1000)   # 0.5 -> 1/2 when it is exactly that float
+            return sp.Rational(r.numerator, r.denominator) if float(r) == v else sp.Float(v)
         return leaf(n)
 
     return _translate(e, lf, _sympy_ops, sp)

@@ -8,6 +8,13 @@ from .semantic.topology import counts
 DEFAULT_DAE_FORMULATION = "projection"
 
 
+ROUTE_TEXT = {
+    "aba": "recursive articulated-body algorithm",
+    "crba": "composite-rigid-body mass matrix and recursive Newton-Euler, solved by pivoting QR",
+    "lagrange": "Lagrange's equations by automatic differentiation",
+}
+
+
 def recursive_ok(model: ir.Model) -> bool:
     """True when the recursive O(N) route applies: a tree of components whose joint variables are
     coordinates or functions of time, and no equation-layer kinetic terms."""
@@ -25,7 +32,21 @@ def kind(model: ir.Model) -> str:
     return "ode" if not model.loops and not model.constraints else "dae"
 
 
-def describe(model: ir.Model) -> str:
+def describe(model: ir.Model, route: str | None = None) -> str:
+    """One line: counts and formulation.  ``route`` is the derived equations' route when known
+    (mechanics decides it; without it the front end's estimate is shown)."""
+    text = _describe(model, route)
+    contacts = [k for k in model.contacts if k.kind != "fix"]
+    fixes = [k for k in model.contacts if k.kind == "fix"]
+    if contacts:
+        text += (f"; {len(contacts)} unilateral contact{'s' * (len(contacts) != 1)} "
+                 f"(event-driven impacts, Newton's restitution law)")
+    if fixes:
+        text += f"; {len(fixes)} fixation{'s' * (len(fixes) != 1)} (impulsive constraints)"
+    return text
+
+
+def _describe(model: ir.Model, route: str | None) -> str:
     c = counts(model)
     parts = []
     if c["bodies"]:
@@ -35,8 +56,9 @@ def describe(model: ir.Model) -> str:
     parts.append(f"{c['coordinates']} coordinate{'s' * (c['coordinates'] != 1)}")
     if kind(model) == "ode":
         topo = "tree" if model.bodies else "equation layer"
-        how = ("recursive articulated-body algorithm" if recursive_ok(model)
-               else "Lagrange's equations by automatic differentiation")
+        if route is None:
+            route = "aba" if recursive_ok(model) else ("lagrange" if not model.bodies else "crba")
+        how = ROUTE_TEXT.get(route, route)
         return f"{model.name}: {', '.join(parts)}, {topo} -> ODE in minimal coordinates ({how})"
     why = []
     if model.loops:

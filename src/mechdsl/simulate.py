@@ -25,7 +25,8 @@ DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
-KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions")
+KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions",
+              "formulation", "reactions")   # the last two concern constrained models (mechdsl.dae)
 
 
 def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", points=None, outputs=None,
@@ -40,6 +41,11 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     methods), integrator_options (dict passed to the back end), singularity_threshold.
     """
     method = str(method or "auto").lower()
+    if eom.model is not None and eom.model.contacts:      # unilateral contacts, fixations (docs/contacts.md)
+        from .impacts import simulate_with_contacts
+
+        return simulate_with_contacts(eom, None, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method,
+                                      points=points, outputs=outputs, x0=x0, p=p, progress=progress, **opts)
     if eom.g is not None:
         return _dispatch("mechdsl.dae", "simulate_dae", "constrained models (DAE)", eom, t_end,
                          t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
@@ -63,25 +69,39 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     xs = start_vector(eom, x0, pv)
     out_names = _check_outputs(eom, outputs)
     compiled = bool(opts.get("compiled", False))
-    funcs = opts.get("functions") or casadi_functions(eom, compiled=compiled, names=("ode", "ode_jacobian"))
+    vm = casadi_functions(eom, names=("ode", "ode_jacobian"))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
     meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
-                            "warnings": [], "notes": list(getattr(funcs, "notes", []))}
-    if compiled and not getattr(funcs, "compiled", False):
-        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
-
+                            "warnings": [], "notes": []}
+    if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
+        return _no_state_result(eom, post, grid, pv, out_names, meta, wall0)
     if method == "auto":
-        method, reason, info = choose_method(eom, funcs, xs, pv, t0, t1, rtol)
+        method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol)
         meta["auto"] = info
     else:
         reason = "requested"
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    if opts.get("functions") is not None:
+        funcs = opts["functions"]
+    elif compiled:
+        funcs = casadi_functions(eom, compiled=True,
+                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
+        funcs["ode"]  # compile now (notes below)
+    else:
+        funcs = vm
+    meta["notes"] += list(getattr(funcs, "notes", []))
+    for key in ("formulation", "reactions"):
+        if opts.get(key) not in (None, False, "ode", "auto"):
+            meta["notes"].append(f"{key} = {opts[key]!r} applies to constrained models only; ignored for this ODE")
+    if compiled and not getattr(funcs, "compiled", False):
+        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     max_steps = int(opts.get("max_steps") or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(opts.get("integrator_options") or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     try:
-        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1)
+        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1,
+                          meta["notes"])
     finally:
         bar.close()
     if fixed is not None:
@@ -98,6 +118,7 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
     stats.update(_energy_drift(signals))
+    stats.update(_integral_drift(signals, eom))
     stats["raw"] = run.stats
     if run.messages.strip():
         meta["integrator_messages"] = _dedup(run.messages)
@@ -115,6 +136,17 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
                   stats=stats, metadata=meta, failure=failure)
 
 
+def _no_state_result(eom, post, grid, pv, out_names, meta, wall0) -> Result:
+    X = np.zeros((len(grid), 0))
+    signals = compute_signals(eom, post, grid, X, pv, out_names)
+    meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
+                versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
+                                              "points": len(grid), "outputs": list(out_names),
+                                              "parameters": dict(zip(eom.params, map(float, pv)))})
+    stats = {"steps": 0, "points": len(grid), "wall_time": time.perf_counter() - wall0}
+    return Result(t=grid.copy(), q=X, qd=X.copy(), coordinates=(), signals=signals, stats=stats, metadata=meta)
+
+
 # --------------------------------------------------------------------------- dispatch and inputs
 
 
@@ -127,6 +159,18 @@ def _dispatch(module, func, what, eom, t_end, **kw):
         raise
     if not hasattr(mod, func):
         raise UsageError(f"{what} cannot be simulated: {module}.{func} is missing")
+    if kw.get("progress") is True:   # the helpers take a callable(t, t_end): drive our bar with it
+        try:
+            t0 = float(kw.get("t_start") or 0.0)
+            bar = I.Progress(True, t0, float(t_end), label=f"{eom.name} ({kw.get('method', '')})")
+        except (TypeError, ValueError):
+            bar = None
+        if bar is not None:
+            kw["progress"] = lambda t, t1: bar.update(float(t))
+            try:
+                return getattr(mod, func)(eom, t_end, **kw)
+            finally:
+                bar.close()
     return getattr(mod, func)(eom, t_end, **kw)
 
 
@@ -274,21 +318,22 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
 
 
-def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1):
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes):
     backend = I.METHODS[method][0]
     if backend == "scipy":
-        rhs = FastFunction(funcs["ode"])
-        jacf = FastFunction(funcs["ode_jacobian"])
-        run = I.run_scipy(method, lambda t, y: rhs(t, y, pv), lambda t, y: jacf(t, y, pv), grid, xs,
+        rhs = FastFunction(funcs["ode"]).bind(p=pv)
+        jacf = None if method in I.NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(p=pv)
+        run = I.run_scipy(method, rhs, jacf, grid, xs,
                           rtol, atol, max_steps, bar, extra, hmin=min_step(t0, t1))
         return run, None
     fixed = None
     steps = None
     if method in I.FIXED_STEP:
-        steps, why = fixed_step_count(method, funcs, xs, pv, t0, t1, rtol, dt)
+        steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
+                                      xs, pv, t0, t1, rtol, dt)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
-        raise UsageError(f"dt applies to the fixed-step methods ({', '.join(I.FIXED_STEP)}), not to {method}")
+        meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
     opts = I.casadi_options(method, rtol, atol, max_steps, steps, extra, hmin=min_step(t0, t1))
     try:
         run = I.run_casadi(method, funcs["ode"], grid, xs, pv, opts, bar)
@@ -452,6 +497,12 @@ def compute_signals(eom, post, t, X, pv, out_names) -> dict[str, np.ndarray]:
         g, gd = mapped(casadi_functions(eom, names=("constraints",))["constraints"])
         for i, cn in enumerate(eom.constraint_names):
             sig[f"residual({cn})"] = g[i].reshape(-1)
+    if getattr(eom, "invariants", None):
+        f = casadi_functions(eom, names=("invariants",))["invariants"]
+        for name, val in zip(f.name_out(), mapped(f)):
+            sig[name] = np.asarray(val, float).reshape(-1)
+    for name, val in _first_integrals(eom, t, X, pv).items():
+        sig.setdefault(name, val)
     if singularity_monitors(eom):
         f = post["singularity"]
         for name, val in zip(f.name_out(), mapped(f)):
@@ -478,6 +529,46 @@ def _singularity_report(eom, signals, t, meta, threshold):
     meta["singularity"] = report
 
 
+MAX_INTEGRAL_SEARCH = 20   # coordinates: beyond this the search costs more than a typical run
+
+
+def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
+    """Values of the model's first integrals (cyclic momenta, Jacobi integral) on the samples,
+    so their drift measures the integrator.  The search is cached on the EOM."""
+    import casadi as ca
+
+    cache = eom.__dict__.setdefault("_integral_function", {})
+    if "f" not in cache:
+        cache["f"] = None
+        if eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts:
+            try:
+                from .analysis.integrals import integral_signals
+
+                sig = integral_signals(eom, pv)
+            except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
+                sig = {}
+            if sig:
+                x = ca.vertcat(eom.q, eom.qd)
+                cache["f"] = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()),
+                                         ["t", "x", "p"], list(sig))
+    f = cache["f"]
+    if f is None or len(t) == 0:
+        return {}
+    res = f.map(len(t))(t.reshape(1, -1), X.T, np.asarray(pv, float).reshape(-1, 1))
+    res = res if isinstance(res, (list, tuple)) else [res]
+    return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
+
+
+def _integral_drift(signals, eom) -> dict:
+    f = eom.__dict__.get("_integral_function", {}).get("f")
+    out = {}
+    for name in (f.name_out() if f is not None else []):
+        v = signals.get(name)
+        if v is not None and len(v) and np.isfinite(v).all():
+            out[name] = float(np.abs(v - v[0]).max())
+    return {"first_integral_drift": out} if out else {}
+
+
 def _energy_drift(signals) -> dict:
     E = signals.get("energy")
     if E is None or len(E) == 0 or not np.isfinite(E).all():
@@ -488,9 +579,14 @@ def _energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
-def is_conservative(eom) -> bool:
+def is_conservative(eom) -> bool | None:
+    """D = 0, Q = 0 and T, V independent of time; None when unknown without forcing a lazily
+    derived field (the recursive route builds Q only on request)."""
     import casadi as ca
 
+    raw = eom.__dict__.get("Q")
+    if raw is not None and hasattr(raw, "get") and getattr(raw, "value", 0) is None and eom.n > 30:
+        return None     # not built yet, and building it is not cheap for large models
     try:
         D, Q = ca.SX(eom.D), ca.SX(eom.Q)
         return bool(D.is_zero() and Q.is_zero()

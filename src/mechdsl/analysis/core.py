@@ -47,7 +47,7 @@ def require_ode(eom, what: str) -> None:
     """The analyses work in minimal coordinates; constrained models (DAE) are refused."""
     if eom.g is not None and eom.g.numel() > 0:
         raise MechError(Diagnostic(
-            "E701", f"{what} needs a model in independent coordinates; '{eom.name}' has "
+            "E901", f"{what} needs a model in independent coordinates; '{eom.name}' has "
                     f"{eom.g.numel()} holonomic constraint(s) ({', '.join(eom.constraint_names)})",
             help="describe the mechanism with independent coordinates (a tree of joints), "
                  "or analyse the constrained model numerically by simulation"))
@@ -216,7 +216,7 @@ def _structure(eom, pv) -> Structure:
         if all(np.all(np.isfinite(o)) for o in out):
             rows.append((i, out))
     if not rows:
-        raise MechError(Diagnostic("E702", f"the equations of '{eom.name}' could not be evaluated "
+        raise MechError(Diagnostic("E902", f"the equations of '{eom.name}' could not be evaluated "
                                            "at any probe state (NaN/inf everywhere)"))
 
     def col(k):
@@ -309,7 +309,8 @@ def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
     n = J.shape[1]
     if J.size == 0 or not np.any(J):
         return np.eye(n)
-    _, s, vt = np.linalg.svd(J)
+    # thin SVD when J is tall (probes stack many rows): the full U would cost O(rows^2)
+    _, s, vt = np.linalg.svd(J, full_matrices=J.shape[0] < n)
     rank = int(np.sum(s > rel * s[0]))
     N = vt[rank:].T.copy()
     return canonical_basis(N)

@@ -79,7 +79,7 @@ def hamiltonian(eom, p=None) -> Hamiltonian:
     pv = param_vector(eom, p)
     st = structure(eom, pv)
     if not st.quadratic_T:
-        raise MechError(Diagnostic("E705", f"the kinetic energy of '{eom.name}' is not quadratic in the "
+        raise MechError(Diagnostic("E905", f"the kinetic energy of '{eom.name}' is not quadratic in the "
                                            "speeds: no Legendre transform in closed form"))
     pt = parts(eom)
     n = eom.n
@@ -133,7 +133,7 @@ def _check_regular(eom, pt, pv) -> None:
         return
     M, _ = pt.M_bias(q0, qd0, 0.0, pv)
     if M.size and (not np.all(np.isfinite(M)) or np.linalg.cond(M) > 1e14):
-        raise MechError(Diagnostic("E706", f"the mass matrix of '{eom.name}' is singular at the start "
+        raise MechError(Diagnostic("E906", f"the mass matrix of '{eom.name}' is singular at the start "
                                            "values: the momenta do not determine the speeds there",
                                    help="choose start values away from the coordinate singularity "
                                         "(e.g. Euler angles with theta = 0)"))
@@ -287,5 +287,5 @@ def _derive(model):
             continue
         if hasattr(m, fn):
             return getattr(m, fn)(model)
-    raise MechError(Diagnostic("E707", f"the Hamiltonian of component model '{model.name}' needs the "
+    raise MechError(Diagnostic("E907", f"the Hamiltonian of component model '{model.name}' needs the "
                                        "mechanics stage (derive), which is not available"))

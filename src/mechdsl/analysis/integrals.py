@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .core import Probe, _is_structural_zero, dense, param_vector, parts, structure, vanishes
+from .core import N_PROBE, Probe, _is_structural_zero, dense, param_vector, parts, structure, vanishes
 
 MAX_PRINT_INSTRUCTIONS = 3000      # larger expressions are not converted to text
 
@@ -70,7 +70,9 @@ def first_integrals(eom, p=None) -> list[FirstIntegral]:
     pt = parts(eom)
     n = eom.n
     st = structure(eom, pv)
-    pr = Probe.states(n)
+    # enough states that the stacked rows (two or more per state) can have full rank n:
+    # with fewer, every model would show spurious "symmetries"
+    pr = Probe.states(n, count=max(N_PROBE, n + 4))
     G = ca.jacobian(eom.g, eom.q) if eom.m else ca.SX.zeros(0, n)
     gt = ca.jacobian(eom.g, eom.t) if eom.m else ca.SX.zeros(0, 1)
     f = ca.Function("fi_probe", pt.args, [ca.gradient(pt.L, eom.q), pt.Qtot, G, gt, pt.L])

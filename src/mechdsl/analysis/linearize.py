@@ -116,7 +116,7 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     elif isinstance(at, str) and at.strip() == "equilibrium":
         eqs = equilibria(eom, guesses, t=t, p=pv)
         if not eqs:
-            raise MechError(Diagnostic("E703", f"no equilibrium of '{eom.name}' was found",
+            raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found",
                                        help="give a starting guess (--guess NAME=VALUE) or linearize "
                                             "about a state (--at t=0)"))
         st = structure(eom, pv)
@@ -206,7 +206,7 @@ def _integrate(eom, q0, qd0, pv, T):
 
     sol = solve_ivp(f, (0.0, T), np.concatenate([q0, qd0]), method="DOP853", rtol=1e-11, atol=1e-12)
     if not sol.success:
-        raise MechError(Diagnostic("E704", f"could not reach t = {T} from the start values: {sol.message}"))
+        raise MechError(Diagnostic("E904", f"could not reach t = {T} from the start values: {sol.message}"))
     x = sol.y[:, -1]
     return x[:n], x[n:]
 

@@ -44,7 +44,7 @@ def run(args) -> int:
                     settings = ", ".join(f"{k} = {_fmt(v)}" for k, v in m.scene.settings)
                     lines.append(f"  scene {name} -> {m.name}" + (f" ({settings})" if settings else ""))
                 else:
-                    lines.append("  " + m.summary())
+                    lines.append("  " + m.summary(derive=True))
                     lines += _extra_lines(m)
             if not args.quiet:
                 print(f"{path}: ok")
@@ -60,6 +60,14 @@ def _extra_lines(m) -> list[str]:
     out = []
     for lp in m.model.loops:
         out.append(f"    {lp.name}: closed by joint {lp.joint}: {' -> '.join(lp.bodies)}")
+    if not m.model.loops and not m.model.constraints:
+        try:
+            from ..analysis.integrals import describe_integrals
+
+            note = " (between impacts)" if m.model.contacts else ""
+            out += [f"    first integral{note} " + s for s in describe_integrals(m.eom)]
+        except MechError:
+            pass
     return out
 
 

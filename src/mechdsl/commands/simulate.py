@@ -66,6 +66,8 @@ def run(args) -> int:
         opts["dt"] = _first(args.dt, settings.get("dt"))
     if args.compiled:
         opts["compiled"] = True
+    if eom.model is not None and eom.model.contacts:     # scene settings of contacts (docs/contacts.md)
+        opts.update({k: settings[k] for k in ("rest_speed", "impact_order") if settings.get(k) is not None})
     from ..simulate import simulate
 
     progress = (not args.no_progress) and sys.stderr.isatty()
@@ -86,6 +88,10 @@ def run(args) -> int:
         plot_result(r, args.plot, overwrite=args.force)
         written.append(args.plot)
     print(summary(r, written))
+    if r.events:
+        from ..impacts import print_events
+
+        print_events(r)
     return 0 if r.success else 1
 
 
@@ -106,11 +112,14 @@ def summary(r, written=()) -> str:
     if parts:
         lines.append("statistics: " + ", ".join(parts))
     if "energy_drift" in s:
-        kind = "drift" if m.get("conservative") else "change (the model is not conservative)"
+        cons = m.get("conservative")
+        kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
         lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
                      f"(relative {s['energy_drift_relative']:.3g})")
     for w in m.get("warnings", []):
         lines.append(f"warning: {w}")
+    for n in m.get("notes", []):
+        lines.append(f"note: {n}")
     if r.failure is not None:
         f = r.failure
         lines.append(f"FAILED at t = {f.time:.10g}: {f.cause}" + (f" ({f.detail})" if f.detail else ""))

@@ -277,10 +277,10 @@ class _Deriver:
         if not hasattr(self, "_reactions"):
             self._reactions = self._all_reactions(ref)
         if ref.joint not in self._reactions:
-            raise MechError(Diagnostic("E652", f"no joint '{ref.joint}' for a reaction output"))
+            raise MechError(Diagnostic("E752", f"no joint '{ref.joint}' for a reaction output"))
         n, f = self._reactions[ref.joint]
         if ref.what not in ("force", "torque") or not 0 <= ref.i < 3:
-            raise MechError(Diagnostic("E653", f"bad reaction component {ref.what}[{ref.i + 1}]"))
+            raise MechError(Diagnostic("E753", f"bad reaction component {ref.what}[{ref.i + 1}]"))
         return (f if ref.what == "force" else n)[ref.i]
 
     def _all_reactions(self, ref) -> dict:
@@ -289,7 +289,7 @@ class _Deriver:
         out = {}
         if self.constrained:
             if self.n_explicit:
-                raise MechError(Diagnostic("E651", f"reaction of joint '{ref.joint}' in a model with explicit "
+                raise MechError(Diagnostic("E751", f"reaction of joint '{ref.joint}' in a model with explicit "
                                                    "constraint equations",
                                            help="reactions are available for trees and for loops closed by joints"))
             loads = []
@@ -317,7 +317,7 @@ class _Deriver:
                 bias = bias - ca.mtimes(ca.jacobian(self.g, self.q).T, self.lam)
             nud = ca.mtimes(B, ca.solve(M, bias)) + gam
         else:
-            raise MechError(Diagnostic("E650", f"reaction of joint '{ref.joint}' needs the explicit "
+            raise MechError(Diagnostic("E750", f"reaction of joint '{ref.joint}' needs the explicit "
                                                f"forward dynamics, not available on route '{self.route}'"))
         out.update(dynamics.joint_reactions(tree, kin, fext, nud))
         return out
@@ -337,7 +337,7 @@ class _Deriver:
         missing = [self.model.coordinates[i] for i in range(self.n) if i not in used]
         if missing and not self.model.constraints and not any(j.closes_loop for j in self.model.joints):
             c = missing[0]
-            raise MechError(Diagnostic("E631", f"coordinate '{c.name}' has no inertia: it drives no joint "
+            raise MechError(Diagnostic("E731", f"coordinate '{c.name}' has no inertia: it drives no joint "
                                                "and appears in no kinetic energy term", c.span))
 
     def _route_note(self) -> str:
@@ -395,4 +395,4 @@ def _guard(fn):
     except (MechError, UsageError):
         raise
     except (ValueError, KeyError) as e:
-        raise MechError(Diagnostic("E629", f"cannot derive the equations: {e}")) from None
+        raise MechError(Diagnostic("E729", f"cannot derive the equations: {e}")) from None

@@ -57,7 +57,7 @@ def aba(tree: Tree, kin: Kinematics, fext: dict, tau) -> tuple[ca.SX, list]:
                                _sub(tau, lk.dofs), lk.E, lk.r)
         Ap, Bp, Cp, pn, pf, Uw, Uv, Di, u = out
         if lk.k == 1 and Di.is_constant() and not Di.is_regular():
-            raise MechError(Diagnostic("E630", f"joint '{lk.joint.name}' moves no mass", lk.joint.span,
+            raise MechError(Diagnostic("E730", f"joint '{lk.joint.name}' moves no mass", lk.joint.span,
                                        "a joint variable needs inertia beyond it (or prescribe its motion)"))
         saved[i] = (Uw, Uv, Di, u)
         lam = lk.parent

@@ -144,11 +144,11 @@ def build_loads(model: ir.Model, kin: Kinematics, env) -> Loads:
             try:
                 k = env.coords.index(f.coordinate)
             except ValueError:
-                raise MechError(Diagnostic("E620", f"generalized force '{f.name}' on unknown coordinate "
+                raise MechError(Diagnostic("E720", f"generalized force '{f.name}' on unknown coordinate "
                                                    f"'{f.coordinate}'", f.span)) from None
             L.Q_gen[k] = L.Q_gen[k] + env.translate(f.Q)
         else:
-            raise MechError(Diagnostic("E621", f"unsupported force '{getattr(f, 'name', f)}'"))
+            raise MechError(Diagnostic("E721", f"unsupported force '{getattr(f, 'name', f)}'"))
     L.V, L.D = V, D
     return L
 
@@ -165,5 +165,5 @@ def add_terms(L: Loads, model: ir.Model, env) -> None:
         elif t.kind == "dissipation":
             D = D + e
         else:
-            raise MechError(Diagnostic("E622", f"unknown term kind '{t.kind}'", t.span))
+            raise MechError(Diagnostic("E722", f"unknown term kind '{t.kind}'", t.span))
     L.T_terms, L.V_terms, L.D_terms = T, V, D

@@ -71,7 +71,7 @@ class JointKind:
         byrole = {jv.role: jv for jv in joint.variables}
         if len(joint.variables) != len(roles) or set(byrole) != set(roles):
             have = ", ".join(jv.role for jv in joint.variables) or "none"
-            raise _err(joint, "E601",
+            raise _err(joint, "E701",
                        f"{joint.kind} joint '{joint.name}' needs the variables ({', '.join(roles)}), has ({have})")
         return self.chain(joint, byrole, point_child)
 
@@ -131,7 +131,7 @@ def plane_axes(joint: ir.Joint) -> tuple[ir.Vec3, ir.Vec3]:
     if k is not None:
         return UNIT[(k + 1) % 3], UNIT[(k + 2) % 3]
     if not all(isinstance(c, ir.Const) for c in joint.axis):
-        raise _err(joint, "E602", f"planar joint '{joint.name}' with a parametric normal needs plane axes")
+        raise _err(joint, "E702", f"planar joint '{joint.name}' with a parametric normal needs plane axes")
     import numpy as np
 
     a = np.array([c.value for c in joint.axis], float)
@@ -159,7 +159,7 @@ class _Rotational(JointKind):
     def quaternion(self, joint) -> bool:
         par = joint.option("parametrization", "euler").lower()
         if par not in ("euler", "quaternion"):
-            raise _err(joint, "E603", f"unknown parametrization '{par}' of joint '{joint.name}'",
+            raise _err(joint, "E703", f"unknown parametrization '{par}' of joint '{joint.name}'",
                        "use parametrization = \"euler\" or \"quaternion\"")
         return par == "quaternion"
 
@@ -168,7 +168,7 @@ class _Rotational(JointKind):
         try:
             return euler_sequence(seq)
         except ValueError:
-            raise _err(joint, "E604", f"invalid Euler sequence '{seq}' of joint '{joint.name}'",
+            raise _err(joint, "E704", f"invalid Euler sequence '{seq}' of joint '{joint.name}'",
                        "three axes from x, y, z with no axis twice in a row, e.g. \"zyx\" or \"zxz\"") from None
 
     def rot_roles(self, joint):
@@ -230,4 +230,4 @@ def kind_of(joint: ir.Joint) -> JointKind:
     try:
         return KINDS[joint.kind]
     except KeyError:
-        raise _err(joint, "E600", f"unknown joint kind '{joint.kind}' of joint '{joint.name}'") from None
+        raise _err(joint, "E700", f"unknown joint kind '{joint.kind}' of joint '{joint.name}'") from None

@@ -160,12 +160,29 @@ def _format_small(model: ir.Model, latex: bool, max_ops: int) -> str:
     out += [f"  Q[{nm}] = {pr(x)}" for nm, x in nz] if nz else ["  Q = 0"]
     out.append("")
     lam = " - (G^T lambda)[q]" if model.constraints or model.loops else ""
+    quat = _quaternion_blocks(model)
     for nm, (acc, rest, Qi) in zip(names, eqs):
         lhs = pr(acc) if rest == 0 else (pr(rest) if acc == 0 else f"{pr(acc)} + {pr(rest)}")
-        rhs = (f"{pr(Qi)}{lam}" if Qi != 0 else lam.replace(" - ", "-", 1)) if lam else pr(Qi)
+        extra = lam + (f" + 2*mu[{quat[nm]}]*{nm}" if nm in quat else "")
+        rhs = (f"{pr(Qi)}{extra}" if Qi != 0 else extra.replace(" - ", "-", 1).replace(" + ", "", 1)) if extra else pr(Qi)
         out.append(f"  {nm}:  {lhs} = {rhs}")
+    for j in dict.fromkeys(quat.values()):
+        qs = [k for k, v in quat.items() if v == j]
+        out.append(f"  with {' + '.join(f'{k}^2' for k in qs)} = 1 (unit quaternion of {j}; "
+                   f"mu[{j}] is its multiplier)")
     out += _constraint_lines(model, pr, sm)
     return "\n".join(out).replace("+ -", "- ") + "\n"
+
+
+def _quaternion_blocks(model: ir.Model) -> dict[str, str]:
+    """coordinate name -> joint name for quaternion joints whose variables are coordinates."""
+    out = {}
+    for j in model.tree_joints:
+        if j.kind in ("spherical", "free") and j.option("parametrization", "euler").lower() == "quaternion":
+            for v in j.variables:
+                if v.role in ("q0", "q1", "q2", "q3") and v.coordinate:
+                    out[v.coordinate] = j.name
+    return out
 
 
 def _constraint_lines(model: ir.Model, pr, sm) -> list[str]:

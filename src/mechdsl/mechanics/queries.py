@@ -19,12 +19,12 @@ class Query:
 
     def _point(self, name):
         if name not in self.kin.tree._points:
-            raise MechError(Diagnostic("E607", f"unknown point '{name}'"))
+            raise MechError(Diagnostic("E707", f"unknown point '{name}'"))
         return name
 
     def _body(self, name):
         if name not in self._bodies:
-            raise MechError(Diagnostic("E615", f"unknown body '{name}'"))
+            raise MechError(Diagnostic("E715", f"unknown body '{name}'"))
         return name
 
     def __call__(self, n: ir.Expr):
@@ -39,14 +39,14 @@ class Query:
             return k.body_omega(self._body(n.body))[n.i]
         if isinstance(n, ir.EnergyRef):
             if self.energies is None:
-                raise MechError(Diagnostic("E623", f"{n.kind} energy used inside a force or energy term",
+                raise MechError(Diagnostic("E723", f"{n.kind} energy used inside a force or energy term",
                                            help="energies may appear in outputs only"))
             if n.kind not in self.energies:
-                raise MechError(Diagnostic("E624", f"unknown energy '{n.kind}'"))
+                raise MechError(Diagnostic("E724", f"unknown energy '{n.kind}'"))
             return self.energies[n.kind]
         if isinstance(n, ir.ReactionRef):
             if self.reaction is None:
-                raise MechError(Diagnostic("E625", f"reaction of joint '{n.joint}' used inside a force or term",
+                raise MechError(Diagnostic("E725", f"reaction of joint '{n.joint}' used inside a force or term",
                                            help="reactions may appear in outputs only"))
             return self.reaction(n)
-        raise MechError(Diagnostic("E626", f"cannot evaluate {type(n).__name__} here"))
+        raise MechError(Diagnostic("E726", f"cannot evaluate {type(n).__name__} here"))

@@ -87,8 +87,8 @@ class Inertia:
 
 
 def _is_zero(x) -> bool:
-    return isinstance(x, ca.SX) and x.nnz() == 0 or (isinstance(x, ca.SX) and all(
-        x[i].is_zero() for i in range(x.numel())))
+    """True when every entry of the SX x is a structural or constant zero."""
+    return isinstance(x, ca.SX) and (x.nnz() == 0 or all(x[i].is_zero() for i in range(x.numel())))
 
 
 def motion_to_child(E, r, w, v):

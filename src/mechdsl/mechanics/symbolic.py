@@ -88,7 +88,7 @@ class _Builder:
             return self.links[n.body][0][n.i, n.j]
         if isinstance(n, ir.BodyOmega):
             return self.omega_world(n.body)[n.i]
-        raise MechError(Diagnostic("E660", f"{exprs.to_text(n)} cannot appear in printed equations"))
+        raise MechError(Diagnostic("E760", f"{exprs.to_text(n)} cannot appear in printed equations"))
 
     def tr(self, e):
         return exprs.to_sympy(e, self.leaf)
@@ -134,7 +134,7 @@ class _Builder:
                     pending.remove(j)
                     break
             else:
-                raise MechError(Diagnostic("E610", f"joint '{pending[0].name}' is not connected to the world"))
+                raise MechError(Diagnostic("E710", f"joint '{pending[0].name}' is not connected to the world"))
 
     def _axis_index(self, a):
         if all(c.is_number for c in a):

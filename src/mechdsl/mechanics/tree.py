@@ -146,7 +146,7 @@ class Tree:
             vals = [float(a[i]) for i in range(3)]
             n = sum(x * x for x in vals) ** 0.5
             if n == 0:
-                raise MechError(Diagnostic("E606", "a joint axis is the zero vector"))
+                raise MechError(Diagnostic("E706", "a joint axis is the zero vector"))
             return ca.SX([x / n for x in vals]) if abs(n - 1) > 0 else a
         return a / ca.norm_2(a)
 
@@ -154,7 +154,7 @@ class Tree:
         try:
             return self._points[name]
         except KeyError:
-            raise MechError(Diagnostic("E607", f"unknown point '{name}'")) from None
+            raise MechError(Diagnostic("E707", f"unknown point '{name}'")) from None
 
     def point_in_link(self, name: str) -> tuple[int, ca.SX]:
         """(link index, position in link coordinates) of a named point."""
@@ -175,7 +175,7 @@ class Tree:
             xd = ca.jacobian(x, env.t)
             return Var("prescribed", x, xd, ca.jacobian(xd, env.t))
         if depends(x, env.qd):
-            raise MechError(Diagnostic("E608", f"joint variable {joint.name}.{jv.role} depends on speeds",
+            raise MechError(Diagnostic("E708", f"joint variable {joint.name}.{jv.role} depends on speeds",
                                        joint.span, "a joint variable may depend on coordinates and time only"))
         if count:
             self.has_general = True
@@ -191,7 +191,7 @@ class Tree:
             for j in list(pending):
                 if j.parent_body in done:
                     if j.child_body in done:
-                        raise MechError(Diagnostic("E609", f"body '{j.child_body}' has two joints to its parent side "
+                        raise MechError(Diagnostic("E709", f"body '{j.child_body}' has two joints to its parent side "
                                                            f"('{j.name}' is one); mark one as closing a loop", j.span))
                     out.append(j)
                     done.add(j.child_body)
@@ -199,11 +199,11 @@ class Tree:
                     progress = True
             if not progress:
                 j = pending[0]
-                raise MechError(Diagnostic("E610", f"joint '{j.name}': its parent body '{j.parent_body}' "
+                raise MechError(Diagnostic("E710", f"joint '{j.name}': its parent body '{j.parent_body}' "
                                                    "is not connected to the world", j.span))
         for b in self.model.bodies:
             if b.name not in done:
-                raise MechError(Diagnostic("E611", f"body '{b.name}' is attached to nothing", b.span,
+                raise MechError(Diagnostic("E711", f"body '{b.name}' is attached to nothing", b.span,
                                            "connect it with a joint (a Free joint for a free body)"))
         return out
 
@@ -222,14 +222,14 @@ class Tree:
         pp = self.point(joint.parent)
         cp = self.point(joint.child)
         if pp.body != joint.parent_body or cp.body != joint.child_body:
-            raise MechError(Diagnostic("E612", f"joint '{joint.name}': its points are not on its bodies", joint.span))
+            raise MechError(Diagnostic("E712", f"joint '{joint.name}': its points are not on its bodies", joint.span))
         r_pre = self.vec(pp.r) - self.body_offset[joint.parent_body]
         if not elements:
             self._new_link(parent, joint, None, ca.SX.eye(3), r_pre)
         for el in elements:
             parent = self._add_element(parent, joint, el, r_pre)
             r_pre = z3()
-        link = self.links[-1] if elements else self.links[-1]
+        link = self.links[-1]          # the child joint frame
         link.body = body
         r_C = self.vec(cp.r)
         self.body_link[body.name] = link.index
@@ -281,7 +281,7 @@ class Tree:
             if kinds == {"coord"}:
                 idx = [v.coord for v in vs]
                 if len(set(idx)) != 4:
-                    raise MechError(Diagnostic("E613", f"quaternion of joint '{joint.name}' needs four distinct coordinates",
+                    raise MechError(Diagnostic("E713", f"quaternion of joint '{joint.name}' needs four distinct coordinates",
                                                joint.span))
                 link.quat = idx
                 self.quaternions.append((joint, idx))
@@ -290,14 +290,14 @@ class Tree:
                 link.vJw, link.vJv = w, z3()
                 link.aJw, link.aJv = ca.jacobian(w, env.t), z3()
             else:
-                raise MechError(Diagnostic("E614", f"quaternion variables of joint '{joint.name}' must all be "
+                raise MechError(Diagnostic("E714", f"quaternion variables of joint '{joint.name}' must all be "
                                                    "coordinates or all be prescribed", joint.span))
             return link.index
         if el.kind == "T":
             E = self.mat(el.R)
             p = self.vec(el.r)
             if depends(ca.vertcat(ca.vec(E), p), ca.vertcat(env.q, env.qd)):
-                raise MechError(Diagnostic("E605", f"moving frame '{joint.name}' depends on the state",
+                raise MechError(Diagnostic("E705", f"moving frame '{joint.name}' depends on the state",
                                            joint.span, "a frame's motion is a function of time and parameters"))
             link = self._new_link(parent, joint, el, E, r_pre + p)
             if ca.depends_on(ca.vertcat(ca.vec(E), p), env.t):

@@ -146,7 +146,7 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    "an extra potential energy"),
     # ------------------------------------------------------------------ contacts (issue 6)
     ComponentClass("Contact", "contact", (
-        _f("point", "point", doc="the contacting point (centre of a sphere when radius > 0)"),
+        _f("point", "point", None, doc="the contacting point (centre of a sphere when radius > 0)"),
         _f("radius", "scalar", 0.0, U.LENGTH),
         _f("surface", "string", "plane", choices=("plane", "sphere", "point")),
         _f("normal", "vec3", _Y, U.ONE, "plane normal (world), pointing to the allowed side"),
@@ -154,8 +154,14 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
         _f("center", "point", "world", doc="sphere centre, or the other point"),
         _f("surface_radius", "scalar", 0.0, U.LENGTH),
         _f("inside", "bool", 0.0, doc="sphere: the point stays inside"),
-        _f("e", "scalar", 1.0, U.ONE, "coefficient of restitution")),
+        _f("e", "scalar", 1.0, U.ONE, "coefficient of restitution"),
+        _f("gap", "scalar", None, U.LENGTH, "the gap as an expression of coordinates and time (>= 0 allowed); "
+                                            "instead of point and surface, e.g. in equation-layer models")),
         "a unilateral frictionless contact with restitution"),
+    ComponentClass("Fixation", "contact", (
+        _f("point", "point", doc="the point that is suddenly fixed"),
+        _f("time", "scalar", dim=U.TIME, doc="when it is fixed (where it is at that time)")),
+        "an impulsive constraint: at `time` the point is fixed in space for good"),
 ]}
 
 

@@ -883,9 +883,26 @@ class Flattener(Evaluator):
                     fields.append((fl.name, K.as_vec3(v, fl.name)))
                 elif isinstance(v, Scalar):
                     fields.append((fl.name, v.expr))
-            out.contacts.append(ir.Contact(name, f["surface"].value, tuple(fields), span))
+            out.contacts.append(ir.Contact(name, self._contact_kind(inst, f, span), tuple(fields), span))
         inst.built = out
         return out
+
+    def _contact_kind(self, inst: CompInst, f, span) -> str:
+        """'fix' (Fixation), 'gap' (Contact with a gap expression) or the Contact's surface."""
+        if inst.cls.name == "Fixation":
+            return "fix"
+        gap = f.get("gap")
+        if gap is not None:
+            if f.get("point") is not None:
+                fail("E211", f"give either a gap or a point for contact '{inst.name}', not both", span)
+            if X.has_speed(gap.expr):
+                fail("E306", f"the gap of contact '{inst.name}' may depend on coordinates and time, not on speeds",
+                     span)
+            return "gap"
+        if f.get("point") is None:
+            fail("E210", f"Contact '{inst.name}' needs 'point' (or a 'gap' expression)", inst.entry.decl.name_span,
+                 "add point = ... (and surface, normal, ...) or gap = ... to its modifiers")
+        return f["surface"].value
 
     def _build_joint(self, inst: CompInst, f, span) -> ir.Joint:
         cls, name = inst.cls, inst.name

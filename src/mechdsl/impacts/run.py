@@ -1,0 +1,436 @@
+"""The hybrid simulation loop: step, locate events on the dense output, apply impacts, restart.
+
+Modes.  Every contact is *open* (free flight, its gap watched) or *closed* (persistent:
+its gap held at zero as a bilateral constraint, its normal force watched).  Fixations, once
+their time has come, are bilateral for good; the model's own constraints always are.
+
+Events in one accepted step [t_a, t_b] (dense output y(t)):
+    open contact i:    e_i(t) = gap_i(y(t)) + offset     crosses to <= 0   -> impact
+    closed contact i:  e_i(t) = lam_i(y(t))              crosses to <= 0   -> release
+The event function E(t) = min_i e_i(t) is sampled at ``samples`` sub-intervals of the
+step; the first sign change is shrunk by a safeguarded Illinois iteration on the
+interpolant to the time resolution of double precision.  E(t_a) > 0 holds at every step
+start (after an event the state is taken on the positive side of the bracket, and a
+contact left touching is projected out of penetration), so an event at the very start of
+a step, or a hop shorter than one step, is still found.  Grid points before the event come
+from this step's interpolant; the integrator restarts at the event.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .impact_map import ImpactError, solve_impact
+from .rootfind import bracket_root
+from .stepper import make_solver
+
+
+class RunFailure(Exception):
+    def __init__(self, time: float, cause: str, detail: str = ""):
+        super().__init__(cause)
+        self.time, self.cause, self.detail = time, cause, detail
+
+
+class Run:
+    def __init__(self, system, opts, grid: np.ndarray, method_cls: str, progress=None):
+        self.s, self.o = system, opts
+        self.grid = np.asarray(grid, float)
+        self.method_cls = method_cls
+        self.progress = progress
+        self.t_now = math.nan              # time reached (for failure reports)
+        n, k = system.n, system.k
+        self.closed = [False] * k
+        self.fix_sel: dict[int, list[int]] = {}
+        self.active: list[int] = list(system.model_rows)
+        self.events: list[dict] = []
+        self.out_y = np.full((len(self.grid), 2 * n), np.nan)
+        self.out_force = np.zeros((len(self.grid), k))
+        self.out_lam = np.zeros((len(self.grid), system.m))
+        self.gi = 0
+        self.stats = {"steps": 0, "rejected_steps": 0, "restarts": 0, "projections": 0, "events": 0,
+                      "root_evaluations": 0}
+        self._burst = (math.nan, 0)
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def n(self) -> int:
+        return self.s.n
+
+    def names(self, idx) -> list[str]:
+        return [self.s.gaps[i].name for i in idx]
+
+    def _rows_of_contacts(self, idx) -> list[int]:
+        return [self.s.contact_row(i) for i in idx]
+
+    def _bilateral_rows(self) -> list[int]:
+        rows = list(self.s.model_rows)
+        for j in sorted(self.fix_sel):
+            rows += self.fix_sel[j]
+        return rows
+
+    def _select(self, t, q) -> None:
+        """Active rows: model, fixations, closed contacts; dependent contact rows are opened."""
+        cand = self._bilateral_rows() + self._rows_of_contacts([i for i, c in enumerate(self.closed) if c])
+        sel = self.s.independent(t, q, cand)
+        sel_set = set(sel)
+        for i, c in enumerate(self.closed):
+            if c and self.s.contact_row(i) not in sel_set:
+                self.closed[i] = False
+        self.active = [r for r in cand if r in sel_set]
+
+    def _lam_closed(self, t, q, qd) -> dict[int, float]:
+        _, lam = self.s.accel(t, q, qd, self.active)
+        pos = {r: j for j, r in enumerate(self.active)}
+        return {i: float(lam[pos[self.s.contact_row(i)]]) for i, c in enumerate(self.closed) if c}
+
+    # ------------------------------------------------------------------ output
+    def _store(self, gi: int, t: float, y: np.ndarray) -> None:
+        self.out_y[gi] = y
+        if self.active:
+            _, lam = self.s.accel(t, y[:self.n], y[self.n:], self.active)
+            for j, r in enumerate(self.active):
+                if r < self.s.m:
+                    self.out_lam[gi, r] = -lam[j]          # EOM convention: M q'' = bias - g_q^T lam
+                elif r < self.s.m + self.s.k:
+                    self.out_force[gi, r - self.s.m] = lam[j]
+
+    def emit(self, sol, t_hi: float, inclusive: bool) -> None:
+        g = self.grid
+        while self.gi < len(g) and (g[self.gi] < t_hi or (inclusive and g[self.gi] <= t_hi)):
+            self._store(self.gi, g[self.gi], sol(g[self.gi]))
+            self.gi += 1
+
+    # ------------------------------------------------------------------ events
+    def event_matrix(self, ts: np.ndarray, Y: np.ndarray):
+        """Event components at the columns of Y: rows (kind, contact index) and values (m, K)."""
+        labels, vals = [], []
+        open_idx = [i for i, c in enumerate(self.closed) if not c]
+        if open_idx:
+            G = self.s.gaps_at(ts, Y[:self.n])
+            vals.append(G[open_idx] + self.o.offset)
+            labels += [("impact", i) for i in open_idx]
+        closed_idx = [i for i, c in enumerate(self.closed) if c]
+        if closed_idx:
+            L = np.zeros((len(closed_idx), len(ts)))
+            for j, t in enumerate(ts):
+                lam = self._lam_closed(t, Y[:self.n, j], Y[self.n:, j])
+                L[:, j] = [lam[i] for i in closed_idx]
+            vals.append(L)
+            labels += [("release", i) for i in closed_idx]
+        return labels, (np.vstack(vals) if vals else np.zeros((0, len(ts))))
+
+    def find_event(self, sol, ta: float, tb: float):
+        """Earliest event in (ta, tb]: (time, state, triggering labels) or None."""
+        if self.s.k == 0:
+            return None
+        ts = np.linspace(ta, tb, self.o.samples + 1)
+        Y = np.asarray(sol(ts), float).reshape(2 * self.n, -1)
+        labels, V = self.event_matrix(ts, Y)
+        if not labels:
+            return None
+        E = V.min(axis=0)
+        if E[0] <= 0:                    # should not happen (see module doc): an event at the step start
+            return ta, Y[:, 0], [lab for lab, v in zip(labels, V[:, 0]) if v <= 0]
+        hit = np.nonzero(E[1:] <= 0)[0]
+        if hit.size == 0:
+            return None
+        j = int(hit[0]) + 1
+
+        def fun(t):
+            y = np.asarray(sol(t), float).reshape(-1, 1)
+            return float(self.event_matrix(np.array([t]), y)[1].min())
+
+        xtol = 4e-16 * max(abs(ta), abs(tb)) + 1e-15 * (tb - ta)
+        a, b, nev = bracket_root(fun, ts[j - 1], ts[j], E[j - 1], E[j], xtol)
+        self.stats["root_evaluations"] += nev
+        yb = np.asarray(sol(b), float).reshape(-1, 1)
+        _, Vb = self.event_matrix(np.array([b]), yb)
+        trig = [lab for lab, v in zip(labels, Vb[:, 0]) if v <= 0] or [labels[int(np.argmin(Vb[:, 0]))]]
+        # the offset only makes detection robust; the impact itself is located where the gap
+        # reaches zero (from the positive side), when that root is bracketed
+        gaps = [i for kind, i in trig if kind == "impact"]
+        if gaps and len(gaps) == len(trig):
+            def raw(t):
+                y = np.asarray(sol(t), float).reshape(-1, 1)
+                return float(np.min(self.s.gaps_at(np.array([t]), y[:self.n])[gaps, 0]))
+
+            lo = ts[j - 1]
+            r_lo = raw(lo)
+            if r_lo > 0:
+                a, _, nev = bracket_root(raw, lo, b, r_lo, raw(b), xtol)
+                self.stats["root_evaluations"] += nev + 2
+        return a, np.asarray(sol(a), float).ravel(), trig
+
+    def _count_event(self, t: float) -> None:
+        self.stats["events"] = len(self.events)
+        if len(self.events) > self.o.max_events:
+            raise RunFailure(t, f"more than {self.o.max_events} events",
+                             "Zeno behaviour? raise rest_speed or max_events")
+        t0, cnt = self._burst
+        if abs(t - t0) <= 1e-12 * max(1.0, abs(t)):
+            cnt += 1
+        else:
+            t0, cnt = t, 1
+        self._burst = (t0, cnt)
+        if cnt > 200 * (self.s.k + len(self.s.fixations) + 1):
+            raise RunFailure(t, "events do not settle at one instant",
+                             f"{cnt} events at t = {t:.12g}; contacts may be contradictory")
+
+    def _record(self, ev: dict) -> None:
+        self.events.append(ev)
+        self._count_event(ev["time"])
+
+    # ------------------------------------------------------------------ event handling
+    def handle(self, t: float, q: np.ndarray, qd: np.ndarray):
+        """Impacts, closing and releasing of contacts at time t; returns the new (q, qd)."""
+        s, o = self.s, self.o
+        try:
+            gap = s.gap(t, q)
+            u = s.normal_speeds(t, q, qd)
+            touching = [i for i in range(s.k) if self.closed[i] or gap[i] <= o.touch]
+            if any(u[i] < -o.v_eps for i in touching):
+                qd = self.impact(t, q, qd, touching)
+            self._select(t, q)
+            qd = self.settle(t, q, qd)
+        except ImpactError as e:
+            raise RunFailure(t, "impact could not be resolved", str(e)) from None
+        open_rows = self._rows_of_contacts([i for i, c in enumerate(self.closed) if not c])
+        q, qd = self.s.project(t, q, qd, self.active, tol=1e-3 * o.offset, one_sided=open_rows,
+                               one_sided_tol=0.5 * o.offset)
+        self.stats["projections"] += 1
+        return q, qd
+
+    def impact(self, t, q, qd, cands: list[int]):
+        s, o = self.s, self.o
+        M, _ = s.dyn(t, q, qd)
+        _, A, ct, _ = s.cons(t, q, qd)
+        B_rows = self._bilateral_rows()
+        if B_rows:
+            B_rows = s.independent(t, q, B_rows)
+        B, bt = A[B_rows], ct[B_rows]
+        if o.impact_order == "sequential":
+            return self._sequential(t, q, qd, cands, M, A, ct, B, bt)
+        rows = self._rows_of_contacts(cands)
+        G, gt = A[rows], ct[rows]
+        e = self._e_eff(cands, G @ qd + gt)
+        sol = solve_impact(M, qd, G, gt, e, B, bt)
+        self._record_impact(t, q, qd, sol, cands)
+        return sol.qd
+
+    def _e_eff(self, cands, u):
+        e = self.s.e[cands].copy()
+        e[e * np.abs(np.minimum(u, 0.0)) < self.o.rest_speed] = 0.0
+        return e
+
+    def _sequential(self, t, q, qd, cands, M, A, ct, B, bt):
+        """Pairwise impacts one after another, the fastest approach first (ties: declaration order)."""
+        o = self.o
+        rows = self._rows_of_contacts(cands)
+        limit = 100 * (len(cands) + 1)
+        for _ in range(limit):
+            u = A[rows] @ qd + ct[rows]
+            j = int(np.argmin(u))
+            if u[j] >= -o.v_eps:
+                return qd
+            i = cands[j]
+            r = [self.s.contact_row(i)]
+            sol = solve_impact(M, qd, A[r], ct[r], self._e_eff([i], u[j:j + 1]), B, bt)
+            self._record_impact(t, q, qd, sol, [i])
+            qd = sol.qd
+        # did not settle pairwise (e < 1 in a touching cluster): finish with one simultaneous impact
+        G, gt = A[rows], ct[rows]
+        sol = solve_impact(M, qd, G, gt, self._e_eff(cands, G @ qd + gt), B, bt)
+        self._record_impact(t, q, qd, sol, cands, note="pairwise impacts did not settle; resolved simultaneously")
+        return sol.qd
+
+    def _record_impact(self, t, q, qd, sol, cands, note: str = "") -> None:
+        s = self.s
+        dT = s.kinetic(t, q, sol.qd) - s.kinetic(t, q, qd)
+        tol = 1e-12 * max(1.0, float(np.max(np.abs(sol.impulses))) if sol.impulses.size else 1.0)
+        inv = [j for j, i in enumerate(cands) if sol.impulses[j] > tol or sol.speeds_before[j] < -self.o.v_eps]
+        ev = {"time": float(t), "kind": "impact", "contact": ", ".join(self.names([cands[j] for j in inv])),
+              "impulse": _one([sol.impulses[j] for j in inv]), "energy_change": float(dT),
+              "speed_before": _one([sol.speeds_before[j] for j in inv]),
+              "speed_after": _one([sol.speeds_after[j] for j in inv])}
+        if note:
+            ev["note"] = note
+        self._record(ev)
+
+    def settle(self, t, q, qd):
+        """Decide which touching contacts are persistent: closed iff their normal force pushes."""
+        s, o = self.s, self.o
+        gap = s.gap(t, q)
+        u = s.normal_speeds(t, q, qd)
+        before = list(self.closed)
+        for i in range(s.k):
+            if not self.closed[i] and gap[i] <= o.touch and abs(u[i]) <= o.v_eps:
+                self.closed[i] = True
+            elif self.closed[i] and u[i] > o.v_eps:
+                self.closed[i] = False     # an impact separated it
+        for _ in range(s.k + 1):
+            self._select(t, q)
+            closed = [i for i, c in enumerate(self.closed) if c]
+            if not closed:
+                break
+            lam, W, afree = self._force_detail(t, q, qd)
+            acc = {i: lam[i] * W[i] - o.acc_tol * max(1.0, abs(afree[i])) for i in closed}
+            worst = min(closed, key=lambda i: (acc[i], i))
+            if acc[worst] > 0:
+                break
+            self.closed[worst] = False
+        self._select(t, q)
+        for i in range(s.k):
+            if self.closed[i] != before[i]:
+                self._record({"time": float(t), "kind": "close" if self.closed[i] else "release",
+                              "contact": s.gaps[i].name, "impulse": 0.0, "energy_change": 0.0,
+                              "speed_before": float(u[i]), "speed_after": float(u[i])})
+        return qd
+
+    def _force_detail(self, t, q, qd):
+        """Normal forces of closed contacts, W_ii = G_i M^-1 G_i^T and their free gap accelerations."""
+        s = self.s
+        import scipy.linalg as sla
+
+        M, b = s.dyn(t, q, qd)
+        _, A, _, gam = s.cons(t, q, qd)
+        cf = sla.cho_factor(M, lower=True)
+        a0 = sla.cho_solve(cf, b)
+        _, lam = s.accel(t, q, qd, self.active)
+        pos = {r: j for j, r in enumerate(self.active)}
+        out_l, out_w, out_a = {}, {}, {}
+        for i, c in enumerate(self.closed):
+            if c:
+                r = s.contact_row(i)
+                out_l[i] = float(lam[pos[r]])
+                out_w[i] = float(A[r] @ sla.cho_solve(cf, A[r]))
+                out_a[i] = float(A[r] @ a0 + gam[r])
+        return out_l, out_w, out_a
+
+    def fixate(self, t, q, qd, j: int):
+        """Fixation j: its point is anchored where it is; the velocity jump from the impact equations."""
+        s = self.s
+        rows = s.fix_rows(j)
+        c, _, _ = s.pos(t, q)
+        s.anchor[rows] = c[rows]
+        base = self._bilateral_rows()
+        sel = s.independent(t, q, base + rows)
+        self.fix_sel[j] = [r for r in rows if r in sel]
+        M, _ = s.dyn(t, q, qd)
+        _, A, ct, _ = s.cons(t, q, qd)
+        B_rows = [r for r in base + self.fix_sel[j] if r in sel]
+        gap = s.gap(t, q)
+        cands = [i for i in range(s.k) if self.closed[i] or gap[i] <= self.o.touch]
+        cr = self._rows_of_contacts(cands)
+        G, gt = A[cr], ct[cr]
+        try:
+            sol = solve_impact(M, qd, G, gt, self._e_eff(cands, G @ qd + gt), A[B_rows], ct[B_rows])
+        except ImpactError as e:
+            raise RunFailure(t, "fixation could not be applied", str(e)) from None
+        dT = s.kinetic(t, q, sol.qd) - s.kinetic(t, q, qd)
+        pos = {r: k for k, r in enumerate(B_rows)}
+        imp = [float(sol.bilateral[pos[r]]) if r in pos else 0.0 for r in rows]
+        f = s.fixations[j]
+        self._record({"time": float(t), "kind": "fixation", "contact": f.label, "impulse": imp,
+                      "energy_change": float(dT), "speed_before": _one(list(A[rows] @ qd + ct[rows])),
+                      "speed_after": _one(list(A[rows] @ sol.qd + ct[rows]))})
+        return self.handle(t, q, sol.qd)
+
+    def consistent_start(self, t, q, qd):
+        """Start values on the model's constraints: positions, then velocities, moving only the
+        coordinates whose start values are not fixed (all of them if every one is fixed)."""
+        s = self.s
+        rows = s.independent(t, q, s.model_rows)
+        if not rows:
+            return q, qd
+        eom = s.eom
+        free_q = [i for i, f in enumerate(eom.fixed_q or (True,) * s.n) if not f] or list(range(s.n))
+        free_v = [i for i, f in enumerate(eom.fixed_qd or (True,) * s.n) if not f] or list(range(s.n))
+        q, qd = np.array(q, float), np.array(qd, float)
+        for _ in range(50):
+            c, A, _ = s.pos(t, q)
+            c = c[rows]
+            if np.max(np.abs(c)) <= 1e-3 * self.o.offset:
+                break
+            q[free_q] -= np.linalg.lstsq(A[rows][:, free_q], c, rcond=None)[0]
+        else:
+            raise RunFailure(t, "inconsistent start values", "the constraints cannot be satisfied by the "
+                             "coordinates whose start values are not fixed")
+        _, A, ct, _ = s.cons(t, q, qd)
+        r = A[rows] @ qd + ct[rows]
+        qd[free_v] -= np.linalg.lstsq(A[rows][:, free_v], r, rcond=None)[0]
+        return q, qd
+
+    # ------------------------------------------------------------------ the loop
+    def run(self, t0: float, t_end: float, q: np.ndarray, qd: np.ndarray):
+        s, o = self.s, self.o
+        n = self.n
+        fix_times = sorted((f.time, j) for j, f in enumerate(s.fixations))
+        fixed = set()
+        t = t0
+        self.t_now = t0
+        for tf, j in fix_times:
+            if tf <= t0:
+                q, qd = self.fixate(t0, q, qd, j)
+                fixed.add(j)
+        q, qd = self.consistent_start(t, q, qd)
+        q, qd = self.handle(t, q, qd)
+        y = np.concatenate([q, qd])
+        while t < t_end:
+            pending = [(tf, j) for tf, j in fix_times if j not in fixed]
+            t_stop = min([t_end] + [tf for tf, _ in pending])
+            pending_times = {tf for tf, _ in pending}
+            rows = list(self.active)
+            jac = s.jacobian(rows) if self.method_cls in ("Radau", "BDF", "LSODA") else None
+            solver = make_solver(self.method_cls, s.rhs(rows), t, y, t_stop, o.rtol, o.atol, o.max_step, jac=jac)
+            self.stats["restarts"] += 1
+            restart = False
+            while solver.status == "running":
+                msg = solver.step()
+                if solver.status == "failed":
+                    where = ", ".join(f"{c} = {v:.6g}" for c, v in zip(s.eom.coords, solver.y[:n]))
+                    raise RunFailure(solver.t, "integrator failed", f"{msg}; at {where}")
+                self.stats["steps"] += 1
+                ta, tb = solver.t_old, solver.t
+                self.t_now = ta
+                if self.progress is not None:
+                    self.progress(tb, t_end)
+                sol = solver.dense_output()
+                ev = self.find_event(sol, ta, tb)
+                if ev is not None:
+                    t_ev, y_ev, _ = ev
+                    self.emit(sol, t_ev, inclusive=False)
+                    t = t_ev
+                    q, qd = self.handle(t, y_ev[:n], y_ev[n:])
+                    y = np.concatenate([q, qd])
+                    restart = True
+                    break
+                # a grid point at a fixation time shows the state after it (as at impacts)
+                self.emit(sol, tb, inclusive=not (tb >= t_stop and t_stop in pending_times))
+                t, y = tb, solver.y.copy()
+                if self.active:
+                    dq, dv = s.drift(t, y[:n], y[n:], self.active)
+                    if max(dq, dv) > o.drift_tol:
+                        q, qd = s.project(t, y[:n], y[n:], self.active, tol=1e-3 * o.offset)
+                        self.stats["projections"] += 1
+                        y = np.concatenate([q, qd])
+                        restart = True
+                        break
+            if restart:
+                continue
+            t = t_stop
+            for tf, j in pending:
+                if tf <= t_stop:
+                    q, qd = self.fixate(t, y[:n], y[n:], j)
+                    y = np.concatenate([q, qd])
+                    fixed.add(j)
+        # grid points at the final time (after an event there)
+        while self.gi < len(self.grid) and self.grid[self.gi] <= t + 1e-12 * max(1.0, abs(t)):
+            self._store(self.gi, self.grid[self.gi], y)
+            self.gi += 1
+        return y
+
+
+def _one(xs):
+    xs = [float(x) for x in xs]
+    return xs[0] if len(xs) == 1 else xs

@@ -1,0 +1,234 @@
+"""``simulate_with_contacts``: simulations of models with unilateral contacts and fixations."""
+from __future__ import annotations
+
+import time as _time
+
+import numpy as np
+
+from .. import result as R
+from ..diagnostics import Diagnostic, MechError, UsageError
+from .gaps import contact_gaps
+from .options import ContactOptions
+from .run import Run, RunFailure
+from .stepper import resolve_method
+from .system import ContactSystem
+
+# options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
+# the simulator can pass its options through unchanged
+_PASSED_THROUGH = ("formulation", "dt", "reactions", "compiled", "max_steps", "integrator_options",
+                   "singularity_threshold", "functions")
+DEFAULT_POINTS = 501
+ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
+
+
+def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_start: float = 0.0,
+                           rtol: float = 1e-8, atol: float = 1e-10, method: str | None = "auto",
+                           points: int | None = None, outputs=None, x0=None, p=None, progress=None,
+                           q0=None, qd0=None, fixations=(), rest_speed: float | None = None,
+                           impact_order: str | None = None, gap_tol: float | None = None,
+                           event_offset: float | None = None, max_events: int = 100000,
+                           max_step: float | None = None, samples: int = 4, **passed) -> R.Result:
+    """Simulate eom with unilateral contacts from t_start to t_end; output on a uniform grid.
+
+    contacts: ``ir.Contact`` / ``ContactGap`` / ``Fixation`` objects (default: the model's);
+    fixations: more :class:`Fixation` objects.  x0 ([q; qd] or {name: value, "der(name)": value})
+    and p (vector or {name: value}) as for ``mechdsl.simulate.simulate``; q0/qd0 override the
+    start values directly.  progress: a callable(t, t_end) called after every step.
+    rest_speed (m/s, default 1e-3), impact_order ("simultaneous" | "sequential"): see
+    docs/contacts.md.  The events (impacts, contacts closing and releasing, fixations) are
+    in ``result.events``.
+    """
+    for k in passed:
+        if k not in _PASSED_THROUGH:
+            raise UsageError(f"unknown option '{k}' for a simulation with contacts")
+    if t_end is None:
+        raise UsageError("give t_end")
+    t_end, t_start = float(t_end), float(t_start)
+    if not (np.isfinite(t_end) and np.isfinite(t_start) and t_end > t_start):
+        raise UsageError(f"t_end ({t_end}) must be after the start time ({t_start})")
+    npts = DEFAULT_POINTS if points is None else int(points)
+    if npts < 2:
+        raise UsageError("points must be at least 2")
+    rest_speed = 1e-3 if rest_speed is None else float(rest_speed)
+    impact_order = impact_order or "simultaneous"
+    opts = ContactOptions(rtol=float(rtol), atol=float(atol), rest_speed=float(rest_speed),
+                          impact_order=impact_order, gap_tol=gap_tol, event_offset=event_offset,
+                          max_events=int(max_events), max_step=max_step, samples=int(samples))
+    method_cls, note = resolve_method(method)
+    gaps, fixes = contact_gaps(eom, contacts)
+    fixes = fixes + list(fixations)
+    pv = parameter_vector(eom, p)
+    xs = start_vector(eom, x0, pv)
+    qs, qds = xs[:eom.n], xs[eom.n:]
+    if q0 is not None:
+        qs = np.asarray(q0, float).ravel()
+    if qd0 is not None:
+        qds = np.asarray(qd0, float).ravel()
+    out_names = output_names(eom, gaps, outputs)
+    system = ContactSystem(eom, gaps, fixes, pv)
+    gap0 = system.gap(t_start, qs)
+    for g, v in zip(gaps, gap0):
+        if v < -opts.touch:
+            raise MechError(Diagnostic("E861", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
+                                       g.span or _no_span(),
+                                       "change the start values so that every gap is >= 0"))
+    grid = np.linspace(t_start, t_end, npts)
+    run = Run(system, opts, grid, method_cls, progress=progress if callable(progress) else None)
+    wall = _time.perf_counter()
+    failure = None
+    try:
+        run.run(t_start, t_end, qs, qds)
+    except RunFailure as f:
+        failure = R.Failure(time=float(f.time), cause=f.cause, detail=f.detail)
+    except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as ex:
+        failure = R.Failure(time=float(run.t_now), cause="numerical failure",
+                            detail=f"{type(ex).__name__}: {ex} (a singular mass matrix or constraint Jacobian?)")
+    wall = _time.perf_counter() - wall
+    m = run.gi
+    Y = run.out_y[:m]
+    n = eom.n
+    res = R.Result(t=grid[:m].copy(), q=Y[:, :n].copy(), qd=Y[:, n:].copy(), coordinates=tuple(eom.coords),
+                   events=run.events, failure=failure)
+    res.signals = _signals(eom, system, grid[:m], Y, run.out_force[:m], run.out_lam[:m], out_names)
+    res.stats = dict(run.stats, rhs_evals=system.n_rhs, points=m, wall_time=wall, events=len(run.events),
+                     impacts=sum(1 for e in run.events if e["kind"] == "impact"))
+    conservative = _conservative(eom)
+    if conservative and m:
+        res.stats.update(_drift_between_events(res, run.events))
+    reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+    res.metadata = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords), "warnings": [],
+                    "method": method_cls.lower(), "method_reason": reason, "conservative": conservative,
+                    "simulator": "mechdsl.impacts",
+                    "options": {"t_start": t_start, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol,
+                                "points": npts, "method": method or "auto", "outputs": list(out_names),
+                                "impact_order": opts.impact_order, "rest_speed": opts.rest_speed,
+                                "gap_tol": opts.touch, "event_offset": opts.offset,
+                                "parameters": dict(zip(eom.params, map(float, pv))),
+                                "start": {**dict(zip(eom.coords, map(float, qs))),
+                                          **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}},
+                    "contacts": [g.name for g in gaps], "fixations": [f.label for f in fixes]}
+    try:
+        from ..simulate import versions
+
+        res.metadata["versions"] = versions()
+    except ImportError:  # pragma: no cover - the ODE simulator is part of mechdsl
+        pass
+    return res
+
+
+def _conservative(eom) -> bool:
+    """No dissipation, no other generalized forces, no explicit time (impacts aside)."""
+    import casadi as ca
+
+    try:
+        return bool(ca.SX(eom.D).is_zero() and ca.SX(eom.Q).is_zero()
+                    and not ca.depends_on(ca.vertcat(ca.SX(eom.T), ca.SX(eom.V)), eom.t))
+    except Exception:  # noqa: BLE001 -- a non-SX energy: make no claim
+        return False
+
+
+def _drift_between_events(res, events) -> dict:
+    """Energy drift of the integration alone: E(t) - E(0) minus the changes at the events up to t."""
+    E = res.signals.get("energy")
+    if E is None or not len(E) or not np.isfinite(E).all():
+        return {}
+    times = np.array([e["time"] for e in events])
+    jumps = np.cumsum([float(e.get("energy_change", 0.0)) for e in events])
+    k = np.searchsorted(times, res.t, side="right")
+    expected = E[0] + np.where(k > 0, jumps[np.maximum(k - 1, 0)] if len(jumps) else 0.0, 0.0)
+    dE = float(np.max(np.abs(E - expected)))
+    scale = max(abs(float(E[0])), float(np.max(np.abs(res.signals["kinetic_energy"]))),
+                float(np.max(np.abs(res.signals["potential_energy"]))), 1e-300)
+    return {"energy_drift": dE, "energy_drift_relative": dE / scale}
+
+
+def output_names(eom, gaps, outputs) -> list[str]:
+    """The EOM outputs to record (all by default); unknown names are usage errors."""
+    if outputs is None:
+        return list(eom.outputs)
+    want = [outputs] if isinstance(outputs, str) else [str(o) for o in outputs]
+    extra = [f"{g.name}.{w}" for g in gaps for w in ("gap", "force")]
+    known = set(eom.outputs) | set(ENERGY_NAMES) | set(extra) | set(eom.coords) | {f"der({c})" for c in eom.coords}
+    unknown = [w for w in want if w not in known]
+    if unknown:
+        raise UsageError(f"'{unknown[0]}' is not an output of {eom.name}; outputs: "
+                         + ", ".join(list(eom.outputs) + list(ENERGY_NAMES) + extra))
+    return [w for w in want if w in eom.outputs]
+
+
+def parameter_vector(eom, p) -> np.ndarray:
+    base = np.array(eom.param_values, float).ravel()
+    if p is None:
+        return base
+    if isinstance(p, dict):
+        out = base.copy()
+        for k, v in p.items():
+            if k not in eom.params:
+                raise UsageError(f"'{k}' is not a parameter of {eom.name}")
+            out[list(eom.params).index(k)] = float(v)
+        return out
+    arr = np.array(p, float).ravel()
+    if arr.size != base.size:
+        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters")
+    return arr
+
+
+def start_vector(eom, x0, pv) -> np.ndarray:
+    q0, qd0 = eom.start(pv)
+    base = np.r_[q0, qd0]
+    if x0 is None:
+        out = base
+    elif isinstance(x0, dict):
+        out = base.copy()
+        for k, v in x0.items():
+            name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+            if name not in eom.coords:
+                raise UsageError(f"'{name}' is not a coordinate of {eom.name}")
+            out[list(eom.coords).index(name) + (eom.n if speed else 0)] = float(v)
+    else:
+        out = np.array(x0, float).ravel()
+        if out.size != 2 * eom.n:
+            raise UsageError(f"x0 has {out.size} entries; expected {2 * eom.n} (coordinates then their speeds)")
+    if not np.isfinite(out).all():
+        raise UsageError("start values are not finite")
+    return out
+
+
+def _no_span():
+    from ..diagnostics import Span
+
+    return Span()
+
+
+def _signals(eom, system, t, Y, force, lam, out_names) -> dict[str, np.ndarray]:
+    """Outputs, energies, invariants and each contact's gap and normal force at the grid points."""
+    import casadi as ca
+
+    n, N = eom.n, len(t)
+    contact_sig = {f"{g.name}.gap": ca.SX(g.gap) for g in system.gaps}
+    forced = {f"{g.name}.force": i for i, g in enumerate(system.gaps)}
+    exprs = {name: eom.outputs[name] for name in out_names}
+    exprs.update({"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V})
+    exprs.update(dict(getattr(eom, "invariants", None) or {}))
+    exprs.update(contact_sig)
+    lam_sym = getattr(eom, "lam", None)
+    ins = [eom.t, eom.q, eom.qd, eom.p] + ([lam_sym] if lam_sym is not None else [])
+    out: dict[str, np.ndarray] = {}
+    cols = [ca.reshape(ca.SX(e), -1, 1) for e in exprs.values()]
+    if cols:
+        f = ca.Function("signals", ins, [ca.vertcat(*cols)])
+        args = [t.reshape(1, -1), Y[:, :n].T, Y[:, n:].T, np.repeat(system.p.reshape(-1, 1), N, 1)]
+        if lam_sym is not None:
+            args.append(lam.T if lam.shape[1] == int(lam_sym.numel()) else np.zeros((int(lam_sym.numel()), N)))
+        vals = np.array(f.map(N)(*args), float) if N else np.zeros((sum(int(c.numel()) for c in cols), 0))
+        row = 0
+        for name, c in zip(exprs, cols):
+            k = int(c.numel())
+            if k == 1:
+                out[name] = vals[row]
+            else:
+                out.update({f"{name}[{i + 1}]": vals[row + i] for i in range(k)})
+            row += k
+    for name, i in forced.items():
+        out[name] = force[:, i].copy()
+    return out

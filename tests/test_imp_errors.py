@@ -1,0 +1,122 @@
+"""Bad input to simulations with contacts: diagnostics and usage errors, never tracebacks;
+a run that stops early keeps its results and says when and why."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from imp_models import ball
+from mechdsl import ir
+from mechdsl.diagnostics import MechError, UsageError
+from mechdsl.impacts import events_table, print_events, simulate_with_contacts
+
+
+def test_start_state_penetrating_a_contact():
+    eom, floor = ball(h0=-0.01)
+    with pytest.raises(MechError) as ex:
+        simulate_with_contacts(eom, [floor], 1.0)
+    assert ex.value.first.code == "E861" and "penetrates contact 'floor'" in ex.value.first.message
+
+
+@pytest.mark.parametrize("method, text", [("nonsense", "unknown method"), ("stormer-verlet", "symplectic")])
+def test_bad_method(method, text):
+    eom, floor = ball()
+    with pytest.raises(UsageError, match=text):
+        simulate_with_contacts(eom, [floor], 1.0, method=method)
+
+
+def test_bad_options():
+    eom, floor = ball()
+    with pytest.raises(UsageError, match="not an output"):
+        simulate_with_contacts(eom, [floor], 1.0, outputs=["nope"])
+    with pytest.raises(UsageError, match="unknown option"):
+        simulate_with_contacts(eom, [floor], 1.0, tolerance=3)
+    with pytest.raises(UsageError, match="impact order"):
+        simulate_with_contacts(eom, [floor], 1.0, impact_order="random")
+    with pytest.raises(UsageError, match="after the start"):
+        simulate_with_contacts(eom, [floor], -1.0)
+
+
+def test_restitution_out_of_range():
+    eom, floor = ball()
+    bad = dataclasses.replace(floor, fields=tuple((k, ir.Const(1.5) if k == "e" else v) for k, v in floor.fields))
+    with pytest.raises(MechError, match="restitution"):
+        simulate_with_contacts(eom, [bad], 1.0)
+
+
+def test_point_contact_without_point_kinematics():
+    eom, floor = ball()
+    eom = dataclasses.replace(eom, point_position=None)
+    with pytest.raises(MechError) as ex:
+        simulate_with_contacts(eom, [floor], 1.0)
+    assert ex.value.first.code == "E862"
+
+
+def test_too_many_events_keeps_results():
+    eom, floor = ball(e=0.9)
+    r = simulate_with_contacts(eom, [floor], 5.0, points=51, max_events=5)
+    assert not r.success
+    assert "more than 5 events" in r.message
+    assert len(r.events) == 6
+    t_fail = r.failure.time
+    assert t_fail == pytest.approx(r.events[-1]["time"])
+    # every output point before the failure is there, none after
+    assert r.t[-1] <= t_fail < r.t[-1] + 0.1 + 1e-12
+    assert np.all(np.isfinite(r.q))
+
+
+def test_events_table():
+    eom, floor = ball()
+    r = simulate_with_contacts(eom, [floor], 5.0, points=3)
+    text = events_table(r.events, max_rows=6)
+    lines = text.splitlines()
+    assert lines[0].startswith(f"events: {len(r.events)} (") and "impact floor" in lines[0]
+    assert len(lines) == 2 + 7 and "more)" in text
+    assert events_table([]) == "events: none\n"
+    import io
+
+    buf = io.StringIO()
+    print_events(r, file=buf)
+    assert buf.getvalue() == events_table(r.events)
+
+
+def test_gap_functions_from_ir():
+    """Gap, Jacobian and normal speed of a sphere contact, against the geometry by hand."""
+    import casadi as ca
+
+    from imp_models import cradle
+    from mechdsl.impacts import contact_gaps, gap_jacobian
+
+    eom, contacts = cradle(2, L=1.0, r=0.05, theta0=-0.3)
+    (cg,), fixes = contact_gaps(eom, contacts)
+    assert fixes == [] and cg.name == "c1" and cg.kind == "point"
+    G, u = gap_jacobian(eom, cg)
+    f = ca.Function("f", [eom.q, eom.qd, eom.t, eom.p], [cg.gap, G, u])
+    th = np.array([-0.2, 0.1])
+    w = np.array([1.0, -0.5])
+    gap, Gv, uv = (np.array(x, float).ravel() for x in f(th, w, 0.0, eom.param_values))
+    x1 = np.array([np.sin(th[0]), -np.cos(th[0])])
+    x2 = np.array([0.1 + np.sin(th[1]), -np.cos(th[1])])
+    d = np.linalg.norm(x2 - x1)
+    assert gap[0] == pytest.approx(d - 0.1)
+    n = (x2 - x1) / d
+    dx1 = np.array([np.cos(th[0]), np.sin(th[0])])
+    dx2 = np.array([np.cos(th[1]), np.sin(th[1])])
+    assert Gv == pytest.approx([-n @ dx1, n @ dx2])
+    assert uv[0] == pytest.approx(-n @ dx1 * w[0] + n @ dx2 * w[1])
+
+
+def test_singular_mass_matrix_is_a_failure_not_a_traceback():
+    """A mass matrix that becomes singular (m(y) = y, reaching 0 at the floor): the run stops
+    with a failure naming the cause, and keeps the points before it."""
+    import casadi as ca
+
+    from mechdsl.eom import from_lagrangian
+
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    eom = from_lagrangian("Odd", ["y"], [], [], q, qd, t, p, T=0.5 * (q[0] - 0.5) * qd[0] ** 2, V=9.81 * q[0],
+                          q0=[1.0], qd0=[0.0], point_position=lambda n: ca.vertcat(0, q[0], 0))
+    floor = ir.Contact("floor", "gap", (("gap", ir.Coord("y")), ("e", ir.Const(0.5))))
+    r = simulate_with_contacts(eom, [floor], 2.0, points=21)
+    assert not r.success
+    assert r.failure.time < 2.0 and len(r.t) < 21
