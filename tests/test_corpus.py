@@ -229,9 +229,14 @@ def test_documentation_is_current():
         "docs/errors.md is stale: run `PYTHONPATH=src python tests/errors_doc.py`"
 
 
-@pytest.mark.xfail(strict=True, reason="GeneralizedForce's field `coordinate` is a reserved word; the grammar "
-                                       "does not accept it as a modifier name (reported to the lead)")
 def test_generalized_force_field_can_be_written(capsys):
     src = ("model A\n  coordinate Real q(start = 0);\n  GeneralizedForce push(coordinate = q, Q = 1);\n"
            "equation\n  kinetic = der(q)^2/2;\nend A;\n")
-    P.parse(src, "gf.mech")
+    tree = P.parse(src, "gf.mech")
+    from mechdsl.printer import to_source
+
+    assert P.parse(to_source(tree), "again") == tree
+    import mechdsl
+
+    r = mechdsl.loads(src).simulate(1.0, points=3)      # q'' = Q = 1
+    assert abs(r["q"][-1] - 0.5) < 1e-8

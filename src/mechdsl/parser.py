@@ -427,6 +427,9 @@ class _Builder(Transformer_NonRecursive):
     def dotted_name(self, meta, items):
         return ".".join(str(t) for t in items)
 
+    def coordinate_field(self, meta, items):
+        return "coordinate"
+
     def argument(self, meta, items):
         each, name, mod, value = items
         return ast.Modifier(name=name, each=each is not None, modification=mod, value=value, span=self.S(meta))
