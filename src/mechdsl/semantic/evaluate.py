@@ -5,6 +5,7 @@ declared name -> value), ``attribute(value, name, span)`` and ``loop_vars``.
 """
 from __future__ import annotations
 
+import abc
 import math
 
 from .. import ast
@@ -38,15 +39,17 @@ def fail(code: str, message: str, span: Span, help: str | None = None):
     raise EvalError(Diagnostic(code, message, span, help))
 
 
-class Evaluator:
+class Evaluator(abc.ABC):
     loop_vars: dict[str, int]
 
     # provided by the flattener
-    def lookup(self, name: str, span: Span) -> Val:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def lookup(self, name: str, span: Span) -> Val:
+        """The value of a declared (or built-in) name."""
 
-    def attribute(self, value: Val, name: str, span: Span) -> Val:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def attribute(self, value: Val, name: str, span: Span) -> Val:
+        """``value.name`` for component references."""
 
     def known_names(self) -> list[str]:  # pragma: no cover - abstract
         return []
