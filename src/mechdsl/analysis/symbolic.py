@@ -19,13 +19,14 @@ from fractions import Fraction
 
 import numpy as np
 
-# --------------------------------------------------------------------------- numbers
-
-
 
 
 class Untranslatable(Exception):
     """An expression this symbolic route cannot express (the caller falls back to another route)."""
+
+
+# --------------------------------------------------------------------------- numbers
+
 
 def exact_number(v: float):
     """sympy number for v: an integer, a small rational, a rational multiple of pi, or a Float."""
