@@ -96,6 +96,28 @@ class EOM:
         return np.array(a, float).ravel(), np.array(b, float).ravel()
 
 
+def parameter_vector(eom: "EOM", p=None) -> np.ndarray:
+    """The numeric parameter vector: the model's values, or overrides (a dict by name, or a
+    full vector).  Shared by every phase that takes ``p=``."""
+    from .diagnostics import UsageError, did_you_mean
+
+    base = np.array(eom.param_values, float).ravel().copy()
+    if p is None:
+        return base
+    if isinstance(p, dict):
+        for k, v in p.items():
+            if k not in eom.params:
+                hint = did_you_mean(k, eom.params)
+                raise UsageError(f"'{k}' is not a parameter of {eom.name}" + (f"; {hint}" if hint else ""))
+            base[list(eom.params).index(k)] = float(v)
+        return base
+    arr = np.array(p, float).ravel()
+    if arr.size != base.size:
+        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters "
+                         f"({', '.join(eom.params)})")
+    return arr
+
+
 def lagrange_terms(T, V, D, Q, q, qd, t):
     """M and bias of Lagrange's equations by automatic differentiation (CasADi SX)."""
     import casadi as ca
