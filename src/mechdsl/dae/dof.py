@@ -44,12 +44,12 @@ class DofReport:
                f"constraints: {self.constraints} (rank {self.rank} at t = {self.t:g})",
                f"degrees of freedom: {self.dof}"]
         if self.redundant:
-            out.append(f"redundant constraints: {self.redundant} ({', '.join(self.redundant_names)}); "
+            out.append(f"redundant constraints: {self.redundant} ({short_list(self.redundant_names)}); "
                        f"the count {self.coordinates} - {self.constraints} = {self.predicted_dof} "
                        f"predicts {self.predicted_dof} degrees of freedom, the rank gives {self.dof}; "
                        "the redundant ones are dropped during simulation")
             if self.vanishing:
-                out.append(f"  of these, {', '.join(self.vanishing)} have a zero gradient (satisfied whatever the "
+                out.append(f"  of these, {short_list(self.vanishing)} have a zero gradient (satisfied whatever the "
                            "coordinates do nearby, e.g. the out-of-plane conditions of a planar loop)")
         if self.dof < 0:
             out.append("over-constrained: more independent constraints than coordinates")
@@ -61,6 +61,14 @@ class DofReport:
                 "independent": list(self.independent), "t": self.t, "vanishing": list(self.vanishing),
                 "min_singular_ratio": (self.singular_values[self.rank - 1] / self.singular_values[0]
                                        if self.rank and self.singular_values[0] > 0 else None)}
+
+
+def short_list(names, limit: int = 8) -> str:
+    """'a, b, c' or 'a, b, ..., z (120 in all)' for long lists in messages."""
+    names = list(names)
+    if len(names) <= limit:
+        return ", ".join(names)
+    return ", ".join(names[:limit - 2]) + f", ..., {names[-1]} ({len(names)} in all)"
 
 
 def numeric_rank(Gs: np.ndarray, tol: float = RANK_TOL) -> tuple[int, np.ndarray]:

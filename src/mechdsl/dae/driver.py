@@ -32,7 +32,7 @@ import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
 from ..result import Failure, Result
-from .dof import dof_report, singular_ratio
+from .dof import dof_report, short_list, singular_ratio
 from .init import initialize
 from .options import DaeOptions, parse_options
 from .record import evaluate_signals, select_signals, standard_signals
@@ -145,7 +145,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     dof = dof_report(eom, init.q, t0, pv)
     notes: list[str] = []
     if dof.redundant:
-        notes.append(f"{dof.redundant} redundant constraint(s) dropped: {', '.join(dof.redundant_names)} "
+        notes.append(f"{dof.redundant} redundant constraint(s) dropped: {short_list(dof.redundant_names)} "
                      f"(rank of G is {dof.rank} of {dof.constraints}); their multipliers are reported as 0")
     system = ConstrainedSystem.build(eom, pv, dof.independent)
     system.fix_row_scale(init.q, t0)
