@@ -94,7 +94,7 @@ class DiagnosticBag:
         return [d for d in self.items if d.severity == "warning"]
 
     def raise_if_errors(self) -> None:
-        errs = self.errors
+        errs = list(dict.fromkeys(self.errors))  # the same error found twice (e.g. in two passes) once
         if errs:
             unique = list(dict.fromkeys(errs))  # the same problem found twice is reported once
             raise MechError(sorted(unique, key=_order))
@@ -115,9 +115,11 @@ def render(d: Diagnostic, source: str | None = None) -> str:
     loc = f"{s.file}:{s.line}:{s.col}" if s.line > 0 else s.file
     out = [f"{loc}: {d.severity}[{d.code}]: {d.message}"]
     if source is not None and s.line > 0:
-        lines = source.splitlines()
+        lines = [ln.rstrip("\r") for ln in source.split("\n")]  # lines as the lexer counts them (\n only)
         if 1 <= s.line <= len(lines):
             text = lines[s.line - 1].expandtabs(4) if "\t" not in lines[s.line - 1] else lines[s.line - 1].replace("\t", " ")
+            # control characters (escape sequences in a damaged file) are not sent to the terminal
+            text = "".join(c if c.isprintable() else "\ufffd" for c in text)
             if len(text) > 200:  # keep the caret line readable for minified input
                 start = max(0, s.col - 80)
                 text = text[start:start + 160]

@@ -59,6 +59,7 @@ class EOM:
     # multipliers of the constraints (DAE models): an SX symbol (m,) that outputs and
     # `reactions` may depend on; the DAE simulator substitutes the computed multipliers.
     lam: object | None = None
+    reactions: dict[str, object] = field(default_factory=dict)   # name -> SX in q, qd, t, p, lam
 
     @property
     def n(self) -> int:
@@ -93,6 +94,28 @@ class EOM:
         f = ca.Function("start", [self.p], [self.q0, self.qd0])
         a, b = f(pv)
         return np.array(a, float).ravel(), np.array(b, float).ravel()
+
+
+def parameter_vector(eom: "EOM", p=None) -> np.ndarray:
+    """The numeric parameter vector: the model's values, or overrides (a dict by name, or a
+    full vector).  Shared by every phase that takes ``p=``."""
+    from .diagnostics import UsageError, did_you_mean
+
+    base = np.array(eom.param_values, float).ravel().copy()
+    if p is None:
+        return base
+    if isinstance(p, dict):
+        for k, v in p.items():
+            if k not in eom.params:
+                hint = did_you_mean(k, eom.params)
+                raise UsageError(f"'{k}' is not a parameter of {eom.name}" + (f"; {hint}" if hint else ""))
+            base[list(eom.params).index(k)] = float(v)
+        return base
+    arr = np.array(p, float).ravel()
+    if arr.size != base.size:
+        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters "
+                         f"({', '.join(eom.params)})")
+    return arr
 
 
 def lagrange_terms(T, V, D, Q, q, qd, t):

@@ -5,7 +5,7 @@ from . import exprs as X
 from . import ir
 from .semantic.topology import counts
 
-DEFAULT_DAE_FORMULATION = "projection"
+DEFAULT_DAE_FORMULATION = "projection"  # mechdsl.dae: index-1 ODE + projection onto both manifolds
 
 
 ROUTE_TEXT = {

@@ -73,11 +73,15 @@ def read_source(path: str | os.PathLike) -> tuple[str, str]:
     try:
         data = p.read_bytes()
     except OSError as e:
-        raise MechError(Diagnostic("E001", f"cannot read {name}: {e.strerror or e}", Span(name))) from None
+        raise MechError(Diagnostic("E001", f"cannot read {name}: {e.strerror or e}", Span(name),
+                                   "check the file's permissions")) from None
     return name, decode_source(data, name)
 
 
 def decode_source(data: bytes, name: str = "<input>") -> str:
+    from .report import forget_source
+
+    forget_source(name)  # an older text of the same name must not be shown under these errors
     if len(data) > MAX_FILE_BYTES:
         raise MechError(Diagnostic("E005", f"file is too large ({len(data)} bytes)", Span(name),
                                    f"the limit is {MAX_FILE_BYTES} bytes"))
@@ -85,7 +89,7 @@ def decode_source(data: bytes, name: str = "<input>") -> str:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = data[:e.start].count(b"\n") + 1
-        col = e.start - (data.rfind(b"\n", 0, e.start) + 1) + 1
+        col = len(data[data.rfind(b"\n", 0, e.start) + 1:e.start].decode("utf-8", "replace")) + 1
         raise MechError(Diagnostic("E002", f"file is not valid UTF-8 (byte 0x{data[e.start]:02x})",
                                    Span(name, line, col, line, col + 1),
                                    "save the file as UTF-8 text")) from None
@@ -159,22 +163,21 @@ def _check_nesting(text: str, filename: str) -> None:
         col += 1
         if ch == "\n":
             line, col = line + 1, 0
-        elif ch == '"':
+        elif ch == '"':  # a string ends at its closing quote or (unterminated: E108 later) at the line end
             j = i + 1
-            while j < n and text[j] != '"':
-                if text[j] == "\\":
-                    j += 1
-                if j < n and text[j] == "\n":
-                    line, col = line + 1, 0
-                j += 1
+            while j < n and text[j] not in '"\n':
+                j += 2 if text[j] == "\\" and j + 1 < n and text[j + 1] != "\n" else 1
             col += j - i
-            i = j
+            i = j if j < n and text[j] == '"' else j - 1
         elif ch == "/" and text.startswith("//", i):
             j = text.find("\n", i)
             i = n if j < 0 else j - 1
         elif ch == "/" and text.startswith("/*", i):
             j = text.find("*/", i + 2)
-            j = n if j < 0 else j + 1
+            if j < 0:
+                raise MechError(Diagnostic("E109", "unterminated comment", Span(filename, line, col, line, col + 2),
+                                           "close the comment with */"))
+            j += 1
             line += text.count("\n", i, j)
             i = j
         elif ch in "([{":
@@ -203,7 +206,9 @@ def _expected_text(expected) -> str:
 
 
 def _syntax_diagnostic(e: UnexpectedInput, text: str, filename: str) -> Diagnostic:
-    lines = text.splitlines() or [""]
+    lines = text.split("\n")  # as the lexer counts lines
+    if len(lines) > 1 and lines[-1] == "":
+        lines.pop()
     line = getattr(e, "line", None) or 1
     col = getattr(e, "column", None) or 1
     if line == -1 or col == -1:  # EOF without position
@@ -233,6 +238,16 @@ def _syntax_diagnostic(e: UnexpectedInput, text: str, filename: str) -> Diagnost
         width = max(1, len(str(tok.value)))
         span = Span(filename, tok.line, tok.column, tok.end_line or tok.line,
                     tok.end_column or tok.column + width)
+        before = text[tok.start_pos - 1] if tok.start_pos > 0 else ""
+        if tok.type in ("NUMBER", "NAME") and (before.isdigit() or before == ".") and _after_number(text, tok.start_pos):
+            bad = _number_text(text, tok)
+            span = Span(filename, tok.line, tok.column - (len(bad) - width), span.end_line, span.end_col)
+            return Diagnostic("E106", f"malformed number: '{bad}'", span,
+                              "numbers look like 1, 0.5, 2e-3" + ("; multiply with '*': 2*L" if tok.type == "NAME"
+                                                                  else ""))
+        if tok.type == "DOT":
+            return Diagnostic("E106", "stray '.'", span,
+                              "numbers look like 1, 0.5, 2e-3; names are joined by single dots: rod.a.x")
         prev = _previous_token_end(text, tok)
         if "SEMICOLON" in expected and prev is not None and (prev[0] < tok.line or str(tok.value) in _STATEMENT_START):
             pl, pc = prev
@@ -244,7 +259,23 @@ def _syntax_diagnostic(e: UnexpectedInput, text: str, filename: str) -> Diagnost
         if tok.type == "EQUAL" and "REL_OP" in expected | {"REL_OP"} and _in_condition(text, tok):
             return Diagnostic("E102", "unexpected '=' in a condition", span, "compare with '=='")
         return Diagnostic("E102", f"unexpected {_describe(tok)}", span, f"expected {_expected_text(expected)}")
-    return Diagnostic("E102", "syntax error", Span(filename, line, col, line, col + 1))
+    return Diagnostic("E102", "syntax error", Span(filename, line, col, line, col + 1),
+                      "see docs/language.md for the syntax")
+
+
+def _after_number(text: str, pos: int) -> bool:
+    """True when the token at pos directly follows a number (``1.2.3``, ``2L``, ``1e``)."""
+    i = pos
+    while i > 0 and (text[i - 1].isalnum() or text[i - 1] in "._"):
+        i -= 1
+    return text[i:pos][:1].isdigit() or (text[i:pos][:1] == "." and text[i + 1:pos][:1].isdigit())
+
+
+def _number_text(text: str, tok: Token) -> str:
+    i = tok.start_pos
+    while i > 0 and (text[i - 1].isalnum() or text[i - 1] in "._"):
+        i -= 1
+    return text[i:tok.end_pos if tok.end_pos is not None else tok.start_pos + len(str(tok.value))]
 
 
 def _in_condition(text: str, tok: Token) -> bool:
@@ -315,7 +346,7 @@ def _unescape(raw: str) -> str:
 
 
 def _number(text: str) -> int | float:
-    if any(c in text for c in ".eE"):
+    if any(c in text for c in ".eE") or len(text) > 300:  # huge integers: float (inf, reported as E106)
         return float(text)
     return int(text)
 
@@ -395,6 +426,9 @@ class _Builder(Transformer_NonRecursive):
 
     def dotted_name(self, meta, items):
         return ".".join(str(t) for t in items)
+
+    def coordinate_field(self, meta, items):
+        return "coordinate"
 
     def argument(self, meta, items):
         each, name, mod, value = items

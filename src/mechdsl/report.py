@@ -13,6 +13,10 @@ def remember_source(filename: str, text: str) -> None:
     _SOURCES[filename] = text
 
 
+def forget_source(filename: str) -> None:
+    _SOURCES.pop(filename, None)
+
+
 def source_of(filename: str) -> str | None:
     return _SOURCES.get(filename)
 

@@ -20,6 +20,7 @@ from . import integrators as I
 from .codegen import FastFunction, casadi_functions, singularity_monitors
 from .diagnostics import UsageError, did_you_mean
 from .result import Failure, Result
+from .eom import parameter_vector
 
 DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
@@ -193,22 +194,6 @@ def _check_numbers(t_start, t_end, rtol, atol, points):
     return t0, t1, rtol, atol, int(npts)
 
 
-def parameter_vector(eom, p) -> np.ndarray:
-    base = np.array(eom.param_values, float).ravel()
-    if p is None:
-        return base
-    if isinstance(p, dict):
-        out = base.copy()
-        for k, v in p.items():
-            if k not in eom.params:
-                hint = did_you_mean(k, eom.params)
-                raise UsageError(f"'{k}' is not a parameter of {eom.name}" + (f"; {hint}" if hint else ""))
-            out[eom.params.index(k)] = float(v)
-        return out
-    arr = np.array(p, float).ravel()
-    if arr.size != base.size:
-        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters ({', '.join(eom.params)})")
-    return arr
 
 
 def start_vector(eom, x0, pv) -> np.ndarray:

@@ -19,28 +19,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from ..eom import parameter_vector as param_vector  # noqa: F401  (re-exported)
 
 SEED = 20240605          # fixed: the analyses are deterministic
 N_PROBE = 8              # random states used by the numeric identity checks
 REL_TOL = 1e-9           # "identically zero" relative to the size of the quantity
 
 
-def param_vector(eom, p=None) -> np.ndarray:
-    """p as a numpy vector: the model's values, or overrides (dict by name, or a full vector)."""
-    base = np.array(eom.param_values, float).ravel().copy()
-    if p is None:
-        return base
-    if isinstance(p, dict):
-        for k, v in p.items():
-            if k not in eom.params:
-                hint = did_you_mean(k, eom.params)
-                raise UsageError(f"unknown parameter {k!r}" + (f"; {hint}" if hint else ""))
-            base[eom.params.index(k)] = float(v)
-        return base
-    arr = np.asarray(p, float).ravel()
-    if arr.shape != base.shape:
-        raise UsageError(f"parameter vector has {arr.size} entries, the model has {base.size}")
-    return arr
 
 
 def require_ode(eom, what: str) -> None:

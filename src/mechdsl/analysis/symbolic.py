@@ -19,6 +19,12 @@ from fractions import Fraction
 
 import numpy as np
 
+
+
+class Untranslatable(Exception):
+    """An expression this symbolic route cannot express (the caller falls back to another route)."""
+
+
 # --------------------------------------------------------------------------- numbers
 
 
@@ -128,7 +134,7 @@ def _apply(op, a):
     }
     fn = table.get(op)
     if fn is None:
-        raise NotImplementedError(f"CasADi operation {op} has no sympy translation")
+        raise Untranslatable(f"CasADi operation {op} has no sympy translation")
     return fn()
 
 
@@ -196,7 +202,7 @@ def from_model(model) -> SymbolicLagrangian:
     from ..exprs import to_sympy
 
     if not equation_layer_only(model):
-        raise NotImplementedError("the ir route covers equation-layer models (T, V, D, Q) only")
+        raise Untranslatable("the ir route covers equation-layer models (T, V, D, Q) only")
     coords = model.coordinate_names
     params = tuple(pp.name for pp in model.real_parameters)
     q, qd, t, p = make_symbols(coords, params)
@@ -220,7 +226,7 @@ def from_model(model) -> SymbolicLagrangian:
         if isinstance(n, ir.TimeDer):
             inner = to_sympy(n.expr, leaf)
             return sum(sp.diff(inner, a) * b for a, b in zip(q, qd)) + sp.diff(inner, t)
-        raise NotImplementedError(f"{type(n).__name__} in an equation-layer model")
+        raise Untranslatable(f"{type(n).__name__} in an equation-layer model")
 
     def conv(expr):      # folded constants arrive as Floats (1/2 -> 0.5): back to exact numbers
         e = to_sympy(expr, leaf)
@@ -247,7 +253,7 @@ def lagrangian_of(eom) -> SymbolicLagrangian:
     if model is not None and equation_layer_only(model) and tuple(model.coordinate_names) == tuple(eom.coords):
         try:
             return from_model(model)
-        except NotImplementedError:
+        except Untranslatable:
             pass
     return from_eom(eom)
 

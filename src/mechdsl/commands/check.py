@@ -60,6 +60,13 @@ def _extra_lines(m) -> list[str]:
     out = []
     for lp in m.model.loops:
         out.append(f"    {lp.name}: closed by joint {lp.joint}: {' -> '.join(lp.bodies)}")
+    if m.model.loops or m.model.constraints:
+        try:
+            from ..dae import check_report
+
+            out += ["    " + s for s in check_report(m.eom)]
+        except MechError:
+            pass
     if not m.model.loops and not m.model.constraints:
         try:
             from ..analysis.integrals import describe_integrals

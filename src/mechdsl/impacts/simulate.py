@@ -12,6 +12,7 @@ from .options import ContactOptions
 from .run import Run, RunFailure
 from .stepper import resolve_method
 from .system import ContactSystem
+from ..eom import parameter_vector  # noqa: F401  (re-exported)
 
 # options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
 # the simulator can pass its options through unchanged
@@ -156,21 +157,6 @@ def output_names(eom, gaps, outputs) -> list[str]:
     return [w for w in want if w in eom.outputs]
 
 
-def parameter_vector(eom, p) -> np.ndarray:
-    base = np.array(eom.param_values, float).ravel()
-    if p is None:
-        return base
-    if isinstance(p, dict):
-        out = base.copy()
-        for k, v in p.items():
-            if k not in eom.params:
-                raise UsageError(f"'{k}' is not a parameter of {eom.name}")
-            out[list(eom.params).index(k)] = float(v)
-        return out
-    arr = np.array(p, float).ravel()
-    if arr.size != base.size:
-        raise UsageError(f"p has {arr.size} entries; {eom.name} has {base.size} parameters")
-    return arr
 
 
 def start_vector(eom, x0, pv) -> np.ndarray:

@@ -17,7 +17,7 @@ def events_table(events: list[dict], max_rows: int = 20) -> str:
         return "events: none\n"
     counts: dict[tuple[str, str], int] = {}
     for e in events:
-        key = (e["kind"], e["contact"])
+        key = (e["kind"], e.get("contact", ""))
         counts[key] = counts.get(key, 0) + 1
     dE = sum(float(e.get("energy_change", 0.0)) for e in events)
     lines = [f"events: {len(events)} (" + ", ".join(f"{n} {k} {c}" for (k, c), n in counts.items())
@@ -30,7 +30,7 @@ def events_table(events: list[dict], max_rows: int = 20) -> str:
         if e is None:
             rows.append(["...", f"({len(events) - max_rows} more)", "", "", "", ""])
             continue
-        rows.append([f"{e['time']:.9g}", e["kind"], e["contact"], _num(e.get("impulse", 0.0)),
+        rows.append([f"{e['time']:.9g}", e["kind"], e.get("contact", ""), _num(e.get("impulse", 0.0)),
                      _num(e.get("energy_change", 0.0)),
                      _num(e.get("speed_before", 0.0)) + " / " + _num(e.get("speed_after", 0.0))])
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]

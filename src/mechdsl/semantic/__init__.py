@@ -113,7 +113,7 @@ class Program:
                             did_you_mean(it.name, SCENE_SETTINGS) or "settings: " + ", ".join(SCENE_SETTINGS))
                 continue
             if it.name in out:
-                diags.error("E202", f"setting '{it.name}' is given twice", it.span)
+                diags.error("E202", f"setting '{it.name}' is given twice", it.span, "keep one of them")
                 continue
             try:
                 out[it.name] = _setting_value(it, kind, values, model)
@@ -140,32 +140,34 @@ def _setting_value(it: ast.Setting, kind: str, values: dict[str, float], model: 
         return v.value
     if kind == "bool":
         if not isinstance(v, ast.Bool):
-            bad(f"'{it.name}' must be true or false")
+            bad(f"'{it.name}' must be true or false", f"{it.name} = true;")
         return v.value
     if kind == "names":
         items = v.items if isinstance(v, ast.Array) else (v,)
         names = []
         for x in items:
             if isinstance(x, ast.String):
-                names.append(x.value)
+                names.append((x.value, x.span))
             elif isinstance(x, (ast.Ref, ast.Call)):
-                names.append(print_expr(x))
+                names.append((print_expr(x), x.span))
             else:
                 bad(f"'{it.name}' lists names of outputs or coordinates", "e.g. outputs = {x, y, der(theta)};")
-        return tuple(_expand_names(names, model, v.span))
+        return tuple(_expand_names(names, model))
     # number / integer: a constant expression in literals and parameters
     try:
         num = _const_eval(v, values)
     except (ValueError, KeyError, ZeroDivisionError, OverflowError, TypeError) as ex:
-        bad(f"'{it.name}' must be a number ({ex})")
+        bad(f"'{it.name}' must be a number ({ex})", "use numbers, parameters of the model and + - * / ^")
+    if isinstance(num, complex):
+        bad(f"'{it.name}' has no real value", "a negative number raised to a fractional power is complex")
     if not math.isfinite(num):
-        bad(f"'{it.name}' must be finite")
+        bad(f"'{it.name}' must be finite", "check the formula")
     if kind == "integer":
         if not float(num).is_integer() or num < 1:
-            bad(f"'{it.name}' must be a positive whole number")
+            bad(f"'{it.name}' must be a positive whole number", f"e.g. {it.name} = 501;")
         return int(num)
     if it.name in ("rtol", "atol", "tolerance", "dt") and num <= 0:
-        bad(f"'{it.name}' must be positive")
+        bad(f"'{it.name}' must be positive", f"e.g. {it.name} = 1e-8;")
     return float(num)
 
 
@@ -177,7 +179,7 @@ def _const_eval(e: ast.Expr, values: dict[str, float]) -> float:
             return math.pi
         if e.simple in values:
             return values[e.simple]
-        raise KeyError(f"'{e.simple}' is not a parameter")
+        raise ValueError(f"'{e.simple}' is not a parameter")
     if isinstance(e, ast.UnaryOp) and e.op in "+-":
         x = _const_eval(e.operand, values)
         return -x if e.op == "-" else x
@@ -189,12 +191,12 @@ def _const_eval(e: ast.Expr, values: dict[str, float]) -> float:
     raise ValueError("use numbers and parameters")
 
 
-def _expand_names(names: list[str], model: ir.Model, span: Span) -> list[str]:
+def _expand_names(names: list[tuple[str, Span]], model: ir.Model) -> list[str]:
     known = {o.name for o in model.outputs} | set(model.coordinate_names) | {
         f"der({c})" for c in model.coordinate_names} | set(ENERGY_SIGNALS)
     out: list[str] = []
     diags = DiagnosticBag()
-    for n in names:
+    for n, span in names:
         if n in known:
             out.append(n)
             continue
@@ -203,7 +205,7 @@ def _expand_names(names: list[str], model: ir.Model, span: Span) -> list[str]:
             out += [o.name for o in model.outputs if o.name.startswith(n + "[")] or prefixed
             continue
         diags.error("E201", f"'{n}' is not an output or coordinate of model '{model.name}'", span,
-                    did_you_mean(n, known))
+                    did_you_mean(n, known) or "declare it in the model as `output Real name = ...;`")
     diags.raise_if_errors()
     return out
 

@@ -183,19 +183,20 @@ def joint_roles(cls: ComponentClass, parametrization: str, point_mass_child: boo
 def as_expr(v: Val, what: str) -> ir.Expr:
     if isinstance(v, Scalar):
         return v.expr
-    raise ValError("E301", f"{what} must be a scalar, got {describe_shape(v)}")
+    raise ValError("E301", f"{what} must be a scalar, got {describe_shape(v)}", "give one number or expression")
 
 
 def as_vec3(v: Val, what: str) -> ir.Vec3:
     if isinstance(v, Arr) and shape_of(v) == (3,):
         return tuple(as_expr(x, what) for x in v.items)  # type: ignore[return-value]
-    raise ValError("E301", f"{what} must be a vector of 3, got {describe_shape(v)}")
+    raise ValError("E301", f"{what} must be a vector of 3, got {describe_shape(v)}", "write it as {x, y, z}")
 
 
 def as_mat3(v: Val, what: str) -> ir.Mat3:
     if isinstance(v, Arr) and shape_of(v) == (3, 3):
         return tuple(as_vec3(r, what) for r in v.items)  # type: ignore[return-value]
-    raise ValError("E301", f"{what} must be a 3x3 matrix, got {describe_shape(v)}")
+    raise ValError("E301", f"{what} must be a 3x3 matrix, got {describe_shape(v)}",
+                   "write it as {{a, b, c}, {d, e, f}, {g, h, i}} or use diagonal({a, b, c})")
 
 
 def python_to_val(x) -> Val:
@@ -214,9 +215,9 @@ C = X.const
 
 def normalized(v: ir.Vec3, what: str) -> ir.Vec3:
     if all(isinstance(c, ir.Const) for c in v):
-        n = math.sqrt(sum(c.value ** 2 for c in v))  # type: ignore[union-attr]
+        n = math.hypot(*(c.value for c in v))  # type: ignore[union-attr]  (no overflow for huge components)
         if n == 0:
-            raise ValError("E310", f"{what} must not be the zero vector")
+            raise ValError("E310", f"{what} must not be the zero vector", "give a direction, e.g. {0, 0, 1}")
         return tuple(C(c.value / n) for c in v)  # type: ignore[union-attr,return-value]
     n = X.func("sqrt", X.vsum(X.mul(c, c) for c in v))
     return tuple(X.div(c, n) for c in v)  # type: ignore[return-value]
@@ -355,7 +356,7 @@ def build_body(cls: ComponentClass, name: str, f: dict[str, Val], span) -> Built
             inertia = diag(sq(ly, lz), sq(lx, lz), sq(lx, ly))
             size = (lx, ly, lz)
         else:  # pragma: no cover - registry and builder out of sync
-            raise ValError("E203", f"no builder for {cls.name}")
+            raise ValError("E203", f"no builder for {cls.name}", "this is a bug in mechdsl")
     out.bodies.append(ir.Body(name, kind, m, com, inertia, shape, size, axis, span))
     out.points.insert(0, ir.Point(name, name, zero3, span))
     out.points.append(ir.Point(f"{name}.com", name, com, span))

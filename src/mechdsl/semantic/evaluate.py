@@ -5,6 +5,7 @@ declared name -> value), ``attribute(value, name, span)`` and ``loop_vars``.
 """
 from __future__ import annotations
 
+import abc
 import math
 
 from .. import ast
@@ -23,6 +24,9 @@ KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_e
 ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
 
 
+MAX_ITERATIONS = 200_000   # loop and comprehension iterations per model, all loops together
+
+
 class EvalError(Exception):
     """A diagnostic raised while evaluating; caught per declaration/equation and collected."""
 
@@ -35,15 +39,17 @@ def fail(code: str, message: str, span: Span, help: str | None = None):
     raise EvalError(Diagnostic(code, message, span, help))
 
 
-class Evaluator:
+class Evaluator(abc.ABC):
     loop_vars: dict[str, int]
 
     # provided by the flattener
-    def lookup(self, name: str, span: Span) -> Val:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def lookup(self, name: str, span: Span) -> Val:
+        """The value of a declared (or built-in) name."""
 
-    def attribute(self, value: Val, name: str, span: Span) -> Val:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def attribute(self, value: Val, name: str, span: Span) -> Val:
+        """``value.name`` for component references."""
 
     def known_names(self) -> list[str]:  # pragma: no cover - abstract
         return []
@@ -54,7 +60,11 @@ class Evaluator:
     # ------------------------------------------------------------------ entry point
     def eval(self, e: ast.Expr) -> Val:
         try:
-            return self._eval(e)
+            v = self._eval(e)
+            if not _finite(v):
+                raise ValError("E303", "this value overflows (it is infinite or not a number)",
+                               "check the formula for products and powers of huge numbers")
+            return v
         except ValError as ve:
             raise EvalError(Diagnostic(ve.code, ve.message, e.span, ve.help)) from None
         except RecursionError:
@@ -76,6 +86,8 @@ class Evaluator:
 
     def _eval(self, e: ast.Expr) -> Val:
         if isinstance(e, ast.Number):
+            if not math.isfinite(e.value):
+                raise ValError("E303", "number is too large", "numbers must be below about 1.8e308")
             # integers are pure numbers; a decimal literal (0.1, 9.81) may stand for a quantity
             return V.const(e.value, integer=isinstance(e.value, int), approx=isinstance(e.value, float))
         if isinstance(e, ast.String):
@@ -109,7 +121,7 @@ class Evaluator:
             return Arr(tuple(out))
         if isinstance(e, ast.Call):
             return self._call(e)
-        raise ValError("E302", f"unexpected expression {type(e).__name__}")
+        raise ValError("E302", f"unexpected expression {type(e).__name__}", "this is not a value")
 
     def _binop(self, e: ast.BinOp) -> Val:
         if e.op in ("+", "-", "*", "/") and isinstance(e.left, ast.BinOp):
@@ -138,7 +150,7 @@ class Evaluator:
         for cond, val in reversed(e.branches):
             c = self._sub(cond)
             if not isinstance(c, Scalar):
-                raise ValError("E301", "an if-condition must be a scalar")
+                raise ValError("E301", "an if-condition must be a scalar", "compare scalars: if x > 0 then ... else ...")
             if c.const is not None:
                 if c.const:
                     result = self._sub(val)
@@ -165,14 +177,15 @@ class Evaluator:
                      "use Integer parameters, loop variables and integer literals")
             return int(v.const)
         fail("E307", f"{what} must be an Integer constant", e.span,
-             "declare the size as `parameter Integer N = ...`")
+             "declare sizes as `parameter Integer N = ...`; indices and bounds are Integer expressions")
         raise AssertionError  # unreachable
 
     def index(self, val: Val, subs: tuple[ast.Expr, ...], span: Span, name: str) -> Val:
         for s in subs:
             k = self.int_value(s, "an index")
             if not isinstance(val, Arr):
-                fail("E303", f"'{name}' is not an array and cannot be indexed", s.span)
+                fail("E303", f"'{name}' is not an array and cannot be indexed", s.span,
+                     f"remove the subscript, or declare '{name}' with a size: {name}[n]")
             if not 1 <= k <= len(val.items):
                 fail("E303", f"index {k} is out of range for '{name}' (1..{len(val.items)})", s.span,
                      "indices start at 1")
@@ -184,10 +197,15 @@ class Evaluator:
         b = self.int_value(rng.stop, "a range bound")
         step = 1 if rng.step is None else self.int_value(rng.step, "a range step")
         if step == 0:
-            fail("E303", "a range step must not be zero", rng.span)
+            fail("E303", "a range step must not be zero", rng.span, "write start:step:stop with a non-zero step, e.g. 1:2:9")
         n = (b - a) // step + 1
-        if n > 100_000:
-            fail("E303", f"range {a}:{b} has {n} elements (limit 100000)", rng.span)
+        if n > V.MAX_ELEMENTS:
+            fail("E303", f"range {a}:{b} has {n} elements (limit {V.MAX_ELEMENTS})", rng.span, "use a shorter range")
+        # nested loops multiply: bound the total work of a model, not only each range
+        self._iterations = getattr(self, "_iterations", 0) + max(n, 0)
+        if self._iterations > MAX_ITERATIONS:
+            fail("E303", f"the loops of this model run more than {MAX_ITERATIONS} times", rng.span,
+                 "use smaller ranges")
         return list(range(a, b + (1 if step > 0 else -1), step))
 
     # ------------------------------------------------------------------ calls
@@ -196,10 +214,11 @@ class Evaluator:
         if len(e.func.parts) != 1 or e.func.parts[0].subscripts or name not in ALL_FUNCS:
             from ..diagnostics import did_you_mean
 
-            fail("E213", f"unknown function '{name}'", e.func.span, did_you_mean(name, ALL_FUNCS))
+            fail("E213", f"unknown function '{name}'", e.func.span,
+                 did_you_mean(name, ALL_FUNCS) or "see docs/language.md for the built-in functions")
         if name in ("kinetic_energy", "potential_energy", "energy", "dissipation_function"):
             if e.args:
-                fail("E304", f"{name}() takes no arguments", e.span)
+                fail("E304", f"{name}() takes no arguments", e.span, f"write {name}()")
             kind = {"kinetic_energy": "kinetic", "potential_energy": "potential", "energy": "energy",
                     "dissipation_function": "dissipation"}[name]
             return Scalar(ir.EnergyRef(kind), U.POWER if kind == "dissipation" else U.ENERGY)
@@ -210,11 +229,11 @@ class Evaluator:
         args = [self._sub(a) for a in e.args]
         if name == "der":
             if len(args) != 1:
-                fail("E304", "der() takes 1 argument", e.span)
+                fail("E304", "der() takes 1 argument", e.span, "write der(q) for the speed of a coordinate q")
             return V.map1(args[0], lambda s: _der(s, e.args[0].span))
         if name in ("position", "velocity"):
             if len(args) != 1 or not isinstance(args[0], CompRef):
-                fail("E209", f"{name}() takes a point or body", e.span)
+                fail("E209", f"{name}() takes a point or body", e.span, f"e.g. {name}(rod.b)")
             return self.attribute(args[0], "r" if name == "position" else "v", e.span)
         if name in X.MATH_FUNCS:
             return V.apply_func(name, args)
@@ -222,27 +241,37 @@ class Evaluator:
 
     def _size(self, e: ast.Call) -> Val:
         if not 1 <= len(e.args) <= 2:
-            fail("E304", "size() takes an array and optionally a dimension", e.span)
+            fail("E304", "size() takes an array and optionally a dimension", e.span, "size(a) or size(a, 1)")
         v = self._sub(e.args[0])
         shape = V.shape_of(v)
         if len(e.args) == 2:
             k = self.int_value(e.args[1], "a dimension")
             if not 1 <= k <= len(shape):
-                fail("E303", f"dimension {k} out of range", e.args[1].span)
+                fail("E303", f"dimension {k} out of range", e.args[1].span,
+                     f"the array has {len(shape)} dimension{'s' if len(shape) != 1 else ''}")
             return V.const(shape[k - 1], integer=True)
         if len(shape) != 1:
-            fail("E304", "size(a) needs a vector; give the dimension: size(a, 1)", e.span)
+            fail("E304", "size(a) needs a vector", e.span, "for a matrix give the dimension: size(a, 1)")
         return V.const(shape[0], integer=True)
 
     def _reaction(self, e: ast.Call, name: str) -> Val:
         if len(e.args) != 1:
-            fail("E304", f"{name}() takes one joint", e.span)
+            fail("E304", f"{name}() takes one joint", e.span, f"e.g. {name}(j1)")
         j = self._sub(e.args[0])
         if not isinstance(j, CompRef) or j.kind != "joint":
-            fail("E209", f"{name}() needs a joint, got {V.describe_shape(j)}", e.args[0].span)
+            fail("E209", f"{name}() needs a joint, got {V.describe_shape(j)}", e.args[0].span,
+                 "reactions are measured in joints: name a Revolute, Prismatic, ... component")
         what = "force" if name == "reaction_force" else "torque"
         d = U.FORCE if what == "force" else U.TORQUE
         return Arr(tuple(Scalar(ir.ReactionRef(j.name, what, i), d) for i in range(3)))
+
+
+def _finite(v: Val) -> bool:
+    if isinstance(v, Scalar):
+        return v.const is None or math.isfinite(v.const)
+    if isinstance(v, Arr):
+        return all(_finite(x) for x in v.items)
+    return True
 
 
 def _is_structural(v: Scalar) -> bool:
@@ -267,13 +296,23 @@ _ARITH = {"+": V.add, "-": V.sub, "*": V.mul, "/": V.div}
 def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
     def need(n):
         if len(args) != n:
-            fail("E304", f"{name}() takes {n} argument{'s' if n != 1 else ''}, got {len(args)}", e.span)
+            fail("E304", f"{name}() takes {n} argument{'s' if n != 1 else ''}, got {len(args)}", e.span,
+                 "see docs/language.md for the built-in functions")
 
     def count(v: Val, what: str) -> int:
         if isinstance(v, Scalar) and v.const is not None and float(v.const).is_integer() and v.const >= 0:
+            if v.const > V.MAX_ELEMENTS:
+                fail("E303", f"{what} {X.fmt_num(v.const)} is too large (limit {V.MAX_ELEMENTS})", e.span,
+                     "use a smaller size")
             return int(v.const)
-        fail("E307", f"{what} must be a non-negative Integer constant", e.span)
+        fail("E307", f"{what} must be a non-negative Integer constant", e.span,
+             "use an integer literal or an Integer parameter")
         raise AssertionError
+
+    def check_total(dims: list[int]) -> list[int]:
+        if math.prod(dims) > V.MAX_ELEMENTS:
+            fail("E303", f"{name}() would build more than {V.MAX_ELEMENTS} elements", e.span, "use smaller sizes")
+        return dims
 
     if name == "cross":
         need(2)
@@ -293,17 +332,17 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
         return V.transpose(args[0])
     if name == "identity":
         need(1)
-        n = count(args[0], "the size")
+        n = check_total([count(args[0], "the size")] * 2)[0]
         return Arr(tuple(Arr(tuple(V.const(1.0 if i == j else 0.0) for j in range(n))) for i in range(n)))
     if name in ("zeros", "ones"):
         if not args:
-            fail("E304", f"{name}() needs a size", e.span)
-        dims = [count(a, "a size") for a in args]
+            fail("E304", f"{name}() needs a size", e.span, f"e.g. {name}(3) or {name}(3, 3)")
+        dims = check_total([count(a, "a size") for a in args])
         return _filled(V.const(0.0 if name == "zeros" else 1.0), dims)
     if name == "fill":
         if len(args) < 2:
-            fail("E304", "fill(value, n, ...) needs a value and a size", e.span)
-        return _filled(args[0], [count(a, "a size") for a in args[1:]])
+            fail("E304", "fill(value, n, ...) needs a value and a size", e.span, "e.g. fill(0.5, 3)")
+        return _filled(args[0], check_total([count(a, "a size") for a in args[1:]]))
     if name == "sum":
         need(1)
         items: list[Val] = list(V.flatten(args[0])) if isinstance(args[0], Arr) else [args[0]]
@@ -316,14 +355,14 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
     if name == "skew":
         need(1)
         if V.shape_of(args[0]) != (3,):
-            fail("E301", "skew() needs a vector of 3", e.span)
+            fail("E301", "skew() needs a vector of 3", e.span, "e.g. skew({wx, wy, wz})")
         x, y, z = args[0].items  # type: ignore[union-attr]
         zero = V.const(0.0)
         return Arr((Arr((zero, V.neg(z), y)), Arr((z, zero, V.neg(x))), Arr((V.neg(y), x, zero))))
     if name == "diagonal":
         need(1)
         if len(V.shape_of(args[0])) != 1:
-            fail("E301", "diagonal() needs a vector", e.span)
+            fail("E301", "diagonal() needs a vector", e.span, "e.g. diagonal({1, 2, 3})")
         items = args[0].items  # type: ignore[union-attr]
         n = len(items)
         return Arr(tuple(Arr(tuple(items[i] if i == j else V.const(0.0) for j in range(n))) for i in range(n)))
@@ -337,7 +376,7 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
             V.require_dimensionless(ang.dim, "a rotation angle", ang.approx)
         R = rodrigues(axis, as_expr(ang, "the rotation angle"))
         return Arr(tuple(Arr(tuple(Scalar(c, U.ONE) for c in row)) for row in R))
-    fail("E213", f"unknown function '{name}'", e.span)
+    fail("E213", f"unknown function '{name}'", e.span, "see docs/language.md for the built-in functions")
     raise AssertionError
 
 

@@ -82,12 +82,15 @@ class Flattener(Evaluator):
         self.constraints: list[ir.Constraint] = []
         self.terms: list[ir.Term] = []
         self.gen_forces: list[ir.GeneralizedForce] = []
+        self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
         self._collect(model, outer or {}, [])
+        self._check_modified_names(outer or {}, model.name)
 
     # ================================================================== declarations
     def _collect(self, m: ast.ModelDef, outer: dict[str, Mod], chain: list[str]) -> None:
         if m.name in chain:
-            self.diags.error("E207", f"model '{m.name}' extends itself (through {' -> '.join(chain)})", m.name_span)
+            self.diags.error("E207", f"model '{m.name}' extends itself (through {' -> '.join(chain)})", m.name_span,
+                             "remove one of the extends clauses in the cycle")
             return
         chain = chain + [m.name]
         own_names = {e.name for e in m.elements if isinstance(e, ast.Declaration)}
@@ -96,16 +99,25 @@ class Flattener(Evaluator):
                 base = self.program.model_def(el.name)
                 if base is None:
                     self.diags.error("E206", f"unknown model '{el.name}' in extends", el.span,
-                                     did_you_mean(el.name, self.program.model_names()))
+                                     did_you_mean(el.name, self.program.model_names())
+                                     or f"models in this file: {', '.join(self.program.model_names())}")
                     continue
                 ext = Mods.from_ast(el.modification, self.diags)
                 # modifications for inherited names: extends-clause, then ours (outer) on top
                 passed = Mods.merge_dicts(ext, {k: v for k, v in outer.items() if k not in own_names})
                 self._collect(base, passed, chain)
+                self._check_modified_names(ext, base.name)
         for el in m.elements:
             if isinstance(el, ast.Declaration):
                 self._declare(el, outer)
         self.equations.extend(m.equations)
+
+    def _check_modified_names(self, mods: dict[str, Mod], model_name: str) -> None:
+        """A modification (scene, extends, API override) must name a declaration of the model."""
+        for k, m in mods.items():
+            if k not in self.entries:
+                self.diags.error("E204", f"model '{model_name}' has no declaration '{k}' to modify", m.name_span,
+                                 did_you_mean(k, self.entries) or "modify its parameters and start values")
 
     def _declare(self, d: ast.Declaration, outer: dict[str, Mod]) -> None:
         if d.name in self.entries:
@@ -124,7 +136,9 @@ class Flattener(Evaluator):
             kind = {"parameter": "parameter", "constant": "parameter", "input": "input",
                     "coordinate": "coordinate", "output": "output", None: "variable"}[d.prefix]
             if d.type_name != "Real" and kind in ("coordinate", "input"):
-                self.diags.error("E215", f"a {d.prefix} must be Real, not {d.type_name}", d.span)
+                self.diags.error("E215", f"{'an' if d.prefix == 'input' else 'a'} {d.prefix} must be Real, "
+                                         f"not {d.type_name}", d.span,
+                                 f"declare it as {d.prefix} Real {d.name}")
                 return
             if d.type_name != "Real" and kind == "variable":
                 kind = "parameter"
@@ -141,7 +155,7 @@ class Flattener(Evaluator):
                 return
             if d.prefix is not None:
                 self.diags.error("E215", f"'{d.prefix}' applies to Real, Integer and Boolean declarations, "
-                                         f"not to a {d.type_name}", d.span)
+                                         f"not to a {d.type_name}", d.span, f"remove '{d.prefix}'")
                 return
             if d.value is not None:
                 self.diags.error("E214", f"a {d.type_name} takes modifiers, not a value", d.value.span,
@@ -182,7 +196,8 @@ class Flattener(Evaluator):
             return Scalar(ir.Const(math.pi), ANY)
         if name == "world":
             return CompRef("world", "world", "World")
-        fail("E201", f"undefined name '{name}'", span, did_you_mean(name, self.known_names()))
+        fail("E201", f"undefined name '{name}'", span,
+             did_you_mean(name, self.known_names()) or f"declare it, e.g. `parameter Real {name} = ...;`")
         raise AssertionError
 
     def value_of(self, entry: Entry, span: Span | None = None) -> Val:
@@ -201,6 +216,11 @@ class Flattener(Evaluator):
             entry.state = 3
             self.diags.items.append(e.diag)
             raise _Failed() from None
+        except ValError as ve:  # raised outside an expression (e.g. the shape of a ragged array)
+            entry.state = 3
+            at = entry.mod.value.span if entry.mod.value is not None else entry.decl.span
+            self.diags.error(ve.code, ve.message, at, ve.help)
+            raise _Failed() from None
         except _Failed:
             entry.state = 3
             raise
@@ -212,8 +232,11 @@ class Flattener(Evaluator):
             for d in entry.decl.dims:
                 n = self.int_value(d, "an array size")
                 if n < 0:
-                    fail("E307", f"array size {n} is negative", d.span)
+                    fail("E307", f"array size {n} is negative", d.span, "array sizes are 0 or more")
                 dims.append(n)
+                if math.prod(dims) > V.MAX_ELEMENTS:
+                    fail("E303", f"array '{entry.decl.name}' would have more than {V.MAX_ELEMENTS} elements",
+                         d.span, "use a smaller size")
             entry.dims = tuple(dims)
         return entry.dims
 
@@ -256,13 +279,15 @@ class Flattener(Evaluator):
                  f"give it one: {d.type_name} {d.name} = ...;" if d.type_name != "Real" else f"parameter Real {d.name} = 1;")
         val = self.eval(e.mod.value)
         if isinstance(val, (Str, CompRef)):
-            fail("E301", f"parameter '{d.name}' must be a number, got {V.describe_shape(val)}", e.mod.value.span)
+            fail("E301", f"parameter '{d.name}' must be a number, got {V.describe_shape(val)}", e.mod.value.span,
+                 "parameters hold numbers, vectors or matrices")
         want = dims
         got = V.shape_of(val)
         if got != want:
             fail("E301", f"parameter '{d.name}' is declared with shape {_shape_text(want)} but its value is "
                          f"{V.describe_shape(val)}", e.mod.value.span,
-                 "use fill(value, n) for arrays" if want and not got else None)
+                 "use fill(value, n) for arrays" if want and not got else
+                 f"give a value of shape {_shape_text(want)}, or change the declared size")
         for s in V.flatten(val) if isinstance(val, Arr) else [val]:
             if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
                 fail("E306", f"parameter '{d.name}' depends on coordinates or time", e.mod.value.span,
@@ -278,7 +303,8 @@ class Flattener(Evaluator):
                     fail("E307", f"{d.type_name} parameter '{d.name}' must have a constant value", e.mod.value.span,
                          "Integer and Boolean parameters are structural: use literals and other Integer parameters")
                 if d.type_name == "Integer" and not float(s.const).is_integer():
-                    fail("E307", f"Integer parameter '{d.name}' has non-integer value {s.const}", e.mod.value.span)
+                    fail("E307", f"Integer parameter '{d.name}' has non-integer value {X.fmt_num(s.const)}", e.mod.value.span,
+                         f"give a whole number, or declare it as parameter Real {d.name}")
                 self._check_range(e, name, s.const)
                 e.params.append(ir.Parameter(name, float(s.const), None, unit, d.doc or "", True, d.name_span))
                 out_items.append(Scalar(ir.Const(float(s.const)), U.ONE if d.type_name == "Boolean" else ANY,
@@ -286,11 +312,17 @@ class Flattener(Evaluator):
                 continue
             binding = s.expr if factor == 1.0 else X.mul(X.const(factor), s.expr)
             try:
-                value = X.evaluate(binding, self.param_values)
+                with _quiet_numpy():
+                    value = X.evaluate(binding, self.param_values)
             except (ValueError, ZeroDivisionError, OverflowError, KeyError) as ex:
-                fail("E303", f"parameter '{name}' cannot be evaluated: {ex}", e.mod.value.span)
+                fail("E303", f"parameter '{name}' cannot be evaluated: {ex}", e.mod.value.span,
+                     "check the formula for division by zero and arguments outside a function's domain")
+            except TypeError:  # a complex number: a negative base to a fractional power
+                fail("E303", f"parameter '{name}' has no real value", e.mod.value.span,
+                     "a negative number raised to a fractional power is complex")
             if not math.isfinite(value):
-                fail("E303", f"parameter '{name}' evaluates to {value}", e.mod.value.span)
+                fail("E303", f"parameter '{name}' evaluates to {value}", e.mod.value.span,
+                     "check the formula for division by zero, overflow and arguments outside a function's domain")
             self._check_range(e, name, value)
             self.param_values[name] = value
             e.params.append(ir.Parameter(name, value, None if isinstance(binding, ir.Const) else binding,
@@ -303,9 +335,13 @@ class Flattener(Evaluator):
             m = e.mod.sub.get(attr)
             if m is not None and m.value is not None:
                 b = self.eval(m.value)
-                if isinstance(b, Scalar) and b.const is not None and bad(value, b.const):
+                if not (isinstance(b, Scalar) and b.const is not None):
+                    fail("E301", f"'{attr}' of '{e.decl.name}' must be a constant number", m.value.span,
+                         f"e.g. {attr} = 0")
+                if bad(value, b.const):
                     fail("E313", f"parameter '{name}' = {X.fmt_num(value)} is {'below its minimum' if attr == 'min' else 'above its maximum'} {X.fmt_num(b.const)}",
-                         (e.mod.value.span if e.mod.value is not None else e.decl.span))
+                         (e.mod.value.span if e.mod.value is not None else e.decl.span),
+                         f"change the value or the {attr} bound")
 
     def _coordinate(self, e: Entry, dims: tuple[int, ...]) -> Val:
         d = e.decl
@@ -339,14 +375,15 @@ class Flattener(Evaluator):
         else:
             if V.shape_of(v) != dims:
                 fail("E301", f"'{attr}' has shape {_shape_text(V.shape_of(v))}, expected {_shape_text(dims)}",
-                     m.value.span)
+                     m.value.span, "give one value for all elements, or one per element")
             vals = V.flatten(v) if dims else [v]
         out = []
         for s in vals:
             if not isinstance(s, Scalar):
-                fail("E301", f"'{attr}' must be numeric", m.value.span)
+                fail("E301", f"'{attr}' must be numeric", m.value.span, f"e.g. {attr} = 0")
             if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
-                fail("E306", f"the {attr} value may only depend on parameters", m.value.span)
+                fail("E306", f"the {attr} value may only depend on parameters", m.value.span,
+                     "start values are numbers or expressions in parameters")
             if dim is not None and attr in ("start", "speed"):
                 self.check_dim(s, dim, f"the {attr} value", m.value.span)
             out.append(s.expr if factor == 1.0 else X.mul(X.const(factor), s.expr))
@@ -367,7 +404,8 @@ class Flattener(Evaluator):
         if V.shape_of(val) != dims:
             fail("E301", f"'{d.name}' is declared with shape {_shape_text(dims)} but its value is "
                          f"{V.describe_shape(val)}", e.mod.value.span,
-                 f"declare it as {d.type_name} {d.name}[{', '.join(map(str, V.shape_of(val)))}]" if V.shape_of(val) else None)
+                 f"declare it as {d.type_name} {d.name}[{', '.join(map(str, V.shape_of(val)))}]" if V.shape_of(val)
+                 else f"give a value of shape {_shape_text(dims)}")
         flat = V.flatten(val) if dims else [val]
         for s in flat:
             if dim is not None:
@@ -383,7 +421,7 @@ class Flattener(Evaluator):
     def _component(self, e: Entry, dims: tuple[int, ...]) -> Val:
         d = e.decl
         if len(dims) > 1:
-            fail("E301", "arrays of components have one dimension", d.span)
+            fail("E301", "arrays of components have one dimension", d.span, f"write {d.type_name} {d.name}[n](...)")
         allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | (
             {r for r, _ in K.QUATERNION_ROLES} if e.cls.name in ("Spherical", "Free") else set())
         for k, m in e.mod.sub.items():
@@ -420,7 +458,8 @@ class Flattener(Evaluator):
             if m is not None and m.value is not None:
                 key = ("field", fname)
                 if (fname, "busy") in inst.busy:
-                    fail("E208", f"'{inst.name}.{fname}' is defined in terms of itself", m.value.span)
+                    fail("E208", f"'{inst.name}.{fname}' is defined in terms of itself", m.value.span,
+                         "break the cycle of definitions")
                 inst.busy.add((fname, "busy"))
                 try:
                     if key not in inst.entry.cache:
@@ -431,6 +470,8 @@ class Flattener(Evaluator):
                 self._check_field(inst, f, val, m.value.span)
             elif f.default is K.REQUIRED:
                 hint = None
+                if cls.connect_fields and fname in cls.connect_fields and self.connect_failed:
+                    raise _Failed()  # most likely set by the connect(...) already reported
                 if cls.connect_fields and fname in cls.connect_fields:
                     hint = f"set it with {fname} = ..., or connect({cls.connect_fields[0]}, {inst.entry.decl.name}, " \
                            f"{cls.connect_fields[1]}) in the equation section"
@@ -451,33 +492,40 @@ class Flattener(Evaluator):
             if f.kind in ("point", "body"):
                 if not isinstance(val, CompRef):
                     fail("E209", f"'{f.name}' of {inst.cls.name} '{inst.name}' must be a {f.kind}, "
-                                 f"got {V.describe_shape(val)}", span)
+                                 f"got {V.describe_shape(val)}", span,
+                         "name a body, a point on a body (e.g. rod.a) or world" if f.kind == "point"
+                         else "name a body or world")
                 ok = {"point": ("point", "body", "world"), "body": ("body", "world")}[f.kind]
                 if val.kind not in ok:
-                    fail("E209", f"'{f.name}' of '{inst.name}' must be a {f.kind}, got the {val.kind} '{val.name}'", span)
+                    fail("E209", f"'{f.name}' of '{inst.name}' must be a {f.kind}, got the {val.kind} '{val.name}'", span,
+                         "name a body, a point on a body (e.g. rod.a) or world" if f.kind == "point"
+                         else "name a body or world")
             elif f.kind == "bodies":
                 items = val.items if isinstance(val, Arr) else ()
                 if not items or not all(isinstance(i, CompRef) and i.kind == "body" for i in items):
-                    fail("E209", f"'{f.name}' must be a list of bodies, e.g. {{sun, earth}}", span)
+                    fail("E209", f"'{f.name}' must be a list of bodies", span, "e.g. bodies = {sun, earth}")
             elif f.kind == "string":
                 if not isinstance(val, Str):
-                    fail("E301", f"'{f.name}' must be a string", span)
+                    fail("E301", f"'{f.name}' must be a string", span,
+                         f'{f.name} = "{f.choices[0] if f.choices else "..."}"')
                 if f.choices and val.value not in f.choices:
                     fail("E217", f"'{val.value}' is not a valid {f.name}", span,
                          "choose one of: " + ", ".join(f.choices))
             elif f.kind == "coordinate":
                 if not (isinstance(val, Scalar) and isinstance(val.expr, ir.Coord)):
-                    fail("E218", f"'{f.name}' must be a coordinate", span)
+                    fail("E218", f"'{f.name}' must be a coordinate", span, "name a `coordinate` or a joint variable such as j1.phi")
             elif f.kind in ("scalar", "bool"):
                 if not isinstance(val, Scalar):
-                    fail("E301", f"'{f.name}' of '{inst.name}' must be a scalar, got {V.describe_shape(val)}", span)
+                    fail("E301", f"'{f.name}' of '{inst.name}' must be a scalar, got {V.describe_shape(val)}", span,
+                         "give one number or expression")
                 if f.dim is not None:
                     self.check_dim(val, f.dim, f"'{f.name}' of '{inst.name}'", span)
             elif f.kind in ("vec3", "mat3"):
                 want = (3,) if f.kind == "vec3" else (3, 3)
                 if not isinstance(val, Arr) or V.shape_of(val) != want:
                     fail("E301", f"'{f.name}' of '{inst.name}' must be {'a vector of 3' if f.kind == 'vec3' else 'a 3x3 matrix'}, "
-                                 f"got {V.describe_shape(val)}", span)
+                                 f"got {V.describe_shape(val)}", span,
+                         "write it as {x, y, z}" if f.kind == "vec3" else "write it as {{..}, {..}, {..}}")
                 if f.dim is not None:
                     for s in V.flatten(val):
                         self.check_dim(s, f.dim, f"'{f.name}' of '{inst.name}'", span)
@@ -489,7 +537,8 @@ class Flattener(Evaluator):
         if isinstance(value, Arr):
             return Arr(tuple(self.attribute(v, name, span) for v in value.items))
         if not isinstance(value, CompRef):
-            fail("E219", f"{V.describe_shape(value)} has no attribute '{name}'", span)
+            fail("E219", f"{V.describe_shape(value)} has no attribute '{name}'", span,
+                 "attributes (.x, .r, .R, .phi, ...) belong to components")
         if value.kind == "world":
             zero = V.const(0.0)
             table = {"r": Arr((zero,) * 3), "v": Arr((zero,) * 3), "x": zero, "y": zero, "z": zero,
@@ -504,7 +553,7 @@ class Flattener(Evaluator):
                 return kin
         inst = self.insts.get(value.name)
         if inst is None:  # a named point of a body (rod.a) or a derived point
-            fail("E219", f"'{value.name}' has no attribute '{name}'", span)
+            fail("E219", f"'{value.name}' has no attribute '{name}'", span, "points have r, v, x, y, z")
         cls = inst.cls
         if name in cls.points:
             return CompRef("point", f"{inst.name}.{name}", "Point")
@@ -517,12 +566,14 @@ class Flattener(Evaluator):
         if f is not None:
             val = self.field_value(inst, name)
             if val is None:
-                fail("E219", f"'{inst.name}.{name}' is not set", span)
+                fail("E219", f"'{inst.name}.{name}' is not set", span, f"give it a value: {name} = ... in the modifiers")
             return val
-        opts = list(cls.points) + [f.name for f in cls.fields] + [r for r, _ in cls.roles]
+        roles = [jv.role for jv in self.joint_vars(inst)] if cls.category == "joint" else []
+        opts = list(cls.points) + [f.name for f in cls.fields] + roles
         if cls.category in ("body", "point", "frame"):
             opts += ["r", "v", "x", "y", "z"] + (["R", "w"] if cls.category != "point" else [])
-        fail("E219", f"{cls.name} '{inst.name}' has no attribute '{name}'", span, did_you_mean(name, opts))
+        fail("E219", f"{cls.name} '{inst.name}' has no attribute '{name}'", span,
+             did_you_mean(name, opts) or ("attributes: " + ", ".join(dict.fromkeys(opts)) if opts else None))
         raise AssertionError
 
     # ------------------------------------------------------------------ joints
@@ -531,7 +582,7 @@ class Flattener(Evaluator):
             return inst.jointvars
         if ("jointvars", "busy") in inst.busy:
             fail("E208", f"the variables of joint '{inst.name}' are defined in terms of themselves",
-                 inst.entry.decl.name_span)
+                 inst.entry.decl.name_span, "break the cycle of definitions")
         inst.busy.add(("jointvars", "busy"))
         try:
             cls = inst.cls
@@ -551,14 +602,15 @@ class Flattener(Evaluator):
                     v = _pick(inst.entry.cache[key], inst, 0, m.each)
                     if not isinstance(v, Scalar):
                         fail("E301", f"joint variable '{role}' of '{inst.name}' must be a scalar, "
-                                     f"got {V.describe_shape(v)}", m.value.span)
+                                     f"got {V.describe_shape(v)}", m.value.span,
+                             f"bind it to a coordinate ({role} = q) or a function of time ({role} = omega*time)")
                     self.check_dim(v, dim, f"'{role}' of '{inst.name}'", m.value.span)
                     if X.has_speed(v.expr):
                         fail("E308", f"joint variable '{role}' of '{inst.name}' depends on speeds", m.value.span,
                              "a joint's motion may depend on coordinates and time only")
                     if m.sub:
-                        fail("E214", f"'{role}' of '{inst.name}' is bound to an expression; set start values on "
-                                     f"the coordinate itself", m.span)
+                        fail("E214", f"'{role}' of '{inst.name}' is bound to an expression", m.span,
+                             "set start values on the coordinate itself: coordinate Real q(start = ...)")
                     coord = v.expr.name if isinstance(v.expr, ir.Coord) else None
                     out.append(ir.JointVar(role, v.expr, coord))
                     continue
@@ -577,9 +629,10 @@ class Flattener(Evaluator):
                         inst.entry.cache[key] = self.eval(sm.value)
                     v = _pick(inst.entry.cache[key], inst, 0, sm.each)
                     if not isinstance(v, Scalar):
-                        fail("E301", f"{attr} of '{name}' must be a scalar", sm.value.span)
+                        fail("E301", f"{attr} of '{name}' must be a scalar", sm.value.span, f"e.g. {role}({attr} = 0)")
                     if X.depends_on_state(v.expr) or X.depends_on_time(v.expr):
-                        fail("E306", f"the {attr} value may only depend on parameters", sm.value.span)
+                        fail("E306", f"the {attr} value may only depend on parameters", sm.value.span,
+                             "start values are numbers or expressions in parameters")
                     vals[attr] = v.expr
                 unit = "rad" if dim == U.ONE else "m"
                 c = ir.Coordinate(name, vals["start"], vals["speed"], bool(_constval(vals["fixed"])),
@@ -616,26 +669,35 @@ class Flattener(Evaluator):
         return self.body_of_point(pname.rsplit(".", 1)[0])
 
     # ================================================================== equations
+    def run_connects(self) -> None:
+        """connect(...) equations first: they complete components before anything reads their fields."""
+        for eq in self.equations:
+            if not self._guard(lambda eq=eq: self._equation(eq, connects=True), eq.span):
+                self.connect_failed = True
+
     def run_equations(self) -> None:
-        for eq in self.equations:  # connects first: they complete components
-            self._guard(lambda eq=eq: self._equation(eq, connects=True), eq.span)
         for eq in self.equations:
             self._guard(lambda eq=eq: self._equation(eq, connects=False), eq.span)
 
-    def _guard(self, fn, span: Span) -> None:
+    def _guard(self, fn, span: Span) -> bool:
         try:
             fn()
+            return True
         except EvalError as e:
             self.diags.items.append(e.diag)
         except _Failed:
             pass
         except ValError as ve:
             self.diags.error(ve.code, ve.message, span, ve.help)
+        return False
 
     def _equation(self, eq, connects: bool) -> None:
         if isinstance(eq, ast.ForEquation):
+            if not _has_work(eq, connects):
+                return  # each pass runs only the loops that hold its kind of equation
             if eq.var in self.entries:
-                fail("E202", f"loop variable '{eq.var}' hides the declaration of the same name", eq.span)
+                fail("E202", f"loop variable '{eq.var}' hides the declaration of the same name", eq.span,
+                     "rename the loop variable")
             values = self.range_values(eq.range)
             for i in values:
                 self.loop_vars[eq.var] = i
@@ -654,7 +716,8 @@ class Flattener(Evaluator):
         if isinstance(eq, ast.EnergyEquation):
             v = self.eval(eq.expr)
             if not isinstance(v, Scalar):
-                fail("E301", f"the {eq.kind} energy must be a scalar, got {V.describe_shape(v)}", eq.expr.span)
+                fail("E301", f"the {eq.kind} energy must be a scalar, got {V.describe_shape(v)}", eq.expr.span,
+                     "for a vector v use dot(v, v)")
             want = U.POWER if eq.kind == "dissipation" else U.ENERGY
             self.check_dim(v, want, f"the {eq.kind} {'function' if eq.kind == 'dissipation' else 'energy'}",
                            eq.expr.span)
@@ -662,16 +725,18 @@ class Flattener(Evaluator):
                 fail("E308", "the potential energy must not depend on speeds", eq.expr.span,
                      "velocity-dependent forces go into force(q) = ... or the dissipation function")
             if any(isinstance(n, (ir.EnergyRef, ir.ReactionRef)) for n in X.walk(v.expr)):
-                fail("E308", f"the {eq.kind} energy cannot refer to energies or reactions", eq.expr.span)
+                fail("E308", f"the {eq.kind} energy cannot refer to energies or reactions", eq.expr.span,
+                     "write the expression itself; kinetic_energy() etc. are for outputs")
             self.terms.append(ir.Term(eq.kind, v.expr, f"{eq.kind}@{eq.span.line}", eq.span))
             return
         if isinstance(eq, ast.ForceEquation):
             c = self.eval(eq.coordinate)
             if not (isinstance(c, Scalar) and isinstance(c.expr, ir.Coord)):
-                fail("E218", f"force(...) needs a coordinate, got {print_expr(eq.coordinate)}", eq.coordinate.span)
+                fail("E218", f"force(...) needs a coordinate, got {print_expr(eq.coordinate)}", eq.coordinate.span,
+                     "force(q) = ... names a `coordinate` or a joint variable such as j1.phi")
             q = self.eval(eq.expr)
             if not isinstance(q, Scalar):
-                fail("E301", "a generalized force must be a scalar", eq.expr.span)
+                fail("E301", "a generalized force must be a scalar", eq.expr.span, "one equation per coordinate: force(q) = Q;")
             if isinstance(c.dim, U.Dim):
                 self.check_dim(q, U.ENERGY / c.dim, f"the generalized force on {c.expr.name}", eq.expr.span)
             self.gen_forces.append(ir.GeneralizedForce(f"force({c.expr.name})", c.expr.name, q.expr, eq.span))
@@ -701,7 +766,7 @@ class Flattener(Evaluator):
         el = self.eval(eq.element)
         if not isinstance(el, CompRef) or el.name not in self.insts:
             fail("E209", f"connect(a, element, b) needs a joint, spring or damper as its second argument, got "
-                         f"{print_expr(eq.element)}", eq.element.span)
+                         f"{print_expr(eq.element)}", eq.element.span, "e.g. connect(rod1.b, j2, rod2.a)")
         inst = self.insts[el.name]
         names = inst.cls.connect_fields
         if names is None:
@@ -724,6 +789,7 @@ class Flattener(Evaluator):
             V.WARNINGS.reset(token)
 
     def _build(self) -> ir.Model:
+        self.run_connects()
         for e in self.entries.values():
             try:
                 self.value_of(e)
@@ -777,7 +843,7 @@ class Flattener(Evaluator):
         if cls.category == "body":
             if cls.name == "Body" and f.get("I") is not None:
                 if any(n.startswith("I_") and inst.entry.mod.sub.get(n) for n in f):
-                    fail("E211", f"give either I or I_11 ... I_32 for '{name}', not both", span)
+                    fail("E211", f"give either I or I_11 ... I_32 for '{name}', not both", span, "remove one of them")
             out = K.build_body(cls, name, f, span)
         elif cls.category == "point":
             body = f["body"]
@@ -787,7 +853,7 @@ class Flattener(Evaluator):
             axis = K.normalized(K.as_vec3(f["axis"], "axis"), "axis")
             if f.get("R") is not None:
                 if inst.entry.mod.sub.get("angle") is not None:
-                    fail("E211", f"give either R or axis and angle for '{name}', not both", span)
+                    fail("E211", f"give either R or axis and angle for '{name}', not both", span, "remove one of them")
                 R = K.as_mat3(f["R"], "R")
             else:
                 R = K.rodrigues(axis, K.as_expr(f["angle"], "angle"))
@@ -872,7 +938,7 @@ class Flattener(Evaluator):
         elif cls.name in ("Spring", "Damper", "SpringDamper"):
             a, b = _point_name(f["a"]), _point_name(f["b"])
             if a == b:
-                fail("E503", f"{cls.name} '{name}' connects a point to itself", span)
+                fail("E503", f"{cls.name} '{name}' connects a point to itself", span, "a and b must be different points")
             zero = X.const(0.0)
             kind = {"Spring": "spring", "Damper": "damper", "SpringDamper": "spring-damper"}[cls.name]
             out.forces.append(ir.SpringDamper(name, kind, a, b, e(f["k"], "k") if "k" in f else zero,
@@ -888,17 +954,24 @@ class Flattener(Evaluator):
         elif cls.name == "Gravitation":
             names = tuple(b.name for b in f["bodies"].items)
             if len(set(names)) != len(names):
-                fail("E202", f"a body appears twice in '{name}'", span)
+                fail("E202", f"a body appears twice in '{name}'", span, "list each body once")
             out.forces.append(ir.Gravitation(name, names, e(f["G"], "G"), span))
         elif cls.name == "Potential":
             v = f["V"]
             if X.has_speed(v.expr):
-                fail("E308", f"potential '{name}' must not depend on speeds", span)
+                fail("E308", f"potential '{name}' must not depend on speeds", span,
+                     "velocity-dependent forces go into a Force, GeneralizedForce or the dissipation function")
             out.terms.append(ir.Term("potential", v.expr, name, span))
         return out
 
 
 # ---------------------------------------------------------------------------- helpers
+
+
+def _quiet_numpy():
+    import numpy as np
+
+    return np.errstate(all="ignore")  # nan/inf are checked and reported as diagnostics
 
 
 def _point_name(v: Val) -> str:
@@ -927,9 +1000,31 @@ def _pick(val: Val, inst: CompInst, rank: int, each: bool) -> Val:
     if inst.k < 0 or each:
         return val
     n = len(inst.entry.elements)
-    if isinstance(val, Arr) and len(val.items) == n and len(V.shape_of(val)) == rank + 1:
+    if isinstance(val, Arr) and len(val.items) == n and _rank(val) == rank + 1:
         return val.items[inst.k]
     return val
+
+
+def _has_work(eq: ast.ForEquation, connects: bool) -> bool:
+    """Whether a for-loop holds connect(...) equations (connects=True) or other equations."""
+    for item in eq.body:
+        if isinstance(item, ast.ForEquation):
+            if _has_work(item, connects):
+                return True
+        elif isinstance(item, ast.Connect) == connects:
+            return True
+    return False
+
+
+def _rank(val: Val) -> int:
+    """Number of array levels, along the first elements (O(rank), unlike shape_of: once per element)."""
+    r = 0
+    while isinstance(val, Arr):
+        r += 1
+        if not val.items:
+            break
+        val = val.items[0]
+    return r
 
 
 def _constval(e: ir.Expr) -> float:

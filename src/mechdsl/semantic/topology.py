@@ -65,8 +65,11 @@ def loop_path(tree: list[ir.Joint], j: ir.Joint) -> tuple[str, ...]:
 
 def check_model(model: ir.Model, diags: DiagnosticBag) -> ir.Model:
     tree, cut, reached = spanning_tree(model, diags)
+    # a body hanging from a reversed joint (E505) is reported there, not again as unconnected
+    reversed_parents = {j.parent_body for j in model.joints
+                        if j.parent_body not in reached and j.child_body in reached and j.kind != "frame"}
     for body in model.bodies:
-        if body.name not in reached:
+        if body.name not in reached and body.name not in reversed_parents:
             diags.error("E501", f"body '{body.name}' is not connected to the world", body.span,
                         f"attach it with a joint, or make it free: Free f(child = {body.name});")
     cut_names = {j.name for j in cut}

@@ -26,6 +26,9 @@ class _Any:
 ANY = _Any()
 
 
+MAX_ELEMENTS = 100_000   # largest array (and range) a model may build
+
+
 class ValError(Exception):
     """Raised by value operations; the evaluator attaches the span."""
 
@@ -192,13 +195,15 @@ def check_val_dim(v: "Val", expected: U.Dim, what: str) -> None:
 def _scalar(v: Val, what: str) -> Scalar:
     if isinstance(v, Scalar):
         return v
-    raise ValError("E301", f"{what} needs a scalar, got {describe_shape(v)}")
+    raise ValError("E301", f"{what} needs a scalar, got {describe_shape(v)}",
+                   "pick an element with a subscript, e.g. v[1], or use norm(v)")
 
 
 def elementwise(a: Val, b: Val, f, what: str) -> Val:
     if isinstance(a, Arr) and isinstance(b, Arr):
         if len(a.items) != len(b.items):
-            raise ValError("E301", f"shape mismatch in {what}: {describe_shape(a)} and {describe_shape(b)}")
+            raise ValError("E301", f"shape mismatch in {what}: {describe_shape(a)} and {describe_shape(b)}",
+                       "both sides must have the same size")
         return Arr(tuple(elementwise(x, y, f, what) for x, y in zip(a.items, b.items)))
     if isinstance(a, Arr) or isinstance(b, Arr):
         raise ValError("E301", f"shape mismatch in {what}: {describe_shape(a)} and {describe_shape(b)}",
@@ -230,7 +235,8 @@ def _num(v: Val) -> bool:
 
 def _check_num(v: Val, op: str) -> None:
     if not _num(v):
-        raise ValError("E302", f"'{op}' cannot be applied to {describe_shape(v)}")
+        raise ValError("E302", f"'{op}' cannot be applied to {describe_shape(v)}",
+                       "arithmetic works on numbers, vectors and matrices; use a point's .r for its position")
 
 
 def add(a: Val, b: Val) -> Val:
@@ -268,18 +274,22 @@ def mul(a: Val, b: Val) -> Val:
         return dot(a, b)
     if len(sa) == 2 and len(sb) == 1:
         if sa[1] != sb[0]:
-            raise ValError("E301", f"matrix-vector product needs matching sizes: {describe_shape(a)} * {describe_shape(b)}")
+            raise ValError("E301", f"matrix-vector product needs matching sizes: {describe_shape(a)} * {describe_shape(b)}",
+                           "an m x n matrix multiplies a vector of n")
         return Arr(tuple(dot(row, b) for row in a.items))
     if len(sa) == 1 and len(sb) == 2:
         if sa[0] != sb[0]:
-            raise ValError("E301", f"vector-matrix product needs matching sizes: {describe_shape(a)} * {describe_shape(b)}")
+            raise ValError("E301", f"vector-matrix product needs matching sizes: {describe_shape(a)} * {describe_shape(b)}",
+                           "a vector of m multiplies an m x n matrix")
         return Arr(tuple(dot(a, col) for col in transpose(b).items))
     if len(sa) == 2 and len(sb) == 2:
         if sa[1] != sb[0]:
-            raise ValError("E301", f"matrix product needs matching sizes: {describe_shape(a)} * {describe_shape(b)}")
+            raise ValError("E301", f"matrix product needs matching sizes: {describe_shape(a)} * {describe_shape(b)}",
+                           "an m x n matrix multiplies an n x k matrix")
         bt = transpose(b)
         return Arr(tuple(Arr(tuple(dot(row, col) for col in bt.items)) for row in a.items))
-    raise ValError("E301", f"cannot multiply {describe_shape(a)} and {describe_shape(b)}")
+    raise ValError("E301", f"cannot multiply {describe_shape(a)} and {describe_shape(b)}",
+                   "'*' multiplies scalars, vectors and matrices of matching sizes")
 
 
 def div(a: Val, b: Val) -> Val:
@@ -287,7 +297,7 @@ def div(a: Val, b: Val) -> Val:
     if shape_of(b) != ():
         raise ValError("E301", f"cannot divide by {describe_shape(b)}", "divide by a scalar")
     if isinstance(b, Scalar) and b.const == 0.0:
-        raise ValError("E303", "division by zero")
+        raise ValError("E303", "division by zero", "check the divisor")
 
     def f(x: Scalar) -> Scalar:
         return Scalar(X.div(x.expr, b.expr), dim_div(x.dim, b.dim), approx=x.approx or b.approx)
@@ -303,8 +313,8 @@ def power(a: Val, b: Val) -> Val:
     d = a.dim
     if isinstance(d, U.Dim) and not d.dimensionless:
         if b.const is None:
-            _problem("E403", f"a quantity with unit {d} can only be raised to a constant power", None,
-                     a.approx or b.approx)
+            _problem("E403", f"a quantity with unit {d} can only be raised to a constant power",
+                     "use a constant exponent, or make the base dimensionless", a.approx or b.approx)
             d = None
         else:
             d = d ** b.const
@@ -314,17 +324,20 @@ def power(a: Val, b: Val) -> Val:
     if a.const is not None and b.const is not None:
         try:
             v = a.const ** b.const
-            if isinstance(v, complex):
-                raise ValError("E303", "this power has no real value")
-            return Scalar(ir.Const(float(v)), d, integer, approx=a.approx or b.approx)
         except (OverflowError, ZeroDivisionError):
-            raise ValError("E303", "this power cannot be evaluated (overflow or division by zero)") from None
+            raise ValError("E303", "this power cannot be evaluated (overflow or division by zero)",
+                           "check the base and the exponent") from None
+        if isinstance(v, complex):
+            raise ValError("E303", f"({X.fmt_num(a.const)})^{X.fmt_num(b.const)} has no real value",
+                           "a negative number raised to a fractional power is complex")
+        return Scalar(ir.Const(float(v)), d, integer, approx=a.approx or b.approx)
     return Scalar(X.power(a.expr, b.expr), d, integer, approx=a.approx or b.approx)
 
 
 def dot(a: Val, b: Val) -> Scalar:
     if not (isinstance(a, Arr) and isinstance(b, Arr)) or shape_of(a) != shape_of(b) or len(shape_of(a)) != 1:
-        raise ValError("E301", f"dot product needs two vectors of the same size, got {describe_shape(a)} and {describe_shape(b)}")
+        raise ValError("E301", f"dot product needs two vectors of the same size, got {describe_shape(a)} and {describe_shape(b)}",
+                       "e.g. dot({1, 0, 0}, v) with v a vector of 3")
     out = None
     for x, y in zip(a.items, b.items):
         term = _smul(x, y)
@@ -336,7 +349,8 @@ def dot(a: Val, b: Val) -> Scalar:
 
 def cross(a: Val, b: Val) -> Arr:
     if shape_of(a) != (3,) or shape_of(b) != (3,):
-        raise ValError("E301", f"cross product needs two vectors of 3, got {describe_shape(a)} and {describe_shape(b)}")
+        raise ValError("E301", f"cross product needs two vectors of 3, got {describe_shape(a)} and {describe_shape(b)}",
+                       "e.g. cross(r, F) with r and F vectors of 3")
     x, y = a.items, b.items
 
     def c(i, j):
@@ -350,13 +364,13 @@ def cross(a: Val, b: Val) -> Arr:
 def transpose(a: Val) -> Arr:
     s = shape_of(a)
     if len(s) != 2:
-        raise ValError("E301", f"transpose needs a matrix, got {describe_shape(a)}")
+        raise ValError("E301", f"transpose needs a matrix, got {describe_shape(a)}", "e.g. transpose(rod.R)")
     return Arr(tuple(Arr(tuple(a.items[i].items[j] for i in range(s[0]))) for j in range(s[1])))
 
 
 def norm(a: Val) -> Scalar:
     if len(shape_of(a)) != 1:
-        raise ValError("E301", f"norm needs a vector, got {describe_shape(a)}")
+        raise ValError("E301", f"norm needs a vector, got {describe_shape(a)}", "e.g. norm(rod.b.r)")
     s = dot(a, a)
     d = s.dim ** Fraction(1, 2) if isinstance(s.dim, U.Dim) else s.dim
     return Scalar(X.func("sqrt", s.expr), d, approx=s.approx)
@@ -401,7 +415,7 @@ def apply_func(name: str, args: list[Val]) -> Val:
     """Math functions, element-wise over arrays."""
     if name in X.UNARY_FUNCS:
         if len(args) != 1:
-            raise ValError("E304", f"{name}() takes 1 argument, got {len(args)}")
+            raise ValError("E304", f"{name}() takes 1 argument, got {len(args)}", f"write {name}(x)")
 
         def f(x: Scalar) -> Scalar:
             if name in ("abs", "sign", "floor", "ceil"):
@@ -415,7 +429,8 @@ def apply_func(name: str, args: list[Val]) -> Val:
                 try:
                     v = _NUMERIC[name](x.const)
                 except (ValueError, OverflowError, ZeroDivisionError):
-                    raise ValError("E303", f"{name}({X.fmt_num(x.const)}) is undefined") from None
+                    raise ValError("E303", f"{name}({X.fmt_num(x.const)}) is undefined",
+                                   f"the argument is outside the domain of {name}() or the result overflows") from None
                 return Scalar(ir.Const(float(v)), d, integer=x.integer and name in ("abs", "sign", "floor", "ceil"),
                               approx=x.approx)
             return Scalar(X.func(name, x.expr), d, approx=x.approx)
@@ -423,7 +438,7 @@ def apply_func(name: str, args: list[Val]) -> Val:
         return map1(args[0], f)
     if name in X.BINARY_FUNCS:
         if len(args) != 2:
-            raise ValError("E304", f"{name}() takes 2 arguments, got {len(args)}")
+            raise ValError("E304", f"{name}() takes 2 arguments, got {len(args)}", f"write {name}(a, b)")
 
         def g(x: Scalar, y: Scalar) -> Scalar:
             d = dim_join(x.dim, y.dim, f"{name}()", x.approx or y.approx)
@@ -436,7 +451,7 @@ def apply_func(name: str, args: list[Val]) -> Val:
             return Scalar(X.func(name, x.expr, y.expr), d, approx=x.approx or y.approx)
 
         return elementwise(args[0], args[1], g, f"{name}()")
-    raise ValError("E205", f"unknown function '{name}'")
+    raise ValError("E213", f"unknown function '{name}'", "see docs/language.md for the built-in functions")
 
 
 _NUMERIC = {

@@ -1,0 +1,354 @@
+"""``simulate_dae``: the segment loop shared by every formulation.
+
+    initialize (consistent start, changes reported)
+    -> count degrees of freedom, drop redundant constraints (independent subset)
+    -> build the formulation's stepper
+    -> advance segment by segment to each output time, after each segment:
+         projection / re-partitioning (the formulation's hook),
+         conditioning check of G (singular configuration -> stop, report the time),
+         drift measurement (||g||, ||G q' + g_t||)
+    -> outputs, multipliers and reactions at the output times -> Result
+
+Chunks.  One integrator call covers up to CHUNK output intervals (the integrator returns
+the states at each output time); a formulation may accept only a prefix (projection does
+when the drift grows).  A chunk that fails is retried one output interval at a time, and
+a failing interval is halved up to MAX_RETRIES times before the run stops with a Failure.
+
+Singular configurations.  At every accepted state the ratio sigma_min / sigma_max of the
+scaled G is computed (at MONITOR_POINTS or more times per run: the output grid is refined
+for the integration by an integer factor).  Once the ratio falls below SINGULAR_WATCH and
+keeps falling, or its linear extrapolation reaches zero within two grid steps, the run
+rewinds to that state and continues in single segments, each ending halfway to the time
+at which the ratio, extrapolated linearly, would reach zero; so a singular configuration
+is approached in geometrically shrinking steps and detected (ratio < singular_tol)
+rather than stepped over.
+"""
+from __future__ import annotations
+
+import time as _time
+import warnings
+
+import numpy as np
+
+from ..diagnostics import UsageError, did_you_mean
+from ..result import Failure, Result
+from .dof import dof_report, short_list, singular_ratio
+from .init import initialize
+from .options import DaeOptions, parse_options
+from .record import evaluate_signals, select_signals, standard_signals
+from .stepper import StepError
+from .system import ConstrainedSystem
+
+DEFAULT_POINTS = 501
+SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
+MONITOR_POINTS = 201       # least number of checks (of drift and conditioning) per run
+MAX_RETRIES = 12           # halvings of a failing segment before giving up
+CHUNK = 64                 # most output intervals per integrator call
+CHUNK_SIZES = (1, 8, 64)   # allowed chunk lengths: one integrator is built per length
+
+
+def _param_vector(eom, p) -> np.ndarray:
+    if p is None:
+        return np.array(eom.param_values, float)
+    if isinstance(p, dict):
+        pv = np.array(eom.param_values, float)
+        for k, v in p.items():
+            if k not in eom.params:
+                raise UsageError(f"unknown parameter {k!r}")
+            pv[eom.params.index(k)] = float(v)
+        return pv
+    pv = np.asarray(p, float).ravel()
+    if pv.size != len(eom.params):
+        raise UsageError(f"parameter vector has {pv.size} entries, the model has {len(eom.params)}")
+    return pv
+
+
+def _start(eom, x0, pv):
+    """Start values with the overrides x0 ([q; qd] or {name | "der(name)": value}) applied;
+    an overridden value counts as fixed for the consistent initialization."""
+    q0, qd0 = eom.start(pv)
+    n = eom.n
+    fq = list(eom.fixed_q) if len(eom.fixed_q) == n else [True] * n
+    fqd = list(eom.fixed_qd) if len(eom.fixed_qd) == n else [True] * n
+    if x0 is None:
+        return q0, qd0, tuple(fq), tuple(fqd)
+    if isinstance(x0, dict):
+        for k, v in x0.items():
+            name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+            if name not in eom.coords:
+                hint = did_you_mean(name, eom.coords)
+                raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
+            i = eom.coords.index(name)
+            if speed:
+                qd0[i], fqd[i] = float(v), True
+            else:
+                q0[i], fq[i] = float(v), True
+    else:
+        x = np.asarray(x0, float).ravel()
+        if x.size != 2 * n:
+            raise UsageError(f"x0 has {x.size} entries; expected {2 * n} (coordinates then their speeds)")
+        q0, qd0 = x[:n].copy(), x[n:].copy()
+    if not (np.all(np.isfinite(q0)) and np.all(np.isfinite(qd0))):
+        raise UsageError("start values are not finite")
+    return q0, qd0, tuple(fq), tuple(fqd)
+
+
+def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
+    f = opts.formulation
+    if f == "baumgarte":
+        from .baumgarte import BaumgarteStepper
+
+        return BaumgarteStepper(system, opts, span)
+    if f == "projection":
+        from .projection import ProjectionStepper
+
+        return ProjectionStepper(system, opts, span)
+    if f == "ggl":
+        from .ggl import GGLStepper
+
+        return GGLStepper(system, opts, t0, q0, qd0)
+    if f == "partitioning":
+        from .partitioning import PartitioningStepper
+
+        return PartitioningStepper(system, opts)
+    raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
+
+
+def simulate_dae(eom, t_end, **kw) -> Result:
+    """Simulate a model with constraints (``eom.g``) as a DAE with multipliers.
+
+    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning'),
+    rtol, atol, method ('auto' | 'bdf' | 'adams' for the ODE formulations, 'idas' for ggl),
+    points, t_start, p (vector or {name: value}), reactions (bool), outputs (names),
+    baumgarte (omega or (alpha, beta)), singular_tol, max_interval, drift_bound, max_steps.
+    See docs/constraints.md.
+    """
+    opts, extra = parse_options(kw)
+    if eom.g is None or eom.m == 0:
+        raise UsageError("simulate_dae needs a model with constraints; use mechdsl.simulate for ODEs")
+    wall0 = _time.perf_counter()
+    pv = _param_vector(eom, opts.p)
+    t0 = float(opts.t_start)
+    t_end = float(t_end)
+    if not t_end > t0:
+        raise UsageError(f"stop time {t_end:g} must be after the start time {t0:g}")
+    points = opts.points or DEFAULT_POINTS
+    # the integration/monitoring grid: the output grid, refined by an integer factor so that
+    # conditioning and drift are checked at MONITOR_POINTS or more times per run
+    refine = max(1, int(np.ceil((MONITOR_POINTS - 1) / (points - 1))))
+    grid = np.linspace(t0, t_end, (points - 1) * refine + 1)
+    span = t_end - t0
+    chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
+
+    q0, qd0, fixed_q, fixed_qd = _start(eom, opts.x0, pv)
+    init = initialize(eom, q0, qd0, t0, pv, fixed_q=fixed_q, fixed_qd=fixed_qd)
+    dof = dof_report(eom, init.q, t0, pv)
+    notes: list[str] = []
+    if dof.redundant:
+        notes.append(f"{dof.redundant} redundant constraint(s) dropped: {short_list(dof.redundant_names)} "
+                     f"(rank of G is {dof.rank} of {dof.constraints}); their multipliers are reported as 0")
+    system = ConstrainedSystem.build(eom, pv, dof.independent)
+    system.fix_row_scale(init.q, t0)
+    if opts.formulation == "partitioning" and dof.dof == 0:
+        notes.append("no degrees of freedom: partitioning has nothing to integrate; using projection")
+        opts.formulation = "projection"
+    method_reason = resolve_method(opts, system, init.q, init.qd, t0, span)
+    stepper = make_stepper(system, opts, t0, init.q, init.qd, span)
+    stepper.reset(t0, init.q, init.qd)
+    setup_wall = _time.perf_counter() - wall0
+    cpu0 = _time.process_time()
+
+    T, Qs, QDs, D, VD = [], [], [], [], []
+    events: list[dict] = []
+    failure = None
+    rank = system.m
+
+    def ratio_at(q, t):
+        return singular_ratio(system.scaled_G(q, t), rank)
+
+    def record(t, q, qd, dv=None):
+        d, v = dv if dv is not None else system.drift(q, qd, t)
+        T.append(t)
+        Qs.append(q.copy())
+        QDs.append(qd.copy())
+        D.append(d)
+        VD.append(v)
+
+    record(t0, stepper.q, stepper.qd)
+    ratio_prev, t_prev = ratio_at(stepper.q, t0), t0
+    min_ratio = ratio_prev
+    seen_d, seen_v = 0.0, 0.0
+    h_sing = np.inf
+    k = 1
+    retries = 0
+    h_fail = np.inf
+    chunk = CHUNK
+    tiny = 1e-13 * max(abs(t_end), span)
+    while k < len(grid) and failure is None:
+        single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
+        if single:
+            target = grid[k]
+            h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
+            times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
+        else:
+            K = max(c for c in CHUNK_SIZES if c <= min(chunk, len(grid) - k))
+            if opts.max_interval:
+                K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
+            times = grid[k:k + K]
+            if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
+                times = np.array([stepper.t + opts.max_interval])
+        saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
+        try:
+            T_acc, Q_acc, QD_acc = stepper.advance(times)
+        except StepError as e:
+            stepper.reset(*saved)
+            if len(times) > 1:          # retry the chunk one output interval at a time
+                chunk = 1
+                continue
+            if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
+                retries += 1
+                continue
+            retries += 1
+            h_fail = (times[-1] - saved[0]) / 2
+            r_now = ratio_at(saved[1], saved[0])
+            near_singular = r_now < 100 * opts.singular_tol
+            if retries > MAX_RETRIES or h_fail < tiny or near_singular:
+                # (near a singular configuration, halving the step only makes the solver retry
+                # ever more ill-conditioned systems: stop at once)
+                if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
+                    failure = Failure(saved[0], "singular configuration",
+                                      f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
+                                      f"and the {opts.formulation} integrator failed: {e}")
+                else:
+                    failure = Failure(saved[0], f"{opts.formulation} integrator failed", str(e))
+                if saved[0] > T[-1]:        # keep the last good state (between output times)
+                    record(*saved)
+            continue
+        retries = 0
+        h_fail = np.inf
+        if opts.progress is not None:
+            opts.progress(float(T_acc[-1]), t_end)
+        if not single:
+            chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
+        elif chunk == 1 and not np.isfinite(h_sing):
+            chunk = 2
+        for i in range(len(T_acc)):
+            t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
+            d_now, v_now, Gs = system.monitor(q_now, qd_now, t_now)
+            ratio = singular_ratio(Gs, rank)
+            min_ratio = min(min_ratio, ratio)
+            seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
+            on_grid = abs(t_now - grid[k]) <= tiny
+            if ratio < opts.singular_tol:
+                events.append({"time": t_now, "kind": "singular", "contact": "-",
+                               "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
+                failure = Failure(t_now, "singular configuration",
+                                  f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
+                                  f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
+                                  "determined by the equations (a dead point or change point of the mechanism)")
+                record(t_now, q_now, qd_now, (d_now, v_now))
+                break
+            h_sing = np.inf
+            if ratio < ratio_prev and t_now > t_prev:
+                tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
+                if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
+                    h_sing = max(0.5 * tau, 1e3 * tiny)
+            ratio_prev, t_prev = ratio, t_now
+            if on_grid:
+                if k % refine == 0:
+                    record(t_now, q_now, qd_now, (d_now, v_now))
+                k += 1
+            if np.isfinite(h_sing) and i < len(T_acc) - 1:
+                # approaching a singular configuration: rewind to here, continue in short segments
+                stepper.reset(t_now, q_now, qd_now)
+                break
+
+    solve_cpu = _time.process_time() - cpu0 - stepper.stats.get("build_cpu_time", 0.0)
+    t = np.array(T)
+    Q = np.array(Qs).reshape(len(T), eom.n)
+    QD = np.array(QDs).reshape(len(T), eom.n)
+    LAM = None
+    if need_lam:
+        LAM = np.zeros((len(T), eom.m))
+        for i in range(len(T)):
+            _, lam = system.accel(Q[i], QD[i], t[i])
+            LAM[i, list(system.active)] = lam
+    plain = {k: v for k, v in chosen.items() if k in eom.outputs}
+    signals = evaluate_signals(eom, plain, t, Q, QD, LAM, pv)
+    signals.update(evaluate_signals(eom, standard_signals(eom), t, Q, QD, LAM, pv))
+    signals["constraint_drift"] = np.array(D)
+    signals["velocity_drift"] = np.array(VD)
+    signals.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, Q, QD, LAM, pv))
+
+    bound = opts.bound
+    # maxima over every checked state (the monitoring grid), not only the recorded ones
+    max_d = max(float(np.max(D)) if D else 0.0, seen_d)
+    max_v = max(float(np.max(VD)) if VD else 0.0, seen_v)
+    drift_ok = max_d <= bound and max_v <= bound
+    stats = dict(stepper.stats)
+    stats.update({"max_constraint_drift": max_d, "max_velocity_drift": max_v, "drift_bound": bound,
+                  "drift_ok": drift_ok, "min_singular_ratio": float(min_ratio),
+                  "wall_time": _time.perf_counter() - wall0, "setup_wall_time": setup_wall,
+                  "solve_cpu_time": solve_cpu})
+    metadata = {"model": eom.name, "formulation": opts.formulation,
+                "formulation_reason": "requested" if (kw.get("formulation") or "auto") != "auto" else
+                "default: index-1 ODE with Baumgarte terms and projection onto both constraint manifolds "
+                "after every segment",
+                "method": _method_name(opts), "method_reason": method_reason, "rtol": opts.rtol, "atol": opts.atol, "points": points,
+                "t_start": t0, "t_end": t_end, "initialization": init.as_dict(), "dof": dof.as_dict(),
+                "constraints": list(eom.constraint_names), "active_constraints": list(system.names),
+                "notes": notes + stepper.notes}
+    if extra:
+        metadata["notes"].append("options without effect on a constrained model: " + ", ".join(sorted(extra)))
+    metadata["options"] = {"t_start": t0, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol, "points": points,
+                           "formulation": opts.formulation, "method": opts.method, "reactions": bool(opts.reactions),
+                           "outputs": list(opts.outputs) if opts.outputs is not None else None,
+                           "parameters": dict(zip(eom.params, map(float, pv))),
+                           "start": {**dict(zip(eom.coords, map(float, init.q))),
+                                     **{f"der({c})": float(v) for c, v in zip(eom.coords, init.qd)}}}
+    metadata["warnings"] = []
+    try:
+        from ..simulate import versions
+
+        metadata["versions"] = versions()
+    except ImportError:  # pragma: no cover
+        pass
+    if not drift_ok:
+        msg = (f"constraint drift exceeded the bound {bound:.1e}: max ||g|| = {max_d:.2e}, "
+               f"max ||G q' + g_t|| = {max_v:.2e} (formulation {opts.formulation}); "
+               "tighten atol or use formulation = \"projection\"")
+        metadata["drift_warning"] = msg
+        metadata["warnings"].append(msg)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
+    return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
+                  metadata=metadata, events=events, failure=failure)
+
+
+STIFF = 1e4   # an overdamped mode decaying this many times within the run makes 'auto' pick BDF
+
+
+def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
+    """Replace method 'auto' by a concrete one; return why."""
+    if opts.formulation == "ggl":
+        opts.method = "idas"
+        return "IDAS is the solver of the GGL formulation"
+    if opts.method == "cvodes":
+        opts.method = "bdf"
+    if opts.method != "auto":
+        return "requested"
+    ev = system.eigenvalues(q, qd, t0)
+    damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
+    rate = max(damped, default=0.0)
+    if rate * span > STIFF:
+        opts.method = "bdf"
+        return (f"auto: stiff (an overdamped mode decays at {rate:.3g}/s, {rate * span:.3g} times the run "
+                "length); BDF")
+    opts.method = "adams"
+    return f"auto: not stiff (fastest overdamped rate {rate:.3g}/s over a {span:g} s run); Adams"
+
+
+def _method_name(opts: DaeOptions) -> str:
+    if opts.formulation == "ggl":
+        return "IDAS (variable-order BDF), algebraic variables excluded from the error test"
+    return "CVODES " + ("Adams" if opts.method == "adams" else "BDF")

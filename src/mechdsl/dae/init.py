@@ -1,0 +1,230 @@
+"""Consistent initialization of a constrained model.
+
+The start values (q0, q0') come from the model; those marked fixed (``EOM.fixed_q`` /
+``EOM.fixed_qd``) are held, the others are changed as little as possible so that
+
+    g(q, t0) = 0          (Gauss-Newton with minimum-norm steps on the free coordinates)
+    G q' + g_t = 0        (one minimum-norm linear least-squares solve on the free speeds)
+
+"As little as possible" is measured in the mass metric (coordinate i weighted by
+sqrt(M_ii)), so the result does not depend on units.  Every changed value is reported
+(:class:`InitReport`); a start the constraints cannot meet raises a MechError that names
+the violated constraints (E821 positions, E822 velocities).
+
+Feasibility is judged per constraint by its distance to the surface in coordinate space,
+|g_i| / ||dg_i/dq||, against ``tol * (1 + ||q||_inf)`` (default tol = 1e-10).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..diagnostics import Diagnostic, MechError
+from ..eom import EOM
+
+CODE_POSITION = "E821"
+CODE_VELOCITY = "E822"
+
+
+@dataclass
+class InitChange:
+    name: str
+    kind: str          # 'start' (position) | 'speed' (velocity)
+    before: float
+    after: float
+
+    @property
+    def change(self) -> float:
+        return self.after - self.before
+
+    def __str__(self) -> str:
+        what = self.name if self.kind == "start" else f"der({self.name})"
+        return f"{what}: {self.before:.12g} -> {self.after:.12g} (changed by {self.change:+.3g})"
+
+
+@dataclass
+class InitReport:
+    q: np.ndarray
+    qd: np.ndarray
+    changes: list[InitChange] = field(default_factory=list)
+    position_residual: float = 0.0     # max |g| after initialization
+    velocity_residual: float = 0.0     # max |G q' + g_t| after initialization
+    iterations: int = 0
+    free_positions: tuple[str, ...] = ()
+    free_speeds: tuple[str, ...] = ()
+
+    def lines(self) -> list[str]:
+        if not self.changes:
+            return ["initial values are consistent with the constraints (nothing changed)"]
+        return ["consistent initialization changed:"] + [f"  {c}" for c in self.changes]
+
+    def as_dict(self) -> dict:
+        return {"changes": [{"name": c.name, "kind": c.kind, "before": c.before, "after": c.after,
+                             "change": c.change} for c in self.changes],
+                "position_residual": self.position_residual, "velocity_residual": self.velocity_residual,
+                "iterations": self.iterations, "free_positions": list(self.free_positions),
+                "free_speeds": list(self.free_speeds)}
+
+
+def _functions(eom: EOM):
+    import casadi as ca
+
+    G = ca.jacobian(eom.g, eom.q)
+    return (ca.Function("g", [eom.q, eom.t, eom.p], [eom.g]),
+            ca.Function("G", [eom.q, eom.t, eom.p], [G]),
+            ca.Function("gt", [eom.q, eom.t, eom.p], [ca.jacobian(eom.g, eom.t)]),
+            ca.Function("M", [eom.q, eom.t, eom.p], [eom.M]))
+
+
+def _flags(flags, n, default=True):
+    flags = tuple(flags)
+    return flags if len(flags) == n else (default,) * n
+
+
+def constraint_labels(eom: EOM) -> list[str]:
+    """'name' or 'name' (doc) for each constraint: explicit constraint equations of a .mech
+    model are named c1, c2, ... and carry their text or documentation string."""
+    docs = {}
+    if eom.model is not None:
+        docs = {c.name: c.doc for c in eom.model.constraints if c.doc}
+    return [f"'{n}' ({docs[n]})" if n in docs else f"'{n}'" for n in eom.constraint_names]
+
+
+def _span(eom: EOM, index: int):
+    """Source span of constraint `index` (an explicit equation) or of its loop's joint."""
+    from ..diagnostics import Span
+
+    if eom.model is None:
+        return Span()
+    name = eom.constraint_names[index]
+    for c in eom.model.constraints:
+        if c.name == name:
+            return c.span
+    joint = name.split(".")[0]
+    for j in eom.model.joints:
+        if j.name == joint:
+            return j.span
+    return eom.model.span
+
+
+def _distances(g, G):
+    norms = np.linalg.norm(G, axis=1)
+    return np.abs(g) / np.where(norms > 0, norms, 1.0)
+
+
+def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float = 1e-10,
+               max_iter: int = 50, fixed_q=None, fixed_qd=None) -> InitReport:
+    """Make (q0, q0') consistent with g = 0 and G q' + g_t = 0, holding the fixed values
+    (``EOM.fixed_q`` / ``EOM.fixed_qd``, or the flags given here)."""
+    pv = eom.param_values if p is None else np.asarray(p, float)
+    if q0 is None or qd0 is None:
+        a, b = eom.start(pv)
+        q0 = a if q0 is None else q0
+        qd0 = b if qd0 is None else qd0
+    q = np.array(q0, float).copy()
+    qd = np.array(qd0, float).copy()
+    n, m = eom.n, eom.m
+    if m == 0:
+        return InitReport(q=q, qd=qd)
+    fg, fG, fgt, fM = _functions(eom)
+    labels = constraint_labels(eom)
+    fixed_q = _flags(eom.fixed_q if fixed_q is None else fixed_q, n)
+    fixed_qd = _flags(eom.fixed_qd if fixed_qd is None else fixed_qd, n)
+    free = [i for i in range(n) if not fixed_q[i]]
+    freev = [i for i in range(n) if not fixed_qd[i]]
+
+    def ev(f, *args, shape=None):
+        a = np.array(f(*args), float)
+        return a.reshape(shape) if shape else a.ravel()
+
+    # ---- positions: Gauss-Newton with minimum-norm steps in the mass metric
+    it = 0
+    g = ev(fg, q, t, pv)
+    G = ev(fG, q, t, pv, shape=(m, n))
+    scale = 1.0 + np.max(np.abs(q))
+    if free:
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
+        for it in range(1, max_iter + 1):
+            if np.max(_distances(g, G)) <= 1e-3 * tol * scale:
+                break
+            A = G[:, free] * d[free][None, :]
+            y = np.linalg.lstsq(A, -g, rcond=1e-12)[0]
+            step = d[free] * y
+            # backtracking on ||g|| keeps Gauss-Newton from overshooting far from the surface
+            lam, g_norm = 1.0, np.linalg.norm(g)
+            while True:
+                trial = q.copy()
+                trial[free] += lam * step
+                g_trial = ev(fg, trial, t, pv)
+                if np.linalg.norm(g_trial) < g_norm or lam < 1e-4:
+                    break
+                lam *= 0.5
+            q = trial
+            g = g_trial
+            G = ev(fG, q, t, pv, shape=(m, n))
+            if np.max(np.abs(lam * step)) <= 1e-15 * scale:
+                break
+    dist = _distances(g, G)
+    bad = [i for i in range(m) if dist[i] > tol * scale]
+    if bad:
+        raise MechError(Diagnostic(
+            CODE_POSITION,
+            "the start values cannot satisfy the constraint" + ("s " if len(bad) > 1 else " ")
+            + ", ".join(f"{labels[i]} with residual {g[i]:.3g}" for i in bad),
+            span=_span(eom, bad[0]),
+            help=("every coordinate in them has a fixed start value; correct the start values or let "
+                  "some of them be computed (fixed = false)" if not free else
+                  "the coordinates left free (" + ", ".join(eom.coords[i] for i in free) + ") cannot close "
+                  "these constraints; check the start values, the dimensions, or free other coordinates")))
+
+    # ---- velocities: one linear least-squares solve (the problem is linear in q')
+    gt = ev(fgt, q, t, pv)
+    r = G @ qd + gt
+    if freev:
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
+        A = G[:, freev] * d[freev][None, :]
+        y = np.linalg.lstsq(A, -r, rcond=1e-12)[0]
+        qd[freev] += d[freev] * y
+        r = G @ qd + gt
+    vscale = 1.0 + np.max(np.abs(qd))
+    vdist = _distances(r, G)
+    badv = [i for i in range(m) if vdist[i] > tol * vscale * 1e2]
+    if badv:
+        raise MechError(Diagnostic(
+            CODE_VELOCITY,
+            "the start speeds violate the velocity form of the constraint" + ("s " if len(badv) > 1 else " ")
+            + ", ".join(f"{labels[i]} with G q' + g_t = {r[i]:.3g}" for i in badv),
+            span=_span(eom, badv[0]),
+            help=("every speed in them has a fixed start value; correct the speeds or let some be computed "
+                  "(speed fixed = false)" if not freev else
+                  "the speeds left free (" + ", ".join(eom.coords[i] for i in freev) + ") cannot satisfy them")))
+
+    changes = []
+    q_in, qd_in = np.asarray(q0, float), np.asarray(qd0, float)
+    for i in range(n):
+        for kind, a, b in (("start", q_in[i], q[i]), ("speed", qd_in[i], qd[i])):
+            if abs(b - a) > 4 * np.finfo(float).eps * (1 + abs(a)):
+                changes.append(InitChange(eom.coords[i], kind, float(a), float(b)))
+    changes.sort(key=lambda c: (c.kind != "start", eom.coords.index(c.name)))
+    return InitReport(q=q, qd=qd, changes=changes, position_residual=float(np.max(np.abs(g))),
+                      velocity_residual=float(np.max(np.abs(r))), iterations=it,
+                      free_positions=tuple(eom.coords[i] for i in free),
+                      free_speeds=tuple(eom.coords[i] for i in freev))
+
+
+def check_report(eom: EOM, p=None, t: float = 0.0) -> list[str]:
+    """Lines for ``mech check``: degrees of freedom and what initialization would change.
+
+    Never raises for a model problem: an inconsistent start becomes an ``error:`` line.
+    """
+    from .dof import dof_report
+
+    try:
+        init = initialize(eom, t=t, p=p)
+        lines = dof_report(eom, init.q, t, p).lines()
+        lines += init.lines()
+    except MechError as e:
+        lines = dof_report(eom, None, t, p).lines()
+        lines += [f"error[{d.code}]: {d.message}" + (f" (help: {d.help})" if d.help else "") for d in e.diagnostics]
+    return lines

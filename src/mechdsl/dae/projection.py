@@ -1,0 +1,94 @@
+"""Index-1 ODE plus coordinate projection ("projection", the default).
+
+At the end of every chunk (one integrator call through one or more output times), and
+before any output time at which the drift has grown past half the bound, the
+state is projected back onto the constraint manifolds:
+
+    positions   q <- q + dq,  min (dq^T M dq)  s.t.  g(q + dq, t) = 0     (Newton, fresh G)
+    velocities  q' <- argmin (q' - q'_0)^T M (q' - q'_0)  s.t.  G q' + g_t = 0
+
+The mass metric M makes the projection independent of units and is the natural metric of
+mechanics (the velocity projection removes the kinetic energy of the constraint-violating
+motion and nothing else).  Between projections the ODE carries mild Baumgarte terms
+(omega = max(rho, 2 pi / T), a tenth of the "baumgarte" formulation's), which slow the
+drift without adding a fast mode: measured on the Cartesian pendulum with Adams at
+1e-10, omega = 500 made the error 15 times larger than omega = 0 or 5, because a stiff
+stabilization mode costs accuracy at every restart.  The largest drift seen before a
+projection is recorded in the statistics ("drift_before_projection").
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .baumgarte import BaumgarteStepper
+from .stepper import StepError
+from .system import kkt_solve
+
+
+def project_positions(system, q, t, tol: float, max_iter: int = 20) -> np.ndarray:
+    """Newton iterations of the M-orthogonal projection onto g(q, t) = 0."""
+    q = np.array(q, float)
+    g = system.g(q, t)
+    last = np.inf
+    for _ in range(max_iter):
+        gn = float(np.max(np.abs(g))) if g.size else 0.0
+        if gn <= tol or gn >= last:
+            break
+        last = gn
+        dq, _ = kkt_solve(system.M(q, t), system.G(q, t), np.zeros_like(q), -g)
+        q = q + dq
+        g = system.g(q, t)
+    if g.size and not np.all(np.isfinite(g)):
+        raise StepError("position projection diverged")
+    return q
+
+
+def project_velocities(system, q, qd, t) -> np.ndarray:
+    M = system.M(q, t)
+    G = system.G(q, t)
+    gt = system.gdot(q, np.zeros_like(qd), t)
+    v, _ = kkt_solve(M, G, M @ qd, -gt)
+    return v
+
+
+def project(system, q, qd, t, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    q = project_positions(system, q, t, tol)
+    return q, project_velocities(system, q, qd, t)
+
+
+class ProjectionStepper(BaumgarteStepper):
+    """Projects at the end of every chunk, and earlier where the drift asks for it.
+
+    Within a chunk of several output times (one integrator call) the states are checked in
+    order; the chunk is cut after the last state whose drift is below PROJECT_AT * bound,
+    and that state is projected (at least the first state is always taken, projected).
+    So every recorded state has drift below the bound, and the chunk length adapts."""
+
+    PROJECT_AT = 0.5
+    rate_factor = 1.0       # mild Baumgarte terms: projection does the work (see docs)
+
+    def __init__(self, system, opts, span: float):
+        super().__init__(system, opts, span)
+        self.name = "projection"
+        self.stats["drift_before_projection"] = 0.0
+        self.stats["velocity_drift_before_projection"] = 0.0
+        self.stats["projections"] = 0
+
+    def advance(self, times):
+        times = np.atleast_1d(np.asarray(times, float))
+        Q, QD = self.integrate(times)
+        limit = self.PROJECT_AT * self.opts.bound
+        keep = len(times)
+        for i in range(len(times)):
+            d, v = self.system.drift(Q[:, i], QD[:, i], times[i])
+            self.stats["drift_before_projection"] = max(self.stats["drift_before_projection"], d)
+            self.stats["velocity_drift_before_projection"] = max(self.stats["velocity_drift_before_projection"], v)
+            if d > limit or v > limit:
+                keep = max(i, 1)
+                break
+        times, Q, QD = times[:keep], Q[:, :keep].copy(), QD[:, :keep].copy()
+        q, qd = project(self.system, Q[:, -1], QD[:, -1], times[-1], 1e-3 * self.opts.bound)
+        self.stats["projections"] += 1
+        Q[:, -1], QD[:, -1] = q, qd
+        self.t, self.q, self.qd = float(times[-1]), q, qd
+        return times, Q.T, QD.T

@@ -1,0 +1,270 @@
+"""A constrained system compiled from an EOM: the pieces every formulation needs.
+
+    M(q, t) q'' = bias(q, q', t) - G^T lambda,     g(q, t) = 0,     G = dg/dq
+
+with, by automatic differentiation (CasADi SX),
+
+    gdot  = G q' + g_t                              (velocity-level residual)
+    gamma = -(d gdot/dq) q' - d gdot/dt             (so that G q'' = gamma on the manifold)
+
+Only the *active* constraints (an independent subset chosen by :mod:`.dof`) enter the
+equations; the full set is kept for monitoring and reporting.
+
+Linear algebra.  The augmented (KKT) system
+
+    [ M   G^T ] [ q''    ]   [ bias                               ]
+    [ G   0   ] [ lambda ] = [ gamma - 2 alpha gdot - beta^2 g    ]
+
+is solved after a symmetric equilibration: D = diag(M)^(-1/2) on the coordinates and
+S = 1/||row of G D|| on the constraints -- symbolically (CasADi's SX ``solve``, an unpivoted
+QR) up to n + m = SX_KKT_MAX, numerically (sparse QR inside an MX Function) above.  Without it the unpivoted QR loses up to 8 digits on badly scaled problems
+such as Andrews' squeezer (M ~ 1e-5, G ~ 1e-2); with it the result agrees with a pivoted
+dense solve to ~1e-15 (tests/test_dae_system.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..eom import EOM
+
+
+def _sx():
+    import casadi as ca
+
+    return ca
+
+
+SX_KKT_MAX = 12   # up to this n + m the augmented system is solved symbolically (SX), above numerically
+
+
+def equilibrated_kkt(M, G, rhs_q, rhs_c):
+    """The equilibrated augmented system: (K, b, d, s) with
+    [[D M D, D G^T S], [S G D, 0]] [y; mu] = [D rhs_q; S rhs_c],  q'' = D y,  lambda = S mu."""
+    ca = _sx()
+    m = G.shape[0]
+    d = 1.0 / ca.sqrt(ca.fabs(ca.diag(M)) + 1e-300)
+    D = ca.diag(d)
+    Ms = ca.mtimes([D, M, D])
+    GD = ca.mtimes(G, D)
+    s = 1.0 / ca.sqrt(ca.sum2(GD * GD) + 1e-300)
+    Gs = ca.mtimes(ca.diag(s), GD)
+    K = ca.blockcat([[Ms, Gs.T], [Gs, ca.SX.zeros(m, m)]])
+    b = ca.vertcat(d * rhs_q, s * rhs_c)
+    return K, b, d, s
+
+
+def equilibrated_kkt_solve(M, G, rhs_q, rhs_c):
+    """Symbolic solve of [[M, G^T], [G, 0]] [x; y] = [rhs_q; rhs_c] with equilibration."""
+    ca = _sx()
+    n = M.shape[0]
+    K, b, d, s = equilibrated_kkt(M, G, rhs_q, rhs_c)
+    x = ca.solve(K, b)
+    return d * x[:n], s * x[n:]
+
+
+@dataclass
+class ConstrainedSystem:
+    """Symbolic and compiled pieces of an EOM with constraints, for numeric parameters p."""
+
+    eom: EOM
+    p: np.ndarray
+    active: tuple[int, ...]
+    sym: dict = field(default_factory=dict)
+    fn: dict = field(default_factory=dict)
+    row_scale: np.ndarray | None = None     # fixed constraint-row scaling (see fix_row_scale)
+    route: str = "sx"                       # 'sx' symbolic KKT solve | 'mx' numeric QR per call
+
+    # -- construction -------------------------------------------------------------------
+    @staticmethod
+    def build(eom: EOM, p: np.ndarray | None = None, active: tuple[int, ...] | None = None) -> "ConstrainedSystem":
+        ca = _sx()
+        if eom.g is None:
+            raise ValueError("ConstrainedSystem needs an EOM with constraints (eom.g)")
+        pv = eom.param_values if p is None else np.asarray(p, float)
+        m_all = eom.m
+        active = tuple(range(m_all)) if active is None else tuple(active)
+        q, qd, t, pp = eom.q, eom.qd, eom.t, eom.p
+        g_all = eom.g
+        g = g_all[list(active)] if active else ca.SX.zeros(0, 1)
+        G = ca.jacobian(g, q)
+        gt = ca.jacobian(g, t)
+        gdot = ca.mtimes(G, qd) + gt
+        gamma = -(ca.jtimes(gdot, q, qd) + ca.jacobian(gdot, t))
+        G_all = ca.jacobian(g_all, q)
+        gdot_all = ca.mtimes(G_all, qd) + ca.jacobian(g_all, t)
+        alpha = ca.SX.sym("alpha")
+        beta = ca.SX.sym("beta")
+        M = eom.M
+        bias = eom.bias
+        rhs_c = gamma - 2 * alpha * gdot - beta**2 * g
+        n, m = eom.n, len(active)
+        if n + m <= SX_KKT_MAX:
+            route = "sx"
+            qdd, lam = equilibrated_kkt_solve(M, G, bias, rhs_c)
+            accel = ca.Function("accel", [q, qd, t, pp, alpha, beta], [qdd, lam])
+        else:
+            # numeric sparse QR at every call (an MX Function around the SX pieces): symbolic
+            # elimination grows as (n + m)^3 and loses accuracy with size
+            route = "mx"
+            parts = ca.Function("kkt", [q, qd, t, pp, alpha, beta], list(equilibrated_kkt(M, G, bias, rhs_c)))
+            Q, QD, TT, P, A, B = (ca.MX.sym(k, *x.shape) for k, x in
+                                  (("q", q), ("qd", qd), ("t", t), ("p", pp), ("alpha", alpha), ("beta", beta)))
+            K, b, d, sc = parts(Q, QD, TT, P, A, B)
+            x = ca.solve(K, b, "qr")
+            accel = ca.Function("accel", [Q, QD, TT, P, A, B], [d * x[:n], sc * x[n:]])
+            qdd = lam = None
+        sym = dict(q=q, qd=qd, t=t, p=pp, g=g, G=G, gt=gt, gdot=gdot, gamma=gamma, M=M, bias=bias,
+                   alpha=alpha, beta=beta, qdd=qdd, lam=lam, g_all=g_all, G_all=G_all, gdot_all=gdot_all)
+        fn = {
+            "g": ca.Function("g", [q, t, pp], [g]),
+            "G": ca.Function("G", [q, t, pp], [G]),
+            "gt": ca.Function("gt", [q, t, pp], [gt]),
+            "gdot": ca.Function("gdot", [q, qd, t, pp], [gdot]),
+            "M": ca.Function("M", [q, t, pp], [M]),
+            "accel": accel,
+            "drift_all": ca.Function("drift_all", [q, qd, t, pp], [g_all, gdot_all]),
+            "G_all": ca.Function("G_all", [q, t, pp], [G_all]),
+            "monitor": ca.Function("monitor", [q, qd, t, pp], [g_all, gdot_all, G, ca.diag(M)]),
+        }
+        fn["ode_jac"] = _ode_jacobian(accel, route, q, qd, t, pp)
+        return ConstrainedSystem(eom=eom, p=pv, active=active, sym=sym, fn=fn, route=route)
+
+    def symbols(self):
+        """Fresh symbols (q, qd, t, p) of the kind the accelerations are built on (SX or MX)."""
+        ca = _sx()
+        Sym = ca.SX if self.route == "sx" else ca.MX
+        n = self.n
+        return Sym.sym("q", n), Sym.sym("qd", n), Sym.sym("t"), Sym.sym("p", self.eom.p.numel())
+
+    # -- sizes and names ------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return self.eom.n
+
+    @property
+    def m(self) -> int:
+        return len(self.active)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.eom.constraint_names[i] for i in self.active)
+
+    # -- numeric helpers (numpy in, numpy out) ---------------------------------------------
+    def g(self, q, t) -> np.ndarray:
+        return np.array(self.fn["g"](q, t, self.p), float).ravel()
+
+    def G(self, q, t) -> np.ndarray:
+        return np.array(self.fn["G"](q, t, self.p), float).reshape(self.m, self.n)
+
+    def gdot(self, q, qd, t) -> np.ndarray:
+        return np.array(self.fn["gdot"](q, qd, t, self.p), float).ravel()
+
+    def M(self, q, t) -> np.ndarray:
+        return np.array(self.fn["M"](q, t, self.p), float).reshape(self.n, self.n)
+
+    def accel(self, q, qd, t, alpha=0.0, beta=0.0) -> tuple[np.ndarray, np.ndarray]:
+        a, lam = self.fn["accel"](q, qd, t, self.p, alpha, beta)
+        return np.array(a, float).ravel(), np.array(lam, float).ravel()
+
+    def drift(self, q, qd, t) -> tuple[float, float]:
+        """(||g||_inf, ||G q' + g_t||_inf) over *all* constraints (dropped redundant ones too)."""
+        g, gd = self.fn["drift_all"](q, qd, t, self.p)
+        g = np.array(g, float).ravel()
+        gd = np.array(gd, float).ravel()
+        return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0)
+
+    def monitor(self, q, qd, t) -> tuple[float, float, np.ndarray]:
+        """One evaluation for the driver's checks: (||g||_inf, ||G q' + g_t||_inf) over all
+        constraints, and the scaled Jacobian of the active ones (as :meth:`scaled_G`)."""
+        g, gd, G, dM = self.fn["monitor"](q, qd, t, self.p)
+        g = np.array(g, float).ravel()
+        gd = np.array(gd, float).ravel()
+        G = np.array(G, float).reshape(self.m, self.n)
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.array(dM, float).ravel()), 1e-300))
+        GD = G * d[None, :]
+        if self.row_scale is None:
+            norms = np.linalg.norm(GD, axis=1)
+            Gs = GD / np.where(norms > 0, norms, 1.0)[:, None]
+        else:
+            Gs = GD * self.row_scale[:, None]
+        return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0, Gs)
+
+    def fix_row_scale(self, q, t) -> None:
+        """Freeze the constraint-row scaling at (q, t) (normally the start).
+
+        Rows normalized afresh at every state would hide a singular configuration in which
+        a constraint's gradient itself vanishes (the parallelogram four-bar at its flat
+        position: one row of G goes to zero); with the scaling frozen it shows."""
+        M = self.M(q, t)
+        GD = self.G(q, t) / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))[None, :]
+        norms = np.linalg.norm(GD, axis=1)
+        self.row_scale = 1.0 / np.where(norms > 0, norms, 1.0)
+
+    def scaled_G(self, q, t) -> np.ndarray:
+        """S G D: coordinates scaled by the mass metric, constraint rows scaled by the frozen
+        row scaling (or normalized at (q, t) if none was frozen)."""
+        if self.row_scale is None:
+            return scale_jacobian(self.G(q, t), self.M(q, t))
+        M = self.M(q, t)
+        GD = self.G(q, t) / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))[None, :]
+        return GD * self.row_scale[:, None]
+
+    def eigenvalues(self, q, qd, t) -> np.ndarray:
+        J = np.array(self.fn["ode_jac"](q, qd, t, self.p), float)
+        if not np.all(np.isfinite(J)) or not J.size:
+            return np.zeros(0)
+        return np.linalg.eigvals(J)
+
+    def spectral_radius(self, q, qd, t) -> float:
+        """Largest |eigenvalue| of the unstabilized index-1 ODE's Jacobian (a rate, 1/s)."""
+        J = np.array(self.fn["ode_jac"](q, qd, t, self.p), float)
+        if not np.all(np.isfinite(J)):
+            return 0.0
+        return float(np.max(np.abs(np.linalg.eigvals(J)))) if J.size else 0.0
+
+
+def _ode_jacobian(accel, route, q, qd, t, pp):
+    """Function (q, qd, t, p) -> d(qd, qdd)/d(q, qd) of the unstabilized index-1 ODE."""
+    ca = _sx()
+    if route == "sx":
+        Q, QD, T, P = q, qd, t, pp
+    else:
+        Q, QD, T, P = ca.MX.sym("q", q.numel()), ca.MX.sym("qd", qd.numel()), ca.MX.sym("t"), ca.MX.sym("p", pp.numel())
+    a, _ = accel(Q, QD, T, P, 0, 0)
+    return ca.Function("ode_jac", [Q, QD, T, P], [ca.jacobian(ca.vertcat(QD, a), ca.vertcat(Q, QD))])
+
+
+def scale_jacobian(G: np.ndarray, M: np.ndarray | None) -> np.ndarray:
+    """Row-normalized G D with D = diag(M)^(-1/2): unit-independent for rank decisions."""
+    G = np.asarray(G, float)
+    if M is not None:
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
+        G = G * d[None, :]
+    norms = np.linalg.norm(G, axis=1)
+    norms[norms == 0] = 1.0
+    return G / norms[:, None]
+
+
+def kkt_solve(M: np.ndarray, G: np.ndarray, r1: np.ndarray, r2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Numeric solve of [[M, G^T], [G, 0]] [x; y] = [r1; r2], equilibrated as the symbolic one.
+
+    Falls back to least squares (minimum norm) when the matrix is singular (redundant or
+    singular constraints)."""
+    n, m = M.shape[0], G.shape[0]
+    d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
+    GD = G * d[None, :]
+    s = 1.0 / np.sqrt(np.sum(GD * GD, axis=1) + 1e-300)
+    K = np.zeros((n + m, n + m))
+    K[:n, :n] = M * d[:, None] * d[None, :]
+    K[:n, n:] = (GD * s[:, None]).T
+    K[n:, :n] = GD * s[:, None]
+    b = np.concatenate([d * r1, s * r2])
+    try:
+        x = np.linalg.solve(K, b)
+        if not np.all(np.isfinite(x)):
+            raise np.linalg.LinAlgError
+    except np.linalg.LinAlgError:
+        x = np.linalg.lstsq(K, b, rcond=1e-13)[0]
+    return d * x[:n], s * x[n:]
