@@ -1,14 +1,14 @@
 """A four-bar through its singular configuration.
 
-models/four_bar.mech is a parallelogram (crank = rocker, coupler = ground) whose crank,
-released vertical with speed 1 rad/s, falls to the horizontal: there all links are
-collinear, the constraint Jacobian loses rank and the constrained equations no longer
-determine the motion (the parallelogram and anti-parallelogram branches meet).  Every
-formulation of mechdsl.dae must stop there and say so, at the right time, rather than
-step across on whichever branch the numbers happen to pick.  The reference is the same
-mechanism on its parallelogram branch in one coordinate
-(benchmarks/stability/four_bar_singular.mech), an ODE without any singularity, which
-passes the change point and keeps its energy.
+benchmarks/stability/four_bar_singular.mech: a parallelogram four-bar (crank = rocker,
+coupler = ground) whose crank, released vertical at 1 rad/s, falls to the horizontal:
+there all links are collinear, the constraint Jacobian loses rank and the constrained
+equations no longer determine the motion (the parallelogram and anti-parallelogram
+branches meet).  Every formulation of mechdsl.dae must stop there and say so, at the right
+time, rather than step across on whichever branch the numbers happen to pick.  The
+reference is the same mechanism on its parallelogram branch in one coordinate (the
+file's second model), an ODE without any singularity, which passes the change point and
+keeps its energy.
 """
 from __future__ import annotations
 
@@ -19,8 +19,7 @@ import numpy as np
 
 from .suite import Case, check_size, fmt_fail, load, pyplot, save
 
-MODEL = "models/four_bar.mech"
-MINIMAL = "benchmarks/stability/four_bar_singular.mech"
+MODEL = "benchmarks/stability/four_bar_singular.mech"     # both models: the loop and one coordinate
 T = 3.0
 TOL = 1e-8
 SMALL = {"projection": ("projection", "cvodes-bdf"), "baumgarte": ("baumgarte", "cvodes-bdf"),
@@ -40,9 +39,9 @@ def run(size: str = "small") -> Case:
 
     check_size(size)
     case = Case(name="fourbar", title="Four-bar through its singular configuration", size=size)
-    mini = simulate(load(MINIMAL).eom, T, rtol=1e-11, atol=1e-11, points=3001)
+    mini = simulate(load(MODEL, model="FourBarParallelogram").eom, T, rtol=1e-11, atol=1e-11, points=3001)
     t_s = crossing_time(mini.t, mini["th"])
-    e = load(MODEL).eom
+    e = load(MODEL, model="FourBarParallelogramLoop").eom
     runs, cpu = {}, {}
     for lab, (form, meth) in (SMALL if size == "small" else FULL).items():
         c = time.process_time()
