@@ -47,14 +47,15 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     if constraints not in ("independent", "all"):
         raise UsageError(f"constraints must be 'independent' or 'all' (got {constraints!r})")
     system = ConstrainedSystem.build(eom, pv, dof.independent if constraints == "independent" else None)
-    S = system.sym
-    qdd = ca.substitute(S["qdd"], ca.vertcat(S["alpha"], S["beta"]), ca.DM([alpha, beta]))
-    x = ca.vertcat(eom.q, eom.qd)
-    ode = ca.Function("ode", [eom.t, x, eom.p], [ca.vertcat(eom.qd, qdd)], ["t", "x", "p"], ["xdot"])
+    q, qd, t, pp = system.symbols()            # SX, or MX when the KKT system is solved numerically
+    qdd, _ = system.fn["accel"](q, qd, t, pp, alpha, beta)
+    x = ca.vertcat(q, qd)
+    xdot = ca.vertcat(qd, qdd)
+    ode = ca.Function("ode", [t, x, pp], [xdot], ["t", "x", "p"], ["xdot"])
     funcs = {"ode": ode}
     if method not in _no_jacobian():
-        funcs["ode_jacobian"] = ca.Function("ode_jacobian", [eom.t, x, eom.p], [ca.jacobian(ode(eom.t, x, eom.p), x)],
-                                            ["t", "x", "p"], ["jac"])
+        funcs["ode_jacobian"] = ca.Function("ode_jacobian", [t, x, pp], [ca.jacobian(xdot, x)], ["t", "x", "p"],
+                                            ["jac"])
     free = eom.replace(g=None)
     free.__dict__["_integral_function"] = {"f": None}   # the free system's symmetries are not the model's
     r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
