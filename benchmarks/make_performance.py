@@ -28,7 +28,6 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import mechdsl  # noqa: E402
 from mechdsl.bench import Setup, parse_tolerances, parse_variants, run_bench, write_chart, write_tables  # noqa: E402
 from mechdsl.bench.report import fastest, fastest_lines, format_table, markdown_table  # noqa: E402
-from mechdsl.fileio import write_atomic  # noqa: E402
 
 from stability.run import available_cases, run_cases  # noqa: E402
 

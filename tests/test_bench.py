@@ -7,19 +7,22 @@ k = sin(a/2), w = sqrt(g/L).
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.special import ellipj
 
 import mechdsl
-from mechdsl.bench import (Setup, parse_tolerances, parse_variant, parse_variants, read_csv, run_bench,
+from mechdsl.bench import (Setup, parse_tolerances, parse_variants, read_csv, run_bench,
                            to_csv_text, write_chart, write_tables)
 from mechdsl.bench import measure
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 
 from conftest import MODELS
+
+REFERENCES = Path("/work/shared/references")
 
 PENDULUM = MODELS / "pendulum.mech"
 STIFF = MODELS.parent / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
@@ -217,3 +220,28 @@ def test_cli_usage_errors(extra, capsys):
             "--tolerances", "1e-3", "--repeats", "1", "--quiet", *extra]
     assert main(args) == 2
     assert "error" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- constrained models
+
+
+def test_constrained_bench_against_cash_reference(tmp_path):
+    """J. Cash's index-3 pendulum (scene Cash): the published reference at t = 1
+    (/work/shared/references/pendulum_index3.json, accurate to ~1e-11), as a one-row CSV."""
+    ref = json.loads((REFERENCES / "pendulum_index3.json").read_text())["reference_t1"]
+    csv = tmp_path / "cash.csv"
+    csv.write_text(f"time,plane.x,plane.y\n1.0,{float(ref['x'])!r},{float(ref['y'])!r}\n")
+    m = mechdsl.load(str(MODELS / "pendulum_cartesian.mech"), scene="Cash")
+    st = Setup.from_model(m)
+    variants = parse_variants("ggl+idas,baumgarte+cvodes-adams,index1-ode+scipy-dop853,index1-ode+idas,ggl+erk")
+    res = run_bench(st, variants=variants, tolerances=[1e-5, 1e-10], reference=csv, repeats=1)
+    assert res.kind == "dae" and res.reference.t.tolist() == [1.0]
+    by = {(r.label, r.tolerance): r for r in res.rows}
+    for lab in ("ggl+idas", "baumgarte+cvodes-adams", "index1-ode+scipy-dop853", "index1-ode+idas"):
+        loose, tight = by[(lab, 1e-5)], by[(lab, 1e-10)]
+        assert loose.ok and tight.ok, (loose.message, tight.message)
+        assert tight.err_final < 1e-7 and tight.err_final < loose.err_final
+        assert "residual" in tight.invariants
+    assert by[("ggl+erk", 1e-5)].status == "n/a"          # GGL is integrated by IDAS only
+    # the unstabilized index-1 ODE lets the constraint drift more than the stabilized GGL form
+    assert by[("index1-ode+scipy-dop853", 1e-5)].invariants["residual"] > by[("ggl+idas", 1e-5)].invariants["residual"]

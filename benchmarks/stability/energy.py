@@ -14,7 +14,6 @@ symplectic method).
 """
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
