@@ -107,10 +107,13 @@ def andrews(quick, figs, tmp):
         return None
     m = mechdsl.load(str(path))
     coords = list(m.eom.coords)
-    ref = andrews_reference_csv(coords, Path(tmp) / "andrews_reference.csv")
+    from mechdsl.bench import read_csv
+
+    ref = read_csv(andrews_reference_csv(coords, Path(tmp) / "andrews_reference.csv"))
+    ref.source = "the IVP Test Set's q(0.03) (PSIDE at 1e-14; /work/shared/references/andrews_squeezer.json)"
     methods = os.environ.get("MECHDSL_ANDREWS_METHODS") or ANDREWS_METHODS
     res = bench("models/andrews.mech", t_end=0.03, methods=methods,
-                tolerances="1e-4..1e-10/1" if quick else "1e-3..1e-11", reference=str(ref),
+                tolerances="1e-4..1e-10/1" if quick else "1e-3..1e-11", reference=ref,
                 repeats=1 if quick else 3, budget=20.0)
     return res
 

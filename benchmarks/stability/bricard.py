@@ -18,7 +18,7 @@ import numpy as np
 from .suite import Case, check_size, fmt_fail, load, pyplot, save
 
 MODEL = "benchmarks/stability/bricard.mech"
-TOL = 1e-8
+TOL = 1e-10
 NAIVE = ("erk", "cvodes-bdf", "scipy-dop853")   # naive runs: 10 ms, 500 steps an output interval (they stop at once)
 REDUCED = {"projection+cvodes-bdf": ("projection", "cvodes-bdf"), "ggl+idas": ("ggl", "idas")}
 
@@ -70,11 +70,11 @@ def run(size: str = "small") -> Case:
     case.check("with the redundant row kept, every integrator fails at once (singular KKT system)",
                all(not r.success and r.failure.time < 1e-3 for r in naive.values()),
                "; ".join(f"{m}: {fmt_fail(r)[:50]}" for m, r in naive.items()))
-    case.check("with it dropped every method runs, keeps the loop closed (max |g| <= 1e-5) and the energy (<= 1e-5)",
-               all(r.success and res(r) <= 1e-5 and edrift(r) <= 1e-5 for r in reduced.values()),
+    case.check("with it dropped every method runs, keeps the loop closed (max |g| <= 1e-6) and the energy (<= 1e-6)",
+               all(r.success and res(r) <= 1e-6 and edrift(r) <= 1e-6 for r in reduced.values()),
                ", ".join(f"{k} {res(r):.0e}/{edrift(r):.0e}" for k, r in reduced.items()))
-    case.check("the linkage really moves and the methods agree on where it is at T (angles within 1e-4)",
-               float(np.abs(base.q[-1] - base.q[0]).max()) > 0.1 and spread <= 1e-4,
+    case.check("the linkage really moves and the methods agree on where it is at T (angles within 1e-5)",
+               float(np.abs(base.q[-1] - base.q[0]).max()) > 0.1 and spread <= 1e-5,
                f"largest angle change {np.abs(base.q[-1] - base.q[0]).max():.2f} rad, spread at T {spread:.1e}")
     return case
 
