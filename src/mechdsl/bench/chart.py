@@ -84,9 +84,13 @@ def draw(res, title: str | None = None):
                         ax.plot([r.cpu], [0.97], marker="x", color=color, ms=8, mew=2, ls="none",
                                 transform=ax.get_xaxis_transform(), clip_on=False)
     ref = res.reference
+    from matplotlib.ticker import NullFormatter
+
     for ax, (key, ylabel) in zip(axes, panels):
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())      # narrow ranges: minor labels overlap
+        ax.yaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(f"CPU time [s] ({res.timer})")
         ax.set_ylabel(ylabel)
         ax.grid(True, which="major", alpha=0.35)
