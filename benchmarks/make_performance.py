@@ -227,7 +227,9 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   `erk`; stiff: `rosenbrock` and `scipy-radau`; constrained: `projection+cvodes-adams` and
   `ggl+idas`; `--reference-methods A,B` to choose). The first is the reference; the
   difference between the two is printed and drawn as its estimated accuracy, and errors
-  within 3x of it are starred: the reference cannot resolve them.
+  within 3x of it are starred: the reference cannot resolve them. (scipy's Radau steps in
+  Python: at 1e-12 on the stiff pendulum below it took over a minute; choose other methods or
+  give a file when that matters.)
 - **Errors** (`--compare`: `positions` = the coordinates (default), `states` = coordinates
   and speeds, or a list of outputs): relative per component, scaled by the component's
   largest magnitude over the reference; *final* = largest at the stop time, *L2* = root mean
