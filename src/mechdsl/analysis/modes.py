@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..fileio import atomic_target, commit, write_atomic
+from ..fileio import write_atomic
 
 
 @dataclass
@@ -113,15 +113,9 @@ class Modes:
         if title:
             fig.suptitle(title, fontsize=10)
         fig.tight_layout()
-        tmp, final = atomic_target(path, overwrite=overwrite)
-        try:
-            fig.savefig(tmp, dpi=110, format=final.suffix.lstrip(".") or "png")
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
-        finally:
-            plt.close(fig)
-        return commit(tmp, final)
+        from ..plot import save_figure
+
+        return save_figure(fig, path, overwrite=overwrite)
 
 
 def modes_of(M, C, K, A, coords) -> Modes:
