@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    args = None
     try:
         ap = build_parser()
         args = ap.parse_args(argv)
@@ -57,7 +58,9 @@ def main(argv: list[str] | None = None) -> int:
     except MechError as e:
         from .report import print_diagnostics
 
-        print_diagnostics(e.diagnostics)
+        # diagnostics of later phases carry no source position: name the file being worked on
+        path = getattr(args, "file", None) or (getattr(args, "files", None) or [None])[0]
+        print_diagnostics([_with_file(d, path) for d in e.diagnostics])
         return 1
     except KeyboardInterrupt:
         print("mech: interrupted", file=sys.stderr)
@@ -71,6 +74,14 @@ def main(argv: list[str] | None = None) -> int:
               "  this is a bug in mechdsl; rerun with MECHDSL_DEBUG=1 for the traceback and report it",
               file=sys.stderr)
         return 3
+
+
+def _with_file(d, path):
+    import dataclasses
+
+    if path and d.span.line == 0 and d.span.file in ("<input>", ""):
+        return dataclasses.replace(d, span=dataclasses.replace(d.span, file=str(path)))
+    return d
 
 
 if __name__ == "__main__":  # pragma: no cover
