@@ -11,9 +11,7 @@ does not exist in general.  The pieces (numpy out, CasADi Functions cached on th
   drop out; their multipliers are reported as 0;
 - ``project``: a configuration moved onto g = 0 by the DAE's consistent initialization
   (``mechdsl.dae.initialize``: minimal change in the mass metric, chosen coordinates held);
-- ``guesses``: starting guesses on the constraint manifold, spread over the *independent*
-  coordinates (the ones a pivoted QR of G leaves free) with the dependent ones solved from the
-  nearest guess already on the manifold, so the spread follows the assembly branch of the start;
+- starting guesses on the manifold: :mod:`.manifold`;
 - ``geometric_stiffness``: sum_l lambda_l d2g_l/dq2, the stiffness the constraint forces add;
 - ``tangent_basis`` (orthonormal) and ``independent_basis`` (columns of the independent
   coordinates: dq = Z dz with dz the changes of those coordinates) of null(G);
@@ -231,69 +229,3 @@ def least_squares_multipliers(s: Setup, q, bias) -> np.ndarray:
     if G.shape[0] == 0:
         return np.zeros(0)
     return np.linalg.lstsq(G.T, bias, rcond=1e-12)[0]
-
-
-# --------------------------------------------------------------------------- starting guesses
-
-
-def guesses(s: Setup, user: list[np.ndarray], st, axes_of, max_guesses: int) -> list[np.ndarray]:
-    """Guesses on the constraint manifold: the user's and the start (projected), then a spread
-    over the independent coordinates (``axes_of(i)``: the values tried for coordinate i),
-    dependent coordinates solved from the nearest projected guess (continuation)."""
-    import itertools
-    import math
-
-    from .equilibrium import _halton
-    from .matrices import sym
-
-    eom, pv, t = s.eom, s.pv, s.t
-    n = eom.n
-    out: list[np.ndarray] = []
-
-    def add(q):
-        if q is None:
-            return
-        for o in out:
-            if np.max(np.abs(o - q), initial=0.0) <= 1e-9 * (1.0 + np.max(np.abs(q), initial=0.0)):
-                return
-        out.append(np.asarray(q, float))
-
-    for g in user:
-        add(project(eom, g, t, pv))
-    add(s.q_start)
-    from .core import parts
-
-    M, _ = parts(eom).M_bias(s.q_start, np.zeros(n), t, pv)
-    indep = independent_coordinates(eom, sym(M), s.G_active(s.q_start))
-    if not indep:
-        return out
-    axes = [axes_of(i) for i in indep]
-    size = math.prod(len(a) for a in axes)
-    if size <= max_guesses:
-        pts = [np.array(c, float) for c in itertools.product(*axes)]
-    else:
-        lo = np.array([min(a) for a in axes])
-        hi = np.array([max(a) for a in axes])
-        pts = [lo + (hi - lo) * _halton(j + 1, len(indep)) for j in range(max_guesses)]
-    angles = [st.angles[i] for i in indep]
-
-    def dist(a, b):
-        d = a - b
-        d = np.where(angles, np.remainder(d + math.pi, 2 * math.pi) - math.pi, d)
-        return float(d @ d)
-
-    base = s.q_start[list(indep)]
-    pts.sort(key=lambda x: dist(x, base))
-    done: list[tuple[np.ndarray, np.ndarray]] = [(base, s.q_start)]
-    fixed = tuple(i in indep for i in range(n))
-    for x in pts:
-        near = min(done, key=lambda d: dist(x, d[0]))[1]
-        q = near.copy()
-        q[list(indep)] = x
-        qp = project(eom, q, t, pv, fixed=fixed)
-        if qp is None:
-            qp = project(eom, q, t, pv)
-        if qp is not None:
-            done.append((x, qp))
-            add(qp)
-    return out

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
-from .constraints import guesses as constrained_guesses
+from .manifold import guesses as constrained_guesses
 from .core import dense, param_vector, structure, wrap_angle
 from .matrices import complement, reduced_first_order, second_order, sym
 

@@ -60,7 +60,7 @@ def rest_state(eom, con, at, q0, pv, t):
                 continue
             q[eom.coords.index(key)] = float(v)
             fixed[eom.coords.index(key)] = True
-        qp = project(eom, q, t, pv, fixed=fixed)
+        qp = _continued(eom, q0, q, fixed, t, pv)
         if qp is None:
             raise MechError(Diagnostic(
                 "E901", f"the state {', '.join(f'{k} = {v:g}' for k, v in at.items())} cannot be brought "
@@ -80,6 +80,22 @@ def rest_state(eom, con, at, q0, pv, t):
             _refuse_motion(eom, f"at {s}")
     raise UsageError(f"cannot linearize at {at!r}: use 'equilibrium', 'start', a dict of coordinate values "
                      "or an Equilibrium")
+
+
+def _continued(eom, q_from, q_to, fixed, t, pv, step: float = 0.25):
+    """Project q_to (the ``fixed`` coordinates held) by continuation from q_from on the
+    manifold: the held values move in steps of at most ``step``, each projection warm-started
+    from the last, so the result stays on the assembly branch of q_from."""
+    d = np.where(fixed, np.asarray(q_to, float) - q_from, 0.0)
+    k = max(1, int(np.ceil(np.max(np.abs(d), initial=0.0) / step)))
+    q = np.asarray(q_from, float).copy()
+    for j in range(1, k + 1):
+        trial = q.copy()
+        trial[np.asarray(fixed)] = (q_from + d * j / k)[np.asarray(fixed)]
+        q = project(eom, trial, t, pv, fixed=fixed)
+        if q is None:
+            return project(eom, q_to, t, pv, fixed=fixed)
+    return q
 
 
 def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
