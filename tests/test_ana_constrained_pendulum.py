@@ -150,3 +150,57 @@ def test_cli_prints_lambda(capsys):
                  "--at", "t=1"]) == 1
     err = capsys.readouterr().err
     assert "E901" in err and "Traceback" not in err
+
+
+def _eom(name, coords, V, g, q0, q, qd):
+    import casadi as ca
+
+    from mechdsl import eom as E
+
+    t, p = ca.SX.sym("t"), ca.SX.sym("p", 0)
+    return E.from_lagrangian(name, coords, [], [], q, qd, t, p, 0.5 * ca.dot(qd, qd), V, g=g, q0=q0)
+
+
+def test_no_degree_of_freedom_and_moving_constraints():
+    """A mass on the unit circle with x held at 0.6 by a second constraint: statics give
+    G' lambda = (0, -m g) with G = [[2x, 2y], [1, 0]] at (0.6, -0.8)."""
+    import casadi as ca
+
+    from mechdsl.analysis.equilibrium import equilibria
+    from mechdsl.analysis.linearize import linearize
+
+    q, qd = ca.SX.sym("q", 2), ca.SX.sym("qd", 2)
+    e = _eom("Held", ["x", "y"], 9.81 * q[1], ca.vertcat(ca.dot(q, q) - 1, q[0] - 0.6), [0.6, -0.8], q, qd)
+    (eq,) = equilibria(e)
+    assert eq.q == pytest.approx([0.6, -0.8])
+    lam1 = 9.81 / 1.6
+    assert eq.lambdas == {"g1": pytest.approx(lam1, rel=1e-12), "g2": pytest.approx(-1.2 * lam1, rel=1e-12)}
+    assert eq.stable is None and "no degree of freedom" in eq.reason
+    lin = linearize(e)
+    assert lin.M.shape == (0, 0) and len(lin.modes()) == 0
+    t = ca.SX.sym("t")
+    moving = _eom("Breathing", ["x", "y"], 9.81 * q[1], ca.dot(q, q) - (1 + 0.1 * ca.sin(t)), [0.6, -0.8], q, qd)
+    moving = moving.replace(g=ca.substitute(moving.g, t, moving.t))
+    with pytest.raises(MechError, match="E901.*depend on time"):
+        equilibria(moving)
+
+
+def test_free_dumbbell_falls_with_g():
+    """Two unit masses joined by a rigid rod of length 1, free in the vertical plane: the
+    translations are symmetry directions of the constrained equations, the reference motion
+    falls with g, the rod carries no force, the orientation is neutral (zero eigenvalue)."""
+    import casadi as ca
+
+    from mechdsl.analysis.equilibrium import equilibria
+
+    q, qd = ca.SX.sym("q", 4), ca.SX.sym("qd", 4)
+    e = _eom("Dumbbell", ["x1", "y1", "x2", "y2"], 9.81 * (q[1] + q[3]),
+             (q[0] - q[2]) ** 2 + (q[1] - q[3]) ** 2 - 1, [0, 0, 1, 0], q, qd)
+    eqs = equilibria(e, max_guesses=8)
+    assert eqs
+    for eq in eqs:
+        assert eq.kind == "accelerated-reference"
+        assert eq.acceleration == pytest.approx([0, -9.81, 0, -9.81], abs=1e-9)
+        assert eq.lambdas["g1"] == 0.0
+        assert (eq.q[0] - eq.q[2]) ** 2 + (eq.q[1] - eq.q[3]) ** 2 == pytest.approx(1.0, abs=1e-12)
+        assert eq.stable is None and "zero eigenvalue" in eq.reason

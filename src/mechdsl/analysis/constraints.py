@@ -105,6 +105,14 @@ class Setup:
         out[list(self.active)] = lam_active
         return out
 
+    def curvature_scale(self, q) -> float:
+        """|sum_l d2g_l/dq2 / |dg_l/dq||: how strongly the constraints bend (for tolerances on
+        the geometric stiffness, which is of the order force scale x this)."""
+        G = self.G_active(q)
+        norms = np.linalg.norm(G, axis=1)
+        w = 1.0 / np.where(norms > 0, norms, 1.0)
+        return float(np.max(np.abs(self.geometric_stiffness(q, w)), initial=0.0))
+
     def geometric_stiffness(self, q, lam_active) -> np.ndarray:
         """sum_l lambda_l d2g_l/dq2 (the Hessian of lambda'g), active constraints only."""
         lam = self.full_multipliers(lam_active)
@@ -201,6 +209,8 @@ def independent_basis(eom, M, G) -> tuple[np.ndarray, tuple[int, ...]]:
     which case Z is the orthonormal basis of null(G)."""
     n = G.shape[1]
     indep = independent_coordinates(eom, M, G)
+    if not indep:
+        return np.zeros((n, 0)), ()
     dep = [i for i in range(n) if i not in indep]
     Z = np.zeros((n, len(indep)))
     Z[list(indep), range(len(indep))] = 1.0
@@ -220,7 +230,10 @@ def rest_multipliers(s: Setup, q, M, bias) -> tuple[np.ndarray, np.ndarray]:
     from ..dae.system import kkt_solve
 
     G = s.G_active(q)
-    return kkt_solve(M, G, bias, np.zeros(G.shape[0]))
+    a, lam = kkt_solve(M, G, bias, np.zeros(G.shape[0]))
+    fs = max(float(np.max(np.abs(bias), initial=0.0)), 1e-300)
+    lam = np.where(np.abs(lam) * np.linalg.norm(G, axis=1) <= 1e-12 * fs, 0.0, lam)   # round-off
+    return a, lam
 
 
 def least_squares_multipliers(s: Setup, q, bias) -> np.ndarray:

@@ -199,8 +199,14 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             found.append((qs, x[n:].copy(), resid))
 
     found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
-    return [_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con, lam=lam_scale * rest[:ma])
+    return [_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
+                      lam=_clean(lam_scale * rest[:ma], lam_scale))
             for qs, rest, resid in found]
+
+
+def _clean(lam, lam_scale):
+    """Multipliers whose force is below 1e-12 of the force scale are round-off: 0."""
+    return np.where(np.abs(lam) <= 1e-12 * lam_scale, 0.0, lam)
 
 
 def _start_multipliers(eom, con, q, t, pv, lam_scale) -> np.ndarray:
@@ -268,6 +274,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     Ksym = sym(Kr)
     heig = np.sort(np.linalg.eigvalsh(Ksym)) if Kr.size else np.zeros(0)
     kscale = max(np.max(np.abs(K), initial=0.0), st.stiffness_scale, 1e-300)
+    if con is not None:      # the geometric stiffness is of the order force scale x curvature
+        kscale = max(kscale, st.force_scale * con.curvature_scale(q))
     circulatory = np.max(np.abs(Kt - Kt.T), initial=0.0) > 1e-7 * kscale
     A = reduced_first_order(Mt, Ct, Kt, Nt)
     ev = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)
@@ -308,6 +316,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
                                 f"{_fmt_list(heig[heig < -etol])} but gyroscopic terms keep the linear "
                                 "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
+    elif heig.size == 0 and con is not None and Z.shape[1] == 0:
+        stable, reason = None, "no degree of freedom: the constraints fix the configuration"
     elif heig.size == 0:
         stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
     else:

@@ -146,7 +146,7 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
     Kfull = K + con.geometric_stiffness(q, lam)
     G = con.G_active(q)
     Z, indep = independent_basis(eom, M, G)
-    if indep:
+    if indep or Z.shape[1] == 0:
         names = tuple(eom.coords[i] for i in indep)
     else:
         names = tuple(f"z{j + 1}" for j in range(Z.shape[1]))
