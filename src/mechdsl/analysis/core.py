@@ -90,6 +90,8 @@ class Parts:
                 ca.jacobian(self.L, t), ca.jacobian(e.bias, t), ca.jacobian(Mv, t),
                 self.b, self.T0, e.T, self.Qtot, e.bias, Mv,
                 ca.jacobian(e.bias, q), ca.jacobian(Mv, q), ca.gradient(self.L, q)])
+        if name == "g":      # constraint residuals (constrained models)
+            return ca.Function(name, [q, t, p], [e.g])
         if name == "energies":
             return ca.Function(name, self.args, [e.T, e.V, self.T0, self.b, e.M])
         raise KeyError(name)
@@ -277,9 +279,7 @@ def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: floa
         M2, b2 = pt.M_bias(pr.q[i] + shift, pr.qd[i], pr.t[i], pv)
         diffs.append(np.concatenate([(b1 - b2) / bias_scale, ((M1 - M2) / M_scale).ravel()]))
     if pt.eom.m:    # constrained: g must be periodic in the coordinate too
-        import casadi as ca
-
-        fg = ca.Function("g", [pt.eom.q, pt.eom.t, pt.eom.p], [pt.eom.g])
+        fg = pt.fn("g")
         for i in range(min(4, len(pr))):
             g1 = dense(fg(pr.q[i], pr.t[i], pv)).ravel()
             g2 = dense(fg(pr.q[i] + shift, pr.t[i], pv)).ravel()

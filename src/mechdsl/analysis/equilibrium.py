@@ -15,6 +15,11 @@ so one equation covers the three cases of the course:
   an ordinary equilibrium (neutral along N), alpha != 0 the uniformly accelerated reference
   motion q(t) = q* + N alpha t^2/2 with the relative equilibrium q* about it.
 
+Constrained models (g(q) = 0, scleronomic): bias(q, 0) = G(q)' lambda (+ M N alpha) with
+g(q) = 0, the multipliers among the unknowns; guesses on the constraint manifold
+(:mod:`.manifold`); stability from the Hessian of V + lambda'g on the tangent space of the
+constraints (:mod:`.constraints`).
+
 Solutions come from Levenberg-Marquardt (scipy least_squares with the CasADi Jacobian) started
 at the user's guesses and a deterministic spread (angles on a grid over [-pi, pi)).  Distinct
 solutions are kept (angles compared modulo 2 pi) and classified by the Hessian K of the
@@ -31,8 +36,8 @@ import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
-from .manifold import guesses as constrained_guesses
 from .core import dense, param_vector, structure, wrap_angle
+from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
 
 MAX_GUESSES = 256
@@ -47,7 +52,10 @@ class Equilibrium:
     'accelerated-reference' (relative equilibrium about a uniformly accelerated motion whose
     acceleration is ``acceleration``).
     ``hessian_eigenvalues``: eigenvalues of the stiffness K (Hessian of the effective potential)
-    transverse to the symmetry directions (``symmetry_directions``), ascending.
+    transverse to the symmetry directions (``symmetry_directions``), ascending.  Constrained
+    models: K is the Hessian of V + lambda'g and the eigenvalues are those of its restriction
+    to the tangent space of the constraints (``tangent_basis``); ``multipliers`` / ``lambdas``
+    are the constraint forces at rest.
     """
 
     coords: tuple[str, ...]
