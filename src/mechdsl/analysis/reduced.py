@@ -36,7 +36,7 @@ from .matrices import first_order, second_order
 
 def _refuse_motion(eom, where: str):
     raise MechError(Diagnostic(
-        "E901", f"a constrained model is linearized about a state at rest; {where} '{eom.name}' moves",
+        "E901", f"a constrained model is linearized about a state at rest; {where}",
         help="linearize about an equilibrium (--at equilibrium, the default) or a configuration at rest "
              "(--at NAME=VALUE,...); a motion's linear model on the constraint manifold is time-varying"))
 
@@ -56,7 +56,7 @@ def rest_state(eom, con, at, q0, pv, t):
                 raise UsageError(f"unknown coordinate {key!r}" + (f"; {hint}" if hint else ""))
             if m:
                 if float(v) != 0.0:
-                    _refuse_motion(eom, f"with der({key}) = {float(v):g}")
+                    _refuse_motion(eom, f"the state given has der({key}) = {float(v):g}")
                 continue
             q[eom.coords.index(key)] = float(v)
             fixed[eom.coords.index(key)] = True
@@ -74,10 +74,10 @@ def rest_state(eom, con, at, q0, pv, t):
 
             rep = initialize(eom, t=t, p=pv)
             if np.max(np.abs(rep.qd), initial=0.0) > 0:
-                _refuse_motion(eom, "at its start values")
+                _refuse_motion(eom, f"'{eom.name}' is in motion at its start values")
             return rep.q, t
         if re.fullmatch(r"t\s*=\s*(.+)", s):
-            _refuse_motion(eom, f"at {s}")
+            _refuse_motion(eom, f"'{s}' asks for a state of the motion of '{eom.name}'")
     raise UsageError(f"cannot linearize at {at!r}: use 'equilibrium', 'start', a dict of coordinate values "
                      "or an Equilibrium")
 
