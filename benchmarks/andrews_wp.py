@@ -4,7 +4,7 @@
 
 For each formulation (projection, ggl, baumgarte, partitioning) and rtol = atol from 1e-3
 to 1e-10 in half decades: the error is the largest relative error of the seven positions
-at t = 0.03 against the IVP Test Set reference (/work/shared/references); the time is the
+at t = 0.03 against the IVP Test Set reference (tests/references, copied from ../shared/references); the time is the
 CPU time of the integration (setup and integrator construction excluded), the minimum
 over `repeats` runs after one warm-up run.  A failed run is shown as a failure.
 

@@ -6,7 +6,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
-REFERENCES = ROOT.parent / "shared" / "references"
+REFERENCES = ROOT / "tests" / "references"   # verbatim copies of ../shared/references
 
 # deep recursion guard for pathological inputs is part of the CLI; tests call the library directly
 sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))

@@ -14,7 +14,7 @@ import numpy as np
 
 from mechdsl.eom import from_lagrangian
 
-REFERENCES = Path("/work/shared/references")
+REFERENCES = Path(__file__).resolve().parent / "references"   # copies of ../shared/references
 
 
 def _syms(coords, params):

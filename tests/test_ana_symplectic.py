@@ -181,11 +181,13 @@ def test_bad_requests():
     assert any("rtol" in n for n in r.metadata["notes"])
 
 
-def test_constrained_model_is_refused():
+def test_constrained_model_needs_rattle():
+    """Methods that ignore constraints refuse constrained models (RATTLE: test_ana_constrained_rattle.py)."""
     from mechdsl import eom as E
 
     q, qd, t, p = ca.SX.sym("q", 2), ca.SX.sym("qd", 2), ca.SX.sym("t"), ca.SX.sym("p", 0)
     eom = E.from_lagrangian("Pend2", ["x", "y"], [], [], q, qd, t, p, 0.5 * ca.dot(qd, qd), 9.81 * q[1],
                             g=ca.dot(q, q) - 1, q0=[1, 0])
-    with pytest.raises(MechError, match="E901"):
-        simulate_symplectic(eom, 1.0, dt=0.01)
+    for method in ("implicit-midpoint", "gauss-legendre", "rk4"):
+        with pytest.raises(UsageError, match="rattle"):
+            simulate_symplectic(eom, 1.0, dt=0.01, method=method)

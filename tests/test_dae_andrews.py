@@ -1,4 +1,4 @@
-"""Andrews' squeezing mechanism (IVP Test Set, Bari/CWI; /work/shared/references).
+"""Andrews' squeezing mechanism (IVP Test Set, Bari/CWI; ../shared/references, copied in tests/references).
 
 Positions at t = 0.03 against the reference (PSIDE at 1e-14, checked to ~1e-10 relative).
 """

@@ -1,6 +1,6 @@
 """Cartesian pendulum (unit point mass, rod of length 1 as a distance constraint).
 
-Cash: J. Cash's MEBDFDAE driver pendul3.f (/work/shared/references/pendulum_index3.json);
+Cash: J. Cash's MEBDFDAE driver pendul3.f (../shared/references, copied in tests/references/pendulum_index3.json);
 its lam is our multiplier since g = (x^2 + y^2 - 1)/2 gives x'' = -x lambda.
 A01: IFToMM benchmark A01 against the exact elliptic-function solution.
 """

@@ -1,7 +1,7 @@
 """The compiled constrained system: equations against the reference, linear algebra, index.
 
 References: Andrews' squeezer as printed in the IVP Test Set (Mazzia, Magherini, Iavernaro;
-/work/shared/references/README.md) -- its force vector f is compared with the bias we
+../shared/references, copied in tests/references/README.md) -- its force vector f is compared with the bias we
 derive from T, V and Q by automatic differentiation.
 """
 import casadi as ca

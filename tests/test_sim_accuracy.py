@@ -1,4 +1,4 @@
-"""Accuracy of simulate() against closed forms (see /work/shared/references/README.md)."""
+"""Accuracy of simulate() against closed forms (see ../shared/references, copied in tests/references/README.md)."""
 from __future__ import annotations
 
 import numpy as np

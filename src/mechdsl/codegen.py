@@ -469,7 +469,7 @@ class FastFunction:
 
     def __call__(self, *args):
         for dst, a in zip(self._args, args):
-            dst[:] = a
+            dst[:] = np.ravel(a, order="F") if np.ndim(a) > 1 else a    # matrices column-major
         self._eval()
         if self._single:
             v = self._views[0]

@@ -55,11 +55,27 @@ def plot_result(result, path, *, overwrite: bool = True, title: str | None = Non
         axes[0, 0].annotate(f"failed: {result.failure.cause}", xy=(result.failure.time, 1), xycoords=("data", "axes fraction"),
                             xytext=(-4, -12), textcoords="offset points", ha="right", color="r", fontsize="small")
     fig.tight_layout()
+    return save_figure(fig, path, overwrite=overwrite)
+
+
+FIGURE_METADATA = {".png": {"Software": "mechdsl"}, ".svg": {"Date": None, "Creator": "mechdsl"},
+                   ".pdf": {"CreationDate": None, "Creator": "mechdsl"}}
+
+
+def save_figure(fig, path, *, overwrite: bool = True, dpi: int = 110) -> Path:
+    """Write a matplotlib figure atomically, deterministically (no dates) and marked as
+    mechdsl's (so a rerun may replace it), then close it.  Format by suffix: png, svg, pdf."""
+    import matplotlib
+
+    matplotlib.rcParams["svg.hashsalt"] = "mechdsl"     # deterministic SVG ids
+    suffix = Path(path).suffix.lower()
+    if suffix not in FIGURE_METADATA:
+        raise UsageError(f"figure file must end in .png, .svg or .pdf (got {str(path)!r})")
+    import matplotlib.pyplot as plt
+
     tmp, final = atomic_target(path, overwrite=overwrite)
     try:
-        meta = {".png": {"Software": "mechdsl"}, ".svg": {"Date": None, "Creator": "mechdsl"},
-                ".pdf": {"CreationDate": None, "Creator": "mechdsl"}}[suffix]
-        fig.savefig(tmp, dpi=110, format=suffix[1:], metadata=meta)
+        fig.savefig(tmp, dpi=dpi, format=suffix[1:], metadata=FIGURE_METADATA[suffix])
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -47,7 +47,7 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
 
         return simulate_with_contacts(eom, None, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method,
                                       points=points, outputs=outputs, x0=x0, p=p, progress=progress, **opts)
-    if eom.g is not None:
+    if eom.g is not None and method not in I.SYMPLECTIC:
         return _dispatch("mechdsl.dae", "simulate_dae", "constrained models (DAE)", eom, t_end,
                          t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
                          outputs=outputs, x0=x0, p=p, progress=progress, **opts)

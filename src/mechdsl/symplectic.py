@@ -11,7 +11,11 @@
 - ``implicit-midpoint``: y1 = y0 + h f((y0 + y1)/2), order 2, symplectic;
 - ``gauss-legendre``: the 2-stage Gauss collocation method, order 4, symplectic;
 - ``rk4``: the classical explicit Runge-Kutta method (4 evaluations a step), not symplectic,
-  for comparisons.
+  for comparisons;
+- ``rattle``: for constrained models (g(q, t) = 0), the constrained Stormer-Verlet method
+  (mechdsl.rattle), symplectic on the constraint manifold, order 2; ``stormer-verlet`` means
+  RATTLE there.  The other methods ignore constraints and refuse constrained models.  Without
+  constraints ``rattle`` is ``stormer-verlet``.
 
 Implicit stages are solved by CasADi's Newton rootfinder (Jacobians by AD of the SX
 residuals).  Steps run in chunks through ``Function.mapaccum``; every step reports its
@@ -28,8 +32,9 @@ import numpy as np
 from .diagnostics import UsageError
 from .result import Failure, Result
 
-METHODS = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rk4")
-SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre")
+METHODS = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rk4", "rattle")
+SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rattle")
+CONSTRAINED = ("stormer-verlet", "rattle")     # methods for models with constraints (RATTLE)
 CHUNK = 2000                  # steps a mapaccum call
 MAX_POINTS = 20001            # recorded points unless ``points`` asks otherwise
 # options of the adaptive solvers that do not apply to a fixed step (noted in the metadata)
@@ -59,6 +64,13 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     method = str(method).lower().replace("_", "-")
     if method not in METHODS:
         raise UsageError(f"unknown symplectic method {method!r}; choose one of {', '.join(METHODS)}")
+    constrained = eom.g is not None and eom.m > 0
+    if constrained and method not in CONSTRAINED:
+        raise UsageError(f"the method '{method}' ignores the constraints of {eom.name}; for a constrained "
+                         "model use method = \"rattle\" (constrained Stormer-Verlet, symplectic) or an "
+                         "adaptive DAE formulation (method = \"auto\", docs/constraints.md)")
+    if method == "rattle" and not constrained:
+        method = "stormer-verlet"          # RATTLE without constraints is Stormer-Verlet
     unknown = sorted(k for k in opts if k not in _IGNORED)
     if unknown:
         raise UsageError(f"unknown option(s) for the fixed-step integrators: {', '.join(unknown)}")
@@ -80,25 +92,41 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     pv = param_vector(eom, p)
     ham = hamiltonian(eom, pv)
     n = eom.n
-    out_names = _output_names(eom, outputs)
-    if x0 is not None:
+    out_names = _output_names(eom, outputs) if not constrained else outputs
+    extra_meta = {}
+    if constrained:
+        from .rattle import consistent_start
+
+        qs, qds, init, active, dof = consistent_start(eom, x0, q0, qd0, t0, pv)
+        extra_meta = {"initialization": init.as_dict(), "dof": dof.as_dict(),
+                      "constraints": list(eom.constraint_names),
+                      "active_constraints": [eom.constraint_names[i] for i in active]}
+    elif x0 is not None:
         from .simulate import start_vector
 
         xs = start_vector(eom, x0, pv)
         qs, qds = xs[:n], xs[n:]
     else:
         qs, qds = eom.start(pv)
-    qs = qs if q0 is None else np.asarray(q0, float).ravel()
-    qds = qds if qd0 is None else np.asarray(qd0, float).ravel()
+    if not constrained:
+        qs = qs if q0 is None else np.asarray(q0, float).ravel()
+        qds = qds if qd0 is None else np.asarray(qd0, float).ravel()
     if qs.size != n or qds.size != n:
         raise UsageError(f"start values need {n} entries each")
     pm0 = np.array(ham.function("momenta")(qs, qds, t0, pv), float).ravel()
 
     nsteps = max(1, int(math.ceil((t_end - t0) / dt - 1e-9)))
     h = (t_end - t0) / nsteps
-    explicit_sv = method == "stormer-verlet" and ham.separable
-    step, state0, evals_per_step, evals_init = _step_function(ham, method, explicit_sv, n, newton_tol, max_newton,
-                                                              qs, pm0, t0, pv)
+    explicit_sv = method == "stormer-verlet" and ham.separable and not constrained
+    if constrained:
+        from .rattle import rattle_step
+
+        method = "rattle"
+        step = rattle_step(ham, eom, active, newton_tol, max_newton)
+        state0, evals_per_step, evals_init = np.concatenate([qs, pm0, [t0], np.zeros(len(active))]), None, 0
+    else:
+        step, state0, evals_per_step, evals_init = _step_function(ham, method, explicit_sv, n, newton_tol,
+                                                                  max_newton, qs, pm0, t0, pv)
     stride = _stride(nsteps, points)
     rec_idx = [0]
     rec_states = [state0.copy()]
@@ -153,7 +181,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     q = S[:n].T
     pm = S[n:2 * n].T
     qd = _map(ham.function("qd"), [q.T, pm.T, t[None, :], pv]).T
-    signals = _signals(eom, ham, q, qd, pm, t, pv, out_names)
+    signals = _signals(eom, ham, q, qd, pm, t, pv, out_names, active if constrained else None)
     wall = _time.perf_counter() - wall0
     stats = {"steps": int(done), "dt": h, "points": int(len(t)), "wall_time": wall,
              "implicit": evals_per_step is None}
@@ -167,17 +195,21 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
                               + "; ".join(ham.notes) + ")"),
            "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
            "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
-           "rk4": "classical Runge-Kutta (explicit, order 4, not symplectic)"}[method]
+           "rk4": "classical Runge-Kutta (explicit, order 4, not symplectic)",
+           "rattle": "RATTLE (constrained Stormer-Verlet: symplectic on the constraint manifold, order 2)"}[method]
     stats.update(_energy_drift(signals))
+    if constrained:
+        stats.update({"max_constraint_drift": float(np.max(signals["constraint_drift"], initial=0.0)),
+                      "max_velocity_drift": float(np.max(signals["velocity_drift"], initial=0.0))})
     meta = {"model": eom.name, "route": getattr(eom, "route", ""), "coordinates": list(eom.coords),
             "method": method, "method_reason": "requested", "why": why, "dt": h,
             "symplectic": method in SYMPLECTIC, "separable": ham.separable, "canonical_variables": True,
             "notes": notes + list(ham.notes), "warnings": [],
             "options": {"t_start": t0, "t_end": t_end, "dt": h, "method": method, "points": int(len(t)),
-                        "outputs": list(out_names), "newton_tolerance": newton_tol,
+                        "outputs": list(out_names or ()), "newton_tolerance": newton_tol,
                         "parameters": dict(zip(eom.params, map(float, pv))),
                         "start": {**dict(zip(eom.coords, map(float, qs))),
-                                  **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}}
+                                  **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}, **extra_meta}
     return Result(t=t, q=q, qd=qd, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=meta, failure=failure)
 
@@ -217,10 +249,11 @@ def _output_names(eom, outputs) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _signals(eom, ham, q, qd, pm, t, pv, out_names) -> dict[str, np.ndarray]:
+def _signals(eom, ham, q, qd, pm, t, pv, out_names, active=None) -> dict[str, np.ndarray]:
     """The simulator's signals (outputs, energies, singularity monitors: mechdsl.simulate's
-    compute_signals, so both kinds of Result look alike), then H, the canonical momenta
-    p_<coordinate> and the first integrals."""
+    compute_signals, so both kinds of Result look alike; constrained models as the DAE
+    simulator records them, with the drift), then H, the canonical momenta p_<coordinate>
+    and the first integrals."""
     import casadi as ca
 
     from .analysis.integrals import integral_signals
@@ -229,8 +262,13 @@ def _signals(eom, ham, q, qd, pm, t, pv, out_names) -> dict[str, np.ndarray]:
 
     if len(t) == 0:
         return {}
-    post = casadi_functions(eom, names=("energy", "outputs", "singularity"), outputs=out_names)
-    sig = compute_signals(eom, post, t, np.hstack([q, qd]), pv, out_names)
+    if active is not None:
+        from .rattle import constrained_signals
+
+        sig, _ = constrained_signals(eom, active, t, q, qd, pv, out_names)
+    else:
+        post = casadi_functions(eom, names=("energy", "outputs", "singularity"), outputs=out_names)
+        sig = compute_signals(eom, post, t, np.hstack([q, qd]), pv, out_names)
     sig["H"] = _map(ham.function("H"), [q.T, pm.T, t[None, :], pv])[0]
     for i, c in enumerate(eom.coords):
         sig[f"p_{c}"] = pm[:, i].copy()

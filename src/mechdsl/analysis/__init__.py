@@ -6,6 +6,10 @@ Hamilton's equations.
     lin = linearize(eom, at="equilibrium")
     lin.modes().frequencies               # rad/s, ascending
 
+Constrained models (closed loops, constraint equations) are analysed on their constraint
+manifold: equilibria with multipliers, the reduced linear model in independent coordinates
+(analysis.reduced), RATTLE for symplectic integration (mechdsl.rattle).
+
 Design notes: docs/internals/analysis.md; user guide: docs/analysis.md.
 """
 from __future__ import annotations

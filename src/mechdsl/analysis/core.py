@@ -90,6 +90,8 @@ class Parts:
                 ca.jacobian(self.L, t), ca.jacobian(e.bias, t), ca.jacobian(Mv, t),
                 self.b, self.T0, e.T, self.Qtot, e.bias, Mv,
                 ca.jacobian(e.bias, q), ca.jacobian(Mv, q), ca.gradient(self.L, q)])
+        if name == "g":      # constraint residuals (constrained models)
+            return ca.Function(name, [q, t, p], [e.g])
         if name == "energies":
             return ca.Function(name, self.args, [e.T, e.V, self.T0, self.b, e.M])
         raise KeyError(name)
@@ -228,6 +230,8 @@ def _structure(eom, pv) -> Structure:
 
     # translational symmetry: directions N with d(bias)/dq N == 0 and dM/dq N == 0 everywhere
     J = np.vstack([np.vstack([o[9] / bias_scale, o[10] / M_scale]) for _, o in rows])
+    if eom.m:   # constrained: the constraints must not change along N either (dg/dq N = 0)
+        J = np.vstack([J, _constraint_rows(eom, pv, pr)])
     N = null_space(J, rel=1e-8) if n else np.zeros((0, 0))
 
     # rest forces (for tolerances): |bias(q, 0)|
@@ -247,6 +251,19 @@ def _structure(eom, pv) -> Structure:
     return st
 
 
+def _constraint_rows(eom, pv, pr: Probe) -> np.ndarray:
+    """dg/dq at the probe states, scaled by its largest entry (symmetry test of constrained models)."""
+    import casadi as ca
+
+    f = ca.Function("G", [eom.q, eom.t, eom.p], [ca.jacobian(eom.g, eom.q)])
+    Gs = [dense(f(pr.q[i], pr.t[i], pv)) for i in range(len(pr))]
+    Gs = [G for G in Gs if np.all(np.isfinite(G))]
+    if not Gs:
+        return np.zeros((0, eom.n))
+    scale = max(max(float(np.max(np.abs(G), initial=0.0)) for G in Gs), 1e-300)
+    return np.vstack(Gs) / scale
+
+
 def _zero_or_sym(expr, var) -> bool:
     import casadi as ca
 
@@ -261,6 +278,12 @@ def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: floa
         M1, b1 = pt.M_bias(pr.q[i], pr.qd[i], pr.t[i], pv)
         M2, b2 = pt.M_bias(pr.q[i] + shift, pr.qd[i], pr.t[i], pv)
         diffs.append(np.concatenate([(b1 - b2) / bias_scale, ((M1 - M2) / M_scale).ravel()]))
+    if pt.eom.m:    # constrained: g must be periodic in the coordinate too
+        fg = pt.fn("g")
+        for i in range(min(4, len(pr))):
+            g1 = dense(fg(pr.q[i], pr.t[i], pv)).ravel()
+            g2 = dense(fg(pr.q[i] + shift, pr.t[i], pv)).ravel()
+            diffs.append((g1 - g2) / max(float(np.max(np.abs(g1), initial=0.0)), 1.0))
     return bool(vanishes(diffs, 1.0, rel=1e-8))
 
 

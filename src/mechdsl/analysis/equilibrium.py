@@ -15,6 +15,11 @@ so one equation covers the three cases of the course:
   an ordinary equilibrium (neutral along N), alpha != 0 the uniformly accelerated reference
   motion q(t) = q* + N alpha t^2/2 with the relative equilibrium q* about it.
 
+Constrained models (g(q) = 0, scleronomic): bias(q, 0) = G(q)' lambda (+ M N alpha) with
+g(q) = 0, the multipliers among the unknowns; guesses on the constraint manifold
+(:mod:`.manifold`); stability from the Hessian of V + lambda'g on the tangent space of the
+constraints (:mod:`.constraints`).
+
 Solutions come from Levenberg-Marquardt (scipy least_squares with the CasADi Jacobian) started
 at the user's guesses and a deterministic spread (angles on a grid over [-pi, pi)).  Distinct
 solutions are kept (angles compared modulo 2 pi) and classified by the Hessian K of the
@@ -30,7 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from .core import dense, param_vector, require_ode, structure, wrap_angle
+from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
+from .core import dense, param_vector, structure, wrap_angle
+from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
 
 MAX_GUESSES = 256
@@ -45,7 +52,10 @@ class Equilibrium:
     'accelerated-reference' (relative equilibrium about a uniformly accelerated motion whose
     acceleration is ``acceleration``).
     ``hessian_eigenvalues``: eigenvalues of the stiffness K (Hessian of the effective potential)
-    transverse to the symmetry directions (``symmetry_directions``), ascending.
+    transverse to the symmetry directions (``symmetry_directions``), ascending.  Constrained
+    models: K is the Hessian of V + lambda'g and the eigenvalues are those of its restriction
+    to the tangent space of the constraints (``tangent_basis``); ``multipliers`` / ``lambdas``
+    are the constraint forces at rest.
     """
 
     coords: tuple[str, ...]
@@ -61,6 +71,20 @@ class Equilibrium:
     symmetry_directions: np.ndarray | None = None
     t: float = 0.0
     notes: list[str] = field(default_factory=list)
+    # constrained models: multipliers of every constraint (0 for dropped redundant ones), the
+    # constraints that were kept, and the orthonormal basis Z of the tangent space the
+    # classification used (hessian_eigenvalues are those of Z'(K + sum lambda_l d2g_l/dq2)Z)
+    multipliers: np.ndarray | None = None
+    constraint_names: tuple[str, ...] = ()
+    active_constraints: tuple[str, ...] = ()
+    tangent_basis: np.ndarray | None = None
+
+    @property
+    def lambdas(self) -> dict[str, float]:
+        """Multipliers by constraint name (empty for unconstrained models)."""
+        if self.multipliers is None:
+            return {}
+        return {c: float(v) for c, v in zip(self.constraint_names, self.multipliers)}
 
     @property
     def values(self) -> dict[str, float]:
@@ -87,6 +111,10 @@ class Equilibrium:
         if self.symmetry_directions is not None and self.symmetry_directions.size:
             d["symmetry_directions"] = [{c: float(v) for c, v in zip(self.coords, col)}
                                         for col in self.symmetry_directions.T]
+        if self.multipliers is not None:
+            d["multipliers"] = self.lambdas
+            d["active_constraints"] = list(self.active_constraints)
+            d["tangent_basis"] = [{c: float(v) for c, v in zip(self.coords, col)} for col in self.tangent_basis.T]
         return d
 
 
@@ -96,65 +124,82 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
 
     guesses: None, a dict {coordinate: value} (missing coordinates take their start values),
     a list of such dicts, or arrays of shape (n,) / (k, n).  p: parameter overrides.
+    Constrained models (scleronomic constraints g(q) = 0): see :mod:`.constraints`; each
+    equilibrium carries its multipliers.
     """
-    require_ode(eom, "equilibrium analysis")
     import casadi as ca
 
     pv = param_vector(eom, p)
     n = eom.n
+    con = setup(eom, pv, t, "equilibrium analysis") if constrained(eom) else None
     st = structure(eom, pv)
     q0, _ = eom.start(pv)
+    qref = q0 if con is None else con.q_start
     N = st.symmetry
     k = N.shape[1]
-    angles = st.angles
-    notes = []
+    ma = 0 if con is None else con.ma
+    notes = [] if con is None else list(con.notes)
     if not st.autonomous:
         notes.append(f"the equations depend explicitly on time: equilibrium at t = {t:g} only")
     if st.force_scale == 0.0:
         # no force at rest anywhere: every configuration is an equilibrium
-        e = _classify(eom, st, pv, q0, np.zeros(k), t, 0.0, notes + ["no generalized force acts at rest: "
-                                                                     "every configuration is an equilibrium"])
+        e = _classify(eom, st, pv, qref, np.zeros(k), t, 0.0, notes + ["no generalized force acts at rest: "
+                                                                       "every configuration is an equilibrium"],
+                      con=con, lam=np.zeros(ma))
         return [e]
 
-    # residual in w = (q, alpha): bias(q, 0, t) - M(q) N alpha ; N'(q - q_ref)
-    w = ca.SX.sym("w", n + k)
-    qref = ca.SX.sym("qref", n)
+    # unknowns w = (q, mu, alpha), lambda = lam_scale * mu:
+    # bias(q, 0, t) - G(q)' lambda - M(q) N alpha ; g(q) / |G row| ; N'(q - q_ref)
+    scale = max(st.force_scale, 1e-300)
+    w = ca.SX.sym("w", n + ma + k)
+    qr = ca.SX.sym("qref", n)
     qw = w[:n]
-    alpha = w[n:]
+    alpha = w[n + ma:]
     rest_bias = ca.substitute(eom.bias, eom.qd, ca.SX.zeros(n))
     r = ca.substitute(rest_bias, eom.q, qw)
     Mq = ca.substitute(eom.M, eom.q, qw)
+    parts_ = [r]
+    lam_scale = np.zeros(0)
+    if con is not None:
+        ga = ca.substitute(eom.g[list(con.active)], eom.q, qw)
+        lam_scale = scale / con.row_norms
+        lam = ca.SX(lam_scale) * w[n:n + ma]
+        parts_ = [r - ca.mtimes(ca.jacobian(ga, qw).T, lam), ga / ca.SX(con.row_norms)]
     if k:
-        r = ca.vertcat(r - ca.mtimes(Mq, ca.mtimes(N, alpha)), ca.mtimes(N.T, qw - qref))
-    r = ca.substitute(r, eom.t, ca.SX(float(t)))
-    args = [w, qref, eom.p]
+        parts_[0] = parts_[0] - ca.mtimes(Mq, ca.mtimes(N, alpha))
+        parts_.append(ca.mtimes(N.T, qw - qr))
+    r = ca.substitute(ca.vertcat(*parts_), eom.t, ca.SX(float(t)))
+    args = [w, qr, eom.p]
     F = ca.Function("eq_res", args, [r])
     JF = ca.Function("eq_jac", args, [ca.jacobian(r, w)])
+    rs = np.concatenate([np.full(n, scale), np.ones(ma), np.full(k, scale)])
 
-    scale = max(st.force_scale, 1e-300)
     tol = 1e-8 * scale
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
-    for g in _guesses(eom, guesses, q0, st, max_guesses):
-        x0 = np.concatenate([g, np.zeros(k)])
+    for g in _guesses(eom, guesses, q0, st, max_guesses, con):
+        x0 = np.concatenate([g, _start_multipliers(eom, con, g, t, pv, lam_scale), np.zeros(k)])
         try:
-            x = levenberg_marquardt(lambda x: dense(F(x, q0, pv)).ravel() / scale,
-                                    lambda x: dense(JF(x, q0, pv)) / scale, x0)
+            x = levenberg_marquardt(lambda x: dense(F(x, qref, pv)).ravel() / rs,
+                                    lambda x: dense(JF(x, qref, pv)) / rs[:, None], x0)
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             continue
         if x is None:
             continue
-        res = dense(F(x, q0, pv)).ravel()
+        res = dense(F(x, qref, pv)).ravel()
         if not np.all(np.isfinite(res)):
             continue
         resid = float(np.max(np.abs(res[:n])))
         if resid > tol:
             continue
         qs = x[:n].copy()
+        if con is not None and np.max(con.distances(qs), initial=0.0) > 1e-9 * (1.0 + np.max(np.abs(qs))):
+            continue
         for i in range(n):
             if st.periodic[i]:
                 qs[i] = wrap_angle(qs[i])
+        qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
         for i, f_ in enumerate(found):
-            if _same(qs, f_[0], st.periodic) or _joined(F, q0, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic):
+            if _same(qs, f_[0], st.periodic) or _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic):
                 if resid < f_[2]:
                     found[i] = (qs, x[n:].copy(), resid)
                 break
@@ -162,7 +207,26 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             found.append((qs, x[n:].copy(), resid))
 
     found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
-    return [_classify(eom, st, pv, qs, al, t, resid, list(notes)) for qs, al, resid in found]
+    return [_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
+                      lam=_clean(lam_scale * rest[:ma], lam_scale))
+            for qs, rest, resid in found]
+
+
+def _clean(lam, lam_scale):
+    """Multipliers whose force is below 1e-12 of the force scale are round-off: 0."""
+    return np.where(np.abs(lam) <= 1e-12 * lam_scale, 0.0, lam)
+
+
+def _start_multipliers(eom, con, q, t, pv, lam_scale) -> np.ndarray:
+    """Scaled least-squares multipliers at a guess (the LM start for mu)."""
+    if con is None:
+        return np.zeros(0)
+    from .core import parts
+
+    _, bias = parts(eom).M_bias(q, np.zeros(eom.n), t, pv)
+    lam = least_squares_multipliers(con, q, bias)
+    out = lam / lam_scale
+    return np.where(np.isfinite(out), out, 0.0)
 
 
 def _same(a: np.ndarray, b: np.ndarray, periodic) -> bool:
@@ -190,14 +254,24 @@ def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic) -> bool:
     return True
 
 
-def _classify(eom, st, pv, q, alpha, t, resid, notes) -> Equilibrium:
+def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equilibrium:
+    """Kind and stability.  Constrained models: K is the Hessian of V + lambda'g (the geometric
+    stiffness of the constraint forces added) and everything is decided on the tangent space
+    of the constraints (coordinates dq = Z dz, Z an orthonormal basis of null(G))."""
     n = eom.n
     N = st.symmetry
     k = N.shape[1]
     acc = N @ alpha if k else np.zeros(n)
     M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
-    P = complement(N)
-    Kr = P.T @ K @ P
+    Z = None
+    if con is not None:
+        K = K + con.geometric_stiffness(q, lam)
+        Z = tangent_basis(con.G_active(q))
+        Mt, Ct, Kt, Nt = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ K @ Z, Z.T @ N
+    else:
+        Mt, Ct, Kt, Nt = M, C, K, N
+    P = complement(Nt)
+    Kr = P.T @ Kt @ P
     accel = bool(k) and np.linalg.norm(M @ acc) > 1e-8 * max(st.force_scale, 1e-300)
     if accel:
         kind = "accelerated-reference"
@@ -208,25 +282,35 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes) -> Equilibrium:
     Ksym = sym(Kr)
     heig = np.sort(np.linalg.eigvalsh(Ksym)) if Kr.size else np.zeros(0)
     kscale = max(np.max(np.abs(K), initial=0.0), st.stiffness_scale, 1e-300)
-    circulatory = np.max(np.abs(K - K.T), initial=0.0) > 1e-7 * kscale
-    A = reduced_first_order(M, C, K, N)
-    lam = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)
-    lam = lam[np.lexsort((lam.imag, lam.real))]
-    lscale = max(1.0, np.max(np.abs(lam), initial=0.0))
-    growth = float(np.max(lam.real, initial=-np.inf)) if lam.size else -np.inf
+    if con is not None:      # the geometric stiffness is of the order force scale x curvature
+        kscale = max(kscale, st.force_scale * con.curvature_scale(q))
+    circulatory = np.max(np.abs(Kt - Kt.T), initial=0.0) > 1e-7 * kscale
+    A = reduced_first_order(Mt, Ct, Kt, Nt)
+    ev = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)
+    ev = ev[np.lexsort((ev.imag, ev.real))]
+    lscale = max(1.0, np.max(np.abs(ev), initial=0.0))
+    growth = float(np.max(ev.real, initial=-np.inf)) if ev.size else -np.inf
     etol = 1e-9 * kscale
-    Csym = sym(C)
-    gyro = np.max(np.abs(C - C.T), initial=0.0) > 1e-9 * max(np.max(np.abs(C), initial=0.0), 1e-300)
-    damping_ok = np.min(np.linalg.eigvalsh(Csym), initial=0.0) >= -1e-9 * max(np.max(np.abs(C), initial=0.0), 1e-300)
+    Csym = sym(Ct)
+    gyro = np.max(np.abs(Ct - Ct.T), initial=0.0) > 1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
+    damping_ok = np.min(np.linalg.eigvalsh(Csym), initial=0.0) >= -1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
     potential = "V - T0" if st.has_T0 else "V"
+    if con is not None:
+        potential += " + lambda'g on the constraint manifold"
+    singular = con is not None and Z.shape[1] != n - con.ma
+    if singular:
+        notes = notes + ["singular configuration: the active constraints lose rank here, so the "
+                         "multipliers are not unique"]
 
     if not st.autonomous:
         stable, reason = None, "explicitly time-dependent equations: stability is not decided here"
+    elif singular:
+        stable, reason = None, "singular configuration of the constraints: stability is not decided here"
     elif growth > 1e-6 * lscale:
-        i = int(np.argmax(lam.real))
+        i = int(np.argmax(ev.real))
         neg = heig[heig < -etol]
         why = (f"Hessian of {potential} has negative eigenvalue(s) {_fmt_list(neg)}; " if neg.size else "")
-        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(lam[i])} with positive "
+        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(ev[i])} with positive "
                                        "real part (Lyapunov's indirect method)")
     elif circulatory:
         stable, reason = None, ("non-conservative positional (circulatory) forces: the stiffness is not "
@@ -240,6 +324,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes) -> Equilibrium:
         stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
                                 f"{_fmt_list(heig[heig < -etol])} but gyroscopic terms keep the linear "
                                 "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
+    elif heig.size == 0 and con is not None and Z.shape[1] == 0:
+        stable, reason = None, "no degree of freedom: the constraints fix the configuration"
     elif heig.size == 0:
         stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
     else:
@@ -250,10 +336,14 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes) -> Equilibrium:
     if accel:
         notes = notes + ["uniformly accelerated reference motion q(t) = q* + a t^2/2 with acceleration a = "
                          + ", ".join(f"{c}: {v:.6g}" for c, v in zip(eom.coords, acc) if abs(v) > 0)]
+    extra = {}
+    if con is not None:
+        extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
+                     active_constraints=tuple(eom.constraint_names[i] for i in con.active), tangent_basis=Z)
     return Equilibrium(coords=tuple(eom.coords), q=np.asarray(q, float), stable=stable,
                        hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,
-                       acceleration=acc if k else np.zeros(n), linear_eigenvalues=lam,
-                       symmetry_directions=N if k else None, t=float(t), notes=list(notes))
+                       acceleration=acc if k else np.zeros(n), linear_eigenvalues=ev,
+                       symmetry_directions=N if k else None, t=float(t), notes=list(notes), **extra)
 
 
 def _fmt_list(v) -> str:
@@ -332,23 +422,26 @@ def parse_guesses(eom, guesses, q0: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _guesses(eom, guesses, q0, st, max_guesses):
+def _guesses(eom, guesses, q0, st, max_guesses, con=None):
     user = parse_guesses(eom, guesses, q0)
     n = eom.n
     N = st.symmetry
     P = N @ N.T if N.size else np.zeros((n, n))
-    axes = []
-    for i in range(n):
+    qc = q0 if con is None else con.q_start
+
+    def axis(i):
         e = np.zeros(n)
         e[i] = 1.0
-        along = np.linalg.norm(P @ e - e) < 1e-8       # coordinate is a symmetry direction: pinned
-        if along:
-            axes.append([q0[i]])
-        elif st.angles[i]:
-            axes.append([-math.pi + 2 * math.pi * j / GRID_ANGLES for j in range(GRID_ANGLES)])
-        else:
-            s = max(1.0, abs(q0[i]))
-            axes.append(sorted({q0[i], q0[i] - 0.5 * s, q0[i] + 0.5 * s, q0[i] - 2 * s, q0[i] + 2 * s, 0.0}))
+        if np.linalg.norm(P @ e - e) < 1e-8:            # coordinate is a symmetry direction: pinned
+            return [qc[i]]
+        if st.angles[i]:
+            return [-math.pi + 2 * math.pi * j / GRID_ANGLES for j in range(GRID_ANGLES)]
+        s = max(1.0, abs(qc[i]))
+        return sorted({qc[i], qc[i] - 0.5 * s, qc[i] + 0.5 * s, qc[i] - 2 * s, qc[i] + 2 * s, 0.0})
+
+    if con is not None:
+        return constrained_guesses(con, user, st, axis, max_guesses)
+    axes = [axis(i) for i in range(n)]
     size = math.prod(len(a) for a in axes)
     spread = []
     if size <= max_guesses:

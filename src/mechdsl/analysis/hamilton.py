@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
-from .core import Probe, dense, param_vector, parts, require_ode, structure
+from .core import Probe, dense, param_vector, parts, structure
 
 SYMBOLIC_MAX_N = 3            # sympy inverts M up to this size
 SYMBOLIC_MAX_OPS = 400        # ... and when its entries are this small
@@ -42,6 +42,9 @@ class Hamiltonian:
     separable: bool                # M constant, b = 0, forces independent of the speeds
     autonomous: bool
     notes: list[str] = field(default_factory=list)
+    # constrained models: Hamilton's equations hold with p' = -dH/dq + Q - G' lambda on g = 0
+    # (the multipliers as in the DAE); mechdsl.rattle integrates them
+    constrained: bool = False
     eom: object = field(default=None, repr=False)
     _fns: dict = field(default_factory=dict, repr=False)
 
@@ -72,10 +75,10 @@ class Hamiltonian:
 
 
 def hamiltonian(eom, p=None) -> Hamiltonian:
-    """The CasADi Hamiltonian of an (unconstrained) EOM."""
+    """The CasADi Hamiltonian of an EOM (for a constrained one: of its Lagrangian; the
+    constraint forces -G' lambda are added by the integrator, mechdsl.rattle)."""
     import casadi as ca
 
-    require_ode(eom, "the Hamiltonian formulation")
     pv = param_vector(eom, p)
     st = structure(eom, pv)
     if not st.quadratic_T:
@@ -92,9 +95,12 @@ def hamiltonian(eom, p=None) -> Hamiltonian:
     pdot = ca.substitute(dLdq + pt.Qtot, eom.qd, qd_of_p)
     momenta = ca.gradient(eom.T, eom.qd)
     sep, notes = _separable(eom, pt, st, pv)
+    constrained = eom.g is not None and eom.m > 0
+    if constrained:
+        notes = notes + ["constrained: der(p) = -dH/dq + Q - G' lambda with g(q, t) = 0 (multipliers lambda)"]
     h = Hamiltonian(coords=tuple(eom.coords), q=eom.q, pm=pm, t=eom.t, p=eom.p, H=H, qd_of_p=qd_of_p,
                     pdot=pdot, momenta=momenta, separable=sep, autonomous=st.autonomous, notes=notes,
-                    eom=eom)
+                    eom=eom, constrained=constrained)
     _check_regular(eom, pt, pv)
     return h
 
@@ -169,6 +175,17 @@ def format_hamiltonian(model, latex: bool = False) -> str:
     qdname = (lambda c: r"\dot{" + _lname(c) + "}") if latex else (lambda c: f"der({c})")
     pname = (lambda c: _latex(P[lg.coords.index(c)], lg, P)) if latex else (lambda c: _momentum_name(c, lg))
     lines = []
+    cons = _constraint_items(eom, lg, fmt) if eom is not None and eom.m else []
+
+    def lam_term(c, text=None):
+        if not cons:
+            return ""
+        if latex:
+            t = r" - (G^\top \lambda)" + ("" if c is None else "_{" + _lname(c) + "}")
+        else:
+            t = " - G' lambda" if c is None else f" - (G' lambda)[{c}]"
+        return t if text != "0" else "-" + t[3:]
+
     if small:
         det = simplify_small(Msym.det(), lg.q)
         fdet = sp.factor(det)
@@ -186,7 +203,7 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         lines.append(("momenta", [(pname(c), fmt(e)) for c, e in zip(lg.coords, pexpr)]))
         lines.append(("Hamiltonian", [("H", fmt(H))]))
         lines.append(("Hamilton's equations", [(qdname(c), fmt(e)) for c, e in zip(lg.coords, qd_sol)]
-                      + [(r"\dot{" + pname(c) + "}" if latex else f"der({pname(c)})", fmt(e))
+                      + [(r"\dot{" + pname(c) + "}" if latex else f"der({pname(c)})", (lambda x, c: ("" if x == "0" and cons else x) + lam_term(c, x))(fmt(e), c))
                          for c, e in zip(lg.coords, pdot)]))
         how = "symbolic Legendre transform"
     else:
@@ -202,12 +219,17 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         lines.append(("Hamilton's equations", [("der(q)" if not latex else r"\dot q", "M^-1 (p - b)" if not latex
                                                 else r"M^{-1}(p - b)"),
                                                ("der(p)" if not latex else r"\dot p",
-                                                "dL/dq (at der(q) = M^-1 (p - b)) + Q - dD/d(der(q))" if not latex
-                                                else r"\partial L/\partial q + Q - \partial D/\partial \dot q")]))
+                                                ("dL/dq (at der(q) = M^-1 (p - b)) + Q - dD/d(der(q))" if not latex
+                                                 else r"\partial L/\partial q + Q - \partial D/\partial \dot q")
+                                                + lam_term(None))]))
         how = f"Legendre transform in matrix form ({n} coordinates: M is inverted numerically)"
     scleronomic = all(e == 0 for e in bsym) and sp.simplify(T0) == 0 and not lg.T.has(lg.t)
     note = ("H equals the energy T + V (scleronomic)" if scleronomic else
             "H = T2 - T0 + V is the Jacobi integral, not the energy T + V (moving frame)")
+    if cons:
+        lines.append(("constraints g(q, t) = 0, G = dg/dq (multipliers lambda; integrate with "
+                      "method = rattle)" if not latex else r"constraints $g(q, t) = 0$, $G = \partial g/\partial q$",
+                      cons))
     if latex:
         body = [r"\begin{aligned}"]
         for head, items in lines:
@@ -222,6 +244,28 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         out += [f"    {k.ljust(w)} = {v}" for k, v in items]
     out.append(f"  note: {note}")
     return "\n".join(out) + "\n"
+
+
+def _constraint_items(eom, lg, fmt) -> list[tuple[str, str]]:
+    """(name, residual) for explicit constraint equations; one line per loop-closing joint."""
+    import casadi as ca
+
+    from .symbolic import sx_to_sympy
+
+    explicit = {c.name for c in eom.model.constraints} if eom.model is not None else set(eom.constraint_names)
+    out, joints = [], []
+    for i, name in enumerate(eom.constraint_names):
+        if name in explicit:
+            g = sx_to_sympy([ca.SX(eom.g)[i]], [eom.q, eom.t, eom.p], [lg.q, [lg.t], lg.p])[0][0, 0]
+            out.append((f"g[{name}]", fmt(g)))
+        else:
+            j = name.split(".")[0]
+            if j not in joints:
+                joints.append(j)
+    for j in joints:
+        names = [c for c in eom.constraint_names if c.split(".")[0] == j]
+        out.append((f"g[{j}.*]", f"closure of the loop at joint {j} ({', '.join(names)}); see mech equations"))
+    return out
 
 
 def _compact(e):

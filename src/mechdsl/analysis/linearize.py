@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
-from .core import dense, param_vector, parts, require_ode, structure, wrap_angle
+from .constraints import constrained, setup
+from .core import dense, param_vector, parts, structure, wrap_angle
 from .matrices import first_order, second_order, skew, sym
 from .modes import Modes, modes_of
 
@@ -39,6 +40,31 @@ class Linearization:
     notes: list[str] = field(default_factory=list)
     eom: object | None = field(default=None, repr=False)
     _modes: Modes | None = field(default=None, repr=False)
+    # constrained models (see analysis.reduced): M, C, K, A, B are those of the reduced model in
+    # the coordinates ``reduced_coords`` (dq = basis dz); multipliers at the reference state for
+    # every constraint (0 for dropped redundant ones); stiffness: the full n x n K including the
+    # geometric stiffness sum lambda_l d2g_l/dq2, before the reduction
+    basis: np.ndarray | None = None
+    reduced_coords: tuple[str, ...] = ()
+    multipliers: np.ndarray | None = None
+    constraint_names: tuple[str, ...] = ()
+    active_constraints: tuple[str, ...] = ()
+    stiffness: np.ndarray | None = None
+
+    @property
+    def constrained(self) -> bool:
+        return self.basis is not None
+
+    @property
+    def matrix_coords(self) -> tuple[str, ...]:
+        """Names of the rows and columns of M, C, K (the reduced coordinates when constrained)."""
+        return self.reduced_coords if self.constrained else self.coords
+
+    @property
+    def lambdas(self) -> dict[str, float]:
+        if self.multipliers is None:
+            return {}
+        return {c: float(v) for c, v in zip(self.constraint_names, self.multipliers)}
 
     @property
     def n(self) -> int:
@@ -60,7 +86,8 @@ class Linearization:
 
     def modes(self) -> Modes:
         if self._modes is None:
-            self._modes = modes_of(self.M, self.C, self.K, self.A, self.coords)
+            md = modes_of(self.M, self.C, self.K, self.A, self.matrix_coords)
+            self._modes = md.in_coordinates(self.basis, self.coords) if self.constrained else md
         return self._modes
 
     @property
@@ -70,6 +97,11 @@ class Linearization:
     def symbolic(self, exact: bool = True):
         """M, C, K derived by sympy from T, V, D, Q at this state (see analysis.symbolic)."""
         from .symbolic import symbolic_linearization
+
+        if self.constrained:
+            raise MechError(Diagnostic("E901", "the symbolic linearization is available for models in "
+                                               "independent coordinates only; the numeric M, C, K of the "
+                                               "reduced model are exact to rounding"))
 
         return symbolic_linearization(self.eom, self.q, self.qd, self.t, self.acceleration,
                                       inputs=self.inputs, exact=exact)
@@ -82,7 +114,16 @@ class Linearization:
                 "inputs": list(self.inputs), "M": self.M.tolist(), "C": self.C.tolist(), "K": self.K.tolist(),
                 "A": self.A.tolist(), "B": self.B.tolist(), "modes": md["modes"],
                 "eigenvalues": md["eigenvalues"], "notes": list(self.notes),
-                "equilibrium": None if self.equilibrium is None else self.equilibrium.to_dict()}
+                "equilibrium": None if self.equilibrium is None else self.equilibrium.to_dict(),
+                **self._constrained_dict()}
+
+    def _constrained_dict(self) -> dict:
+        if not self.constrained:
+            return {}
+        return {"reduced_coordinates": list(self.reduced_coords),
+                "basis": [{c: float(v) for c, v in zip(self.coords, col)} for col in self.basis.T],
+                "multipliers": self.lambdas, "active_constraints": list(self.active_constraints),
+                "stiffness_full": self.stiffness.tolist()}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2) + "\n"
@@ -102,10 +143,13 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
     None: the parameters the model declares ``input``; () for none.
     """
-    require_ode(eom, "linearization")
     from .equilibrium import Equilibrium, equilibria
 
     pv = param_vector(eom, p)
+    if constrained(eom):
+        from .reduced import linearize_constrained
+
+        return linearize_constrained(eom, setup(eom, pv, t, "linearization"), at, inputs, pv, t, guesses)
     n = eom.n
     q0, qd0 = eom.start(pv)
     eq = None

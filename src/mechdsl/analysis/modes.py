@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..fileio import atomic_target, commit, write_atomic
+from ..fileio import write_atomic
 
 
 @dataclass
@@ -79,6 +79,17 @@ class Modes:
             w.writerow(row)
         return buf.getvalue()
 
+    def in_coordinates(self, basis: np.ndarray, coords) -> "Modes":
+        """The same modes with shapes mapped by dq = basis dz into ``coords`` (constrained
+        models: from the reduced coordinates to the original ones), rescaled to a largest entry 1."""
+        S = np.asarray(basis) @ self.shapes if len(self) else np.zeros((len(coords), 0))
+        S = np.array([_normalize(S[:, j]) for j in range(S.shape[1])]).T if S.shape[1] else S
+        if S.size and np.max(np.abs(S.imag), initial=0.0) <= 1e-10:
+            S = S.real
+        return Modes(coords=tuple(coords), frequencies=self.frequencies, damping_ratios=self.damping_ratios,
+                     shapes=S, eigenvalues=self.eigenvalues, kinds=self.kinds,
+                     mode_eigenvalues=self.mode_eigenvalues)
+
     def write_json(self, path, overwrite: bool = True):
         return write_atomic(path, self.to_json(), overwrite=overwrite)
 
@@ -113,15 +124,9 @@ class Modes:
         if title:
             fig.suptitle(title, fontsize=10)
         fig.tight_layout()
-        tmp, final = atomic_target(path, overwrite=overwrite)
-        try:
-            fig.savefig(tmp, dpi=110, format=final.suffix.lstrip(".") or "png")
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
-        finally:
-            plt.close(fig)
-        return commit(tmp, final)
+        from ..plot import save_figure
+
+        return save_figure(fig, path, overwrite=overwrite)
 
 
 def modes_of(M, C, K, A, coords) -> Modes:

@@ -54,12 +54,20 @@ def format_equilibria(name: str, coords, eqs) -> str:
     kinds = sorted({e.kind for e in eqs})
     lines = [f"{name}: {len(eqs)} equilibri{'um' if len(eqs) == 1 else 'a'} ({', '.join(kinds)})"]
     rows = []
+    # constrained models: the multipliers of the constraints kept (dropped redundant ones are 0)
+    lam_names = list(eqs[0].active_constraints) if eqs[0].multipliers is not None else []
     for i, e in enumerate(eqs, 1):
-        rows.append([str(i)] + [num(v) for v in e.q] + [e.kind, e.stability,
-                                                        "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
-    lines.append(table(["#"] + list(coords) + ["kind", "stability", "Hessian eigenvalues"], rows))
+        lam = [num(e.lambdas[c]) for c in lam_names]
+        rows.append([str(i)] + [num(v) for v in e.q] + lam + [e.kind, e.stability,
+                                                              "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
+    head = "Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues"
+    lines.append(table(["#"] + list(coords) + [f"lambda[{c}]" for c in lam_names] + ["kind", "stability", head],
+                       rows))
+    common = [n for n in eqs[0].notes if all(n in e.notes for e in eqs[1:])] if len(eqs) > 1 else []
     for i, e in enumerate(eqs, 1):
         lines.append(f"  {i}: {e.reason}")
         for note in e.notes:
-            lines.append(f"     note: {note}")
+            if note not in common:
+                lines.append(f"     note: {note}")
+    lines += [f"  note: {n}" for n in common]
     return "\n".join(lines)

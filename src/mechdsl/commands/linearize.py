@@ -79,13 +79,19 @@ def _state(text: str) -> dict:
 def format_linearization(name: str, lin) -> str:
     from ..analysis.tables import matrix, num, table
 
-    c = list(lin.coords)
+    c = list(lin.matrix_coords)
     where = {"equilibrium": "about the equilibrium", "accelerated-reference":
              "about the relative equilibrium of the accelerated reference motion",
              "state": f"about the state at t = {num(lin.t)}"}[lin.kind]
     lines = [f"{name}: linear model {where}",
              "  " + ", ".join(f"{k} = {num(v)}" for k, v in lin.values.items())
              + ("" if not any(lin.qd) else "; " + ", ".join(f"der({k}) = {num(v)}" for k, v in zip(c, lin.qd)))]
+    if lin.constrained:
+        lines.append("  constraint multipliers: " + ", ".join(f"lambda[{k}] = {num(lin.lambdas[k])}"
+                                                            for k in lin.active_constraints))
+        lines.append(f"  on the constraint manifold: {len(c)} independent coordinate(s) dz = ({', '.join(c)}), "
+                     "dq = Z dz; K includes the geometric stiffness sum lambda_l d2g_l/dq2")
+        lines.append(matrix("Z (basis of the tangent space)", lin.basis, list(lin.coords), c))
     if lin.equilibrium is not None:
         lines.append(f"  stability: {lin.equilibrium.stability} ({lin.equilibrium.reason})")
     for note in lin.notes:
@@ -107,8 +113,8 @@ def format_linearization(name: str, lin) -> str:
         s = md.shapes[:, j]
         rows.append([str(j + 1), md.kinds[j], num(md.frequencies[j]), num(md.hz[j]), num(md.damping_ratios[j]),
                      num(md.mode_eigenvalues[j])] + [num(v) for v in s])
-    lines.append("  modes:")
-    lines.append(table(["mode", "kind", "w (rad/s)", "f (Hz)", "zeta", "eigenvalue"] + c, rows, "    "))
+    lines.append("  modes:" + (" (shapes in the original coordinates)" if lin.constrained else ""))
+    lines.append(table(["mode", "kind", "w (rad/s)", "f (Hz)", "zeta", "eigenvalue"] + list(md.coords), rows, "    "))
     return "\n".join(lines)
 
 
