@@ -31,9 +31,7 @@ from mechdsl.bench.report import fastest, fastest_lines, format_table, markdown_
 
 from stability.run import available_cases, run_cases  # noqa: E402
 
-ANDREWS_JSON = ROOT.parent / "shared" / "references" / "andrews_squeezer.json"
-if not ANDREWS_JSON.exists():
-    ANDREWS_JSON = Path("/work/shared/references/andrews_squeezer.json")
+ANDREWS_JSON = ROOT / "tests" / "references" / "andrews_squeezer.json"     # a copy of ../shared/references
 
 
 def log(msg: str) -> None:
@@ -110,7 +108,7 @@ def andrews(quick, figs, tmp):
     from mechdsl.bench import read_csv
 
     ref = read_csv(andrews_reference_csv(coords, Path(tmp) / "andrews_reference.csv"))
-    ref.source = "the IVP Test Set's q(0.03) (PSIDE at 1e-14; /work/shared/references/andrews_squeezer.json)"
+    ref.source = "the IVP Test Set's q(0.03) (PSIDE at 1e-14; tests/references/andrews_squeezer.json)"
     methods = os.environ.get("MECHDSL_ANDREWS_METHODS") or ANDREWS_METHODS
     res = bench("models/andrews.mech", t_end=0.03, methods=methods,
                 tolerances="1e-4..1e-10/1" if quick else "1e-3..1e-11", reference=ref,
@@ -310,7 +308,7 @@ def page(ctx) -> str:
                                 "wp_andrews", ctx["figs"],
                                 "models/andrews.mech against the Test Set for IVP Solvers' reference at t = 0.03 "
                                 "(PSIDE at 1e-14; positions correct to about 1e-10, "
-                                "/work/shared/references/andrews_squeezer.json). Errors are relative, positions "
+                                "tests/references/andrews_squeezer.json). Errors are relative, positions "
                                 f"only. Check (7 correct digits faster than scipy DOP853): "
                                 f"**{'holds' if holds else 'FAILS'}**: {detail}.",
                                 targets=(1e-4, 1e-7, 1e-9), data_dir=ctx["data"]))

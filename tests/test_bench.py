@@ -1,13 +1,12 @@
 """mech bench: method specifications, error norms, references, the sweep, the CLI.
 
 The physics check uses the closed-form motion of the pendulum released from the horizontal
-(/work/shared/references/README.md, "Closed forms"): sin(theta/2) = k cd(w t | k^2),
+(tests/references/README.md, "Closed forms", a copy of ../shared/references): sin(theta/2) = k cd(w t | k^2),
 k = sin(a/2), w = sqrt(g/L).
 """
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,9 +19,7 @@ from mechdsl.bench import measure
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 
-from conftest import MODELS
-
-REFERENCES = Path("/work/shared/references")
+from conftest import MODELS, REFERENCES
 
 PENDULUM = MODELS / "pendulum.mech"
 STIFF = MODELS.parent / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
@@ -227,7 +224,7 @@ def test_cli_usage_errors(extra, capsys):
 
 def test_constrained_bench_against_cash_reference(tmp_path):
     """J. Cash's index-3 pendulum (scene Cash): the published reference at t = 1
-    (/work/shared/references/pendulum_index3.json, accurate to ~1e-11), as a one-row CSV."""
+    (tests/references/pendulum_index3.json, accurate to ~1e-11), as a one-row CSV."""
     ref = json.loads((REFERENCES / "pendulum_index3.json").read_text())["reference_t1"]
     csv = tmp_path / "cash.csv"
     csv.write_text(f"time,plane.x,plane.y\n1.0,{float(ref['x'])!r},{float(ref['y'])!r}\n")

@@ -7,7 +7,7 @@ Set.  Written as it stands (x = (q, q'), z = lambda, 0 = g(q)) its differentiati
 at the start, whatever its options.  The reduced formulations of mechdsl.dae (GGL at
 index 2, Baumgarte, projection and partitioning as index-1 ODEs) reach 7 correct digits in
 the positions against the Test Set's reference (PSIDE at 1e-14;
-/work/shared/references/andrews_squeezer.json).
+tests/references/andrews_squeezer.json, a copy of ../shared/references).
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ import numpy as np
 from .suite import Case, check_size, load, pyplot, save
 
 MODEL = "models/andrews.mech"
-REFERENCE = Path("/work/shared/references/andrews_squeezer.json")
+REFERENCE = Path(__file__).resolve().parents[2] / "tests" / "references" / "andrews_squeezer.json"   # ../shared copy
 T = 0.03
 REDUCED = {"ggl+idas": ("ggl", "idas"), "baumgarte+cvodes-bdf": ("baumgarte", "cvodes-bdf"),
            "projection+cvodes-bdf": ("projection", "cvodes-bdf"),
