@@ -116,8 +116,8 @@ def andrews(quick, figs, tmp):
     return res
 
 
-ANDREWS_METHODS = ("ggl+idas,baumgarte+cvodes-bdf,baumgarte+cvodes-adams,projection+cvodes-bdf,"
-                   "projection+cvodes-adams,partitioning+cvodes-adams,index1-ode+scipy-dop853")
+ANDREWS_METHODS = ("ggl+idas,projection+erk,baumgarte+erk,baumgarte+cvodes-bdf,baumgarte+cvodes-adams,"
+                   "projection+cvodes-bdf,projection+cvodes-adams,partitioning+cvodes-adams,index1-ode+scipy-dop853")
 
 
 def andrews_check(res, digits=7):

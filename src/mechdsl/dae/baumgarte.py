@@ -26,7 +26,8 @@ import math
 
 import numpy as np
 
-from .stepper import GridIntegrators, Stepper, StepError, call_integrator, chunk_span, integrator_options, scaled_dae
+from .stepper import (GridIntegrators, Stepper, StepError, call_integrator, chunk_span, integrator_options,
+                      ode_plugin, scaled_dae)
 
 RATE_FACTOR = 10.0
 
@@ -49,15 +50,20 @@ def automatic_rates(system, q, qd, t, span: float, factor: float = RATE_FACTOR) 
 
 
 class BaumgarteStepper(Stepper):
-    """Integrates the Baumgarte-stabilized index-1 ODE with CVODES (BDF or Adams)."""
+    """Integrates the Baumgarte-stabilized index-1 ODE with CVODES (BDF or Adams) or CasADi's
+    explicit Runge-Kutta 5(4) (method "erk": no Jacobian, cheap steps for non-stiff mechanisms)."""
 
     rate_factor = RATE_FACTOR
 
     def __init__(self, system, opts, span: float):
         super().__init__(system=system, opts=opts, name="baumgarte")
         self.span = span
-        dae = scaled_dae(index1_dae(system))
-        self.F = GridIntegrators("index1", "cvodes", dae, integrator_options(opts, "cvodes"), self.stats)
+        plugin = ode_plugin(opts)
+        iopts = integrator_options(opts, plugin)
+        key = ("index1", plugin, tuple(sorted(iopts.items())))
+        self.F = system.shared(key, lambda: GridIntegrators("index1", plugin, scaled_dae(index1_dae(system)),
+                                                            iopts, {}))
+        self.F.stats = self.stats
         self.user_rates = _user_rates(opts.baumgarte)
         self.rates = (0.0, 0.0)
 

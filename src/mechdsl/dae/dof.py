@@ -134,3 +134,15 @@ def singular_ratio(Gs: np.ndarray, rank: int) -> float:
     if s[0] == 0:
         return 0.0
     return float(s[rank - 1] / s[0]) if len(s) >= rank else 0.0
+
+
+def singular_ratios(Gs: np.ndarray, rank: int) -> np.ndarray:
+    """:func:`singular_ratio` of a stack of scaled Jacobians (K, m, n), in one batched SVD."""
+    K = Gs.shape[0]
+    if rank == 0 or Gs.shape[1] == 0:
+        return np.ones(K)
+    s = np.linalg.svd(Gs, compute_uv=False)
+    if s.shape[1] < rank:
+        return np.zeros(K)
+    top = s[:, 0]
+    return np.where(top > 0, s[:, rank - 1] / np.where(top > 0, top, 1.0), 0.0)

@@ -15,7 +15,7 @@ FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
 DEFAULT_FORMULATION = "projection"
 # method names (those of mechdsl.integrators included) -> the CVODES multistep method
 ODE_METHODS = {"auto": "auto", "bdf": "bdf", "cvodes": "bdf", "cvodes-bdf": "bdf", "adams": "adams",
-               "cvodes-adams": "adams"}
+               "cvodes-adams": "adams", "erk": "erk"}
 DAE_METHODS = {"auto": "idas", "idas": "idas"}
 
 # options of the ODE simulator that have no meaning here (reported in the metadata notes)

@@ -79,8 +79,9 @@ class ProjectionStepper(BaumgarteStepper):
         Q, QD = self.integrate(times)
         limit = self.PROJECT_AT * self.opts.bound
         keep = len(times)
+        D, V = self.system.drift_many(Q, QD, times)       # one mapped call for the whole segment
         for i in range(len(times)):
-            d, v = self.system.drift(Q[:, i], QD[:, i], times[i])
+            d, v = float(D[i]), float(V[i])
             self.stats["drift_before_projection"] = max(self.stats["drift_before_projection"], d)
             self.stats["velocity_drift_before_projection"] = max(self.stats["velocity_drift_before_projection"], v)
             if d > limit or v > limit:

@@ -76,15 +76,28 @@ class ConstrainedSystem:
     row_scale: np.ndarray | None = None     # fixed constraint-row scaling (see fix_row_scale)
     route: str = "sx"                       # 'sx' symbolic KKT solve | 'mx' numeric QR per call
 
+    fast: dict = field(default_factory=dict)   # buffer-call wrappers of fn entries (codegen.FastFunction)
+
     # -- construction -------------------------------------------------------------------
     @staticmethod
     def build(eom: EOM, p: np.ndarray | None = None, active: tuple[int, ...] | None = None) -> "ConstrainedSystem":
-        ca = _sx()
+        """The system for these parameter values.  The symbolic pieces and Functions do not
+        depend on p (it is an input): they are built once per (EOM, active set) and shared."""
         if eom.g is None:
             raise ValueError("ConstrainedSystem needs an EOM with constraints (eom.g)")
         pv = eom.param_values if p is None else np.asarray(p, float)
-        m_all = eom.m
-        active = tuple(range(m_all)) if active is None else tuple(active)
+        active = tuple(range(eom.m)) if active is None else tuple(active)
+        cache = eom.__dict__.setdefault("_constrained_systems", {})
+        key = (active, eom.n + len(active) <= SX_KKT_MAX)     # the active set and the linear-algebra route
+        if key not in cache:
+            cache[key] = ConstrainedSystem._build(eom, pv, active)
+        base = cache[key]
+        return ConstrainedSystem(eom=eom, p=pv, active=active, sym=base.sym, fn=base.fn, route=base.route,
+                                 fast=base.fast)
+
+    @staticmethod
+    def _build(eom: EOM, pv: np.ndarray, active: tuple[int, ...]) -> "ConstrainedSystem":
+        ca = _sx()
         q, qd, t, pp = eom.q, eom.qd, eom.t, eom.p
         g_all = eom.g
         g = g_all[list(active)] if active else ca.SX.zeros(0, 1)
@@ -170,19 +183,37 @@ class ConstrainedSystem:
 
     def drift(self, q, qd, t) -> tuple[float, float]:
         """(||g||_inf, ||G q' + g_t||_inf) over *all* constraints (dropped redundant ones too)."""
-        g, gd = self.fn["drift_all"](q, qd, t, self.p)
-        g = np.array(g, float).ravel()
-        gd = np.array(gd, float).ravel()
+        g, gd = self._call_fast("drift_all", q, qd, t, self.p)
+        g = np.ravel(g)
+        gd = np.ravel(gd)
         return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0)
+
+    def shared(self, key, build):
+        """An object built once per (EOM, active set) and kept for later runs (e.g. the CasADi
+        integrators of a formulation, which cost ~0.5 ms each to build)."""
+        obj = self.fast.get(("shared", key))
+        if obj is None:
+            obj = self.fast[("shared", key)] = build()
+        return obj
+
+    def _call_fast(self, name: str, *args):
+        """Evaluate fn[name] through Function.buffer (the driver calls these at every check)."""
+        f = self.fast.get(name)
+        if f is None:
+            from ..codegen import FastFunction
+
+            f = self.fast[name] = FastFunction(self.fn[name])
+        out = f(*args)
+        return out if isinstance(out, tuple) else (out,)
 
     def monitor(self, q, qd, t) -> tuple[float, float, np.ndarray]:
         """One evaluation for the driver's checks: (||g||_inf, ||G q' + g_t||_inf) over all
         constraints, and the scaled Jacobian of the active ones (as :meth:`scaled_G`)."""
-        g, gd, G, dM = self.fn["monitor"](q, qd, t, self.p)
-        g = np.array(g, float).ravel()
-        gd = np.array(gd, float).ravel()
-        G = np.array(G, float).reshape(self.m, self.n)
-        d = 1.0 / np.sqrt(np.maximum(np.abs(np.array(dM, float).ravel()), 1e-300))
+        g, gd, G, dM = self._call_fast("monitor", q, qd, t, self.p)
+        g = np.ravel(g)
+        gd = np.ravel(gd)
+        G = np.asarray(G, float).reshape(self.m, self.n)
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.ravel(dM)), 1e-300))
         GD = G * d[None, :]
         if self.row_scale is None:
             norms = np.linalg.norm(GD, axis=1)
@@ -190,6 +221,48 @@ class ConstrainedSystem:
         else:
             Gs = GD * self.row_scale[:, None]
         return (float(np.max(np.abs(g))) if g.size else 0.0, float(np.max(np.abs(gd))) if gd.size else 0.0, Gs)
+
+    def _mapped(self, name: str, K: int):
+        key = f"{name}_map_{K}"
+        f = self.fast.get(key)
+        if f is None:
+            from ..codegen import FastFunction
+
+            f = self.fast[key] = FastFunction(self.fn[name].map(K))
+        return f
+
+    def drift_many(self, Q: np.ndarray, QD: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`drift` at K states (columns of Q, QD) in one mapped call: arrays (K,), (K,)."""
+        K = len(T)
+        P = np.repeat(np.asarray(self.p, float).reshape(-1, 1), K, axis=1)
+        g, gd = self._mapped("drift_all", K)(np.asarray(Q, float), np.asarray(QD, float),
+                                              np.asarray(T, float).reshape(1, K), P)
+        g = np.asarray(g, float).reshape(-1, K)
+        gd = np.asarray(gd, float).reshape(-1, K)
+        return (np.max(np.abs(g), axis=0) if g.size else np.zeros(K),
+                np.max(np.abs(gd), axis=0) if gd.size else np.zeros(K))
+
+    def monitor_many(self, Q: np.ndarray, QD: np.ndarray, T: np.ndarray):
+        """:meth:`monitor` at K states at once (one mapped CasADi call): arrays d (K,), v (K,)
+        and the scaled Jacobians (K, m, n)."""
+        K = len(T)
+        f = self._mapped("monitor", K)
+        P = np.repeat(np.asarray(self.p, float).reshape(-1, 1), K, axis=1)
+        g, gd, G, dM = f(np.asarray(Q, float).T, np.asarray(QD, float).T, np.asarray(T, float).reshape(1, K), P)
+        g = np.asarray(g, float).reshape(-1, K)
+        gd = np.asarray(gd, float).reshape(-1, K)
+        d_ = np.max(np.abs(g), axis=0) if g.size else np.zeros(K)
+        v_ = np.max(np.abs(gd), axis=0) if gd.size else np.zeros(K)
+        m, n = self.m, self.n
+        Gk = np.asarray(G, float).reshape(m, n, K, order="F").transpose(2, 0, 1) if m else np.zeros((K, 0, n))
+        dinv = 1.0 / np.sqrt(np.maximum(np.abs(np.asarray(dM, float).reshape(n, K)), 1e-300))   # (n, K)
+        GD = Gk * dinv.T[:, None, :]
+        if self.row_scale is None:
+            norms = np.linalg.norm(GD, axis=2)
+            Gs = GD / np.where(norms > 0, norms, 1.0)[:, :, None]
+        else:
+            Gs = GD * self.row_scale[None, :, None]
+        return d_, v_, Gs
 
     def fix_row_scale(self, q, t) -> None:
         """Freeze the constraint-row scaling at (q, t) (normally the start).
