@@ -41,7 +41,7 @@ from .system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
 SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
-MONITOR_POINTS = 201       # least number of checks (of drift and conditioning) per run
+MONITOR_POINTS = 61       # least number of checks (of drift and conditioning) per run
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
 CHUNK = 64                 # most output intervals per integrator call (one integrator is built
                            # per segment length and kept with the system, so reruns reuse it)
