@@ -6,6 +6,7 @@ Syntax errors are turned into labelled diagnostics (E1xx); nothing from lark rea
 from __future__ import annotations
 
 import os
+import re
 from functools import lru_cache
 from pathlib import Path
 
@@ -118,10 +119,7 @@ def parse(text: str, filename: str = "<input>") -> ast.File:
         raise MechError(Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
                                    "a file holds one or more `model Name ... end Name;` (and scenes)"))
     _check_nesting(text, filename)
-    try:
-        tree = _lark().parse(text)
-    except UnexpectedInput as e:
-        raise MechError(_syntax_diagnostic(e, text, filename)) from None
+    tree = _parse_recovering(text, filename)
     builder = _Builder(filename)
     try:
         result = builder.transform(tree)
@@ -133,6 +131,78 @@ def parse(text: str, filename: str = "<input>") -> ast.File:
         raise MechError(builder.problems)
     _check_depth(result)
     return result
+
+
+# ----------------------------------------------------------------------------- error recovery
+MAX_SYNTAX_ERRORS = 20
+_STRUCTURE = re.compile(r"\b(model|scene|end|equation|loop)\b")
+_HEADER = re.compile(r"\b(?:(?:model|scene)\s+[A-Za-z_]\w*|equation|loop)\b")  # on code, docs blanked
+
+
+def _parse_recovering(text: str, filename: str):
+    """Parse; on a syntax error blank the broken statement and parse again to find more errors.
+
+    Recovery is deliberately conservative so that no follow-on error is ever invented: the blanked
+    region runs from the end of the previous statement (a ';' or a header such as `model A`,
+    `equation`, `... loop`) to the next ';', and it may not contain a structural keyword (model,
+    scene, end, equation, loop). An error on the first token after the blanked region is taken
+    for a consequence of the blanking and not reported. Lexical errors that swallow the rest of
+    the file (unterminated string or comment) and the end of the file stop the search.
+    """
+    diagnostics: list[Diagnostic] = []
+    masked = text
+    skip_to = -1  # an error exactly here is a consequence of the previous blanking
+    while True:
+        try:
+            tree = _lark().parse(masked)
+        except UnexpectedInput as e:
+            pos = _error_offset(e)
+            if diagnostics and pos == skip_to:
+                break
+            d = _syntax_diagnostic(e, masked, filename)
+            diagnostics.append(d)
+            if pos is None or d.code in ("E103", "E108", "E109") or len(diagnostics) >= MAX_SYNTAX_ERRORS:
+                break
+            region = _recovery_region(masked, pos)
+            if region is None:
+                break
+            a, b = region
+            masked = masked[:a] + re.sub(r"[^\r\n]", " ", masked[a:b]) + masked[b:]
+            code = _code_only(masked)
+            m = re.compile(r"\S").search(code, b)
+            skip_to = m.start() if m else -1
+            continue
+        if diagnostics:
+            raise MechError(diagnostics)
+        return tree
+    raise MechError(diagnostics)
+
+
+def _error_offset(e: UnexpectedInput) -> int | None:
+    if isinstance(e, UnexpectedCharacters):
+        return e.pos_in_stream
+    tok = getattr(e, "token", None)
+    if tok is None or tok.type == "$END" or tok.start_pos is None:
+        return None
+    return tok.start_pos
+
+
+def _code_only(text: str) -> str:
+    """`text` with strings and comments replaced by spaces (offsets and newlines kept)."""
+    def blank(m: re.Match) -> str:
+        return re.sub(r"[^\r\n]", " ", m.group(0))
+    return re.sub(r'"(?:[^"\\\n]|\\.)*"|//[^\n]*|/\*.*?\*/', blank, text, flags=re.S)
+
+
+def _recovery_region(text: str, pos: int) -> tuple[int, int] | None:
+    code = _code_only(text)
+    start = code.rfind(";", 0, pos) + 1
+    for m in _HEADER.finditer(code, start, pos):
+        start = m.end()
+    end = code.find(";", pos)
+    if end < 0 or _STRUCTURE.search(code, start, end + 1):
+        return None
+    return start, end + 1
 
 
 def _check_depth(root: ast.Node) -> None:
