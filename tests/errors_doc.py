@@ -223,6 +223,15 @@ ENTRIES = [
                                       "coordinate or an expression; the loop itself fixes that variable.",
           "Leave the loop-closing joint's variables unset, or close the loop at another joint.",
           corpus="E507_loop_joint_bound.mech"),
+    Entry("E508", "negative mass", "A body whose mass evaluates to a negative number with the parameter values "
+                                   "in force (also after `--set` or `with_params`). The equations of motion "
+                                   "would run on a negative kinetic energy without failing.",
+          "Fix the sign of `m` or of the parameters it uses.", corpus="E508_negative_mass.mech"),
+    Entry("E509", "impossible inertia tensor", "An inertia tensor no rigid body can have: not symmetric, a "
+                                               "negative principal moment, or principal moments that break "
+                                               "the triangle inequality I1 + I2 >= I3.",
+          "Check the values and signs; each principal moment is at most the sum of the other two.",
+          corpus="E509_inertia_triangle_inequality.mech"),
     # ------------------------------------------------------------------ E6xx
     Entry("E601", "unknown scene setting", "A setting that scenes do not have.",
           "Fix the spelling; the hint suggests the setting.", corpus="E601_unknown_setting.mech"),

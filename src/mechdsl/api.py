@@ -166,6 +166,11 @@ class Model:
             env[p.name] = p.value
             params.append(p)
         model = dataclasses.replace(self.model, parameters=tuple(params))
+        from .semantic.physical import mass_property_problems
+
+        problems = mass_property_problems(model)
+        if problems:
+            raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None
         new = Model(self.program, model, scene, self._overrides, self._target)
         return new
