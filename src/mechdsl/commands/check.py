@@ -34,8 +34,14 @@ def run(args) -> int:
             elif args.model:
                 targets = [("model", args.model)]
             else:
-                targets = [("model", n) for n in program.model_names()] + [("scene", n) for n in program.scene_names()]
+                # a model used as a part of others is checked inside them (alone it may be
+                # incomplete, like a Modelica partial model: a link without its joint)
+                parts = program.part_users()
+                targets = [("model", n) for n in program.model_names() if n not in parts]
+                targets += [("scene", n) for n in program.scene_names()]
             lines = []
+            if not (args.scene or args.model):
+                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
                 for w in m.warnings:

@@ -49,6 +49,17 @@ class Program:
     def model_names(self) -> list[str]:
         return list(self._models)
 
+    def part_users(self) -> dict[str, list[str]]:
+        """Models used as component types inside other models: {part: [models that contain it]}."""
+        out: dict[str, list[str]] = {}
+        for m in self._models.values():
+            for el in m.elements:
+                if isinstance(el, ast.Declaration) and el.type_name in self._models and el.type_name != m.name:
+                    users = out.setdefault(el.type_name, [])
+                    if m.name not in users:
+                        users.append(m.name)
+        return out
+
     def scene_names(self) -> list[str]:
         return list(self._scenes)
 

@@ -17,6 +17,7 @@ from .. import units as U
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
 from ..printer import expr as print_expr
 from . import components as K
+from . import instances as Inst
 from . import mods as Mods
 from . import values as V
 from .evaluate import BUILTIN_NAMES, EvalError, Evaluator, fail
@@ -83,17 +84,24 @@ class Flattener(Evaluator):
         self.terms: list[ir.Term] = []
         self.gen_forces: list[ir.GeneralizedForce] = []
         self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
+        self.instances: dict[str, ast.Declaration] = {}   # model instances, by (prefixed) name
         self._collect(model, outer or {}, [])
         self._check_modified_names(outer or {}, model.name)
 
     # ================================================================== declarations
-    def _collect(self, m: ast.ModelDef, outer: dict[str, Mod], chain: list[str]) -> None:
+    def _collect(self, m: ast.ModelDef, outer: dict[str, Mod], chain: list[str], prefix: str = "",
+                 names: set[str] | None = None) -> None:
+        """Register m's declarations and equations; `prefix` (e.g. 's.') when m is an instance `s`,
+        `names`: the instance's own names, renamed with the prefix (m's, or a derived model's)."""
         if m.name in chain:
-            self.diags.error("E207", f"model '{m.name}' extends itself (through {' -> '.join(chain)})", m.name_span,
-                             "remove one of the extends clauses in the cycle")
+            what = "extends or contains" if prefix else "extends"
+            self.diags.error("E207", f"model '{m.name}' {what} itself (through {' -> '.join(chain + [m.name])})",
+                             m.name_span, "remove one of the extends clauses or instances in the cycle")
             return
         chain = chain + [m.name]
-        own_names = {e.name for e in m.elements if isinstance(e, ast.Declaration)}
+        if prefix and names is None:
+            names = Inst.declared_names(self.program, m)
+        own_names = {prefix + e.name for e in m.elements if isinstance(e, ast.Declaration)}
         for el in m.elements:
             if isinstance(el, ast.Extends):
                 base = self.program.model_def(el.name)
@@ -102,24 +110,60 @@ class Flattener(Evaluator):
                                      did_you_mean(el.name, self.program.model_names())
                                      or f"models in this file: {', '.join(self.program.model_names())}")
                     continue
-                ext = Mods.from_ast(el.modification, self.diags)
+                ext = Mods.from_ast(Inst.rename(el.modification, names or set(), prefix), self.diags)
+                ext = {prefix + k: v for k, v in ext.items()}
                 # modifications for inherited names: extends-clause, then ours (outer) on top
                 passed = Mods.merge_dicts(ext, {k: v for k, v in outer.items() if k not in own_names})
-                self._collect(base, passed, chain)
-                self._check_modified_names(ext, base.name)
+                self._collect(base, passed, chain, prefix, names)
+                self._check_modified_names(ext, base.name, prefix)
         for el in m.elements:
             if isinstance(el, ast.Declaration):
-                self._declare(el, outer)
-        self.equations.extend(m.equations)
+                d = Inst.rename(el, names or set(), prefix)
+                if self.program.model_def(d.type_name) is not None and d.type_name not in K.CLASSES:
+                    self._instance(d, outer, chain)
+                else:
+                    self._declare(d, outer)
+        self.equations.extend(Inst.rename(m.equations, names or set(), prefix))
 
-    def _check_modified_names(self, mods: dict[str, Mod], model_name: str) -> None:
+    def _instance(self, d: ast.Declaration, outer: dict[str, Mod], chain: list[str]) -> None:
+        """`Sub s(mods);`: Sub's declarations and equations are added as s.x, with mods on top."""
+        sub = self.program.model_def(d.type_name)
+        problem = None
+        if d.prefix is not None:
+            problem = ("E215", f"'{d.prefix}' cannot be applied to a model instance", d.span, f"remove '{d.prefix}'")
+        elif d.dims:
+            problem = ("E203", f"arrays of model instances ('{d.type_name} {d.name}[...]') are not supported",
+                       d.dims[0].span, "declare the instances one by one, or use arrays of components "
+                                       "(bodies, joints, forces) with a `for` loop")
+        elif d.value is not None:
+            problem = ("E214", f"a model instance takes modifiers, not a value", d.value.span,
+                       f"write {d.type_name} {d.name}(parameter = ...)")
+        elif d.name in self.entries or d.name in self.instances:
+            problem = ("E202", f"'{d.name}' is declared twice", d.name_span, "rename one of them")
+        if problem:
+            self.diags.error(*problem)
+            return
+        self.instances[d.name] = d
+        mod = Mods.merge(Mod(sub=Mods.from_ast(d.modification, self.diags), span=d.span, name_span=d.name_span),
+                         outer.get(d.name))
+        inner = {f"{d.name}.{k}": v for k, v in mod.sub.items()}
+        self._collect(sub, inner, chain, d.name + ".")  # type: ignore[arg-type]
+        self._check_modified_names(inner, sub.name, d.name + ".")  # type: ignore[union-attr]
+
+    def _check_modified_names(self, mods: dict[str, Mod], model_name: str, prefix: str = "") -> None:
         """A modification (scene, extends, API override) must name a declaration of the model."""
         for k, m in mods.items():
-            if k not in self.entries:
-                self.diags.error("E204", f"model '{model_name}' has no declaration '{k}' to modify", m.name_span,
-                                 did_you_mean(k, self.entries) or "modify its parameters and start values")
+            if k not in self.entries and k not in self.instances:
+                local = k[len(prefix):] if k.startswith(prefix) else k
+                own = [n[len(prefix):] for n in self.entries if n.startswith(prefix)]
+                self.diags.error("E204", f"model '{model_name}' has no declaration '{local}' to modify", m.name_span,
+                                 did_you_mean(local, own) or "modify its parameters and start values")
 
     def _declare(self, d: ast.Declaration, outer: dict[str, Mod]) -> None:
+        if d.name in self.instances:
+            self.diags.error("E202", f"'{d.name}' is declared twice (first at line "
+                                     f"{self.instances[d.name].name_span.line})", d.name_span, "rename one of them")
+            return
         if d.name in self.entries:
             prev = self.entries[d.name].decl
             self.diags.error("E202", f"'{d.name}' is declared twice (first at line {prev.name_span.line})",
@@ -145,13 +189,10 @@ class Flattener(Evaluator):
         else:
             cls = K.CLASSES.get(d.type_name)
             if cls is None:
-                if self.program.model_def(d.type_name) is not None:
-                    self.diags.error("E203", f"model '{d.type_name}' cannot be used as a component type", d.span,
-                                     f"reuse it with `extends {d.type_name};`")
-                else:
-                    self.diags.error("E203", f"unknown type '{d.type_name}'", d.span,
-                                     did_you_mean(d.type_name, list(K.CLASSES) + sorted(SCALAR_TYPES))
-                                     or "built-in types: " + ", ".join(sorted(K.CLASSES)))
+                types = list(K.CLASSES) + sorted(SCALAR_TYPES) + self.program.model_names()
+                self.diags.error("E203", f"unknown type '{d.type_name}'", d.span,
+                                 did_you_mean(d.type_name, types)
+                                 or "built-in types: " + ", ".join(sorted(K.CLASSES)))
                 return
             if d.prefix is not None:
                 self.diags.error("E215", f"'{d.prefix}' applies to Real, Integer and Boolean declarations, "
@@ -196,9 +237,35 @@ class Flattener(Evaluator):
             return Scalar(ir.Const(math.pi), ANY)
         if name == "world":
             return CompRef("world", "world", "World")
+        if name in self.instances:
+            fail("E201", f"'{name}' is a model instance ({self.instances[name].type_name}), not a value", span,
+                 f"refer to one of its declarations, e.g. {name}.{next(iter(self._own(name)), 'x')}")
         fail("E201", f"undefined name '{name}'", span,
              did_you_mean(name, self.known_names()) or f"declare it, e.g. `parameter Real {name} = ...;`")
         raise AssertionError
+
+    def eval_ref(self, r: ast.Ref) -> Val:
+        """`s.x.y` where `s` is a model instance: the longest declared name `s.x` first, then fields."""
+        if len(r.parts) > 1 and r.parts[0].name in self.instances and not r.parts[0].subscripts:
+            names = [p.name for p in r.parts]
+            for k in range(len(r.parts), 1, -1):
+                joined = ".".join(names[:k])
+                if joined in self.entries and all(not p.subscripts for p in r.parts[:k - 1]):
+                    last = r.parts[k - 1]
+                    val = self.index(self.lookup(joined, last.span), last.subscripts, last.span, joined)
+                    for part in r.parts[k:]:
+                        val = self.attribute(val, part.name, part.span)
+                        val = self.index(val, part.subscripts, part.span, part.name)
+                    return val
+            head = next((k for k in range(len(names) - 1, 0, -1) if ".".join(names[:k]) in self.instances), 1)
+            inst, rest = ".".join(names[:head]), names[head]
+            own = self._own(inst)
+            fail("E201", f"model instance '{inst}' has no declaration '{rest}'", r.parts[head].span,
+                 did_you_mean(rest, own) or f"declarations of {inst}: {', '.join(own[:8])}")
+        return super().eval_ref(r)
+
+    def _own(self, inst: str) -> list[str]:
+        return [n[len(inst) + 1:] for n in self.entries if n.startswith(inst + ".")]
 
     def value_of(self, entry: Entry, span: Span | None = None) -> Val:
         if entry.state == 2:
