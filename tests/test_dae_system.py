@@ -101,20 +101,44 @@ def test_idas_refuses_the_raw_index3_form():
     assert index == 2
 
 
-def test_both_linear_algebra_routes_agree(monkeypatch):
-    """n + m up to SX_KKT_MAX: symbolic solve; above: numeric QR per call (MX)."""
+def test_the_linear_algebra_routes_agree(monkeypatch):
+    """n + m up to SX_KKT_MAX: symbolic solve; above: Cholesky + Schur complement in SX when M is
+    positive definite, else numeric QR per call (MX). All three agree with a pivoted dense solve."""
     import mechdsl.dae.system as S
 
     e = andrews_eom()
     q0, _ = e.start()
     rng = np.random.default_rng(7)
-    states = [(q0 + 0.3 * rng.normal(size=7), 30 * rng.normal(size=7)) for _ in range(3)]
+    states = [(q0 + 0.3 * rng.normal(size=7), 30 * rng.normal(size=7)) for _ in range(5)]
     out = {}
-    for limit in (100, 0):
+    for limit, schur in ((100, 60), (0, 60), (0, 0)):
         monkeypatch.setattr(S, "SX_KKT_MAX", limit)
+        monkeypatch.setattr(S, "SCHUR_MAX_N", schur)
         s = ConstrainedSystem.build(e)
         out[s.route] = [s.accel(q, qd, 0.0, 3.0, 5.0) for q, qd in states]
-    assert set(out) == {"sx", "mx"}
-    for (a1, l1), (a2, l2) in zip(out["sx"], out["mx"]):
-        assert np.linalg.norm(a1 - a2) <= 1e-11 * np.linalg.norm(a1)
-        assert np.linalg.norm(l1 - l2) <= 1e-11 * np.linalg.norm(l1)
+    assert set(out) == {"sx", "schur", "mx"}
+    s = ConstrainedSystem.build(e)
+    gamma_f = ca.Function("gam", [e.q, e.qd, e.t, e.p, s.sym["alpha"], s.sym["beta"]],
+                          [s.sym["gamma"] - 2 * s.sym["alpha"] * s.sym["gdot"] - s.sym["beta"] ** 2 * s.sym["g"]])
+    bias_f = ca.Function("b", [e.q, e.qd, e.t, e.p], [e.bias])
+    for k, (q, qd) in enumerate(states):
+        M, G = s.M(q, 0.0), s.G(q, 0.0)
+        K = np.block([[M, G.T], [G, np.zeros((6, 6))]])
+        rhs = np.concatenate([np.array(bias_f(q, qd, 0.0, e.param_values)).ravel(),
+                              np.array(gamma_f(q, qd, 0.0, e.param_values, 3.0, 5.0)).ravel()])
+        x = np.linalg.solve(K, rhs)          # LAPACK, partial pivoting: the independent route
+        for route in out:
+            a, lam = out[route][k]
+            assert np.linalg.norm(a - x[:7]) <= 1e-10 * np.linalg.norm(x[:7]), route
+            assert np.linalg.norm(lam - x[7:]) <= 1e-10 * np.linalg.norm(x[7:]), route
+
+
+def test_schur_route_is_not_used_with_a_singular_mass_matrix(monkeypatch):
+    """A coordinate without mass (M singular, the KKT matrix still regular) needs the QR route."""
+    import mechdsl.dae.system as S
+
+    e = andrews_eom()
+    zero_mass = e.replace(M=e.M * ca.diag(ca.DM([0, 1, 1, 1, 1, 1, 1])))
+    monkeypatch.setattr(S, "SX_KKT_MAX", 0)
+    assert S._kkt_route(zero_mass, zero_mass.param_values, 6) == "mx"
+    assert S._kkt_route(e, e.param_values, 6) == "schur"

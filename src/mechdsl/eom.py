@@ -72,11 +72,19 @@ class EOM:
         import copy
 
         new = copy.copy(self)
+        new.__dict__.pop("_fn_cache", None)      # Functions of the old fields
         for k, v in changes.items():
             if k not in self.__dataclass_fields__:
                 raise TypeError(f"EOM has no field {k!r}")
             setattr(new, k, v)
         return new
+
+    def cached(self, key, build):
+        """A value built once per EOM (Functions of its fields); ``replace`` starts afresh."""
+        cache = self.__dict__.setdefault("_fn_cache", {})
+        if key not in cache:
+            cache[key] = build()
+        return cache[key]
 
     @property
     def m(self) -> int:
@@ -91,7 +99,7 @@ class EOM:
         import casadi as ca
 
         pv = self.param_values if p is None else np.asarray(p, float)
-        f = ca.Function("start", [self.p], [self.q0, self.qd0])
+        f = self.cached("start", lambda: ca.Function("start", [self.p], [self.q0, self.qd0]))
         a, b = f(pv)
         return np.array(a, float).ravel(), np.array(b, float).ravel()
 

@@ -56,9 +56,21 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     if method not in _no_jacobian():
         funcs["ode_jacobian"] = ca.Function("ode_jacobian", [t, x, pp], [ca.jacobian(xdot, x)], ["t", "x", "p"],
                                             ["jac"])
+    compiled_note = None
+    if kw.pop("compiled", False):
+        # the same native code as the DAE layer's compiled runs, so that a chart compares methods
+        from ..codegen import compile_functions
+
+        native, compiled_note, _lib = compile_functions(list(funcs.values()), tag="index1", jacobian=False)
+        if native and all(native.get(k) is not None for k in funcs):
+            funcs = {k: native[k] for k in funcs}
+            compiled_note = None
     free = eom.replace(g=None)
     free.__dict__["_integral_function"] = {"f": None}   # the free system's symmetries are not the model's
     r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
+    r.metadata["compiled"] = compiled_note is None and funcs["ode"] is not ode
+    if compiled_note:
+        r.metadata.setdefault("notes", []).append(compiled_note)
     if len(r.t):
         g = ca.Function("g", [eom.t, eom.q, eom.p], [eom.g])
         G = np.array(g.map(len(r.t))(r.t.reshape(1, -1), r.q.T, pv.reshape(-1, 1)), float)

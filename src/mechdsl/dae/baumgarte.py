@@ -60,10 +60,12 @@ class BaumgarteStepper(Stepper):
         self.span = span
         plugin = ode_plugin(opts)
         iopts = integrator_options(opts, plugin)
-        key = ("index1", plugin, tuple(sorted(iopts.items())))
+        key = ("index1", plugin, tuple(sorted(iopts.items())), bool(opts.compiled))
         self.F = system.shared(key, lambda: GridIntegrators("index1", plugin, scaled_dae(index1_dae(system)),
-                                                            iopts, {}))
+                                                            iopts, {}, compiled=opts.compiled))
         self.F.stats = self.stats
+        if self.F.note:
+            self.notes.append(self.F.note)
         self.user_rates = _user_rates(opts.baumgarte)
         self.rates = (0.0, 0.0)
 

@@ -111,9 +111,10 @@ def dof_report(eom: EOM, q=None, t: float = 0.0, p=None, tol: float = RANK_TOL) 
     q = np.asarray(q, float)
     if m == 0:
         return DofReport(coordinates=n, constraints=0, rank=0, dof=n, redundant=0, t=t)
-    G = np.array(ca.Function("G", [eom.q, eom.t, eom.p], [ca.jacobian(eom.g, eom.q)])(q, t, pv),
-                 float).reshape(m, n)
-    M = np.array(ca.Function("M", [eom.q, eom.t, eom.p], [eom.M])(q, t, pv), float).reshape(n, n)
+    f = eom.cached("dof_GM", lambda: ca.Function("GM", [eom.q, eom.t, eom.p], [ca.jacobian(eom.g, eom.q), eom.M]))
+    Gv, Mv = f(q, t, pv)
+    G = np.array(Gv, float).reshape(m, n)
+    M = np.array(Mv, float).reshape(n, n)
     Gs = scale_jacobian(G, M)
     rank, s = numeric_rank(Gs, tol)
     keep = independent_rows(Gs, rank)

@@ -298,7 +298,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 "method": _method_name(opts), "method_reason": method_reason, "rtol": opts.rtol, "atol": opts.atol, "points": points,
                 "t_start": t0, "t_end": t_end, "initialization": init.as_dict(), "dof": dof.as_dict(),
                 "constraints": list(eom.constraint_names), "active_constraints": list(system.names),
-                "notes": notes + stepper.notes}
+                "notes": notes + stepper.notes,
+                "compiled": bool(getattr(getattr(stepper, "F", None), "compiled", False)),
+                "kkt_route": system.route}
+    if opts.compiled and not metadata["compiled"] and not any("compiled" in n for n in metadata["notes"]):
+        metadata["notes"].append(f"compiled code is not available for formulation {opts.formulation!r}; "
+                                 "it runs in the virtual machine")
     if extra:
         metadata["notes"].append("options without effect on a constrained model: " + ", ".join(sorted(extra)))
     metadata["options"] = {"t_start": t0, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol, "points": points,

@@ -68,6 +68,10 @@ class InitReport:
 
 
 def _functions(eom: EOM):
+    return eom.cached("init_functions", lambda: _build_functions(eom))
+
+
+def _build_functions(eom: EOM):
     import casadi as ca
 
     G = ca.jacobian(eom.g, eom.q)

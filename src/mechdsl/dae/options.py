@@ -19,7 +19,7 @@ ODE_METHODS = {"auto": "auto", "bdf": "bdf", "cvodes": "bdf", "cvodes-bdf": "bdf
 DAE_METHODS = {"auto": "idas", "idas": "idas"}
 
 # options of the ODE simulator that have no meaning here (reported in the metadata notes)
-_IGNORED = ("compiled", "dt", "integrator_options", "singularity_threshold", "functions", "name", "scene",
+_IGNORED = ("dt", "integrator_options", "singularity_threshold", "functions", "name", "scene",
             "verbose")
 
 
@@ -43,6 +43,7 @@ class DaeOptions:
     drift_bound: float | None = None     # default max(10 atol, 1e-10)
     repartition_cond: float = 10.0       # partitioning: re-partition when cond(G_v) grows by this factor
     force_index: bool = False            # skip the index guard (benchmarks only)
+    compiled: bool = False               # ODE formulations: the integrated right-hand side as C (gcc)
 
     @property
     def bound(self) -> float:

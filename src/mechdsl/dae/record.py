@@ -98,16 +98,20 @@ def evaluate_signals(eom, chosen: dict, t, Q, QD, LAM, p) -> dict[str, np.ndarra
 
     if not chosen:
         return {}
-    lam = lam_symbol(eom)
-    names, exprs = [], []
-    for k, v in chosen.items():
-        v = ca.SX(v)
-        if v.numel() == 1:
-            names.append(k)
-        else:
-            names += [f"{k}[{i + 1}]" for i in range(v.numel())]
-        exprs.append(ca.vec(v))
-    F = ca.Function("signals", [eom.q, eom.qd, eom.t, eom.p, lam], [ca.vertcat(*exprs)])
+    def build():
+        lam = lam_symbol(eom)
+        names, exprs = [], []
+        for k, v in chosen.items():
+            v = ca.SX(v)
+            if v.numel() == 1:
+                names.append(k)
+            else:
+                names += [f"{k}[{i + 1}]" for i in range(v.numel())]
+            exprs.append(ca.vec(v))
+        return names, ca.Function("signals", [eom.q, eom.qd, eom.t, eom.p, lam], [ca.vertcat(*exprs)])
+
+    # the signals of a name are the same expressions on every run of this EOM
+    names, F = eom.cached(("signals", tuple(chosen)), build)
     N = len(t)
     if N == 0:
         return {k: np.zeros(0) for k in names}
@@ -119,6 +123,10 @@ def evaluate_signals(eom, chosen: dict, t, Q, QD, LAM, p) -> dict[str, np.ndarra
 
 def standard_signals(eom) -> dict[str, object]:
     """Energies and constraint residuals, recorded in every run."""
+    return dict(eom.cached("standard_signals", lambda: _standard_signals(eom)))
+
+
+def _standard_signals(eom) -> dict[str, object]:
     import casadi as ca
 
     out = {"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V}

@@ -122,10 +122,37 @@ def call_integrator(F, **args):
 class GridIntegrators:
     """CasADi integrators of one DAE on s in [0, 1] with K equal output steps, built on demand."""
 
-    def __init__(self, name: str, plugin: str, dae: dict, opts: dict, stats: dict | None = None):
+    def __init__(self, name: str, plugin: str, dae: dict, opts: dict, stats: dict | None = None,
+                 compiled: bool = False):
         self.name, self.plugin, self.dae, self.opts = name, plugin, dae, opts
         self.stats = stats if stats is not None else {}
         self._cache: dict[int, object] = {}
+        self.compiled = False              # True once the right-hand side runs as native code
+        self.note: str | None = None       # why compiled code is not used, when it was asked for
+        self._problem = self.dae
+        if compiled:
+            self._compile()
+
+    def _compile(self) -> None:
+        """The ODE right-hand side as C, compiled and loaded (cached by the code's hash, like
+        mechdsl.codegen for the tree models); the virtual machine when that is not possible."""
+        import casadi as ca
+
+        from ..codegen import compile_functions
+        from ..integrators import dae_function
+
+        d = self.dae
+        if "z" in d and d["z"].numel():
+            self.note = "compiled code is used for the ODE formulations only; this one runs in the virtual machine"
+            return
+        with build_timer(self.stats):
+            f = ca.Function("ode", [d["t"], d["x"], d["p"]], [d["ode"]], ["t", "x", "p"], ["xdot"])
+            funcs, note, _lib = compile_functions([f], tag=self.name, jacobian=self.plugin != "erk")
+        if not funcs or funcs.get("ode") is None:
+            self.note = note or "compiled code unavailable"
+            return
+        self._problem = dae_function(funcs["ode"])
+        self.compiled = True
 
     def get(self, K: int):
         if K not in self._cache:
@@ -133,7 +160,8 @@ class GridIntegrators:
 
             with build_timer(self.stats):
                 grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
-                self._cache[K] = ca.integrator(f"{self.name}_{K}", self.plugin, self.dae, 0.0, grid, self.opts)
+                self._cache[K] = ca.integrator(f"{self.name}_{K}", self.plugin, self._problem, 0.0, grid,
+                                               self.opts)
         return self._cache[K]
 
 

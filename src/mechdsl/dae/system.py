@@ -37,6 +37,78 @@ def _sx():
 
 
 SX_KKT_MAX = 12   # up to this n + m the augmented system is solved symbolically (SX), above numerically
+SCHUR_MAX_N = 60  # above SX_KKT_MAX: Cholesky + Schur complement in SX up to this n, when M is positive definite
+SCHUR_MIN_RCOND = 1e-8   # least lambda_min/lambda_max of the equilibrated M at the start for the Schur route
+
+
+def _cholesky(A: list[list]) -> list[list]:
+    """Lower L with A = L L^T, in SX scalars (A symmetric positive definite: no pivoting needed)."""
+    ca = _sx()
+    n = len(A)
+    L = [[None] * n for _ in range(n)]
+    for j in range(n):
+        s = A[j][j] - sum((L[j][k] * L[j][k] for k in range(j)), ca.SX(0))
+        L[j][j] = ca.sqrt(s)
+        for i in range(j + 1, n):
+            L[i][j] = (A[i][j] - sum((L[i][k] * L[j][k] for k in range(j)), ca.SX(0))) / L[j][j]
+    return L
+
+
+def _forward(L, b: list) -> list:
+    ca = _sx()
+    y = []
+    for i in range(len(b)):
+        y.append((b[i] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))) / L[i][i])
+    return y
+
+
+def _backward(L, b: list) -> list:
+    ca = _sx()
+    n = len(b)
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = (b[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), ca.SX(0))) / L[i][i]
+    return x
+
+
+def schur_kkt_solve(M, G, rhs_q, rhs_c):
+    """The equilibrated augmented system solved by its Schur complement, in SX:
+    Ms = L L^T (Cholesky), Y = L^-1 Gs^T, (Y^T Y) mu = Y^T L^-1 bq - bc, y = L^-T (L^-1 bq - Y mu).
+    Cost ~ n^3/6 + n^2 m + m^3/6 operations, no pivoting: both factors are of positive definite
+    matrices (the equilibrated mass matrix; the Schur complement with independent constraints)."""
+    ca = _sx()
+    n, m = M.shape[0], G.shape[0]
+    K, b, d, s = equilibrated_kkt(M, G, rhs_q, rhs_c)
+    A = [[K[i, j] for j in range(n)] for i in range(n)]
+    L = _cholesky(A)
+    cols = [_forward(L, [K[n + r, i] for i in range(n)]) for r in range(m)]     # Y's columns: L^-1 Gs^T
+    z = _forward(L, [b[i] for i in range(n)])
+    dot = lambda u, v: sum((ui * vi for ui, vi in zip(u, v)), ca.SX(0))      # noqa: E731
+    S = [[dot(cols[r], cols[c]) for c in range(m)] for r in range(m)]
+    R = _cholesky(S)
+    mu = _backward(R, _forward(R, [dot(cols[r], z) - b[n + r] for r in range(m)]))
+    w = [z[i] - sum((cols[r][i] * mu[r] for r in range(m)), ca.SX(0)) for i in range(n)]
+    y = _backward(L, w)
+    return d * ca.vertcat(*y), s * ca.vertcat(*mu)
+
+
+def _kkt_route(eom: EOM, pv: np.ndarray, m: int) -> str:
+    """'sx' (small), 'schur' (mid-size with a well-conditioned mass matrix) or 'mx' (numeric QR)."""
+    n = eom.n
+    if n + m <= SX_KKT_MAX:
+        return "sx"
+    if n > SCHUR_MAX_N or m == 0:
+        return "mx"
+    ca = _sx()
+    try:
+        q0 = eom.start(pv)[0] if eom.q0 is not None else np.zeros(n)
+        fM = eom.cached("M", lambda: ca.Function("M", [eom.q, eom.t, eom.p], [eom.M]))
+        M = np.array(fM(q0, 0.0, pv), float)
+        d = 1.0 / np.sqrt(np.abs(np.diag(M)) + 1e-300)
+        ev = np.linalg.eigvalsh(d[:, None] * M * d[None, :])
+    except Exception:  # noqa: BLE001 - cannot judge: the route that needs no assumption
+        return "mx"
+    return "schur" if np.all(np.isfinite(ev)) and ev[0] > SCHUR_MIN_RCOND * ev[-1] else "mx"
 
 
 def equilibrated_kkt(M, G, rhs_q, rhs_c):
@@ -74,7 +146,7 @@ class ConstrainedSystem:
     sym: dict = field(default_factory=dict)
     fn: dict = field(default_factory=dict)
     row_scale: np.ndarray | None = None     # fixed constraint-row scaling (see fix_row_scale)
-    route: str = "sx"                       # 'sx' symbolic KKT solve | 'mx' numeric QR per call
+    route: str = "sx"                       # 'sx' symbolic KKT solve | 'schur' SX Cholesky + Schur | 'mx' numeric QR
 
     fast: dict = field(default_factory=dict)   # buffer-call wrappers of fn entries (codegen.FastFunction)
 
@@ -88,15 +160,16 @@ class ConstrainedSystem:
         pv = eom.param_values if p is None else np.asarray(p, float)
         active = tuple(range(eom.m)) if active is None else tuple(active)
         cache = eom.__dict__.setdefault("_constrained_systems", {})
-        key = (active, eom.n + len(active) <= SX_KKT_MAX)     # the active set and the linear-algebra route
+        route = _kkt_route(eom, pv, len(active))
+        key = (active, route)     # the active set and the linear-algebra route
         if key not in cache:
-            cache[key] = ConstrainedSystem._build(eom, pv, active)
+            cache[key] = ConstrainedSystem._build(eom, pv, active, route)
         base = cache[key]
         return ConstrainedSystem(eom=eom, p=pv, active=active, sym=base.sym, fn=base.fn, route=base.route,
                                  fast=base.fast)
 
     @staticmethod
-    def _build(eom: EOM, pv: np.ndarray, active: tuple[int, ...]) -> "ConstrainedSystem":
+    def _build(eom: EOM, pv: np.ndarray, active: tuple[int, ...], route: str) -> "ConstrainedSystem":
         ca = _sx()
         q, qd, t, pp = eom.q, eom.qd, eom.t, eom.p
         g_all = eom.g
@@ -113,14 +186,13 @@ class ConstrainedSystem:
         bias = eom.bias
         rhs_c = gamma - 2 * alpha * gdot - beta**2 * g
         n, m = eom.n, len(active)
-        if n + m <= SX_KKT_MAX:
-            route = "sx"
-            qdd, lam = equilibrated_kkt_solve(M, G, bias, rhs_c)
+        if route in ("sx", "schur"):
+            solve = equilibrated_kkt_solve if route == "sx" else schur_kkt_solve
+            qdd, lam = solve(M, G, bias, rhs_c)
             accel = ca.Function("accel", [q, qd, t, pp, alpha, beta], [qdd, lam])
         else:
             # numeric sparse QR at every call (an MX Function around the SX pieces): symbolic
             # elimination grows as (n + m)^3 and loses accuracy with size
-            route = "mx"
             parts = ca.Function("kkt", [q, qd, t, pp, alpha, beta], list(equilibrated_kkt(M, G, bias, rhs_c)))
             Q, QD, TT, P, A, B = (ca.MX.sym(k, *x.shape) for k, x in
                                   (("q", q), ("qd", qd), ("t", t), ("p", pp), ("alpha", alpha), ("beta", beta)))
@@ -147,7 +219,7 @@ class ConstrainedSystem:
     def symbols(self):
         """Fresh symbols (q, qd, t, p) of the kind the accelerations are built on (SX or MX)."""
         ca = _sx()
-        Sym = ca.SX if self.route == "sx" else ca.MX
+        Sym = ca.SX if self.route in ("sx", "schur") else ca.MX
         n = self.n
         return Sym.sym("q", n), Sym.sym("qd", n), Sym.sym("t"), Sym.sym("p", self.eom.p.numel())
 
@@ -301,7 +373,7 @@ class ConstrainedSystem:
 def _ode_jacobian(accel, route, q, qd, t, pp):
     """Function (q, qd, t, p) -> d(qd, qdd)/d(q, qd) of the unstabilized index-1 ODE."""
     ca = _sx()
-    if route == "sx":
+    if route in ("sx", "schur"):
         Q, QD, T, P = q, qd, t, pp
     else:
         Q, QD, T, P = ca.MX.sym("q", q.numel()), ca.MX.sym("qd", qd.numel()), ca.MX.sym("t"), ca.MX.sym("p", pp.numel())
