@@ -43,6 +43,7 @@ DEFAULT_POINTS = 501
 SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
 MONITOR_POINTS = 61       # least number of checks (of drift and conditioning) per run
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
+FIRST_CHUNK = 8            # ggl, partitioning: intervals of the first segment, doubled after each full one
 CHUNK = 64                 # most output intervals per integrator call (one integrator is built
                            # per segment length and kept with the system, so reruns reuse it)
 
@@ -182,7 +183,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     k = 1
     retries = 0
     h_fail = np.inf
-    chunk = CHUNK
+    # IDAS (ggl) and the partitioned CVODES with its Newton solves grind for minutes when a segment
+    # runs into a singular configuration before they fail; they start with short segments and stop
+    # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
+    cautious = opts.formulation in ("ggl", "partitioning")
+    chunk = FIRST_CHUNK if cautious else CHUNK
+    tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
     while k < len(grid) and failure is None:
         single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
@@ -192,6 +198,10 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
         else:
             K = min(chunk, len(grid) - k)     # the tail in one segment (integrators are cached per K)
+            # a segment stops well before an extrapolated loss of rank: an integrator driven into a
+            # singular configuration grinds (IDAS: minutes) before it fails
+            if cautious and np.isfinite(tau_pred):
+                K = max(1, min(K, int(0.5 * tau_pred / (grid[1] - grid[0]))))
             if opts.max_interval:
                 K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
             times = grid[k:k + K]
@@ -250,8 +260,11 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 record(t_now, q_now, qd_now, (d_now, v_now))
                 break
             h_sing = np.inf
+            if t_now > t_prev:
+                tau_pred = np.inf
             if ratio < ratio_prev and t_now > t_prev:
                 tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
+                tau_pred = tau
                 if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
                     h_sing = max(0.5 * tau, 1e3 * tiny)
             ratio_prev, t_prev = ratio, t_now
