@@ -20,3 +20,16 @@ def models_dir() -> Path:
 
 def model_files():
     return sorted(MODELS.glob("*.mech"))
+
+
+def run_stability_case(name: str, size: str):
+    """Run case `name` of benchmarks/stability at `size` ("small" | "full"); its assertions must hold."""
+    import importlib
+    import sys
+
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    case = importlib.import_module(f"stability.{name}").run(size)
+    assert case.checks, f"{name}: no checks"
+    assert case.holds, "\n" + case.report()
+    return case

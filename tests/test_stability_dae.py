@@ -6,32 +6,19 @@ redundant constraint (rank of G, energy, loop closure).  Full sizes are marked s
 """
 from __future__ import annotations
 
-import importlib
-import sys
-
 import pytest
 
-from conftest import ROOT
-
-sys.path.insert(0, str(ROOT / "benchmarks"))
+from conftest import run_stability_case
 
 CASES = ["cartesian", "andrews", "fourbar", "bricard"]
 
 
-def _run(name, size):
-    mod = importlib.import_module(f"stability.{name}")
-    case = mod.run(size)
-    assert case.checks, f"{name}: no checks"
-    assert case.holds, "\n" + case.report()
-    return case
-
-
 @pytest.mark.parametrize("name", CASES)
 def test_stability_dae_small(name):
-    _run(name, "small")
+    run_stability_case(name, "small")
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_stability_dae_full(name):
-    _run(name, "full")
+    run_stability_case(name, "full")

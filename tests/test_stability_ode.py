@@ -6,32 +6,19 @@ case modules.  The full sizes (the charts of docs/performance.md) are marked slo
 """
 from __future__ import annotations
 
-import importlib
-import sys
-
 import pytest
 
-from conftest import ROOT
-
-sys.path.insert(0, str(ROOT / "benchmarks"))
+from conftest import run_stability_case
 
 CASES = ["stiff", "energy", "gimbal", "chaos"]
 
 
-def _run(name, size):
-    mod = importlib.import_module(f"stability.{name}")
-    case = mod.run(size)
-    assert case.checks, f"{name}: no checks"
-    assert case.holds, "\n" + case.report()
-    return case
-
-
 @pytest.mark.parametrize("name", CASES)
 def test_stability_small(name):
-    _run(name, "small")
+    run_stability_case(name, "small")
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_stability_full(name):
-    _run(name, "full")
+    run_stability_case(name, "full")
