@@ -172,3 +172,19 @@ def test_cli_check_and_simulate_with_instances(tmp_path, capsys):
     assert main(["simulate", str(f), "--scene", "Heavy", "--points", "5", "-o", str(csv)]) == 0
     header = csv.read_text().splitlines()[0].split(",")
     assert header[:7] == ["time", "l1.q", "l2.q", "l3.q", "der(l1.q)", "der(l2.q)", "der(l3.q)"]
+
+
+@pytest.mark.parametrize("k, m, L", [(2.0, 1.0, 1.0), (5.0, 2.0, 0.7)])
+def test_shipped_coupled_pendulums_modes_closed_form(k, m, L):
+    """models/coupled_pendulums.mech (two SwingingBob instances and a spring):
+    w1^2 = g/L (in phase), w2^2 = g/L + 2k/m (in opposition)."""
+    from conftest import ROOT
+
+    model = mechdsl.load(ROOT / "models" / "coupled_pendulums.mech", model="CoupledPendulums")
+    model = model.with_params(k=k, **{"left.m": m, "right.m": m, "left.L": L, "right.L": L})
+    modes = model.linearize(at="equilibrium").modes()
+    g = 9.81
+    np.testing.assert_allclose(modes.frequencies, [math.sqrt(g / L), math.sqrt(g / L + 2 * k / m)], rtol=1e-10)
+    s1, s2 = (np.asarray(modes.shapes)[:, i] for i in range(2))
+    assert s1[1] / s1[0] == pytest.approx(1.0, rel=1e-9)     # in phase
+    assert s2[1] / s2[0] == pytest.approx(-1.0, rel=1e-9)    # in opposition
