@@ -151,6 +151,7 @@ def _parse_recovering(text: str, filename: str):
     """
     diagnostics: list[Diagnostic] = []
     masked = text
+    code = None   # `masked` without strings and comments, computed at the first error
     skip_to = -1  # an error exactly here is a consequence of the previous blanking
     while True:
         try:
@@ -163,12 +164,12 @@ def _parse_recovering(text: str, filename: str):
             diagnostics.append(d)
             if pos is None or d.code in ("E103", "E108", "E109") or len(diagnostics) >= MAX_SYNTAX_ERRORS:
                 break
-            region = _recovery_region(masked, pos)
+            code = _code_only(masked) if code is None else code
+            region = _recovery_region(code, pos)
             if region is None:
                 break
             a, b = region
-            masked = masked[:a] + re.sub(r"[^\r\n]", " ", masked[a:b]) + masked[b:]
-            code = _code_only(masked)
+            masked, code = (_blank(x, a, b) for x in (masked, code))   # blanking keeps code in step
             m = re.compile(r"\S").search(code, b)
             skip_to = m.start() if m else -1
             continue
@@ -187,15 +188,19 @@ def _error_offset(e: UnexpectedInput) -> int | None:
     return tok.start_pos
 
 
+def _blank(text: str, a: int, b: int) -> str:
+    """`text` with [a, b) replaced by spaces, line breaks kept (so every offset stays true)."""
+    return text[:a] + re.sub(r"[^\r\n]", " ", text[a:b]) + text[b:]
+
+
 def _code_only(text: str) -> str:
     """`text` with strings and comments replaced by spaces (offsets and newlines kept)."""
-    def blank(m: re.Match) -> str:
-        return re.sub(r"[^\r\n]", " ", m.group(0))
-    return re.sub(r'"(?:[^"\\\n]|\\.)*"|//[^\n]*|/\*.*?\*/', blank, text, flags=re.S)
+    return re.sub(r'"(?:[^"\\\n]|\\.)*"|//[^\n]*|/\*.*?\*/', lambda m: _blank(m.group(0), 0, len(m.group(0))),
+                  text, flags=re.S)
 
 
-def _recovery_region(text: str, pos: int) -> tuple[int, int] | None:
-    code = _code_only(text)
+def _recovery_region(code: str, pos: int) -> tuple[int, int] | None:
+    """The statement around offset `pos` of `code` (see _parse_recovering), or None."""
     start = code.rfind(";", 0, pos) + 1
     for m in _HEADER.finditer(code, start, pos):
         start = m.end()

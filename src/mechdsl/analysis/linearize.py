@@ -143,7 +143,7 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
     None: the parameters the model declares ``input``; () for none.
     """
-    from .equilibrium import Equilibrium, equilibria
+    from .equilibrium import Equilibrium
 
     pv = param_vector(eom, p)
     if constrained(eom):
@@ -158,16 +158,7 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     if isinstance(at, Equilibrium):
         eq = at
     elif isinstance(at, str) and at.strip() == "equilibrium":
-        eqs = equilibria(eom, guesses, t=t, p=pv)
-        if not eqs:
-            raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found",
-                                       help="give a starting guess (--guess NAME=VALUE) or linearize "
-                                            "about a state (--at t=0)"))
-        st = structure(eom, pv)
-        eq = min(eqs, key=lambda e: _distance(e.q, q0, st.periodic))
-        if len(eqs) > 1:
-            notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to the start "
-                         "values: " + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+        eq = nearest_equilibrium(eom, guesses, t, pv, q0, notes, "linearize about a state (--at t=0)")
     if eq is not None:
         q, qd, t, acc = np.asarray(eq.q, float), np.zeros(n), eq.t, eq.acceleration
         kind = "accelerated-reference" if eq.kind == "accelerated-reference" else "equilibrium"
@@ -196,6 +187,23 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
                          q=np.asarray(q, float), qd=np.asarray(qd, float), t=float(t),
                          acceleration=np.asarray(acc, float), kind=kind, p=pv, equilibrium=eq,
                          notes=notes, eom=eom)
+
+
+def nearest_equilibrium(eom, guesses, t, pv, q0, notes: list, other: str):
+    """The equilibrium nearest to q0 (angles compared modulo 2 pi), noted when there are several;
+    E903 with the hint `other` when there is none."""
+    from .equilibrium import equilibria
+
+    eqs = equilibria(eom, guesses, t=t, p=pv)
+    if not eqs:
+        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found",
+                                   help=f"give a starting guess (--guess NAME=VALUE) or {other}"))
+    periodic = structure(eom, pv).periodic
+    eq = min(eqs, key=lambda e: _distance(e.q, q0, periodic))
+    if len(eqs) > 1:
+        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to the start "
+                     "values: " + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+    return eq
 
 
 def _distance(a, b, periodic) -> float:

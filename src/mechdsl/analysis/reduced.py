@@ -30,7 +30,7 @@ import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from .constraints import independent_basis, project, rest_multipliers
-from .core import parts, wrap_angle
+from .core import parts
 from .matrices import first_order, second_order
 
 
@@ -100,8 +100,8 @@ def _continued(eom, q_from, q_to, fixed, t, pv, step: float = 0.25):
 
 def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
     """The reduced linear model (see the module docstring) as a :class:`Linearization`."""
-    from .equilibrium import Equilibrium, equilibria
-    from .linearize import Linearization, _inputs, declared_inputs
+    from .equilibrium import Equilibrium
+    from .linearize import Linearization, _inputs, declared_inputs, nearest_equilibrium
 
     n = eom.n
     q0 = con.q_start
@@ -110,17 +110,8 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
     if isinstance(at, Equilibrium):
         eq = at
     elif isinstance(at, str) and at.strip() == "equilibrium":
-        eqs = equilibria(eom, guesses, t=t, p=pv)
-        if not eqs:
-            raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found",
-                                       help="give a starting guess (--guess NAME=VALUE) or linearize "
-                                            "about a configuration at rest (--at NAME=VALUE)"))
-        periodic = [bool(a) for a in _periodic(eom, pv)]
-        eq = min(eqs, key=lambda e: sum((wrap_angle(x - y) if per else x - y) ** 2
-                                        for x, y, per in zip(e.q, q0, periodic)))
-        if len(eqs) > 1:
-            notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to the start "
-                         "values: " + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+        eq = nearest_equilibrium(eom, guesses, t, pv, q0, notes,
+                                 "linearize about a configuration at rest (--at NAME=VALUE)")
     pt = parts(eom)
     if eq is not None:
         if eq.multipliers is None:
@@ -167,12 +158,6 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
                          multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
                          active_constraints=tuple(eom.constraint_names[i] for i in con.active),
                          stiffness=Kfull)
-
-
-def _periodic(eom, pv):
-    from .core import structure
-
-    return structure(eom, pv).periodic
 
 
 def _check_inputs(eom, inputs) -> None:

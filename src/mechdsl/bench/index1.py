@@ -56,7 +56,7 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     if method not in _no_jacobian():
         funcs["ode_jacobian"] = ca.Function("ode_jacobian", [t, x, pp], [ca.jacobian(xdot, x)], ["t", "x", "p"],
                                             ["jac"])
-    compiled_note = None
+    compiled_note, native_code = None, False
     if kw.pop("compiled", False):
         # the same native code as the DAE layer's compiled runs, so that a chart compares methods
         from ..codegen import compile_functions
@@ -64,11 +64,11 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
         native, compiled_note, _lib = compile_functions(list(funcs.values()), tag="index1", jacobian=False)
         if native and all(native.get(k) is not None for k in funcs):
             funcs = {k: native[k] for k in funcs}
-            compiled_note = None
+            compiled_note, native_code = None, True
     free = eom.replace(g=None)
     free.__dict__["_integral_function"] = {"f": None}   # the free system's symmetries are not the model's
     r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
-    r.metadata["compiled"] = compiled_note is None and funcs["ode"] is not ode
+    r.metadata["compiled"] = native_code
     if compiled_note:
         r.metadata.setdefault("notes", []).append(compiled_note)
     if len(r.t):

@@ -160,7 +160,8 @@ class ConstrainedSystem:
         pv = eom.param_values if p is None else np.asarray(p, float)
         active = tuple(range(eom.m)) if active is None else tuple(active)
         cache = eom.__dict__.setdefault("_constrained_systems", {})
-        route = _kkt_route(eom, pv, len(active))
+        route = eom.cached(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
+                           lambda: _kkt_route(eom, pv, len(active)))
         key = (active, route)     # the active set and the linear-algebra route
         if key not in cache:
             cache[key] = ConstrainedSystem._build(eom, pv, active, route)

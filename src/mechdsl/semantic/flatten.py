@@ -155,7 +155,7 @@ class Flattener(Evaluator):
         for k, m in mods.items():
             if k not in self.entries and k not in self.instances:
                 local = k[len(prefix):] if k.startswith(prefix) else k
-                own = [n[len(prefix):] for n in self.entries if n.startswith(prefix)]
+                own = self._own(prefix[:-1]) if prefix else list(self.entries)
                 self.diags.error("E204", f"model '{model_name}' has no declaration '{local}' to modify", m.name_span,
                                  did_you_mean(local, own) or "modify its parameters and start values")
 
