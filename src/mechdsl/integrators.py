@@ -207,6 +207,16 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
 _INTEGRATOR_CACHE: dict = {}
 
 
+def make_integrator(name: str, plugin: str, problem, t0: float, grid, opts: dict):
+    """The one place a ``casadi.integrator`` is built (ODE runs, DAE formulations, benchmarks).
+
+    ``problem`` is a CasADi DAE Function or dict; ``grid`` the output times (a float for one)."""
+    import casadi as ca
+
+    out = [float(v) for v in np.atleast_1d(grid)]
+    return ca.integrator(name, plugin, problem, float(t0), out, opts)
+
+
 def _integrator(method, ode, grid, opts):
     """casadi.integrator, cached per (model Function, method, grid, options): building one
     derives its Jacobians (0.35 s for a 30-link chain in the VM), which parameter sweeps and
@@ -219,7 +229,7 @@ def _integrator(method, ode, grid, opts):
     hit = _INTEGRATOR_CACHE.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1]
-    integ = ca.integrator("sim", plugin, dae_function(ode), tgrid[0], list(tgrid), opts)
+    integ = make_integrator("sim", plugin, dae_function(ode), tgrid[0], tgrid, opts)
     if len(_INTEGRATOR_CACHE) >= 16:
         _INTEGRATOR_CACHE.pop(next(iter(_INTEGRATOR_CACHE)))
     _INTEGRATOR_CACHE[key] = (ode, integ)

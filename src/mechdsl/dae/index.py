@@ -14,6 +14,8 @@ index.  Rank decisions are made after Ruiz equilibration of dh/dz, so units do n
 """
 from __future__ import annotations
 
+from ..integrators import make_integrator
+
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
@@ -101,4 +103,4 @@ def guarded_idas(name: str, dae: dict, x0, z0, p0, t0: float, tout, opts: dict, 
     import casadi as ca
 
     index = check_for_idas(dae, x0, z0, p0, t0, opts, allowed_index, what, force)
-    return ca.integrator(name, "idas", dae, t0, tout, opts), index
+    return make_integrator(name, "idas", dae, t0, tout, opts), index

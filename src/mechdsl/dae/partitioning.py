@@ -28,6 +28,8 @@ of G_v overshot three times the re-partition level.
 """
 from __future__ import annotations
 
+from ..integrators import make_integrator
+
 import numpy as np
 
 from .dof import dependent_columns
@@ -140,7 +142,7 @@ class PartitioningStepper(Stepper):
         udd = ca.vertcat(*[qdd[i] for i in ind]) if k else ca.MX.zeros(0, 1)
         dae = {"x": ca.vertcat(u, ud), "t": s, "p": ca.vertcat(p, t0, h, vk, vdk, vddk),
                "ode": h * ca.vertcat(ud, udd)}
-        F = ca.integrator("partitioned", "cvodes", dae, 0.0, 1.0, integrator_options(self.opts, "cvodes"))
+        F = make_integrator("partitioned", "cvodes", dae, 0.0, 1.0, integrator_options(self.opts, "cvodes"))
         recover = ca.Function("recover", [u, ud, s, p, t0, h, vk, vdk, vddk], [q, qd])
         return F, recover
 

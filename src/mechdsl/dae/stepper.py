@@ -10,6 +10,8 @@ integrator per K serves every chunk (cached in :class:`GridIntegrators`).
 """
 from __future__ import annotations
 
+from ..integrators import make_integrator
+
 import abc
 import contextlib
 import io
@@ -160,8 +162,8 @@ class GridIntegrators:
 
             with build_timer(self.stats):
                 grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
-                self._cache[K] = ca.integrator(f"{self.name}_{K}", self.plugin, self._problem, 0.0, grid,
-                                               self.opts)
+                self._cache[K] = make_integrator(f"{self.name}_{K}", self.plugin, self._problem, 0.0, grid,
+                                                self.opts)
         return self._cache[K]
 
 
