@@ -118,8 +118,44 @@ class Equilibrium:
         return d
 
 
+@dataclass
+class Search:
+    """How the search went, for saying why nothing was found: starting guesses tried, how many
+    converged, the smallest force at rest reached (relative to the force scale) and where, and
+    how many runs ran off to coordinates far beyond their start (a force that decays without
+    vanishing, as a central attraction's)."""
+
+    guesses: int = 0
+    converged: int = 0
+    best_residual: float = math.inf
+    best_q: np.ndarray | None = None
+    runaway: int = 0
+
+    def why_none(self, coords) -> str:
+        """The reason no equilibrium was found, in words (empty when nothing is known)."""
+        if not self.guesses:
+            return ""
+        out = f"none of {self.guesses} starting guesses converged"
+        if self.best_q is not None and math.isfinite(self.best_residual):
+            where = ", ".join(f"{c} = {v:.4g}" for c, v in zip(coords, self.best_q))
+            out += (f"; the smallest force at rest reached was {self.best_residual:.3g} of the force "
+                    f"scale (at {where})")
+        if self.runaway:
+            out += (f"; {self.runaway} of the searches ran off to coordinates more than {RUNAWAY:g} times "
+                    "farther out than their start: the force at rest decays without vanishing, so the model "
+                    "has no static equilibrium (a central attraction, e.g. the Kepler problem, has none: "
+                    "bodies released at rest fall towards each other)")
+        return out
+
+
+class Equilibria(list):
+    """The equilibria found (a list of :class:`Equilibrium`) with ``search``, a :class:`Search`."""
+
+    search: Search
+
+
 def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = MAX_GUESSES
-               ) -> list[Equilibrium]:
+               ) -> Equilibria:
     """Distinct equilibria of the model, each classified (see the module docstring).
 
     guesses: None, a dict {coordinate: value} (missing coordinates take their start values),
@@ -146,7 +182,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         e = _classify(eom, st, pv, qref, np.zeros(k), t, 0.0, notes + ["no generalized force acts at rest: "
                                                                        "every configuration is an equilibrium"],
                       con=con, lam=np.zeros(ma))
-        return [e]
+        return _result([e], Search())
 
     # unknowns w = (q, mu, alpha), lambda = lam_scale * mu:
     # bias(q, 0, t) - G(q)' lambda - M(q) N alpha ; g(q) / |G row| ; N'(q - q_ref)
@@ -176,7 +212,9 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
 
     tol = 1e-8 * scale
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
+    search = Search()
     for g in _guesses(eom, guesses, q0, st, max_guesses, con):
+        search.guesses += 1
         x0 = np.concatenate([g, _start_multipliers(eom, con, g, t, pv, lam_scale), np.zeros(k)])
         try:
             x = levenberg_marquardt(lambda x: dense(F(x, qref, pv)).ravel() / rs,
@@ -190,7 +228,9 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             continue
         resid = float(np.max(np.abs(res[:n])))
         if resid > tol:
+            _note_failure(search, x[:n], g, resid / scale)
             continue
+        search.converged += 1
         qs = x[:n].copy()
         if con is not None and np.max(con.distances(qs), initial=0.0) > 1e-9 * (1.0 + np.max(np.abs(qs))):
             continue
@@ -207,9 +247,26 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             found.append((qs, x[n:].copy(), resid))
 
     found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
-    return [_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
-                      lam=_clean(lam_scale * rest[:ma], lam_scale))
-            for qs, rest, resid in found]
+    return _result([_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
+                              lam=_clean(lam_scale * rest[:ma], lam_scale))
+                    for qs, rest, resid in found], search)
+
+
+def _result(eqs, search: Search) -> Equilibria:
+    out = Equilibria(eqs)
+    out.search = search
+    return out
+
+
+RUNAWAY = 10.0           # a failed run that ends this many times farther out than its start ran away
+
+
+def _note_failure(search: Search, q, g, rel_resid: float) -> None:
+    size = 1.0 + float(np.max(np.abs(g), initial=0.0))
+    if float(np.max(np.abs(q), initial=0.0)) > RUNAWAY * size:
+        search.runaway += 1
+    if rel_resid < search.best_residual:
+        search.best_residual, search.best_q = rel_resid, np.asarray(q, float).copy()
 
 
 def _clean(lam, lam_scale):

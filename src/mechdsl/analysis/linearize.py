@@ -190,19 +190,26 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
 
 
 def nearest_equilibrium(eom, guesses, t, pv, q0, notes: list, other: str):
-    """The equilibrium nearest to q0 (angles compared modulo 2 pi), noted when there are several;
-    E903 with the hint `other` when there is none."""
-    from .equilibrium import equilibria
+    """The equilibrium nearest to the first guess (without guesses: to q0; angles compared
+    modulo 2 pi), noted when there are several; E903 saying why and with the hint `other` when
+    there is none."""
+    from .equilibrium import equilibria, parse_guesses
 
     eqs = equilibria(eom, guesses, t=t, p=pv)
     if not eqs:
-        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found",
-                                   help=f"give a starting guess (--guess NAME=VALUE) or {other}"))
+        why = eqs.search.why_none(eom.coords)
+        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found" + (f": {why}" if why else ""),
+                                   help=f"{other}; a steady motion (a circular orbit, a spinning top) is a "
+                                        "relative equilibrium, not a rest state: linearize about a state on "
+                                        "it with --at NAME=VALUE,der(NAME)=SPEED; or give a starting guess "
+                                        "(--guess NAME=VALUE)"))
     periodic = structure(eom, pv).periodic
-    eq = min(eqs, key=lambda e: _distance(e.q, q0, periodic))
+    user = parse_guesses(eom, guesses, q0)
+    target, what = (user[0], "the guess") if user else (q0, "the start values")
+    eq = min(eqs, key=lambda e: _distance(e.q, target, periodic))
     if len(eqs) > 1:
-        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to the start "
-                     "values: " + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to {what}: "
+                     + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
     return eq
 
 
