@@ -218,7 +218,7 @@ def quaternion_model(eom, joints: list[str]):
         rot = [roles.get(r) for r in ("phi", "theta", "psi")]
         if any(v is None or v.coordinate is None for v in rot):
             raise _lock_error(j.name, "its angles are not all plain coordinates")
-        names = [f"{j.name}.__q{k}" for k in range(4)]
+        names = [f"{j.name}.q{k}" for k in range(4)]
         for v in rot:
             angle_of[v.coordinate] = (j.name, v.role)
         coord_new[rot[0].coordinate] = [ir.Coordinate(name=nm, start=ir.ONE if k == 0 else ir.ZERO, owner=j.name)
@@ -256,7 +256,7 @@ def quaternion_model(eom, joints: list[str]):
             ang = {role: q[old_index[c]] for c, (jj, role) in angle_of.items() if jj == jn}
             quat = euler_to_quaternion(seqs[jn], ang["phi"], ang["theta"], ang["psi"])
             for k in range(4):
-                out[qe.coords.index(f"{jn}.__q{k}")] = quat[k]
+                out[qe.coords.index(f"{jn}.q{k}")] = quat[k]
         return out
 
     return qe, to_new

@@ -37,7 +37,7 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from . import charts
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
-from .core import dense, param_vector, structure, wrap_angle
+from .core import dense, param_vector, parts, structure, wrap_angle
 from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
 
@@ -272,7 +272,9 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     for qs, rest, resid in found:
         locked = charts.locked_joints(eom, qs, t, pv) if con is None else []
         if blocks or locked:
-            out.append(_classify_in_chart(eom, st, pv, qs, rest[ma:], t, resid, list(notes), blocks, locked))
+            e = _classify_in_chart(eom, st, pv, qs, rest[ma:], t, resid, list(notes), blocks, locked)
+            if e is not None:       # None: a critical point of the Euler chart only (gimbal lock)
+                out.append(e)
         else:
             out.append(_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
                                  lam=_clean(lam_scale * rest[:ma], lam_scale)))
@@ -330,6 +332,12 @@ def _classify_in_chart(eom, st, pv, qs, alpha, t, resid, notes, blocks, locked) 
     ch, stc, qb, Z, base, more = chart_of(eom, qs, t, pv)
     nz = ch.n
     k = stc.symmetry.shape[1]
+    if locked and not k:
+        # at gimbal lock dV/d(angles) = J' grad V vanishes where J loses rank: a point that is
+        # no equilibrium in a regular chart is an artefact of the Euler angles
+        _, bias = parts(ch).M_bias(np.zeros(nz), np.zeros(nz), t, pv)
+        if np.max(np.abs(bias), initial=0.0) > 1e-8 * max(st.force_scale, 1e-300):
+            return None
     a = np.zeros(k)
     if k and len(alpha) == st.symmetry.shape[1]:
         a = np.linalg.lstsq(stc.symmetry, Z.T @ (st.symmetry @ alpha) if base is eom else np.zeros(nz),
@@ -479,6 +487,10 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     k = N.shape[1]
     acc = N @ alpha if k else np.zeros(n)
     M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
+    if k and np.linalg.norm(M @ acc) <= 1e-8 * max(st.force_scale, 1e-300) and np.any(acc):
+        # no force along N: alpha is arbitrary where N carries no inertia; the reference is at rest
+        acc = np.zeros(n)
+        M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
     Z = None
     if con is not None:
         K = K + con.geometric_stiffness(q, lam)
@@ -575,9 +587,22 @@ def drop_inert(M, C, K, N):
     """Leave out the directions that carry neither inertia nor force (M v = 0, K v = K'v = 0,
     C v = C'v = 0: a point mass spinning about its own axis); (M, C, K, N, count) in an
     orthonormal basis of the rest."""
+    R = active_basis(M, C, K)
+    if R is None:
+        return M, C, K, N, 0
+    Nr = R.T @ N
+    if Nr.size:
+        U, sv, _ = np.linalg.svd(Nr, full_matrices=False)
+        Nr = U[:, sv > 1e-8]
+    return R.T @ M @ R, R.T @ C @ R, R.T @ K @ R, Nr, M.shape[0] - R.shape[1]
+
+
+def active_basis(M, C, K):
+    """Orthonormal basis of the complement of the directions without inertia or force (None
+    when there are none); columns that are coordinate axes are kept exactly."""
     n = M.shape[0]
     if n == 0:
-        return M, C, K, N, 0
+        return None
     from .core import null_space
 
     scale = max(np.max(np.abs(M), initial=0.0), 1e-300)
@@ -585,13 +610,10 @@ def drop_inert(M, C, K, N):
     J = np.vstack([M / scale, K / ks, K.T / ks, C / ks, C.T / ks])
     inert = null_space(J, rel=1e-10)
     if inert.shape[1] == 0:
-        return M, C, K, N, 0
+        return None
     R = complement(inert)
-    Nr = R.T @ N
-    if Nr.size:
-        U, sv, _ = np.linalg.svd(Nr, full_matrices=False)
-        Nr = U[:, sv > 1e-8]
-    return R.T @ M @ R, R.T @ C @ R, R.T @ K @ R, Nr, inert.shape[1]
+    R[np.abs(R) <= 1e-12] = 0.0
+    return R
 
 
 def singular_mass(M) -> str:
