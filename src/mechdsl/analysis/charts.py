@@ -324,3 +324,44 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
         q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, s / 4]
     q = np.array(q)
     return q / np.linalg.norm(q)
+
+
+# --------------------------------------------------------------------------- Euler twins
+
+
+def euler_blocks(eom) -> list[tuple[list[int], bool]]:
+    """([i_phi, i_theta, i_psi], proper) of every Euler-angle joint whose three angles are
+    coordinates; proper: a sequence like z-x-z (first axis = last axis)."""
+    def build():
+        from ..mechanics.rotations import euler_sequence
+
+        model = eom.model
+        out = []
+        if model is None:
+            return out
+        for j in model.joints:
+            if j.kind not in ("spherical", "free") or j.option("parametrization", "euler").lower() != "euler":
+                continue
+            roles = {v.role: v.coordinate for v in j.variables}
+            idx = [roles.get(r) for r in ("phi", "theta", "psi")]
+            if any(c is None or c not in eom.coords for c in idx):
+                continue
+            try:
+                a, _, c = euler_sequence(j.option("sequence", "zyx"))
+            except ValueError:
+                continue
+            out.append(([eom.coords.index(c) for c in idx], a == c))
+        return out
+
+    return eom.cached("euler_blocks", build)
+
+
+def euler_twin(q: np.ndarray, block) -> np.ndarray:
+    """The other Euler angles of the same rotation: (phi + pi, pi - theta, psi + pi) for
+    Tait-Bryan sequences, (phi + pi, -theta, psi + pi) for proper Euler sequences."""
+    (i, j, k), proper = block
+    out = np.array(q, float)
+    out[i] += np.pi
+    out[j] = -out[j] if proper else np.pi - out[j]
+    out[k] += np.pi
+    return out

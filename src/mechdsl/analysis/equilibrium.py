@@ -259,7 +259,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
                 qs[i] = wrap_angle(qs[i])
         qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
         for i, f_ in enumerate(found):
-            if _same(qs, f_[0], st.periodic, blocks) or _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol,
+            if _same(qs, f_[0], st.periodic, blocks) or _euler_same(eom, qs, f_[0], st) or _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol,
                                                                 st.periodic, blocks):
                 if resid < f_[2]:
                     found[i] = (qs, x[n:].copy(), resid)
@@ -449,6 +449,26 @@ def _same(a: np.ndarray, b: np.ndarray, periodic, blocks=()) -> bool:
         if abs(d) > 1e-6 * (1.0 + abs(x)):
             return False
     return True
+
+
+def _euler_same(eom, a, b, st) -> bool:
+    """a and b describe the same configuration through the other Euler angles of a joint's
+    rotation, up to a shift along the symmetry directions (angles modulo 2 pi)."""
+    eb = charts.euler_blocks(eom)
+    if not eb:
+        return False
+    N = st.symmetry
+    for block in eb:
+        tw = charts.euler_twin(b, block)
+        d = np.array([wrap_angle(x - y) if (per or i in block[0]) else x - y
+                      for i, (x, y, per) in enumerate(zip(a, tw, st.periodic))])
+        if N.size:
+            d = d - N @ (N.T @ d)
+            d = np.array([wrap_angle(x) if (per or i in block[0]) else x
+                          for i, (x, per) in enumerate(zip(d, st.periodic))])
+        if np.max(np.abs(d), initial=0.0) <= 1e-6 * (1.0 + np.max(np.abs(a), initial=0.0)):
+            return True
+    return False
 
 
 def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic, blocks=()) -> bool:
