@@ -388,7 +388,10 @@ def _family_directions(ch, st, pv, t, alpha) -> np.ndarray:
         r = ca.vertcat(ca.substitute(rest, ch.q, z) / scale, ca.mtimes(vv.T, z) - s)
         F = ca.Function("famr", [z, ch.p], [r])
         JF = ca.Function("famj", [z, ch.p], [ca.jacobian(r, z)])
-        x = levenberg_marquardt(lambda x: dense(F(x, pv)).ravel(), lambda x: dense(JF(x, pv)), s * v)
+        try:
+            x = levenberg_marquardt(lambda x: dense(F(x, pv)).ravel(), lambda x: dense(JF(x, pv)), s * v)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            x = None
         if x is None:
             continue
         res = dense(f(x, pv)).ravel()

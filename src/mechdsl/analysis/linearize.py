@@ -318,7 +318,12 @@ def _integrate(eom, q0, qd0, pv, T):
 
     def f(tt, x):
         M, b = pt.M_bias(x[:n], x[n:], tt, pv)
-        return np.concatenate([x[n:], np.linalg.solve(M, b)])
+        try:
+            return np.concatenate([x[n:], np.linalg.solve(M, b)])
+        except np.linalg.LinAlgError:
+            raise MechError(Diagnostic("E904", f"could not reach t = {T} from the start values: the mass "
+                                               f"matrix is singular at t = {tt:.6g}",
+                                       help="linearize about an earlier time or about the start (--at start)")) from None
 
     sol = solve_ivp(f, (0.0, T), np.concatenate([q0, qd0]), method="DOP853", rtol=1e-11, atol=1e-12)
     if not sol.success:

@@ -51,7 +51,8 @@ def singular_mass_error(eom, v, where: str = "at this state"):
     dirn = ""
     if v is not None and len(coords) == len(v):
         big = [f"{c}" for c, x in zip(coords, v) if abs(x) > 0.1 * np.max(np.abs(v))]
-        dirn = f" (no inertia along a combination of {', '.join(big)})"
+        dirn = f" (no inertia along {big[0]})" if len(big) == 1 else \
+            f" (no inertia along a combination of {', '.join(big)})"
     return MechError(Diagnostic("E910", f"the mass matrix of '{getattr(eom, 'name', '?')}' is singular {where}"
                                         f"{dirn}: the equations of motion do not determine the accelerations",
                                 help="give the bodies involved a mass and a moment of inertia, or use another "
