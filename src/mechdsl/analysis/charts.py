@@ -200,7 +200,12 @@ def _lock_error(joint, why):
 
 def quaternion_model(eom, joints: list[str]):
     """The EOM of the same model with the Euler-angle joints ``joints`` in quaternions, and a
-    function mapping coordinate vectors of ``eom`` to coordinate vectors of the new one."""
+    function mapping coordinate vectors of ``eom`` to coordinate vectors of the new one
+    (derived once per EOM and set of joints)."""
+    return eom.cached(("quaternion_model", tuple(joints)), lambda: _quaternion_model(eom, list(joints)))
+
+
+def _quaternion_model(eom, joints: list[str]):
     from .. import ir
     from ..mechanics import derive
 
