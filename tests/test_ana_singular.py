@@ -56,3 +56,14 @@ def test_gimbal_lock_at_rest_is_linearized_in_a_quaternion_chart():
     assert any("gimbal lock" in n for n in lin.notes)
     mgl, A = 9.81 * 0.5, 0.12 + 0.25
     assert sorted(ev.real for ev in lin.eigenvalues)[-1] == pytest.approx(np.sqrt(mgl / A), rel=1e-9)
+
+
+def test_gimbal_lock_with_an_angle_used_elsewhere_is_E908(tmp_path, capsys):
+    """A potential on psi is no function of the rotation: the chart cannot be switched."""
+    src = open(os.path.join(MODELS, "heavy_top.mech")).read()
+    src = src.replace("end HeavyTop;", "equation\n  potential = 0.01*tip.psi^2;\nend HeavyTop;")
+    f = tmp_path / "top_psi.mech"
+    f.write_text(src)
+    assert main(["equilibrium", str(f), "--model", "HeavyTop"]) == 1
+    err = capsys.readouterr().err
+    assert "error[E908]" in err and "tip.psi" in err
