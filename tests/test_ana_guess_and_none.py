@@ -33,6 +33,25 @@ def test_cli_guess_steers(capsys):
     assert "stability: unstable" in out
 
 
+def test_a_force_that_decays_without_vanishing_has_no_equilibrium():
+    """V = V0 exp(-x): the force V0 exp(-x) never vanishes; every search runs off to large x."""
+    import casadi as ca
+
+    from mechdsl import eom as E
+    from mechdsl.diagnostics import MechError
+
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 1)
+    e = E.from_lagrangian("Decay", ["x"], ["V0"], [2.0], q, qd, t, p, 0.5 * qd[0] ** 2,
+                          p[0] * ca.exp(-q[0]), q0=[0.5], qd0=[0.0])
+    with pytest.raises(MechError) as ex:
+        linearize(e)
+    d = ex.value.diagnostics[0]
+    assert d.code == "E903"
+    assert "ran off" in d.message and "no static equilibrium" in d.message
+    assert "--at t=0" in d.help
+
+
+@pytest.mark.slow
 def test_kepler_says_why_there_is_no_equilibrium(capsys):
     rc = main(["linearize", os.path.join(MODELS, "kepler.mech")])
     err = capsys.readouterr().err

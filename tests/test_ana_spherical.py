@@ -101,6 +101,7 @@ def test_quaternion_pendulum_equilibria_are_unit_and_distinct():
 def test_pendulum_modes_are_sqrt_g_over_L_twice(joint):
     e = pendulum(joint)
     eqs = equilibria(e)
+    assert len(eqs) == 2                     # one hanging, one inverted: every chart, q ~ -q, twins
     stable = [x for x in eqs if x.stable]
     unstable = [x for x in eqs if x.stable is False]
     assert stable and unstable
@@ -153,7 +154,7 @@ def test_asymmetric_top_hanging_modes(joint):
     eqs = equilibria(e)
     mgl = m_top * 9.81 * l_top
     hang = [x for x in eqs if x.stable]
-    assert len(hang) == 1
+    assert len(eqs) == 2 and len(hang) == 1
     assert hang[0].hessian_eigenvalues == pytest.approx([mgl, mgl], rel=1e-9)
     assert all(x.stable is False for x in eqs if x is not hang[0])
     md = linearize(e, at=hang[0]).modes()

@@ -334,9 +334,9 @@ def matrix_to_quaternion(R: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- Euler twins
 
 
-def euler_blocks(eom) -> list[tuple[list[int], bool]]:
-    """([i_phi, i_theta, i_psi], proper) of every Euler-angle joint whose three angles are
-    coordinates; proper: a sequence like z-x-z (first axis = last axis)."""
+def euler_blocks(eom) -> list[tuple[list[int], bool, str]]:
+    """([i_phi, i_theta, i_psi], proper, joint name) of every Euler-angle joint whose three
+    angles are coordinates; proper: a sequence like z-x-z (first axis = last axis)."""
     def build():
         from ..mechanics.rotations import euler_sequence
 
@@ -355,7 +355,7 @@ def euler_blocks(eom) -> list[tuple[list[int], bool]]:
                 a, _, c = euler_sequence(j.option("sequence", "zyx"))
             except ValueError:
                 continue
-            out.append(([eom.coords.index(c) for c in idx], a == c))
+            out.append(([eom.coords.index(c) for c in idx], a == c, j.name))
         return out
 
     return eom.cached("euler_blocks", build)
@@ -364,7 +364,7 @@ def euler_blocks(eom) -> list[tuple[list[int], bool]]:
 def euler_twin(q: np.ndarray, block) -> np.ndarray:
     """The other Euler angles of the same rotation: (phi + pi, pi - theta, psi + pi) for
     Tait-Bryan sequences, (phi + pi, -theta, psi + pi) for proper Euler sequences."""
-    (i, j, k), proper = block
+    (i, j, k), proper = block[0], block[1]
     out = np.array(q, float)
     out[i] += np.pi
     out[j] = -out[j] if proper else np.pi - out[j]

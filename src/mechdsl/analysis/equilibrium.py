@@ -227,6 +227,8 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     tol = 1e-8 * scale
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
     search = Search()
+    # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
+    families = con is None and bool(blocks or charts.euler_blocks(eom))
     for g in _guesses(eom, guesses, q0, st, max_guesses, con):
         if blocks:
             g = charts.normalize_blocks(g, blocks, fallback=q0)
@@ -246,6 +248,9 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         if resid > tol:
             _note_failure(search, x[:n], g, resid / scale)
             continue
+        if _decayed(x, g, n, JF, qref, pv, st):
+            search.runaway += 1
+            continue
         search.converged += 1
         qs = x[:n].copy()
         if blocks:
@@ -257,10 +262,13 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         for i in range(n):
             if st.periodic[i]:
                 qs[i] = wrap_angle(qs[i])
+        if con is None and eom.singularity_monitors and _lock_artefact(eom, qs, t, pv, tol):
+            continue
         qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
         for i, f_ in enumerate(found):
-            if _same(qs, f_[0], st.periodic, blocks) or _euler_same(eom, qs, f_[0], st) or _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol,
-                                                                st.periodic, blocks):
+            if _same(qs, f_[0], st.periodic, blocks) or _euler_same(eom, qs, f_[0], st) or \
+                    _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic, blocks, families) or \
+                    (families and _rotation_joined(eom, qs, f_[0], t, pv, tol)):
                 if resid < f_[2]:
                     found[i] = (qs, x[n:].copy(), resid)
                 break
@@ -275,6 +283,9 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             e = _classify_in_chart(eom, st, pv, qs, rest[ma:], t, resid, list(notes), blocks, locked)
             if e is not None:       # None: a critical point of the Euler chart only (gimbal lock)
                 out.append(e)
+        elif families:
+            st_f, a_f, more = _with_families(eom, st, pv, qs, t, rest[ma:])
+            out.append(_classify(eom, st_f, pv, qs, a_f, t, resid, list(notes) + more))
         else:
             out.append(_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
                                  lam=_clean(lam_scale * rest[:ma], lam_scale)))
@@ -325,6 +336,17 @@ def chart_of(eom, q, t, pv):
     return ch, st, qb, Z, base, notes
 
 
+def _lock_artefact(eom, q, t, pv, tol) -> bool:
+    """q is at gimbal lock and only a critical point of the Euler angles: the same configuration
+    in quaternions has a force at rest (dV/d(angles) = J' grad V vanishes where J loses rank)."""
+    locked = charts.locked_joints(eom, q, t, pv)
+    if not locked:
+        return False
+    base, to_new = charts.quaternion_model(eom, locked)
+    _, bias = parts(base).M_bias(to_new(q), np.zeros(base.n), t, pv)
+    return not np.max(np.abs(bias), initial=0.0) <= tol
+
+
 def _classify_in_chart(eom, st, pv, qs, alpha, t, resid, notes, blocks, locked) -> Equilibrium:
     """Classification in the chart of :func:`chart_of`; continuous families of equilibria
     through the point (a top's rotation about the vertical) are neutral directions, like
@@ -342,32 +364,43 @@ def _classify_in_chart(eom, st, pv, qs, alpha, t, resid, notes, blocks, locked) 
     if k and len(alpha) == st.symmetry.shape[1]:
         a = np.linalg.lstsq(stc.symmetry, Z.T @ (st.symmetry @ alpha) if base is eom else np.zeros(nz),
                             rcond=None)[0]
-    fam = _family_directions(ch, stc, pv, t, a)
-    if fam.shape[1]:
-        import dataclasses
-
-        Nold = stc.symmetry
-        Nall = np.linalg.qr(np.hstack([Nold, fam]))[0] if k else fam
-        a = np.linalg.lstsq(Nall, Nold @ a, rcond=None)[0] if k else np.zeros(Nall.shape[1])
-        stc = dataclasses.replace(stc, symmetry=Nall)
-        more.append(f"{fam.shape[1]} direction(s) along a continuous family of equilibria through this "
-                    "point: neutral")
-    e = _classify(ch, stc, pv, np.zeros(nz), a, t, resid, notes + more)
+    stc, a, fam_notes = _with_families(ch, stc, pv, np.zeros(nz), t, a)
+    e = _classify(ch, stc, pv, np.zeros(nz), a, t, resid, notes + more + fam_notes)
     e.coords, e.q, e.chart_coords = tuple(eom.coords), np.asarray(qs, float), tuple(ch.coords)
     e.tangent_basis = Z if base is eom else None
     e.acceleration = np.zeros(eom.n) if not k else (st.symmetry @ alpha)
     return e
 
 
-def _family_directions(ch, st, pv, t, alpha) -> np.ndarray:
+def _with_families(eom, st, pv, q, t, alpha):
+    """(structure, alpha, notes) with the directions along a continuous family of equilibria
+    through q added to the symmetry directions (neutral)."""
+    import dataclasses
+
+    fam = _family_directions(eom, st, pv, t, alpha, q)
+    if not fam.shape[1]:
+        return st, alpha, []
+    Nold = st.symmetry
+    k = Nold.shape[1]
+    Nall = np.linalg.qr(np.hstack([Nold, fam]))[0] if k else fam
+    a = np.linalg.lstsq(Nall, Nold @ alpha, rcond=None)[0] if k else np.zeros(Nall.shape[1])
+    return (dataclasses.replace(st, symmetry=Nall), a,
+            [f"{fam.shape[1]} direction(s) along a continuous family of equilibria through this point: neutral"])
+
+
+def _family_directions(ch, st, pv, t, alpha, q=None) -> np.ndarray:
     """Orthonormal directions v of zero stiffness (transverse to the symmetry directions) along
-    which the point continues as a curve of equilibria: from z = s v (s = 0.2) Levenberg-Marquardt
-    with the gauge v'z = s converges to an equilibrium."""
+    which the point q (default 0: a chart's centre) continues as a curve of equilibria: from
+    q + s v (s = 0.2) Levenberg-Marquardt with the gauge v'(z - q) = s converges to an
+    equilibrium.  Not for accelerated references."""
     import casadi as ca
 
     n = ch.n
+    q = np.zeros(n) if q is None else np.asarray(q, float)
     N = st.symmetry
-    M, C, K, _, _ = second_order(ch, np.zeros(n), np.zeros(n), t, pv, acc=N @ alpha if N.size else np.zeros(n))
+    if N.size and np.any(alpha):
+        return np.zeros((n, 0))
+    M, C, K, _, _ = second_order(ch, q, np.zeros(n), t, pv, acc=np.zeros(n))
     P = complement(N)
     Kr = sym(P.T @ K @ P)
     if not Kr.size:
@@ -385,18 +418,18 @@ def _family_directions(ch, st, pv, t, alpha) -> np.ndarray:
     for v in null:
         s = 0.2
         vv = ca.DM(v)
-        r = ca.vertcat(ca.substitute(rest, ch.q, z) / scale, ca.mtimes(vv.T, z) - s)
+        r = ca.vertcat(ca.substitute(rest, ch.q, z) / scale, ca.mtimes(vv.T, z - ca.DM(q)) - s)
         F = ca.Function("famr", [z, ch.p], [r])
         JF = ca.Function("famj", [z, ch.p], [ca.jacobian(r, z)])
         try:
-            x = levenberg_marquardt(lambda x: dense(F(x, pv)).ravel(), lambda x: dense(JF(x, pv)), s * v)
+            x = levenberg_marquardt(lambda x: dense(F(x, pv)).ravel(), lambda x: dense(JF(x, pv)), q + s * v)
         except (ValueError, np.linalg.LinAlgError, FloatingPointError):
             x = None
         if x is None:
             continue
         res = dense(f(x, pv)).ravel()
         if np.all(np.isfinite(res)) and np.max(np.abs(res), initial=0.0) <= 1e-8 * scale \
-                and abs(float(v @ x) - s) <= 1e-6:
+                and abs(float(v @ (x - q)) - s) <= 1e-6:
             keep.append(v)
     if not keep:
         return np.zeros((n, 0))
@@ -411,6 +444,16 @@ def _result(eqs, search: Search) -> Equilibria:
 
 
 RUNAWAY = 10.0           # a failed run that ends this many times farther out than its start ran away
+
+
+def _decayed(x, g, n, JF, qref, pv, st) -> bool:
+    """A run that went far out (RUNAWAY / 2) to where both the force and its derivative have decayed
+    below tolerance (V0 exp(-x) at x = 34) found no equilibrium, only a vanishing force."""
+    size = 1.0 + float(np.max(np.abs(g), initial=0.0))
+    if float(np.max(np.abs(x[:n]), initial=0.0)) <= 0.5 * RUNAWAY * size:
+        return False
+    J = dense(JF(x, qref, pv))[:n, :n]
+    return float(np.max(np.abs(J), initial=0.0)) <= 1e-8 * max(st.stiffness_scale, 1e-300)
 
 
 def _note_failure(search: Search, q, g, rel_resid: float) -> None:
@@ -474,13 +517,54 @@ def _euler_same(eom, a, b, st) -> bool:
     return False
 
 
-def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic, blocks=()) -> bool:
+def _rotation_joined(eom, a, b, t, pv, tol) -> bool:
+    """Euler-angle models: a and b are one configuration or on one family of equilibria as
+    rotations: the same model in quaternions is at rest along the great circle between them
+    (Euler coordinates cannot say so near gimbal lock, where a line of angles is one rotation)."""
+    eb = charts.euler_blocks(eom)
+    if not eb:
+        return False
+    try:
+        base, to_new = charts.quaternion_model(eom, [blk[2] for blk in eb])
+    except MechError:
+        return False
+    qa, qb = to_new(a), to_new(b)
+    blocks = charts.quaternion_blocks(base)
+    quat = [i for _, idx in blocks for i in idx]
+    rest = [i for i in range(base.n) if i not in quat]
+    per = structure(eom, pv).periodic
+    da = np.zeros(base.n)
+    for i in rest:
+        c = base.coords[i]
+        j = eom.coords.index(c)
+        da[i] = wrap_angle(qa[i] - qb[i]) if per[j] else qa[i] - qb[i]
+    if np.max(np.abs(da), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(qa[rest]), initial=0.0)):
+        return False
+    for _, idx in blocks:
+        if np.dot(qa[idx], qb[idx]) < 0:
+            qb[idx] = -qb[idx]
+    pt = parts(base)
+    for s in (0.0, 0.25, 0.5, 0.75, 1.0):
+        w = qb + s * (qa - qb)
+        w[rest] = qb[rest] + s * da[rest]
+        for _, idx in blocks:
+            nb = np.linalg.norm(w[idx])
+            if nb < 1e-6:
+                return False
+            w[idx] = w[idx] / nb
+        _, bias = pt.M_bias(w, np.zeros(base.n), t, pv)
+        if not np.max(np.abs(bias), initial=0.0) <= tol:
+            return False
+    return True
+
+
+def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic, blocks=(), families=False) -> bool:
     """Two solutions of one degenerate equilibrium (slow convergence at a multiple root) or, with
     quaternion joints, of one continuous family (a rotation about the vertical): the residual
     stays below tol along the path between them (quaternion blocks: the great circle)."""
     d = np.array([wrap_angle(x - y) if per else x - y for x, y, per in zip(a, b, periodic)])
     quat = [i for _, idx in blocks for i in idx]
-    if not blocks and np.max(np.abs(d), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(a), initial=0.0)):
+    if not (blocks or families) and np.max(np.abs(d), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(a), initial=0.0)):
         return False
     n = len(a)
     bb = np.array(b, float)
