@@ -1,0 +1,102 @@
+"""Golden dumps per phase: `mech compile FILE --emit FORM` for every shipped model and every form
+is compared with tests/golden/<model>.<form>.txt (the file's default target, as `mech compile`
+picks it).
+
+Rewrite them, after checking that a change is intended, with
+
+    python -m pytest tests/test_golden.py --update-golden
+
+which writes the files that differ, removes those of models that no longer exist and lists
+both at the end of the run.  Text must match exactly; numbers match to a relative 1e-8 (plus
+1e-13 absolute), since computed values (the eom dump's values at its states) may differ in their
+last bits between platforms, libm or CasADi versions.
+"""
+import difflib
+import math
+import re
+from pathlib import Path
+
+import pytest
+
+from mechdsl.cli import main
+
+from conftest import MODELS, ROOT, model_files
+
+GOLDEN = ROOT / "tests" / "golden"
+FORMS = ("ast", "source", "model", "eom")
+UPDATE = "python -m pytest tests/test_golden.py --update-golden"
+REL, ABS = 1e-8, 1e-13
+
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|\bnan\b|-?\binf\b")
+
+
+def same_text(expected: str, actual: str) -> bool:
+    """Equal text, numbers equal within REL/ABS (the tokens around them exactly equal)."""
+    if expected == actual:
+        return True
+    a, b = _NUMBER.split(expected), _NUMBER.split(actual)
+    if a != b:
+        return False
+    for x, y in zip(_NUMBER.findall(expected), _NUMBER.findall(actual)):
+        fx, fy = float(x), float(y)
+        if x == y or (math.isnan(fx) and math.isnan(fy)):
+            continue
+        if not math.isclose(fx, fy, rel_tol=REL, abs_tol=ABS):
+            return False
+    return True
+
+
+def emit(path: Path, form: str, capsys) -> str:
+    assert main(["compile", str(path), "--emit", form]) == 0, capsys.readouterr().err
+    return capsys.readouterr().out
+
+
+def _diff(expected: str, actual: str, name: str, limit: int = 40) -> str:
+    lines = list(difflib.unified_diff(expected.splitlines(), actual.splitlines(),
+                                      f"tests/golden/{name} (committed)", f"{name} (now)", lineterm="", n=1))
+    more = f"\n... {len(lines) - limit} more diff lines" if len(lines) > limit else ""
+    return "\n".join(lines[:limit]) + more
+
+
+@pytest.mark.parametrize("form", FORMS)
+@pytest.mark.parametrize("path", model_files(), ids=lambda p: p.stem)
+def test_golden(path, form, capsys, update_golden, golden_changes):
+    name = f"{path.stem}.{form}.txt"
+    golden = GOLDEN / name
+    actual = emit(path, form, capsys)
+    expected = golden.read_text(encoding="utf-8") if golden.exists() else None
+    if update_golden:
+        if expected is None or not same_text(expected, actual):
+            GOLDEN.mkdir(exist_ok=True)
+            golden.write_text(actual, encoding="utf-8")
+            golden_changes.append(f"{'created' if expected is None else 'rewritten'}: tests/golden/{name}")
+        return
+    if expected is None:
+        pytest.fail(f"missing golden file tests/golden/{name}; create it with: {UPDATE}")
+    assert same_text(expected, actual), (
+        f"`mech compile models/{path.name} --emit {form}` differs from tests/golden/{name}:\n"
+        f"{_diff(expected, actual, name)}\nif the change is intended: {UPDATE}")
+
+
+def test_no_stale_golden_files(update_golden, golden_changes):
+    wanted = {f"{p.stem}.{f}.txt" for p in model_files() for f in FORMS}
+    stale = sorted(p for p in GOLDEN.glob("*.txt") if p.name not in wanted)
+    if update_golden:
+        for p in stale:
+            p.unlink()
+            golden_changes.append(f"removed (no such model or form): tests/golden/{p.name}")
+        return
+    assert not stale, f"golden files of no shipped model: {[p.name for p in stale]}; remove them with: {UPDATE}"
+
+
+# ----------------------------------------------------------------------------- the comparison itself
+
+
+def test_same_text_tolerates_last_digits_only():
+    assert same_text("T = 0.1234567891; 2\n", "T = 0.1234567892; 2\n")
+    assert same_text("x = 0\n", "x = 1e-16\n")
+    assert not same_text("T = 0.1234567891\n", "T = 0.1234568891\n")     # 1e-7 relative
+    assert not same_text("M[j1.phi,j1.phi] = 1\n", "M[j1.phi,j2.phi] = 1\n")
+    assert not same_text("x = m1 * L\n", "x = m2 * L\n")                # digits in names count
+    assert not same_text("x = 2.194e-06\n", "x = 2.195e-06\n")           # small values too
+    assert not same_text("x = 1\n", "x = 1\ny = 2\n")
