@@ -21,6 +21,8 @@ Why this form (the golden files in tests/golden/ compare it):
   Python guarantees across versions; NumPy's Generator streams are not).  A change of the
   physics changes the numbers whatever the printer; 10 significant digits, compared with a
   tolerance by the golden test (different libm or CasADi simplifications change the last bits).
+- **Noise.**  Values below NOISE times the largest of their line are rounding noise of an
+  exact zero (``cos(pi/2)``) that differs between platforms; they print as 0.
 - **Deterministic and fast.**  Declaration order everywhere; one CasADi Function for all
   quantities, evaluated three times; text is built only for expressions under the size cap.
 """
@@ -59,9 +61,9 @@ def dump_eom(eom) -> str:
     L.append(f"states s0 (start), s1, s2 (seed {SEED}); the values after '=' below are at s0; s1; s2 "
              "(one value when an expression depends on parameters only):")
     L.append(f"  time = {_nums([s[2][0] for s in states])}")
-    for k, group in ((0, eom.coords), (1, eom.coords), (4, range(eom.m) if eom.lam is not None else ())):
-        for i, _ in enumerate(group):
-            L.append(f"  {names[k][i]} = {_nums([s[k][i] for s in states])}")
+    for k in (0, 1, 4):                     # coordinates, speeds, multipliers
+        for i, name in enumerate(names[k]):
+            L.append(f"  {name} = {_nums([s[k][i] for s in states])}")
     param_bits = ((1 << len(eom.params)) - 1) << (2 * eom.n + 1)     # inputs: q, qd, t, p, lambda
     n_nz = sum(1 for lab, _ in entries if lab.startswith("M["))
     for idx, (label, e) in enumerate(entries):
@@ -102,10 +104,10 @@ def _entries(eom) -> list:
     out += [("T", ca.SX(eom.T)), ("V", ca.SX(eom.V)), ("D", ca.SX(eom.D))]
     out += [(f"Q[{c}]", x) for c, x in zip(eom.coords, col(eom.Q, eom.n))]
     M = ca.SX(eom.M)
-    for i in range(eom.n):
-        for j in range(i + 1):
-            if not ca.SX(M[i, j]).is_zero():
-                out.append((f"M[{eom.coords[i]},{eom.coords[j]}]", M[i, j]))
+    sp = M.sparsity()
+    lower = sorted((i, j, k) for k, (i, j) in enumerate(zip(sp.row(), sp.get_col())) if j <= i)
+    nz = M.nonzeros()
+    out += [(f"M[{eom.coords[i]},{eom.coords[j]}]", nz[k]) for i, j, k in lower if not nz[k].is_zero()]
     out += [(f"bias[{c}]", x) for c, x in zip(eom.coords, col(eom.bias, eom.n))]
     if eom.qdd is not None:
         out += [(f"qdd[{c}]", x) for c, x in zip(eom.coords, col(eom.qdd, eom.n))]
@@ -204,8 +206,9 @@ def _op_names(ca) -> dict:
 
 def _read_graph(ca, ins, exprs, names):
     """For each expression: its text (None when over MAX_CHARS), the bit set of the input
-    symbols it depends on and its number of operations, from one SX Function's instructions
-    (live_variables off, so every instruction has its own work slot)."""
+    symbols it depends on and its number of operations (counted only when the text is not
+    shown), from one SX Function's instructions (live_variables off, so every instruction
+    has its own work slot)."""
     if not exprs:
         return [], [], []
     offsets, k = [], 0
@@ -215,9 +218,9 @@ def _read_graph(ca, ins, exprs, names):
     f = ca.Function("dump_eom_graph", ins, exprs, {"live_variables": False})
     opname = _op_names(ca)
     node: dict[int, ir.Expr] = {}       # work slot -> IR expression
-    size: dict[int, int] = {}           # work slot -> upper bound of its text length
+    size: dict[int, int] = {}           # work slot -> bound of its text length (MAX_CHARS + 1: too long)
     dep: dict[int, int] = {}            # work slot -> bit set of input symbols
-    reach: dict[int, int] = {}          # work slot -> bit set of operation instructions
+    kids: dict[int, list] = {}          # work slot of an operation -> its argument slots
     texts = [None] * len(exprs)
     deps = [0] * len(exprs)
     ops = [0] * len(exprs)
@@ -227,30 +230,41 @@ def _read_graph(ca, ins, exprs, names):
         i_out = list(f.instruction_output(k))
         if op == "OUTPUT":
             w, o = i_in[0], i_out[0]
-            size_ok = size[w] <= MAX_CHARS
-            texts[o] = to_text(node[w]) if size_ok else None
-            if texts[o] is not None and len(texts[o]) > MAX_CHARS:
-                texts[o] = None
-            deps[o], ops[o] = dep[w], bin(reach[w]).count("1")
+            text = to_text(node[w]) if size[w] <= MAX_CHARS else None
+            texts[o] = text if text is not None and len(text) <= MAX_CHARS else None
+            deps[o] = dep[w]
+            if texts[o] is None:
+                ops[o] = _count_ops(w, kids)
             continue
         w = i_out[0]
         if op == "INPUT":
             a, nz = i_in
             node[w] = _leaf(a, nz, names)
-            size[w], dep[w], reach[w] = len(to_text(node[w])), 1 << (offsets[a] + nz), 0
+            size[w], dep[w] = len(to_text(node[w])), 1 << (offsets[a] + nz)
             continue
         if op == "CONST":
             node[w] = ir.Const(float(f.instruction_constant(k)))
-            size[w], dep[w], reach[w] = len(to_text(node[w])), 0, 0
+            size[w], dep[w] = len(to_text(node[w])), 0
             continue
-        args = [node[j] for j in i_in[:_arity(op)]]
-        node[w] = _ir_op(op, args)
-        size[w] = min(sum(size[j] for j in i_in[:len(args)]) + len(op) + 6, MAX_CHARS + 1)
-        dep[w], reach[w] = 0, 1 << k
-        for j in i_in[:len(args)]:
+        args = i_in[:_arity(op)]
+        node[w] = _ir_op(op, [node[j] for j in args])
+        size[w] = min(sum(size[j] for j in args) + len(op) + 6, MAX_CHARS + 1)
+        dep[w], kids[w] = 0, args
+        for j in args:
             dep[w] |= dep[j]
-            reach[w] |= reach[j]
     return texts, deps, ops
+
+
+def _count_ops(w: int, kids: dict) -> int:
+    """Operations in the graph below slot w, each shared one counted once."""
+    seen, stack = set(), [w]
+    while stack:
+        v = stack.pop()
+        if v in seen or v not in kids:
+            continue
+        seen.add(v)
+        stack.extend(kids[v])
+    return len(seen)
 
 
 def _arity(op: str) -> int:
