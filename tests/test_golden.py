@@ -19,11 +19,12 @@ from pathlib import Path
 import pytest
 
 from mechdsl.cli import main
+from mechdsl.commands.compile import EMITS
 
 from conftest import MODELS, ROOT, model_files
 
 GOLDEN = ROOT / "tests" / "golden"
-FORMS = ("ast", "source", "model", "eom")
+FORMS = EMITS                                  # every form `mech compile --emit` offers
 UPDATE = "python -m pytest tests/test_golden.py --update-golden"
 REL, ABS = 1e-8, 1e-13
 
@@ -58,24 +59,29 @@ def _diff(expected: str, actual: str, name: str, limit: int = 40) -> str:
     return "\n".join(lines[:limit]) + more
 
 
+def check_golden(golden: Path, actual: str, what: str, update: bool, changes: list) -> None:
+    """Compare `actual` with the file `golden`; under --update-golden write it when it differs
+    (beyond the numeric tolerance) and record that in `changes`."""
+    name = golden.name
+    expected = golden.read_text(encoding="utf-8") if golden.exists() else None
+    if update:
+        if expected is None or not same_text(expected, actual):
+            golden.parent.mkdir(exist_ok=True)
+            golden.write_text(actual, encoding="utf-8")
+            changes.append(f"{'created' if expected is None else 'rewritten'}: tests/golden/{name}")
+        return
+    if expected is None:
+        pytest.fail(f"missing golden file tests/golden/{name}; create it with: {UPDATE}", pytrace=False)
+    if not same_text(expected, actual):
+        pytest.fail(f"`{what}` differs from tests/golden/{name}:\n"
+                    f"{_diff(expected, actual, name)}\nif the change is intended: {UPDATE}", pytrace=False)
+
+
 @pytest.mark.parametrize("form", FORMS)
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.stem)
 def test_golden(path, form, capsys, update_golden, golden_changes):
-    name = f"{path.stem}.{form}.txt"
-    golden = GOLDEN / name
-    actual = emit(path, form, capsys)
-    expected = golden.read_text(encoding="utf-8") if golden.exists() else None
-    if update_golden:
-        if expected is None or not same_text(expected, actual):
-            GOLDEN.mkdir(exist_ok=True)
-            golden.write_text(actual, encoding="utf-8")
-            golden_changes.append(f"{'created' if expected is None else 'rewritten'}: tests/golden/{name}")
-        return
-    if expected is None:
-        pytest.fail(f"missing golden file tests/golden/{name}; create it with: {UPDATE}")
-    if not same_text(expected, actual):
-        pytest.fail(f"`mech compile models/{path.name} --emit {form}` differs from tests/golden/{name}:\n"
-                    f"{_diff(expected, actual, name)}\nif the change is intended: {UPDATE}", pytrace=False)
+    check_golden(GOLDEN / f"{path.stem}.{form}.txt", emit(path, form, capsys),
+                 f"mech compile models/{path.name} --emit {form}", update_golden, golden_changes)
 
 
 def test_no_stale_golden_files(update_golden, golden_changes):
@@ -89,7 +95,22 @@ def test_no_stale_golden_files(update_golden, golden_changes):
     assert not stale, f"golden files of no shipped model: {[p.name for p in stale]}; remove them with: {UPDATE}"
 
 
-# ----------------------------------------------------------------------------- the comparison itself
+# ----------------------------------------------------------------------------- the mechanism itself
+
+
+def test_check_golden_fails_creates_and_rewrites_only_on_change(tmp_path):
+    g = tmp_path / "golden" / "m.eom.txt"
+    with pytest.raises(pytest.fail.Exception, match="missing golden file .*--update-golden"):
+        check_golden(g, "x = 1\n", "cmd", False, [])
+    changes: list = []
+    check_golden(g, "x = 1\n", "cmd", True, changes)
+    assert g.read_text() == "x = 1\n" and changes == ["created: tests/golden/m.eom.txt"]
+    check_golden(g, "x = 1.0000000000001\n", "cmd", True, changes)        # within tolerance: kept
+    assert g.read_text() == "x = 1\n" and len(changes) == 1
+    with pytest.raises(pytest.fail.Exception, match=r"(?s)`cmd` differs.*-x = 1\n\+x = 2"):
+        check_golden(g, "x = 2\n", "cmd", False, [])
+    check_golden(g, "x = 2\n", "cmd", True, changes)
+    assert g.read_text() == "x = 2\n" and changes[-1] == "rewritten: tests/golden/m.eom.txt"
 
 
 def test_same_text_tolerates_last_digits_only():
