@@ -172,3 +172,17 @@ def test_eom_dump_names_symbols_by_the_model():
 def test_eom_dump_summarizes_large_expressions():
     text = (GOLDEN / "nlink_pendulum.eom.txt").read_text()
     assert re.search(r"^qdd\[q\[1\]\] = <\d+ operations in all 3 coordinates, all 3 speeds, .*>$", text, re.M)
+
+
+def test_eom_dump_stops_counting_operations_past_its_budget(monkeypatch):
+    """Counting each large expression's operations is quadratic in a big model; past the
+    budget the dump says 'large expression' for it and every later one."""
+    import mechdsl
+    from mechdsl import dump_eom as d
+
+    eom = mechdsl.load(MODELS / "nlink_pendulum.mech").eom
+    monkeypatch.setattr(d, "OPS_BUDGET", 200)
+    heads = [ln for ln in d.dump_eom(eom).splitlines() if " = <" in ln]
+    counted = [ln for ln in heads if " operations in " in ln]
+    assert counted and heads[:len(counted)] == counted                 # counts first, then none
+    assert all("<large expression in " in ln for ln in heads[len(counted):]) and len(heads) > len(counted)

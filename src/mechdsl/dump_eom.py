@@ -5,7 +5,8 @@ accelerations of the recursive route, the constraints g, outputs, reactions, inv
 singularity monitors and the start values) is written as
 
     name = expression                 (small: at most MAX_CHARS characters of text)
-    name = <N operations in deps>     (large: its size and the symbols it depends on)
+    name = <N operations in deps>     (large: its size and the symbols it depends on;
+                                       '<large expression in deps>' past OPS_BUDGET)
       = v0; v1; v2                    (its values at the three states of the header)
 
 Why this form (the golden files in tests/golden/ compare it):
@@ -38,6 +39,7 @@ SEED = 20261124          # the seeded states
 N_RANDOM = 2             # random states besides the start state
 Q_SPREAD = 0.5           # random states: q = q0 + U(-Q_SPREAD, Q_SPREAD), likewise qd, lambda
 QD_SPREAD = 1.0
+OPS_BUDGET = 1_000_000   # operations the size counts of one dump may visit (see _count_ops)
 NOISE = 1e-12            # relative size below which a value prints as 0 (see _nums)
 
 
@@ -75,7 +77,8 @@ def dump_eom(eom) -> str:
             continue
         text = exprs[idx]
         if text is None:
-            text = f"<{ops[idx]} operations in {_deps_text(deps[idx], names)}>"
+            size = f"{ops[idx]} operations" if ops[idx] is not None else "large expression"
+            text = f"<{size} in {_deps_text(deps[idx], names)}>"
         L.append(f"{label} = {text}")
         if e.is_constant():
             continue
@@ -223,7 +226,8 @@ def _read_graph(ca, ins, exprs, names):
     kids: dict[int, list] = {}          # work slot of an operation -> its argument slots
     texts = [None] * len(exprs)
     deps = [0] * len(exprs)
-    ops = [0] * len(exprs)
+    ops: list = [None] * len(exprs)
+    budget = [OPS_BUDGET]
     for k in range(f.n_instructions()):
         op = opname.get(f.instruction_id(k), "?")
         i_in = list(f.instruction_input(k))
@@ -234,7 +238,7 @@ def _read_graph(ca, ins, exprs, names):
             texts[o] = text if text is not None and len(text) <= MAX_CHARS else None
             deps[o] = dep[w]
             if texts[o] is None:
-                ops[o] = _count_ops(w, kids)
+                ops[o] = _count_ops(w, kids, budget)
             continue
         w = i_out[0]
         if op == "INPUT":
@@ -255,15 +259,21 @@ def _read_graph(ca, ins, exprs, names):
     return texts, deps, ops
 
 
-def _count_ops(w: int, kids: dict) -> int:
-    """Operations in the graph below slot w, each shared one counted once."""
+def _count_ops(w: int, kids: dict, budget: list) -> int | None:
+    """Operations in the graph below slot w, each shared one counted once; None once the
+    walks of one dump have visited OPS_BUDGET operations (then for every later expression
+    too, so a large model's dump stays fast and its lines uniform)."""
     seen, stack = set(), [w]
     while stack:
         v = stack.pop()
         if v in seen or v not in kids:
             continue
+        if len(seen) >= budget[0]:
+            budget[0] = 0
+            return None
         seen.add(v)
         stack.extend(kids[v])
+    budget[0] -= len(seen)
     return len(seen)
 
 
