@@ -107,10 +107,13 @@ def _entries(eom) -> list:
     out += [("T", ca.SX(eom.T)), ("V", ca.SX(eom.V)), ("D", ca.SX(eom.D))]
     out += [(f"Q[{c}]", x) for c, x in zip(eom.coords, col(eom.Q, eom.n))]
     M = ca.SX(eom.M)
-    sp = M.sparsity()
-    lower = sorted((i, j, k) for k, (i, j) in enumerate(zip(sp.row(), sp.get_col())) if j <= i)
-    nz = M.nonzeros()
-    out += [(f"M[{eom.coords[i]},{eom.coords[j]}]", nz[k]) for i, j, k in lower if not nz[k].is_zero()]
+    sp, nz = M.sparsity(), M.nonzeros()
+    lower: dict = {}                        # (i, j), i >= j -> nonzero index; the lower one wins
+    for k, (i, j) in enumerate(zip(sp.row(), sp.get_col())):
+        if j <= i or (j, i) not in lower:
+            lower[(max(i, j), min(i, j))] = k
+    out += [(f"M[{eom.coords[i]},{eom.coords[j]}]", nz[lower[i, j]]) for i, j in sorted(lower)
+            if not nz[lower[i, j]].is_zero()]
     out += [(f"bias[{c}]", x) for c, x in zip(eom.coords, col(eom.bias, eom.n))]
     if eom.qdd is not None:
         out += [(f"qdd[{c}]", x) for c, x in zip(eom.coords, col(eom.qdd, eom.n))]
