@@ -17,6 +17,7 @@ through ``codegen.FastFunction`` (buffer calls).
 """
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 import sys
@@ -99,6 +100,72 @@ class Progress:
             self.bar.close()
 
 
+# --------------------------------------------------------------------------- messages
+
+
+class _Router:
+    """Stands in for sys.stdout/sys.stderr while a capture is active: writes from a capturing
+    thread go to that thread's buffer, every other thread's to the stream it replaced."""
+
+    def __init__(self, base):
+        self.base = base
+
+    def write(self, text):
+        buf = _ROUTES.get((id(self), threading.get_ident()))
+        return (buf if buf is not None else self.base).write(text)
+
+    def flush(self):
+        if self.base is not None:
+            self.base.flush()
+
+    def __getattr__(self, name):
+        return getattr(self.base, name)
+
+
+_ROUTES: dict[tuple[int, int], io.StringIO] = {}
+_ROUTE_LOCK = threading.Lock()
+_ROUTERS: dict[str, list] = {}     # stream name -> [router, users]
+
+
+@contextlib.contextmanager
+def captured_messages():
+    """Capture what CasADi and SUNDIALS print (they print through Python's sys.stdout and
+    sys.stderr) from the calling thread only, into the StringIO yielded.
+
+    Output of other threads passes through unchanged, concurrent captures in several threads
+    do not interfere, and the streams are restored when the last capture ends (unless
+    someone else replaced them meanwhile): no process-wide effect outlives a run."""
+    buf = io.StringIO()
+    me = threading.get_ident()
+    with _ROUTE_LOCK:
+        routers, previous = [], []
+        for name in ("stdout", "stderr"):
+            entry = _ROUTERS.get(name)
+            if entry is None or getattr(sys, name) is not entry[0]:
+                entry = [_Router(getattr(sys, name)), 0]
+                _ROUTERS[name] = entry
+                setattr(sys, name, entry[0])
+            entry[1] += 1
+            routers.append(entry)
+            previous.append(_ROUTES.get((id(entry[0]), me)))     # a capture inside a capture
+            _ROUTES[(id(entry[0]), me)] = buf
+    try:
+        yield buf
+    finally:
+        with _ROUTE_LOCK:
+            for name, entry, prev in zip(("stdout", "stderr"), routers, previous):
+                if prev is None:
+                    _ROUTES.pop((id(entry[0]), me), None)
+                else:
+                    _ROUTES[(id(entry[0]), me)] = prev
+                entry[1] -= 1
+                if entry[1] == 0:
+                    if getattr(sys, name) is entry[0]:
+                        setattr(sys, name, entry[0].base)
+                    if _ROUTERS.get(name) is entry:
+                        del _ROUTERS[name]
+
+
 # --------------------------------------------------------------------------- casadi
 
 
@@ -165,26 +232,22 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
     keep = (buf, X, xin, pin, integ)  # alive while the worker runs, even if the caller is interrupted
 
     def work():
-        try:
-            assert keep
-            ev()
-        except Exception as e:  # noqa: BLE001 - reported as a failure, never raised
-            box["error"] = str(e)
+        with captured_messages() as captured:   # what CasADi prints from this worker thread only
+            try:
+                assert keep
+                ev()
+            except Exception as e:  # noqa: BLE001 - reported as a failure, never raised
+                box["error"] = str(e)
+        box["messages"] = captured.getvalue()
 
-    captured = io.StringIO()
-    old_err = sys.stderr
-    sys.stderr = captured            # CasADi prints through Python's sys.stderr
     th = threading.Thread(target=work, name="mechdsl-integrator", daemon=True)
     seen = 0
-    try:
-        th.start()
-        while th.is_alive():
-            th.join(0.1)
-            seen = _count_filled(X, seen)
-            if seen:
-                progress.update(float(grid[seen - 1]))
-    finally:
-        sys.stderr = old_err
+    th.start()
+    while th.is_alive():
+        th.join(0.1)
+        seen = _count_filled(X, seen)
+        if seen:
+            progress.update(float(grid[seen - 1]))
     seen = _count_filled(X, 0)
     progress.update(float(grid[seen - 1]) if seen else float(grid[0]))
     try:
@@ -198,7 +261,7 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
             error = f"integrator stopped early (status {buf.ret()})"
         else:
             error = "non-finite state"
-    run = Run(X=X, reached=seen, stats=_flat(stats), error=error, messages=captured.getvalue())
+    run = Run(X=X, reached=seen, stats=_flat(stats), error=error, messages=box.get("messages", ""))
     if error is not None:
         run.fail_time = _parse_fail_time(run.messages + "\n" + error)
     return run

@@ -8,7 +8,6 @@ why.  See docs/simulate.md (users) and docs/internals/numerics.md (design).
 """
 from __future__ import annotations
 
-import importlib
 import math
 import platform
 import time
@@ -26,50 +25,46 @@ DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
-KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions",
-              "formulation", "reactions")   # the last two concern constrained models (mechdsl.dae)
+KNOWN_OPTS = ("singularity_threshold", "functions")   # back-end options of the ODE runs (besides the settings)
 
 
-def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", points=None, outputs=None,
-             x0=None, p=None, progress=None, **opts) -> Result:
+def simulate(eom, t_end, *, progress=None, **kw) -> Result:
     """Integrate ``eom`` from t_start to t_end and sample it on ``points`` equidistant times.
 
-    x0: full state [q; qd] (array) or a dict of overrides {coordinate: value, "der(c)": value};
-    p: parameter vector or dict of overrides {name: value} (dependent parameters are not
-    re-evaluated: use Model.with_params for that).  outputs: names of EOM.outputs to record
-    (default all).  progress: True shows a bar on stderr for runs longer than 0.5 s, or a
-    callable(t, t_end).  opts: compiled (bool), max_steps (per output interval), dt (fixed-step
-    methods), integrator_options (dict passed to the back end), singularity_threshold.
+    The keyword arguments are the fields of :class:`mechdsl.simulation.SimulationSettings`
+    (t_start, rtol, atol, method, formulation, points, outputs, x0, p, dt, reactions,
+    compiled, max_steps, integrator_options, rest_speed, impact_order, budget,
+    estimate_error) and back-end options (functions, singularity_threshold, baumgarte,
+    ...).  x0: full state [q; qd] (array) or a dict of overrides {coordinate: value,
+    "der(c)": value}; p: parameter vector or dict of overrides {name: value} (dependent
+    parameters are not re-evaluated: use Model.with_params for that).  progress: True shows
+    a bar on stderr for runs longer than 0.5 s, or a callable(t, t_end).  Every run goes
+    through the one simulation layer (mechdsl.simulation: formulate, then solve).
     """
-    method = str(method or "auto").lower()
-    if eom.model is not None and eom.model.contacts:      # unilateral contacts, fixations (docs/contacts.md)
-        from .impacts import simulate_with_contacts
+    from .simulation import simulate as run
+    from .simulation.settings import from_kwargs
 
-        return simulate_with_contacts(eom, None, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method,
-                                      points=points, outputs=outputs, x0=x0, p=p, progress=progress, **opts)
-    if eom.g is not None and method not in I.SYMPLECTIC:
-        return _dispatch("mechdsl.dae", "simulate_dae", "constrained models (DAE)", eom, t_end,
-                         t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
-                         outputs=outputs, x0=x0, p=p, progress=progress, **opts)
-    if method in I.SYMPLECTIC:
-        return _dispatch("mechdsl.symplectic", "simulate_symplectic", f"the symplectic method '{method}'",
-                         eom, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
-                         outputs=outputs, x0=x0, p=p, progress=progress, **opts)
+    return run(eom, from_kwargs(t_end, **kw), progress=progress)
+
+
+def simulate_ode(eom, s, progress=None) -> Result:
+    """The ODE back end: minimal coordinates, CasADi integrator plugins or scipy (settings
+    ``s`` validated by mechdsl.simulation.settings)."""
     wall0 = time.perf_counter()
+    opts = dict(s.extra)
     unknown = sorted(set(opts) - set(KNOWN_OPTS))
     if unknown:
         hint = did_you_mean(unknown[0], KNOWN_OPTS)
         raise UsageError(f"unknown simulation option '{unknown[0]}'" + (f"; {hint}" if hint else ""))
+    method = s.method
     if method != "auto" and method not in I.METHODS:
-        names = ["auto", *I.METHODS, *I.SYMPLECTIC]
-        hint = did_you_mean(method, names)
-        raise UsageError(f"unknown method '{method}'" + (f"; {hint}" if hint else "")
-                         + f" (methods: {', '.join(names)})")
-    t0, t1, rtol, atol, npts = _check_numbers(t_start, t_end, rtol, atol, points)
-    pv = parameter_vector(eom, p)
-    xs = start_vector(eom, x0, pv)
-    out_names = _check_outputs(eom, outputs)
-    compiled = bool(opts.get("compiled", False))
+        raise UsageError(f"method '{method}' does not apply to an ODE model (methods: {', '.join(['auto', *I.METHODS])}"
+                         ", or a fixed-step method)")
+    t0, t1, rtol, atol, npts = s.t_start, s.t_end, s.rtol, s.atol, s.points or DEFAULT_POINTS
+    pv = parameter_vector(eom, s.p)
+    xs = start_vector(eom, s.x0, pv)
+    out_names = _check_outputs(eom, s.outputs)
+    compiled = s.compiled
     vm = casadi_functions(eom, names=("ode", "ode_jacobian"))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
@@ -92,17 +87,18 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     else:
         funcs = vm
     meta["notes"] += list(getattr(funcs, "notes", []))
-    for key in ("formulation", "reactions"):
-        if opts.get(key) not in (None, False, "ode", "auto"):
-            meta["notes"].append(f"{key} = {opts[key]!r} applies to constrained models only; ignored for this ODE")
+    if s.formulation not in ("auto", "ode"):
+        meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
+    if s.reactions:
+        meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
     if compiled and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
-    max_steps = int(opts.get("max_steps") or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
-    extra = dict(opts.get("integrator_options") or {})
+    max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
+    extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     try:
-        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1,
-                          meta["notes"])
+        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
+                          meta["notes"], s.budget)
     finally:
         bar.close()
     if fixed is not None:
@@ -115,7 +111,7 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     X[0] = xs
     t = grid[:n_ok].copy()
     signals = compute_signals(eom, post, t, X, pv, out_names)
-    _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold", SINGULARITY_THRESHOLD)))
+    _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
     stats.update(_energy_drift(signals))
@@ -149,51 +145,6 @@ def _no_state_result(eom, post, grid, pv, out_names, meta, wall0) -> Result:
 
 
 # --------------------------------------------------------------------------- dispatch and inputs
-
-
-def _dispatch(module, func, what, eom, t_end, **kw):
-    try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as e:
-        if e.name == module:
-            raise UsageError(f"{what} cannot be simulated: module {module} is not available in this installation") from None
-        raise
-    if not hasattr(mod, func):
-        raise UsageError(f"{what} cannot be simulated: {module}.{func} is missing")
-    if kw.get("progress") is True:   # the helpers take a callable(t, t_end): drive our bar with it
-        try:
-            t0 = float(kw.get("t_start") or 0.0)
-            bar = I.Progress(True, t0, float(t_end), label=f"{eom.name} ({kw.get('method', '')})")
-        except (TypeError, ValueError):
-            bar = None
-        if bar is not None:
-            kw["progress"] = lambda t, t1: bar.update(float(t))
-            try:
-                return getattr(mod, func)(eom, t_end, **kw)
-            finally:
-                bar.close()
-    return getattr(mod, func)(eom, t_end, **kw)
-
-
-def _check_numbers(t_start, t_end, rtol, atol, points):
-    try:
-        t0, t1, rtol, atol = float(t_start), float(t_end), float(rtol), float(atol)
-    except (TypeError, ValueError):
-        raise UsageError("t_start, t_end, rtol and atol must be numbers") from None
-    if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
-        raise UsageError(f"the end time must be a finite number after the start time (got {t0} .. {t1})")
-    if not (0 < rtol < 1) or not (0 < atol < 1) or not math.isfinite(atol):
-        raise UsageError(f"tolerances must lie in (0, 1) (got rtol={rtol}, atol={atol})")
-    if rtol < 1e-14:
-        raise UsageError(f"rtol={rtol} is below what double precision can deliver (use at least 1e-14)")
-    npts = DEFAULT_POINTS if points is None else points
-    if isinstance(npts, float) and npts == int(npts):
-        npts = int(npts)
-    if not isinstance(npts, (int, np.integer)) or isinstance(npts, bool) or npts < 2:
-        raise UsageError(f"points must be an integer >= 2 (the number of output times including both ends); got {points!r}")
-    return t0, t1, rtol, atol, int(npts)
-
-
 
 
 def start_vector(eom, x0, pv) -> np.ndarray:
@@ -276,7 +227,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol) -> tuple[str, str, dict]:
             f"benchmarks/integrators.py", info)
 
 
-def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]:
+def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000) -> tuple[int, str]:
     """Steps for the fixed-step methods: h = dt, or h * omega = 0.5 rtol^(1/order), omega the
     fastest rate seen at the start: the spectral radius of the Jacobian, sqrt(max |qdd|) and
     max |qd| (coordinates in units of order 1), and 2 pi / horizon."""
@@ -298,12 +249,12 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]
         pass
     omega = max(rho, omega_acc, 2 * math.pi / span)
     h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
-    steps = min(max(1, math.ceil(span / h)), 10_000_000)
-    return steps, (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
+    steps = min(max(1, math.ceil(span / h)), int(budget))
+    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
 
 
-def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes):
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget):
     backend = I.METHODS[method][0]
     if backend == "scipy":
         rhs = FastFunction(funcs["ode"]).bind(p=pv)
@@ -315,7 +266,7 @@ def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom
     steps = None
     if method in I.FIXED_STEP:
         steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
-                                      xs, pv, t0, t1, rtol, dt)
+                                      xs, pv, t0, t1, rtol, dt, budget)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
         meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
