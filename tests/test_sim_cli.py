@@ -1,7 +1,8 @@
 """`mech simulate` against a stand-in for the lead's mechdsl.api (load -> Model with .eom).
 
 The stand-in implements only the interface the command relies on: load(path, model, scene)
-returning an object with .eom, .scene_settings, .parameter_values and .with_params(**kw).
+returning an object with .eom, .scene_settings, .with_params(**kw) and the real
+Model.simulate (settings resolve there, as for a Python caller).
 """
 from __future__ import annotations
 
@@ -12,21 +13,25 @@ import types
 import numpy as np
 import pytest
 
+from mechdsl.api import Model as RealModel
 from mechdsl.cli import main
 from sim_models import blowup, pendulum
 
 
 class FakeModel:
     def __init__(self, eom, settings=None, values=None):
-        self.eom = eom
         self.scene_settings = dict(settings or {})
         self.parameter_values = np.array(eom.param_values if values is None else values, float)
+        self.eom = eom.replace(param_values=self.parameter_values)
 
     def with_params(self, **kw):
         v = self.parameter_values.copy()
         for k, x in kw.items():
             v[self.eom.params.index(k)] = x
         return FakeModel(self.eom, self.scene_settings, v)
+
+    simulate = RealModel.simulate      # the command is thin over Model.simulate: the real one runs
+    settings = RealModel.settings
 
 
 @pytest.fixture

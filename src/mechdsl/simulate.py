@@ -98,7 +98,7 @@ def simulate_ode(eom, s, progress=None) -> Result:
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     try:
         run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
-                          meta["notes"], s.budget)
+                          meta["notes"], 10 * s.budget)
     finally:
         bar.close()
     if fixed is not None:

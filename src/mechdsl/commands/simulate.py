@@ -24,6 +24,13 @@ def add_parser(sub):
     p.add_argument("--atol", type=_number_arg, metavar="A", help="absolute tolerance (default 1e-10)")
     p.add_argument("--method", metavar="M", help="integration method (default auto; see docs/simulate.md)")
     p.add_argument("--dt", type=_number_arg, metavar="H", help="step size of the fixed-step methods")
+    p.add_argument("--formulation", metavar="F",
+                   help="constrained models: auto, projection, ggl, baumgarte or partitioning (docs/constraints.md)")
+    p.add_argument("--reactions", action="store_true", help="constrained models: record every multiplier and reaction")
+    p.add_argument("--budget", type=int, metavar="N",
+                   help="most output points and fixed steps a run may take (default 10000000)")
+    p.add_argument("--estimate-error", action="store_true",
+                   help="run again at a 100 times tighter tolerance and report the difference per output")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override a parameter (m=2) or a start value (theta.start=pi/4, theta.speed=0)")
     p.add_argument("-o", "--output", metavar="OUT.csv", help="write the results as CSV (+ OUT.json sidecar)")
@@ -35,46 +42,24 @@ def add_parser(sub):
 
 
 def run(args) -> int:
+    """Parse, call mechdsl.Model, print and write: the settings resolve in Model.simulate
+    exactly as for a Python caller (argument > scene > default)."""
+    from ..api import load
     from ..fileio import check_writable
 
     params, starts = parse_sets(args.set)
     for path in (args.output, _sidecar(args.output), args.plot):
         if path:
             check_writable(path, overwrite=args.force)
-    try:
-        from ..api import load
-    except ModuleNotFoundError as e:
-        if e.name and e.name.endswith("api"):
-            raise UsageError("mech simulate needs the .mech front end (mechdsl.api), which this build lacks") from None
-        raise
-
     model = load(args.file, model=args.model, scene=args.scene)
-    settings = dict(getattr(model, "scene_settings", None) or {})
-    model, pdict = _apply_params(model, params)
-    eom = model.eom
-    x0 = _start_overrides(eom, starts)
-    pv = getattr(model, "parameter_values", None)
-    t_end = args.t_end if args.t_end is not None else settings.get("stop_time")
-    if t_end is None:
+    model = model.with_params(**params) if params else model
+    x0 = _start_overrides(model.eom, starts)
+    t_end = args.t_end
+    if t_end is None and model.scene_settings.get("stop_time") is None:
         t_end = 10.0
         print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
-    tol = settings.get("tolerance")
-    rtol = _first(args.rtol, settings.get("rtol"), tol, 1e-8)
-    atol = _first(args.atol, settings.get("atol"), 1e-10)
-    opts = {}
-    if args.dt is not None or settings.get("dt") is not None:
-        opts["dt"] = _first(args.dt, settings.get("dt"))
-    if args.compiled:
-        opts["compiled"] = True
-    if eom.model is not None and eom.model.contacts:     # scene settings of contacts (docs/contacts.md)
-        opts.update({k: settings[k] for k in ("rest_speed", "impact_order") if settings.get(k) is not None})
-    from ..simulate import simulate
-
-    progress = (not args.no_progress) and sys.stderr.isatty()
-    r = simulate(eom, float(t_end), t_start=_first(args.t_start, settings.get("start_time"), 0.0),
-                 rtol=rtol, atol=atol, method=_first(args.method, settings.get("method"), "auto"),
-                 points=_first(args.points, settings.get("points")), outputs=settings.get("outputs"),
-                 x0=x0 or None, p=(pv if pv is not None and not pdict else pdict or None), progress=progress, **opts)
+    r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
+                       progress=(not args.no_progress) and sys.stderr.isatty())
     r.metadata["source"] = str(args.file)
     if args.scene:
         r.metadata["scene"] = args.scene
@@ -95,6 +80,14 @@ def run(args) -> int:
     return 0 if r.success else 1
 
 
+def cli_settings(args) -> dict:
+    """The simulation settings given on the command line (None: not given)."""
+    return {"t_start": args.t_start, "rtol": args.rtol, "atol": args.atol, "method": args.method,
+            "points": args.points, "dt": args.dt, "formulation": args.formulation,
+            "compiled": True if args.compiled else None, "reactions": True if args.reactions else None,
+            "budget": args.budget, "estimate_error": True if args.estimate_error else None}
+
+
 # --------------------------------------------------------------------------- pieces
 
 
@@ -103,19 +96,38 @@ def summary(r, written=()) -> str:
     s = r.stats
     lines = [f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)"]
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
+    ran = m.get("run") or {}
+    if ran:
+        lines.append(f"ran: {ran.get('problem')} problem, formulation {ran.get('formulation')}, integrator "
+                     f"{ran.get('integrator')}, rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}"
+                     + (", compiled" if ran.get("compiled") else ""))
     parts = []
-    for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians")):
+    for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians"),
+                       ("rejected_steps", "rejected steps"), ("events", "events")):
         if s.get(key) is not None:
             parts.append(f"{s[key]} {label}")
+    if s.get("cpu_time") is not None:
+        parts.append(f"{s['cpu_time']:.3g} s CPU")
     if s.get("wall_time") is not None:
         parts.append(f"{s['wall_time']:.3g} s")
     if parts:
         lines.append("statistics: " + ", ".join(parts))
-    if "energy_drift" in s:
+    if s.get("energy_drift") is not None:
         cons = m.get("conservative")
         kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
         lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
                      f"(relative {s['energy_drift_relative']:.3g})")
+    inv = {k: v for k, v in (s.get("invariant_drift") or {}).items() if k != "energy"}
+    if inv:
+        lines.append("invariant drift: " + ", ".join(f"{k} {v:.3g}" for k, v in inv.items()))
+    if s.get("constraint_drift") is not None:
+        lines.append(f"constraint drift: max ||g|| = {s['constraint_drift']:.3g}")
+    est = m.get("error_estimate")
+    if est:
+        diffs = est["max_abs_difference"]
+        lines.append(f"error estimate (difference to a run at {est['reference']}):")
+        for k, v in diffs.items():
+            lines.append(f"  {k}: {v:.3g}")
     for w in m.get("warnings", []):
         lines.append(f"warning: {w}")
     for n in m.get("notes", []):
@@ -133,13 +145,6 @@ def _sidecar(path):
     if not path:
         return None
     return path[:-4] + ".json" if path.endswith(".csv") else path + ".json"
-
-
-def _first(*vals):
-    for v in vals:
-        if v is not None:
-            return v
-    return None
 
 
 def parse_sets(items) -> tuple[dict[str, float], dict[str, float]]:
@@ -160,14 +165,6 @@ def parse_sets(items) -> tuple[dict[str, float], dict[str, float]]:
         else:
             params[name] = value
     return params, starts
-
-
-def _apply_params(model, params):
-    if not params:
-        return model, {}
-    if hasattr(model, "with_params"):
-        return model.with_params(**params), {}
-    return model, dict(params)  # no Model.with_params: plain overrides of the parameter vector
 
 
 def _start_overrides(eom, starts):
@@ -221,3 +218,8 @@ def _number_arg(text: str) -> float:
         return eval_number(text)
     except UsageError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _apply_params(model, params):
+    """(model with the parameters set, {}) (kept for commands/bench.py)."""
+    return (model.with_params(**params) if params else model), {}

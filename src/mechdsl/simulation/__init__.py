@@ -49,6 +49,7 @@ def solve(problem: Problem, progress=None) -> Result:
     meta = r.metadata
     meta.setdefault("warnings", [])
     meta.setdefault("notes", [])
+    meta.setdefault("conservative", "energy" in problem.invariants)
     ran = backend.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,

@@ -5,9 +5,9 @@ Resolved once with one precedence, argument (CLI or API) > scene > default, by
 its options from it.  The checks here are the only ones on times, tolerances and counts
 (one rule for ODE, DAE, contact and fixed-step runs).
 
-Budget.  A run may ask for at most ``budget`` output points and at most ``budget`` fixed
-steps ((t_end - t_start) / dt); the default (10^7) keeps a mistyped ``points`` or ``dt``
-from running for hours or exhausting memory.  Pass ``budget=`` (``--budget`` on the
+Budget.  A run may ask for at most ``budget`` output points (default 10^6) and at most
+10 x ``budget`` fixed steps ((t_end - t_start) / dt); this keeps a mistyped ``points`` or
+``dt`` from running for hours or exhausting memory.  Pass ``budget=`` (``--budget`` on the
 command line) to allow more.
 """
 from __future__ import annotations
@@ -23,7 +23,8 @@ DEFAULT_POINTS = 501
 DEFAULT_RTOL = 1e-8
 DEFAULT_ATOL = 1e-10
 DEFAULT_T_END = 10.0
-DEFAULT_BUDGET = 10_000_000
+DEFAULT_BUDGET = 1_000_000      # output points; fixed steps: STEPS_PER_BUDGET times this
+STEPS_PER_BUDGET = 10
 MIN_RTOL = 1e-14            # below this double precision cannot deliver the tolerance
 MAX_TIME = 1e15             # |t| beyond this: the time grid loses sub-second resolution
 # scene settings (semantic.SCENE_SETTINGS) -> settings field
@@ -164,8 +165,9 @@ def validate(s: SimulationSettings) -> SimulationSettings:
         dt = _number("dt", dt)
         if not (math.isfinite(dt) and dt > 0):
             raise UsageError(f"dt must be a positive number (got {dt})")
-        if (t1 - t0) / dt > budget:
-            raise UsageError(f"dt = {dt:g} makes {(t1 - t0) / dt:.3g} steps, more than the budget of {budget}; "
+        if (t1 - t0) / dt > STEPS_PER_BUDGET * budget:
+            raise UsageError(f"dt = {dt:g} makes {(t1 - t0) / dt:.3g} steps, more than the budget of "
+                             f"{STEPS_PER_BUDGET * budget} ({STEPS_PER_BUDGET} x budget); "
                              "pass a larger budget (--budget N, budget=N) or a larger dt")
     method = str(s.method or "auto").lower()
     from .registry import check_method

@@ -1,0 +1,259 @@
+"""The one simulation layer (mechdsl.simulation): settings, problem, what ran, statistics,
+accuracy report, non-finite results, no global side effects.  Each test failed before the
+layer existed (project issue 12, failures 2-5 and 7; issue 18)."""
+from __future__ import annotations
+
+import json
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mechdsl
+from mechdsl.cli import main
+from mechdsl.diagnostics import UsageError
+from mechdsl.simulate import simulate
+from sim_models import chain, pendulum
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
+          "energy_drift", "energy_drift_relative", "invariant_drift", "constraint_drift")
+
+
+def _four_bar_with_scene(tmp_path, settings: str) -> Path:
+    text = (MODELS / "four_bar.mech").read_text()
+    path = tmp_path / "fb.mech"
+    path.write_text(text + f"\nscene Custom\n  model FourBar;\n  stop_time = 0.5;\n{settings}\nend Custom;\n")
+    return path
+
+
+# ------------------------------------------------------------------ failure 2: metadata names what ran
+
+
+def test_partitioning_runs_the_method_it_names():
+    """Partitioning used to integrate with CVODES BDF whatever the method, labelled 'CasADi erk'."""
+    m = mechdsl.load(MODELS / "four_bar.mech")
+    erk = m.simulate(0.3, formulation="partitioning", method="erk", points=31)
+    bdf = m.simulate(0.3, formulation="partitioning", method="cvodes-bdf", points=31)
+    assert erk.success and bdf.success
+    assert erk.metadata["run"]["integrator"] == "casadi:erk" and erk.metadata["run"]["method"] == "erk"
+    assert bdf.metadata["run"]["integrator"] == "casadi:cvodes" and bdf.metadata["run"]["method"] == "bdf"
+    # two different integrators at the same tolerance: close, but not the same numbers
+    assert not np.array_equal(erk.q, bdf.q)
+    np.testing.assert_allclose(erk.q, bdf.q, atol=1e-5)
+    auto = m.simulate(0.3, formulation="partitioning", points=31)
+    assert auto.metadata["run"]["integrator"] == "casadi:cvodes" and "CVODES" in auto.metadata["method"]
+
+
+@pytest.mark.parametrize("file, kw, problem, integrator", [
+    ("double_pendulum.mech", {"method": "scipy-dop853"}, "ode", "scipy:DOP853"),
+    ("double_pendulum.mech", {"method": "rk4", "dt": 0.01}, "canonical", "mechdsl:rk4"),
+    ("pendulum_cartesian.mech", {"formulation": "ggl"}, "dae", "casadi:idas"),
+    ("bouncing_ball.mech", {}, "hybrid", "scipy:DOP853"),
+])
+def test_every_run_says_what_ran(file, kw, problem, integrator):
+    r = mechdsl.load(MODELS / file).simulate(0.5, points=11, **kw)
+    run = r.metadata["run"]
+    assert run["problem"] == problem and run["integrator"] == integrator
+    for key in ("formulation", "method", "rtol", "atol", "compiled", "settings"):
+        assert key in run
+    assert run["rtol"] == r.metadata["run"]["settings"]["rtol"]
+
+
+# ------------------------------------------------------------------ failure 3: CLI = API for a scene
+
+
+def test_cli_honours_scene_formulation_reactions_and_matches_the_api(tmp_path, capsys):
+    path = _four_bar_with_scene(tmp_path, '  formulation = "ggl";\n  reactions = true;\n  points = 26;')
+    out = tmp_path / "r.csv"
+    assert main(["simulate", str(path), "--scene", "Custom", "-o", str(out), "--no-progress"]) == 0
+    meta = json.loads((tmp_path / "r.json").read_text())["metadata"]
+    assert meta["formulation"] == "ggl" and meta["run"]["integrator"] == "casadi:idas"
+    api = mechdsl.load(path, scene="Custom").simulate()
+    assert api.metadata["run"] == meta["run"]
+    header = out.read_text().splitlines()[0].split(",")
+    assert header == api.columns                       # reactions recorded by both
+    assert any(c.startswith("lambda") or "F_close" in c for c in header)
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(data[:, 1:1 + len(api.coordinates)], api.q, rtol=0, atol=1e-12)
+
+
+def test_cli_formulation_option_overrides_the_scene(tmp_path, capsys):
+    path = _four_bar_with_scene(tmp_path, '  formulation = "ggl";\n  points = 11;')
+    assert main(["simulate", str(path), "--scene", "Custom", "--formulation", "baumgarte", "--no-progress"]) == 0
+    assert "formulation baumgarte" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------ failure 4 and 7: one statistics schema
+
+
+@pytest.mark.parametrize("file, kw", [
+    ("double_pendulum.mech", {}),
+    ("pendulum_cartesian.mech", {}),
+    ("pendulum_cartesian.mech", {"formulation": "partitioning"}),
+    ("bouncing_ball.mech", {}),
+    ("double_pendulum.mech", {"method": "stormer-verlet", "dt": 0.01}),
+])
+def test_every_run_has_the_same_statistics_and_invariant_drift(file, kw):
+    r = mechdsl.load(MODELS / file).simulate(0.5, points=11, **kw)
+    for key in SCHEMA:
+        assert key in r.stats
+    assert isinstance(r.stats["steps"], int) and r.stats["steps"] > 0
+    assert r.stats["energy_drift"] is not None and r.stats["energy_drift"] >= 0
+    E = r["energy"]
+    change = float(np.abs(E - E[0]).max())
+    if r.metadata["run"]["problem"] == "hybrid":     # contacts: the drift between events (impacts dissipate)
+        assert r.stats["energy_drift"] <= change
+    else:
+        assert r.stats["energy_drift"] == pytest.approx(change, rel=1e-12, abs=1e-300)
+
+
+def test_dae_summary_prints_steps_and_energy_drift(capsys):
+    assert main(["simulate", str(MODELS / "pendulum_cartesian.mech"), "--t-end", "0.5", "--points", "11",
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "steps" in out and "energy drift" in out and "constraint drift" in out
+
+
+@pytest.mark.parametrize("file", ["double_pendulum.mech", "pendulum_cartesian.mech", "bouncing_ball.mech"])
+def test_one_tolerance_rule_for_every_model(file):
+    with pytest.raises(UsageError, match="double precision"):
+        mechdsl.load(MODELS / file).simulate(0.5, rtol=1e-15)
+
+
+def test_rk4_is_reachable_from_the_api_and_the_cli(capsys):
+    """docs/analysis.md documents rk4; it was refused with 'unknown method'."""
+    r = mechdsl.load(MODELS / "double_pendulum.mech").simulate(1.0, method="rk4", dt=0.001, points=11)
+    ref = mechdsl.load(MODELS / "double_pendulum.mech").simulate(1.0, rtol=1e-12, atol=1e-12, points=11)
+    assert r.success and r.metadata["run"]["method"] == "rk4"
+    np.testing.assert_allclose(r.q, ref.q, atol=1e-8)      # order 4 at h = 1e-3
+    assert main(["simulate", str(MODELS / "double_pendulum.mech"), "--t-end", "0.2", "--method", "rk4",
+                 "--dt", "0.01", "--no-progress"]) == 0
+
+
+# ------------------------------------------------------------------ failure 5: no global stderr swap
+
+
+def test_output_of_other_code_during_a_run_is_not_swallowed(capsys):
+    """run_casadi replaced sys.stderr for the whole process while a run went on: a progress
+    callback's (or any other thread's) messages vanished into the integrator's buffer."""
+    said = []
+
+    def progress(t, t1):
+        if not said:
+            print("progress message", file=sys.stderr)
+            said.append(t)
+
+    simulate(chain(5), 200.0, method="erk", rtol=1e-11, atol=1e-11, points=2001, progress=progress)
+    assert said and "progress message" in capsys.readouterr().err
+
+
+def test_concurrent_runs_leave_stderr_as_it_was():
+    original = sys.stderr
+    barrier = threading.Barrier(3)
+    results = []
+
+    def work():
+        barrier.wait()
+        results.append(simulate(chain(4), 100.0, method="erk", rtol=1e-11, atol=1e-11, points=501))
+
+    threads = [threading.Thread(target=work) for _ in range(3)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert sys.stderr is original
+    assert len(results) == 3 and all(r.success for r in results)
+    np.testing.assert_array_equal(results[0].q, results[1].q)     # deterministic under threads
+
+
+# ------------------------------------------------------------------ issue 18: times and counts
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--t-start=-1e308"], "times must lie within"),
+    (["--points", "1e308"], "points"),
+    (["--points", "10000000"], "budget"),
+    (["--method", "rk4", "--dt", "1e-12"], "budget"),
+])
+def test_absurd_times_and_counts_are_usage_errors(args, text, capsys):
+    code = main(["simulate", str(MODELS / "heavy_top.mech"), "--t-end", "1", "--no-progress", *args])
+    err = capsys.readouterr().err
+    assert code == 2 and text in err and "Traceback" not in err
+
+
+def test_scene_start_time_overflow_is_a_usage_error(tmp_path, capsys):
+    text = (MODELS / "heavy_top.mech").read_text().replace("stop_time = 2;", "stop_time = 2;\n  start_time = -1e308;")
+    path = tmp_path / "top.mech"
+    path.write_text(text)
+    code = main(["simulate", str(path), "--scene", "Spin", "--no-progress"])
+    assert code == 2 and "times must lie within" in capsys.readouterr().err
+
+
+def test_budget_can_be_raised():
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    with pytest.raises(UsageError, match="budget"):
+        m.simulate(0.01, points=200, budget=100)
+    assert len(m.simulate(0.01, points=200, budget=1000).t) == 200
+
+
+def test_non_finite_results_fail_with_time_and_coordinate(monkeypatch):
+    """A back end that returns inf/nan without noticing: the run fails at the first such
+    time, names the coordinate and keeps the results before it."""
+    import mechdsl.symplectic as symp
+    from mechdsl.result import Result
+
+    def broken(eom, t_end, **kw):
+        t = np.linspace(0.0, t_end, 6)
+        q = np.zeros((6, eom.n))
+        q[3:, 0] = np.nan
+        return Result(t=t, q=q, qd=np.zeros((6, eom.n)), coordinates=tuple(eom.coords),
+                      signals={"energy": np.zeros(6)}, metadata={"method": "rk4"})
+
+    monkeypatch.setattr(symp, "simulate_symplectic", broken)
+    r = simulate(pendulum(), 1.0, method="rk4", dt=0.1)
+    assert not r.success and r.failure.time == pytest.approx(0.6)
+    assert "theta" in r.failure.detail
+    assert len(r.t) == 3 and np.isfinite(r.q).all() and len(r["energy"]) == 3
+
+
+# ------------------------------------------------------------------ accuracy report and error estimate
+
+
+def test_drift_warning_when_the_result_is_worse_than_the_tolerance():
+    """The fixed-step rk (CasADi) with a coarse dt: energy drifts far beyond rtol."""
+    r = mechdsl.load(MODELS / "double_pendulum.mech").simulate(5.0, method="rk", dt=0.05, rtol=1e-10,
+                                                               atol=1e-10, points=51)
+    assert any("energy should stay constant" in w for w in r.metadata["warnings"])
+    good = mechdsl.load(MODELS / "double_pendulum.mech").simulate(1.0, rtol=1e-10, atol=1e-10, points=51)
+    assert not any("should stay constant" in w for w in good.metadata["warnings"])
+
+
+def test_error_estimate_against_the_actual_error():
+    """estimate_error: the difference to a run at a 100x tighter tolerance is close to the
+    actual error (against a run at rtol 1e-13)."""
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    r = m.simulate(3.0, rtol=1e-6, atol=1e-8, points=31, estimate_error=True, method="cvodes-adams")
+    ref = m.simulate(3.0, rtol=1e-13, atol=1e-13, points=31, method="cvodes-adams")
+    est = r.metadata["error_estimate"]["max_abs_difference"]
+    for j, c in enumerate(r.coordinates):
+        actual = float(np.abs(r.q[:, j] - ref.q[:, j]).max())
+        assert actual > 0
+        assert 0.5 * actual <= est[c] <= 2.0 * actual
+    assert "x2" in est
+
+
+# ------------------------------------------------------------------ the problem
+
+
+def test_problem_dump_is_deterministic_and_names_the_formulation(tmp_path, capsys):
+    path = _four_bar_with_scene(tmp_path, '  formulation = "ggl";')
+    args = ["compile", str(path), "--scene", "Custom", "--emit", "problem"]
+    assert main(args) == 0
+    first = capsys.readouterr().out
+    assert main(args) == 0
+    assert capsys.readouterr().out == first
+    assert "kind: dae" in first and "formulation: ggl" in first and "constraints: " in first
+    assert "invariants: energy" in first and "inputs: none" in first
