@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import sys
 
-from ..diagnostics import UsageError
-from ..fileio import write_atomic
+from ..fileio import check_writable, write_atomic
+from ._common import add_force_arg, target_line
 
 EMITS = ("ast", "source", "model", "eom", "problem")
 
@@ -21,6 +21,7 @@ def add_parser(sub):
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
     p.add_argument("--t-end", type=float, metavar="T",
                    help="--emit problem: end time (default: the scene's stop_time, else 10)")
+    add_force_arg(p)
     return p
 
 
@@ -31,6 +32,8 @@ def run(args) -> int:
     from ..printer import to_source
     from ..semantic import analyze
 
+    if args.output:
+        check_writable(args.output, args.force)
     tree = parse_file(args.file)
     if args.emit == "ast":
         text = dump_ast(tree, spans=not args.no_spans)
@@ -39,6 +42,7 @@ def run(args) -> int:
     else:
         program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
+        print(f"mech: {target_line(args, m)}", file=sys.stderr)
         if args.emit == "model":
             text = dump_model(m.model)
         elif args.emit == "problem":
@@ -53,9 +57,7 @@ def run(args) -> int:
 
             text = dump_eom(m.eom)
     if args.output:
-        if args.output == args.file:
-            raise UsageError("refusing to overwrite the input file")
-        write_atomic(args.output, text)
+        write_atomic(args.output, text, overwrite=args.force)
     else:
         sys.stdout.write(text)
     return 0
