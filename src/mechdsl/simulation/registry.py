@@ -20,16 +20,18 @@ class MethodInfo:
     description: str
 
 
+FIXED_METHODS = {"stormer-verlet": "Stormer-Verlet / leapfrog (symplectic, order 2; RATTLE with constraints)",
+                 "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
+                 "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
+                 "rk4": "classical Runge-Kutta of order 4 with a fixed step dt (not symplectic)",
+                 "rattle": "RATTLE, constrained Stormer-Verlet (symplectic on the constraint manifold)"}
+
+
 def _table() -> dict[str, MethodInfo]:
     from .. import integrators as I
     from ..dae.options import DAE_METHODS, ODE_METHODS
     from ..impacts.stepper import ALIASES, SCIPY_METHODS
 
-    fixed = {"stormer-verlet": "Stormer-Verlet / leapfrog (symplectic, order 2; RATTLE with constraints)",
-             "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
-             "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
-             "rk4": "classical Runge-Kutta of order 4 with a fixed step dt (not symplectic)",
-             "rattle": "RATTLE, constrained Stormer-Verlet (symplectic on the constraint manifold)"}
     out: dict[str, MethodInfo] = {"auto": MethodInfo("auto", (ODE, DAE, EVENTS), "chosen from the model")}
     for name, row in I.METHODS.items():
         kinds = (ODE,) + ((DAE,) if name in ODE_METHODS else ()) + ((EVENTS,) if name in ALIASES else ())
@@ -43,7 +45,7 @@ def _table() -> dict[str, MethodInfo]:
             out[name] = MethodInfo(name, out[name].backends + (EVENTS,), out[name].description)
         else:
             out[name] = MethodInfo(name, (EVENTS,), f"models with contacts: scipy {cls} with event location")
-    for name, desc in fixed.items():
+    for name, desc in FIXED_METHODS.items():
         out[name] = MethodInfo(name, (FIXED,), desc)
     return out
 
@@ -52,12 +54,23 @@ _CACHE: dict[str, MethodInfo] = {}
 
 
 def methods() -> dict[str, MethodInfo]:
+    """Every method name (imports the DAE and contact back ends' tables)."""
     if not _CACHE:
         _CACHE.update(_table())
     return _CACHE
 
 
 def check_method(name: str) -> MethodInfo:
+    """The registry entry of a method name; an unknown name is a UsageError with did-you-mean.
+
+    Fixed-step and ODE names are answered without importing the DAE and contact back ends
+    (cold start of ``mech simulate``)."""
+    from .. import integrators as I
+
+    if name in FIXED_METHODS:
+        return MethodInfo(name, (FIXED,), FIXED_METHODS[name])
+    if (name == "auto" or name in I.METHODS) and not _CACHE:
+        return MethodInfo(name, (ODE, DAE, EVENTS), I.METHODS[name][3] if name in I.METHODS else "chosen from the model")
     table = methods()
     if name not in table:
         hint = did_you_mean(name, list(table))
@@ -67,4 +80,4 @@ def check_method(name: str) -> MethodInfo:
 
 
 def fixed_step_methods() -> tuple[str, ...]:
-    return tuple(n for n, m in methods().items() if FIXED in m.backends)
+    return tuple(FIXED_METHODS)
