@@ -257,3 +257,21 @@ def test_problem_dump_is_deterministic_and_names_the_formulation(tmp_path, capsy
     assert capsys.readouterr().out == first
     assert "kind: dae" in first and "formulation: ggl" in first and "constraints: " in first
     assert "invariants: energy" in first and "inputs: none" in first
+
+
+def test_first_integral_search_is_cached_on_disk(tmp_path, monkeypatch):
+    """The search runs once per model and parameter values; a later process reads it back."""
+    import mechdsl.analysis.integrals as integrals
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    first = mechdsl.load(MODELS / "heavy_top.mech").simulate(0.2, points=11, method="erk")
+    assert "p_tip.phi" in first.signals and list((tmp_path / "integrals").iterdir())
+
+    searches = []
+    monkeypatch.setattr(integrals, "integral_signals", lambda *a, **k: searches.append(1) or {})
+    again = mechdsl.load(MODELS / "heavy_top.mech").with_params(m=1.0).simulate(0.2, points=11, method="erk")
+    assert not searches
+    np.testing.assert_array_equal(again["p_tip.phi"], first["p_tip.phi"])
+    other = mechdsl.load(MODELS / "heavy_top.mech").with_params(m=2.0)
+    other.simulate(0.2, points=11, method="erk")       # other parameter values: a new search
+    assert searches == [1]

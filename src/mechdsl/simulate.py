@@ -477,22 +477,63 @@ def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
     if "f" not in cache:
         cache["f"] = None
         if eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts:
-            try:
-                from .analysis.integrals import integral_signals
-
-                sig = integral_signals(eom, pv)
-            except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
-                sig = {}
-            if sig:
-                x = ca.vertcat(eom.q, eom.qd)
-                cache["f"] = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()),
-                                         ["t", "x", "p"], list(sig))
+            cache["f"] = _integral_function(eom, pv)
     f = cache["f"]
     if f is None or len(t) == 0:
         return {}
     res = f.map(len(t))(t.reshape(1, -1), X.T, np.asarray(pv, float).reshape(-1, 1))
     res = res if isinstance(res, (list, tuple)) else [res]
     return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
+
+
+INTEGRAL_CACHE_VERSION = "1"
+
+
+def _integral_function(eom, pv):
+    """The first integrals as one Function (t, x, p), or None.  The search (0.05-0.2 s) is
+    cached on disk under the hash of the serialized T, V, D, Q, g and the parameter values,
+    so a repeated ``mech simulate`` of the same model skips it."""
+    import hashlib
+
+    import casadi as ca
+
+    from .codegen import cache_dir
+
+    path = None
+    try:
+        x = ca.vertcat(eom.q, eom.qd)
+        parts = [ca.SX(eom.T), ca.SX(eom.V), ca.SX(eom.D), ca.SX(eom.Q),
+                 ca.SX(eom.g) if eom.g is not None else ca.SX(0, 1)]
+        key_f = ca.Function("key", [eom.t, x, eom.p], parts)
+        h = hashlib.sha256()
+        for piece in (INTEGRAL_CACHE_VERSION, __import__("mechdsl").__version__, ca.__version__,
+                      ",".join(eom.coords), key_f.serialize(), np.asarray(pv, float).tobytes().hex()):
+            h.update(str(piece).encode())
+        path = cache_dir() / "integrals" / (h.hexdigest()[:32] + ".txt")
+        if path.is_file():
+            text = path.read_text()
+            return None if text == "none" else ca.Function.deserialize(text)
+    except Exception:  # noqa: BLE001 - no cache: search
+        path = None
+    try:
+        from .analysis.integrals import integral_signals
+
+        sig = integral_signals(eom, pv)
+    except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
+        sig = {}
+    f = None
+    if sig:
+        x = ca.vertcat(eom.q, eom.qd)
+        f = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()), ["t", "x", "p"], list(sig))
+    if path is not None:
+        try:
+            from .fileio import write_atomic
+
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(path, "none" if f is None else f.serialize(), overwrite=True)
+        except Exception:  # noqa: BLE001 - a cache that cannot be written is only slower
+            pass
+    return f
 
 
 def _integral_drift(signals, eom) -> dict:
