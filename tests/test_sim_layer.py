@@ -184,12 +184,21 @@ def test_absurd_times_and_counts_are_usage_errors(args, text, capsys):
     assert code == 2 and text in err and "Traceback" not in err
 
 
-def test_scene_start_time_overflow_is_a_usage_error(tmp_path, capsys):
-    text = (MODELS / "heavy_top.mech").read_text().replace("stop_time = 2;", "stop_time = 2;\n  start_time = -1e308;")
+@pytest.mark.parametrize("setting, text", [
+    ("start_time = -1e308;", "times must lie within"),
+    ("points = 1e308;", "too large to be a count"),
+    ("points = 100000000;", "budget"),
+    ("dt = 1e-12;", "budget"),
+])
+def test_absurd_scene_settings_are_usage_errors(tmp_path, capsys, setting, text):
+    src = (MODELS / "heavy_top.mech").read_text()
+    key = setting.split(" ")[0]
+    lines = [ln for ln in src.splitlines() if not ln.strip().startswith(f"{key} =")]
     path = tmp_path / "top.mech"
-    path.write_text(text)
+    path.write_text("\n".join(lines).replace("stop_time = 2;", f"stop_time = 2;\n  {setting}") + "\n")
     code = main(["simulate", str(path), "--scene", "Spin", "--no-progress"])
-    assert code == 2 and "times must lie within" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert code == 2 and text in err and "Traceback" not in err and len(err) < 400
 
 
 def test_budget_can_be_raised():

@@ -135,6 +135,8 @@ def _number(name, v) -> float:
 def _count(name, v, least: int) -> int:
     if isinstance(v, float) and math.isfinite(v) and v == int(v):
         v = int(v)
+    if isinstance(v, int) and not isinstance(v, bool) and v > 2 ** 53:
+        raise UsageError(f"{name} = {float(v):g} is too large to be a count")
     if isinstance(v, bool) or not isinstance(v, int) or v < least:
         raise UsageError(f"{name} must be an integer >= {least}; got {v!r}")
     return int(v)
