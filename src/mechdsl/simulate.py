@@ -20,6 +20,7 @@ from .codegen import FastFunction, casadi_functions, singularity_monitors
 from .diagnostics import UsageError, did_you_mean
 from .result import Failure, Result
 from .eom import parameter_vector
+from .simulation.inputs import start_vector  # noqa: F401  (re-exported: one builder)
 
 DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
@@ -145,32 +146,6 @@ def _no_state_result(eom, post, grid, pv, out_names, meta, wall0) -> Result:
 
 
 # --------------------------------------------------------------------------- dispatch and inputs
-
-
-def start_vector(eom, x0, pv) -> np.ndarray:
-    n = eom.n
-    q0, qd0 = casadi_functions(eom, names=("start",))["start"](pv)
-    base = np.r_[np.array(q0, float).ravel(), np.array(qd0, float).ravel()]
-    if x0 is None:
-        out = base
-    elif isinstance(x0, dict):
-        out = base.copy()
-        for k, v in x0.items():
-            name, speed = k, False
-            if k.startswith("der(") and k.endswith(")"):
-                name, speed = k[4:-1], True
-            if name not in eom.coords:
-                hint = did_you_mean(name, eom.coords)
-                raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
-            out[eom.coords.index(name) + (n if speed else 0)] = float(v)
-    else:
-        out = np.array(x0, float).ravel()
-        if out.size != 2 * n:
-            raise UsageError(f"x0 has {out.size} entries; expected {2 * n} (coordinates then their speeds)")
-    if not np.isfinite(out).all():
-        bad = [(eom.coords + tuple(f"der({c})" for c in eom.coords))[i] for i in np.flatnonzero(~np.isfinite(out))]
-        raise UsageError(f"start values are not finite: {', '.join(bad)}")
-    return out
 
 
 def _check_outputs(eom, outputs) -> tuple[str, ...]:

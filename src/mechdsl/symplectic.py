@@ -58,7 +58,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     """
     import casadi as ca
 
-    from .analysis.core import param_vector
+    from .eom import parameter_vector
     from .analysis.hamilton import hamiltonian
 
     method = str(method).lower().replace("_", "-")
@@ -89,7 +89,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
         notes.append("fixed-step method: ignored " + ", ".join(sorted(opts)))
     wall0 = _time.perf_counter()
 
-    pv = param_vector(eom, p)
+    pv = parameter_vector(eom, p)
     ham = hamiltonian(eom, pv)
     n = eom.n
     out_names = _output_names(eom, outputs) if not constrained else outputs
@@ -102,7 +102,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
                       "constraints": list(eom.constraint_names),
                       "active_constraints": [eom.constraint_names[i] for i in active]}
     elif x0 is not None:
-        from .simulate import start_vector
+        from .simulation.inputs import start_vector
 
         xs = start_vector(eom, x0, pv)
         qs, qds = xs[:n], xs[n:]
