@@ -47,7 +47,6 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
     "scipy-bdf": ("scipy", "BDF", {}, "scipy variable-order BDF (stiff)"),
     "scipy-lsoda": ("scipy", "LSODA", {}, "scipy LSODA (automatic Adams/BDF switching)"),
 }
-SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rattle")   # mechdsl.symplectic
 # methods that never evaluate the Jacobian of the right-hand side (compiled code can omit it;
 # CVODES asks for derivatives when it is set up, even with functional iteration)
 NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853")

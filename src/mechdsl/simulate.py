@@ -448,12 +448,8 @@ def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
     so their drift measures the integrator.  The search is cached on the EOM."""
     import casadi as ca
 
-    cache = eom.__dict__.setdefault("_integral_function", {})
-    if "f" not in cache:
-        cache["f"] = None
-        if eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts:
-            cache["f"] = _integral_function(eom, pv)
-    f = cache["f"]
+    searchable = eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
+    f = eom.cached("first_integrals", lambda: _integral_function(eom, pv) if searchable else None)
     if f is None or len(t) == 0:
         return {}
     res = f.map(len(t))(t.reshape(1, -1), X.T, np.asarray(pv, float).reshape(-1, 1))
@@ -512,7 +508,7 @@ def _integral_function(eom, pv):
 
 
 def _integral_drift(signals, eom) -> dict:
-    f = eom.__dict__.get("_integral_function", {}).get("f")
+    f = eom.cached("first_integrals", lambda: None)
     out = {}
     for name in (f.name_out() if f is not None else []):
         v = signals.get(name)
@@ -536,8 +532,7 @@ def is_conservative(eom) -> bool | None:
     derived field (the recursive route builds Q only on request)."""
     import casadi as ca
 
-    raw = eom.__dict__.get("Q")
-    if raw is not None and hasattr(raw, "get") and getattr(raw, "value", 0) is None and eom.n > 30:
+    if not eom.is_built("Q") and eom.n > 30:
         return None     # not built yet, and building it is not cheap for large models
     try:
         D, Q = ca.SX(eom.D), ca.SX(eom.Q)

@@ -32,7 +32,9 @@ import numpy as np
 from .diagnostics import UsageError
 from .result import Failure, Result
 
-METHODS = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rk4", "rattle")
+from .simulation.registry import FIXED_METHODS
+
+METHODS = tuple(FIXED_METHODS)     # the names live in the one method registry
 SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rattle")
 CONSTRAINED = ("stormer-verlet", "rattle")     # methods for models with constraints (RATTLE)
 CHUNK = 2000                  # steps a mapaccum call

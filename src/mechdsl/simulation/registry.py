@@ -20,6 +20,7 @@ class MethodInfo:
     description: str
 
 
+# fixed-step methods in canonical variables (mechdsl.symplectic; its METHODS are these names)
 FIXED_METHODS = {"stormer-verlet": "Stormer-Verlet / leapfrog (symplectic, order 2; RATTLE with constraints)",
                  "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
                  "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
