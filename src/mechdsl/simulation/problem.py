@@ -96,7 +96,7 @@ def dump(problem: Problem) -> str:
         lines.append(f"  formulation: {problem.formulation}")
     lines.append(f"  states ({len(problem.states)}): " + ", ".join(problem.states))
     lines.append(f"  parameters ({len(problem.parameters)}): "
-                 + ", ".join(f"{n} = {v:.17g}" for n, v in problem.parameters))
+                 + ", ".join(f"{n} = {v!r}" for n, v in problem.parameters))
     lines.append("  inputs: " + (", ".join(problem.inputs) or "none"))
     lines.append("  invariants: " + (", ".join(problem.invariants) or "none"))
     lines.append("  constraints: " + (", ".join(problem.constraints) or "none"))
