@@ -284,3 +284,13 @@ def test_first_integral_search_is_cached_on_disk(tmp_path, monkeypatch):
     other = mechdsl.load(MODELS / "heavy_top.mech").with_params(m=2.0)
     other.simulate(0.2, points=11, method="erk")       # other parameter values: a new search
     assert searches == [1]
+
+
+def test_estimate_error_on_the_command_line(tmp_path, capsys):
+    out = tmp_path / "e.csv"
+    assert main(["simulate", str(MODELS / "double_pendulum.mech"), "--t-end", "1", "--points", "11", "--rtol", "1e-6",
+                 "--estimate-error", "-o", str(out), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "error estimate (max difference to a run at rtol = 1e-08" in text and "j1.phi:" in text
+    est = json.loads((tmp_path / "e.json").read_text())["metadata"]["error_estimate"]["max_abs_difference"]
+    assert 0 < est["j1.phi"] < 1e-3
