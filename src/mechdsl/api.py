@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from .semantic.mods import Mod
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
+_EOM_LOCK = threading.Lock()
 
 
 def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True) -> Program:
@@ -194,9 +196,10 @@ class Model:
                 from .mechanics import derive
 
                 base = derive(self.model)
-                if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
-                    _EOM_CACHE.pop(next(iter(_EOM_CACHE)))
-                _EOM_CACHE[key] = base
+                with _EOM_LOCK:             # models simulated in several threads
+                    if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
+                        _EOM_CACHE.pop(next(iter(_EOM_CACHE)), None)
+                    _EOM_CACHE[key] = base
             self._eom = base.replace(param_values=self.parameter_values, model=self.model)   # keeps lazy fields lazy
         return self._eom
 

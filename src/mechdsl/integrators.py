@@ -169,6 +169,7 @@ def captured_messages():
 
 
 _DAE_CACHE: dict = {}
+_CACHE_LOCK = threading.Lock()
 
 
 def dae_function(ode):
@@ -180,7 +181,8 @@ def dae_function(ode):
     import casadi as ca
 
     key = id(ode)
-    hit = _DAE_CACHE.get(key)
+    with _CACHE_LOCK:
+        hit = _DAE_CACHE.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1]
 
@@ -189,9 +191,10 @@ def dae_function(ode):
     p = ca.MX.sym("p", ode.size1_in(2))
     e = ca.MX(0, 1)
     dae = ca.Function("dae", [t, x, e, p, e], [ode(t, x, p), e, e, e], ca.dyn_in(), ca.dyn_out())
-    if len(_DAE_CACHE) > 64:
-        _DAE_CACHE.clear()
-    _DAE_CACHE[key] = (ode, dae)     # holding ode keeps its id unique while cached
+    with _CACHE_LOCK:                # runs in several threads share the caches
+        if len(_DAE_CACHE) > 64:
+            _DAE_CACHE.clear()
+        _DAE_CACHE[key] = (ode, dae)     # holding ode keeps its id unique while cached
     return dae
 
 
@@ -288,13 +291,15 @@ def _integrator(method, ode, grid, opts):
     plugin = METHODS[method][1]
     tgrid = tuple(float(v) for v in grid)
     key = (id(ode), plugin, tgrid, repr(sorted(opts.items())))
-    hit = _INTEGRATOR_CACHE.get(key)
+    with _CACHE_LOCK:
+        hit = _INTEGRATOR_CACHE.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1]
     integ = make_integrator("sim", plugin, dae_function(ode), tgrid[0], tgrid, opts)
-    if len(_INTEGRATOR_CACHE) >= 16:
-        _INTEGRATOR_CACHE.pop(next(iter(_INTEGRATOR_CACHE)))
-    _INTEGRATOR_CACHE[key] = (ode, integ)
+    with _CACHE_LOCK:
+        if len(_INTEGRATOR_CACHE) >= 16:
+            _INTEGRATOR_CACHE.pop(next(iter(_INTEGRATOR_CACHE)))
+        _INTEGRATOR_CACHE[key] = (ode, integ)
     return integ
 
 
