@@ -309,3 +309,15 @@ def test_mech_simulate_imports_only_what_it_needs(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_settings_refuse_bad_values_for_every_model():
+    from mechdsl.dae.options import FORMULATIONS
+    from mechdsl.simulation.registry import FORMULATIONS as KNOWN
+
+    assert tuple(FORMULATIONS) == KNOWN
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    for kw, text in ((dict(formulation="nonsense"), "unknown formulation"), (dict(outputs=5), "list of names"),
+                     (dict(points="abc"), "points"), (dict(estimate_error="yes"), "true or false")):
+        with pytest.raises(UsageError, match=text):
+            m.simulate(0.1, **kw)

@@ -20,6 +20,20 @@ class MethodInfo:
     description: str
 
 
+# formulations of constrained models (mechdsl.dae.options.FORMULATIONS, checked by a test) and
+# their aliases; 'ode' names the unconstrained problem
+FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
+FORMULATION_NAMES = ("auto", "ode", "dae", "index1", *FORMULATIONS)
+
+
+def check_formulation(name: str) -> str:
+    if name not in FORMULATION_NAMES:
+        hint = did_you_mean(name, FORMULATION_NAMES)
+        raise UsageError(f"unknown formulation '{name}'" + (f"; {hint}" if hint else "")
+                         + f" (formulations: {', '.join(n for n in FORMULATION_NAMES if n not in ('dae', 'index1'))})")
+    return name
+
+
 # fixed-step methods in canonical variables (mechdsl.symplectic; its METHODS are these names)
 FIXED_METHODS = {"stormer-verlet": "Stormer-Verlet / leapfrog (symplectic, order 2; RATTLE with constraints)",
                  "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",

@@ -172,20 +172,24 @@ def validate(s: SimulationSettings) -> SimulationSettings:
                              f"{STEPS_PER_BUDGET * budget} ({STEPS_PER_BUDGET} x budget); "
                              "pass a larger budget (--budget N, budget=N) or a larger dt")
     method = str(s.method or "auto").lower()
-    from .registry import check_method
+    formulation = str(s.formulation or "auto").lower()
+    from .registry import check_formulation, check_method
 
     check_method(method)
+    check_formulation(formulation)
     outputs = s.outputs
     if isinstance(outputs, str):
         outputs = (outputs,)
     elif outputs is not None:
+        if not isinstance(outputs, (list, tuple)) or not all(isinstance(o, str) for o in outputs):
+            raise UsageError(f"outputs must be a list of names (got {outputs!r})")
         outputs = tuple(outputs)
     max_steps = None if s.max_steps is None else _count("max_steps", s.max_steps, 1)
     for name in ("reactions", "compiled", "estimate_error"):
         if not isinstance(getattr(s, name), (bool, int)):
             raise UsageError(f"{name} must be true or false (got {getattr(s, name)!r})")
     return dataclasses.replace(s, t_start=t0, t_end=t1, rtol=rtol, atol=atol, points=points, dt=dt,
-                               method=method, formulation=str(s.formulation or "auto").lower(),
+                               method=method, formulation=formulation,
                                outputs=outputs, max_steps=max_steps, reactions=bool(s.reactions),
                                compiled=bool(s.compiled), budget=budget, estimate_error=bool(s.estimate_error))
 
