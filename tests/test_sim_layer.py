@@ -321,3 +321,16 @@ def test_settings_refuse_bad_values_for_every_model():
                      (dict(points="abc"), "points"), (dict(estimate_error="yes"), "true or false")):
         with pytest.raises(UsageError, match=text):
             m.simulate(0.1, **kw)
+
+
+@pytest.mark.skipif(__import__("mechdsl.codegen", fromlist=["x"]).find_compiler() is None,
+                    reason="needs a C compiler")
+def test_cli_honours_scene_compiled(tmp_path, capsys):
+    text = (MODELS / "double_pendulum.mech").read_text()
+    path = tmp_path / "dp.mech"
+    path.write_text(text + "\nscene Fast\n  model DoublePendulum;\n  stop_time = 0.2;\n  points = 11;\n"
+                           "  compiled = true;\nend Fast;\n")
+    out = tmp_path / "dp.csv"
+    assert main(["simulate", str(path), "--scene", "Fast", "-o", str(out), "--no-progress"]) == 0
+    meta = json.loads((tmp_path / "dp.json").read_text())["metadata"]
+    assert meta["run"]["compiled"] is True and meta["options"]["compiled"] is True
