@@ -1,7 +1,6 @@
 """Every method runs, agrees with a reference, and conserves energy to a tolerance-scaled bound."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
