@@ -230,24 +230,17 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000)
 
 
 def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget):
-    backend = I.METHODS[method][0]
-    if backend == "scipy":
-        rhs = FastFunction(funcs["ode"]).bind(p=pv)
-        jacf = None if method in I.NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(p=pv)
-        run = I.run_scipy(method, rhs, jacf, grid, xs,
-                          rtol, atol, max_steps, bar, extra, hmin=min_step(t0, t1))
-        return run, None
-    fixed = None
-    steps = None
+    """One run of the integrator plug-in of ``method`` over the output grid."""
+    fixed, steps = None, None
     if method in I.FIXED_STEP:
         steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
                                       xs, pv, t0, t1, rtol, dt, budget)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
         meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
-    opts = I.casadi_options(method, rtol, atol, max_steps, steps, extra, hmin=min_step(t0, t1))
     try:
-        run = I.run_casadi(method, funcs["ode"], grid, xs, pv, opts, bar)
+        run = I.plugin(method).advance(method, funcs, grid, xs, pv, rtol=rtol, atol=atol, max_steps=max_steps,
+                                       fixed_steps=steps, extra=extra, progress=bar, hmin=min_step(t0, t1))
     except RuntimeError as e:  # bad integrator options
         raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
     return run, fixed
@@ -259,9 +252,7 @@ def min_step(t0, t1) -> float:
 
 
 def _counts(method, raw):
-    if I.METHODS[method][0] == "scipy":
-        return dict(raw)
-    return I.casadi_counts(method, raw)
+    return I.plugin(method).counts(method, raw)
 
 
 # --------------------------------------------------------------------------- failure
@@ -275,7 +266,7 @@ def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps,
     t_fail = run.fail_time
     x_fail = run.fail_state
     unstable = False
-    if x_fail is None and k + 1 < len(grid) and I.METHODS[method][0] == "casadi":
+    if x_fail is None and k + 1 < len(grid) and I.plugin(method).zoom:
         # zoom in: re-integrate the failing interval on finer grids (3 levels of 50 subintervals);
         # a fixed-step method is checked with the adaptive erk instead
         zoom = "erk" if method in I.FIXED_STEP else method
