@@ -73,6 +73,10 @@ def test_cli_honours_scene_formulation_reactions_and_matches_the_api(tmp_path, c
     assert meta["formulation"] == "ggl" and meta["run"]["integrator"] == "casadi:idas"
     api = mechdsl.load(path, scene="Custom").simulate()
     assert api.metadata["run"] == meta["run"]
+    api_meta = json.loads(api.to_json_text())["metadata"]
+    for key in ("source", "target", "scene"):           # said by the command only
+        meta.pop(key, None)
+    assert api_meta == meta
     header = out.read_text().splitlines()[0].split(",")
     assert header == api.columns                       # reactions recorded by both
     assert any(c.startswith("lambda") or "F_close" in c for c in header)
@@ -334,3 +338,16 @@ def test_cli_honours_scene_compiled(tmp_path, capsys):
     assert main(["simulate", str(path), "--scene", "Fast", "-o", str(out), "--no-progress"]) == 0
     meta = json.loads((tmp_path / "dp.json").read_text())["metadata"]
     assert meta["run"]["compiled"] is True and meta["options"]["compiled"] is True
+
+
+@pytest.mark.parametrize("file", ["pendulum.mech", "bouncing_ball.mech", "heavy_top.mech"])
+def test_cli_and_api_give_the_same_run_for_the_first_scene(file, tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    assert main(["simulate", str(MODELS / file), "-o", str(out), "--no-progress"]) == 0
+    cli = json.loads((tmp_path / "r.json").read_text())["metadata"]
+    api = mechdsl.load(MODELS / file).simulate()
+    api_meta = json.loads(api.to_json_text())["metadata"]
+    for key in ("source", "target", "scene"):
+        cli.pop(key, None)
+    assert api_meta == cli
+    assert out.read_text() == api.to_csv_text()
