@@ -351,3 +351,13 @@ def test_cli_and_api_give_the_same_run_for_the_first_scene(file, tmp_path, capsy
         cli.pop(key, None)
     assert api_meta == cli
     assert out.read_text() == api.to_csv_text()
+
+
+def test_kinds_of_the_shipped_models():
+    """The golden problem dumps (tests/golden/*.problem.txt, checked by test_golden.py) name
+    the kind each shipped model's default run solves."""
+    golden = Path(__file__).resolve().parent / "golden"
+    kinds = {name: (golden / f"{name}.problem.txt").read_text().splitlines()[1].split()[1]
+             for name in ("double_pendulum", "pendulum_cartesian", "bouncing_ball", "heavy_top")}
+    assert kinds == {"double_pendulum": "ode", "pendulum_cartesian": "dae", "bouncing_ball": "hybrid",
+                     "heavy_top": "canonical"}
