@@ -361,3 +361,17 @@ def test_kinds_of_the_shipped_models():
              for name in ("double_pendulum", "pendulum_cartesian", "bouncing_ball", "heavy_top")}
     assert kinds == {"double_pendulum": "ode", "pendulum_cartesian": "dae", "bouncing_ball": "hybrid",
                      "heavy_top": "canonical"}
+
+
+def test_problem_and_metadata_do_not_depend_on_what_ran_before(monkeypatch):
+    """is_conservative answered None for large models until someone had built Q: the problem
+    dump (and a run's metadata) changed with the order of calls in the process."""
+    import mechdsl.api as api
+    from mechdsl.simulation import dump
+
+    monkeypatch.setattr(api, "_EOM_CACHE", {})          # a fresh derivation: Q not built yet
+    m = mechdsl.load(MODELS / "nfourbar.mech")
+    first = dump(m.problem(t_end=1.0))
+    m.eom.Q                                              # noqa: B018 - what another caller may do
+    assert dump(m.problem(t_end=1.0)) == first
+    assert "invariants: energy" in first

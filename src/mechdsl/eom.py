@@ -86,12 +86,6 @@ class EOM:
             cache[key] = build()
         return cache[key]
 
-    def is_built(self, name: str) -> bool:
-        """False when a lazily derived field (M, bias, Q of mechanics.derive.LazyEOM) has not
-        been computed yet: a caller can skip work that would force an expensive derivation."""
-        v = self.__dict__.get(name)
-        return not (hasattr(v, "get") and getattr(v, "value", 0) is None)
-
     @property
     def m(self) -> int:
         return 0 if self.g is None else int(self.g.numel())

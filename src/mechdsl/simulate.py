@@ -518,13 +518,12 @@ def _energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
-def is_conservative(eom) -> bool | None:
-    """D = 0, Q = 0 and T, V independent of time; None when unknown without forcing a lazily
-    derived field (the recursive route builds Q only on request)."""
+def is_conservative(eom) -> bool:
+    """D = 0, Q = 0 and T, V independent of time.  Builds Q when the recursive route has not
+    yet: an answer that depended on whether another caller had built it would make the
+    metadata and ``--emit problem`` depend on what ran before in the process."""
     import casadi as ca
 
-    if not eom.is_built("Q") and eom.n > 30:
-        return None     # not built yet, and building it is not cheap for large models
     try:
         D, Q = ca.SX(eom.D), ca.SX(eom.Q)
         return bool(D.is_zero() and Q.is_zero()
