@@ -375,3 +375,24 @@ def test_problem_and_metadata_do_not_depend_on_what_ran_before(monkeypatch):
     m.eom.Q                                              # noqa: B018 - what another caller may do
     assert dump(m.problem(t_end=1.0)) == first
     assert "invariants: energy" in first
+
+
+def test_message_capture_is_per_thread_and_nests():
+    from mechdsl.integrators import captured_messages
+
+    original = sys.stderr
+    seen = {}
+
+    def worker():
+        with captured_messages() as buf:
+            print("from the worker", file=sys.stderr)
+            with captured_messages() as inner:
+                print("inner", file=sys.stderr)
+            print("worker again", file=sys.stderr)
+        seen["outer"], seen["inner"] = buf.getvalue(), inner.getvalue()
+
+    th = threading.Thread(target=worker)
+    th.start()
+    th.join()
+    assert seen == {"outer": "from the worker\nworker again\n", "inner": "inner\n"}
+    assert sys.stderr is original

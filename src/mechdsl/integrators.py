@@ -111,6 +111,8 @@ class _Router:
 
     def write(self, text):
         buf = _ROUTES.get((id(self), threading.get_ident()))
+        if buf is None and self.base is None:     # no stream at all (pythonw): nothing to write to
+            return len(text)
         return (buf if buf is not None else self.base).write(text)
 
     def flush(self):
