@@ -396,3 +396,10 @@ def test_message_capture_is_per_thread_and_nests():
     th.join()
     assert seen == {"outer": "from the worker\nworker again\n", "inner": "inner\n"}
     assert sys.stderr is original
+
+
+def test_bench_runs_rk4(capsys):
+    assert main(["bench", str(MODELS / "double_pendulum.mech"), "--t-end", "0.5", "--methods", "rk4",
+                 "--tolerances", "1e-4", "--repeats", "1"]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("rk4 ")]
+    assert rows and rows[0].rstrip().endswith("ok")
