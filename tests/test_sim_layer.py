@@ -441,3 +441,22 @@ def test_bench_runs_rk4(capsys):
                  "--tolerances", "1e-4", "--repeats", "1"]) == 0
     rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("rk4 ")]
     assert rows and rows[0].rstrip().endswith("ok")
+
+
+def test_threaded_runs_of_distinct_models_match_sequential_runs():
+    files = ("double_pendulum.mech", "pendulum_cartesian.mech", "bouncing_ball.mech", "heavy_top.mech")
+    models = [mechdsl.load(MODELS / f) for f in files]
+    results: dict = {}
+
+    def work(i):
+        results[i] = models[i].simulate(0.3, points=7)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(len(files))]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    for i, m in enumerate(models):
+        alone = m.simulate(0.3, points=7)
+        np.testing.assert_array_equal(results[i].q, alone.q)
+        np.testing.assert_array_equal(results[i]["energy"], alone["energy"])
