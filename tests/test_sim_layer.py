@@ -460,3 +460,14 @@ def test_threaded_runs_of_distinct_models_match_sequential_runs():
         alone = m.simulate(0.3, points=7)
         np.testing.assert_array_equal(results[i].q, alone.q)
         np.testing.assert_array_equal(results[i]["energy"], alone["energy"])
+
+
+def test_non_finite_output_is_warned_about(tmp_path):
+    text = (MODELS / "pendulum.mech").read_text()
+    assert "output" in text
+    src = text.replace("end Pendulum;", "  output Real w = sqrt(-1 - cos(theta)*cos(theta));\nend Pendulum;", 1)
+    path = tmp_path / "p.mech"
+    path.write_text(src)
+    r = mechdsl.load(path, model="Pendulum").simulate(0.2, points=5)
+    assert r.success and not np.isfinite(r["w"]).any()
+    assert any("w is nan at t = 0" in w for w in r.metadata["warnings"])

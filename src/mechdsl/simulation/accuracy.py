@@ -30,7 +30,22 @@ DRIFT_FACTOR = 1e3     # invariant drift this many times the tolerance: the accu
 
 
 def check_finite(r: Result) -> None:
-    """A run that produced inf/nan fails at the first such time; results before it are kept."""
+    """A run whose state became inf/nan fails at the first such time (results before it are
+    kept); a recorded output that is not finite where the state is gets a warning."""
+    _check_states(r)
+    bad = []
+    for name, v in r.signals.items():
+        if isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "f" and len(v) == len(r.t):
+            idx = np.flatnonzero(~np.isfinite(v))
+            if idx.size:
+                bad.append(f"{name} is {v[idx[0]]} at t = {float(r.t[idx[0]]):.10g}")
+    if bad:
+        r.metadata.setdefault("warnings", []).append(
+            "recorded values are not finite (the model's expressions, e.g. a square root of a negative "
+            "number): " + "; ".join(bad[:3]) + (f"; and {len(bad) - 3} more" if len(bad) > 3 else ""))
+
+
+def _check_states(r: Result) -> None:
     if r.q.size == 0 and r.qd.size == 0:
         return
     X = np.hstack([r.q, r.qd])
