@@ -471,3 +471,14 @@ def test_non_finite_output_is_warned_about(tmp_path):
     r = mechdsl.load(path, model="Pendulum").simulate(0.2, points=5)
     assert r.success and not np.isfinite(r["w"]).any()
     assert any("w is nan at t = 0" in w for w in r.metadata["warnings"])
+
+
+@pytest.mark.parametrize("file, kw, text", [
+    ("bouncing_ball.mech", {"dt": 0.01, "reactions": True}, "a contact problem: dt = 0.01, reactions = True"),
+    ("heavy_top.mech", {"max_steps": 10}, "a fixed-step problem: max_steps = 10"),
+    ("double_pendulum.mech", {"rest_speed": 1.0}, "an ODE problem: rest_speed = 1.0"),
+])
+def test_settings_without_effect_are_noted(file, kw, text):
+    """They used to be dropped silently by the contact and fixed-step drivers."""
+    r = mechdsl.load(MODELS / file).simulate(0.2, points=5, **kw)
+    assert any(text in n for n in r.metadata["notes"])

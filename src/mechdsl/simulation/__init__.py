@@ -27,7 +27,7 @@ def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
 def solve(problem: Problem, progress=None) -> Result:
     from .. import integrators as I
     from . import accuracy as A
-    from .backends import BACKENDS
+    from .backends import BACKENDS, ignored_settings
 
     s = problem.settings
     backend = BACKENDS[problem.backend]
@@ -50,6 +50,10 @@ def solve(problem: Problem, progress=None) -> Result:
     meta.setdefault("warnings", [])
     meta.setdefault("notes", [])
     meta.setdefault("conservative", "energy" in problem.invariants)
+    unused = ignored_settings(backend, s)
+    if unused:
+        what = {"ode": "an ODE", "dae": "a DAE", "hybrid": "a contact", "canonical": "a fixed-step"}[problem.kind]
+        meta["notes"].append(f"settings without effect on {what} problem: " + ", ".join(unused))
     ran = backend.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,

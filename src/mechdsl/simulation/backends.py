@@ -16,6 +16,7 @@ from ..result import Result
 
 class Backend:
     name = ""
+    ignores: tuple[str, ...] = ()       # settings without effect here (noted in the metadata when set)
 
     def run(self, problem, progress) -> Result:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -26,6 +27,7 @@ class Backend:
 
 class OdeBackend(Backend):
     name = "ode"
+    ignores = ("rest_speed", "impact_order")
 
     def run(self, problem, progress):
         from ..simulate import simulate_ode
@@ -43,6 +45,7 @@ class OdeBackend(Backend):
 
 class DaeBackend(Backend):
     name = "dae"
+    ignores = ("rest_speed", "impact_order")
 
     def run(self, problem, progress):
         from ..dae import simulate_dae
@@ -66,6 +69,7 @@ class DaeBackend(Backend):
 
 class EventsBackend(Backend):
     name = "events"
+    ignores = ("dt", "max_steps", "integrator_options", "formulation", "reactions", "compiled")
 
     def run(self, problem, progress):
         from ..impacts import simulate_with_contacts
@@ -94,6 +98,7 @@ class EventsBackend(Backend):
 
 class FixedStepBackend(Backend):
     name = "fixed-step"
+    ignores = ("max_steps", "integrator_options", "rest_speed", "impact_order")
 
     def run(self, problem, progress):
         from ..symplectic import simulate_symplectic
@@ -109,6 +114,16 @@ class FixedStepBackend(Backend):
         return simulate_symplectic(problem.eom, s.t_end, method=s.method, dt=s.dt, t_start=s.t_start, p=s.p,
                                    x0=s.x0, points=s.points, outputs=s.outputs, progress=progress,
                                    **ignored, **kw)
+
+
+def ignored_settings(backend: Backend, settings) -> list[str]:
+    """The settings a run was given that its back end does not use."""
+    out = []
+    for name in backend.ignores:
+        v = getattr(settings, name)
+        if v not in (None, False, {}, "auto"):
+            out.append(f"{name} = {v!r}")
+    return out
 
     def describe(self, r):
         m = r.metadata.get("method")
