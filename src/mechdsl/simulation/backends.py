@@ -115,6 +115,10 @@ class FixedStepBackend(Backend):
                                    x0=s.x0, points=s.points, outputs=s.outputs, progress=progress,
                                    **ignored, **kw)
 
+    def describe(self, r):
+        m = r.metadata.get("method")
+        return {"formulation": "canonical", "integrator": f"mechdsl:{m}", "method": m}
+
 
 def ignored_settings(backend: Backend, settings) -> list[str]:
     """The settings a run was given that its back end does not use."""
@@ -124,10 +128,6 @@ def ignored_settings(backend: Backend, settings) -> list[str]:
         if v not in (None, False, {}, "auto"):
             out.append(f"{name} = {v!r}")
     return out
-
-    def describe(self, r):
-        m = r.metadata.get("method")
-        return {"formulation": "canonical", "integrator": f"mechdsl:{m}", "method": m}
 
 
 BACKENDS: dict[str, Backend] = {b.name: b for b in (OdeBackend(), DaeBackend(), EventsBackend(), FixedStepBackend())}
