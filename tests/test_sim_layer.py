@@ -482,3 +482,11 @@ def test_settings_without_effect_are_noted(file, kw, text):
     """They used to be dropped silently by the contact and fixed-step drivers."""
     r = mechdsl.load(MODELS / file).simulate(0.2, points=5, **kw)
     assert any(text in n for n in r.metadata["notes"])
+
+
+def test_no_error_estimate_below_the_precision_floor(capsys):
+    """At rtol = 1e-13 the 'tighter' run would be clamped to the same 1e-14 floor... or below
+    it: an estimate of 0 would be a silent wrong answer; it says why there is none instead."""
+    r = mechdsl.load(MODELS / "double_pendulum.mech").simulate(0.2, rtol=1e-13, atol=1e-13, points=5,
+                                                               estimate_error=True)
+    assert r.metadata["error_estimate"]["unavailable"] and not r.metadata["error_estimate"]["max_abs_difference"]

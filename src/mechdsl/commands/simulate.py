@@ -148,7 +148,9 @@ def summary(r, written=()) -> str:
     if s.get("constraint_drift") is not None:
         lines.append(f"constraint drift: max ||g|| = {s['constraint_drift']:.3g}")
     est = m.get("error_estimate")
-    if est:
+    if est and est.get("unavailable"):
+        lines.append(f"error estimate unavailable: {est['unavailable']}")
+    elif est:
         lines.append(f"error estimate (max difference to a run at {est['reference']}):")
         for k, v in est["max_abs_difference"].items():
             lines.append(f"  {k}: {v:.3g}")

@@ -78,8 +78,14 @@ def _estimate_error(r: Result, problem: Problem) -> None:
         dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
         tighter = s.replace(dt=dt / 4, estimate_error=False, budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
         how = f"dt = {dt / 4:g}"
+    elif s.rtol / 100 < MIN_RTOL:
+        r.metadata["error_estimate"] = {
+            "reference": None, "max_abs_difference": {},
+            "unavailable": f"rtol = {s.rtol:g}: a run 100 times tighter would be below {MIN_RTOL:g}, which double "
+                           "precision cannot deliver; estimate at a looser rtol"}
+        return
     else:
-        tighter = s.replace(rtol=max(s.rtol / 100, MIN_RTOL), atol=s.atol / 100, estimate_error=False)
+        tighter = s.replace(rtol=s.rtol / 100, atol=s.atol / 100, estimate_error=False)
         how = f"rtol = {tighter.rtol:g}, atol = {tighter.atol:g}"
     if problem.backend == "fixed-step" and s.points is None:
         tighter = tighter.replace(points=len(r.t)) if len(r.t) >= 2 else tighter
