@@ -112,6 +112,10 @@ def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
         from .partitioning import PartitioningStepper
 
         return PartitioningStepper(system, opts)
+    if f == "augmented":
+        from .augmented import AugmentedStepper
+
+        return AugmentedStepper(system, opts, span)
     raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
 
 
@@ -187,6 +191,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # runs into a singular configuration before they fail; they start with short segments and stop
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
+    crossing = getattr(stepper, "crosses_singular", False)   # augmented: passes through singular configurations
     chunk = FIRST_CHUNK if cautious else CHUNK
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
@@ -250,7 +255,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             min_ratio = min(min_ratio, ratio)
             seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
             on_grid = abs(t_now - grid[k]) <= tiny
-            if ratio < opts.singular_tol:
+            if ratio < opts.singular_tol and not crossing:
                 events.append({"time": t_now, "kind": "singular", "contact": "-",
                                "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
                 failure = Failure(t_now, "singular configuration",
@@ -262,7 +267,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             h_sing = np.inf
             if t_now > t_prev:
                 tau_pred = np.inf
-            if ratio < ratio_prev and t_now > t_prev:
+            if ratio < ratio_prev and t_now > t_prev and not crossing:
                 tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
                 tau_pred = tau
                 if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
