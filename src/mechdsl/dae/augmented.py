@@ -49,7 +49,6 @@ import numpy as np
 from .baumgarte import _user_rates
 from .projection import ProjectionStepper
 from .stepper import GridIntegrators, Stepper, StepError, integrator_options, ode_plugin, scaled_dae
-from .system import _backward, _cholesky, _forward
 
 PENALTY = 1e8          # rho: penalty relative to the equilibrated mass matrix (cond(W) ~ rho)
 ITERATIONS = 4         # augmented Lagrangian iterations of the accelerations
@@ -57,17 +56,57 @@ PROJECTION_ITERATIONS = 30
 SINGULAR_EVENT = 1e-2  # a local minimum of the singular-value ratio below this is reported
 
 
-def band_order(system) -> list[int]:
-    """A band-reducing order of the coordinates for the Cholesky factor of W (reverse
-    Cuthill-McKee on the structure of M + G^T G; declaration order breaks ties)."""
+def band_order(system) -> tuple[list[int], list[int]]:
+    """A band-reducing order of the coordinates (reverse Cuthill-McKee on the structure of
+    M + G^T G) and, in that order, the envelope of W: first[i] = the first column of row i
+    with a structural nonzero (the Cholesky factor has no fill outside the envelope)."""
     import casadi as ca
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import reverse_cuthill_mckee
 
     M, G = system.sym["M"], system.sym["G"]
     S = ca.DM(M.sparsity(), 1) + ca.mtimes(ca.DM(G.sparsity(), 1).T, ca.DM(G.sparsity(), 1))
-    pattern = csr_matrix(np.array(S, float) != 0)
-    return [int(i) for i in reverse_cuthill_mckee(pattern, symmetric_mode=True)]
+    pattern = np.array(S, float) != 0
+    pattern |= np.eye(system.n, dtype=bool)
+    order = [int(i) for i in reverse_cuthill_mckee(csr_matrix(pattern), symmetric_mode=True)]
+    P = pattern[np.ix_(order, order)]
+    first = [int(np.argmax(P[i, :i + 1])) for i in range(system.n)]
+    return order, first
+
+
+def envelope_cholesky(A, first: list[int]) -> list[dict]:
+    """Lower L with A = L L^T for A symmetric positive definite (SX), computed only inside
+    the envelope (row i from column first[i]): L[i] is {column: SX}."""
+    import casadi as ca
+
+    n = len(first)
+    L: list[dict] = [{} for _ in range(n)]
+    for i in range(n):
+        for j in range(first[i], i + 1):
+            acc = A(i, j)
+            for k in range(max(first[i], first[j]), j):
+                acc = acc - L[i][k] * L[j][k]
+            L[i][j] = ca.sqrt(acc) if i == j else acc / L[j][j]
+    return L
+
+
+def envelope_solve(L: list[dict], first: list[int], b: list) -> list:
+    """x with L L^T x = b (forward then backward substitution inside the envelope)."""
+    n = len(first)
+    y = []
+    for i in range(n):
+        acc = b[i]
+        for k in range(first[i], i):
+            acc = acc - L[i][k] * y[k]
+        y.append(acc / L[i][i])
+    x = [None] * n
+    for i in reversed(range(n)):
+        acc = y[i]
+        for k in range(i + 1, n):
+            if first[k] <= i:
+                acc = acc - L[k][i] * x[k]
+        x[i] = acc / L[i][i]
+    return x
 
 
 def augmented_ode(system, row_scale: np.ndarray, rho: float = PENALTY, iterations: int = ITERATIONS) -> dict:
@@ -80,16 +119,14 @@ def augmented_ode(system, row_scale: np.ndarray, rho: float = PENALTY, iteration
     alpha, beta = s["alpha"], s["beta"]
     c = s["gamma"] - 2 * alpha * s["gdot"] - beta**2 * s["g"]
     A = ca.DM(rho * np.asarray(row_scale, float) ** 2)
-    W = M + ca.mtimes([G.T, ca.diag(A), G])
-    order = band_order(system)
-    Wp = W[order, order]
-    L = _cholesky([[Wp[i, j] for j in range(len(order))] for i in range(len(order))])
-    inverse = np.argsort(order)
+    order, first = band_order(system)
+    Wp = (M + ca.mtimes([G.T, ca.diag(A), G]))[order, order]
+    L = envelope_cholesky(lambda i, j: Wp[i, j], first)
+    inverse = [int(i) for i in np.argsort(order)]
 
     def solve(r):
         rp = r[order]
-        y = _backward(L, _forward(L, [rp[i] for i in range(len(order))]))
-        return ca.vertcat(*y)[list(inverse)]
+        return ca.vertcat(*envelope_solve(L, first, [rp[i] for i in range(system.n)]))[inverse]
 
     a = ca.SX.zeros(system.n)
     lam = ca.SX.zeros(system.m)
@@ -97,6 +134,16 @@ def augmented_ode(system, row_scale: np.ndarray, rho: float = PENALTY, iteration
         a = a + solve(s["bias"] - ca.mtimes(M, a) - ca.mtimes(G.T, lam + A * (ca.mtimes(G, a) - c)))
         lam = lam + A * (ca.mtimes(G, a) - c)
     return {"x": ca.vertcat(q, qd), "t": t, "p": ca.vertcat(p, alpha, beta), "ode": ca.vertcat(qd, a)}
+
+
+def shared_ode(system) -> dict:
+    """augmented_ode for the system's frozen row scaling, built once per (EOM, active set,
+    scaling) and kept with the system."""
+    if system.row_scale is None:
+        raise ValueError("the augmented formulation needs the frozen row scaling (system.fix_row_scale)")
+    scale = np.asarray(system.row_scale, float)
+    return system.shared(("augmented_ode", scale.tobytes(), PENALTY, ITERATIONS),
+                         lambda: augmented_ode(system, scale))
 
 
 def _penalty_solve(W_factor, r):
@@ -118,6 +165,7 @@ def project_positions(system, q0, t, A, tol: float) -> np.ndarray:
     augmented Lagrangian 1/2 (q - q0)^T M (q - q0) + mu^T g + 1/2 g^T A g."""
     q0 = np.array(q0, float)
     q, mu = q0.copy(), np.zeros(system.m)
+    last = np.inf
     for _ in range(PROJECTION_ITERATIONS):
         g = system.g(q, t)
         if not np.all(np.isfinite(g)):
@@ -127,8 +175,10 @@ def project_positions(system, q0, t, A, tol: float) -> np.ndarray:
         q = q + step
         g = system.g(q, t)
         mu = mu + A * g
-        if np.max(np.abs(g), initial=0.0) <= tol and np.max(np.abs(step)) <= 1e-3 * tol * (1 + np.max(np.abs(q))):
+        size = np.max(np.abs(g), initial=0.0)
+        if size <= tol or size >= last:       # feasible, or no more progress
             break
+        last = size
     if not np.all(np.isfinite(q)):
         raise StepError("position projection diverged")
     return q
@@ -140,13 +190,16 @@ def project_velocities(system, q, qd0, t, A, tol: float) -> np.ndarray:
     M, G, F = _leading(system, q, t, A)
     gt = system.gdot(q, np.zeros_like(qd0), t)
     v, mu = np.array(qd0, float), np.zeros(system.m)
+    last = np.inf
     for _ in range(PROJECTION_ITERATIONS):
         dv = _penalty_solve(F, -(M @ (v - qd0)) - G.T @ (mu + A * (G @ v + gt)))
         v = v + dv
         r = G @ v + gt
         mu = mu + A * r
-        if np.max(np.abs(r), initial=0.0) <= tol and np.max(np.abs(dv)) <= tol * (1 + np.max(np.abs(v))):
+        size = np.max(np.abs(r), initial=0.0)
+        if size <= tol or size >= last:
             break
+        last = size
     return v
 
 
@@ -159,15 +212,13 @@ class AugmentedStepper(ProjectionStepper):
     def __init__(self, system, opts, span: float):
         Stepper.__init__(self, system=system, opts=opts, name="augmented")
         self.span = span
-        if system.row_scale is None:
-            raise ValueError("AugmentedStepper needs the frozen row scaling (system.fix_row_scale)")
         self.A = PENALTY * np.asarray(system.row_scale, float) ** 2
         plugin = ode_plugin(opts)
         iopts = integrator_options(opts, plugin)
         key = ("augmented", plugin, tuple(sorted(iopts.items())), bool(opts.compiled),
                np.asarray(system.row_scale, float).tobytes(), PENALTY, ITERATIONS)
         self.F = system.shared(key, lambda: GridIntegrators(
-            "augmented", plugin, scaled_dae(augmented_ode(system, system.row_scale)), iopts, {},
+            "augmented", plugin, scaled_dae(shared_ode(system)), iopts, {},
             compiled=opts.compiled))
         self.F.stats = self.stats
         if self.F.note:
@@ -190,37 +241,41 @@ class AugmentedStepper(ProjectionStepper):
         q = project_positions(self.system, q, t, self.A, tol)
         return q, project_velocities(self.system, q, qd, t, self.A, tol)
 
-    def reset(self, t, q, qd) -> None:
-        super().reset(t, q, qd)
-        if getattr(self, "_ratios", None) and self._ratios[-1][0] > t:
-            self._ratios = [r for r in self._ratios if r[0] <= t]
+    def watch(self, t: float, ratio: float) -> None:
+        """Called by the driver with sigma_min/sigma_max of the scaled G at every accepted
+        state: reports each passage through a singular configuration (a local minimum of
+        the ratio below SINGULAR_EVENT) as an event, at the time where the lines through
+        the two states on each side of the minimum meet."""
+        self._ratios = (self._ratios + [(float(t), float(ratio))])[-4:]
+        if len(self._ratios) < 4:
+            return
+        (t0, r0), (t1, r1), (t2, r2), (t3, r3) = self._ratios
+        if not (r1 < r0 and r2 < r3 and min(r1, r2) < SINGULAR_EVENT):
+            return
+        left, right = (r1 - r0) / (t1 - t0), (r3 - r2) / (t3 - t2)      # falling, rising
+        tc = min(max((r2 - right * t2 - r1 + left * t1) / (left - right), t1), t2)
+        if any(abs(e["time"] - tc) <= t2 - t1 for e in self.events):
+            return
+        self.events.append({"time": tc, "kind": "singular", "contact": "-",
+                            "detail": "crossed a singular configuration (sigma_min/sigma_max of the scaled "
+                                      f"constraint Jacobian {min(r1, r2):.2e} at the nearest checked state)"})
 
-    def advance(self, times):
-        T, Q, QD = super().advance(times)
-        self._watch(T, Q)
-        return T, Q, QD
 
-    def _watch(self, T, Q) -> None:
-        """Report each passage through a singular configuration: a local minimum of the
-        scaled singular-value ratio below SINGULAR_EVENT, its time from the intersection of
-        the lines through the two states on each side."""
-        from .dof import singular_ratio
+def ode_eigenvalues(system, q, qd, t) -> np.ndarray:
+    """Eigenvalues of the Jacobian of the augmented ODE without stabilization terms at (q, q'),
+    by central differences in one mapped call (for the choice of method): 2 (2n) right-hand
+    sides instead of the symbolic Jacobian of a large model."""
+    import casadi as ca
 
-        for t, q in zip(T, Q):
-            self._ratios.append((float(t), singular_ratio(self.system.scaled_G(q, t), self.system.m)))
-            if len(self._ratios) < 4:
-                continue
-            (t0, r0), (t1, r1), (t2, r2), (t3, r3) = self._ratios[-4:]
-            self._ratios = self._ratios[-4:]
-            if not (r1 < r0 and r2 < r3 and min(r1, r2) < SINGULAR_EVENT):
-                continue
-            left = (r1 - r0) / (t1 - t0)        # < 0
-            right = (r3 - r2) / (t3 - t2)       # > 0
-            # the two lines r1 + left (t - t1) and r2 + right (t - t2) meet at the passage
-            tc = (r2 - right * t2 - r1 + left * t1) / (left - right)
-            tc = min(max(tc, t1), t2)
-            if any(abs(e["time"] - tc) <= (t2 - t1) for e in self.events):
-                continue
-            self.events.append({"time": tc, "kind": "singular", "contact": "-",
-                                "detail": f"crossed a singular configuration (sigma_min/sigma_max of the scaled "
-                                          f"constraint Jacobian {min(r1, r2):.2e} at the nearest checked state)"})
+    dae = shared_ode(system)
+    f = ca.Function("augmented_ode", [dae["x"], dae["t"], dae["p"]], [dae["ode"]])
+    x = np.concatenate([q, qd])
+    N = x.size
+    h = 1e-6 * np.maximum(1.0, np.abs(x))
+    X = np.concatenate([x[:, None] + np.diag(h), x[:, None] - np.diag(h)], axis=1)
+    P = np.repeat(np.concatenate([system.p, [0.0, 0.0]])[:, None], 2 * N, axis=1)
+    F = np.array(f.map(2 * N)(X, np.full((1, 2 * N), float(t)), P), float)
+    J = (F[:, :N] - F[:, N:]) / (2 * h)[None, :]
+    if not np.all(np.isfinite(J)):
+        return np.zeros(0)
+    return np.linalg.eigvals(J)

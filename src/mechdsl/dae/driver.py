@@ -273,6 +273,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
                     h_sing = max(0.5 * tau, 1e3 * tiny)
             ratio_prev, t_prev = ratio, t_now
+            if crossing:
+                stepper.watch(t_now, ratio)
             if on_grid:
                 if k % refine == 0:
                     record(t_now, q_now, qd_now, (d_now, v_now))
@@ -361,7 +363,12 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
         opts.method = "bdf"
     if opts.method != "auto":
         return "requested"
-    ev = system.eigenvalues(q, qd, t0)
+    if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
+        from .augmented import ode_eigenvalues
+
+        ev = ode_eigenvalues(system, q, qd, t0)
+    else:
+        ev = system.eigenvalues(q, qd, t0)
     damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
     rate = max(damped, default=0.0)
     if rate * span > STIFF:
