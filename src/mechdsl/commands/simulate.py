@@ -52,6 +52,7 @@ def run(args) -> int:
         opts["dt"] = _first(args.dt, settings.get("dt"))
     if args.compiled:
         opts["compiled"] = True
+    opts.update({k: settings[k] for k in ("formulation", "reactions") if settings.get(k) is not None})
     if eom.model is not None and eom.model.contacts:     # scene settings of contacts (docs/contacts.md)
         opts.update({k: settings[k] for k in ("rest_speed", "impact_order") if settings.get(k) is not None})
     from ..simulate import simulate

@@ -243,22 +243,21 @@ class AugmentedStepper(ProjectionStepper):
 
     def watch(self, t: float, ratio: float) -> None:
         """Called by the driver with sigma_min/sigma_max of the scaled G at every accepted
-        state: reports each passage through a singular configuration (a local minimum of
-        the ratio below SINGULAR_EVENT) as an event, at the time where the lines through
-        the two states on each side of the minimum meet."""
-        self._ratios = (self._ratios + [(float(t), float(ratio))])[-4:]
-        if len(self._ratios) < 4:
+        state.  Reports each passage through a singular configuration, a strict minimum of
+        the ratio below SINGULAR_EVENT in the middle of five states, as an event at the time
+        where the line through the two states before it meets the line through the two
+        after it (sigma_min falls and rises linearly through an isolated singularity)."""
+        self._ratios = (self._ratios + [(float(t), float(ratio))])[-5:]
+        if len(self._ratios) < 5:
             return
-        (t0, r0), (t1, r1), (t2, r2), (t3, r3) = self._ratios
-        if not (r1 < r0 and r2 < r3 and min(r1, r2) < SINGULAR_EVENT):
+        (t0, r0), (t1, r1), (t2, r2), (t3, r3), (t4, r4) = self._ratios
+        if not (r0 > r1 > r2 < r3 < r4 and r2 < SINGULAR_EVENT):
             return
-        left, right = (r1 - r0) / (t1 - t0), (r3 - r2) / (t3 - t2)      # falling, rising
-        tc = min(max((r2 - right * t2 - r1 + left * t1) / (left - right), t1), t2)
-        if any(abs(e["time"] - tc) <= t2 - t1 for e in self.events):
-            return
+        left, right = (r1 - r0) / (t1 - t0), (r4 - r3) / (t4 - t3)      # falling, rising
+        tc = min(max((r3 - right * t3 - r1 + left * t1) / (left - right), t1), t3)
         self.events.append({"time": tc, "kind": "singular", "contact": "-",
                             "detail": "crossed a singular configuration (sigma_min/sigma_max of the scaled "
-                                      f"constraint Jacobian {min(r1, r2):.2e} at the nearest checked state)"})
+                                      f"constraint Jacobian {r2:.2e} at the nearest checked state)"})
 
 
 def ode_eigenvalues(system, q, qd, t) -> np.ndarray:
