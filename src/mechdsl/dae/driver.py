@@ -122,7 +122,7 @@ def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
 def simulate_dae(eom, t_end, **kw) -> Result:
     """Simulate a model with constraints (``eom.g``) as a DAE with multipliers.
 
-    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning'),
+    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning' | 'augmented'),
     rtol, atol, method ('auto' | 'bdf' | 'adams' for the ODE formulations, 'idas' for ggl),
     points, t_start, p (vector or {name: value}), reactions (bool), outputs (names),
     baumgarte (omega or (alpha, beta)), singular_tol, max_interval, drift_bound, max_steps.
