@@ -220,3 +220,32 @@ def test_a02_scene_runs_its_20_seconds():
     E = r["energy"]
     assert np.max(np.abs(E - E[0])) < 1e-6 * np.max(np.abs(r["kinetic_energy"]))
     assert r.stats["drift_ok"]
+
+
+def _massless_z(tied: bool):
+    """A pendulum bob (x, y) on a unit rod and a coordinate z without inertia, tied to x
+    (z = x) or free."""
+    import casadi as ca
+
+    from mechdsl.eom import from_lagrangian
+
+    q, qd, t, p = ca.SX.sym("q", 3), ca.SX.sym("qd", 3), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    g = [0.5 * (q[0] ** 2 + q[1] ** 2 - 1)] + ([q[2] - q[0]] if tied else [])
+    return from_lagrangian("Massless", ("x", "y", "z"), (), [], q, qd, t, p, 0.5 * (qd[0] ** 2 + qd[1] ** 2),
+                           9.81 * q[1], g=ca.vertcat(*g), q0=[1, 0, 1], constraint_names=["rod", "tie"][:len(g)])
+
+
+def test_a_coordinate_without_inertia_held_by_a_constraint_is_fine():
+    a = simulate_dae(_massless_z(True), 2.0, formulation="augmented", rtol=1e-10, atol=1e-10, points=5)
+    b = simulate_dae(_massless_z(True), 2.0, formulation="projection", rtol=1e-10, atol=1e-10, points=5)
+    assert a.success and np.max(np.abs(a.q - b.q)) < 1e-8
+    assert np.max(np.abs(a.q[:, 2] - a.q[:, 0])) < 1e-9
+
+
+def test_a_coordinate_without_inertia_nothing_holds_is_e840():
+    from mechdsl.diagnostics import MechError
+
+    with pytest.raises(MechError) as err:
+        simulate_dae(_massless_z(False), 1.0, formulation="augmented", points=3)
+    assert err.value.first.code == "E840" and "along z" in err.value.first.message
+    assert "projection" in err.value.first.help

@@ -158,11 +158,15 @@ def _penalty_solve(W_factor, r):
 
 
 def _leading(system, q, t, A):
-    from scipy.linalg import cho_factor
+    from scipy.linalg import LinAlgError, cho_factor
 
     M = system.M(q, t)
     G = system.G(q, t)
-    return M, G, cho_factor(M + G.T @ (A[:, None] * G))
+    try:
+        return M, G, cho_factor(M + G.T @ (A[:, None] * G))
+    except (LinAlgError, ValueError):
+        raise StepError("M + G^T A G is not positive definite here (a coordinate without inertia that no "
+                        "constraint holds?)") from None
 
 
 def project_positions(system, q0, t, A, tol: float) -> np.ndarray:
@@ -210,16 +214,41 @@ def project_velocities(system, q, qd0, t, A, tol: float) -> np.ndarray:
     return v
 
 
+CODE_LEADING = "E840"
+
+
+def check_leading(system, q, t, A) -> None:
+    """E840 when M + G^T A G is singular at the start (coordinates without inertia that no
+    constraint holds: the formulation would divide by zero where the KKT route does not)."""
+    from ..diagnostics import Diagnostic, MechError
+    from .dof import short_list
+
+    W = system.M(q, t) + system.G(q, t).T @ (A[:, None] * system.G(q, t))
+    d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(W)), 1e-300))
+    w, V = np.linalg.eigh(d[:, None] * W * d[None, :])
+    if np.all(np.isfinite(w)) and w[0] > 1e-12 * max(w[-1], 1e-300):
+        return
+    v = np.abs(V[:, 0])
+    names = [system.eom.coords[i] for i in range(system.n) if v[i] >= 0.3 * v.max()]
+    raise MechError(Diagnostic(
+        CODE_LEADING,
+        "formulation \"augmented\" needs M + G^T A G positive definite, but it is singular at the start "
+        f"along {short_list(names)}: coordinates without inertia that no constraint holds",
+        help="use formulation = \"projection\" (its augmented system tolerates them), or give those "
+             "coordinates inertia"))
+
+
 class AugmentedStepper(ProjectionStepper):
     """The augmented Lagrangian ODE, integrated like the projection formulation's index-1
     ODE (same chunks, same projection rule), with the penalty projections of this module."""
 
     crosses_singular = True       # the driver does not stop at a loss of rank
 
-    def __init__(self, system, opts, span: float):
+    def __init__(self, system, opts, span: float, t0: float, q0):
         Stepper.__init__(self, system=system, opts=opts, name="augmented")
         self.span = span
         self.A = PENALTY * np.asarray(system.row_scale, float) ** 2
+        check_leading(system, q0, t0, self.A)
         plugin = ode_plugin(opts)
         iopts = integrator_options(opts, plugin)
         key = ("augmented", plugin, tuple(sorted(iopts.items())), bool(opts.compiled),
@@ -285,7 +314,8 @@ def ode_eigenvalues(system, q, qd, t) -> np.ndarray:
     X = np.concatenate([x[:, None] + np.diag(h), x[:, None] - np.diag(h)], axis=1)
     P = np.repeat(np.concatenate([system.p, [0.0, 0.0]])[:, None], 2 * N, axis=1)
     F = np.array(f.map(2 * N)(X, np.full((1, 2 * N), float(t)), P), float)
-    J = (F[:, :N] - F[:, N:]) / (2 * h)[None, :]
+    with np.errstate(all="ignore"):      # a singular W gives NaN here; E840 reports it next
+        J = (F[:, :N] - F[:, N:]) / (2 * h)[None, :]
     if not np.all(np.isfinite(J)):
         return np.zeros(0)
     return np.linalg.eigvals(J)

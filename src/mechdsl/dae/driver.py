@@ -115,7 +115,7 @@ def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
     if f == "augmented":
         from .augmented import AugmentedStepper
 
-        return AugmentedStepper(system, opts, span)
+        return AugmentedStepper(system, opts, span, t0, q0)
     raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
 
 
