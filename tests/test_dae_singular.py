@@ -63,13 +63,14 @@ def nfourbar(N: int):
 def check_against_reference(model, r, N: int, angle_tol: float):
     coords = model.eom.coords
     theta = reference_theta(N, r.t[-1])
-    th = theta(r.t)[0]
+    th, w = theta(r.t)
     cranks = [i for i, c in enumerate(coords) if c.startswith("ground[")]
     couplers = [i for i, c in enumerate(coords) if c.startswith("left[")]
     assert len(cranks) == N + 1 and len(couplers) == N
     # every crank turns by -theta (phi about +z), every coupler by +theta relative to its crank
     assert np.max(np.abs(r.q[:, cranks] + th[:, None])) < angle_tol
     assert np.max(np.abs(r.q[:, couplers] - th[:, None])) < angle_tol
+    assert np.max(np.abs(r.qd[:, cranks] + w[:, None])) < 2 * angle_tol      # speeds (up to ~6.7 rad/s)
     # the first crank's tip (the benchmark's point B0)
     assert np.max(np.abs(r["x_top"] - L_ROD * np.sin(th))) < 2 * angle_tol
     assert np.max(np.abs(r["y_top"] - L_ROD * np.cos(th))) < 2 * angle_tol
