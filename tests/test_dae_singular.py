@@ -96,6 +96,9 @@ def test_nfourbar_crosses_every_singular_configuration_like_the_one_dof_referenc
 
 def test_energy_and_drift_stay_bounded_through_the_passages():
     r = nfourbar(3).simulate(rtol=1e-9, atol=1e-11)
+    again = nfourbar(3).simulate(rtol=1e-9, atol=1e-11)
+    np.testing.assert_array_equal(r.q, again.q)              # deterministic
+    assert [e["time"] for e in r.events] == [e["time"] for e in again.events]
     E = r["energy"]
     scale = np.max(np.abs(r["kinetic_energy"]))
     assert np.max(np.abs(E - E[0])) < 1e-7 * scale
