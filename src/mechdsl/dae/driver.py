@@ -363,6 +363,10 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
         opts.method = "bdf"
     if opts.method != "auto":
         return "requested"
+    if opts.formulation == "partitioning":
+        opts.method = "bdf"
+        return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
+                "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there")
     if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
         from .augmented import ode_eigenvalues
 
