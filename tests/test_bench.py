@@ -67,7 +67,7 @@ def test_bad_variants(bad):
 
 def test_tolerances():
     default = parse_tolerances(None)
-    assert len(default) == 21 and default[0] == 1e-2 and default[-1] == 1e-12
+    assert len(default) == 21 and default[0] == pytest.approx(1e-2) and default[-1] == pytest.approx(1e-12)
     assert np.allclose(np.diff(np.log10(default)), -0.5)
     assert parse_tolerances("1e-4,1e-2,1e-4") == [1e-2, 1e-4]
     assert parse_tolerances("1e-3..1e-5/1") == [1e-3, 1e-4, 1e-5]
@@ -141,7 +141,7 @@ def test_errors_against_the_closed_form(tmp_path, setup):
 def test_auto_reference_estimates_its_own_accuracy(setup):
     res = run_bench(setup, variants=parse_variants("erk"), tolerances=[1e-6], repeats=1)
     ref = res.reference
-    assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == 1e-8
+    assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == pytest.approx(1e-8, rel=1e-12)
     true_err = np.abs(ref.values["theta"] - exact_theta(ref.t)).max() / np.abs(exact_theta(ref.t)).max()
     est = ref.accuracy["final"]
     assert true_err < 1e-7 and 0 < est < 1e-6
