@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 PILOT_TOL = 1e-6
 PILOT_CAP = 2.0          # CPU seconds: the pilot stops here (where the simulator reports progress)
 CHEAP = 0.1              # CPU seconds of the pilot below which the full default sweep is affordable
-RUN_TARGET = 0.5         # CPU seconds of one run at PILOT_TOL that a default horizon aims at
+RUN_TARGET = 1.0         # CPU seconds of one run at PILOT_TOL that a default horizon aims at
 RUN_BUDGET = 5.0         # CPU seconds: one run longer than this ends its method's sweep
-SWEEP_BUDGET = 30.0      # CPU seconds for all runs of the default plan's sweep
+SWEEP_BUDGET = 25.0      # CPU seconds for all runs of the default plan's sweep
 TOLERANCES = {"cheap": "1e-2..1e-10/1", "moderate": "1e-3..1e-9/1", "costly": "1e-3..1e-8/1"}
 
 
@@ -117,19 +117,16 @@ def default_plan(setup, *, t_end_given: bool, tolerances_given: bool, repeats_gi
         plan.notes.append(f"the pilot run (default method at tolerance {PILOT_TOL:g}) failed at t = {f.time:.6g}: "
                           f"{f.cause}")
     level = "cheap" if cost <= CHEAP else "moderate" if cost <= RUN_TARGET else "costly"
-    if not t_end_given and level == "costly":
-        new_span = nice_below(span * RUN_TARGET / cost)
-        if failed and reached > setup.t_start:
-            new_span = min(new_span, nice_below(0.5 * (reached - setup.t_start)))
-        new_span = min(new_span, span)
-        plan.t_end = setup.t_start + new_span
-        plan.notes.append(f"horizon shortened to t = {plan.t_end:g} (from {setup.t_end:g}): one run at tolerance "
-                          f"{PILOT_TOL:g} over the whole horizon costs about {cost:.3g} s of CPU; "
-                          "give --t-end for another")
-    elif not t_end_given and failed and reached > setup.t_start:
-        plan.t_end = setup.t_start + nice_below(0.5 * (reached - setup.t_start))
-        plan.notes.append(f"horizon shortened to t = {plan.t_end:g} (from {setup.t_end:g}), before the pilot's "
-                          "failure; give --t-end for another")
+    if not t_end_given:
+        by_cost = nice_below(span * RUN_TARGET / cost) if level == "costly" else span
+        by_failure = nice_below(0.5 * (reached - setup.t_start)) if failed and reached > setup.t_start else span
+        new_span = min(by_cost, by_failure, span)
+        if new_span < span:
+            plan.t_end = setup.t_start + new_span
+            why = (f"one run at tolerance {PILOT_TOL:g} over the whole horizon costs about {cost:.3g} s of CPU"
+                   if by_cost <= by_failure else "it ends well before the pilot's failure")
+            plan.notes.append(f"horizon shortened to t = {plan.t_end:g} (from {setup.t_end:g}): {why}; "
+                              "give --t-end for another")
     what = {"cheap": f"cheap (a run at {PILOT_TOL:g} costs {cost:.2g} s of CPU)",
             "moderate": f"moderately costly (a run at {PILOT_TOL:g} costs {cost:.2g} s of CPU)",
             "costly": f"costly (a run at {PILOT_TOL:g} over the scene's horizon costs {cost:.3g} s of CPU)"}[level]
