@@ -361,3 +361,15 @@ def test_cli_bench_defaults_on_a_small_model(capsys):
     out = capsys.readouterr().out
     assert "plan: default plan for a model that is cheap" in out and "plan: methods: the default set" in out
     assert "reference: auto: scipy-dop853" in out and "t = 0 .. 3" in out
+
+
+def test_a_run_is_stopped_after_its_cpu_seconds():
+    """The default plan stops a run after STOP_AFTER s of CPU where the simulator reports
+    progress (here: the bouncing ball's first output point)."""
+    from mechdsl.bench.runner import measure_run
+
+    st = Setup.from_model(mechdsl.load(str(MODELS / "bouncing_ball.mech"), scene="Bounce"))
+    row = measure_run(st, parse_variants("erk")[0], 1e-6, st.points, None, None, ("drop.s",), 1, False,
+                      stop_after=0.0)
+    assert row.status == "skipped" and "stopped at t = " in row.message and "after 0 s" in row.message
+    assert 0 < row.t_reached < st.t_end and row.cpu > 0

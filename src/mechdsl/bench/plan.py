@@ -16,7 +16,6 @@ Whatever the user gave on the command line is kept as given.
 from __future__ import annotations
 
 import math
-import time
 import warnings
 from dataclasses import dataclass, field
 
@@ -26,6 +25,8 @@ CHEAP = 0.1              # CPU seconds of the pilot below which the full default
 RUN_TARGET = 1.0         # CPU seconds of one run at PILOT_TOL that a default horizon aims at
 RUN_BUDGET = 5.0         # CPU seconds: one run longer than this ends its method's sweep
 SWEEP_BUDGET = 25.0      # CPU seconds for all runs of the default plan's sweep
+STOP_AFTER = 2 * RUN_BUDGET     # CPU seconds after which a run of the default plan is stopped
+SLOW_FORMULATIONS = ("partitioning",)   # left out of the default methods unless the model is cheap
 TOLERANCES = {"cheap": "1e-2..1e-10/1", "moderate": "1e-3..1e-9/1", "costly": "1e-3..1e-8/1"}
 
 
@@ -38,52 +39,43 @@ class Plan:
     sweep_budget: float | None = None   # all runs; None: unlimited
     notes: list[str] = field(default_factory=list)
     pilot_cpu: float | None = None
-
-
-class _Stop(Exception):
-    """Raised from the pilot's progress callback when it has used its CPU."""
+    level: str | None = None            # cheap | moderate | costly (None: no pilot)
+    stop_after: float | None = None     # CPU seconds after which one run is stopped (where it reports progress)
 
 
 def pilot(setup, cap: float = PILOT_CAP) -> tuple[float, float, object]:
     """(CPU seconds, simulated time reached, Result or None) of one run of the simulator's
     default method at PILOT_TOL; stopped after ``cap`` CPU seconds where the simulator
-    reports progress (between output points).  The rate is then estimated from the part
-    after the first report, which leaves out building the functions."""
+    reports progress (between output points).  The cost of a stopped run is extrapolated
+    from the part after the first report, which leaves out building the functions."""
     from ..simulate import simulate
+    from .timing import OverBudget, cpu_call, cpu_cap
 
     marks: list[tuple[float, float]] = []
-    c0 = time.process_time()
-
-    def progress(t, _t1):
-        c = time.process_time() - c0
-        marks.append((c, float(t)))
-        if c > cap:
-            raise _Stop
-
     kw = {}
     if setup.constrained and setup.default_formulation:
         kw["formulation"] = setup.default_formulation
     if setup.compiled:
         kw["compiled"] = True
-    result = None
-    try:
+
+    def run():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            result = simulate(setup.eom, setup.t_end, t_start=setup.t_start, rtol=PILOT_TOL, atol=PILOT_TOL,
-                              points=setup.points, x0=setup.x0, p=setup.p, progress=progress, **kw)
-    except _Stop:
-        pass
-    cpu = time.process_time() - c0
+            try:
+                return simulate(setup.eom, setup.t_end, t_start=setup.t_start, rtol=PILOT_TOL, atol=PILOT_TOL,
+                                points=setup.points, x0=setup.x0, p=setup.p, progress=cpu_cap(cap, marks), **kw)
+            except OverBudget:
+                return None
+
+    cpu, result = cpu_call(run)
     if result is not None and getattr(result, "success", False):
         return cpu, setup.t_end, result
     reached = marks[-1][1] if marks else setup.t_start
     if result is not None and len(result.t):
         reached = max(reached, float(result.t[-1]))
     if len(marks) >= 2 and marks[-1][1] > marks[0][1]:
-        # extrapolate the full run's cost from the rate after the first report
         (c1, t1), (c2, t2) = marks[0], marks[-1]
-        rate = (c2 - c1) / (t2 - t1)
-        cpu = c1 + rate * (setup.t_end - t1)
+        cpu = c1 + (c2 - c1) / (t2 - t1) * (setup.t_end - t1)
     elif reached > setup.t_start:
         cpu = cpu * (setup.t_end - setup.t_start) / (reached - setup.t_start)
     else:
@@ -117,6 +109,7 @@ def default_plan(setup, *, t_end_given: bool, tolerances_given: bool, repeats_gi
         plan.notes.append(f"the pilot run (default method at tolerance {PILOT_TOL:g}) failed at t = {f.time:.6g}: "
                           f"{f.cause}")
     level = "cheap" if cost <= CHEAP else "moderate" if cost <= RUN_TARGET else "costly"
+    plan.level = level
     if not t_end_given:
         by_cost = nice_below(span * RUN_TARGET / cost) if level == "costly" else span
         by_failure = nice_below(0.5 * (reached - setup.t_start)) if failed and reached > setup.t_start else span
@@ -140,8 +133,26 @@ def default_plan(setup, *, t_end_given: bool, tolerances_given: bool, repeats_gi
     if not budget_given:
         plan.budget = RUN_BUDGET
         plan.sweep_budget = SWEEP_BUDGET
-        chosen.append(f"{RUN_BUDGET:g} s of CPU a run and {SWEEP_BUDGET:g} s for the sweep")
+        plan.stop_after = STOP_AFTER
+        chosen.append(f"{RUN_BUDGET:g} s of CPU a run (stopped after {STOP_AFTER:g} s where it reports progress) "
+                      f"and {SWEEP_BUDGET:g} s for the sweep")
     if chosen:
         plan.notes.append(f"default plan for a model that is {what}: " + ", ".join(chosen)
                           + "; give --tolerances, --repeats or --budget for others")
     return plan
+
+
+def plan_methods(plan: Plan, labels: list[str]) -> list[str]:
+    """The default methods for this plan: a formulation that can grind for a minute in one
+    run (partitioning: 65 s and a failure at 1e-3 on the slider-crank) is left out unless
+    the model is cheap; a note says so."""
+    if plan.level in (None, "cheap"):
+        return labels
+    keep = [lab for lab in labels if lab.split("+")[0] not in SLOW_FORMULATIONS]
+    left = [lab for lab in labels if lab not in keep]
+    if left and keep:
+        plan.notes.append(f"left out {', '.join(left)}: one of its runs can take a minute on a model that is not "
+                          f"cheap (a run is not interrupted inside the integrator); give --methods {left[0]} "
+                          "to include it")
+        return keep
+    return labels

@@ -23,7 +23,7 @@ from ..diagnostics import MechError, Span, UsageError
 from . import measure, reference as R
 from .index1 import FORMULATION as INDEX1
 from .spec import SYMPLECTIC_ORDER, Variant, parse_variant
-from .timing import TIMER, timed
+from .timing import TIMER, OverBudget, timed
 
 DEFAULT_POINTS = 101
 DEFAULT_BUDGET = 30.0      # CPU seconds: a run longer than this ends the variant's sweep
@@ -186,10 +186,16 @@ def symplectic_dt(setup: Setup, method: str, tol: float, points: int) -> float:
     return (setup.t_end - setup.t_start) / (per * (points - 1))
 
 
-def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: int, outputs, dt=None):
+def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: int, outputs, dt=None,
+                     stop_after: float | None = None):
+    """One run; ``stop_after``: CPU seconds after which it is stopped (timing.OverBudget)
+    where the simulator reports progress."""
     from ..simulate import simulate
+    from .timing import cpu_cap
 
     kw = variant.kwargs
+    if stop_after is not None:
+        kw["progress"] = cpu_cap(stop_after)
     if variant.formulation is None and setup.constrained and setup.default_formulation:
         kw["formulation"] = setup.default_formulation
     if dt is not None:
@@ -221,7 +227,7 @@ def _stat(st: dict, *keys):
 
 
 def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Reference, columns,
-                repeats: int, conservative) -> Row:
+                repeats: int, conservative, stop_after: float | None = None) -> Row:
     row = Row(label=variant.label, method=variant.method, formulation=variant.formulation, tolerance=tol)
     outputs = _outputs_for(setup.eom, columns)
     dt = variant.fixed_dt
@@ -235,9 +241,13 @@ def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Re
         row.dt = dt
 
         def once():
-            return simulate_variant(setup, variant, tol, points, outputs, dt)
+            return simulate_variant(setup, variant, tol, points, outputs, dt, stop_after)
 
         tm = timed(once, repeats, ok=lambda r: r.success)
+    except OverBudget as e:
+        row.status, row.message = "skipped", f"{e} (a run is stopped after {stop_after:g} s)"
+        row.cpu, row.t_reached = e.cpu, e.t
+        return row
     except UsageError as e:
         row.status, row.message = "n/a", str(e)
         return row
@@ -344,10 +354,13 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
 
 def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="auto", reference_methods=None,
               compare="positions", repeats: int = 3, budget: float = DEFAULT_BUDGET,
-              sweep_budget: float | None = None, log: Callable[[str], None] | None = None) -> BenchResult:
+              sweep_budget: float | None = None, stop_after: float | None = None,
+              log: Callable[[str], None] | None = None) -> BenchResult:
     """Every variant over the tolerance sweep against the reference.  budget: CPU seconds of
     one run beyond which its variant's tighter tolerances are skipped; sweep_budget: CPU
-    seconds of all runs beyond which the remaining ones are skipped (None: no limit)."""
+    seconds of all runs beyond which the remaining ones are skipped (None: no limit);
+    stop_after: CPU seconds after which one run is stopped where the simulator reports
+    progress (its row is skipped, and so are its variant's tighter tolerances)."""
     from ..simulate import is_conservative
 
     if repeats < 1:
@@ -382,7 +395,7 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
                           message=f"the sweep used its budget of {sweep_budget:g} s of CPU")
             else:
                 c0 = time.process_time()
-                row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative)
+                row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative, stop_after)
                 spent += time.process_time() - c0
                 if log:
                     log(one_line(row))

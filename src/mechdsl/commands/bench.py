@@ -85,8 +85,6 @@ def run(args) -> int:
     setup = Setup.from_model(model, t_end=args.t_end, points=args.points, x0=x0, compiled=args.compiled,
                              source=str(args.file))
     kind = classify_setup(setup)
-    methods = args.methods or default_methods(kind)
-    variants = parse_variants(methods, args.formulations or None)
     ref_methods = None
     if args.reference_methods:
         from ..bench.spec import split_top
@@ -97,19 +95,23 @@ def run(args) -> int:
 
     repeats = args.repeats or 3
     budget = DEFAULT_BUDGET if args.budget is None else args.budget
-    sweep_budget = None
+    sweep_budget = stop_after = None
+    methods = args.methods or default_methods(kind)
     if args.reference == "auto":           # a file reference fixes the horizon and costs nothing to make
-        from ..bench.plan import default_plan
+        from ..bench.plan import default_plan, plan_methods
 
         plan = default_plan(setup, t_end_given=args.t_end is not None, tolerances_given=args.tolerances is not None,
                             repeats_given=args.repeats is not None, budget_given=args.budget is not None, log=log)
+        if not args.methods:
+            methods = plan_methods(plan, methods)
         setup.t_end = plan.t_end
         setup.notes += plan.notes
         if plan.tolerances is not None:
             tolerances = parse_tolerances(plan.tolerances)
         repeats = plan.repeats or repeats
         budget = plan.budget if plan.budget is not None else budget
-        sweep_budget = plan.sweep_budget
+        sweep_budget, stop_after = plan.sweep_budget, plan.stop_after
+    variants = parse_variants(methods, args.formulations or None)
     if not args.methods:
         setup.notes.append(f"methods: the default set for a{'n' if kind == 'ode' else ''} {kind} model "
                            f"({', '.join(v.label for v in variants)}); give --methods for others")
@@ -118,7 +120,7 @@ def run(args) -> int:
             log(f"plan: {n}")
     res = run_bench(setup, variants=variants, tolerances=tolerances, reference=args.reference,
                     reference_methods=ref_methods, compare=args.compare, repeats=repeats, budget=budget,
-                    sweep_budget=sweep_budget, log=log)
+                    sweep_budget=sweep_budget, stop_after=stop_after, log=log)
     print(format_table(res))
     from ..bench.report import fastest_lines
 
