@@ -95,9 +95,11 @@ class Result:
 
     # -- output -----------------------------------------------------------------------
     def table(self) -> np.ndarray:
+        if not len(self.t):
+            return np.zeros((0, len(self.columns)))
         cols = [self.t[:, None], self.q, self.qd] + [np.asarray(v, float).reshape(len(self.t), -1)
                                                      for v in self.signals.values()]
-        return np.hstack(cols) if len(self.t) else np.zeros((0, len(self.columns)))
+        return np.hstack(cols)
 
     def to_csv_text(self) -> str:
         lines = [",".join(_csv_name(c) for c in self.columns)]

@@ -116,7 +116,8 @@ def summary(r, written=()) -> str:
     s = r.stats
     lines = [m["target"]] if m.get("target") else []
     if r.failure is not None and len(r.t) <= 1:
-        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {r.t[0]:g} was reached")
+        t0 = r.t[0] if len(r.t) else m.get("options", {}).get("t_start", r.failure.time)
+        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {t0:g} was reached")
     else:
         lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)")
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
@@ -140,7 +141,10 @@ def summary(r, written=()) -> str:
     if r.failure is not None:
         f = r.failure
         lines.append(f"FAILED at t = {f.time:.10g}: {f.cause}" + (f" ({f.detail})" if f.detail else ""))
-        lines.append(f"results kept up to t = {r.t[-1]:.10g}; last good state there: " + _state_text(r))
+        if len(r.t):
+            lines.append(f"results kept up to t = {r.t[-1]:.10g}; last good state there: " + _state_text(r))
+        else:
+            lines.append("no results to keep: the run failed at its start")
     for w in written:
         lines.append(f"wrote {w}")
     return "\n".join(lines)
