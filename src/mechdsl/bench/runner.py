@@ -312,6 +312,8 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
     outputs = _outputs_for(setup.eom, columns)
     from .timing import cpu_call
 
+    given = reference_methods is not None
+
     def attempt(lab, t):
         v = parse_variant(lab)
         if log:
@@ -328,7 +330,6 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
 
     # given methods: that pair at the reference tolerance; auto: the kind's candidates in order, at
     # the reference tolerance and then looser ones (R.reference_ladder) until two of them succeed
-    given = reference_methods is not None
     candidates = tuple(reference_methods) if given else R.auto_candidates(kind)
     ladder = [tol] if given else R.reference_ladder(tol)
     failures: list[str] = []
