@@ -95,6 +95,12 @@ class Linearization:
     def eigenvalues(self) -> np.ndarray:
         return self.modes().eigenvalues
 
+    def lqr(self, Q, R):
+        """The LQR state feedback du = -K dx for this linear model (analysis.lqr)."""
+        from .lqr import lqr
+
+        return lqr(self, Q, R)
+
     def symbolic(self, exact: bool = True):
         """M, C, K derived by sympy from T, V, D, Q at this state (see analysis.symbolic)."""
         from .symbolic import symbolic_linearization

@@ -54,6 +54,32 @@ def table(times, values, hold: str = "zoh") -> Table:
     return Table(t, v, hold)
 
 
+def read_table(path, hold: str = "zoh", what: str = "input table") -> Table:
+    """A table from a CSV file of (time, value) rows; a first line that is not numbers is a header."""
+    import csv
+
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError) as e:
+        raise UsageError(f"{what}: cannot read {path}: {getattr(e, 'strerror', None) or e}") from None
+    data = []
+    for i, r in enumerate(rows):
+        try:
+            vals = [float(c) for c in r]
+        except ValueError:
+            if i == 0:
+                continue                     # a header
+            raise UsageError(f"{what}: {path} line {i + 1} is not two numbers: {','.join(r)[:80]}") from None
+        if len(vals) != 2:
+            raise UsageError(f"{what}: {path} line {i + 1} has {len(vals)} columns; expected 2 (time, value)")
+        data.append(vals)
+    if not data:
+        raise UsageError(f"{what}: {path} has no (time, value) rows")
+    arr = np.array(data, float)
+    return table(arr[:, 0], arr[:, 1], hold)
+
+
 @dataclass
 class Signal:
     name: str
