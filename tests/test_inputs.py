@@ -190,7 +190,7 @@ end Bead;
     m = mechdsl.loads(src, model="Bead")
     assert m.problem(t_end=1.0).kind == "dae"
     r = m.simulate(1.0, rtol=1e-10, atol=1e-12, points=3)
-    assert r.q[-1, 0] == pytest.approx(0.5 * 1.0 * 1.0 ** 2 / 2, rel=1e-6)     # a = F / (2 m)
+    assert r.q[-1, 0] == pytest.approx(0.5 * (2.0 / 2.0) * 1.0 ** 2, rel=1e-6)     # a = F / (2 m), F = 2 (default)
 
 
 def test_cli_input_constant_and_csv(tmp_path):
