@@ -40,6 +40,8 @@ from .system import scale_jacobian
 THETA_TARGET = 0.05   # aimed-for Newton contraction of the warm start at a sub-segment end
 THETA_REJECT = 0.3    # above this the sub-segment is redone shorter (branch-jump risk)
 SWITCH_EARLY = 0.7    # re-partition at this fraction of repartition_cond
+CONT_STEPS = 4        # steps of the continuation check of the dependent coordinates per sub-segment
+CONT_NEWTON = 8       # Newton iterations per continuation step
 
 
 def _partition_cond(system, q, t, dep) -> float:
@@ -224,9 +226,65 @@ class PartitioningStepper(Stepper):
         if miss > 0.5 * moved + 1e-10 * (1 + np.linalg.norm(vk)):
             # Newton found a root far from the prediction: possibly another assembly branch
             raise StepError("the dependent coordinates left the predicted branch")
+        self._check_continuation(q, qd, t1)
         theta = self._contraction(q, t1, v_pred)
         self.t, self.q, self.qd = float(t1), q, qd
         return theta
+
+    def _check_continuation(self, q1, qd1, t1: float) -> None:
+        """The dependent coordinates at the sub-segment end must be the continuation of those
+        at its start (another root of g(u, v) = 0 is another assembly branch: measured on the
+        Cartesian pendulum, y -> -y over one long sub-segment put the mass over the top with
+        5.8 J more energy, and the run reported success).
+
+        Two checks.  (1) det(G_v) keeps its sign: along a continuous branch on which G_v stays
+        regular it cannot change sign.  (2) v is followed from the start along the cubic
+        Hermite path of (u, u') in CONT_STEPS steps, each a tangent prediction and Newton
+        iterations that must contract; the point reached must be the recovered one."""
+        sysm, dep, ind = self.system, list(self.dep), list(self.ind)
+        t0, q0, qd0 = self.t, self.q, self.qd
+        G0, G1 = sysm.geometry(q0, t0)[1], sysm.geometry(q1, t1)[1]
+        s0, s1 = np.linalg.slogdet(G0[:, dep])[0], np.linalg.slogdet(G1[:, dep])[0]
+        if s0 * s1 <= 0:
+            raise StepError("the dependent coordinates changed assembly branch (det G_v changed sign)")
+        h = t1 - t0
+        u0, u1, ud0, ud1 = q0[ind], q1[ind], qd0[ind] * h, qd1[ind] * h
+        tol = 1e-3 * self.opts.bound
+        qq = q0.copy()
+        v = q0[dep].copy()
+        vs = qd0[dep] * h              # dv/ds at the start (s = (t - t0) / h)
+        for j in range(1, CONT_STEPS + 1):
+            s = j / CONT_STEPS
+            ds = 1.0 / CONT_STEPS
+            h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+            qq[ind] = h00 * u0 + h10 * ud0 + h01 * u1 + h11 * ud1
+            qq[dep] = v + vs * ds
+            t = t0 + s * h
+            last = np.inf
+            for _it in range(CONT_NEWTON):
+                r, G, _ = sysm.geometry(qq, t)
+                try:
+                    dv = -np.linalg.solve(G[:, dep], r)
+                except np.linalg.LinAlgError:
+                    raise StepError("the dependent coordinates cannot be continued: G_v is singular") from None
+                step = float(np.linalg.norm(dv))
+                if not np.isfinite(step) or step > 0.5 * last:
+                    raise StepError("the dependent coordinates cannot be continued (Newton does not contract)")
+                qq[dep] += dv
+                last = step
+                if step <= tol * (1 + float(np.linalg.norm(qq[dep]))):
+                    break
+            else:
+                raise StepError("the dependent coordinates cannot be continued (Newton iteration limit)")
+            dh00, dh10, dh01, dh11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
+            us = dh00 * u0 + dh10 * ud0 + dh01 * u1 + dh11 * ud1
+            _, G, gt = sysm.geometry(qq, t)
+            vs = -np.linalg.solve(G[:, dep], G[:, ind] @ us + h * gt)
+            v = qq[dep].copy()
+        gap = float(np.linalg.norm(v - q1[dep]))
+        if gap > 1e3 * tol * (1 + float(np.linalg.norm(v))):
+            raise StepError(f"the dependent coordinates are not the continuation of the start values "
+                            f"(off by {gap:.3g}): another assembly branch")
 
     def _contraction(self, q, t, v_pred) -> float:
         """theta = |dv_2| / |dv_1| of two Newton steps from the prediction v_pred at (u(t), t)."""
