@@ -294,6 +294,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     signals["velocity_drift"] = np.array(VD)
     signals.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, Q, QD, LAM, pv))
 
+    energy = energy_check(eom, signals, opts, failure is None)
     bound = opts.bound
     # maxima over every checked state (the monitoring grid), not only the recorded ones
     max_d = max(float(np.max(D)) if D else 0.0, seen_d)
@@ -304,6 +305,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                   "drift_ok": drift_ok, "min_singular_ratio": float(min_ratio),
                   "wall_time": _time.perf_counter() - wall0, "setup_wall_time": setup_wall,
                   "solve_cpu_time": solve_cpu})
+    stats.update(common_stats(stats, energy))
     metadata = {"model": eom.name, "formulation": opts.formulation,
                 "formulation_reason": "requested" if (kw.get("formulation") or "auto") != "auto" else
                 "default: index-1 ODE with Baumgarte terms and projection onto both constraint manifolds "
@@ -339,9 +341,63 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         metadata["drift_warning"] = msg
         metadata["warnings"].append(msg)
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    if energy.get("energy_warning"):
+        msg = energy["energy_warning"]
+        metadata["energy_warning"] = msg
+        metadata["warnings"].append(msg)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    metadata["conservative"] = energy.get("conservative")
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
     return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=metadata, events=events, failure=failure)
+
+
+ENERGY_FACTOR = 1e4     # a conservative model whose relative energy drift exceeds this many rtol warns
+ENERGY_FLOOR = 1e-6      # ... and never below this relative drift
+
+
+def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
+    """Energy drift of the recorded states; for a conservative model (no damping, no other
+    generalized forces, no explicit time in T, V or the constraints) a drift far above the
+    tolerance means a wrong answer (e.g. a jump to another assembly branch), so it warns."""
+    from ..simulate import _energy_drift, is_conservative
+
+    import casadi as ca
+
+    out = dict(_energy_drift(signals))
+    try:
+        cons = is_conservative(eom)
+        if cons:
+            cons = not ca.depends_on(ca.SX(eom.g), eom.t)
+    except Exception:  # noqa: BLE001 -- a non-SX model: make no claim
+        cons = None
+    out["conservative"] = cons
+    if cons and "energy_drift_relative" in out:
+        limit = max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol)
+        out["energy_bound_relative"] = limit
+        if out["energy_drift_relative"] > limit:
+            out["energy_warning"] = (
+                f"the model is conservative but its energy changed by {out['energy_drift']:.3g} "
+                f"(relative {out['energy_drift_relative']:.2e}, more than {limit:.1e} = "
+                f"max({ENERGY_FLOOR:g}, {ENERGY_FACTOR:g} rtol)): the results are not to be trusted; "
+                f"tighten rtol/atol or use formulation = \"projection\" (formulation {opts.formulation})")
+    return out
+
+
+def common_stats(st: dict, energy: dict) -> dict:
+    """The statistics under the names every simulator uses (steps, rhs_evals, jacobian_evals,
+    rejected_steps, cpu_time, energy_drift, constraint_drift)."""
+    out = {"steps": int(st.get("nsteps", 0)), "rhs_evals": int(st.get("nfevals", 0)),
+           # CVODES/IDAS: linear-solver setups (each evaluates the Jacobian); erk: none
+           "jacobian_evals": int(st.get("nlinsetups", 0)),
+           "rejected_steps": int(st.get("netfails", 0)) + int(st.get("nncfails", 0)),
+           "cpu_time": float(st.get("solve_cpu_time", 0.0)),
+           "constraint_drift": float(st.get("max_constraint_drift", 0.0))}
+    for k in ("energy_drift", "energy_drift_relative", "energy_bound_relative"):
+        if k in energy:
+            out[k] = energy[k]
+    out["energy_ok"] = "energy_warning" not in energy
+    return out
 
 
 STIFF = 1e4   # an overdamped mode decaying this many times within the run makes 'auto' pick BDF
@@ -352,6 +408,10 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
     if opts.formulation == "ggl":
         opts.method = "idas"
         return "IDAS is the solver of the GGL formulation"
+    if opts.formulation == "partitioning" and opts.method == "auto":
+        opts.method = "bdf"
+        return ("auto: partitioning solves for the dependent coordinates by Newton's method inside the "
+                "right-hand side; CVODES BDF answers a failed solve with a shorter step")
     if opts.method == "cvodes":
         opts.method = "bdf"
     if opts.method != "auto":
