@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from .stepper import (GridIntegrators, Stepper, StepError, call_integrator, chunk_span, integrator_options,
-                      ode_plugin, scaled_dae)
+from .stepper import (GridIntegrators, NonFiniteError, Stepper, StepError, call_integrator, chunk_span,
+                      integrator_options, ode_plugin, scaled_dae, state_names)
 
 RATE_FACTOR = 10.0
 
@@ -85,7 +85,8 @@ class BaumgarteStepper(Stepper):
         self._count(F)
         x = np.array(r["xf"], float).reshape(2 * self.system.n, K)
         if not np.all(np.isfinite(x)):
-            raise StepError("the state became non-finite")
+            j = int(np.argmax(~np.all(np.isfinite(x), axis=0)))       # first output with inf/nan
+            raise NonFiniteError(float(np.atleast_1d(times)[j]), state_names(self.system)[int(np.argmax(~np.isfinite(x[:, j])))])
         self.stats["baumgarte_alpha"] = alpha
         self.stats["baumgarte_beta"] = beta
         n = self.system.n

@@ -36,7 +36,7 @@ from .dof import dof_report, short_list, singular_ratio, singular_ratios
 from .init import initialize
 from .options import DaeOptions, parse_options
 from .record import evaluate_signals, select_signals, standard_signals
-from .stepper import StepError
+from .stepper import NonFiniteError, StepError, locate_nonfinite
 from .system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
@@ -162,6 +162,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     T, Qs, QDs, D, VD = [], [], [], [], []
     events: list[dict] = []
     failure = None
+    failure_code = None
     rank = system.m
 
     def ratio_at(q, t):
@@ -187,7 +188,9 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # runs into a singular configuration before they fail; they start with short segments and stop
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
-    chunk = FIRST_CHUNK if cautious else CHUNK
+    # every run starts with a short segment: the step budget of a call grows with its length, and a
+    # model with absurd time scales then fails after a few seconds, not minutes
+    chunk = FIRST_CHUNK
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
     while k < len(grid) and failure is None:
@@ -209,7 +212,10 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 times = np.array([stepper.t + opts.max_interval])
         saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
         try:
-            T_acc, Q_acc, QD_acc = stepper.advance(times)
+            try:
+                T_acc, Q_acc, QD_acc = stepper.advance(times)
+            except np.linalg.LinAlgError as la:   # degenerate linear algebra: a failed segment, retried
+                raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
         except StepError as e:
             stepper.reset(*saved)
             if len(times) > 1:          # retry the chunk one output interval at a time
@@ -230,7 +236,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                                       f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
                                       f"and the {opts.formulation} integrator failed: {e}")
                 else:
-                    failure = Failure(saved[0], f"{opts.formulation} integrator failed", str(e))
+                    failure, failure_code = integrator_failure(system, opts, saved, times[-1] - saved[0], e)
                 if saved[0] > T[-1]:        # keep the last good state (between output times)
                     record(*saved)
             continue
@@ -328,6 +334,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                            "start": {**dict(zip(eom.coords, map(float, init.q))),
                                      **{f"der({c})": float(v) for c, v in zip(eom.coords, init.qd)}}}
     metadata["warnings"] = []
+    if failure_code:
+        metadata["failure_code"] = failure_code
     try:
         from ..simulate import versions
 
@@ -350,6 +358,27 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
     return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=metadata, events=events, failure=failure)
+
+
+CODE_INTEGRATOR = "E824"    # the integrator gave up (step budget, step size collapse, Newton)
+CODE_NONFINITE = "E825"     # the equations or the state became inf/nan
+
+
+def integrator_failure(system, opts: DaeOptions, saved, h: float, e: StepError):
+    """The Failure (and its code) of a segment that failed for good, from the last good state
+    ``saved`` = (t, q, q'): a non-finite state or right-hand side is named with its time and
+    coordinate; otherwise the integrator's own message and the work it did."""
+    t, q, qd = saved
+    where = (e.t, e.name) if isinstance(e, NonFiniteError) else locate_nonfinite(system, t, q, qd, h)
+    if where is not None:
+        tw, name = where
+        return Failure(t, "non-finite state",
+                       f"[{CODE_NONFINITE}] {name} is inf or nan at t = {tw:.10g} (after the last good state at "
+                       f"t = {t:.10g}); the model's equations are not defined there"), CODE_NONFINITE
+    return Failure(t, f"{opts.formulation} integrator failed",
+                   f"[{CODE_INTEGRATOR}] {e}; the step budget is {opts.steps} steps per monitoring interval "
+                   "(max_steps), halved intervals included; a model with time scales far shorter than the "
+                   "run (check its masses and lengths) or a stiff one (method = \"bdf\") ends here"), CODE_INTEGRATOR
 
 
 ENERGY_FACTOR = 1e4     # a conservative model whose relative energy drift exceeds this many rtol warns

@@ -280,7 +280,10 @@ class PartitioningStepper(Stepper):
             dh00, dh10, dh01, dh11 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1, -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
             us = dh00 * u0 + dh10 * ud0 + dh01 * u1 + dh11 * ud1
             _, G, gt = sysm.geometry(qq, t)
-            vs = -np.linalg.solve(G[:, dep], G[:, ind] @ us + h * gt)
+            try:
+                vs = -np.linalg.solve(G[:, dep], G[:, ind] @ us + h * gt)
+            except np.linalg.LinAlgError:
+                raise StepError("the dependent coordinates cannot be continued: G_v is singular") from None
             v = qq[dep].copy()
         gap = float(np.linalg.norm(v - q1[dep]))
         if gap > 1e3 * tol * (1 + float(np.linalg.norm(v))):

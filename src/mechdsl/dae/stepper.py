@@ -27,6 +27,39 @@ class StepError(Exception):
     """A segment could not be integrated (the integrator or a Newton solve failed)."""
 
 
+class NonFiniteError(StepError):
+    """The integrated state became inf/nan: when (first output time with one) and where."""
+
+    def __init__(self, t: float, name: str):
+        self.t, self.name = float(t), name
+        super().__init__(f"{name} became non-finite by t = {t:.10g}")
+
+
+def state_names(system) -> list[str]:
+    """Names of the state (q, q') entries: the coordinates, then der(coordinate)."""
+    c = list(system.eom.coords)
+    return c + [f"der({x})" for x in c]
+
+
+def locate_nonfinite(system, t: float, q: np.ndarray, qd: np.ndarray, h: float) -> tuple[float, str] | None:
+    """Where the equations first give inf/nan after the state (t, q, q'): the accelerations at
+    that state, at t and at times t + h 10^-k (k = 12 .. 0) and then along the linear motion.
+    Returns (time, name) or None.  Used to explain an integrator failure."""
+    names = [f"der(der({x}))" for x in system.eom.coords] + [f"lambda[{x}]" for x in system.names]
+    ts = [t] + [t + h * 10.0 ** -k for k in range(12, -1, -1)]
+    for moving in (False, True):
+        for tk in ts:
+            qk = q + (tk - t) * qd if moving else q
+            try:
+                a, lam = system.accel(qk, qd, tk)
+            except Exception:  # noqa: BLE001 -- a failing evaluation is not a finding
+                continue
+            v = np.concatenate([a, lam])
+            if not np.all(np.isfinite(v)):
+                return float(tk), names[int(np.argmax(~np.isfinite(v)))]
+    return None
+
+
 _STAT_KEYS = ("nsteps", "nfevals", "netfails", "nncfails", "nlinsetups")
 _ERK_KEYS = {"n_steps": "nsteps", "n_rhs": "nfevals", "n_reject": "netfails"}
 
@@ -118,7 +151,21 @@ def call_integrator(F, **args):
         text = (solver[-1] if solver else (msg[-1] if msg else "integrator failed"))
         if printed:
             text += f"; {printed[-1]}"
+        text = f"{text}; {_work_done(F)}" if _work_done(F) else text
         raise StepError(text[:400]) from None
+
+
+def _work_done(F) -> str:
+    """'N steps accepted, R rejected' of a failed call (the erk plugin's only explanation)."""
+    try:
+        st = F.stats()
+    except Exception:  # noqa: BLE001 -- no statistics after this failure
+        return ""
+    n = st.get("nsteps", st.get("n_steps"))
+    r = st.get("netfails", st.get("n_reject"))
+    if n is None:
+        return ""
+    return f"{int(n)} steps accepted" + (f", {int(r)} rejected" if r is not None else "")
 
 
 class GridIntegrators:
@@ -162,8 +209,10 @@ class GridIntegrators:
 
             with build_timer(self.stats):
                 grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
-                self._cache[K] = make_integrator(f"{self.name}_{K}", self.plugin, self._problem, 0.0, grid,
-                                                self.opts)
+                opts = dict(self.opts)
+                if "max_num_steps" in opts:       # the budget is per interval: K of them per call
+                    opts["max_num_steps"] = int(opts["max_num_steps"]) * K
+                self._cache[K] = make_integrator(f"{self.name}_{K}", self.plugin, self._problem, 0.0, grid, opts)
         return self._cache[K]
 
 
