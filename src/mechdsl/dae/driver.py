@@ -36,7 +36,7 @@ from .dof import dof_report, short_list, singular_ratio, singular_ratios
 from .init import initialize
 from .options import DaeOptions, parse_options
 from .record import evaluate_signals, select_signals, standard_signals
-from .stepper import NonFiniteError, StepError, locate_nonfinite
+from .stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
 from .system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
@@ -193,95 +193,106 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     chunk = FIRST_CHUNK
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
-    while k < len(grid) and failure is None:
-        single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
-        if single:
-            target = grid[k]
-            h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
-            times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
-        else:
-            K = min(chunk, len(grid) - k)     # the tail in one segment (integrators are cached per K)
-            # a segment stops well before an extrapolated loss of rank: an integrator driven into a
-            # singular configuration grinds (IDAS: minutes) before it fails
-            if cautious and np.isfinite(tau_pred):
-                K = max(1, min(K, int(0.5 * tau_pred / (grid[1] - grid[0]))))
-            if opts.max_interval:
-                K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
-            times = grid[k:k + K]
-            if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
-                times = np.array([stepper.t + opts.max_interval])
-        saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
-        try:
+    interrupted = False
+    guard = interrupt_guard()
+    guard.__enter__()
+    try:
+        while k < len(grid) and failure is None:
+            single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
+            if single:
+                target = grid[k]
+                h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
+                times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
+            else:
+                K = min(chunk, len(grid) - k)     # the tail in one segment (integrators are cached per K)
+                # a segment stops well before an extrapolated loss of rank: an integrator driven into a
+                # singular configuration grinds (IDAS: minutes) before it fails
+                if cautious and np.isfinite(tau_pred):
+                    K = max(1, min(K, int(0.5 * tau_pred / (grid[1] - grid[0]))))
+                if opts.max_interval:
+                    K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
+                times = grid[k:k + K]
+                if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
+                    times = np.array([stepper.t + opts.max_interval])
+            saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
             try:
-                T_acc, Q_acc, QD_acc = stepper.advance(times)
-            except np.linalg.LinAlgError as la:   # degenerate linear algebra: a failed segment, retried
-                raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
-        except StepError as e:
-            stepper.reset(*saved)
-            if len(times) > 1:          # retry the chunk one output interval at a time
-                chunk = 1
-                continue
-            if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
+                try:
+                    T_acc, Q_acc, QD_acc = stepper.advance(times)
+                except np.linalg.LinAlgError as la:   # degenerate linear algebra: a failed segment, retried
+                    raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
+            except StepError as e:
+                stepper.reset(*saved)
+                if len(times) > 1:          # retry the chunk one output interval at a time
+                    chunk = 1
+                    continue
+                if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
+                    retries += 1
+                    continue
                 retries += 1
+                h_fail = (times[-1] - saved[0]) / 2
+                r_now = ratio_at(saved[1], saved[0])
+                near_singular = r_now < 100 * opts.singular_tol
+                if retries > MAX_RETRIES or h_fail < tiny or near_singular:
+                    # (near a singular configuration, halving the step only makes the solver retry
+                    # ever more ill-conditioned systems: stop at once)
+                    if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
+                        failure = Failure(saved[0], "singular configuration",
+                                          f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
+                                          f"and the {opts.formulation} integrator failed: {e}")
+                    else:
+                        failure, failure_code = integrator_failure(system, opts, saved, times[-1] - saved[0], e)
+                    if saved[0] > T[-1]:        # keep the last good state (between output times)
+                        record(*saved)
                 continue
-            retries += 1
-            h_fail = (times[-1] - saved[0]) / 2
-            r_now = ratio_at(saved[1], saved[0])
-            near_singular = r_now < 100 * opts.singular_tol
-            if retries > MAX_RETRIES or h_fail < tiny or near_singular:
-                # (near a singular configuration, halving the step only makes the solver retry
-                # ever more ill-conditioned systems: stop at once)
-                if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
-                    failure = Failure(saved[0], "singular configuration",
-                                      f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
-                                      f"and the {opts.formulation} integrator failed: {e}")
-                else:
-                    failure, failure_code = integrator_failure(system, opts, saved, times[-1] - saved[0], e)
-                if saved[0] > T[-1]:        # keep the last good state (between output times)
-                    record(*saved)
-            continue
-        retries = 0
-        h_fail = np.inf
-        if opts.progress is not None:
-            opts.progress(float(T_acc[-1]), t_end)
-        if not single:
-            chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
-        elif chunk == 1 and not np.isfinite(h_sing):
-            chunk = 2
-        d_all, v_all, Gs_all = system.monitor_many(Q_acc, QD_acc, T_acc)   # one call per segment
-        ratios = singular_ratios(Gs_all, rank)
-        for i in range(len(T_acc)):
-            t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
-            d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
-            min_ratio = min(min_ratio, ratio)
-            seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
-            on_grid = abs(t_now - grid[k]) <= tiny
-            if ratio < opts.singular_tol:
-                events.append({"time": t_now, "kind": "singular", "contact": "-",
-                               "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
-                failure = Failure(t_now, "singular configuration",
-                                  f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
-                                  f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
-                                  "determined by the equations (a dead point or change point of the mechanism)")
-                record(t_now, q_now, qd_now, (d_now, v_now))
-                break
-            h_sing = np.inf
-            if t_now > t_prev:
-                tau_pred = np.inf
-            if ratio < ratio_prev and t_now > t_prev:
-                tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
-                tau_pred = tau
-                if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
-                    h_sing = max(0.5 * tau, 1e3 * tiny)
-            ratio_prev, t_prev = ratio, t_now
-            if on_grid:
-                if k % refine == 0:
+            retries = 0
+            h_fail = np.inf
+            if opts.progress is not None:
+                opts.progress(float(T_acc[-1]), t_end)
+            if not single:
+                chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
+            elif chunk == 1 and not np.isfinite(h_sing):
+                chunk = 2
+            d_all, v_all, Gs_all = system.monitor_many(Q_acc, QD_acc, T_acc)   # one call per segment
+            ratios = singular_ratios(Gs_all, rank)
+            for i in range(len(T_acc)):
+                t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
+                d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
+                min_ratio = min(min_ratio, ratio)
+                seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
+                on_grid = abs(t_now - grid[k]) <= tiny
+                if ratio < opts.singular_tol:
+                    events.append({"time": t_now, "kind": "singular", "contact": "-",
+                                   "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
+                    failure = Failure(t_now, "singular configuration",
+                                      f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
+                                      f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
+                                      "determined by the equations (a dead point or change point of the mechanism)")
                     record(t_now, q_now, qd_now, (d_now, v_now))
-                k += 1
-            if np.isfinite(h_sing) and i < len(T_acc) - 1:
-                # approaching a singular configuration: rewind to here, continue in short segments
-                stepper.reset(t_now, q_now, qd_now)
-                break
+                    break
+                h_sing = np.inf
+                if t_now > t_prev:
+                    tau_pred = np.inf
+                if ratio < ratio_prev and t_now > t_prev:
+                    tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
+                    tau_pred = tau
+                    if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
+                        h_sing = max(0.5 * tau, 1e3 * tiny)
+                ratio_prev, t_prev = ratio, t_now
+                if on_grid:
+                    if k % refine == 0:
+                        record(t_now, q_now, qd_now, (d_now, v_now))
+                    k += 1
+                if np.isfinite(h_sing) and i < len(T_acc) - 1:
+                    # approaching a singular configuration: rewind to here, continue in short segments
+                    stepper.reset(t_now, q_now, qd_now)
+                    break
+    except KeyboardInterrupt:      # Ctrl-C: stop now, keep what was recorded, raise it below
+        interrupted = True
+        n_rec = min(map(len, (T, Qs, QDs, D, VD)))      # a record() cut short in the middle
+        del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
+        failure = Failure(T[-1], "interrupted", "the run was interrupted (Ctrl-C); results up to here are kept")
+    finally:
+        guard.__exit__(None, None, None)
 
     solve_cpu = _time.process_time() - cpu0 - stepper.stats.get("build_cpu_time", 0.0)
     t = np.array(T)
@@ -356,8 +367,22 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
     metadata["conservative"] = energy.get("conservative")
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
-    return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
-                  metadata=metadata, events=events, failure=failure)
+    result = Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
+                    metadata=metadata, events=events, failure=failure)
+    if interrupted:
+        metadata["interrupted"] = True
+        raise RunInterrupted(result)
+    return result
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a constrained run: a KeyboardInterrupt that carries the partial Result
+    (``.result``: failure "interrupted", metadata["interrupted"] = True), so a caller may
+    write what was computed before it stops."""
+
+    def __init__(self, result: Result):
+        super().__init__("interrupted")
+        self.result = result
 
 
 CODE_INTEGRATOR = "E824"    # the integrator gave up (step budget, step size collapse, Newton)

@@ -134,6 +134,46 @@ def integrator_options(opts: DaeOptions, plugin: str) -> dict:
     return o
 
 
+_SIGINT = {"seen": False}     # set by interrupt_guard's handler; read after every integrator call
+
+
+@contextlib.contextmanager
+def interrupt_guard():
+    """Make Ctrl-C stop a run even when CasADi swallows it.
+
+    CasADi polls for Ctrl-C while it integrates; inside a solver callback (IDAS' residual,
+    the rootfinder in the partitioned right-hand side) the resulting KeyboardInterrupt is
+    turned into a recoverable callback failure and lost, and the run went on to the end.  For
+    the duration of the run (main thread only, when Python's default handler is in place)
+    the SIGINT handler is wrapped: it notes the signal and then does what the default does;
+    every integrator call checks the note.  The previous handler is restored on exit."""
+    import signal
+    import threading
+
+    _SIGINT["seen"] = False
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+
+    def handler(signum, frame):
+        _SIGINT["seen"] = True
+        signal.default_int_handler(signum, frame)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _SIGINT["seen"] = False
+
+
+def check_interrupt() -> None:
+    if _SIGINT["seen"]:
+        _SIGINT["seen"] = False
+        raise KeyboardInterrupt
+
+
 def call_integrator(F, **args):
     """Call a CasADi integrator; any failure becomes a StepError with the solver's message.
 
@@ -143,8 +183,15 @@ def call_integrator(F, **args):
     buf = io.StringIO()
     try:
         with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
-            return F(**args)
+            out = F(**args)
+        check_interrupt()
+        return out
     except RuntimeError as e:
+        check_interrupt()
+        if "KeyboardInterrupt" in str(e):
+            # CasADi checks for Ctrl-C while it integrates, consumes Python's pending signal and
+            # reports it as a RuntimeError: give it back as what it is
+            raise KeyboardInterrupt from None
         msg = [ln.strip() for ln in str(e).strip().splitlines() if ln.strip()]
         solver = [ln for ln in msg if "returned" in ln or "flag" in ln.lower()]
         printed = [ln.strip() for ln in buf.getvalue().splitlines() if ln.strip().startswith("At t")]
