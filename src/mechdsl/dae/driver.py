@@ -188,9 +188,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # runs into a singular configuration before they fail; they start with short segments and stop
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
-    # every run starts with a short segment: the step budget of a call grows with its length, and a
-    # model with absurd time scales then fails after a few seconds, not minutes
-    chunk = FIRST_CHUNK
+    chunk = FIRST_CHUNK if cautious else CHUNK
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
     interrupted = False
@@ -419,12 +417,14 @@ def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
     import casadi as ca
 
     out = dict(_energy_drift(signals))
-    try:
-        cons = is_conservative(eom)
-        if cons:
-            cons = not ca.depends_on(ca.SX(eom.g), eom.t)
-    except Exception:  # noqa: BLE001 -- a non-SX model: make no claim
-        cons = None
+
+    def conservative():
+        try:
+            return bool(is_conservative(eom)) and not ca.depends_on(ca.SX(eom.g), eom.t)
+        except Exception:  # noqa: BLE001 -- a non-SX model: make no claim
+            return None
+
+    cons = eom.cached("dae_conservative", conservative)
     out["conservative"] = cons
     if cons and "energy_drift_relative" in out:
         limit = max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol)
