@@ -74,13 +74,14 @@ class BaumgarteStepper(Stepper):
             return self.user_rates
         return automatic_rates(self.system, self.q, self.qd, self.t, self.span, self.rate_factor)
 
-    def integrate(self, times):
-        """States at ``times`` (equally spaced after the current time): (n, K) arrays q, qd."""
-        h, K = chunk_span(self.t, times)
+    def integrate(self, times, monitor=None):
+        """States at ``times`` (increasing, after the current time): (n, K) arrays q, qd."""
+        h, grid = chunk_span(self.t, times, monitor)
+        K = len(np.atleast_1d(times))
         self.rates = self._rates()
         alpha, beta = self.rates
         p = np.concatenate([self.system.p, [alpha, beta, self.t, h]])
-        F = self.F.get(K)
+        F = self.F.get(grid, self.step_budget)
         r = call_integrator(F, x0=np.concatenate([self.q, self.qd]), p=p)
         self._count(F)
         x = np.array(r["xf"], float).reshape(2 * self.system.n, K)
@@ -92,9 +93,9 @@ class BaumgarteStepper(Stepper):
         n = self.system.n
         return x[:n], x[n:]
 
-    def advance(self, times):
+    def advance(self, times, monitor=None):
         times = np.atleast_1d(np.asarray(times, float))
-        Q, QD = self.integrate(times)
+        Q, QD = self.integrate(times, monitor)
         self.t, self.q, self.qd = float(times[-1]), Q[:, -1].copy(), QD[:, -1].copy()
         return times, Q.T, QD.T
 

@@ -43,7 +43,8 @@ DEFAULT_POINTS = 501
 SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
 MONITOR_POINTS = 61       # least number of checks (of drift and conditioning) per run
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
-FIRST_CHUNK = 8            # ggl, partitioning: intervals of the first segment, doubled after each full one
+FIRST_CHUNK = 8            # intervals of the first segment (ggl, partitioning: doubled after each full one)
+BUDGET_MARGIN = 8.0        # a call may take this many times the steps per unit time seen before
 CHUNK = 64                 # most output intervals per integrator call (one integrator is built
                            # per segment length and kept with the system, so reruns reuse it)
 
@@ -94,6 +95,21 @@ def _start(eom, x0, pv):
     return q0, qd0, tuple(fq), tuple(fqd)
 
 
+def with_outputs(times, outs, t_now: float, tiny: float):
+    """The segment's times with the output times strictly inside it added, and a flag per time:
+    True for the segment's own (monitoring) times."""
+    times = np.atleast_1d(np.asarray(times, float))
+    inner = outs[(outs > t_now + tiny) & (outs < times[-1] - tiny)]
+    if inner.size:
+        inner = inner[np.min(np.abs(inner[:, None] - times[None, :]), axis=1) > tiny]
+    if not inner.size:
+        return times, np.ones(len(times), bool)
+    allt = np.concatenate([times, inner])
+    mon = np.concatenate([np.ones(len(times), bool), np.zeros(len(inner), bool)])
+    order = np.argsort(allt, kind="stable")
+    return allt[order], mon[order]
+
+
 def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
     f = opts.formulation
     if f == "baumgarte":
@@ -134,10 +150,11 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     if not t_end > t0:
         raise UsageError(f"stop time {t_end:g} must be after the start time {t0:g}")
     points = opts.points or DEFAULT_POINTS
-    # the integration/monitoring grid: the output grid, refined by an integer factor so that
-    # conditioning and drift are checked at MONITOR_POINTS or more times per run
-    refine = max(1, int(np.ceil((MONITOR_POINTS - 1) / (points - 1))))
-    grid = np.linspace(t0, t_end, (points - 1) * refine + 1)
+    # the monitoring grid (drift, conditioning, projection, segment ends) does not depend on the
+    # output grid: output times between its points are extra integrator output times only, so the
+    # numbers at a time do not depend on how many points were asked for
+    grid = np.linspace(t0, t_end, MONITOR_POINTS)
+    out_t = np.linspace(t0, t_end, points)
     span = t_end - t0
     chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
 
@@ -177,6 +194,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         VD.append(v)
 
     record(t0, stepper.q, stepper.qd)
+    j_out = 1              # next output time to record
     ratio_prev, t_prev = ratio_at(stepper.q, t0), t0
     min_ratio = ratio_prev
     seen_d, seen_v = 0.0, 0.0
@@ -188,7 +206,11 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # runs into a singular configuration before they fail; they start with short segments and stop
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
+    # step budget per integrator output interval (CasADi's max_num_steps): max_steps until a segment
+    # succeeded (a model with absurd time scales then fails within seconds), afterwards also up to
+    # BUDGET_MARGIN times the steps per unit time seen there (long monitoring intervals of long runs)
     chunk = FIRST_CHUNK if cautious else CHUNK
+    density = None         # integrator steps per unit time of the last successful segment
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
     interrupted = False
@@ -213,14 +235,21 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
                     times = np.array([stepper.t + opts.max_interval])
             saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
+            times, is_mon = with_outputs(times, out_t[j_out:], stepper.t, tiny)
+            H = float(times[-1] - stepper.t)
+            budget = opts.steps
+            if density is not None:
+                budget = max(budget, int(np.ceil(BUDGET_MARGIN * density * H / max(1, int(np.sum(is_mon))))))
+            stepper.step_budget = budget
+            steps_before = stepper.stats.get("nsteps", 0)
             try:
                 try:
-                    T_acc, Q_acc, QD_acc = stepper.advance(times)
+                    T_acc, Q_acc, QD_acc = stepper.advance(times, is_mon)
                 except np.linalg.LinAlgError as la:   # degenerate linear algebra: a failed segment, retried
                     raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
             except StepError as e:
                 stepper.reset(*saved)
-                if len(times) > 1:          # retry the chunk one output interval at a time
+                if int(np.sum(is_mon)) > 1:     # retry the chunk one monitoring interval at a time
                     chunk = 1
                     continue
                 if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
@@ -244,10 +273,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 continue
             retries = 0
             h_fail = np.inf
+            density = (stepper.stats.get("nsteps", 0) - steps_before) / H
             if opts.progress is not None:
                 opts.progress(float(T_acc[-1]), t_end)
+            n_mon = int(np.sum(is_mon[:len(T_acc)]))
             if not single:
-                chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
+                chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, n_mon)
             elif chunk == 1 and not np.isfinite(h_sing):
                 chunk = 2
             d_all, v_all, Gs_all = system.monitor_many(Q_acc, QD_acc, T_acc)   # one call per segment
@@ -255,6 +286,12 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             for i in range(len(T_acc)):
                 t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
                 d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
+                is_output = j_out < len(out_t) and abs(t_now - out_t[j_out]) <= tiny
+                if not is_mon[i]:       # an output time between checks: recorded, never acted upon
+                    if is_output:
+                        record(t_now, *stepper.for_record(t_now, q_now, qd_now))
+                        j_out += 1
+                    continue
                 min_ratio = min(min_ratio, ratio)
                 seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
                 on_grid = abs(t_now - grid[k]) <= tiny
@@ -276,9 +313,10 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                     if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
                         h_sing = max(0.5 * tau, 1e3 * tiny)
                 ratio_prev, t_prev = ratio, t_now
+                if is_output:
+                    record(t_now, q_now, qd_now, (d_now, v_now))
+                    j_out += 1
                 if on_grid:
-                    if k % refine == 0:
-                        record(t_now, q_now, qd_now, (d_now, v_now))
                     k += 1
                 if np.isfinite(h_sing) and i < len(T_acc) - 1:
                     # approaching a singular configuration: rewind to here, continue in short segments

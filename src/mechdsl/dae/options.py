@@ -39,7 +39,7 @@ class DaeOptions:
     outputs: tuple[str, ...] | None = None
     baumgarte: object = None             # None (automatic), rate omega, or (alpha, beta)
     singular_tol: float = 1e-6           # sigma_min / sigma_max of the scaled G below this: singular
-    max_steps: int | None = None         # integrator steps per monitoring interval (default 5000)
+    max_steps: int | None = None         # integrator steps per interval at the start (default 5000)
     max_interval: float | None = None    # longest segment between checks (default: monitoring grid)
     drift_bound: float | None = None     # default max(10 atol, 1e-10)
     repartition_cond: float = 10.0       # partitioning: re-partition when cond(G_v) grows by this factor
@@ -52,8 +52,8 @@ class DaeOptions:
 
     @property
     def steps(self) -> int:
-        """Integrator steps allowed per monitoring interval (a call through K intervals gets K
-        times this; a failing interval is halved, so a fast phase gets more per unit time)."""
+        """Integrator steps allowed per output interval of an integrator call until a segment
+        succeeded; then also up to 8 times the steps per unit time seen (see the driver)."""
         return int(self.max_steps or STEPS_PER_INTERVAL)
 
 

@@ -155,7 +155,7 @@ class PartitioningStepper(Stepper):
         if not self.dep:
             self.choose_partition(q, t)
 
-    def advance(self, times):
+    def advance(self, times, monitor=None):
         times = np.atleast_1d(np.asarray(times, float))
         Q, QD = [], []
         for t1 in times:

@@ -74,19 +74,34 @@ class ProjectionStepper(BaumgarteStepper):
         self.stats["velocity_drift_before_projection"] = 0.0
         self.stats["projections"] = 0
 
-    def advance(self, times):
+    def for_record(self, t, q, qd):
+        """An output state between projections, projected when its drift is above the level
+        that triggers a projection (for the record only: the integration goes on unchanged)."""
+        d, v = self.system.drift(q, qd, t)
+        limit = self.PROJECT_AT * self.opts.bound
+        if d > limit or v > limit:
+            return project(self.system, q, qd, t, 1e-3 * self.opts.bound)
+        return q, qd
+
+    def advance(self, times, monitor=None):
+        """``monitor`` (bool per time, default all) marks the checking times: only there is the
+        drift judged and the chunk cut, so output times in between change nothing."""
         times = np.atleast_1d(np.asarray(times, float))
-        Q, QD = self.integrate(times)
+        mon = np.ones(len(times), bool) if monitor is None else np.asarray(monitor, bool)
+        Q, QD = self.integrate(times, monitor)
         limit = self.PROJECT_AT * self.opts.bound
         keep = len(times)
         D, V = self.system.drift_many(Q, QD, times)       # one mapped call for the whole segment
-        for i in range(len(times)):
+        last_ok = None
+        for i in np.flatnonzero(mon):
             d, v = float(D[i]), float(V[i])
             self.stats["drift_before_projection"] = max(self.stats["drift_before_projection"], d)
             self.stats["velocity_drift_before_projection"] = max(self.stats["velocity_drift_before_projection"], v)
             if d > limit or v > limit:
-                keep = max(i, 1)
+                # cut after the last checking time with a small drift (at least the first one)
+                keep = (last_ok if last_ok is not None else i) + 1
                 break
+            last_ok = i
         times, Q, QD = times[:keep], Q[:, :keep].copy(), QD[:, :keep].copy()
         q, qd = project(self.system, Q[:, -1], QD[:, -1], times[-1], 1e-3 * self.opts.bound)
         self.stats["projections"] += 1

@@ -74,13 +74,20 @@ class Stepper(abc.ABC):
     stats: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     name: str = ""
+    step_budget: int | None = None     # most integrator steps per output interval of the next call (driver)
 
     def reset(self, t: float, q: np.ndarray, qd: np.ndarray) -> None:
         self.t, self.q, self.qd = float(t), np.array(q, float), np.array(qd, float)
 
     @abc.abstractmethod
-    def advance(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Integrate through ``times``; return (t, q, qd) of the accepted prefix (at least one)."""
+    def advance(self, times: np.ndarray, monitor=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Integrate through ``times``; return (t, q, qd) of the accepted prefix (at least one).
+        ``monitor`` (bool per time) marks the driver's checking times; the others are output
+        times, which must not change the integration (no cut, no projection there)."""
+
+    def for_record(self, t: float, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The state recorded at an output time between the monitoring times (as integrated)."""
+        return q, qd
 
     def after_segment(self) -> None:
         """Hook after a successful segment (projection, re-partitioning)."""
@@ -250,17 +257,32 @@ class GridIntegrators:
         self._problem = dae_function(funcs["ode"])
         self.compiled = True
 
-    def get(self, K: int):
-        if K not in self._cache:
-            import casadi as ca
+    MAX_PATTERNS = 256     # integrators kept for non-uniform grids (output times between checks)
 
+    def get(self, K, budget: int | None = None):
+        """The integrator through K equal steps of [0, 1], or (K a tuple) through those
+        fractions, with at most ``budget`` steps per output interval (CasADi's max_num_steps
+        counts per output time; rounded up to a power of 2 so that few integrators are built;
+        default: the options' max_num_steps)."""
+        if budget is not None and "max_num_steps" in self.opts:
+            budget = 1 << max(10, int(np.ceil(np.log2(max(int(budget), 1)))))
+        key = (K, budget)
+        if key not in self._cache:
+            if len(self._cache) > self.MAX_PATTERNS:
+                for k in [k for k in self._cache if not isinstance(k[0], (int, np.integer))]:
+                    del self._cache[k]
             with build_timer(self.stats):
-                grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
+                if isinstance(K, (int, np.integer)):
+                    grid = [float(x) for x in np.linspace(0.0, 1.0, K + 1)[1:]]
+                else:
+                    grid = list(K)
                 opts = dict(self.opts)
-                if "max_num_steps" in opts:       # the budget is per interval: K of them per call
-                    opts["max_num_steps"] = int(opts["max_num_steps"]) * K
-                self._cache[K] = make_integrator(f"{self.name}_{K}", self.plugin, self._problem, 0.0, grid, opts)
-        return self._cache[K]
+                if "max_num_steps" in opts:
+                    opts["max_num_steps"] = budget if budget is not None else int(opts["max_num_steps"])
+                label = K if isinstance(K, (int, np.integer)) else f"g{len(grid)}"
+                self._cache[key] = make_integrator(f"{self.name}_{label}_{len(self._cache)}", self.plugin,
+                                                   self._problem, 0.0, grid, opts)
+        return self._cache[key]
 
 
 @contextlib.contextmanager
@@ -275,7 +297,28 @@ def build_timer(stats: dict):
         stats["build_cpu_time"] = stats.get("build_cpu_time", 0.0) + time.process_time() - c0
 
 
-def chunk_span(t0: float, times: np.ndarray) -> tuple[float, int]:
-    """(h, K) of a chunk from t0 through equally spaced times (h = times[-1] - t0)."""
+def chunk_span(t0: float, times: np.ndarray, monitor=None) -> tuple[float, int | tuple[float, ...]]:
+    """(h, grid) of a chunk from t0 through increasing times (h = times[-1] - t0): grid is K
+    when the times are equally spaced, else their fractions s = (t - t0) / h.
+
+    ``monitor`` marks the chunk's own times (equally spaced; the others are output times in
+    between).  Their fractions are exactly those of the equally spaced grid, so that the
+    integrator passes through the same monitoring states with or without output times in
+    between; the output fractions are rounded to 12 digits so that chunks of the same
+    pattern share one integrator."""
     times = np.atleast_1d(np.asarray(times, float))
-    return float(times[-1] - t0), len(times)
+    h = float(times[-1] - t0)
+    K = len(times)
+    s = (times - t0) / h
+    uniform = np.linspace(0.0, 1.0, K + 1)[1:]
+    if np.all(np.abs(s - uniform) <= 1e-12):
+        return h, K
+    s = np.round(s, 12)
+    if monitor is not None:
+        mon = np.asarray(monitor, bool)
+        Km = int(np.sum(mon))
+        um = np.linspace(0.0, 1.0, Km + 1)[1:]
+        if np.all(np.abs(s[mon] - um) <= 1e-9):
+            s[mon] = um
+    s[-1] = 1.0
+    return h, tuple(float(x) for x in s)
