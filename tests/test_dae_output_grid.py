@@ -56,3 +56,12 @@ def test_outputs_between_checks_keep_the_drift_bound():
     assert r.stats["drift_ok"]
     assert np.max(r["constraint_drift"]) <= r.stats["drift_bound"]
     assert np.max(r["velocity_drift"]) <= r.stats["drift_bound"]
+
+
+@pytest.mark.slow
+def test_partitioning_results_do_not_depend_on_the_output_grid():
+    """Output times inside a sub-segment are integrated on the side from its start (main: the
+    sub-segments were cut at every output time)."""
+    a, b, step = _pair(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), 10.0, 11, 201, formulation="partitioning")
+    assert np.max(np.abs(b.q[::step] - a.q)) <= 1e-13
+    assert np.max(np.abs(b.qd[::step] - a.qd)) <= 1e-12

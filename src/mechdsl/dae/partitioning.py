@@ -157,15 +157,21 @@ class PartitioningStepper(Stepper):
 
     def advance(self, times, monitor=None):
         times = np.atleast_1d(np.asarray(times, float))
-        Q, QD = [], []
-        for t1 in times:
-            self._advance_to(float(t1))
-            Q.append(self.q.copy())
-            QD.append(self.qd.copy())
-        return times, np.array(Q), np.array(QD)
+        mon = np.ones(len(times), bool) if monitor is None else np.asarray(monitor, bool)
+        at: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        for t1 in times[mon]:
+            outs = [float(t) for t in times[~mon] if self.t < t < t1]
+            self._advance_to(float(t1), outs, at)
+            at[float(t1)] = (self.q.copy(), self.qd.copy())
+        Q = np.array([at[float(t)][0] for t in times])
+        QD = np.array([at[float(t)][1] for t in times])
+        return times, Q, QD
 
-    def _advance_to(self, t1: float) -> None:
-        """Integrate to t1 in adaptive sub-segments (see the module docstring)."""
+    def _advance_to(self, t1: float, outs=(), at=None) -> None:
+        """Integrate to t1 in adaptive sub-segments (see the module docstring).  The states at
+        the output times ``outs`` (before t1) go into ``at``: each is integrated from the start
+        of the accepted sub-segment containing it, on the side, so output times never cut a
+        sub-segment and do not change the run."""
         if self.h_sub is None:
             rho = self.system.spectral_radius(self.q, self.qd, self.t)
             self.h_sub = 0.1 / rho if rho > 0 else t1 - self.t
@@ -195,6 +201,14 @@ class PartitioningStepper(Stepper):
                 continue
             fails = 0
             self.stats["subsegments"] += 1
+            inside = [t for t in outs if saved[0] < t <= self.t]
+            if inside:
+                end = (self.t, self.q.copy(), self.qd.copy())
+                for t_o in inside:
+                    self.reset(*saved)
+                    self._sub_advance(t_o)
+                    at[t_o] = (self.q.copy(), self.qd.copy())
+                self.reset(*end)
             factor = min(3.0, max(0.2, (THETA_TARGET / theta) ** (1 / 3) if theta > 0 else 3.0))
             truncated = h < self.h_sub
             if not (truncated and factor >= 1):      # a cut-short last piece says little about growth
