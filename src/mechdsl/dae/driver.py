@@ -9,14 +9,15 @@
          drift measurement (||g||, ||G q' + g_t||)
     -> outputs, multipliers and reactions at the output times -> Result
 
-Chunks.  One integrator call covers up to CHUNK output intervals (the integrator returns
-the states at each output time); a formulation may accept only a prefix (projection does
-when the drift grows).  A chunk that fails is retried one output interval at a time, and
+Chunks.  One integrator call covers up to CHUNK monitoring intervals (the integrator returns
+the states at each monitoring and output time); a formulation may accept only a prefix
+(projection does when the drift grows).  A chunk that fails is retried one monitoring interval at a time, and
 a failing interval is halved up to MAX_RETRIES times before the run stops with a Failure.
 
 Singular configurations.  At every accepted state the ratio sigma_min / sigma_max of the
-scaled G is computed (at MONITOR_POINTS or more times per run: the output grid is refined
-for the integration by an integer factor).  Once the ratio falls below SINGULAR_WATCH and
+scaled G is computed (at the MONITOR_POINTS equally spaced monitoring times, refined near
+trouble; output times in between are only extra output times of the integrator calls, so
+they change no number).  Once the ratio falls below SINGULAR_WATCH and
 keeps falling, or its linear extrapolation reaches zero within two grid steps, the run
 rewinds to that state and continues in single segments, each ending halfway to the time
 at which the ratio, extrapolated linearly, would reach zero; so a singular configuration
