@@ -78,3 +78,34 @@ def test_four_bar_with_a_tiny_crank_ends_with_a_coded_failure():
     assert ok == "False" and code_ == "E824"
     assert float(cpu) < 20.0          # a bound on the work, generous for a shared machine (measured 1.5 s)
     assert "steps" in failure
+
+
+MECH = (ROOT / "models" / "pendulum_cartesian.mech").read_text()
+
+
+def _undefined_model(constraint):
+    src = MECH.replace('bob.x^2 + bob.y^2 = L^2 "rod";', constraint)
+    return src[:src.index("scene Cash")]
+
+
+@pytest.mark.parametrize("constraint, what", [
+    ('sqrt((bob.x - 2*L) * L) + bob.y = 0 "rod";', "residual"),     # nan at the start x = L
+    ('sqrt(abs(bob.x - L) * L) + bob.y = 0 "rod";', "gradient"),    # infinite slope at x = L
+])
+def test_constraint_undefined_at_the_start_is_a_located_error(constraint, what, tmp_path):
+    """main: numpy's LinAlgError ('SVD did not converge') escaped as a traceback."""
+    import mechdsl
+
+    m = mechdsl.loads(_undefined_model(constraint), filename="bad.mech")
+    with pytest.raises(mechdsl.MechError) as info:
+        m.simulate(1.0, points=3)
+    d = info.value.diagnostics[0]
+    assert d.code == "E826" and "'c1' (rod)" in d.message and what in d.message
+    assert d.span.file == "bad.mech" and d.span.line == 29
+    # the command line: exit code 1 and the located message, no traceback
+    f = tmp_path / "bad.mech"
+    f.write_text(_undefined_model(constraint))
+    out = subprocess.run([sys.executable, "-m", "mechdsl", "simulate", str(f), "--no-progress",
+                          "-o", str(tmp_path / "out.csv")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1, out.stderr
+    assert "error[E826]" in out.stderr and "Traceback" not in out.stderr
