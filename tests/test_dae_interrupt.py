@@ -44,3 +44,41 @@ def test_ctrl_c_stops_a_constrained_run_and_keeps_partial_results(formulation):
     assert np.all(np.isfinite(r.q)) and np.max(np.hypot(r["x"] - x, r["y"] - y)) < tol
     # the run leaves Python's own Ctrl-C handler in place
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_sigint_to_a_process_stops_the_run():
+    """A real SIGINT (as Ctrl-C in a terminal) to a process in a long GGL run (IDAS, where
+    CasADi lost the interrupt inside the residual callback)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    tests = Path(__file__).resolve().parent
+    code = (
+        "import sys, warnings\n"
+        f"sys.path.insert(0, {str(tests)!r})\n"
+        "warnings.simplefilter('ignore')\n"
+        "from dae_models import pendulum_eom\n"
+        "from mechdsl.dae import RunInterrupted, simulate_dae\n"
+        "eom = pendulum_eom(gravity=9.81, v0=(0.0, 0.0))\n"
+        "simulate_dae(eom, 0.5, points=3, formulation='ggl')\n"
+        "print('ready', flush=True)\n"
+        "try:\n"
+        "    r = simulate_dae(eom, 400.0, rtol=1e-12, atol=1e-12, points=401, formulation='ggl')\n"
+        "    print('finished', r.t[-1], flush=True)\n"
+        "except RunInterrupted as e:\n"
+        "    print('interrupted', e.result.t[-1], e.result.failure.cause, flush=True)\n"
+        "    sys.exit(130)\n")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "ready"
+        time.sleep(0.3)
+        os.kill(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, (out, err)
+    word, t_last, cause = out.split(maxsplit=2)
+    assert word == "interrupted" and float(t_last) < 400.0 and cause.strip() == "interrupted"
