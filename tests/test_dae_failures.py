@@ -109,3 +109,17 @@ def test_constraint_undefined_at_the_start_is_a_located_error(constraint, what, 
                           "-o", str(tmp_path / "out.csv")], capture_output=True, text=True, timeout=120)
     assert out.returncode == 1, out.stderr
     assert "error[E826]" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_the_driver_loop_is_bounded(monkeypatch):
+    """Every loop of the driver counts its integrator calls; at the bound the run fails (E824)
+    with the results up to there (here the bound is lowered to 5 calls of 0.1 s)."""
+    from dae_models import pendulum_eom
+    from mechdsl.dae import driver
+
+    monkeypatch.setattr(driver, "MAX_CALLS", 5)
+    r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), 2.0, points=3, max_interval=0.1)
+    assert not r.success and r.metadata["failure_code"] == "E824"
+    assert "more than 5 integrator calls" in r.failure.detail
+    assert 0.0 < r.failure.time <= 5 * 0.1 + 1e-12 and r.t[-1] == r.failure.time
+    assert r.stats["segments"] == 5

@@ -46,6 +46,7 @@ MONITOR_POINTS = 61       # least number of checks (of drift and conditioning) p
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
 FIRST_CHUNK = 8            # intervals of the first segment (ggl, partitioning: doubled after each full one)
 BUDGET_MARGIN = 8.0        # a call may take this many times the steps per unit time seen before
+MAX_CALLS = 100_000        # integrator calls per run: a bound on every loop of the driver
 CHUNK = 64                 # most output intervals per integrator call (one integrator is built
                            # per segment length and kept with the system, so reruns reuse it)
 
@@ -218,7 +219,17 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     guard = interrupt_guard()
     guard.__enter__()
     try:
+        calls = 0
         while k < len(grid) and failure is None:
+            calls += 1
+            if calls > MAX_CALLS:
+                failure, failure_code = Failure(stepper.t, f"{opts.formulation} integrator failed",
+                                                f"[{CODE_INTEGRATOR}] the run needed more than {MAX_CALLS} integrator "
+                                                "calls (segments shortened near a singular configuration or after "
+                                                "failures without end)"), CODE_INTEGRATOR
+                if stepper.t > T[-1]:
+                    record(stepper.t, stepper.q, stepper.qd)
+                break
             single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
             if single:
                 target = grid[k]
