@@ -252,7 +252,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             budget = opts.steps
             if density is not None:
                 budget = max(budget, int(np.ceil(BUDGET_MARGIN * density * H / max(1, int(np.sum(is_mon))))))
-            stepper.step_budget = budget
+            stepper.step_budget = budget if budget > opts.steps else None     # None: max_steps exactly
             steps_before = stepper.stats.get("nsteps", 0)
             try:
                 try:
@@ -261,6 +261,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                     raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
             except StepError as e:
                 stepper.reset(*saved)
+                if getattr(e, "stats", None):     # a failed call's work counts too
+                    stepper.count_stats(e.stats)
                 if int(np.sum(is_mon)) > 1:     # retry the chunk one monitoring interval at a time
                     chunk = 1
                     continue
@@ -449,9 +451,10 @@ def integrator_failure(system, opts: DaeOptions, saved, h: float, e: StepError):
                        f"[{CODE_NONFINITE}] {name} is inf or nan at t = {tw:.10g} (after the last good state at "
                        f"t = {t:.10g}); the model's equations are not defined there"), CODE_NONFINITE
     return Failure(t, f"{opts.formulation} integrator failed",
-                   f"[{CODE_INTEGRATOR}] {e}; the step budget is {opts.steps} steps per monitoring interval "
-                   "(max_steps), halved intervals included; a model with time scales far shorter than the "
-                   "run (check its masses and lengths) or a stiff one (method = \"bdf\") ends here"), CODE_INTEGRATOR
+                   f"[{CODE_INTEGRATOR}] {e}; the step budget is max_steps = {opts.steps} steps per interval until "
+                   "a segment succeeded, then 8 times the steps per unit time seen; failing intervals were halved "
+                   f"up to {MAX_RETRIES} times; a model with time scales far shorter than the run (check its masses "
+                   "and lengths) or a stiff one (method = \"bdf\") ends here"), CODE_INTEGRATOR
 
 
 ENERGY_FACTOR = 1e4     # a conservative model whose relative energy drift exceeds this many rtol warns

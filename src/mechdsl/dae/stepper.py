@@ -94,7 +94,11 @@ class Stepper(abc.ABC):
 
     # -- helpers ---------------------------------------------------------------------------
     def _count(self, integrator) -> None:
-        st = integrator.stats()
+        self.count_stats(integrator.stats())
+
+    def count_stats(self, st: dict) -> None:
+        """Add an integrator call's statistics (CVODES/IDAS or erk names) to self.stats."""
+        st = dict(st)
         for src, k in _ERK_KEYS.items():          # CasADi's erk names its counts differently
             if src in st and k not in st:
                 st[k] = st[src]
@@ -206,7 +210,12 @@ def call_integrator(F, **args):
         if printed:
             text += f"; {printed[-1]}"
         text = f"{text}; {_work_done(F)}" if _work_done(F) else text
-        raise StepError(text[:400]) from None
+        err = StepError(text[:400])
+        try:
+            err.stats = dict(F.stats())       # the work of the failed call (counted by the driver)
+        except Exception:  # noqa: BLE001
+            pass
+        raise err from None
 
 
 def _work_done(F) -> str:
