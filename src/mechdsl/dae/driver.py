@@ -97,6 +97,28 @@ def _start(eom, x0, pv):
     return q0, qd0, tuple(fq), tuple(fqd)
 
 
+FIRST_PERIODS = 50         # the first segment of an ODE formulation spans at most this many periods
+
+
+def first_chunk(system, stepper, grid) -> int:
+    """Monitoring intervals of the first segment of the ODE formulations: all (CHUNK) unless
+    the run is long against the model's time scale 2 pi / rate, rate = max(spectral radius,
+    sqrt(|q''| / |q|)) at the start; then about FIRST_PERIODS periods.  A segment is
+    integrated to its end before the drift check cuts it, so a first segment through a whole
+    long run (IFToMM A01: 2000 s, cut after ~100 s) doubled the work."""
+    q, qd, t = stepper.q, stepper.qd, stepper.t
+    try:
+        qdd, _ = system.accel(q, qd, t)
+        rate = max(system.spectral_radius(q, qd, t),
+                   float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300))))
+    except Exception:  # noqa: BLE001 -- no estimate: the default
+        return CHUNK
+    if not np.isfinite(rate) or rate <= 0:
+        return CHUNK
+    dt = float(grid[1] - grid[0])
+    return int(max(1, min(CHUNK, np.ceil(FIRST_PERIODS * 2 * np.pi / rate / dt))))
+
+
 def with_outputs(times, outs, t_now: float, tiny: float):
     """The segment's times with the output times strictly inside it added, and a flag per time:
     True for the segment's own (monitoring) times."""
@@ -211,7 +233,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # step budget per integrator output interval (CasADi's max_num_steps): max_steps until a segment
     # succeeded (a model with absurd time scales then fails within seconds), afterwards also up to
     # BUDGET_MARGIN times the steps per unit time seen there (long monitoring intervals of long runs)
-    chunk = FIRST_CHUNK if cautious else CHUNK
+    chunk = FIRST_CHUNK if cautious else first_chunk(system, stepper, grid)
     density = None         # integrator steps per unit time of the last successful segment
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
