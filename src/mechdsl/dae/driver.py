@@ -481,6 +481,7 @@ def integrator_failure(system, opts: DaeOptions, saved, h: float, e: StepError):
 
 ENERGY_FACTOR = 1e4     # a conservative model whose relative energy drift exceeds this many rtol warns
 ENERGY_FLOOR = 1e-6      # ... and never below this relative drift
+ENERGY_CAP = 0.05        # ... and always above this one (a loose tolerance does not excuse 80 %)
 
 
 def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
@@ -502,13 +503,14 @@ def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
     cons = eom.cached("dae_conservative", conservative)
     out["conservative"] = cons
     if cons and "energy_drift_relative" in out:
-        limit = max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol)
+        limit = min(ENERGY_CAP, max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol))
         out["energy_bound_relative"] = limit
         if out["energy_drift_relative"] > limit:
             out["energy_warning"] = (
                 f"the model is conservative but its energy changed by {out['energy_drift']:.3g} "
                 f"(relative {out['energy_drift_relative']:.2e}, more than {limit:.1e} = "
-                f"max({ENERGY_FLOOR:g}, {ENERGY_FACTOR:g} rtol)): the results are not to be trusted; "
+                f"min({ENERGY_CAP:g}, max({ENERGY_FLOOR:g}, {ENERGY_FACTOR:g} rtol))): the results are not to be "
+                "trusted; "
                 f"tighten rtol/atol or use formulation = \"projection\" (formulation {opts.formulation})")
     return out
 
