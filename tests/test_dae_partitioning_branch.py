@@ -85,7 +85,7 @@ def test_partitioning_runs_the_requested_method(method, jacobians):
 
 def test_partitioning_auto_method_is_named():
     r, _ = _run(1.0, 3)
-    assert "BDF" in r.metadata["method"] and "partitioning" in r.metadata["method_reason"]
+    assert "BDF" in r.metadata["method"] and "partition" in r.metadata["method_reason"]
 
 
 def test_common_statistics_keys():

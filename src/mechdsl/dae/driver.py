@@ -521,6 +521,7 @@ def common_stats(st: dict, energy: dict) -> dict:
     out = {"steps": int(st.get("nsteps", 0)), "rhs_evals": int(st.get("nfevals", 0)),
            # CVODES/IDAS: linear-solver setups (each evaluates the Jacobian); erk: none
            "jacobian_evals": int(st.get("nlinsetups", 0)),
+           "jac_evals": int(st.get("nlinsetups", 0)),          # the simulation layer's name (SCHEMA)
            "rejected_steps": int(st.get("netfails", 0)) + int(st.get("nncfails", 0)),
            "cpu_time": float(st.get("solve_cpu_time", 0.0)),
            "constraint_drift": float(st.get("max_constraint_drift", 0.0))}
@@ -539,14 +540,14 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
     if opts.formulation == "ggl":
         opts.method = "idas"
         return "IDAS is the solver of the GGL formulation"
-    if opts.formulation == "partitioning" and opts.method == "auto":
-        opts.method = "bdf"
-        return ("auto: partitioning solves for the dependent coordinates by Newton's method inside the "
-                "right-hand side; CVODES BDF answers a failed solve with a shorter step")
     if opts.method == "cvodes":
         opts.method = "bdf"
     if opts.method != "auto":
         return "requested"
+    if opts.formulation == "partitioning":
+        opts.method = "bdf"
+        return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
+                "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there")
     ev = system.eigenvalues(q, qd, t0)
     damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
     rate = max(damped, default=0.0)

@@ -144,7 +144,7 @@ class PartitioningStepper(Stepper):
         udd = ca.vertcat(*[qdd[i] for i in ind]) if k else ca.MX.zeros(0, 1)
         dae = {"x": ca.vertcat(u, ud), "t": s, "p": ca.vertcat(p, t0, h, vk, vdk, vddk),
                "ode": h * ca.vertcat(ud, udd)}
-        plugin = ode_plugin(self.opts)      # the requested method (BDF unless asked otherwise)
+        plugin = ode_plugin(self.opts)          # the method asked for (metadata names it)
         F = make_integrator("partitioned", plugin, dae, 0.0, 1.0, integrator_options(self.opts, plugin))
         recover = ca.Function("recover", [u, ud, s, p, t0, h, vk, vdk, vddk], [q, qd])
         return F, recover
