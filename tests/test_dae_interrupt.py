@@ -82,3 +82,32 @@ def test_sigint_to_a_process_stops_the_run():
     assert p.returncode == 130, (out, err)
     word, t_last, cause = out.split(maxsplit=2)
     assert word == "interrupted" and float(t_last) < 400.0 and cause.strip() == "interrupted"
+
+
+@pytest.mark.slow
+def test_sigint_to_mech_simulate_writes_partial_results_and_exits_130(tmp_path):
+    """`mech simulate` of a constrained scene stopped by SIGINT: exit 130, the CSV holds the
+    results up to the interrupt (main: the run went on to the end and exited 0)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "a01.csv"
+    # A01 over 20000 s at 1e-12: ~40 s of integration after about a second of start-up
+    p = subprocess.Popen([sys.executable, "-m", "mechdsl", "simulate", str(root / "models" / "pendulum_cartesian.mech"),
+                          "--scene", "A01", "--t-end", "20000", "--points", "20001", "--no-progress", "-o", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(6.0)                            # loaded, derived, integrating
+        os.kill(p.pid, signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, (stdout, stderr)
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    rows = [ln for ln in out.read_text().splitlines() if ln and not ln.startswith("#")]
+    assert 2 <= len(rows) - 1 < 20001                  # header + the points reached
+    assert "interrupted" in stdout                      # the summary names the failure
