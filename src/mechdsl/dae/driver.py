@@ -42,7 +42,7 @@ from .system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
 SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
-MONITOR_POINTS = 61       # least number of checks (of drift and conditioning) per run
+MONITOR_POINTS = 61       # the monitoring grid (drift, conditioning, projection), whatever the output points
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
 FIRST_CHUNK = 8            # intervals of the first segment (ggl, partitioning: doubled after each full one)
 BUDGET_MARGIN = 8.0        # a call may take this many times the steps per unit time seen before

@@ -1,12 +1,14 @@
 """Common machinery of the formulations: segment integrators on a scaled time axis.
 
-The driver advances a formulation chunk by chunk: ``advance(times)`` integrates from the
-current state through the increasing, equally spaced ``times`` (several output times in
-one integrator call, or a single time), and returns the states it accepts there.  Between
+The driver advances a formulation chunk by chunk: ``advance(times, monitor)`` integrates
+from the current state through the increasing ``times`` (several monitoring times in one
+integrator call, or a single time, plus the output times in between, flagged False in
+``monitor``), and returns the states it accepts there.  Between
 chunks the driver checks drift and conditioning; the formulation projects or
 re-partitions.  Each CasADi integrator is built on the unit interval s in [0, 1] with
 t = t_k + s h (t_k and h are parameters) and an output grid of K equal steps, so one
-integrator per K serves every chunk (cached in :class:`GridIntegrators`).
+integrator per K serves every chunk (cached in :class:`GridIntegrators`); chunks with
+output times in between get an integrator per pattern of fractions.
 """
 from __future__ import annotations
 
