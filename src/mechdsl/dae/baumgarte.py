@@ -87,7 +87,8 @@ class BaumgarteStepper(Stepper):
         x = np.array(r["xf"], float).reshape(2 * self.system.n, K)
         if not np.all(np.isfinite(x)):
             j = int(np.argmax(~np.all(np.isfinite(x), axis=0)))       # first output with inf/nan
-            raise NonFiniteError(float(np.atleast_1d(times)[j]), state_names(self.system)[int(np.argmax(~np.isfinite(x[:, j])))])
+            which = int(np.argmax(~np.isfinite(x[:, j])))
+            raise NonFiniteError(float(np.atleast_1d(times)[j]), state_names(self.system)[which])
         self.stats["baumgarte_alpha"] = alpha
         self.stats["baumgarte_beta"] = beta
         n = self.system.n
