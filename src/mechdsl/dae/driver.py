@@ -102,15 +102,14 @@ FIRST_PERIODS = 50         # the first segment of an ODE formulation spans at mo
 
 def first_chunk(system, stepper, grid) -> int:
     """Monitoring intervals of the first segment of the ODE formulations: all (CHUNK) unless
-    the run is long against the model's time scale 2 pi / rate, rate = max(spectral radius,
-    sqrt(|q''| / |q|)) at the start; then about FIRST_PERIODS periods.  A segment is
+    the run is long against the model's time scale 2 pi / rate, rate = sqrt(|q''| / |q|) at
+    the start (no Jacobian: it can take seconds to build); then about FIRST_PERIODS periods.  A segment is
     integrated to its end before the drift check cuts it, so a first segment through a whole
     long run (IFToMM A01: 2000 s, cut after ~100 s) doubled the work."""
     q, qd, t = stepper.q, stepper.qd, stepper.t
     try:
         qdd, _ = system.accel(q, qd, t)
-        rate = max(system.spectral_radius(q, qd, t),
-                   float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300))))
+        rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
     except Exception:  # noqa: BLE001 -- no estimate: the default
         return CHUNK
     if not np.isfinite(rate) or rate <= 0:
@@ -152,13 +151,17 @@ def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
         from .partitioning import PartitioningStepper
 
         return PartitioningStepper(system, opts)
+    if f == "augmented":
+        from .augmented import AugmentedStepper
+
+        return AugmentedStepper(system, opts, span, t0, q0)
     raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
 
 
 def simulate_dae(eom, t_end, **kw) -> Result:
     """Simulate a model with constraints (``eom.g``) as a DAE with multipliers.
 
-    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning'),
+    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning' | 'augmented'),
     rtol, atol, method ('auto' | 'bdf' | 'adams' for the ODE formulations, 'idas' for ggl),
     points, t_start, p (vector or {name: value}), reactions (bool), outputs (names),
     baumgarte (omega or (alpha, beta)), singular_tol, max_interval, drift_bound, max_steps.
@@ -230,6 +233,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # runs into a singular configuration before they fail; they start with short segments and stop
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
+    crossing = getattr(stepper, "crosses_singular", False)   # augmented: passes through singular configurations
     # step budget per integrator output interval (CasADi's max_num_steps): max_steps until a segment
     # succeeded (a model with absurd time scales then fails within seconds), afterwards also up to
     # BUDGET_MARGIN times the steps per unit time seen there (long monitoring intervals of long runs)
@@ -324,6 +328,9 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
                 is_output = j_out < len(out_t) and abs(t_now - out_t[j_out]) <= tiny
                 if not is_mon[i]:       # an output time between checks: recorded, never acted upon
+                    min_ratio = min(min_ratio, ratio)
+                    if crossing:        # (augmented: passages are reported from every state seen)
+                        stepper.watch(t_now, ratio)
                     if is_output:
                         record(t_now, *stepper.for_record(t_now, q_now, qd_now))
                         j_out += 1
@@ -331,7 +338,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 min_ratio = min(min_ratio, ratio)
                 seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
                 on_grid = abs(t_now - grid[k]) <= tiny
-                if ratio < opts.singular_tol:
+                if ratio < opts.singular_tol and not crossing:
                     events.append({"time": t_now, "kind": "singular", "contact": "-",
                                    "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
                     failure = Failure(t_now, "singular configuration",
@@ -343,12 +350,14 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                 h_sing = np.inf
                 if t_now > t_prev:
                     tau_pred = np.inf
-                if ratio < ratio_prev and t_now > t_prev:
+                if ratio < ratio_prev and t_now > t_prev and not crossing:
                     tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
                     tau_pred = tau
                     if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
                         h_sing = max(0.5 * tau, 1e3 * tiny)
                 ratio_prev, t_prev = ratio, t_now
+                if crossing:
+                    stepper.watch(t_now, ratio)
                 if is_output:
                     record(t_now, q_now, qd_now, (d_now, v_now))
                     j_out += 1
@@ -548,7 +557,12 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
         opts.method = "bdf"
         return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
                 "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there")
-    ev = system.eigenvalues(q, qd, t0)
+    if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
+        from .augmented import ode_eigenvalues
+
+        ev = ode_eigenvalues(system, q, qd, t0)
+    else:
+        ev = system.eigenvalues(q, qd, t0)
     damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
     rate = max(damped, default=0.0)
     if rate * span > STIFF:

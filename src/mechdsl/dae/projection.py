@@ -80,6 +80,9 @@ class ProjectionStepper(BaumgarteStepper):
         self.stats["velocity_drift_before_projection"] = 0.0
         self.stats["projections"] = 0
 
+    def project(self, q, qd, t, tol):
+        return project(self.system, q, qd, t, tol)
+
     def for_record(self, t, q, qd):
         """An output state between projections, projected when its drift is above the level
         that triggers a projection (for the record only: the integration goes on unchanged)."""
@@ -87,7 +90,7 @@ class ProjectionStepper(BaumgarteStepper):
         limit = self.PROJECT_AT * self.opts.bound
         if d > limit or v > limit:
             try:
-                return project(self.system, q, qd, t, 1e-3 * self.opts.bound)
+                return self.project(q, qd, t, 1e-3 * self.opts.bound)
             except StepError:       # recorded as integrated; the drift statistics show it
                 return q, qd
         return q, qd
@@ -112,7 +115,7 @@ class ProjectionStepper(BaumgarteStepper):
                 break
             last_ok = i
         times, Q, QD = times[:keep], Q[:, :keep].copy(), QD[:, :keep].copy()
-        q, qd = project(self.system, Q[:, -1], QD[:, -1], times[-1], 1e-3 * self.opts.bound)
+        q, qd = self.project(Q[:, -1], QD[:, -1], times[-1], 1e-3 * self.opts.bound)
         self.stats["projections"] += 1
         Q[:, -1], QD[:, -1] = q, qd
         self.t, self.q, self.qd = float(times[-1]), q, qd
