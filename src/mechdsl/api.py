@@ -166,9 +166,9 @@ class Model:
             env[p.name] = p.value
             params.append(p)
         model = dataclasses.replace(self.model, parameters=tuple(params))
-        from .semantic.physical import mass_property_problems
+        from .semantic.physical import value_problems
 
-        problems = mass_property_problems(model)
+        problems = value_problems(model)
         if problems:
             raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None

@@ -76,6 +76,10 @@ def const(v: float) -> Const:
     return Const(float(v))
 
 
+def _finite_const(e: Expr) -> bool:
+    return isinstance(e, Const) and math.isfinite(e.value)
+
+
 def is_const(e: Expr, v: float | None = None) -> bool:
     return isinstance(e, Const) and (v is None or e.value == v)
 
@@ -101,7 +105,8 @@ def sub(a: Expr, b: Expr) -> Expr:
 
 
 def mul(a: Expr, b: Expr) -> Expr:
-    if is_const(a, 0.0) or is_const(b, 0.0):
+    # 0*x folds to 0 only for a finite constant x: x = 1/(r - r) must stay an error, not vanish
+    if (is_const(a, 0.0) and _finite_const(b)) or (is_const(b, 0.0) and _finite_const(a)):
         return Const(0.0)
     if is_const(a, 1.0):
         return b
@@ -117,9 +122,7 @@ def div(a: Expr, b: Expr) -> Expr:
         return a
     if isinstance(a, Const) and isinstance(b, Const) and b.value != 0.0:
         return Const(a.value / b.value)
-    if is_const(a, 0.0) and not is_const(b, 0.0):
-        return Const(0.0)
-    return Op("div", (a, b))
+    return Op("div", (a, b))   # 0/b is 0 only for b != 0, which a symbolic b does not promise
 
 
 def neg(a: Expr) -> Expr:
