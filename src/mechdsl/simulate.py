@@ -42,6 +42,9 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     methods), integrator_options (dict passed to the back end), singularity_threshold.
     """
     method = str(method or "auto").lower()
+    from .preflight import check_start   # the start check: what `mech check` accepts can start here
+
+    check_start(eom, p=p, x0=x0, t=t_start if isinstance(t_start, (int, float)) else 0.0)
     if eom.model is not None and eom.model.contacts:      # unilateral contacts, fixations (docs/contacts.md)
         from .impacts import simulate_with_contacts
 

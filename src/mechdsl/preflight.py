@@ -1,0 +1,330 @@
+"""The start check: the numbers of a derived model at its start state, before any step.
+
+``preflight(eom, p, x0, t)`` returns the problems (Diagnostics, empty when the model can
+start); ``check_start`` raises them.  ``mech check`` runs it on every model and scene, and
+``simulate.simulate`` at its start, so that `--set`, `with_params` and `x0` values are judged
+too: what ``check`` accepts, ``simulate`` can start (docs/simulate.md, "The start check").
+
+In order (the first group that finds something ends the check):
+
+  E740  a parameter value that is not finite              (at the parameter)
+  E508-E512  the component values (semantic/physical.py)  (at the component)
+  E741  a start value that is not finite                  (at the coordinate's joint)
+  E821/E822  consistent initialization (dae/init.py)      (constrained models)
+  E742  the mass matrix is not finite at the start
+  E743  the mass matrix is singular at the start (on the motions the constraints allow):
+        a coordinate moves no inertia (a point mass on a Spherical joint, a rod of length 0)
+  E745  a spring or damper whose ends coincide at the start (its direction is undefined)
+  E744  the generalized forces are not finite at the start
+  E746  the energy is not finite at the start (overflow: a product of huge values)
+  E747  a constraint residual or Jacobian is not finite at the start
+
+Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
+energy, the constraint Jacobian); the mass matrix of the recursive route (CRBA, O(N^2)) is
+built only to explain non-finite accelerations.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .diagnostics import Diagnostic, MechError, Span
+
+SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
+COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
+
+_HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
+                        "or give the body a Sphere/Body inertia")
+
+
+def check_start(eom, p=None, x0=None, t: float = 0.0) -> None:
+    """Raise a MechError with the start problems of ``eom`` (see the module docstring)."""
+    problems = preflight(eom, p, x0, t)
+    if problems:
+        raise MechError(problems)
+
+
+def preflight(eom, p=None, x0=None, t: float = 0.0) -> list[Diagnostic]:
+    """The problems of ``eom`` at its start state with parameters ``p`` (vector or overrides)
+    and start overrides ``x0`` (as ``simulate`` takes them); empty when it can start."""
+    from .eom import parameter_vector
+
+    pv = parameter_vector(eom, p)
+    model = eom.model
+    bad = [i for i in range(pv.size) if not math.isfinite(pv[i])]
+    if bad:
+        return [Diagnostic("E740", f"the value of parameter '{eom.params[i]}' is not finite ({pv[i]:g})",
+                           _param_span(model, eom.params[i]),
+                           "check its formula for overflow and division by zero, or the value given "
+                           "with --set / with_params") for i in bad]
+    if model is not None:
+        from .semantic.physical import parameter_env, value_problems
+
+        env = parameter_env(model)
+        env.update(zip(eom.params, map(float, pv)))
+        found = value_problems(model, env)
+        if found:
+            return found
+    if eom.n == 0:
+        return []
+    with np.errstate(all="ignore"):
+        return _numbers(eom, pv, x0, float(t))
+
+
+def _numbers(eom, pv, x0, t) -> list[Diagnostic]:
+    q0, qd0 = eom.start(pv)
+    bad = [i for i in range(2 * eom.n) if not math.isfinite(np.r_[q0, qd0][i])]
+    if bad:
+        return [_start_problem(eom, i, np.r_[q0, qd0][i]) for i in bad]
+    if eom.m:
+        from .dae.driver import _start
+        from .dae.init import initialize
+
+        q, qd, fq, fqd = _start(eom, x0, pv)
+        g_problem = _constraint_problem(eom, q, t, pv)
+        if g_problem:
+            return g_problem
+        try:
+            init = initialize(eom, q, qd, t, pv, fixed_q=fq, fixed_qd=fqd)
+        except MechError as e:
+            return e.diagnostics
+        q, qd = init.q, init.qd
+    else:
+        from .simulate import start_vector
+
+        x = start_vector(eom, x0, pv)
+        q, qd = x[:eom.n], x[eom.n:]
+    return _dynamics_problems(eom, q, qd, t, pv)
+
+
+def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
+    from .codegen import casadi_functions
+
+    x = np.r_[q, qd]
+    fs = casadi_functions(eom, names=("ode", "energy", "mass_matrix", "bias"))
+    if eom.m:
+        M = _mass(fs, t, x, pv, eom.n)
+        rhs = _value(fs["bias"], t, x, pv)
+        G = _jacobian(eom, q, t, pv)
+    else:
+        M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
+        rhs = _value(fs["ode"], t, x, pv)
+        G = None
+    ok_rhs = bool(np.all(np.isfinite(rhs)))
+    if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix
+        M = _mass(fs, t, x, pv, eom.n)
+    if M is not None:
+        found = _mass_problems(eom, M, G)
+        if found:
+            return found
+    if not ok_rhs:
+        return _force_problems(eom, q, t, pv, rhs)
+    T, V, _ = (float(v) for v in fs["energy"](t, x, pv))
+    if not (math.isfinite(T) and math.isfinite(V)):
+        return [Diagnostic("E746", f"the energy at the start is not finite (kinetic {T:g}, potential {V:g})",
+                           _model_span(eom),
+                           "a product of huge values overflows: check the parameters for values near 1e308, "
+                           "or choose units that keep the numbers moderate")]
+    return []
+
+
+# ----------------------------------------------------------------------------- the parts
+
+
+def _mass_problems(eom, M, G) -> list[Diagnostic]:
+    bad_rows = [i for i in range(eom.n) if not np.all(np.isfinite(M[i]))]
+    if bad_rows:
+        names = ", ".join(eom.coords[i] for i in bad_rows)
+        return [Diagnostic("E742", f"the mass matrix is not finite at the start (in the equation of {names})",
+                           _coord_span(eom, eom.coords[bad_rows[0]]),
+                           "check the masses, lengths and inertias of the bodies these coordinates move "
+                           "for overflow and division by zero")]
+    Z = np.eye(eom.n)
+    if G is not None and G.size:
+        _, s, vt = np.linalg.svd(G)
+        rank = int(np.sum(s > 1e-10 * max(float(s[0]), 1e-300))) if s.size else 0
+        Z = vt[rank:].T                      # the speeds the constraints allow
+        if Z.shape[1] == 0:
+            return []
+    Ms = 0.5 * (M + M.T)
+    d = np.sqrt(np.abs(np.diag(Ms)))
+    scale = float(np.max(d)) if d.size else 0.0
+    if scale == 0.0:
+        return [_singular(eom, np.ones(eom.n), Z.shape[1] < eom.n)]
+    # scale each coordinate by its own inertia so that units do not matter; a coordinate with
+    # none at all is singular by itself
+    dinv = np.where(d > 1e-150 * scale, 1.0 / np.maximum(d, 1e-300), 0.0)
+    zero = [i for i in range(eom.n) if d[i] <= 1e-150 * scale and np.any(np.abs(Z[i]) > 1e-8)]
+    if zero:
+        v = np.zeros(eom.n)
+        v[zero] = 1.0
+        return [_singular(eom, v, Z.shape[1] < eom.n)]
+    A = Z.T @ (dinv[:, None] * Ms * dinv[None, :]) @ Z
+    ev, vecs = np.linalg.eigh(0.5 * (A + A.T))
+    if ev[0] <= SINGULAR_RCOND * max(float(ev[-1]), 1e-300):
+        return [_singular(eom, dinv * (Z @ vecs[:, 0]), Z.shape[1] < eom.n)]
+    return []
+
+
+def _singular(eom, v, constrained: bool) -> Diagnostic:
+    """E743 for the null direction v (in coordinates): named by its coordinates and joints."""
+    v = np.abs(np.asarray(v, float))
+    top = float(np.max(v)) if v.size else 0.0
+    idx = [i for i in range(eom.n) if v[i] > 0.3 * top] or list(range(eom.n))
+    coords = [eom.coords[i] for i in idx]
+    joint = _owner_joint(eom, coords[0])
+    model = eom.model
+    hint = ("every coordinate needs inertia beyond it: give the bodies it moves a mass and (for rotations) "
+            "an extent, or prescribe its motion") if joint is not None else (
+        "its kinetic energy must be positive in its speed at the start (T = 1/2 m der(q)^2, not der(q)^4)")
+    if joint is not None and model is not None:
+        hint = point_rotation_hint(model, joint) or hint
+    where = f" (joint '{joint.name}')" if joint is not None else ""
+    allowed = " on the motions the constraints allow" if constrained else ""
+    return Diagnostic("E743", f"the mass matrix is singular at the start{allowed}: "
+                              f"{', '.join(coords)}{where} move{'s' if len(coords) == 1 else ''} no inertia",
+                      joint.span if joint is not None else _coord_span(eom, coords[0]), hint)
+
+
+def point_rotation_hint(model, joint) -> str | None:
+    """The hint for rotations of a point mass (no inertia about any axis through it), else None."""
+    child = _body(model, joint.child_body)
+    if joint.kind in ("spherical", "free") and child is not None and child.kind == "point":
+        return _HINT_POINT_ROTATION.format(kind=joint.kind.capitalize())
+    return None
+
+
+def _force_problems(eom, q, t, pv, rhs) -> list[Diagnostic]:
+    found = _coincident_ends(eom, q, t, pv)
+    if found:
+        return found
+    n = eom.n
+    rows = [i % n for i in range(rhs.size) if not math.isfinite(rhs[i])]
+    rows = list(dict.fromkeys(rows)) or list(range(n))
+    names = ", ".join(eom.coords[i] for i in rows)
+    return [Diagnostic("E744", f"the accelerations are not finite at the start (in the equation of {names})",
+                       _coord_span(eom, eom.coords[rows[0]]),
+                       "a force law or a term is not defined at the start state (a division by zero, a "
+                       "square root of a negative number, an overflow); check the forces on these coordinates")]
+
+
+def _coincident_ends(eom, q, t, pv) -> list[Diagnostic]:
+    from . import ir
+
+    model = eom.model
+    if model is None or eom.point_position is None:
+        return []
+    import casadi as ca
+
+    out = []
+    for f in model.forces:
+        if not isinstance(f, ir.SpringDamper):
+            continue
+        try:
+            fn = ca.Function("ends", [eom.q, eom.t, eom.p],
+                             [ca.vertcat(eom.point_position(f.a), eom.point_position(f.b))])
+        except Exception:  # noqa: BLE001 - cannot judge this one: the generic message follows
+            continue
+        ab = np.array(fn(q, t, pv), float).ravel()
+        size = max(1.0, float(np.max(np.abs(ab))))
+        if np.all(np.isfinite(ab)) and np.linalg.norm(ab[3:] - ab[:3]) <= COINCIDE_REL * size:
+            out.append(Diagnostic("E745", f"the ends of {f.kind} '{f.name}' coincide at the start ('{f.a}' and "
+                                          f"'{f.b}'): its direction, and so its force, is undefined", f.span,
+                                  "start the bodies apart (set a start value), or attach the ends to other points"))
+    return out
+
+
+def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
+    from .dae.init import _span, constraint_labels
+
+    if not np.all(np.isfinite(q)):
+        return []
+    g = _value(_constraint_fns(eom)[0], q, t, pv)
+    G = _jacobian(eom, q, t, pv)
+    bad = [i for i in range(eom.m) if not (math.isfinite(g[i]) and np.all(np.isfinite(G[i])))]
+    if not bad:
+        return []
+    labels = constraint_labels(eom)
+    return [Diagnostic("E747", "the constraint" + ("s " if len(bad) > 1 else " ")
+                       + ", ".join(labels[i] for i in bad) + " cannot be evaluated at the start (not finite)",
+                       _span(eom, bad[0]),
+                       "check the lengths and start values of the bodies in the loop for zero, huge "
+                       "or undefined values")]
+
+
+def _constraint_fns(eom):
+    from .dae.init import _functions
+
+    return _functions(eom)
+
+
+def _jacobian(eom, q, t, pv) -> np.ndarray:
+    return _value(_constraint_fns(eom)[1], q, t, pv).reshape(eom.m, eom.n)
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _mass(fs, t, x, pv, n) -> np.ndarray:
+    """M at the start: (q, t, p), or (t, x, p) when it depends on the speeds (codegen)."""
+    f = fs["mass_matrix"]
+    args = (t, x, pv) if f.name_in(0) == "t" else (x[:n], t, pv)
+    return _value(f, *args).reshape(n, n)
+
+
+def _value(f, *args) -> np.ndarray:
+    out = f(*args)
+    if isinstance(out, (tuple, list)):
+        out = out[0]
+    return np.array(out, float).ravel()
+
+
+def _start_problem(eom, i: int, value: float) -> Diagnostic:
+    name = eom.coords[i % eom.n]
+    what = name if i < eom.n else f"der({name})"
+    return Diagnostic("E741", f"the start value of {what} is not finite ({value:g})", _coord_span(eom, name),
+                      "check its start/speed formula for a function outside its domain (asin of more than 1, "
+                      "sqrt of a negative number) or a division by zero, with the parameter values in force")
+
+
+def _param_span(model, name: str) -> Span:
+    if model is not None:
+        for p in model.parameters:
+            if p.name == name:
+                return p.span
+    return Span()
+
+
+def _owner_joint(eom, coord: str):
+    model = eom.model
+    if model is None:
+        return None
+    for c in model.coordinates:
+        if c.name == coord and c.owner:
+            for j in model.joints:
+                if j.name == c.owner:
+                    return j
+    return None
+
+
+def _coord_span(eom, coord: str) -> Span:
+    j = _owner_joint(eom, coord)
+    if j is not None:
+        return j.span
+    if eom.model is not None:
+        for c in eom.model.coordinates:
+            if c.name == coord:
+                return c.span
+    return _model_span(eom)
+
+
+def _model_span(eom) -> Span:
+    return eom.model.span if eom.model is not None else Span()
+
+
+def _body(model, name: str):
+    for b in model.bodies:
+        if b.name == name:
+            return b
+    return None
