@@ -10,6 +10,7 @@ In order (the first group that finds something ends the check):
   E740  a parameter value that is not finite              (at the parameter)
   E508-E512  the component values (semantic/physical.py)  (at the component)
   E741  a start value that is not finite                  (at the coordinate's joint)
+  E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
   E742  the mass matrix is not finite at the start
   E743  the mass matrix is singular at the start (on the motions the constraints allow):
@@ -32,6 +33,7 @@ import numpy as np
 from .diagnostics import Diagnostic, MechError, Span
 
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
+ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
 COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
@@ -77,6 +79,9 @@ def _numbers(eom, pv, x0, t) -> list[Diagnostic]:
     bad = [i for i in range(2 * eom.n) if not math.isfinite(np.r_[q0, qd0][i])]
     if bad:
         return [_start_problem(eom, i, np.r_[q0, qd0][i]) for i in bad]
+    found = _huge_angles(eom, q0)
+    if found:
+        return found
     if eom.m:
         from .dae.driver import _start
         from .dae.init import initialize
@@ -118,14 +123,14 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         found = _mass_problems(eom, M, G)
         if found:
             return found
-    if not ok_rhs:
-        return _force_problems(eom, q, t, pv, rhs)
     T, V, _ = (float(v) for v in fs["energy"](t, x, pv))
     if not (math.isfinite(T) and math.isfinite(V)):
         return [Diagnostic("E746", f"the energy at the start is not finite (kinetic {T:g}, potential {V:g})",
                            _model_span(eom),
                            "a product of huge values overflows: check the parameters for values near 1e308, "
                            "or choose units that keep the numbers moderate")]
+    if not ok_rhs:
+        return _force_problems(eom, q, t, pv, rhs)
     return []
 
 
@@ -133,6 +138,8 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
 
 
 def _mass_problems(eom, M, G) -> list[Diagnostic]:
+    """E742 (not finite) or E743 (singular on the speeds the constraints allow, judged after
+    scaling each coordinate by its own inertia, so that units do not matter)."""
     bad_rows = [i for i in range(eom.n) if not np.all(np.isfinite(M[i]))]
     if bad_rows:
         names = ", ".join(eom.coords[i] for i in bad_rows)
@@ -140,30 +147,24 @@ def _mass_problems(eom, M, G) -> list[Diagnostic]:
                            _coord_span(eom, eom.coords[bad_rows[0]]),
                            "check the masses, lengths and inertias of the bodies these coordinates move "
                            "for overflow and division by zero")]
-    Z = np.eye(eom.n)
-    if G is not None and G.size:
-        _, s, vt = np.linalg.svd(G)
-        rank = int(np.sum(s > 1e-10 * max(float(s[0]), 1e-300))) if s.size else 0
-        Z = vt[rank:].T                      # the speeds the constraints allow
-        if Z.shape[1] == 0:
-            return []
-    Ms = 0.5 * (M + M.T)
+    Ms = 0.5 * M + 0.5 * M.T             # (no overflow near 1e308)
     d = np.sqrt(np.abs(np.diag(Ms)))
     scale = float(np.max(d)) if d.size else 0.0
     if scale == 0.0:
-        return [_singular(eom, np.ones(eom.n), Z.shape[1] < eom.n)]
-    # scale each coordinate by its own inertia so that units do not matter; a coordinate with
-    # none at all is singular by itself
-    dinv = np.where(d > 1e-150 * scale, 1.0 / np.maximum(d, 1e-300), 0.0)
-    zero = [i for i in range(eom.n) if d[i] <= 1e-150 * scale and np.any(np.abs(Z[i]) > 1e-8)]
-    if zero:
-        v = np.zeros(eom.n)
-        v[zero] = 1.0
-        return [_singular(eom, v, Z.shape[1] < eom.n)]
+        return [_singular(eom, np.ones(eom.n), G is not None)]
+    dinv = 1.0 / np.where(d > 1e-150 * scale, d, scale)     # a coordinate with no inertia keeps a 0
+    Z = np.eye(eom.n)
+    if G is not None and G.size:
+        Gs = G * dinv[None, :]
+        _, sv, vt = np.linalg.svd(Gs)
+        rank = int(np.sum(sv > 1e-10 * max(float(sv[0]), 1e-300))) if sv.size else 0
+        Z = vt[rank:].T                      # the (scaled) speeds the constraints allow
+        if Z.shape[1] == 0:
+            return []
     A = Z.T @ (dinv[:, None] * Ms * dinv[None, :]) @ Z
     ev, vecs = np.linalg.eigh(0.5 * (A + A.T))
     if ev[0] <= SINGULAR_RCOND * max(float(ev[-1]), 1e-300):
-        return [_singular(eom, dinv * (Z @ vecs[:, 0]), Z.shape[1] < eom.n)]
+        return [_singular(eom, Z @ vecs[:, 0], Z.shape[1] < eom.n)]
     return []
 
 
@@ -171,7 +172,7 @@ def _singular(eom, v, constrained: bool) -> Diagnostic:
     """E743 for the null direction v (in coordinates): named by its coordinates and joints."""
     v = np.abs(np.asarray(v, float))
     top = float(np.max(v)) if v.size else 0.0
-    idx = [i for i in range(eom.n) if v[i] > 0.3 * top] or list(range(eom.n))
+    idx = [i for i in range(eom.n) if v[i] > 1e-6 * top] or list(range(eom.n))
     coords = [eom.coords[i] for i in idx]
     joint = _owner_joint(eom, coords[0])
     model = eom.model
@@ -278,6 +279,22 @@ def _value(f, *args) -> np.ndarray:
     if isinstance(out, (tuple, list)):
         out = out[0]
     return np.array(out, float).ravel()
+
+
+def _huge_angles(eom, q0) -> list[Diagnostic]:
+    """An angle so large that double precision resolves it to worse than ANGLE_RESOLUTION:
+    sin and cos of it are noise, and constraints on it cannot be held."""
+    if eom.model is None:
+        return []
+    out = []
+    for i, c in enumerate(eom.model.coordinates[:eom.n]):
+        res = abs(float(q0[i])) * np.finfo(float).eps
+        if c.unit == "rad" and res > ANGLE_RESOLUTION:
+            out.append(Diagnostic("E748", f"the start angle of {c.name} ({q0[i]:.6g} rad) is too large to compute "
+                                          f"with: double precision resolves it only to {res:.2g} rad",
+                                  _coord_span(eom, c.name),
+                                  "give the angle modulo 2 pi (between -pi and pi)"))
+    return out
 
 
 def _start_problem(eom, i: int, value: float) -> Diagnostic:

@@ -1,0 +1,184 @@
+"""The start check (mechdsl.preflight, E740-E748, E754) and the degenerate component values
+(semantic/physical.py, E510-E512): what `mech check` accepts, `mech simulate` can start.
+
+Each case is a model that passed `check` (exit 0) before and failed or hung in `simulate`, or a
+value the fuzzer found on a shipped model; each now gets a coded, located error from both."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+import mechdsl
+from mechdsl.cli import main
+from mechdsl.diagnostics import MechError
+from mechdsl.preflight import _mass_problems, preflight
+
+from conftest import MODELS
+
+SPHERICAL = """model SphPend
+  Gravity gravity(g = {0, -9.81, 0});
+  PointMass bob(m = 1);
+  Point pivot(body = world, r = {0, 0, 0});
+  Spherical j(parent = pivot, child = bob, theta(start = 0.3));
+end SphPend;
+"""
+COINCIDENT = """model SD
+  Gravity gravity(g = {0, -9.81, 0});
+  PointMass bob(m = 1);
+  Planar j(parent = world, child = bob, axis = {0, 0, 1});
+  SpringDamper sd(a = world, b = bob, k = 10, c = 1, l0 = 0.5);
+end SD;
+"""
+NO_MASS = """model NoMass
+  parameter Real m = 0;
+  Gravity gravity(g = {0, -9.81, 0});
+  PointMass bob(m = m);
+  Revolute j(parent = world, child = bob, axis = {0, 0, 1});
+end NoMass;
+"""
+NOT_QUADRATIC = """model NQ
+  coordinate Real x(start = 1);
+  coordinate Real y(start = 0);
+equation
+  kinetic = der(x)^4 + der(y)^2;
+  potential = y;
+  0 = x^2 + y^2 - 1;
+end NQ;
+"""
+ZERO_OVER_ZERO = """model Z
+  parameter Real r = 1;
+  parameter Real a = 0/(r - r);
+  PointMass p(m = 1);
+  Prismatic j(parent = world, child = p, axis = {1, 0, 0}, s(start = a));
+end Z;
+"""
+
+
+def _cli(args, capsys):
+    rc = main(args)
+    cap = capsys.readouterr()
+    assert "Traceback" not in cap.err and "internal error" not in cap.err
+    return rc, cap.err
+
+
+def _located(err: str, code: str, path, line: int) -> None:
+    """A coded error at path:line:col, with the source line, a caret and a hint."""
+    m = re.search(rf"^(\S+):(\d+):(\d+): error\[{code}\]", err, re.M)
+    assert m, err
+    assert m.group(1).endswith(str(path.name)) and int(m.group(2)) == line, err
+    assert "^" in err and "help:" in err
+
+
+def _write(tmp_path, text, name="m.mech"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text,code,line,words", [
+    (SPHERICAL, "E730", 5, "a point mass on a Spherical joint has no inertia about the rod"),
+    (COINCIDENT, "E745", 5, "ends of spring-damper 'sd' coincide"),
+    (NO_MASS, "E730", 5, "joint 'j' moves no mass"),
+    (NOT_QUADRATIC, "E754", 5, "not quadratic in the speeds"),
+    (ZERO_OVER_ZERO, "E303", 3, "division by zero"),
+], ids=["spherical-point-mass", "coincident-spring", "no-mass", "not-quadratic", "zero-over-zero"])
+def test_check_and_simulate_refuse_the_same_start(tmp_path, capsys, text, code, line, words):
+    path = _write(tmp_path, text)
+    rc, err = _cli(["check", str(path)], capsys)
+    assert rc == 1
+    _located(err, code, path, line)
+    assert words in err
+    rc, err = _cli(["simulate", str(path), "--t-end", "0.1", "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
+    assert rc == 1 and f"error[{code}]" in err
+    assert not (tmp_path / "o.csv").exists()
+
+
+def _edited(tmp_path, model: str, old: str, new: str):
+    text = (MODELS / model).read_text()
+    assert old in text
+    return _write(tmp_path, text.replace(old, new, 1), model)
+
+
+@pytest.mark.parametrize("model,old,new,code,line", [
+    ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = 1e-320', "E741", 22),
+    ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = -0.5', "E511", 18),
+    ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = 1e308', "E510", 18),
+    ("nfourbar.mech", "phi(start = zeros(N + 1)", "phi(start = fill(tan(pi/2), N + 1)", "E748", 27),
+    ("particle_on_sphere.mech", 'R(unit = "m") = 1 ', 'R(unit = "m") = 1.7e308 ', "E746", 15),
+    ("bouncing_ball.mech", "normal = {0, 1, 0}", "normal = {0, 0, 0}", "E512", 30),
+    ("falling_rod.mech", 'L(unit = "m") = 1 ', 'L(unit = "m") = 0 ', "E743", 26),
+    ("falling_rod.mech", 'm(unit = "kg") = 1 ', 'm(unit = "kg") = 1e308 ', "E746", 16),
+], ids=["slider-tiny-length", "slider-negative-length", "slider-huge-length", "nfourbar-tan-pi-2",
+        "sphere-huge-radius", "ball-zero-normal", "rod-zero-length", "rod-huge-mass"])
+def test_fuzzer_values_on_shipped_models(tmp_path, capsys, model, old, new, code, line):
+    """Each was a traceback (exit 3), a hang, or nan/inf results with exit 0."""
+    path = _edited(tmp_path, model, old, new)
+    rc, err = _cli(["check", str(path)], capsys)
+    assert rc == 1
+    _located(err, code, path, line)
+
+
+@pytest.mark.parametrize("setting,code", [("L=0", "E743"), ("m=1e308", "E746"), ("L=-1", "E511")])
+def test_simulate_set_is_checked(tmp_path, capsys, setting, code):
+    """`--set L=0` on falling_rod never returned; now it is refused before the first step."""
+    rc, err = _cli(["simulate", str(MODELS / "falling_rod.mech"), "--set", setting, "--t-end", "0.5",
+                    "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
+    assert rc == 1 and f"error[{code}]" in err
+    _located(err, code, MODELS / "falling_rod.mech", 26 if code == "E743" else (16 if code == "E746" else 25))
+
+
+def test_api_parameter_vector_is_checked_at_simulate():
+    """simulate(eom, p=...) does not go through with_params: the start check sees the values."""
+    from mechdsl.simulate import simulate
+
+    m = mechdsl.load(MODELS / "falling_rod.mech", model="FallingRod")
+    with pytest.raises(MechError) as e:
+        simulate(m.eom, 0.1, p={"L": 0.0})
+    assert e.value.first.code == "E743" and "fly.phi" in e.value.first.message
+    with pytest.raises(MechError) as e:
+        m.with_params(L=1e308).simulate(0.1)
+    assert e.value.first.code == "E510"
+
+
+def test_non_finite_parameter_vector_is_named():
+    m = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum")
+    p = np.array(m.eom.param_values, float)
+    p[0] = np.inf
+    found = preflight(m.eom, p)
+    assert [d.code for d in found] == ["E740"] and m.eom.params[0] in found[0].message
+    assert found[0].span.line > 0
+
+
+def test_shipped_models_start_clean():
+    """The check finds nothing on a shipped model with its own values (all are run by test_cli_check)."""
+    m = mechdsl.load(MODELS / "slider_crank.mech")
+    assert preflight(m.eom) == []
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_singular_direction_matches_a_constructed_null_vector(seed):
+    """Against an independent construction: M = A diag(ev) A^T with one zero eigenvalue whose
+    eigenvector involves known coordinates; the check names exactly those (and none for ev > 0)."""
+    rng = np.random.default_rng(seed)
+    n = 5
+    eom = mechdsl.loads("model Chain\n" + "".join(f"  coordinate Real q{i};\n" for i in range(n))
+                        + "equation\n  kinetic = " + " + ".join(f"der(q{i})^2" for i in range(n))
+                        + ";\nend Chain;\n").eom
+    k = sorted(rng.choice(n, size=2, replace=False))
+    null = np.zeros(n)
+    null[k] = rng.uniform(0.5, 1.0, size=2) * rng.choice([-1, 1], size=2)
+    null /= np.linalg.norm(null)
+    Q, _ = np.linalg.qr(np.column_stack([null, rng.normal(size=(n, n - 1))]))
+    scales = 10.0 ** rng.uniform(-3, 3, size=n)
+    ev = np.r_[0.0, rng.uniform(1.0, 5.0, size=n - 1)]
+    M = Q @ np.diag(ev) @ Q.T
+    M = scales[:, None] * M * scales[None, :]        # other units: the check must not care
+    found = _mass_problems(eom, M, None)
+    assert [d.code for d in found] == ["E743"]
+    named = found[0].message.split(": ", 1)[1]
+    assert all(eom.coords[i] in named for i in k)
+    assert not any(eom.coords[i] in named for i in range(n) if i not in k)
+    ev[0] = 1e-3
+    assert _mass_problems(eom, scales[:, None] * (Q @ np.diag(ev) @ Q.T) * scales[None, :], None) == []
