@@ -11,14 +11,14 @@ In order (the first group that finds something ends the check):
   E508-E512  the component values (semantic/physical.py)  (at the component)
   E741  a start value that is not finite                  (at the coordinate's joint)
   E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
+  E747  a constraint residual or Jacobian that is not finite at the start (at the loop's joint)
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
   E742  the mass matrix is not finite at the start
   E743  the mass matrix is singular at the start (on the motions the constraints allow):
         a coordinate moves no inertia (a point mass on a Spherical joint, a rod of length 0)
-  E745  a spring or damper whose ends coincide at the start (its direction is undefined)
-  E744  the generalized forces are not finite at the start
   E746  the energy is not finite at the start (overflow: a product of huge values)
-  E747  a constraint residual or Jacobian is not finite at the start
+  E745  a spring or damper whose ends coincide at the start (its direction is undefined)
+  E744  the accelerations are not finite at the start for another reason
 
 Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
 energy, the constraint Jacobian); the mass matrix of the recursive route (CRBA, O(N^2)) is
