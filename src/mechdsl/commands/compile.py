@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import sys
 
-from ..diagnostics import UsageError
-from ..fileio import write_atomic
+from ..fileio import check_writable, write_atomic
+from ._common import add_force_arg, target_line
 
 EMITS = ("ast", "source", "model", "eom")
 
@@ -19,6 +19,7 @@ def add_parser(sub):
     p.add_argument("--no-spans", action="store_true", help="omit source positions from --emit ast")
     p.add_argument("-o", "--output", help="write to this file instead of standard output")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    add_force_arg(p)
     return p
 
 
@@ -29,6 +30,8 @@ def run(args) -> int:
     from ..printer import to_source
     from ..semantic import analyze
 
+    if args.output:
+        check_writable(args.output, args.force)
     tree = parse_file(args.file)
     if args.emit == "ast":
         text = dump_ast(tree, spans=not args.no_spans)
@@ -37,6 +40,7 @@ def run(args) -> int:
     else:
         program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
+        print(f"mech: {target_line(args, m)}", file=sys.stderr)
         if args.emit == "model":
             text = dump_model(m.model)
         else:
@@ -44,9 +48,7 @@ def run(args) -> int:
 
             text = dump_eom(m.eom)
     if args.output:
-        if args.output == args.file:
-            raise UsageError("refusing to overwrite the input file")
-        write_atomic(args.output, text)
+        write_atomic(args.output, text, overwrite=args.force)
     else:
         sys.stdout.write(text)
     return 0

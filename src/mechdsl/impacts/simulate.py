@@ -78,7 +78,8 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     wall = _time.perf_counter()
     failure = None
     try:
-        run.run(t_start, t_end, qs, qds)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # non-finite values fail the run
+            run.run(t_start, t_end, qs, qds)
     except RunFailure as f:
         failure = R.Failure(time=float(f.time), cause=f.cause, detail=f.detail)
     except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as ex:
