@@ -13,6 +13,7 @@ In order (the first group that finds something ends the check):
   E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
   E747  a constraint residual or Jacobian that is not finite at the start (at the loop's joint)
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
+  E749  a loop whose positions double precision cannot resolve to the drift bound (lengths 1e16)
   E742  the mass matrix is not finite at the start
   E743  the mass matrix is singular at the start (on the motions the constraints allow):
         a coordinate moves no inertia (a point mass on a Spherical joint, a rod of length 0)
@@ -34,22 +35,24 @@ from .diagnostics import Diagnostic, MechError, Span
 
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
-COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
+COINCIDE_REL = 1e-12
+DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10        # spring/damper ends closer than this times the model's size coincide
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
                         "or give the body a Sphere/Body inertia")
 
 
-def check_start(eom, p=None, x0=None, t: float = 0.0) -> None:
+def check_start(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_BOUND) -> None:
     """Raise a MechError with the start problems of ``eom`` (see the module docstring)."""
-    problems = preflight(eom, p, x0, t)
+    problems = preflight(eom, p, x0, t, drift_bound)
     if problems:
         raise MechError(problems)
 
 
-def preflight(eom, p=None, x0=None, t: float = 0.0) -> list[Diagnostic]:
+def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:
     """The problems of ``eom`` at its start state with parameters ``p`` (vector or overrides)
-    and start overrides ``x0`` (as ``simulate`` takes them); empty when it can start."""
+    and start overrides ``x0`` (as ``simulate`` takes them); empty when it can start.
+    drift_bound: the constraint drift the DAE simulation will hold (E749)."""
     from .eom import parameter_vector
 
     pv = parameter_vector(eom, p)
@@ -70,11 +73,13 @@ def preflight(eom, p=None, x0=None, t: float = 0.0) -> list[Diagnostic]:
             return found
     if eom.n == 0:
         return []
+    if not isinstance(drift_bound, (int, float)) or not drift_bound > 0:
+        drift_bound = DRIFT_BOUND          # a bad option is refused by the simulator itself
     with np.errstate(all="ignore"):
-        return _numbers(eom, pv, x0, float(t))
+        return _numbers(eom, pv, x0, float(t), drift_bound)
 
 
-def _numbers(eom, pv, x0, t) -> list[Diagnostic]:
+def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
     q0, qd0 = eom.start(pv)
     bad = [i for i in range(2 * eom.n) if not math.isfinite(np.r_[q0, qd0][i])]
     if bad:
@@ -95,6 +100,9 @@ def _numbers(eom, pv, x0, t) -> list[Diagnostic]:
         except MechError as e:
             return e.diagnostics
         q, qd = init.q, init.qd
+        found = _loop_resolution(eom, q, t, pv, drift_bound)
+        if found:
+            return found
     else:
         from .simulate import start_vector
 
@@ -234,6 +242,34 @@ def _coincident_ends(eom, q, t, pv) -> list[Diagnostic]:
                                           f"'{f.b}'): its direction, and so its force, is undefined", f.span,
                                   "start the bodies apart (set a start value), or attach the ends to other points"))
     return out
+
+
+def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
+    """E749: loop closures compare positions; when double precision resolves the positions of
+    the loop's points only to more than the drift bound, no projection can hold them."""
+    model = eom.model
+    if model is None or eom.point_position is None:
+        return []
+    import casadi as ca
+
+    cut = [j for j in model.joints if j.closes_loop]
+    if not cut:
+        return []
+    fn = eom.cached("preflight_loop_points", lambda: ca.Function(
+        "loop_points", [eom.q, eom.t, eom.p],
+        [ca.vertcat(*[eom.point_position(n) for j in cut for n in (j.parent, j.child)])]))
+    xyz = np.abs(_value(fn, q, t, pv))
+    if not xyz.size or not np.all(np.isfinite(xyz)):
+        return []
+    k = int(np.argmax(xyz)) // 6
+    res = float(np.max(xyz)) * np.finfo(float).eps
+    if res <= drift_bound:
+        return []
+    j = cut[k]
+    return [Diagnostic("E749", f"the loop closed by joint '{j.name}' lies {np.max(xyz):.3g} from the origin: "
+                               f"double precision resolves its positions only to {res:.2g}, more than the "
+                               f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
+                       "choose units (or an origin) that keep the positions moderate, or raise atol")]
 
 
 def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:

@@ -44,7 +44,9 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     method = str(method or "auto").lower()
     from .preflight import check_start   # the start check: what `mech check` accepts can start here
 
-    check_start(eom, p=p, x0=x0, t=t_start if isinstance(t_start, (int, float)) else 0.0)
+    numbers = isinstance(t_start, (int, float)) and isinstance(atol, (int, float))   # else refused below
+    check_start(eom, p=p, x0=x0, t=t_start if numbers else 0.0,
+                drift_bound=opts.get("drift_bound") or (max(10 * atol, 1e-10) if numbers else 1e-9))
     if eom.model is not None and eom.model.contacts:      # unilateral contacts, fixations (docs/contacts.md)
         from .impacts import simulate_with_contacts
 

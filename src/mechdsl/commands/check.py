@@ -46,7 +46,10 @@ def run(args) -> int:
                 lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
-                check_start(m.eom, t=float(m.scene_settings.get("start_time", 0.0)))
+                settings = m.scene_settings
+                atol = settings.get("atol", 1e-10)
+                check_start(m.eom, t=float(settings.get("start_time", 0.0)),
+                            drift_bound=settings.get("drift_bound") or max(10 * float(atol), 1e-10))
                 for w in m.warnings:
                     print(format_diagnostics([w]), file=sys.stderr)
                 if kind == "scene":
