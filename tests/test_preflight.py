@@ -182,3 +182,16 @@ def test_singular_direction_matches_a_constructed_null_vector(seed):
     assert not any(eom.coords[i] in named for i in range(n) if i not in k)
     ev[0] = 1e-3
     assert _mass_problems(eom, scales[:, None] * (Q @ np.diag(ev) @ Q.T) * scales[None, :], None) == []
+
+
+@pytest.mark.parametrize("value", [1e-320, 1e308])
+def test_initialization_never_raises_a_numpy_error(value):
+    """dae.init called directly (as analyses do) on a slider-crank whose rod length makes the
+    start nan or inf: a located E747, not numpy's LinAlgError from lstsq."""
+    from mechdsl.dae.init import initialize
+    from mechdsl.eom import parameter_vector
+
+    eom = mechdsl.load(MODELS / "slider_crank.mech").eom
+    with pytest.raises(MechError) as e:
+        initialize(eom, p=parameter_vector(eom, {"l": value}))
+    assert e.value.first.code == "E747" and e.value.first.span.line > 0
