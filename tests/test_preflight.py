@@ -195,3 +195,20 @@ def test_initialization_never_raises_a_numpy_error(value):
     with pytest.raises(MechError) as e:
         initialize(eom, p=parameter_vector(eom, {"l": value}))
     assert e.value.first.code == "E747" and e.value.first.span.line > 0
+
+
+@pytest.mark.parametrize("text,code", [(SPHERICAL, "E730"), (COINCIDENT, "E745"), (NO_MASS, "E730")],
+                         ids=["spherical-point-mass", "coincident-spring", "no-mass"])
+def test_api_simulate_refuses_at_the_start(text, code):
+    with pytest.raises(MechError) as e:
+        mechdsl.loads(text).simulate(0.1)
+    assert e.value.first.code == code and e.value.first.span.line == 5
+
+
+def test_api_with_params_zero_mass_is_named():
+    """A pendulum bob of mass 0 (a parameter, so not caught while deriving): E743 names the joint."""
+    m = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum").with_params(m=0.0)
+    with pytest.raises(MechError) as e:
+        m.simulate(0.1)
+    d = e.value.first
+    assert d.code == "E743" and "theta (joint 'hinge') moves no inertia" in d.message and d.span.line > 0

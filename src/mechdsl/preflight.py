@@ -186,7 +186,8 @@ def _singular(eom, v, constrained: bool) -> Diagnostic:
     model = eom.model
     hint = ("every coordinate needs inertia beyond it: give the bodies it moves a mass and (for rotations) "
             "an extent, or prescribe its motion") if joint is not None else (
-        "its kinetic energy must be positive in its speed at the start (T = 1/2 m der(q)^2, not der(q)^4)")
+        "the kinetic energy must grow with every speed at the start: check the masses it uses (not 0) "
+        "and that it is quadratic in der(...) (1/2 m der(q)^2, not der(q)^4)")
     if joint is not None and model is not None:
         hint = point_rotation_hint(model, joint) or hint
     where = f" (joint '{joint.name}')" if joint is not None else ""
@@ -353,11 +354,10 @@ def _owner_joint(eom, coord: str):
     model = eom.model
     if model is None:
         return None
-    for c in model.coordinates:
-        if c.name == coord and c.owner:
-            for j in model.joints:
-                if j.name == c.owner:
-                    return j
+    owner = next((c.owner for c in model.coordinates if c.name == coord), None)
+    for j in model.joints:       # the joint that declared it, else one that it drives (phi = theta)
+        if j.name == owner or (owner is None and any(v.coordinate == coord for v in j.variables)):
+            return j
     return None
 
 
