@@ -212,3 +212,21 @@ def test_api_with_params_zero_mass_is_named():
         m.simulate(0.1)
     d = e.value.first
     assert d.code == "E743" and "theta (joint 'hinge') moves no inertia" in d.message and d.span.line > 0
+
+
+def test_negative_kinetic_energy_in_the_equation_layer():
+    """A negative mass inside `kinetic = ...` is no component value (E508 cannot see it); the
+    start check finds the negative eigenvalue of M and names the coordinate."""
+    text = """model Neg
+  parameter Real m = -1;
+  coordinate Real x(start = 0);
+  coordinate Real y(start = 0);
+equation
+  kinetic = 1/2*der(x)^2 + 1/2*m*der(y)^2;
+  potential = x^2 + y^2;
+end Neg;
+"""
+    found = preflight(mechdsl.loads(text).eom)
+    assert [d.code for d in found] == ["E743"] and "negative kinetic energy" in found[0].message
+    assert "y" in found[0].message.split(": ", 1)[1] and " x" not in found[0].message.split(": ", 1)[1]
+    assert preflight(mechdsl.loads(text).with_params(m=2.0).eom) == []

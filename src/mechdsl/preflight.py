@@ -15,8 +15,9 @@ In order (the first group that finds something ends the check):
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
   E749  a loop whose positions double precision cannot resolve to the drift bound (lengths 1e16)
   E742  the mass matrix is not finite at the start
-  E743  the mass matrix is singular at the start (on the motions the constraints allow):
-        a coordinate moves no inertia (a point mass on a Spherical joint, a rod of length 0)
+  E743  the mass matrix is singular (or not positive definite) at the start, on the motions
+        the constraints allow: a coordinate moves no inertia (a point mass on a Spherical
+        joint, a rod of length 0), or a negative mass in the equation layer
   E746  the energy is not finite at the start (overflow: a product of huge values)
   E745  a spring or damper whose ends coincide at the start (its direction is undefined)
   E744  the accelerations are not finite at the start for another reason
@@ -171,13 +172,17 @@ def _mass_problems(eom, M, G) -> list[Diagnostic]:
             return []
     A = Z.T @ (dinv[:, None] * Ms * dinv[None, :]) @ Z
     ev, vecs = np.linalg.eigh(0.5 * (A + A.T))
-    if ev[0] <= SINGULAR_RCOND * max(float(ev[-1]), 1e-300):
+    top = max(float(np.max(np.abs(ev))), 1e-300)
+    if ev[0] < -SINGULAR_RCOND * top:
+        return [_singular(eom, Z @ vecs[:, 0], Z.shape[1] < eom.n, negative=True)]
+    if ev[0] <= SINGULAR_RCOND * top:
         return [_singular(eom, Z @ vecs[:, 0], Z.shape[1] < eom.n)]
     return []
 
 
-def _singular(eom, v, constrained: bool) -> Diagnostic:
-    """E743 for the null direction v (in coordinates): named by its coordinates and joints."""
+def _singular(eom, v, constrained: bool, negative: bool = False) -> Diagnostic:
+    """E743 for the null direction v (or one of negative kinetic energy), named by its
+    coordinates and joints."""
     v = np.abs(np.asarray(v, float))
     top = float(np.max(v)) if v.size else 0.0
     idx = [i for i in range(eom.n) if v[i] > 1e-6 * top] or list(range(eom.n))
@@ -192,6 +197,12 @@ def _singular(eom, v, constrained: bool) -> Diagnostic:
         hint = point_rotation_hint(model, joint) or hint
     where = f" (joint '{joint.name}')" if joint is not None else ""
     allowed = " on the motions the constraints allow" if constrained else ""
+    if negative:
+        return Diagnostic("E743", f"the mass matrix is not positive definite at the start{allowed}: a motion of "
+                                  f"{', '.join(coords)}{where} has a negative kinetic energy",
+                          joint.span if joint is not None else _coord_span(eom, coords[0]),
+                          "masses and moments of inertia are positive: check the signs of the masses in the "
+                          "kinetic energy and of the parameters they use")
     return Diagnostic("E743", f"the mass matrix is singular at the start{allowed}: "
                               f"{', '.join(coords)}{where} move{'s' if len(coords) == 1 else ''} no inertia",
                       joint.span if joint is not None else _coord_span(eom, coords[0]), hint)
