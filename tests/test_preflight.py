@@ -230,3 +230,14 @@ end Neg;
     assert [d.code for d in found] == ["E743"] and "negative kinetic energy" in found[0].message
     assert "y" in found[0].message.split(": ", 1)[1] and " x" not in found[0].message.split(": ", 1)[1]
     assert preflight(mechdsl.loads(text).with_params(m=2.0).eom) == []
+
+
+def test_loop_too_large_for_the_drift_bound(tmp_path, capsys):
+    """nfourbar with l = tan(pi/2) = 1.6e16 m: positions resolved to ~4 m cannot be held to 1e-9
+    (the projection never converged: the run did not return)."""
+    rc, err = _cli(["check", str(MODELS / "nfourbar.mech"), "--model", "NFourBar"], capsys)
+    assert rc == 0
+    m = mechdsl.load(MODELS / "nfourbar.mech", model="NFourBar")
+    found = preflight(m.eom, {"l": 1.633123935319537e16})
+    assert [d.code for d in found] == ["E749"] and found[0].span.line == 29
+    assert preflight(m.eom, {"l": 1e3}) == []            # a large but resolvable mechanism is fine
