@@ -241,3 +241,18 @@ def test_loop_too_large_for_the_drift_bound(tmp_path, capsys):
     found = preflight(m.eom, {"l": 1.633123935319537e16})
     assert [d.code for d in found] == ["E749"] and found[0].span.line == 29
     assert preflight(m.eom, {"l": 1e3}) == []            # a large but resolvable mechanism is fine
+
+
+def test_start_overrides_replace_the_model_values():
+    """x0 given by the caller replaces a start value the model cannot compute (asin of 1e319):
+    the run starts; without the override the start check names the coordinate."""
+    from mechdsl.simulate import simulate
+
+    eom = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum").eom
+    ok = preflight(eom, None, {"theta": 0.3})
+    assert ok == []
+    with_bad = eom.replace(q0=eom.q0 * float("nan"))
+    assert [d.code for d in preflight(with_bad)] == ["E741"]
+    assert preflight(with_bad, None, {"theta": 0.3, "der(theta)": 0.0}) == []
+    r = simulate(with_bad, 0.05, x0={"theta": 0.3, "der(theta)": 0.0}, points=3)
+    assert r.failure is None and r.q[0, 0] == pytest.approx(0.3) and np.all(np.isfinite(r.q))

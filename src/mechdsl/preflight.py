@@ -36,8 +36,8 @@ from .diagnostics import Diagnostic, MechError, Span
 
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
-COINCIDE_REL = 1e-12
-DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10        # spring/damper ends closer than this times the model's size coincide
+COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
+DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
                         "or give the body a Sphere/Body inertia")
@@ -82,10 +82,12 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
 
 def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
     q0, qd0 = eom.start(pv)
-    bad = [i for i in range(2 * eom.n) if not math.isfinite(np.r_[q0, qd0][i])]
+    x_model = np.r_[q0, qd0]
+    given = _overridden(eom, x0)            # values x0 replaces are the caller's (UsageError if bad)
+    bad = [i for i in range(2 * eom.n) if i not in given and not math.isfinite(x_model[i])]
     if bad:
-        return [_start_problem(eom, i, np.r_[q0, qd0][i]) for i in bad]
-    found = _huge_angles(eom, q0)
+        return [_start_problem(eom, i, x_model[i]) for i in bad]
+    found = _huge_angles(eom, q0, given)
     if found:
         return found
     if eom.m:
@@ -329,7 +331,21 @@ def _value(f, *args) -> np.ndarray:
     return np.array(out, float).ravel()
 
 
-def _huge_angles(eom, q0) -> list[Diagnostic]:
+def _overridden(eom, x0) -> set[int]:
+    """Indices of [q; qd] that the start overrides x0 replace."""
+    if x0 is None:
+        return set()
+    if not isinstance(x0, dict):
+        return set(range(2 * eom.n))
+    out = set()
+    for k in x0:
+        name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+        if name in eom.coords:
+            out.add(eom.coords.index(name) + (eom.n if speed else 0))
+    return out
+
+
+def _huge_angles(eom, q0, given=frozenset()) -> list[Diagnostic]:
     """An angle so large that double precision resolves it to worse than ANGLE_RESOLUTION:
     sin and cos of it are noise, and constraints on it cannot be held."""
     if eom.model is None:
@@ -337,7 +353,7 @@ def _huge_angles(eom, q0) -> list[Diagnostic]:
     out = []
     for i, c in enumerate(eom.model.coordinates[:eom.n]):
         res = abs(float(q0[i])) * np.finfo(float).eps
-        if c.unit == "rad" and res > ANGLE_RESOLUTION:
+        if c.unit == "rad" and res > ANGLE_RESOLUTION and i not in given:
             out.append(Diagnostic("E748", f"the start angle of {c.name} ({q0[i]:.6g} rad) is too large to compute "
                                           f"with: double precision resolves it only to {res:.2g} rad",
                                   _coord_span(eom, c.name),
