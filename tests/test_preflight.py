@@ -256,3 +256,12 @@ def test_start_overrides_replace_the_model_values():
     assert preflight(with_bad, None, {"theta": 0.3, "der(theta)": 0.0}) == []
     r = simulate(with_bad, 0.05, x0={"theta": 0.3, "der(theta)": 0.0}, points=3)
     assert r.failure is None and r.q[0, 0] == pytest.approx(0.3) and np.all(np.isfinite(r.q))
+
+
+@pytest.mark.parametrize("formula", ["0/(r - r)", "0*(1/(r - r))", "(r - r)*(1/(r - r))"])
+def test_zero_times_undefined_is_not_folded_to_zero(formula):
+    """The constant folder turned 0/x and 0*x into 0 for any x: 0/(r - r) was a silent 0."""
+    text = ZERO_OVER_ZERO.replace("0/(r - r)", formula)
+    with pytest.raises(MechError) as e:
+        mechdsl.loads(text)
+    assert [d.code for d in e.value.diagnostics] == ["E303"] and e.value.first.span.line == 3
