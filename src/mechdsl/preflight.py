@@ -64,7 +64,9 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
                            _param_span(model, eom.params[i]),
                            "check its formula for overflow and division by zero, or the value given "
                            "with --set / with_params") for i in bad]
-    if model is not None:
+    own = None if model is None else np.array([q.value for q in model.real_parameters], float)
+    if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
+        # the model's own values were judged when it was analyzed (or by with_params)
         from .semantic.physical import parameter_env, value_problems
 
         env = parameter_env(model)
@@ -167,7 +169,7 @@ def _mass_problems(eom, M, G) -> list[Diagnostic]:
     Z = np.eye(eom.n)
     if G is not None and G.size:
         Gs = G * dinv[None, :]
-        _, sv, vt = np.linalg.svd(Gs)
+        _, sv, vt = np.linalg.svd(Gs, full_matrices=Gs.shape[0] < Gs.shape[1])   # V in full, U not
         rank = int(np.sum(sv > 1e-10 * max(float(sv[0]), 1e-300))) if sv.size else 0
         Z = vt[rank:].T                      # the (scaled) speeds the constraints allow
         if Z.shape[1] == 0:
