@@ -120,14 +120,14 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
     from .codegen import casadi_functions
 
     x = np.r_[q, qd]
-    fs = casadi_functions(eom, names=("ode", "energy", "mass_matrix", "bias"))
+    fs = casadi_functions(eom, names=("energy", "mass_matrix", "bias"))
     if eom.m:
         M = _mass(fs, t, x, pv, eom.n)
         rhs = _value(fs["bias"], t, x, pv)
         G = _jacobian(eom, q, t, pv)
     else:
         M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
-        rhs = _value(fs["ode"], t, x, pv)
+        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, pv)   # simulate's own
         G = None
     ok_rhs = bool(np.all(np.isfinite(rhs)))
     if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix
