@@ -265,3 +265,31 @@ def test_zero_times_undefined_is_not_folded_to_zero(formula):
     with pytest.raises(MechError) as e:
         mechdsl.loads(text)
     assert [d.code for d in e.value.diagnostics] == ["E303"] and e.value.first.span.line == 3
+
+
+def test_constraint_not_finite_at_the_start_is_named():
+    text = """model C
+  coordinate Real x(start = 1);
+  coordinate Real y(start = 0, fixed = false);
+equation
+  kinetic = 1/2*der(x)^2 + 1/2*der(y)^2;
+  potential = y;
+  y = sqrt(x - 2) "guide";
+end C;
+"""
+    found = preflight(mechdsl.loads(text).eom)
+    assert [d.code for d in found] == ["E747"] and "guide" in found[0].message and found[0].span.line == 7
+
+
+def test_mass_matrix_not_finite_at_the_start_is_named():
+    text = """model K
+  coordinate Real x(start = 1);
+  coordinate Real y(start = 0);
+equation
+  kinetic = 1/2*der(x)^2/(x - 1) + 1/2*der(y)^2;
+  potential = y;
+end K;
+"""
+    found = preflight(mechdsl.loads(text).eom)
+    assert [d.code for d in found] == ["E742"] and "equation of x" in found[0].message
+    assert preflight(mechdsl.loads(text.replace("start = 1", "start = 2")).eom) == []
