@@ -293,3 +293,24 @@ end K;
     found = preflight(mechdsl.loads(text).eom)
     assert [d.code for d in found] == ["E742"] and "equation of x" in found[0].message
     assert preflight(mechdsl.loads(text.replace("start = 1", "start = 2")).eom) == []
+
+
+def test_parametric_axis_of_zero_length_is_named_without_warnings():
+    """axis = {0, 0, a} is stored normalized (a / sqrt(a^2)): a = 0 was nan everywhere; now E512
+    for the joint and the rod, and no numpy RuntimeWarning on the way."""
+    import warnings
+
+    text = """model Ax
+  parameter Real a = 1;
+  Gravity gravity(g = {0, -9.81, 0});
+  Rod rod(m = 1, L = 1, axis = {a, 0, 0});
+  Revolute j(parent = world, child = rod.a, axis = {0, 0, a});
+end Ax;
+"""
+    m = mechdsl.loads(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(MechError) as e:
+            m.with_params(a=0.0)
+    assert [(d.code, d.span.line) for d in e.value.diagnostics] == [("E512", 4), ("E512", 5)]
+    m.with_params(a=-2.0)                           # any nonzero direction is fine

@@ -36,7 +36,8 @@ def _number(e: ir.Expr, env: dict[str, float]) -> float | None:
     if X.depends_on_state(e) or X.depends_on_time(e):
         return None
     try:
-        v = X.evaluate(e, env)
+        with np.errstate(all="ignore"):
+            v = X.evaluate(e, env)
     except Exception:  # noqa: BLE001 - an expression we cannot judge here is judged by the numerics
         return None
     return v if math.isfinite(v) else None
@@ -71,6 +72,13 @@ def _raw(e: ir.Expr, env: dict[str, float]) -> float | None:
         return None
 
 
+def _numerator(e: ir.Expr) -> ir.Expr:
+    """c for a normalized component c / sqrt(...) (components.normalized), else e itself."""
+    if isinstance(e, ir.Op) and e.op == "div" and isinstance(e.args[1], ir.Op) and e.args[1].op == "sqrt":
+        return e.args[0]
+    return e
+
+
 _LENGTHS = {"rod": ("length L",), "disk": ("radius R",), "cylinder": ("radius R", "length L"),
             "sphere": ("radius R",), "box": ("size[1]", "size[2]", "size[3]")}
 
@@ -88,14 +96,19 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
                               "and division by zero"))
         return True
 
-    def zero_direction(what: str, owner: str, vec, span) -> None:
-        vals = [_raw(c, env) for c in vec]
-        if any(v is None for v in vals) or not_finite(what, owner, vals, span):
-            return
+    def zero_direction(what: str, owner: str, vec, span) -> bool:
+        # a parametric direction is stored normalized, c / sqrt(c . c): judge the numerators c
+        vals = [_raw(_numerator(c), env) for c in vec]
+        if any(v is None for v in vals):
+            return False
+        if not_finite(what, owner, vals, span):
+            return True
         if all(v == 0 for v in vals):
             out.append(Diagnostic("E512", f"{what} of {owner} is the zero vector", span,
                                   "a direction needs a nonzero component, e.g. {0, 1, 0}; check the parameters "
                                   "it is built from"))
+            return True
+        return False
 
     for b in model.bodies:
         if b.kind not in ("point", "rigid"):
@@ -112,8 +125,8 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
                     out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", b.span,
                                           "lengths and radii are >= 0; reverse the body's axis instead of "
                                           "the sign of its length"))
-            if b.shape in ("rod", "disk", "cylinder"):
-                zero_direction("the axis", owner, b.axis, b.span)
+            if b.shape in ("rod", "disk", "cylinder") and zero_direction("the axis", owner, b.axis, b.span):
+                continue                       # (its inertia, built from the axis, says nothing more)
             not_finite("the inertia tensor", owner, [_raw(e, env) for row in b.inertia for e in row], b.span)
     for j in model.joints:
         if j.kind in ("revolute", "prismatic", "cylindrical", "planar"):
