@@ -102,7 +102,8 @@ def _edited(tmp_path, model: str, old: str, new: str):
 
 
 @pytest.mark.parametrize("model,old,new,code,line", [
-    ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = 1e-320', "E741", 22),
+    ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = 1e-320', "E740", 11),
+    ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = 0.05', "E741", 22),
     ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = -0.5', "E511", 18),
     ("slider_crank.mech", 'l(unit = "m") = 0.3', 'l(unit = "m") = 1e308', "E510", 18),
     ("nfourbar.mech", "phi(start = zeros(N + 1)", "phi(start = fill(tan(pi/2), N + 1)", "E748", 27),
@@ -110,7 +111,7 @@ def _edited(tmp_path, model: str, old: str, new: str):
     ("bouncing_ball.mech", "normal = {0, 1, 0}", "normal = {0, 0, 0}", "E512", 30),
     ("falling_rod.mech", 'L(unit = "m") = 1 ', 'L(unit = "m") = 0 ', "E743", 26),
     ("falling_rod.mech", 'm(unit = "kg") = 1 ', 'm(unit = "kg") = 1e308 ', "E746", 16),
-], ids=["slider-tiny-length", "slider-negative-length", "slider-huge-length", "nfourbar-tan-pi-2",
+], ids=["slider-tiny-length", "slider-rod-shorter-than-crank", "slider-negative-length", "slider-huge-length", "nfourbar-tan-pi-2",
         "sphere-huge-radius", "ball-zero-normal", "rod-zero-length", "rod-huge-mass"])
 def test_fuzzer_values_on_shipped_models(tmp_path, capsys, model, old, new, code, line):
     """Each was a traceback (exit 3), a hang, or nan/inf results with exit 0."""
@@ -149,6 +150,15 @@ def test_non_finite_parameter_vector_is_named():
     found = preflight(m.eom, p)
     assert [d.code for d in found] == ["E740"] and m.eom.params[0] in found[0].message
     assert found[0].span.line > 0
+
+
+@pytest.mark.parametrize("value", [1e-320, -5e-324])
+def test_subnormal_parameter_is_refused(value):
+    """falling_rod with m = 1e-320 ran for minutes on subnormal arithmetic (and m g had 2 digits)."""
+    m = mechdsl.load(MODELS / "falling_rod.mech", model="FallingRod")
+    found = preflight(m.eom, {"m": value})
+    assert [d.code for d in found] == ["E740"] and "'m'" in found[0].message and "too small" in found[0].message
+    assert preflight(m.eom, {"m": 1e-300}) == []        # small, but a normal number
 
 
 def test_shipped_models_start_clean():

@@ -7,7 +7,7 @@ too: what ``check`` accepts, ``simulate`` can start (docs/simulate.md, "The star
 
 In order (the first group that finds something ends the check):
 
-  E740  a parameter value that is not finite              (at the parameter)
+  E740  a parameter value that is not finite, or subnormal (below 2.2e-308)  (at the parameter)
   E508-E512  the component values (semantic/physical.py)  (at the component)
   E741  a start value that is not finite                  (at the coordinate's joint)
   E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
@@ -58,12 +58,16 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
 
     pv = parameter_vector(eom, p)
     model = eom.model
-    bad = [i for i in range(pv.size) if not math.isfinite(pv[i])]
+    tiny = np.finfo(float).tiny
+    bad = [i for i in range(pv.size) if not math.isfinite(pv[i]) or 0.0 < abs(pv[i]) < tiny]
     if bad:
-        return [Diagnostic("E740", f"the value of parameter '{eom.params[i]}' is not finite ({pv[i]:g})",
+        return [Diagnostic("E740", f"the value of parameter '{eom.params[i]}' is "
+                           + (f"not finite ({pv[i]:g})" if not math.isfinite(pv[i]) else
+                              f"too small to compute with ({pv[i]:g}: below {tiny:.3g}, double precision "
+                              "keeps only a few of its digits)"),
                            _param_span(model, eom.params[i]),
                            "check its formula for overflow and division by zero, or the value given "
-                           "with --set / with_params") for i in bad]
+                           "with --set / with_params; use 0 for nothing, or other units") for i in bad]
     own = None if model is None else np.array([q.value for q in model.real_parameters], float)
     if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
         # the model's own values were judged when it was analyzed (or by with_params)
