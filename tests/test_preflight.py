@@ -324,3 +324,14 @@ end Ax;
             m.with_params(a=0.0)
     assert [(d.code, d.span.line) for d in e.value.diagnostics] == [("E512", 4), ("E512", 5)]
     m.with_params(a=-2.0)                           # any nonzero direction is fine
+
+
+def test_crank_of_length_zero_in_a_loop(tmp_path, capsys):
+    """four_bar with crank length a = 0: on the one motion the loop allows, the crank and the
+    coupler turn against each other moving no inertia (M is singular on null(G), a 1x1 matrix
+    that was compared with itself); the run failed inside the integrator at t = 0."""
+    rc, err = _cli(["simulate", str(MODELS / "four_bar.mech"), "--set", "a=0", "--t-end", "0.2",
+                    "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
+    assert rc == 1 and "error[E743]" in err and "on the motions the constraints allow" in err
+    assert "crank_pivot.phi" in err and "elbow.phi" in err
+    assert preflight(mechdsl.load(MODELS / "four_bar.mech").eom, {"a": 0.05}) == []

@@ -180,7 +180,7 @@ def _mass_problems(eom, M, G) -> list[Diagnostic]:
             return []
     A = Z.T @ (dinv[:, None] * Ms * dinv[None, :]) @ Z
     ev, vecs = np.linalg.eigh(0.5 * (A + A.T))
-    top = max(float(np.max(np.abs(ev))), 1e-300)
+    top = max(float(np.max(np.abs(ev))), 1.0)    # the scaled matrix has a unit diagonal: its scale is 1
     if ev[0] < -SINGULAR_RCOND * top:
         return [_singular(eom, Z @ vecs[:, 0], Z.shape[1] < eom.n, negative=True)]
     if ev[0] <= SINGULAR_RCOND * top:
