@@ -76,8 +76,31 @@ def const(v: float) -> Const:
     return Const(float(v))
 
 
-def _finite_const(e: Expr) -> bool:
-    return isinstance(e, Const) and math.isfinite(e.value)
+_TOTAL_OPS = frozenset({"add", "sub", "mul", "neg", "sin", "cos", "abs", "sign", "min", "max", "floor", "ceil"})
+
+
+def _always_finite(e: Expr) -> bool:
+    """True when e is finite wherever its leaves are (parameters, coordinates and time are):
+    no division except by a nonzero constant, no function with poles or a restricted domain.
+    Only such an e may vanish from 0*e; 0*(1/(r - r)) must stay an error."""
+    if isinstance(e, Const):
+        return math.isfinite(e.value)
+    for n in walk(e):
+        if isinstance(n, Const):
+            if not math.isfinite(n.value):
+                return False
+        elif isinstance(n, Op):
+            if n.op == "div":
+                d = n.args[1]
+                if not (isinstance(d, Const) and d.value != 0.0 and math.isfinite(d.value)):
+                    return False
+            elif n.op == "pow":
+                k = n.args[1]
+                if not (isinstance(k, Const) and k.value >= 0 and k.value == int(k.value)):
+                    return False
+            elif n.op not in _TOTAL_OPS:
+                return False
+    return True
 
 
 def is_const(e: Expr, v: float | None = None) -> bool:
@@ -106,7 +129,7 @@ def sub(a: Expr, b: Expr) -> Expr:
 
 def mul(a: Expr, b: Expr) -> Expr:
     # 0*x folds to 0 only for a finite constant x: x = 1/(r - r) must stay an error, not vanish
-    if (is_const(a, 0.0) and _finite_const(b)) or (is_const(b, 0.0) and _finite_const(a)):
+    if (is_const(a, 0.0) and _always_finite(b)) or (is_const(b, 0.0) and _always_finite(a)):
         return Const(0.0)
     if is_const(a, 1.0):
         return b
