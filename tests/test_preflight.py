@@ -337,3 +337,12 @@ def test_crank_of_length_zero_in_a_loop(tmp_path, capsys):
     assert rc == 1 and "error[E743]" in err and "on the motions the constraints allow" in err
     assert "crank_pivot.phi" in err and "elbow.phi" in err
     assert preflight(mechdsl.load(MODELS / "four_bar.mech").eom, {"a": 0.05}) == []
+
+
+@pytest.mark.parametrize("setting", ["a=0", "e=1"])
+def test_dependent_parameter_that_cannot_be_evaluated(tmp_path, capsys, setting):
+    """kepler's vp = sqrt(mu (1 + e) / (a (1 - e))): `--set a=0` was a ZeroDivisionError (exit 3)."""
+    rc, err = _cli(["simulate", str(MODELS / "kepler.mech"), "--set", setting, "--t-end", "0.1",
+                    "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
+    assert rc == 1 and "error[E303]" in err and "parameter 'vp'" in err
+    _located(err, "E303", MODELS / "kepler.mech", 26)
