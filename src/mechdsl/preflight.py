@@ -21,7 +21,6 @@ In order (the first group that finds something ends the check):
   E746  the energy is not finite at the start (overflow: a product of huge values)
   E745  a spring or damper whose ends coincide at the start (its direction is undefined)
   E744  the accelerations are not finite at the start for another reason
-  E755  an output that is not finite at the start             (at the output)
   E756  a contact gap that is not finite at the start          (at the contact)
 
 Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
@@ -150,32 +149,7 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
                            "or choose units that keep the numbers moderate")]
     if not ok_rhs:
         return _force_problems(eom, q, t, pv, rhs)
-    return _output_problems(eom, q, qd, t, pv)
-
-
-def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
-    """E755: an output that is not finite at the start would be a column of inf or nan in
-    the results of a run that otherwise succeeds (kepler's distance with a = 1e308)."""
-    import casadi as ca
-
-    def build():
-        names = [k for k, v in eom.outputs.items()
-                 if eom.lam is None or not ca.depends_on(ca.SX(v), eom.lam)]   # reactions need the run
-        exprs = [ca.SX(eom.outputs[k]) for k in names]
-        return names, ca.Function("start_outputs", [eom.q, eom.qd, eom.t, eom.p], [ca.vertcat(*exprs)] if exprs
-                                  else [ca.SX(0, 1)])
-
-    names, fn = eom.cached("preflight_outputs", build)
-    if names:
-        vals = _value(fn, q, qd, t, pv)
-        spans = {o.name: o.span for o in eom.model.outputs} if eom.model is not None else {}
-        for k, v in zip(names, vals):
-            if not math.isfinite(v):
-                return [Diagnostic("E755", f"output '{k}' is not finite at the start ({v:g})",
-                                   spans.get(k, _model_span(eom)),
-                                   "its formula overflows or divides by zero at the start state with these "
-                                   "parameter values: check them, or write the output so that it stays finite")]
-    return _gap_problems(eom, q, t, pv)
+    return _gap_problems(eom, q, t, pv)      # (an output that is not finite is a warning of the run)
 
 
 def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
