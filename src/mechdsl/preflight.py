@@ -11,7 +11,7 @@ In order (the first group that finds something ends the check):
   E508-E512  the component values (semantic/physical.py)  (at the component)
   E741  a start value that is not finite                  (at the coordinate's joint)
   E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
-  E747  a constraint residual or Jacobian that is not finite at the start (at the loop's joint)
+  E826  a constraint residual or gradient that is not finite at the start (dae/init.py)
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
   E749  a loop whose positions double precision cannot resolve to the drift bound (lengths 1e16)
   E742  the mass matrix is not finite at the start
@@ -319,21 +319,16 @@ def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
 
 
 def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
-    from .dae.init import _span, constraint_labels
+    """E826 (dae/init.py): a constraint residual or gradient that is inf/nan at the start."""
+    from .dae.init import check_defined
 
     if not np.all(np.isfinite(q)):
         return []
-    g = _value(_constraint_fns(eom)[0], q, t, pv)
-    G = _jacobian(eom, q, t, pv)
-    bad = [i for i in range(eom.m) if not (math.isfinite(g[i]) and np.all(np.isfinite(G[i])))]
-    if not bad:
-        return []
-    labels = constraint_labels(eom)
-    return [Diagnostic("E747", "the constraint" + ("s " if len(bad) > 1 else " ")
-                       + ", ".join(labels[i] for i in bad) + " cannot be evaluated at the start (not finite)",
-                       _span(eom, bad[0]),
-                       "check the lengths and start values of the bodies in the loop for zero, huge "
-                       "or undefined values")]
+    try:
+        check_defined(eom, _value(_constraint_fns(eom)[0], q, t, pv), _jacobian(eom, q, t, pv))
+    except MechError as e:
+        return e.diagnostics
+    return []
 
 
 def _constraint_fns(eom):
