@@ -2,8 +2,9 @@
 
 ``preflight(eom, p, x0, t)`` returns the problems (Diagnostics, empty when the model can
 start); ``check_start`` raises them.  ``mech check`` runs it on every model and scene, and
-``simulate.simulate`` at its start, so that `--set`, `with_params` and `x0` values are judged
-too: what ``check`` accepts, ``simulate`` can start (docs/simulate.md, "The start check").
+``simulation.simulate`` (the entry of every run) before it formulates, so that `--set`,
+`with_params`, `p` and `x0` values are judged too: what ``check`` accepts, ``simulate`` can
+start (docs/simulate.md, "The start check").
 
 In order (the first group that finds something ends the check):
 
