@@ -164,13 +164,13 @@ class Model:
             if p.name in values:
                 p = dataclasses.replace(p, value=values[p.name], binding=None)
             elif p.binding is not None and not p.integer:
-                p = dataclasses.replace(p, value=evaluate(p.binding, env))
+                p = dataclasses.replace(p, value=_dependent_value(p, env, evaluate))
             env[p.name] = p.value
             params.append(p)
         model = dataclasses.replace(self.model, parameters=tuple(params))
-        from .semantic.physical import mass_property_problems
+        from .semantic.physical import value_problems
 
-        problems = mass_property_problems(model)
+        problems = value_problems(model)
         if problems:
             raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None
@@ -262,6 +262,26 @@ class Model:
 
 
 # ---------------------------------------------------------------------------- helpers
+
+
+def _dependent_value(p: ir.Parameter, env: dict[str, float], evaluate) -> float:
+    """A dependent parameter re-evaluated with new values: a value it cannot have (1/0,
+    sqrt(-1), overflow) is E303 at the parameter, as when the file itself is analyzed."""
+    problem = None
+    try:
+        with np.errstate(all="ignore"):
+            value = float(evaluate(p.binding, env))
+        if not math.isfinite(value):
+            problem = f"evaluates to {value}"
+    except (ValueError, ZeroDivisionError, OverflowError) as ex:
+        problem = f"cannot be evaluated: {ex}"
+    except TypeError:  # a complex number: a negative base to a fractional power
+        problem = "has no real value"
+    if problem is None:
+        return value
+    raise MechError(Diagnostic("E303", f"parameter '{p.name}' {problem} with the values given", p.span,
+                               "it depends on the parameters changed (--set / with_params): check their "
+                               "values against its formula (division by zero, a function's domain)"))
 
 
 def _number(name: str, v) -> float:
