@@ -6,6 +6,24 @@ from pathlib import Path
 from .fileio import atomic_target, check_figure, commit
 
 MAX_LEGEND = 12
+_BASE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+         "#bcbd22", "#17becf")          # matplotlib's tab10
+
+
+def colours(n: int) -> list[str]:
+    """n distinct colours: tab10 first, then hues spaced by the golden angle at alternating
+    lightness, so no two curves of one plot share a colour however many there are."""
+    import colorsys
+
+    out = list(_BASE[:n])
+    k = 0
+    while len(out) < n:
+        h = (0.05 + k * 0.6180339887498949) % 1.0
+        light, sat = (0.35, 0.85) if k % 2 == 0 else (0.6, 0.65)
+        r, g, b = colorsys.hls_to_rgb(h, light, sat)
+        out.append(f"#{round(255 * r):02x}{round(255 * g):02x}{round(255 * b):02x}")
+        k += 1
+    return out
 
 
 def plot_result(result, path, *, overwrite: bool = False, title: str | None = None) -> Path:
