@@ -223,7 +223,9 @@ class Model:
         for key in keys:
             if key in s and key not in kw:
                 kw["t_start" if key == "start_time" else key] = s[key]
-        return simulate(self.eom, float(t_end), **opts, **kw)
+        r = simulate(self.eom, float(t_end), **opts, **kw)
+        r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
+        return r
 
     def equilibria(self, guesses=None, **kw):
         from .analysis.equilibrium import equilibria
@@ -239,6 +241,20 @@ class Model:
         from .analysis.integrals import first_integrals
 
         return first_integrals(self.eom)
+
+    def draw(self, t: float | None = None, q=None, **kw):
+        """The mechanism as a matplotlib Figure: at coordinates q, else at time t of a run from the
+        start values, else at the start (docs/animate.md)."""
+        from .display import draw_model
+
+        return draw_model(self, t, q, **kw)
+
+    def equations(self, form: str = "lagrange"):
+        """The equations of motion as sympy equations: form "lagrange" (M q'' = bias, one per
+        coordinate) or "hamilton" (q' = dH/dp, p' = -dH/dq).  Displays typeset in notebooks."""
+        from .display import equations
+
+        return equations(self, form)
 
     def summary(self, derive: bool = False) -> str:
         """Counts and formulation; derive=True asks the mechanics which route it takes."""

@@ -35,7 +35,8 @@ class BarStage:
         ax.axvline(0.0, color=INK, lw=0.8)
         ax.grid(True, axis="x", alpha=0.3)
         ax.set_xlabel("coordinate value (each in its unit)")
-        self.bars = ax.barh(range(n), np.zeros(n), color=colours(n), animated=True)
+        self.swatch = colours(n) + [INK, "#ffffff"]
+        self.bars = ax.barh(range(n), np.zeros(n), color=self.swatch[:n], animated=True)
         fig.text(0.5, 0.96, (title + ": " if title else "") + "no bodies to draw; coordinates shown as bars",
                  ha="center", va="top", fontsize=10, color="#555555")
         self.clock = fig.text(0.02, 0.90, "", fontsize=11, family="monospace", color=INK, animated=True)

@@ -18,6 +18,8 @@ VIEWS = ("auto", "xy", "xz", "yz", "3d")
 _PLANES = {"xy": ((1, 0, 0), (0, 1, 0)), "xz": ((1, 0, 0), (0, 0, 1)), "yz": ((0, 1, 0), (0, 0, 1))}
 AZIMUTH, ELEVATION = math.radians(35.0), math.radians(20.0)
 INK = "#222222"
+FLASH = "#ff7f0e"                 # an impact
+TRACE = "#d62728"                 # the path of a traced point
 
 
 def projection(view: str) -> np.ndarray:
@@ -78,6 +80,7 @@ class Stage:
         bodies = [it for it in geometry.items if it.kind in ("rod", "solid", "sphere", "point", "link")
                   and not it.extra.get("hidden")]
         palette = dict(zip([it.name for it in bodies], colours(len(bodies))))
+        self.swatch = list(palette.values()) + [INK, FLASH, TRACE, "#555555", "#ffffff"]
         for it in geometry.items:
             getattr(self, "_add_" + it.kind)(it, palette.get(it.name, INK))
         self._impacts(events)
@@ -89,6 +92,8 @@ class Stage:
         ax.text(0.98, 0.97, f"view {self.view}", transform=ax.transAxes, va="top", ha="right", fontsize=8,
                 color="#777777")
         self._scale_bar()
+        if self.view == "3d":
+            self._triad(P)
         self._background = None
 
     # ------------------------------------------------------------------ frames
@@ -155,6 +160,16 @@ class Stage:
         self.ax.plot([xa, xa + length], [ya, ya], color=INK, lw=2, solid_capstyle="butt")
         self.ax.text(xa + length / 2, ya + 0.01 * (y1 - y0), f"{length:g} m", ha="center", va="bottom",
                      fontsize=8, color=INK)
+
+    def _triad(self, P) -> None:
+        """World axes x, y, z as seen in the 3d view (bottom left)."""
+        x0, y0 = 0.09, 0.11
+        for e, name in zip(np.eye(3), "xyz"):
+            d = P @ e * 0.06
+            self.ax.annotate("", xy=(x0 + d[0], y0 + d[1] * 1.2), xytext=(x0, y0), xycoords="axes fraction",
+                             arrowprops={"arrowstyle": "->", "color": "#555555", "lw": 1.2})
+            self.ax.text(x0 + d[0] * 1.35, y0 + d[1] * 1.2 * 1.35, name, transform=self.ax.transAxes,
+                         ha="center", va="center", fontsize=8, color="#555555")
 
     def _line(self, **kw):
         (ln,) = self.ax.plot([], [], animated=True, **kw)
@@ -265,7 +280,7 @@ class Stage:
         self.updaters.append(lambda k: c.set_center((pts[k, 0], pts[k, 1])))
 
     def _add_trace(self, it, colour):
-        ln = self._line(color="#d62728", lw=1, alpha=0.8, zorder=2)
+        ln = self._line(color=TRACE, lw=1, zorder=2)
         pts = self.S[:, :, it.cols.start]
         self.updaters.append(lambda k: ln.set_data(pts[: k + 1, 0], pts[: k + 1, 1]))
 
@@ -283,9 +298,9 @@ class Stage:
             return
         cols = [c for it in balls for c in range(it.cols.start, it.cols.stop)]
         pts = self.S[:, :, cols]
-        ln = self._line(color="#ff7f0e", marker="*", ms=16, ls="none", alpha=0.9, zorder=7)
+        ln = self._line(color=FLASH, marker="*", ms=16, ls="none", mec=INK, mew=0.5, zorder=7)
         word = self.ax.text(0.02, 0.90, "", transform=self.ax.transAxes, va="top", fontsize=10,
-                            color="#ff7f0e", animated=True)
+                            color=FLASH, animated=True)
         self.moving.append(word)
 
         def update(k):

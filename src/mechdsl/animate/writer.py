@@ -50,15 +50,24 @@ def save(stage, path, fps: float, overwrite: bool = False) -> Path:
 
 
 def _images(stage):
-    """Frames as palette images sharing one palette (taken from the middle frame): fast and stable."""
+    """Frames as palette images sharing one palette: fast, and no colour flickers between frames.
+    The palette comes from a few sample frames and a swatch of every colour the stage uses (so
+    a colour seen in few frames, like an impact's flash, keeps its hue)."""
+    from matplotlib.colors import to_rgb
     from PIL import Image
 
     def rgb(k):
-        return Image.fromarray(np.asarray(stage.frame(k))[:, :, :3])
+        return np.asarray(stage.frame(k))[:, :, :3].copy()
 
-    mid = rgb(stage.n_frames // 2).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+    samples = [rgb(int(k)) for k in np.unique(np.linspace(0, stage.n_frames - 1, 5).round())]
+    w = samples[0].shape[1]
+    swatch = np.zeros((8, w, 3), np.uint8)
+    for i, c in enumerate(getattr(stage, "swatch", ())):
+        x = (i * 8) % w
+        swatch[:, x: x + 8] = np.round(np.array(to_rgb(c)) * 255)
+    palette = Image.fromarray(np.vstack(samples + [swatch])).quantize(colors=192, method=Image.Quantize.MEDIANCUT)
     for k in range(stage.n_frames):
-        yield rgb(k).quantize(palette=mid, dither=Image.Dither.NONE)
+        yield Image.fromarray(rgb(k)).quantize(palette=palette, dither=Image.Dither.NONE)
 
 
 def _gif(stage, path: Path, fps: float) -> None:

@@ -62,6 +62,7 @@ def run(args) -> int:
                  points=_first(args.points, settings.get("points")), outputs=settings.get("outputs"),
                  x0=x0 or None, p=model.parameter_values, progress=progress, **opts)
     r.metadata["source"] = str(args.file)
+    r.source_model = model                       # units for the plot (mechdsl.plot.signal_units)
     r.metadata["target"] = target_line(args, model)
     if model.scene is not None:
         r.metadata["scene"] = model.scene.name
