@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from . import ast, ir
+from . import display as _display
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 from .parser import parse, parse_file
 from .semantic import Program, analyze
@@ -117,6 +118,9 @@ class Model:
     @property
     def warnings(self) -> list[Diagnostic]:
         return list(getattr(self.program, "last_warnings", []))
+
+    _repr_html_ = _display.model_html            # notebook displays (mechdsl.display)
+    _repr_markdown_ = _display.model_markdown
 
     def __repr__(self) -> str:
         scene = f", scene {self.scene.name}" if self.scene else ""

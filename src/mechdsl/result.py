@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from . import display as _display
 from .fileio import write_atomic_group
 
 
@@ -40,6 +41,9 @@ class Result:
     metadata: dict[str, Any] = field(default_factory=dict)         # model, options, method and why, versions
     events: list[dict[str, Any]] = field(default_factory=list)
     failure: Failure | None = None
+
+    _repr_html_ = _display.result_html            # notebook displays (mechdsl.display)
+    _repr_markdown_ = _display.result_markdown
 
     # -- access -----------------------------------------------------------------------
     @property
