@@ -135,7 +135,24 @@ def test_model_without_bodies_is_drawn_as_bars(tmp_path):
 
 
 @pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
-def test_every_shipped_model_animates(path, tmp_path, capsys):
+def test_every_shipped_model_draws_moving_frames(path, tmp_path):
+    """Three frames of each model from its start state nudged (no simulation: rendering only)."""
+    from types import SimpleNamespace
+
+    m = mechdsl.load(path)
+    q0 = m.eom.start()[0]
+    Q = q0 + np.outer([0.0, 0.05, 0.1], np.ones_like(q0))
+    fake = SimpleNamespace(t=np.array([0.0, 0.05, 0.1]), q=Q, events=[], failure=None)
+    anim = animate(fake, m, fps=20, size=(160, 120))
+    assert len(anim) == 3
+    anim.save(tmp_path / "a.gif")
+    assert (tmp_path / "a.gif").stat().st_size > 500
+    assert (np.array(anim.frame(0)) != np.array(anim.frame(2))).any()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
+def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, capsys):
     out = tmp_path / f"{path.stem}.gif"
     assert main(["animate", str(path), "-o", str(out), "--t-end", "0.1", "--fps", "20", "--size", "160x120"]) == 0
     from PIL import Image
