@@ -65,6 +65,18 @@ def in_notebook() -> bool:
     return shell is not None and "IPKernelApp" in getattr(shell, "config", {})
 
 
+def notebook_bar(**kw):
+    """tqdm's notebook progress bar when running in Jupyter (and ipywidgets is there), else None."""
+    if not in_notebook():
+        return None
+    try:
+        from tqdm.notebook import tqdm as notebook_tqdm
+
+        return notebook_tqdm(**kw)
+    except ImportError:             # no ipywidgets: the caller uses the text bar
+        return None
+
+
 # --------------------------------------------------------------------------- Model
 
 
