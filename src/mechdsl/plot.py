@@ -14,6 +14,29 @@ _BASE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e37
          "#bcbd22", "#17becf")          # matplotlib's tab10
 
 
+_DISPLAY_FIGURE = None
+
+
+def new_figure(**kw):
+    """A matplotlib Figure (no pyplot) that also shows itself in a notebook: ``_repr_png_``
+    renders it, since without pyplot no inline backend registers a display for it."""
+    global _DISPLAY_FIGURE
+    if _DISPLAY_FIGURE is None:
+        from matplotlib.figure import Figure
+
+        class DisplayFigure(Figure):
+            def _repr_png_(self) -> bytes:
+                import io
+
+                buf = io.BytesIO()
+                self.savefig(buf, format="png", dpi=80, metadata=FIGURE_METADATA[".png"])
+                return buf.getvalue()
+
+        DisplayFigure.__qualname__ = "DisplayFigure"
+        _DISPLAY_FIGURE = DisplayFigure
+    return _DISPLAY_FIGURE(**kw)
+
+
 def colours(n: int) -> list[str]:
     """n distinct colours: tab10 first, then hues spaced by the golden angle at alternating
     lightness, so no two curves of one plot share a colour however many there are."""
@@ -69,8 +92,6 @@ def result_figure(result, *signals, energy: bool = True, drift: bool = False, mo
     (``energy=False`` leaves them out); with ``drift=True`` the energy drift E(t) - E(0) as its
     own panel.  Legends sit outside the data, right of each axis; colours never repeat within
     a figure.  A failed run is drawn up to its last point with the failure marked."""
-    from matplotlib.figure import Figure      # no pyplot: no global backend or figure registry touched
-
     from .diagnostics import UsageError
 
     units = signal_units(result, model)
@@ -93,7 +114,7 @@ def result_figure(result, *signals, energy: bool = True, drift: bool = False, mo
         panels = [("curves", "", [])]
     palette = dict(zip(names, colours(len(names))))
     heights = [1.0 if kind == "curves" else 0.8 for kind, _, _ in panels]
-    fig = Figure(figsize=(width, 1.2 + 2.4 * sum(heights)), layout="constrained")
+    fig = new_figure(figsize=(width, 1.2 + 2.4 * sum(heights)), layout="constrained")   # no pyplot
     axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False, gridspec_kw={"height_ratios": heights})[:, 0]
     t = result.t
     for ax, (kind, unit, ns) in zip(axes, panels):

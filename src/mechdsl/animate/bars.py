@@ -13,15 +13,13 @@ class BarStage:
 
     def __init__(self, names, units, t, Q, *, title="", size=(480, 400), dpi=80):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        from ..plot import colours
+        from ..plot import colours, new_figure
 
         self.t = np.asarray(t, float)
         self.Q = np.asarray(Q, float).reshape(len(self.t), -1)
         self.n_frames = len(self.t)
         n = self.Q.shape[1]
-        self.figure = fig = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
+        self.figure = fig = new_figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
         FigureCanvasAgg(fig)
         ax = self.ax = fig.add_axes((0.3, 0.12, 0.62, 0.72))
         labels = [f"{c} [{u}]" if u else c for c, u in zip(names, units)]

@@ -59,9 +59,7 @@ class Stage:
 
     def __init__(self, geometry, t, X, *, view="auto", events=(), title="", size=(480, 400), dpi=80):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        from ..plot import colours
+        from ..plot import colours, new_figure
 
         check_view(view)
         self.view = detect_view(X, geometry.anchors) if view == "auto" else view
@@ -70,7 +68,7 @@ class Stage:
         P = projection(self.view)
         self.S = np.einsum("ij,njk->nik", P, X)              # (N, 2, K) screen coordinates
         self.n_frames = len(self.t)
-        self.figure = fig = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
+        self.figure = fig = new_figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
         FigureCanvasAgg(fig)
         ax = self.ax = fig.add_axes((0, 0, 1, 1))
         ax.set_axis_off()
