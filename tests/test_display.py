@@ -184,3 +184,13 @@ def test_progress_bar_outside_a_notebook_is_the_text_one():
     from mechdsl.display import in_notebook, notebook_bar
 
     assert not in_notebook() and notebook_bar(total=1) is None
+
+
+def test_api_reference_is_up_to_date():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("api_doc", ROOT / "tests" / "api_doc.py")
+    api_doc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(api_doc)
+    assert (ROOT / "docs" / "api.md").read_text(encoding="utf-8") == api_doc.generate(), \
+        "docs/api.md is stale: run PYTHONPATH=src python tests/api_doc.py"
