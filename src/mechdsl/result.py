@@ -2,8 +2,12 @@
 
 ``r.t`` (n_t,), ``r.q`` and ``r.qd`` (n_t, n) in coordinate order, ``r.coordinates`` the
 names, ``r[name]`` any recorded signal (a coordinate, ``der(name)``, an output, an energy,
-an invariant, a drift measure), ``r.to_csv(path)``, ``r.stats`` (steps, RHS evaluations,
-wall time, ...), ``r.success``/``r.message``/``r.failure`` and ``r.events``.
+an invariant, a drift measure), ``r.to_csv(path)``, ``r.stats`` (one schema for every run:
+steps, rhs_evals, jac_evals, rejected_steps, events, points, cpu_time, wall_time,
+energy_drift(_relative), invariant_drift, constraint_drift; see
+mechdsl.simulation.accuracy), ``r.metadata["run"]`` (what ran: problem kind, formulation,
+integrator, method, tolerances, compiled), ``r.success``/``r.message``/``r.failure`` and
+``r.events``.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``mech compile FILE --emit ast|model|eom``: dump a named intermediate form (deterministic)."""
+"""``mech compile FILE --emit ast|source|model|eom|problem``: dump a named intermediate form (deterministic)."""
 from __future__ import annotations
 
 import sys
@@ -6,11 +6,11 @@ import sys
 from ..fileio import check_writable, write_atomic
 from ._common import add_force_arg, target_line
 
-EMITS = ("ast", "source", "model", "eom")
+EMITS = ("ast", "source", "model", "eom", "problem")
 
 
 def add_parser(sub):
-    p = sub.add_parser("compile", help="dump an intermediate form (ast, source, model, eom)",
+    p = sub.add_parser("compile", help="dump an intermediate form (ast, source, model, eom, problem)",
                        description="Run the pipeline up to a phase and print its named intermediate form.")
     p.add_argument("file", metavar="FILE")
     p.add_argument("--emit", choices=EMITS, default="model", help="which form (default: model)")
@@ -19,6 +19,8 @@ def add_parser(sub):
     p.add_argument("--no-spans", action="store_true", help="omit source positions from --emit ast")
     p.add_argument("-o", "--output", help="write to this file instead of standard output")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    p.add_argument("--t-end", type=float, metavar="T",
+                   help="--emit problem: end time (default: the scene's stop_time, else 10)")
     add_force_arg(p)
     return p
 
@@ -43,6 +45,13 @@ def run(args) -> int:
         print(f"mech: {target_line(args, m)}", file=sys.stderr)
         if args.emit == "model":
             text = dump_model(m.model)
+        elif args.emit == "problem":
+            from ..simulation import dump
+
+            t_end = args.t_end
+            if t_end is None and m.scene_settings.get("stop_time") is None:
+                t_end = 10.0
+            text = dump(m.problem(t_end=t_end))
         else:
             from ..dump_eom import dump_eom
 

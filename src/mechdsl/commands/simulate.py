@@ -19,6 +19,13 @@ def add_parser(sub):
     p.add_argument("--atol", type=_number_arg, metavar="A", help="absolute tolerance (default 1e-10)")
     p.add_argument("--method", metavar="M", help="integration method (default auto; see docs/simulate.md)")
     p.add_argument("--dt", type=_number_arg, metavar="H", help="step size of the fixed-step methods")
+    p.add_argument("--formulation", metavar="F",
+                   help="constrained models: auto, projection, ggl, baumgarte or partitioning (docs/constraints.md)")
+    p.add_argument("--reactions", action="store_true", help="constrained models: record every multiplier and reaction")
+    p.add_argument("--budget", type=int, metavar="N",
+                   help="most output points a run may record (default 1000000; fixed steps: 10 N)")
+    p.add_argument("--estimate-error", action="store_true",
+                   help="run again at a 100 times tighter tolerance and report the difference per output")
     add_set_arg(p)
     p.add_argument("-o", "--output", metavar="OUT.csv", help="write the results as CSV (+ OUT.json sidecar)")
     p.add_argument("--plot", metavar="OUT.png", help="plot coordinates and energy (.png, .svg or .pdf)")
@@ -38,31 +45,15 @@ def run(args) -> int:
     if args.plot:
         check_figure(args.plot, overwrite=args.force)
     model, x0 = load_model(args, starts_in_model=False)
-    settings = model.scene_settings
-    eom = model.eom
-    t_end = args.t_end if args.t_end is not None else settings.get("stop_time")
-    if t_end is None:
+    t_end = args.t_end
+    if t_end is None and model.scene_settings.get("stop_time") is None:
         t_end = 10.0
         print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
-    tol = settings.get("tolerance")
-    rtol = _first(args.rtol, settings.get("rtol"), tol, 1e-8)
-    atol = _first(args.atol, settings.get("atol"), 1e-10)
-    opts = {}
-    if args.dt is not None or settings.get("dt") is not None:
-        opts["dt"] = _first(args.dt, settings.get("dt"))
-    if args.compiled:
-        opts["compiled"] = True
-    if eom.model is not None and eom.model.contacts:     # scene settings of contacts (docs/contacts.md)
-        opts.update({k: settings[k] for k in ("rest_speed", "impact_order") if settings.get(k) is not None})
-    from ..simulate import simulate
-
-    progress = (not args.no_progress) and sys.stderr.isatty()
-    r = simulate(eom, float(t_end), t_start=_first(args.t_start, settings.get("start_time"), 0.0),
-                 rtol=rtol, atol=atol, method=_first(args.method, settings.get("method"), "auto"),
-                 points=_first(args.points, settings.get("points")), outputs=settings.get("outputs"),
-                 x0=x0 or None, p=model.parameter_values, progress=progress, **opts)
+    # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
+    # caller (argument > scene > default), so CLI and API give the same run for the same scene
+    r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
+                       progress=(not args.no_progress) and sys.stderr.isatty())
     r.metadata["source"] = str(args.file)
-    r.source_model = model                       # units for the plot (mechdsl.plot.signal_units)
     r.metadata["target"] = target_line(args, model)
     if model.scene is not None:
         r.metadata["scene"] = model.scene.name
@@ -75,6 +66,14 @@ def run(args) -> int:
     for line in lost:
         print(f"mech: error: {line}", file=sys.stderr)
     return 0 if r.success and not lost else 1
+
+
+def cli_settings(args) -> dict:
+    """The simulation settings given on the command line (None: not given)."""
+    return {"t_start": args.t_start, "rtol": args.rtol, "atol": args.atol, "method": args.method,
+            "points": args.points, "dt": args.dt, "formulation": args.formulation,
+            "compiled": True if args.compiled else None, "reactions": True if args.reactions else None,
+            "budget": args.budget, "estimate_error": True if args.estimate_error else None}
 
 
 def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
@@ -122,19 +121,39 @@ def summary(r, written=()) -> str:
     else:
         lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)")
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
+    ran = m.get("run") or {}
+    if ran:
+        lines.append(f"ran: {ran.get('problem')} problem, formulation {ran.get('formulation')}, integrator "
+                     f"{ran.get('integrator')}, rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}"
+                     + (", compiled" if ran.get("compiled") else ""))
     parts = []
-    for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians")):
+    for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians"),
+                       ("rejected_steps", "rejected steps"), ("events", "events")):
         if s.get(key) is not None:
             parts.append(f"{s[key]} {label}")
+    if s.get("cpu_time") is not None:
+        parts.append(f"{s['cpu_time']:.3g} s CPU")
     if s.get("wall_time") is not None:
         parts.append(f"{s['wall_time']:.3g} s")
     if parts:
         lines.append("statistics: " + ", ".join(parts))
-    if "energy_drift" in s:
+    if s.get("energy_drift") is not None:
         cons = m.get("conservative")
         kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
         lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
                      f"(relative {s['energy_drift_relative']:.3g})")
+    inv = {k: v for k, v in (s.get("invariant_drift") or {}).items() if k != "energy"}
+    if inv:
+        lines.append("invariant drift: " + ", ".join(f"{k} {v:.3g}" for k, v in inv.items()))
+    if s.get("constraint_drift") is not None:
+        lines.append(f"constraint drift: max ||g|| = {s['constraint_drift']:.3g}")
+    est = m.get("error_estimate")
+    if est and est.get("unavailable"):
+        lines.append(f"error estimate unavailable: {est['unavailable']}")
+    elif est:
+        lines.append(f"error estimate (max difference to a run at {est['reference']}):")
+        for k, v in est["max_abs_difference"].items():
+            lines.append(f"  {k}: {v:.3g}")
     for w in m.get("warnings", []):
         lines.append(f"warning: {w}")
     for n in m.get("notes", []):
@@ -158,13 +177,6 @@ def _state_text(r, limit: int = 8) -> str:
     pairs += [(f"der({c})", r.qd[-1, i]) for i, c in enumerate(r.coordinates)]
     text = ", ".join(f"{n} = {v:.6g}" for n, v in pairs[:limit])
     return text + (f", ... ({len(pairs) - limit} more in the CSV)" if len(pairs) > limit else "")
-
-
-def _first(*vals):
-    for v in vals:
-        if v is not None:
-            return v
-    return None
 
 
 def _number_arg(text: str) -> float:
