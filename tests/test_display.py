@@ -101,7 +101,7 @@ def test_hamilton_equations_of_the_pendulum():
     assert len(eqs) == 2
     H = eqs.extra["H"]
     s = _by_name(H)
-    p, th, mass, L, g = s["p_{theta}"], s["theta"], s["m"], s["L"], s["g"]
+    p, th, mass, L, g = s["p_theta"], s["theta"], s["m"], s["L"], s["g"]
     assert sp.simplify(H - (p**2 / (2 * mass * L**2) - mass * g * L * sp.cos(th))) == 0
     assert sp.simplify(eqs[0].rhs - p / (mass * L**2)) == 0
     assert sp.simplify(eqs[1].rhs + mass * g * L * sp.sin(th)) == 0

@@ -250,21 +250,16 @@ def equations(m, form: str = "lagrange") -> Equations:
             raise UsageError(f"the equations of {m.name} are too large to show symbolically: {e}") from None
         extra = {"T": T, "V": V} | ({"D": D} if D != 0 else {})
         return Equations([sp.Eq(a + b, Qi) for a, b, Qi in eqs], form, extra)
-    from .analysis.hamilton import _lagrangian_for
+    from .analysis.hamilton import _lagrangian_for, symbolic_hamilton
 
     lg, _ = _lagrangian_for(m)
-    n = len(lg.q)
-    P = [sp.Symbol(f"p_{{{c}}}", real=True) for c in lg.coords]
-    pexpr = [sp.diff(lg.L, v) for v in lg.qd]
-    sol = sp.solve([sp.Eq(Pi, e) for Pi, e in zip(P, pexpr)], list(lg.qd), dict=True)
-    if len(sol) != 1:
-        raise UsageError(f"cannot solve the momenta of {m.name} for the speeds (singular Legendre transform)")
-    sub = sol[0]
-    H = sp.simplify((sum(Pi * v for Pi, v in zip(P, lg.qd)) - lg.L).xreplace(sub))
-    qd_eqs = [sp.Eq(sp.Symbol(f"\\dot{{{c}}}", real=True), sp.diff(H, P[i])) for i, c in enumerate(lg.coords)]
-    force = [lg.Q[i] - sp.diff(lg.D, lg.qd[i]) for i in range(n)]
-    pd_eqs = [sp.Eq(sp.Symbol(f"\\dot{{p}}_{{{c}}}", real=True),
-                    sp.simplify(-sp.diff(H, lg.q[i]) + force[i].xreplace(sub))) for i, c in enumerate(lg.coords)]
+    h = symbolic_hamilton(lg)
+    if not h["small"]:
+        raise UsageError(f"Hamilton's equations of {m.name} are too large to show symbolically (M is not "
+                         "inverted by sympy); `mech equations --hamiltonian` prints them in matrix form")
+    qd_eqs = [sp.Eq(sp.Symbol(f"\\dot{{{c}}}", real=True), e) for c, e in zip(lg.coords, h["qd"])]
+    pd_eqs = [sp.Eq(sp.Symbol(f"\\dot{{{P.name}}}", real=True), e) for P, e in zip(h["P"], h["pdot"])]
+    H = h["H"]
     return Equations(qd_eqs + pd_eqs, form, {"H": H})
 
 
