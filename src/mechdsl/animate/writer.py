@@ -66,8 +66,15 @@ def _images(stage):
         x = (i * 8) % w
         swatch[:, x: x + 8] = np.round(np.array(to_rgb(c)) * 255)
     palette = Image.fromarray(np.vstack(samples + [swatch])).quantize(colors=192, method=Image.Quantize.MEDIANCUT)
+    # Pillow's palette lookup is approximate: white may land on a near-white entry; that entry is
+    # made pure white in the frames' palette, so the background stays white
+    white = Image.new("RGB", (1, 1), "white").quantize(palette=palette, dither=Image.Dither.NONE).getpixel((0, 0))
+    entries = list(palette.getpalette())
+    entries[3 * white: 3 * white + 3] = [255, 255, 255]
     for k in range(stage.n_frames):
-        yield Image.fromarray(rgb(k)).quantize(palette=palette, dither=Image.Dither.NONE)
+        im = Image.fromarray(rgb(k)).quantize(palette=palette, dither=Image.Dither.NONE)
+        im.putpalette(entries)
+        yield im
 
 
 def _gif(stage, path: Path, fps: float) -> None:
