@@ -220,3 +220,27 @@ def test_missing_folder_and_foreign_file_are_refused_before_any_work(tmp_path, c
     rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(foreign)])
     assert rc == 2 and "--force" in capsys.readouterr().err
     assert foreign.read_bytes() == b"GIF89a not ours"
+
+
+def test_mp4_frames_are_piped_to_ffmpeg(tmp_path, monkeypatch, capsys):
+    """Our side of the ffmpeg pipe (the machine has no ffmpeg): a stand-in program records the
+    arguments and the raw frames it receives."""
+    import os
+    import stat
+    import sys
+
+    fake = tmp_path / "bin" / "ffmpeg"
+    fake.parent.mkdir()
+    fake.write_text(f"#!{sys.executable}\n"
+                    "import sys\n"
+                    "data = sys.stdin.buffer.read()\n"
+                    "args = sys.argv[1:]\n"
+                    "open(args[-1], 'wb').write(' '.join(args[:-1]).encode() + b'\\n' + str(len(data)).encode())\n")
+    fake.chmod(fake.stat().st_mode | stat.S_IXUSR)
+    monkeypatch.setenv("PATH", f"{fake.parent}{os.pathsep}{os.environ['PATH']}")
+    out = tmp_path / "p.mp4"
+    assert main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
+                 "--size", "100x80"]) == 0
+    args, nbytes = out.read_text().split("\n")
+    assert "-s 100x80" in args and "-r 10" in args and "-pix_fmt rgba" in args
+    assert int(nbytes) == 3 * 100 * 80 * 4                       # three RGBA frames
