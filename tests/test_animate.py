@@ -244,3 +244,26 @@ def test_mp4_frames_are_piped_to_ffmpeg(tmp_path, monkeypatch, capsys):
     args, nbytes = out.read_text().split("\n")
     assert "-s 100x80" in args and "-r 10" in args and "-pix_fmt rgba" in args
     assert int(nbytes) == 3 * 100 * 80 * 4                       # three RGBA frames
+
+
+BEAD = """model Bead "sin(s) = t: the mass matrix cos(s)^2 is singular at t = 1"
+  parameter Real m = 1;
+  coordinate Real s(start = 0, speed = 1);
+equation
+  kinetic = 1/2*m*cos(s)^2*der(s)^2;
+end Bead;
+"""
+
+
+def test_a_failed_run_is_animated_up_to_the_failure_and_says_so(tmp_path, capsys):
+    src = tmp_path / "bead.mech"
+    src.write_text(BEAD)
+    out = tmp_path / "bead.gif"
+    assert main(["animate", str(src), "-o", str(out), "--t-end", "3", "--fps", "10"]) == 1
+    cap = capsys.readouterr()
+    assert "simulation failed at t = 1" in cap.err and "animated up to t = 1" in cap.err
+    assert "11 frames at 10 fps, 1 s of model time" in cap.out
+    from PIL import Image
+
+    with Image.open(out) as im:
+        assert im.n_frames == 11

@@ -56,7 +56,7 @@ def run(args) -> int:
     anim = animate(r, m, fps=args.fps, speed=args.speed, view=args.view, trails=args.trail, size=size)
     path = anim.save(args.output, overwrite=args.force)
     what = "bars of the coordinates (no bodies to draw)" if anim.view == "bars" else f"view {anim.view}"
-    print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps, {times[-1] - times[0]:g} s of model time, {what}")
+    print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps, {anim.times[-1] - anim.times[0]:g} s of model time, {what}")
     if r.failure is not None:
         print(f"mech: error: {r.failure}; animated up to t = {r.t[-1]:.6g}", file=sys.stderr)
         return 1
