@@ -67,6 +67,10 @@ class Stage:
         self.geometry = geometry
         P = projection(self.view)
         self.S = np.einsum("ij,njk->nik", P, X)              # (N, 2, K) screen coordinates
+        self.depth = None
+        if self.view == "3d":                                 # distance towards the viewer, in [0, 1]
+            D = np.einsum("j,njk->nk", np.cross(P[0], P[1]), X)
+            self.depth = (D - D.min()) / max(float(np.ptp(D)), 1e-12)
         self.n_frames = len(self.t)
         self.figure = fig = new_figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
         FigureCanvasAgg(fig)
@@ -169,6 +173,13 @@ class Stage:
             self.ax.text(x0 + d[0] * 1.35, y0 + d[1] * 1.2 * 1.35, name, transform=self.ax.transAxes,
                          ha="center", va="center", fontsize=8, color="#555555")
 
+    def _by_depth(self, artist, it) -> None:
+        """In 3d, bodies nearer the viewer are drawn over farther ones (z-order set per frame)."""
+        if self.depth is None:
+            return
+        z = 3.0 + 0.99 * self.depth[:, it.cols].mean(axis=1)
+        self.updaters.append(lambda k: artist.set_zorder(z[k]))
+
     def _line(self, **kw):
         (ln,) = self.ax.plot([], [], animated=True, **kw)
         self.moving.append(ln)
@@ -177,6 +188,7 @@ class Stage:
     # ------------------------------------------------------------------ drawables
     def _add_rod(self, it, colour):
         ln = self._line(color=colour, lw=7, solid_capstyle="round", zorder=3)
+        self._by_depth(ln, it)
         pts = self.S[:, :, it.cols]
         self.updaters.append(lambda k: ln.set_data(pts[k, 0], pts[k, 1]))
 
@@ -194,6 +206,7 @@ class Stage:
         if it.extra.get("hidden"):
             return
         ln = self._line(color=colour, marker="o", ms=10, ls="none", mec=INK, zorder=4)
+        self._by_depth(ln, it)
         pts = self.S[:, :, it.cols]
         self.updaters.append(lambda k: ln.set_data(pts[k, 0], pts[k, 1]))
 
@@ -203,6 +216,7 @@ class Stage:
         c = Circle((0, 0), it.radius, facecolor=colour, edgecolor=INK, lw=1, zorder=4, animated=True)
         self.ax.add_patch(c)
         self.moving.append(c)
+        self._by_depth(c, it)
         pts = self.S[:, :, it.cols.start]
         self.updaters.append(lambda k: c.set_center((pts[k, 0], pts[k, 1])))
 
@@ -213,6 +227,7 @@ class Stage:
                        animated=True)
         self.ax.add_patch(poly)
         self.moving.append(poly)
+        self._by_depth(poly, it)
         pts = self.S[:, :, it.cols]
         self.updaters.append(lambda k: poly.set_xy(_hull(pts[k].T)))
 
