@@ -112,13 +112,17 @@ def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
         from .partitioning import PartitioningStepper
 
         return PartitioningStepper(system, opts)
+    if f == "augmented":
+        from .augmented import AugmentedStepper
+
+        return AugmentedStepper(system, opts, span, t0, q0)
     raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
 
 
 def simulate_dae(eom, t_end, **kw) -> Result:
     """Simulate a model with constraints (``eom.g``) as a DAE with multipliers.
 
-    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning'),
+    Options: formulation ('auto' = 'projection' | 'ggl' | 'baumgarte' | 'partitioning' | 'augmented'),
     rtol, atol, method ('auto' | 'bdf' | 'adams' for the ODE formulations, 'idas' for ggl),
     points, t_start, p (vector or {name: value}), reactions (bool), outputs (names),
     baumgarte (omega or (alpha, beta)), singular_tol, max_interval, drift_bound, max_steps.
@@ -187,6 +191,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # runs into a singular configuration before they fail; they start with short segments and stop
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
+    crossing = getattr(stepper, "crosses_singular", False)   # augmented: passes through singular configurations
     chunk = FIRST_CHUNK if cautious else CHUNK
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
@@ -250,7 +255,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             min_ratio = min(min_ratio, ratio)
             seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
             on_grid = abs(t_now - grid[k]) <= tiny
-            if ratio < opts.singular_tol:
+            if ratio < opts.singular_tol and not crossing:
                 events.append({"time": t_now, "kind": "singular", "contact": "-",
                                "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
                 failure = Failure(t_now, "singular configuration",
@@ -262,12 +267,14 @@ def simulate_dae(eom, t_end, **kw) -> Result:
             h_sing = np.inf
             if t_now > t_prev:
                 tau_pred = np.inf
-            if ratio < ratio_prev and t_now > t_prev:
+            if ratio < ratio_prev and t_now > t_prev and not crossing:
                 tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
                 tau_pred = tau
                 if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
                     h_sing = max(0.5 * tau, 1e3 * tiny)
             ratio_prev, t_prev = ratio, t_now
+            if crossing:
+                stepper.watch(t_now, ratio)
             if on_grid:
                 if k % refine == 0:
                     record(t_now, q_now, qd_now, (d_now, v_now))
@@ -360,7 +367,12 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
         opts.method = "bdf"
         return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
                 "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there")
-    ev = system.eigenvalues(q, qd, t0)
+    if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
+        from .augmented import ode_eigenvalues
+
+        ev = ode_eigenvalues(system, q, qd, t0)
+    else:
+        ev = system.eigenvalues(q, qd, t0)
     damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
     rate = max(damped, default=0.0)
     if rate * span > STIFF:

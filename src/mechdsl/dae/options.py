@@ -11,7 +11,7 @@ from dataclasses import dataclass, fields
 
 from ..diagnostics import UsageError, did_you_mean
 
-FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
+FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning", "augmented")
 DEFAULT_FORMULATION = "projection"
 # method names (those of mechdsl.integrators included) -> the CVODES multistep method
 ODE_METHODS = {"auto": "auto", "bdf": "bdf", "cvodes": "bdf", "cvodes-bdf": "bdf", "adams": "adams",
