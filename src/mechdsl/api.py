@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import ast, ir
+from . import display as _display
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 from .parser import parse, parse_file
 from .semantic import Program, analyze
@@ -120,6 +121,9 @@ class Model:
     def warnings(self) -> list[Diagnostic]:
         return list(getattr(self.program, "last_warnings", []))
 
+    _repr_html_ = _display.model_html            # notebook displays (mechdsl.display)
+    _repr_markdown_ = _display.model_markdown
+
     def __repr__(self) -> str:
         scene = f", scene {self.scene.name}" if self.scene else ""
         return f"<mechdsl.Model {self.name}{scene}: {len(self.coordinates)} coordinates>"
@@ -218,8 +222,10 @@ class Model:
         (t_start, formulation, outputs, dt, reactions, compiled, budget, estimate_error, ...)."""
         from .simulation import simulate
 
-        return simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
-                                                **kw), progress=progress)
+        r = simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
+                                             **kw), progress=progress)
+        r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
+        return r
 
     def settings(self, **args):
         """The resolved, validated SimulationSettings of a run (argument > scene > default)."""
@@ -247,6 +253,20 @@ class Model:
         from .analysis.integrals import first_integrals
 
         return first_integrals(self.eom)
+
+    def draw(self, t: float | None = None, q=None, **kw):
+        """The mechanism as a matplotlib Figure: at coordinates q, else at time t of a run from the
+        start values, else at the start (docs/animate.md)."""
+        from .display import draw_model
+
+        return draw_model(self, t, q, **kw)
+
+    def equations(self, form: str = "lagrange"):
+        """The equations of motion as sympy equations: form "lagrange" (M q'' = bias, one per
+        coordinate) or "hamilton" (q' = dH/dp, p' = -dH/dq).  Displays typeset in notebooks."""
+        from .display import equations
+
+        return equations(self, form)
 
     def summary(self, derive: bool = False) -> str:
         """Counts and formulation; derive=True asks the mechanics which route it takes."""

@@ -138,6 +138,7 @@ class _Deriver:
             fixed_q=tuple(c.fixed for c in model.coordinates),
             fixed_qd=tuple(c.speed_fixed for c in model.coordinates),
             route=route, model=model, point_position=kin.point_pos, point_velocity=kin.point_vel,
+            body_rotation=kin.body_rot,
             singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam)
 
     # -- energies ---------------------------------------------------------------------
