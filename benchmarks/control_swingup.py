@@ -81,31 +81,37 @@ def solve(ode, p, N, repeat):
 
 
 def main(argv=None):
-    import mechdsl
-
     ap = argparse.ArgumentParser()
     ap.add_argument("--N", default="30,60,120")
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args(argv)
+    for line in rows([int(v) for v in a.N.split(",")], a.repeat):
+        print(line, flush=True)
+
+
+def rows(Ns, repeat):
+    """The table, line by line (also used by benchmarks/make_performance.py)."""
+    import mechdsl
+
     os.environ.setdefault("MECHDSL_CACHE", os.path.join(tempfile.gettempdir(), "mechdsl-bench-cache"))
     m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
     pv = m.parameter_vector()
     hand, hp = hand_ode()
     variants = [("hand", hand, hp), ("mechdsl", m.casadi()["ode"], pv),
                 ("compiled", m.casadi(compiled=True)["ode"], pv)]
-    print(f"cart-pole swing-up, T = {T} s, RK4 x {M_RK} per interval, |F| <= {F_MAX} N; "
-          f"ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in variants)}")
-    print(f"{'N':>4} {'variant':>9} {'solve s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} {'replay gap':>11}")
-    for N in [int(v) for v in a.N.split(",")]:
+    yield (f"cart-pole swing-up, T = {T} s, RK4 x {M_RK} per interval, |F| <= {F_MAX} N; "
+           f"ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in variants)}")
+    yield f"{'N':>4} {'variant':>9} {'solve s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} {'replay gap':>11}"
+    for N in Ns:
         base = None
         for name, f, p in variants:
-            t_solve, t_total, (iters, u, X) = solve(f, p, N, a.repeat)
+            t_solve, t_total, (iters, u, X) = solve(f, p, N, repeat)
             base = base or t_solve
             times = np.linspace(0, T, N + 1)
             r = m.simulate(T, x0={"theta": math.pi}, inputs={"F": mechdsl.table(times, np.r_[u, u[-1]])},
                            rtol=1e-10, atol=1e-12, points=N + 1)
             gap = float(np.abs(np.c_[r.q, r.qd].T - X).max())
-            print(f"{N:>4} {name:>9} {t_solve:>8.3f} {t_total:>9.3f} {iters:>6} {t_solve / base:>7.2f} {gap:>11.2e}")
+            yield f"{N:>4} {name:>9} {t_solve:>8.3f} {t_total:>9.3f} {iters:>6} {t_solve / base:>7.2f} {gap:>11.2e}"
 
 
 if __name__ == "__main__":

@@ -400,7 +400,7 @@ def _short(error: str) -> str:
 def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
     """Outputs, energies (and constraint residuals / singularity monitors when present)
     on the sample times: one vectorized (mapped) call per Function.  U: the inputs on the
-    sample times (rows = times; None: the model's input values are all zero / there are none)."""
+    sample times (rows = times; None: the inputs' defaults)."""
     import casadi as ca
 
     N = len(t)
@@ -410,7 +410,8 @@ def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndar
     T = t.reshape(1, N)
     XT = X.T
     P = np.asarray(pv, float).reshape(-1, 1)
-    UT = np.zeros((eom.nu, N)) if U is None else np.asarray(U, float).reshape(N, -1).T
+    UT = (np.tile(np.asarray(eom.input_defaults, float).reshape(-1, 1), (1, N)) if U is None
+          else np.asarray(U, float).reshape(N, -1).T)
 
     def mapped(f):
         res = f.map(N)(T, XT, UT, P)
