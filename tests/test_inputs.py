@@ -234,3 +234,22 @@ end Bad;
     with pytest.raises(MechError) as ei:
         mechdsl.loads(src, model="Bad")
     assert code in str(ei.value)
+
+
+def test_input_in_a_prescribed_motion_is_refused():
+    """phi = a (an input) in a joint: the velocities would miss da/dt (before: a silent wrong
+    answer, the body turned without angular velocity); now E760 at the input."""
+    src = """model PM
+  input Real a = 0;
+  Gravity gravity(g = {0, -9.81, 0});
+  Body b(m = 1, I = identity(3));
+  Body c(m = 1, I = identity(3));
+  Revolute hinge(parent = world, child = b, axis = {0, 0, 1}, phi = a);
+  Prismatic s(parent = b, child = c, axis = {1, 0, 0}, s(start = 0.1));
+end PM;
+"""
+    m = mechdsl.loads(src, model="PM")
+    with pytest.raises(MechError) as ei:
+        m.eom
+    assert "E760" in str(ei.value) and "input 'a' moves part of the mechanism" in str(ei.value)
+    assert ":2:14:" in str(ei.value)
