@@ -70,8 +70,10 @@ ENTRIES = [
           "Pass the files inside it: `mech check models/*.mech`.", command="mech check models"),
     Entry("E004", "no model", "The file is empty, or holds only comments and blank lines.",
           "Write at least one `model Name ... end Name;`.", corpus="E004_only_comments.mech"),
-    Entry("E005", "file too large", "The file is larger than 20 MB: not a hand-written model.",
-          "Split it, or generate smaller models.", command="mech check big.mech"),
+    Entry("E005", "file too large", "The file is larger than the `file_bytes` limit (2 MB; checked before "
+                                    "reading): not a hand-written model.",
+          "Split it, or generate smaller models; `--limit file_bytes=N` raises the limit.",
+          command="mech check big.mech"),
     # ------------------------------------------------------------------ E1xx
     Entry("E101", "unexpected character", "A character that cannot start any token, such as `$`, `'` or `×`.",
           "Remove it. Strings use double quotes; multiplication is `*`.", corpus="E101_dollar.mech"),
@@ -277,7 +279,7 @@ def run(entry: Entry) -> tuple[str, str]:
                 args = ["check", "models"]
             elif entry.code == "E005":
                 with open("big.mech", "wb") as f:
-                    f.truncate(P.MAX_FILE_BYTES + 1)
+                    f.truncate(limits.get("file_bytes") + 1)
                 args = ["check", "big.mech"]
             err, out = io.StringIO(), io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):

@@ -130,10 +130,12 @@ def test_file_too_large(tmp_path, capsys, monkeypatch):
     path = tmp_path / "big.mech"
     path.write_text("model A\n  coordinate Real q(start = 0);\nequation\n  kinetic = der(q)^2/2;\nend A;\n")
     assert run_check(path, capsys)[0] == 0
-    monkeypatch.setattr(P, "MAX_FILE_BYTES", 40)  # the real limit is 20 MB; the check is the same
-    rc, out, err = run_check(path, capsys)
+    from mechdsl import limits
+
+    with limits.override(file_bytes=40):  # the real limit is 2 MB; the check is the same
+        rc, out, err = run_check(path, capsys)
     assert rc == 1 and err.startswith(f"{path}: error[E005]: file is too large (")
-    assert "help: the limit is 40 bytes" in err
+    assert "the limit is 40;" in err and "--limit file_bytes=N" in err
 
 
 def test_unknown_scene_via_api():

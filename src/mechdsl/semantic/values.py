@@ -26,7 +26,6 @@ class _Any:
 ANY = _Any()
 
 
-MAX_ELEMENTS = 100_000   # largest array (and range) a model may build
 
 
 class ValError(Exception):
