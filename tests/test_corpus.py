@@ -276,3 +276,13 @@ def test_generalized_force_field_can_be_written(capsys):
 
     r = mechdsl.loads(src).simulate(1.0, points=3)      # q'' = Q = 1
     assert abs(r["q"][-1] - 0.5) < 1e-8
+
+
+def test_mutual_instances_are_found_by_check(capsys):
+    # A has a B and B has an A: both are parts, which check used to skip ("checked there"),
+    # so check passed while simulate refused the file.  The whole-file check names the cycle.
+    path = CORPUS / "E207_mutual_instances.mech"
+    for command in (["check"], ["simulate", "--t-end", "0.01"]):
+        assert main([*command, str(path)]) == 1
+        err = capsys.readouterr().err
+        assert "error[E207]: model 'A' extends or contains itself (through A -> B -> A)" in err, err

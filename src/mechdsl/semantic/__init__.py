@@ -41,6 +41,50 @@ class Program:
                 continue
             table[item.name] = item
         diags.raise_if_errors()
+        self._check_cycles()
+
+    def _check_cycles(self) -> None:
+        """E207 for every model that extends or contains itself, directly or through others.
+
+        Checked for the whole file (not only when a model is flattened), so `mech check` finds
+        mutual instances (A has a B, B has an A) even though both are parts it checks nowhere else."""
+        uses = {name: [el.name if isinstance(el, ast.Extends) else el.type_name for el in m.elements
+                       if isinstance(el, ast.Extends) or el.type_name in self._models]
+                for name, m in self._models.items()}
+        order = {name: i for i, name in enumerate(self._models)}
+        cycles: dict[frozenset, list[str]] = {}
+        state: dict[str, int] = {}   # 1 on the path, 2 done
+        for root in self._models:
+            if root in state:
+                continue
+            path, stack = [root], [iter(uses[root])]
+            state[root] = 1
+            while stack:  # iterative depth-first search: chains of parts may be long
+                nxt = next(stack[-1], None)
+                if nxt is None:
+                    state[path.pop()] = 2
+                    stack.pop()
+                elif nxt not in self._models or state.get(nxt) == 2:
+                    continue
+                elif state.get(nxt) == 1:
+                    cyc = path[path.index(nxt):]
+                    k = min(range(len(cyc)), key=lambda i: order[cyc[i]])  # start at the first in the file
+                    cycles.setdefault(frozenset(cyc), cyc[k:] + cyc[:k])
+                else:
+                    state[nxt] = 1
+                    path.append(nxt)
+                    stack.append(iter(uses[nxt]))
+        diags = DiagnosticBag()
+        for cyc in cycles.values():
+            m = self._models[cyc[0]]
+            closed = list(zip(cyc, cyc[1:] + cyc[:1]))
+            extends_only = all(any(isinstance(el, ast.Extends) and el.name == b for el in self._models[a].elements)
+                               and not any(isinstance(el, ast.Declaration) and el.type_name == b
+                                           for el in self._models[a].elements) for a, b in closed)
+            what = "extends" if extends_only else "extends or contains"
+            diags.error("E207", f"model '{m.name}' {what} itself (through {' -> '.join(cyc + [cyc[0]])})",
+                        m.name_span, "remove one of the extends clauses or instances in the cycle")
+        diags.raise_if_errors()
 
     # ------------------------------------------------------------------ names
     def model_def(self, name: str) -> ast.ModelDef | None:
