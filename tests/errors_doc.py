@@ -70,7 +70,7 @@ ENTRIES = [
           "Pass the files inside it: `mech check models/*.mech`.", command="mech check models"),
     Entry("E004", "no model", "The file is empty, or holds only comments and blank lines.",
           "Write at least one `model Name ... end Name;`.", corpus="E004_only_comments.mech"),
-    Entry("E005", "file too large", "The file is larger than the `file_bytes` limit (2 MB; checked before "
+    Entry("E005", "file too large", "The file is larger than the `file_bytes` limit (1 MB; checked before "
                                     "reading): not a hand-written model.",
           "Split it, or generate smaller models; `--limit file_bytes=N` raises the limit.",
           command="mech check big.mech"),
@@ -212,6 +212,10 @@ ENTRIES = [
           "Make the model smaller, or raise the budget the message names with `--limit NAME=N` (see "
           "docs/language.md, Limits).", corpus="E316_too_many_coordinates.mech"),
     # ------------------------------------------------------------------ E4xx
+    Entry("E317", "too many models", "The file holds more models and scenes than the `models` limit (500): "
+                                     "`mech check` analyzes and derives each of them.",
+          "Split the file (or `--limit models=N`).", corpus="E317_too_many_models.mech",
+          shown="model M1\nend M1;\n...\nmodel M501\nend M501;\n"),
     Entry("E401", "incompatible units", "Two quantities with different units added, subtracted, compared or "
                                         "given as the branches of an `if`.",
           "Check the formula and the parameters' units.", corpus="E401_kg_plus_m.mech"),

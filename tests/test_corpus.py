@@ -166,7 +166,7 @@ def test_file_too_large(tmp_path, capsys, monkeypatch):
     path = tmp_path / "big.mech"
     path.write_text("model A\n  coordinate Real q(start = 0);\nequation\n  kinetic = der(q)^2/2;\nend A;\n")
     assert run_check(path, capsys)[0] == 0
-    with limits.override(file_bytes=40):  # the real limit is 2 MB; the check is the same
+    with limits.override(file_bytes=40):  # the real limit is 1 MB; the check is the same
         rc, out, err = run_check(path, capsys)
     assert rc == 1 and err.startswith(f"{path}: error[E005]: file is too large (")
     assert "the limit is 40;" in err and "--limit file_bytes=N" in err

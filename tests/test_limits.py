@@ -59,8 +59,9 @@ def first_error(err: str, path) -> tuple[str, int, int]:
     ("nfourbar.mech", "parameter Integer N = 2 ", "parameter Integer N = 10000 ", "E316", None),
     # N = 1000: 2001 coordinates, the derivation ran for minutes
     ("nfourbar.mech", "parameter Integer N = 2 ", "parameter Integer N = 1000 ", "E316", None),
-    # a million-character name: unit parsing hung, and its CSV did not parse back
-    ("double_pendulum.mech", "output Real x2(", "output Real " + "x" * 1_000_000 + "(", "E314", 22),
+    # a million-character name: unit parsing hung, and its CSV did not parse back (900,000 here:
+    # a file of a million characters is over the file_bytes limit, E005)
+    ("double_pendulum.mech", "output Real x2(", "output Real " + "x" * 900_000 + "(", "E314", 22),
 ])
 def test_budget_examples_stop_with_a_located_error(tmp_path, model, old, new, code, line):
     path = mutant(tmp_path, model, old, new)
@@ -71,6 +72,12 @@ def test_budget_examples_stop_with_a_located_error(tmp_path, model, old, new, co
     if line is not None:
         assert got_line == line
     assert "--limit " in err  # the hint says how to raise the budget
+
+
+def test_file_over_the_size_limit_is_refused_before_parsing(tmp_path):
+    path = mutant(tmp_path, "double_pendulum.mech", "output Real x2(", "output Real " + "x" * 1_000_000 + "(")
+    rc, err = check_cli(path)
+    assert rc == 1 and err.startswith(f"{path}: error[E005]: file is too large (1,00")
 
 
 def test_budget_reported_once_at_the_declaration_that_passes_it(tmp_path, capsys):

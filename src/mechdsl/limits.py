@@ -28,7 +28,8 @@ class Limit:
 
 
 _ALL = (
-    Limit("file_bytes", 2_000_000, "E005", "size of a model file in bytes"),
+    Limit("file_bytes", 1_000_000, "E005", "size of a model file in bytes"),
+    Limit("models", 500, "E317", "models and scenes in one file"),
     Limit("name_length", 256, "E314", "characters in an identifier"),
     Limit("nesting", 200, "E104", "brackets nested in one expression"),
     Limit("depth", 600, "E104", "depth of a syntax tree (long operator chains)"),

@@ -10,6 +10,7 @@ import math
 
 from .. import ast
 from .. import ir
+from .. import limits
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
 from ..printer import expr as print_expr
 from . import mods as Mods
@@ -32,6 +33,11 @@ class Program:
         self._models: dict[str, ast.ModelDef] = {}
         self._scenes: dict[str, ast.SceneDef] = {}
         diags = DiagnosticBag()
+        if len(file.items) > limits.get("models"):
+            item = file.items[limits.get("models")]
+            raise MechError(Diagnostic("E317", f"the file holds more than {limits.get('models'):,} models and scenes "
+                                               f"({len(file.items):,})", item.name_span,
+                                       "split it into several files; " + limits.hint("models")))
         for item in file.items:
             table = self._models if isinstance(item, ast.ModelDef) else self._scenes
             other = self._scenes if isinstance(item, ast.ModelDef) else self._models
