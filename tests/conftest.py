@@ -33,3 +33,36 @@ def run_stability_case(name: str, size: str):
     assert case.checks, f"{name}: no checks"
     assert case.holds, "\n" + case.report()
     return case
+
+
+# ----------------------------------------------------------------------------- golden files
+
+GOLDEN_CHANGES = pytest.StashKey[list]()
+
+
+def pytest_addoption(parser):
+    parser.addoption("--update-golden", action="store_true", default=False,
+                     help="rewrite tests/golden/*.txt from the current output (tests/test_golden.py) "
+                          "and list the files that changed")
+
+
+@pytest.fixture
+def update_golden(request) -> bool:
+    return request.config.getoption("--update-golden")
+
+
+@pytest.fixture
+def golden_changes(request) -> list:
+    """Where test_golden records the files it wrote or removed under --update-golden."""
+    return request.config.stash.setdefault(GOLDEN_CHANGES, [])
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if not config.getoption("--update-golden"):
+        return
+    changes = config.stash.get(GOLDEN_CHANGES, [])
+    terminalreporter.section("golden files")
+    if not changes:
+        terminalreporter.write_line("no golden file changed")
+    for line in sorted(changes):
+        terminalreporter.write_line(line)

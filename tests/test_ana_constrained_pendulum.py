@@ -137,7 +137,7 @@ def test_cli_prints_lambda(capsys):
     from mechdsl.cli import main
 
     assert main(["equilibrium", str(MODELS / "pendulum_cartesian.mech"), "--model", "PendulumCartesian",
-                 "--set", "m=3", "L=2"]) == 0
+                 "--set", "m=3,L=2"]) == 0
     out = capsys.readouterr().out
     assert "lambda[c1]" in out and "7.3575" in out and "-7.3575" in out      # m g / (2 L)
     assert "stable" in out and "unstable" in out

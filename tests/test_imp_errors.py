@@ -120,3 +120,22 @@ def test_singular_mass_matrix_is_a_failure_not_a_traceback():
     r = simulate_with_contacts(eom, [floor], 2.0, points=21)
     assert not r.success
     assert r.failure.time < 2.0 and len(r.t) < 21
+
+
+def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
+    """A mass of 1e308 overflows the weight to inf: the contact run must fail at t = 0 naming the
+    non-finite acceleration (it used to spin for ever in the one-step solver's step-size loop),
+    write what it has, and exit 1 (not 3)."""
+    import subprocess
+    import sys
+
+    from conftest import MODELS
+
+    out = tmp_path / "r.csv"
+    for model, value in (("falling_rod.mech", "m=1e308"), ("pendulum_wall.mech", "g=1e308")):
+        p = subprocess.run([sys.executable, "-m", "mechdsl", "simulate", str(MODELS / model), "--set", value,
+                            "--t-end", "0.1", "-o", str(out), "--force"], capture_output=True, text=True, timeout=60)
+        assert p.returncode == 1, p.stdout + p.stderr
+        assert "non-finite right-hand side" in p.stdout and "Traceback" not in p.stderr
+        assert "RuntimeWarning" not in p.stderr
+        assert out.read_text().startswith("time,")

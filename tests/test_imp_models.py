@@ -35,6 +35,25 @@ def test_bouncing_ball_components():
     assert r["floor.force"][-1] == pytest.approx(G, rel=1e-8)
 
 
+def test_bouncing_ball_default_scene_shows_the_bounces(tmp_path):
+    """The default scene's output shows what the model is about: the sampled height falls back
+    to the floor again and again (at least 15 visible rebounds), and the first rebound's apex
+    is e^2 h (closed form; sampling at 5 ms misses the apex by at most g dt^2 / 8 = 3e-5 m)."""
+    import csv
+
+    out = tmp_path / "b.csv"
+    assert mech(["simulate", str(MODELS / "bouncing_ball.mech"), "-o", str(out), "--no-progress"]) == 0
+    rows = list(csv.DictReader(out.open()))
+    h = np.array([float(r["height"]) for r in rows])
+    v = np.diff(h)
+    rebounds = int(np.sum((v[:-1] < 0) & (v[1:] > 0)))
+    assert rebounds >= 15 and len(rows) >= 501
+    first, second = 0.4515, 1.1740          # the first two impact times (closed form, as above)
+    t = np.array([float(r["time"]) for r in rows])
+    apex = h[(t > first) & (t < second)].max()
+    assert apex == pytest.approx(0.8 ** 2 * 1.0, abs=1e-4)
+
+
 def test_bouncing_ball_equation_layer_same_events():
     _, a = run("bouncing_ball.mech", "BounceElastic")
     T1 = np.sqrt(2 / G)

@@ -1,54 +1,57 @@
-"""`mech simulate` against a stand-in for the lead's mechdsl.api (load -> Model with .eom).
-
-The stand-in implements only the interface the command relies on: load(path, model, scene)
-returning an object with .eom, .scene_settings, .parameter_values and .with_params(**kw).
-"""
+"""`mech simulate` end to end on real model files (written to a temporary folder)."""
 from __future__ import annotations
 
 import json
-import sys
-import types
 
 import numpy as np
 import pytest
 
 from mechdsl.cli import main
-from sim_models import blowup, pendulum
 
+PENDULUM = """model Pendulum
+  parameter Real m(unit = "kg") = 1;
+  parameter Real L(unit = "m") = 1;
+  parameter Real g(unit = "m/s2") = 9.81;
+  coordinate Real theta(start = 0.5, unit = "rad");
+  output Real x = L*sin(theta);
+  output Real y = -L*cos(theta);
+equation
+  kinetic = 1/2*m*L^2*der(theta)^2;
+  potential = -m*g*L*cos(theta);
+end Pendulum;
 
-class FakeModel:
-    def __init__(self, eom, settings=None, values=None):
-        self.eom = eom
-        self.scene_settings = dict(settings or {})
-        self.parameter_values = np.array(eom.param_values if values is None else values, float)
+scene Swing
+  model Pendulum;
+  stop_time = 2;
+  points = 11;
+  outputs = {x};
+end Swing;
+"""
 
-    def with_params(self, **kw):
-        v = self.parameter_values.copy()
-        for k, x in kw.items():
-            v[self.eom.params.index(k)] = x
-        return FakeModel(self.eom, self.scene_settings, v)
+# T = m u'^2/2, V = -k u^4/4: u'' = u^3.  From u = 1, u' = 1/sqrt(2): u = 1/(1 - t/sqrt(2)),
+# infinite at t = sqrt(2).
+BLOWUP = """model Blowup
+  parameter Real m(unit = "kg") = 1;
+  parameter Real k(unit = "N/m3") = 1;
+  coordinate Real u(start = 1, speed = 1/sqrt(2), unit = "m");
+equation
+  kinetic = 1/2*m*der(u)^2;
+  potential = -k*u^4/4;
+end Blowup;
+"""
 
 
 @pytest.fixture
-def fake_api(monkeypatch):
-    calls = []
-    registry = {"pendulum.mech": lambda scene: FakeModel(
-        pendulum(), {"stop_time": 2.0, "points": 11, "outputs": ("x",)} if scene == "Swing" else {}),
-        "blowup.mech": lambda scene: FakeModel(blowup())}
-    mod = types.ModuleType("mechdsl.api")
-
-    def load(path, model=None, scene=None):
-        calls.append((path, model, scene))
-        return registry[str(path).split("/")[-1]](scene)
-
-    mod.load = load
-    monkeypatch.setitem(sys.modules, "mechdsl.api", mod)
-    return calls
+def files(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "pendulum.mech").write_text(PENDULUM)
+    (tmp_path / "blowup.mech").write_text(BLOWUP)
+    return tmp_path
 
 
-def test_simulate_writes_csv_json_plot_and_summary(tmp_path, fake_api, capsys):
+def test_simulate_writes_csv_json_plot_and_summary(tmp_path, files, capsys):
     out, png = tmp_path / "p.csv", tmp_path / "p.png"
-    code = main(["simulate", "pendulum.mech", "--t-end", "1", "--points", "6", "-o", str(out),
+    code = main(["simulate", "pendulum.mech", "--model", "Pendulum", "--t-end", "1", "--points", "6", "-o", str(out),
                  "--plot", str(png), "--set", "L=2", "--set", "theta.start=pi/4", "--no-progress"])
     text = capsys.readouterr().out
     assert code == 0
@@ -62,16 +65,16 @@ def test_simulate_writes_csv_json_plot_and_summary(tmp_path, fake_api, capsys):
     assert png.read_bytes().startswith(b"\x89PNG")
 
 
-def test_scene_settings_are_used(tmp_path, fake_api, capsys):
+def test_scene_settings_are_used(tmp_path, files, capsys):
     out = tmp_path / "s.csv"
     assert main(["simulate", "pendulum.mech", "--scene", "Swing", "-o", str(out)]) == 0
-    assert fake_api[-1] == ("pendulum.mech", None, "Swing")
+    assert "scene Swing of model Pendulum" in capsys.readouterr().out
     lines = out.read_text().splitlines()
     assert len(lines) == 12 and lines[0].split(",")[3] == "x" and "y" not in lines[0].split(",")
     assert float(lines[-1].split(",")[0]) == 2.0
 
 
-def test_failure_exits_1_and_keeps_partial_results(tmp_path, fake_api, capsys):
+def test_failure_exits_1_and_keeps_partial_results(tmp_path, files, capsys):
     out = tmp_path / "b.csv"
     code = main(["simulate", "blowup.mech", "--t-end", "3", "--points", "31", "-o", str(out)])
     text = capsys.readouterr().out
@@ -81,7 +84,7 @@ def test_failure_exits_1_and_keeps_partial_results(tmp_path, fake_api, capsys):
     assert json.loads((tmp_path / "b.json").read_text())["failure"]["cause"] == "solution blows up"
 
 
-def test_usage_errors_exit_2_without_traceback(tmp_path, fake_api, capsys):
+def test_usage_errors_exit_2_without_traceback(tmp_path, files, capsys):
     assert main(["simulate", "pendulum.mech", "--set", "theta"]) == 2
     assert "NAME=VALUE" in capsys.readouterr().err
     assert main(["simulate", "pendulum.mech", "--set", "thetaa.start=1"]) == 2
@@ -97,13 +100,14 @@ def test_usage_errors_exit_2_without_traceback(tmp_path, fake_api, capsys):
 
 
 def test_value_expressions():
-    from mechdsl.commands.simulate import eval_number, parse_sets
-
-    assert eval_number("pi/4") == pytest.approx(np.pi / 4)
-    assert eval_number("2^3") == 8 and eval_number("-deg(180)") == pytest.approx(-np.pi)
-    assert parse_sets(["m=2", "a.b.start=1", "q.speed=-1"]) == ({"m": 2.0}, {"a.b": 1.0, "der(q)": -1.0})
+    from mechdsl.commands._common import assignments, number, split_starts
     from mechdsl.diagnostics import UsageError
 
-    for bad in ("__import__('os')", "1+", "x"):
+    assert number("pi/4") == pytest.approx(np.pi / 4)
+    assert number("2^3") == pytest.approx(8) and number("-deg(180)") == pytest.approx(-np.pi)
+    assert split_starts(assignments(["m=2", "a.b.start=1,q.speed=-1"])) == \
+        ({"m": 2.0}, {"a.b": 1.0, "der(q)": -1.0})
+    assert assignments(["x=atan(1),y=sqrt(4)"]) == pytest.approx({"x": np.pi / 4, "y": 2.0})
+    for bad in ("__import__('os')", "1+", "x", "9**9**9", "inf", "1e400", "0/0", "(-1)^0.5", "1" * 300):
         with pytest.raises(UsageError):
-            eval_number(bad)
+            number(bad)

@@ -1,9 +1,6 @@
 """Every method runs, agrees with a reference, and conserves energy to a tolerance-scaled bound."""
 from __future__ import annotations
 
-import sys
-import types
-
 import numpy as np
 import pytest
 
@@ -118,25 +115,32 @@ def test_progress_callback_sees_time_advance():
 
 
 def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
+    """The problem's kind picks the back end: fixed-step methods the canonical integrator,
+    constrained models the DAE driver (each called with the settings of the run)."""
+    import mechdsl.dae as dae
+    import mechdsl.symplectic as symp
+    from mechdsl.result import Result
+
+    def fake(tag, calls):
+        def run(eom, t_end, **kw):
+            calls.append((eom, t_end, kw))
+            return Result(t=np.array([0.0, t_end]), q=np.zeros((2, eom.n)), qd=np.zeros((2, eom.n)),
+                          coordinates=tuple(eom.coords), metadata={"method": tag})
+        return run
+
     e = pendulum()
     calls = []
-    fake = types.ModuleType("mechdsl.symplectic")
-    fake.simulate_symplectic = lambda eom, t_end, **kw: calls.append((eom, t_end, kw)) or "result"
-    monkeypatch.setitem(sys.modules, "mechdsl.symplectic", fake)
-    assert simulate(e, 3.0, method="stormer-verlet", dt=0.01) == "result"
+    monkeypatch.setattr(symp, "simulate_symplectic", fake("stormer-verlet", calls))
+    r = simulate(e, 3.0, method="stormer-verlet", dt=0.01)
+    assert r.metadata["run"]["problem"] == "canonical"
     assert calls[0][1] == 3.0 and calls[0][2]["method"] == "stormer-verlet" and calls[0][2]["dt"] == 0.01
-    monkeypatch.setitem(sys.modules, "mechdsl.symplectic", None)
-    with pytest.raises(UsageError, match="symplectic"):
-        simulate(e, 1.0, method="gauss-legendre")
 
     import casadi as ca
 
     c = pendulum()
     c.g = ca.SX(c.q[0] ** 2 - 1)  # any constraint routes to the DAE helper
-    dae = types.ModuleType("mechdsl.dae")
-    dae.simulate_dae = lambda eom, t_end, **kw: ("dae", t_end, kw["rtol"])
-    monkeypatch.setitem(sys.modules, "mechdsl.dae", dae)
-    assert simulate(c, 2.0, rtol=1e-7) == ("dae", 2.0, 1e-7)
-    monkeypatch.setitem(sys.modules, "mechdsl.dae", None)
-    with pytest.raises(UsageError, match="constrained"):
-        simulate(c, 1.0)
+    c.constraint_names = ("g1",)
+    dcalls = []
+    monkeypatch.setattr(dae, "simulate_dae", fake("bdf", dcalls))
+    r = simulate(c, 2.0, rtol=1e-7)
+    assert r.metadata["run"]["problem"] == "dae" and dcalls[0][1] == 2.0 and dcalls[0][2]["rtol"] == 1e-7

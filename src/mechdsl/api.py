@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from .semantic.mods import Mod
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
+_EOM_LOCK = threading.Lock()
 
 
 def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True) -> Program:
@@ -194,9 +196,10 @@ class Model:
                 from .mechanics import derive
 
                 base = derive(self.model)
-                if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
-                    _EOM_CACHE.pop(next(iter(_EOM_CACHE)))
-                _EOM_CACHE[key] = base
+                with _EOM_LOCK:             # models simulated in several threads
+                    if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
+                        _EOM_CACHE.pop(next(iter(_EOM_CACHE)), None)
+                    _EOM_CACHE[key] = base
             self._eom = base.replace(param_values=self.parameter_values, model=self.model)   # keeps lazy fields lazy
         return self._eom
 
@@ -207,23 +210,28 @@ class Model:
         return casadi_functions(self.eom, compiled=compiled)
 
     def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
-                 method: str | None = None, points: int | None = None, **kw):
-        """Integrate from the start values to t_end; returns a mechdsl.result.Result."""
-        from .simulate import simulate
+                 method: str | None = None, points: int | None = None, progress=None, **kw):
+        """Integrate from the start values to t_end; returns a mechdsl.result.Result.
 
-        s = self.scene_settings
-        t_end = _pick(t_end, s.get("stop_time"), None)
-        if t_end is None:
-            raise UsageError("give t_end (no scene stop_time to default to)")
-        opts = dict(rtol=_pick(rtol, s.get("rtol"), 1e-8), atol=_pick(atol, s.get("atol"), 1e-10),
-                    method=_pick(method, s.get("method"), "auto"), points=_pick(points, s.get("points"), None))
-        keys = ("start_time", "outputs", "formulation", "dt", "reactions", "compiled")
-        if self.model.contacts:
-            keys += ("rest_speed", "impact_order")      # docs/contacts.md
-        for key in keys:
-            if key in s and key not in kw:
-                kw["t_start" if key == "start_time" else key] = s[key]
-        return simulate(self.eom, float(t_end), **opts, **kw)
+        Settings resolve once, argument > scene > default (mechdsl.simulation.settings):
+        t_end, rtol, atol, method, points and every other field of SimulationSettings
+        (t_start, formulation, outputs, dt, reactions, compiled, budget, estimate_error, ...)."""
+        from .simulation import simulate
+
+        return simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
+                                                **kw), progress=progress)
+
+    def settings(self, **args):
+        """The resolved, validated SimulationSettings of a run (argument > scene > default)."""
+        from .simulation import resolve
+
+        return resolve(self.scene_settings, args)
+
+    def problem(self, **args):
+        """The problem a run would solve (mechdsl.simulation.Problem; ``mech compile --emit problem``)."""
+        from .simulation import formulate
+
+        return formulate(self.eom, self.settings(**args))
 
     def equilibria(self, guesses=None, **kw):
         from .analysis.equilibrium import equilibria
@@ -254,13 +262,6 @@ class Model:
 
 
 # ---------------------------------------------------------------------------- helpers
-
-
-def _pick(*vals):
-    for v in vals:
-        if v is not None:
-            return v
-    return None
 
 
 def _number(name: str, v) -> float:

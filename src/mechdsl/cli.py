@@ -27,14 +27,16 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser; ``only``: import and register just that command (a run of one
+    command imports only what it needs: bench, plotting and analysis stay unloaded)."""
     from . import __version__
     from .commands import COMMANDS
 
     ap = _Parser(prog="mech", description="mechdsl: equation-based modelling of rigid-body mechanics")
     ap.add_argument("--version", action="version", version=f"mechdsl {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in COMMANDS:
+    for name in ([only] if only in COMMANDS else COMMANDS):
         try:
             mod = importlib.import_module(f".commands.{name}", __package__)
         except ModuleNotFoundError as e:
@@ -62,7 +64,10 @@ def main(argv: list[str] | None = None) -> int:
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
     args = None
     try:
-        ap = build_parser()
+        from .commands import COMMANDS
+
+        words = sys.argv[1:] if argv is None else list(argv)
+        ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
         args = ap.parse_args(argv)
         if not getattr(args, "_run", None):
             ap.print_help(sys.stderr)

@@ -61,6 +61,13 @@ class MechError(Exception):
     def first(self) -> Diagnostic:
         return self.diagnostics[0]
 
+    def __str__(self) -> str:
+        """The same located text the command line prints: ``file:line:col: error[CODE]: ...``, the
+        source line, a caret and the hint, one block per diagnostic."""
+        from .report import format_diagnostics
+
+        return format_diagnostics(self.diagnostics)
+
 
 class InternalError(Exception):
     """A bug in mechdsl (never the user's fault)."""

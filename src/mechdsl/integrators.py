@@ -17,6 +17,7 @@ through ``codegen.FastFunction`` (buffer calls).
 """
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 import sys
@@ -46,7 +47,6 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
     "scipy-bdf": ("scipy", "BDF", {}, "scipy variable-order BDF (stiff)"),
     "scipy-lsoda": ("scipy", "LSODA", {}, "scipy LSODA (automatic Adams/BDF switching)"),
 }
-SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rattle")   # mechdsl.symplectic
 # methods that never evaluate the Jacobian of the right-hand side (compiled code can omit it;
 # CVODES asks for derivatives when it is set up, even with functional iteration)
 NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853")
@@ -99,10 +99,79 @@ class Progress:
             self.bar.close()
 
 
+# --------------------------------------------------------------------------- messages
+
+
+class _Router:
+    """Stands in for sys.stdout/sys.stderr while a capture is active: writes from a capturing
+    thread go to that thread's buffer, every other thread's to the stream it replaced."""
+
+    def __init__(self, base):
+        self.base = base
+
+    def write(self, text):
+        buf = _ROUTES.get((id(self), threading.get_ident()))
+        if buf is None and self.base is None:     # no stream at all (pythonw): nothing to write to
+            return len(text)
+        return (buf if buf is not None else self.base).write(text)
+
+    def flush(self):
+        if self.base is not None:
+            self.base.flush()
+
+    def __getattr__(self, name):
+        return getattr(self.base, name)
+
+
+_ROUTES: dict[tuple[int, int], io.StringIO] = {}
+_ROUTE_LOCK = threading.Lock()
+_ROUTERS: dict[str, list] = {}     # stream name -> [router, users]
+
+
+@contextlib.contextmanager
+def captured_messages():
+    """Capture what CasADi and SUNDIALS print (they print through Python's sys.stdout and
+    sys.stderr) from the calling thread only, into the StringIO yielded.
+
+    Output of other threads passes through unchanged, concurrent captures in several threads
+    do not interfere, and the streams are restored when the last capture ends (unless
+    someone else replaced them meanwhile): no process-wide effect outlives a run."""
+    buf = io.StringIO()
+    me = threading.get_ident()
+    with _ROUTE_LOCK:
+        routers, previous = [], []
+        for name in ("stdout", "stderr"):
+            entry = _ROUTERS.get(name)
+            if entry is None or getattr(sys, name) is not entry[0]:
+                entry = [_Router(getattr(sys, name)), 0]
+                _ROUTERS[name] = entry
+                setattr(sys, name, entry[0])
+            entry[1] += 1
+            routers.append(entry)
+            previous.append(_ROUTES.get((id(entry[0]), me)))     # a capture inside a capture
+            _ROUTES[(id(entry[0]), me)] = buf
+    try:
+        yield buf
+    finally:
+        with _ROUTE_LOCK:
+            for name, entry, prev in zip(("stdout", "stderr"), routers, previous):
+                if prev is None:
+                    _ROUTES.pop((id(entry[0]), me), None)
+                else:
+                    _ROUTES[(id(entry[0]), me)] = prev
+                entry[1] -= 1
+                if entry[1] == 0:
+                    if getattr(sys, name) is entry[0]:
+                        setattr(sys, name, entry[0].base)
+                    if _ROUTERS.get(name) is entry:
+                        del _ROUTERS[name]
+
+
 # --------------------------------------------------------------------------- casadi
 
 
 _DAE_CACHE: dict = {}
+_CACHE_LOCK = threading.Lock()
 
 
 def dae_function(ode):
@@ -114,7 +183,8 @@ def dae_function(ode):
     import casadi as ca
 
     key = id(ode)
-    hit = _DAE_CACHE.get(key)
+    with _CACHE_LOCK:
+        hit = _DAE_CACHE.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1]
 
@@ -123,9 +193,10 @@ def dae_function(ode):
     p = ca.MX.sym("p", ode.size1_in(2))
     e = ca.MX(0, 1)
     dae = ca.Function("dae", [t, x, e, p, e], [ode(t, x, p), e, e, e], ca.dyn_in(), ca.dyn_out())
-    if len(_DAE_CACHE) > 64:
-        _DAE_CACHE.clear()
-    _DAE_CACHE[key] = (ode, dae)     # holding ode keeps its id unique while cached
+    with _CACHE_LOCK:                # runs in several threads share the caches
+        if len(_DAE_CACHE) > 64:
+            _DAE_CACHE.clear()
+        _DAE_CACHE[key] = (ode, dae)     # holding ode keeps its id unique while cached
     return dae
 
 
@@ -165,26 +236,22 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
     keep = (buf, X, xin, pin, integ)  # alive while the worker runs, even if the caller is interrupted
 
     def work():
-        try:
-            assert keep
-            ev()
-        except Exception as e:  # noqa: BLE001 - reported as a failure, never raised
-            box["error"] = str(e)
+        with captured_messages() as captured:   # what CasADi prints from this worker thread only
+            try:
+                assert keep
+                ev()
+            except Exception as e:  # noqa: BLE001 - reported as a failure, never raised
+                box["error"] = str(e)
+        box["messages"] = captured.getvalue()
 
-    captured = io.StringIO()
-    old_err = sys.stderr
-    sys.stderr = captured            # CasADi prints through Python's sys.stderr
     th = threading.Thread(target=work, name="mechdsl-integrator", daemon=True)
     seen = 0
-    try:
-        th.start()
-        while th.is_alive():
-            th.join(0.1)
-            seen = _count_filled(X, seen)
-            if seen:
-                progress.update(float(grid[seen - 1]))
-    finally:
-        sys.stderr = old_err
+    th.start()
+    while th.is_alive():
+        th.join(0.1)
+        seen = _count_filled(X, seen)
+        if seen:
+            progress.update(float(grid[seen - 1]))
     seen = _count_filled(X, 0)
     progress.update(float(grid[seen - 1]) if seen else float(grid[0]))
     try:
@@ -198,7 +265,7 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
             error = f"integrator stopped early (status {buf.ret()})"
         else:
             error = "non-finite state"
-    run = Run(X=X, reached=seen, stats=_flat(stats), error=error, messages=captured.getvalue())
+    run = Run(X=X, reached=seen, stats=_flat(stats), error=error, messages=box.get("messages", ""))
     if error is not None:
         run.fail_time = _parse_fail_time(run.messages + "\n" + error)
     return run
@@ -226,13 +293,15 @@ def _integrator(method, ode, grid, opts):
     plugin = METHODS[method][1]
     tgrid = tuple(float(v) for v in grid)
     key = (id(ode), plugin, tgrid, repr(sorted(opts.items())))
-    hit = _INTEGRATOR_CACHE.get(key)
+    with _CACHE_LOCK:
+        hit = _INTEGRATOR_CACHE.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1]
     integ = make_integrator("sim", plugin, dae_function(ode), tgrid[0], tgrid, opts)
-    if len(_INTEGRATOR_CACHE) >= 16:
-        _INTEGRATOR_CACHE.pop(next(iter(_INTEGRATOR_CACHE)))
-    _INTEGRATOR_CACHE[key] = (ode, integ)
+    with _CACHE_LOCK:
+        if len(_INTEGRATOR_CACHE) >= 16:
+            _INTEGRATOR_CACHE.pop(next(iter(_INTEGRATOR_CACHE)))
+        _INTEGRATOR_CACHE[key] = (ode, integ)
     return integ
 
 
@@ -351,3 +420,49 @@ def run_scipy(method: str, rhs: Callable, jac: Callable | None, grid: np.ndarray
         error = f"solver stopped at t = {solver.t} ({solver.status})"
         fail_time = solver.t
     return Run(X=X, reached=k, stats=stats, error=error, fail_time=fail_time, fail_state=fail_state)
+
+
+# --------------------------------------------------------------------------- plug-ins
+
+
+class IntegratorPlugin:
+    """A family of ODE integrators behind one hook: ``advance`` integrates x' = ode(t, x, p)
+    over the output grid and returns a :class:`Run`; ``counts`` maps its raw statistics to
+    the schema's names; ``zoom``: a failure can be located by re-integrating on finer grids."""
+
+    zoom = False
+
+    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress,
+                hmin) -> Run:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def counts(self, method: str, raw: dict) -> dict:
+        return dict(raw)
+
+
+class CasadiPlugin(IntegratorPlugin):
+    zoom = True
+
+    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin):
+        opts = casadi_options(method, rtol, atol, max_steps, fixed_steps, extra, hmin=hmin)
+        return run_casadi(method, funcs["ode"], grid, x0, p, opts, progress)
+
+    def counts(self, method, raw):
+        return casadi_counts(method, raw)
+
+
+class ScipyPlugin(IntegratorPlugin):
+    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin):
+        from .codegen import FastFunction
+
+        rhs = FastFunction(funcs["ode"]).bind(p=p)
+        jac = None if method in NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(p=p)
+        return run_scipy(method, rhs, jac, grid, x0, rtol, atol, max_steps, progress, extra, hmin=hmin)
+
+
+PLUGINS: dict[str, IntegratorPlugin] = {"casadi": CasadiPlugin(), "scipy": ScipyPlugin()}
+
+
+def plugin(method: str) -> IntegratorPlugin:
+    """The plug-in that runs ``method`` (a name of METHODS)."""
+    return PLUGINS[METHODS[method][0]]

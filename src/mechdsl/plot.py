@@ -3,31 +3,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .diagnostics import UsageError
-from .fileio import atomic_target, commit
+from .fileio import atomic_target, check_figure, commit
 
 MAX_LEGEND = 12
 
 
-def plot_result(result, path, *, overwrite: bool = True, title: str | None = None) -> Path:
+def plot_result(result, path, *, overwrite: bool = False, title: str | None = None) -> Path:
     """Coordinates against time (top) and kinetic, potential and total energy (bottom).
 
     The format follows the suffix (.png, .svg, .pdf); the file is written atomically.  A
     failed run is plotted up to its last point with the failure marked.
     """
-    suffix = Path(path).suffix.lower()
-    if suffix not in (".png", ".svg", ".pdf"):
-        raise UsageError(f"plot file must end in .png, .svg or .pdf (got {str(path)!r})")
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    matplotlib.rcParams["svg.hashsalt"] = "mechdsl"     # deterministic SVG ids
+    check_figure(path, overwrite)
+    from matplotlib.figure import Figure      # no pyplot: no global backend or figure registry touched
 
     has_energy = "energy" in result.signals
-    fig, axes = plt.subplots(2 if has_energy else 1, 1, figsize=(8, 6.5 if has_energy else 4), sharex=True,
-                             squeeze=False)
+    fig = Figure(figsize=(8, 6.5 if has_energy else 4))
+    axes = fig.subplots(2 if has_energy else 1, 1, sharex=True, squeeze=False)
     ax = axes[0, 0]
     for i, name in enumerate(result.coordinates):
         ax.plot(result.t, result.q[:, i], label=name if i < MAX_LEGEND else None, lw=1.2)
@@ -62,23 +54,24 @@ FIGURE_METADATA = {".png": {"Software": "mechdsl"}, ".svg": {"Date": None, "Crea
                    ".pdf": {"CreationDate": None, "Creator": "mechdsl"}}
 
 
-def save_figure(fig, path, *, overwrite: bool = True, dpi: int = 110) -> Path:
-    """Write a matplotlib figure atomically, deterministically (no dates) and marked as
-    mechdsl's (so a rerun may replace it), then close it.  Format by suffix: png, svg, pdf."""
+def save_figure(fig, path, *, overwrite: bool = False, dpi: int = 110) -> Path:
+    """Write a matplotlib figure atomically, deterministically (no dates, fixed SVG ids) and
+    marked as mechdsl's (so a rerun may replace it), then close it if pyplot manages it.
+    Format by suffix: png, svg, pdf.  No global matplotlib state is changed."""
     import matplotlib
 
-    matplotlib.rcParams["svg.hashsalt"] = "mechdsl"     # deterministic SVG ids
-    suffix = Path(path).suffix.lower()
-    if suffix not in FIGURE_METADATA:
-        raise UsageError(f"figure file must end in .png, .svg or .pdf (got {str(path)!r})")
-    import matplotlib.pyplot as plt
-
-    tmp, final = atomic_target(path, overwrite=overwrite)
+    final = check_figure(path, overwrite)
+    suffix = final.suffix.lower()
+    tmp, final = atomic_target(final, overwrite=overwrite)
     try:
-        fig.savefig(tmp, dpi=dpi, format=suffix[1:], metadata=FIGURE_METADATA[suffix])
+        with matplotlib.rc_context({"svg.hashsalt": "mechdsl"}):
+            fig.savefig(tmp, dpi=dpi, format=suffix[1:], metadata=FIGURE_METADATA[suffix])
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     finally:
-        plt.close(fig)
+        if getattr(fig.canvas, "manager", None) is not None:      # a pyplot figure
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
     return commit(tmp, final)

@@ -2,8 +2,12 @@
 
 ``r.t`` (n_t,), ``r.q`` and ``r.qd`` (n_t, n) in coordinate order, ``r.coordinates`` the
 names, ``r[name]`` any recorded signal (a coordinate, ``der(name)``, an output, an energy,
-an invariant, a drift measure), ``r.to_csv(path)``, ``r.stats`` (steps, RHS evaluations,
-wall time, ...), ``r.success``/``r.message``/``r.failure`` and ``r.events``.
+an invariant, a drift measure), ``r.to_csv(path)``, ``r.stats`` (one schema for every run:
+steps, rhs_evals, jac_evals, rejected_steps, events, points, cpu_time, wall_time,
+energy_drift(_relative), invariant_drift, constraint_drift; see
+mechdsl.simulation.accuracy), ``r.metadata["run"]`` (what ran: problem kind, formulation,
+integrator, method, tolerances, compiled), ``r.success``/``r.message``/``r.failure`` and
+``r.events``.
 """
 from __future__ import annotations
 
@@ -14,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .fileio import write_atomic
+from .fileio import write_atomic_group
 
 
 @dataclass
@@ -95,9 +99,11 @@ class Result:
 
     # -- output -----------------------------------------------------------------------
     def table(self) -> np.ndarray:
+        if not len(self.t):
+            return np.zeros((0, len(self.columns)))
         cols = [self.t[:, None], self.q, self.qd] + [np.asarray(v, float).reshape(len(self.t), -1)
                                                      for v in self.signals.values()]
-        return np.hstack(cols) if len(self.t) else np.zeros((0, len(self.columns)))
+        return np.hstack(cols)
 
     def to_csv_text(self) -> str:
         lines = [",".join(_csv_name(c) for c in self.columns)]
@@ -105,12 +111,21 @@ class Result:
             lines.append(",".join(_fmt(v) for v in row))
         return "\n".join(lines) + "\n"
 
-    def to_csv(self, path, sidecar: bool = True, overwrite: bool = True) -> None:
-        """Write the CSV (atomically) and, by default, a JSON sidecar next to it."""
-        write_atomic(path, self.to_csv_text(), overwrite=overwrite)
+    def to_csv(self, path, sidecar: bool = True, overwrite: bool = False) -> list[str]:
+        """Write the CSV and, by default, its JSON sidecar (OUT.csv -> OUT.json), atomically.
+
+        An existing file that mechdsl did not write is replaced only with ``overwrite=True``
+        (a UsageError otherwise); earlier results of mechdsl are replaced.  The sidecar records
+        the CSV's SHA-256 (``csv_sha256``), so a pair torn apart by a crash between the two
+        renames is recognisable.  Returns the paths written."""
+        text = self.to_csv_text()
+        items = [(path, text)]
         if sidecar:
-            write_atomic(str(path) + ".json" if not str(path).endswith(".csv") else str(path)[:-4] + ".json",
-                         self.to_json_text(), overwrite=overwrite)
+            import hashlib
+
+            summary = self.to_json_text(csv_sha256=hashlib.sha256(text.encode("utf-8")).hexdigest())
+            items.append((sidecar_path(path), summary))
+        return [str(p) for p in write_atomic_group(items, overwrite)]
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -124,8 +139,14 @@ class Result:
             "events": self.events,
         }
 
-    def to_json_text(self) -> str:
-        return json.dumps(_jsonable(self.summary()), indent=2, sort_keys=True) + "\n"
+    def to_json_text(self, **extra) -> str:
+        return json.dumps(_jsonable({**self.summary(), **extra}), indent=2, sort_keys=True) + "\n"
+
+
+def sidecar_path(path) -> str:
+    """OUT.csv -> OUT.json (any other name: NAME.json appended)."""
+    path = str(path)
+    return path[:-4] + ".json" if path.endswith(".csv") else path + ".json"
 
 
 def _csv_name(c: str) -> str:

@@ -8,7 +8,6 @@ why.  See docs/simulate.md (users) and docs/internals/numerics.md (design).
 """
 from __future__ import annotations
 
-import importlib
 import math
 import platform
 import time
@@ -21,55 +20,52 @@ from .codegen import FastFunction, casadi_functions, singularity_monitors
 from .diagnostics import UsageError, did_you_mean
 from .result import Failure, Result
 from .eom import parameter_vector
+from .simulation.inputs import start_vector  # noqa: F401  (re-exported: one builder)
 
 DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
-KNOWN_OPTS = ("compiled", "max_steps", "dt", "integrator_options", "singularity_threshold", "functions",
-              "formulation", "reactions")   # the last two concern constrained models (mechdsl.dae)
+KNOWN_OPTS = ("singularity_threshold", "functions")   # back-end options of the ODE runs (besides the settings)
 
 
-def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", points=None, outputs=None,
-             x0=None, p=None, progress=None, **opts) -> Result:
+def simulate(eom, t_end, *, progress=None, **kw) -> Result:
     """Integrate ``eom`` from t_start to t_end and sample it on ``points`` equidistant times.
 
-    x0: full state [q; qd] (array) or a dict of overrides {coordinate: value, "der(c)": value};
-    p: parameter vector or dict of overrides {name: value} (dependent parameters are not
-    re-evaluated: use Model.with_params for that).  outputs: names of EOM.outputs to record
-    (default all).  progress: True shows a bar on stderr for runs longer than 0.5 s, or a
-    callable(t, t_end).  opts: compiled (bool), max_steps (per output interval), dt (fixed-step
-    methods), integrator_options (dict passed to the back end), singularity_threshold.
+    The keyword arguments are the fields of :class:`mechdsl.simulation.SimulationSettings`
+    (t_start, rtol, atol, method, formulation, points, outputs, x0, p, dt, reactions,
+    compiled, max_steps, integrator_options, rest_speed, impact_order, budget,
+    estimate_error) and back-end options (functions, singularity_threshold, baumgarte,
+    ...).  x0: full state [q; qd] (array) or a dict of overrides {coordinate: value,
+    "der(c)": value}; p: parameter vector or dict of overrides {name: value} (dependent
+    parameters are not re-evaluated: use Model.with_params for that).  progress: True shows
+    a bar on stderr for runs longer than 0.5 s, or a callable(t, t_end).  Every run goes
+    through the one simulation layer (mechdsl.simulation: formulate, then solve).
     """
-    method = str(method or "auto").lower()
-    if eom.model is not None and eom.model.contacts:      # unilateral contacts, fixations (docs/contacts.md)
-        from .impacts import simulate_with_contacts
+    from .simulation import simulate as run
+    from .simulation.settings import from_kwargs
 
-        return simulate_with_contacts(eom, None, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method,
-                                      points=points, outputs=outputs, x0=x0, p=p, progress=progress, **opts)
-    if eom.g is not None and method not in I.SYMPLECTIC:
-        return _dispatch("mechdsl.dae", "simulate_dae", "constrained models (DAE)", eom, t_end,
-                         t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
-                         outputs=outputs, x0=x0, p=p, progress=progress, **opts)
-    if method in I.SYMPLECTIC:
-        return _dispatch("mechdsl.symplectic", "simulate_symplectic", f"the symplectic method '{method}'",
-                         eom, t_end, t_start=t_start, rtol=rtol, atol=atol, method=method, points=points,
-                         outputs=outputs, x0=x0, p=p, progress=progress, **opts)
+    return run(eom, from_kwargs(t_end, **kw), progress=progress)
+
+
+def simulate_ode(eom, s, progress=None) -> Result:
+    """The ODE back end: minimal coordinates, CasADi integrator plugins or scipy (settings
+    ``s`` validated by mechdsl.simulation.settings)."""
     wall0 = time.perf_counter()
+    opts = dict(s.extra)
     unknown = sorted(set(opts) - set(KNOWN_OPTS))
     if unknown:
         hint = did_you_mean(unknown[0], KNOWN_OPTS)
         raise UsageError(f"unknown simulation option '{unknown[0]}'" + (f"; {hint}" if hint else ""))
+    method = s.method
     if method != "auto" and method not in I.METHODS:
-        names = ["auto", *I.METHODS, *I.SYMPLECTIC]
-        hint = did_you_mean(method, names)
-        raise UsageError(f"unknown method '{method}'" + (f"; {hint}" if hint else "")
-                         + f" (methods: {', '.join(names)})")
-    t0, t1, rtol, atol, npts = _check_numbers(t_start, t_end, rtol, atol, points)
-    pv = parameter_vector(eom, p)
-    xs = start_vector(eom, x0, pv)
-    out_names = _check_outputs(eom, outputs)
-    compiled = bool(opts.get("compiled", False))
+        raise UsageError(f"method '{method}' does not apply to an ODE model (methods: {', '.join(['auto', *I.METHODS])}"
+                         ", or a fixed-step method)")
+    t0, t1, rtol, atol, npts = s.t_start, s.t_end, s.rtol, s.atol, s.points or DEFAULT_POINTS
+    pv = parameter_vector(eom, s.p)
+    xs = start_vector(eom, s.x0, pv)
+    out_names = _check_outputs(eom, s.outputs)
+    compiled = s.compiled
     vm = casadi_functions(eom, names=("ode", "ode_jacobian"))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
@@ -92,17 +88,18 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     else:
         funcs = vm
     meta["notes"] += list(getattr(funcs, "notes", []))
-    for key in ("formulation", "reactions"):
-        if opts.get(key) not in (None, False, "ode", "auto"):
-            meta["notes"].append(f"{key} = {opts[key]!r} applies to constrained models only; ignored for this ODE")
+    if s.formulation not in ("auto", "ode"):
+        meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
+    if s.reactions:
+        meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
     if compiled and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
-    max_steps = int(opts.get("max_steps") or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
-    extra = dict(opts.get("integrator_options") or {})
+    max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
+    extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     try:
-        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, opts.get("dt"), extra, bar, eom, t0, t1,
-                          meta["notes"])
+        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
+                          meta["notes"], 10 * s.budget)
     finally:
         bar.close()
     if fixed is not None:
@@ -115,7 +112,7 @@ def simulate(eom, t_end, *, t_start=0.0, rtol=1e-8, atol=1e-10, method="auto", p
     X[0] = xs
     t = grid[:n_ok].copy()
     signals = compute_signals(eom, post, t, X, pv, out_names)
-    _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold", SINGULARITY_THRESHOLD)))
+    _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
     stats.update(_energy_drift(signals))
@@ -149,77 +146,6 @@ def _no_state_result(eom, post, grid, pv, out_names, meta, wall0) -> Result:
 
 
 # --------------------------------------------------------------------------- dispatch and inputs
-
-
-def _dispatch(module, func, what, eom, t_end, **kw):
-    try:
-        mod = importlib.import_module(module)
-    except ModuleNotFoundError as e:
-        if e.name == module:
-            raise UsageError(f"{what} cannot be simulated: module {module} is not available in this installation") from None
-        raise
-    if not hasattr(mod, func):
-        raise UsageError(f"{what} cannot be simulated: {module}.{func} is missing")
-    if kw.get("progress") is True:   # the helpers take a callable(t, t_end): drive our bar with it
-        try:
-            t0 = float(kw.get("t_start") or 0.0)
-            bar = I.Progress(True, t0, float(t_end), label=f"{eom.name} ({kw.get('method', '')})")
-        except (TypeError, ValueError):
-            bar = None
-        if bar is not None:
-            kw["progress"] = lambda t, t1: bar.update(float(t))
-            try:
-                return getattr(mod, func)(eom, t_end, **kw)
-            finally:
-                bar.close()
-    return getattr(mod, func)(eom, t_end, **kw)
-
-
-def _check_numbers(t_start, t_end, rtol, atol, points):
-    try:
-        t0, t1, rtol, atol = float(t_start), float(t_end), float(rtol), float(atol)
-    except (TypeError, ValueError):
-        raise UsageError("t_start, t_end, rtol and atol must be numbers") from None
-    if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
-        raise UsageError(f"the end time must be a finite number after the start time (got {t0} .. {t1})")
-    if not (0 < rtol < 1) or not (0 < atol < 1) or not math.isfinite(atol):
-        raise UsageError(f"tolerances must lie in (0, 1) (got rtol={rtol}, atol={atol})")
-    if rtol < 1e-14:
-        raise UsageError(f"rtol={rtol} is below what double precision can deliver (use at least 1e-14)")
-    npts = DEFAULT_POINTS if points is None else points
-    if isinstance(npts, float) and npts == int(npts):
-        npts = int(npts)
-    if not isinstance(npts, (int, np.integer)) or isinstance(npts, bool) or npts < 2:
-        raise UsageError(f"points must be an integer >= 2 (the number of output times including both ends); got {points!r}")
-    return t0, t1, rtol, atol, int(npts)
-
-
-
-
-def start_vector(eom, x0, pv) -> np.ndarray:
-    n = eom.n
-    q0, qd0 = casadi_functions(eom, names=("start",))["start"](pv)
-    base = np.r_[np.array(q0, float).ravel(), np.array(qd0, float).ravel()]
-    if x0 is None:
-        out = base
-    elif isinstance(x0, dict):
-        out = base.copy()
-        for k, v in x0.items():
-            name, speed = k, False
-            if k.startswith("der(") and k.endswith(")"):
-                name, speed = k[4:-1], True
-            if name not in eom.coords:
-                hint = did_you_mean(name, eom.coords)
-                raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
-            out[eom.coords.index(name) + (n if speed else 0)] = float(v)
-    else:
-        out = np.array(x0, float).ravel()
-        if out.size != 2 * n:
-            raise UsageError(f"x0 has {out.size} entries; expected {2 * n} (coordinates then their speeds)")
-    if not np.isfinite(out).all():
-        bad = [(eom.coords + tuple(f"der({c})" for c in eom.coords))[i] for i in np.flatnonzero(~np.isfinite(out))]
-        raise UsageError(f"start values are not finite: {', '.join(bad)}")
-    return out
 
 
 def _check_outputs(eom, outputs) -> tuple[str, ...]:
@@ -276,7 +202,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol) -> tuple[str, str, dict]:
             f"benchmarks/integrators.py", info)
 
 
-def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]:
+def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000) -> tuple[int, str]:
     """Steps for the fixed-step methods: h = dt, or h * omega = 0.5 rtol^(1/order), omega the
     fastest rate seen at the start: the spectral radius of the Jacobian, sqrt(max |qdd|) and
     max |qd| (coordinates in units of order 1), and 2 pi / horizon."""
@@ -298,30 +224,23 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt) -> tuple[int, str]
         pass
     omega = max(rho, omega_acc, 2 * math.pi / span)
     h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
-    steps = min(max(1, math.ceil(span / h)), 10_000_000)
-    return steps, (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
+    steps = min(max(1, math.ceil(span / h)), int(budget))
+    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
 
 
-def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes):
-    backend = I.METHODS[method][0]
-    if backend == "scipy":
-        rhs = FastFunction(funcs["ode"]).bind(p=pv)
-        jacf = None if method in I.NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(p=pv)
-        run = I.run_scipy(method, rhs, jacf, grid, xs,
-                          rtol, atol, max_steps, bar, extra, hmin=min_step(t0, t1))
-        return run, None
-    fixed = None
-    steps = None
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget):
+    """One run of the integrator plug-in of ``method`` over the output grid."""
+    fixed, steps = None, None
     if method in I.FIXED_STEP:
         steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
-                                      xs, pv, t0, t1, rtol, dt)
+                                      xs, pv, t0, t1, rtol, dt, budget)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
         meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
-    opts = I.casadi_options(method, rtol, atol, max_steps, steps, extra, hmin=min_step(t0, t1))
     try:
-        run = I.run_casadi(method, funcs["ode"], grid, xs, pv, opts, bar)
+        run = I.plugin(method).advance(method, funcs, grid, xs, pv, rtol=rtol, atol=atol, max_steps=max_steps,
+                                       fixed_steps=steps, extra=extra, progress=bar, hmin=min_step(t0, t1))
     except RuntimeError as e:  # bad integrator options
         raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
     return run, fixed
@@ -333,9 +252,7 @@ def min_step(t0, t1) -> float:
 
 
 def _counts(method, raw):
-    if I.METHODS[method][0] == "scipy":
-        return dict(raw)
-    return I.casadi_counts(method, raw)
+    return I.plugin(method).counts(method, raw)
 
 
 # --------------------------------------------------------------------------- failure
@@ -349,7 +266,7 @@ def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps,
     t_fail = run.fail_time
     x_fail = run.fail_state
     unstable = False
-    if x_fail is None and k + 1 < len(grid) and I.METHODS[method][0] == "casadi":
+    if x_fail is None and k + 1 < len(grid) and I.plugin(method).zoom:
         # zoom in: re-integrate the failing interval on finer grids (3 levels of 50 subintervals);
         # a fixed-step method is checked with the adaptive erk instead
         zoom = "erk" if method in I.FIXED_STEP else method
@@ -522,21 +439,8 @@ def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
     so their drift measures the integrator.  The search is cached on the EOM."""
     import casadi as ca
 
-    cache = eom.__dict__.setdefault("_integral_function", {})
-    if "f" not in cache:
-        cache["f"] = None
-        if eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts:
-            try:
-                from .analysis.integrals import integral_signals
-
-                sig = integral_signals(eom, pv)
-            except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
-                sig = {}
-            if sig:
-                x = ca.vertcat(eom.q, eom.qd)
-                cache["f"] = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()),
-                                         ["t", "x", "p"], list(sig))
-    f = cache["f"]
+    searchable = eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
+    f = eom.cached("first_integrals", lambda: _integral_function(eom, pv) if searchable else None)
     if f is None or len(t) == 0:
         return {}
     res = f.map(len(t))(t.reshape(1, -1), X.T, np.asarray(pv, float).reshape(-1, 1))
@@ -544,8 +448,58 @@ def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
     return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
 
 
+INTEGRAL_CACHE_VERSION = "1"
+
+
+def _integral_function(eom, pv):
+    """The first integrals as one Function (t, x, p), or None.  The search (0.05-0.2 s) is
+    cached on disk under the hash of the serialized T, V, D, Q, g and the parameter values,
+    so a repeated ``mech simulate`` of the same model skips it."""
+    import hashlib
+
+    import casadi as ca
+
+    from .codegen import cache_dir
+
+    path = None
+    try:
+        x = ca.vertcat(eom.q, eom.qd)
+        parts = [ca.SX(eom.T), ca.SX(eom.V), ca.SX(eom.D), ca.SX(eom.Q),
+                 ca.SX(eom.g) if eom.g is not None else ca.SX(0, 1)]
+        key_f = ca.Function("key", [eom.t, x, eom.p], parts)
+        h = hashlib.sha256()
+        for piece in (INTEGRAL_CACHE_VERSION, __import__("mechdsl").__version__, ca.__version__,
+                      ",".join(eom.coords), key_f.serialize(), np.asarray(pv, float).tobytes().hex()):
+            h.update(str(piece).encode())
+        path = cache_dir() / "integrals" / (h.hexdigest()[:32] + ".txt")
+        if path.is_file():
+            text = path.read_text()
+            return None if text == "none" else ca.Function.deserialize(text)
+    except Exception:  # noqa: BLE001 - no cache: search
+        path = None
+    try:
+        from .analysis.integrals import integral_signals
+
+        sig = integral_signals(eom, pv)
+    except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
+        sig = {}
+    f = None
+    if sig:
+        x = ca.vertcat(eom.q, eom.qd)
+        f = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()), ["t", "x", "p"], list(sig))
+    if path is not None:
+        try:
+            from .fileio import write_atomic
+
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(path, "none" if f is None else f.serialize(), overwrite=True)
+        except Exception:  # noqa: BLE001 - a cache that cannot be written is only slower
+            pass
+    return f
+
+
 def _integral_drift(signals, eom) -> dict:
-    f = eom.__dict__.get("_integral_function", {}).get("f")
+    f = eom.cached("first_integrals", lambda: None)
     out = {}
     for name in (f.name_out() if f is not None else []):
         v = signals.get(name)
@@ -564,14 +518,12 @@ def _energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
-def is_conservative(eom) -> bool | None:
-    """D = 0, Q = 0 and T, V independent of time; None when unknown without forcing a lazily
-    derived field (the recursive route builds Q only on request)."""
+def is_conservative(eom) -> bool:
+    """D = 0, Q = 0 and T, V independent of time.  Builds Q when the recursive route has not
+    yet: an answer that depended on whether another caller had built it would make the
+    metadata and ``--emit problem`` depend on what ran before in the process."""
     import casadi as ca
 
-    raw = eom.__dict__.get("Q")
-    if raw is not None and hasattr(raw, "get") and getattr(raw, "value", 0) is None and eom.n > 30:
-        return None     # not built yet, and building it is not cheap for large models
     try:
         D, Q = ca.SX(eom.D), ca.SX(eom.Q)
         return bool(D.is_zero() and Q.is_zero()

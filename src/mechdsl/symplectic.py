@@ -32,7 +32,9 @@ import numpy as np
 from .diagnostics import UsageError
 from .result import Failure, Result
 
-METHODS = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rk4", "rattle")
+from .simulation.registry import FIXED_METHODS
+
+METHODS = tuple(FIXED_METHODS)     # the names live in the one method registry
 SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rattle")
 CONSTRAINED = ("stormer-verlet", "rattle")     # methods for models with constraints (RATTLE)
 CHUNK = 2000                  # steps a mapaccum call
@@ -58,7 +60,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
     """
     import casadi as ca
 
-    from .analysis.core import param_vector
+    from .eom import parameter_vector
     from .analysis.hamilton import hamiltonian
 
     method = str(method).lower().replace("_", "-")
@@ -89,7 +91,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
         notes.append("fixed-step method: ignored " + ", ".join(sorted(opts)))
     wall0 = _time.perf_counter()
 
-    pv = param_vector(eom, p)
+    pv = parameter_vector(eom, p)
     ham = hamiltonian(eom, pv)
     n = eom.n
     out_names = _output_names(eom, outputs) if not constrained else outputs
@@ -102,7 +104,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
                       "constraints": list(eom.constraint_names),
                       "active_constraints": [eom.constraint_names[i] for i in active]}
     elif x0 is not None:
-        from .simulate import start_vector
+        from .simulation.inputs import start_vector
 
         xs = start_vector(eom, x0, pv)
         qs, qds = xs[:n], xs[n:]

@@ -126,7 +126,7 @@ class Linearization:
                 "stiffness_full": self.stiffness.tolist()}
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2) + "\n"
+        return json.dumps({"generator": "mechdsl", **self.to_dict()}, indent=2) + "\n"
 
 
 def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, guesses=None) -> Linearization:

@@ -58,7 +58,7 @@ class Modes:
                 "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues]}
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=2) + "\n"
+        return json.dumps({"generator": "mechdsl", **self.to_dict()}, indent=2) + "\n"
 
     def to_csv_text(self) -> str:
         buf = io.StringIO()
@@ -90,22 +90,19 @@ class Modes:
                      shapes=S, eigenvalues=self.eigenvalues, kinds=self.kinds,
                      mode_eigenvalues=self.mode_eigenvalues)
 
-    def write_json(self, path, overwrite: bool = True):
+    def write_json(self, path, overwrite: bool = False):
         return write_atomic(path, self.to_json(), overwrite=overwrite)
 
-    def write_csv(self, path, overwrite: bool = True):
+    def write_csv(self, path, overwrite: bool = False):
         return write_atomic(path, self.to_csv_text(), overwrite=overwrite)
 
-    def plot(self, path, title: str = "", overwrite: bool = True):
+    def plot(self, path, title: str = "", overwrite: bool = False):
         """Bar chart of each mode shape (one panel per mode), written atomically."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure     # no pyplot: no global backend or figure registry
 
         k = max(1, len(self))
-        fig, axes = plt.subplots(k, 1, figsize=(max(4.0, 0.9 * len(self.coords) + 2.5), 1.9 * k + 0.6),
-                                 squeeze=False)
+        fig = Figure(figsize=(max(4.0, 0.9 * len(self.coords) + 2.5), 1.9 * k + 0.6))
+        axes = fig.subplots(k, 1, squeeze=False)
         x = np.arange(len(self.coords))
         for j, ax in enumerate(axes[:, 0]):
             if j >= len(self):

@@ -13,7 +13,7 @@ import math
 from pathlib import Path
 
 from ..diagnostics import UsageError
-from ..fileio import atomic_target, check_writable, commit
+from ..fileio import atomic_target, check_writable, commit, output_folder
 from . import measure
 
 FLOOR = 1e-17        # zero errors are drawn here (log axes)
@@ -156,7 +156,7 @@ def save(fig, path, overwrite=True) -> Path:
 
 def write_chart(res, out_dir, stem="work_precision", overwrite=False, title=None) -> list[Path]:
     plt = _setup_mpl()
-    paths = [Path(out_dir) / f"{stem}{ext}" for ext in (".png", ".svg")]
+    paths = [output_folder(out_dir) / f"{stem}{ext}" for ext in (".png", ".svg")]
     for p in paths:
         check_writable(p, overwrite)
     fig = draw(res, title)

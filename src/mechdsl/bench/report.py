@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from ..fileio import check_writable, write_atomic
+from ..fileio import check_writable, output_folder, write_atomic
 from . import measure
 from .reference import fmt_accuracy, is_floor
 
@@ -87,7 +87,7 @@ def _default(o):
 
 
 def write_tables(res, out_dir, overwrite=False) -> list[Path]:
-    d = Path(out_dir)
+    d = output_folder(out_dir)
     csv_p, json_p = d / "bench.csv", d / "bench.json"
     for p in (csv_p, json_p):          # both checked before either is written
         check_writable(p, overwrite)

@@ -11,13 +11,11 @@ HELP = "speed against accuracy: run methods over a tolerance sweep, measure erro
 def add_parser(sub):
     from ..bench.runner import DEFAULT_BUDGET
     from ..bench.spec import DEFAULT_TOLERANCES
+    from ._common import add_set_arg, add_target_args
     from .simulate import _number_arg
 
     p = sub.add_parser("bench", help=HELP, description=HELP)
-    p.add_argument("file", metavar="FILE", help=".mech file")
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("--model", metavar="M", help="model to benchmark (default: the file's main model)")
-    g.add_argument("--scene", metavar="S", help="scene to benchmark (model, overrides, stop time, points)")
+    add_target_args(p, what="benchmark")
     p.add_argument("--methods", action="append", default=[], metavar="LIST",
                    help="comma-separated method specifications: erk, cvodes-bdf, scipy-dop853, stormer-verlet, "
                         "rk[dt=0.01]; for constrained models FORMULATION+METHOD, e.g. projection+cvodes-bdf "
@@ -38,8 +36,7 @@ def add_parser(sub):
                    help=f"CPU seconds: a run longer than this ends its method's sweep (default {DEFAULT_BUDGET:g})")
     p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time)")
     p.add_argument("--points", type=int, metavar="N", help="output points (default: scene points, else 101)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a parameter (m=2) or a start value (theta.start=pi/4, theta.speed=0)")
+    add_set_arg(p)
     p.add_argument("--compiled", action="store_true", help="generated and compiled C code for every method")
     p.add_argument("-o", "--output", metavar="DIR", help="write bench.csv, bench.json, work_precision.png/.svg here")
     p.add_argument("--no-chart", action="store_true", help="write no chart")
@@ -63,33 +60,25 @@ def default_methods(kind: str) -> list[str]:
 
 
 def run(args) -> int:
-    from pathlib import Path
 
     from ..bench import Setup, format_table, parse_tolerances, parse_variants, run_bench, write_chart, write_tables
     from ..bench.runner import classify_setup
-    from ..fileio import check_writable
-    from .simulate import _apply_params, _start_overrides, parse_sets
+    from ..fileio import check_writable, output_folder
+    from ._common import load_model, target_line
 
     if args.repeats < 1:
         raise UsageError("--repeats must be at least 1")
     tolerances = parse_tolerances(args.tolerances)
-    out = Path(args.output) if args.output else None
+    out = output_folder(args.output) if args.output else None
     if out is not None:
-        if out.exists() and not out.is_dir():
-            raise UsageError(f"{out} is not a directory (-o takes a directory)")
         names = ["bench.json", "bench.csv"] + ([] if args.no_chart else ["work_precision.png", "work_precision.svg"])
         for n in names:
             check_writable(out / n, overwrite=args.force)
-    params, starts = parse_sets(args.set)
-    from ..api import load
-
-    model = load(args.file, model=args.model, scene=args.scene)
-    model, pdict = _apply_params(model, params)
-    x0 = _start_overrides(model.eom, starts) or None
+    model, x0 = load_model(args, starts_in_model=False)
+    x0 = x0 or None
+    print(target_line(args, model))
     setup = Setup.from_model(model, t_end=args.t_end, points=args.points, x0=x0, compiled=args.compiled,
                              source=str(args.file))
-    if pdict:
-        setup.p = pdict
     kind = classify_setup(setup)
     methods = args.methods or default_methods(kind)
     variants = parse_variants(methods, args.formulations or None)

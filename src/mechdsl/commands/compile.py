@@ -1,16 +1,16 @@
-"""``mech compile FILE --emit ast|model|eom``: dump a named intermediate form (deterministic)."""
+"""``mech compile FILE --emit ast|source|model|eom|problem``: dump a named intermediate form (deterministic)."""
 from __future__ import annotations
 
 import sys
 
-from ..diagnostics import UsageError
-from ..fileio import write_atomic
+from ..fileio import check_writable, write_atomic
+from ._common import add_force_arg, target_line
 
-EMITS = ("ast", "source", "model", "eom")
+EMITS = ("ast", "source", "model", "eom", "problem")
 
 
 def add_parser(sub):
-    p = sub.add_parser("compile", help="dump an intermediate form (ast, source, model, eom)",
+    p = sub.add_parser("compile", help="dump an intermediate form (ast, source, model, eom, problem)",
                        description="Run the pipeline up to a phase and print its named intermediate form.")
     p.add_argument("file", metavar="FILE")
     p.add_argument("--emit", choices=EMITS, default="model", help="which form (default: model)")
@@ -19,6 +19,9 @@ def add_parser(sub):
     p.add_argument("--no-spans", action="store_true", help="omit source positions from --emit ast")
     p.add_argument("-o", "--output", help="write to this file instead of standard output")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    p.add_argument("--t-end", type=float, metavar="T",
+                   help="--emit problem: end time (default: the scene's stop_time, else 10)")
+    add_force_arg(p)
     return p
 
 
@@ -29,6 +32,8 @@ def run(args) -> int:
     from ..printer import to_source
     from ..semantic import analyze
 
+    if args.output:
+        check_writable(args.output, args.force)
     tree = parse_file(args.file)
     if args.emit == "ast":
         text = dump_ast(tree, spans=not args.no_spans)
@@ -37,16 +42,22 @@ def run(args) -> int:
     else:
         program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
+        print(f"mech: {target_line(args, m)}", file=sys.stderr)
         if args.emit == "model":
             text = dump_model(m.model)
+        elif args.emit == "problem":
+            from ..simulation import dump
+
+            t_end = args.t_end
+            if t_end is None and m.scene_settings.get("stop_time") is None:
+                t_end = 10.0
+            text = dump(m.problem(t_end=t_end))
         else:
             from ..dump_eom import dump_eom
 
             text = dump_eom(m.eom)
     if args.output:
-        if args.output == args.file:
-            raise UsageError("refusing to overwrite the input file")
-        write_atomic(args.output, text)
+        write_atomic(args.output, text, overwrite=args.force)
     else:
         sys.stdout.write(text)
     return 0

@@ -1,23 +1,24 @@
 """``mech equations FILE``: Lagrange's equations of a model, as people write them."""
 from __future__ import annotations
 
+from ._common import add_set_arg, add_target_args, load_model, target_line
+
 
 def add_parser(sub):
     p = sub.add_parser("equations", help="print the Lagrange equations of a model",
                        description="Print T, V, D, Q and one Lagrange equation per coordinate, simplified "
                                    "(sympy). Large models are described by their structure instead.")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("--model", help="the model to print (default: the file's main model)")
-    p.add_argument("--scene", help="print the model of this scene (with its overrides)")
+    add_target_args(p, what="print")
+    add_set_arg(p)
     p.add_argument("--latex", action="store_true", help="print LaTeX (an align environment)")
     p.add_argument("--hamiltonian", action="store_true", help="print Hamilton's equations instead")
     return p
 
 
 def run(args) -> int:
-    from ..api import load_model_ir
-
-    model = load_model_ir(args.file, model=args.model, scene=args.scene)
+    m = load_model(args)
+    model = m.model
+    print(("% " if args.latex else "") + target_line(args, m))
     if args.hamiltonian:
         try:
             from ..analysis.hamilton import format_hamiltonian

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from ..diagnostics import UsageError
+from ._common import add_force_arg, add_guess_arg, add_set_arg, add_target_args, assignments, load_model, target_line
 
 
 def add_parser(sub):
@@ -13,34 +13,32 @@ def add_parser(sub):
                                    "spread over each coordinate's range) and classify each: stable "
                                    "(Lagrange-Dirichlet), unstable, or undetermined, with the eigenvalues "
                                    "that decide.")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("--model", help="model to analyse")
-    p.add_argument("--scene", help="scene whose model (and values) to analyse")
-    p.add_argument("--guess", action="append", nargs="+", metavar="NAME=VALUE",
-                   help="a starting guess (coordinates not named keep their start values); repeat "
-                        "--guess for several guesses; values may use pi, e.g. theta=pi/2")
-    p.add_argument("--set", action="append", nargs="+", metavar="NAME=VALUE", help="change parameter values")
+    add_target_args(p, what="analyse")
+    add_guess_arg(p, "a starting guess, e.g. theta=pi/2 or x=1,phi=0.5 (coordinates not named keep "
+                     "their start values); repeat --guess for several guesses")
+    add_set_arg(p)
     p.add_argument("--time", type=float, default=0.0, help="time at which to evaluate time-dependent models")
     p.add_argument("-o", "--output", metavar="OUT.json", help="write the equilibria as JSON")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    add_force_arg(p)
     return p
 
 
 def run(args) -> int:
     from ..analysis.equilibrium import equilibria
-    from ..analysis.tables import assignments, load_model
-    from ..fileio import write_atomic
+    from ..fileio import check_writable, write_atomic
 
-    if args.output and args.output == args.file:
-        raise UsageError("refusing to overwrite the input file")
+    if args.output:
+        check_writable(args.output, args.force)
     m = load_model(args)
-    guesses = [assignments(g) for g in (args.guess or [])]
+    print(target_line(args, m))
+    guesses = [assignments([g], "--guess") for g in args.guess]
     eqs = equilibria(m.eom, guesses or None, t=args.time)
     print(format_equilibria(m.name, m.eom.coords, eqs))
     if args.output:
-        data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
+        data = {"generator": "mechdsl", "model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
                 "equilibria": [e.to_dict() for e in eqs]}
-        write_atomic(args.output, json.dumps(data, indent=2) + "\n")
+        write_atomic(args.output, json.dumps(data, indent=2) + "\n", overwrite=args.force)
         print(f"wrote {args.output}")
     return 0
 

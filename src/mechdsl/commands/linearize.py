@@ -4,47 +4,48 @@ from __future__ import annotations
 
 import re
 
-from ..diagnostics import UsageError
+from ._common import add_force_arg, add_guess_arg, add_set_arg, add_target_args, assignments, load_model, target_line
 
 
 def add_parser(sub):
     p = sub.add_parser("linearize", help="linear model and modes about an equilibrium or a state",
                        description="Linearize the equations of motion: M dq'' + C dq' + K dq = B du; print "
                                    "M, C, K, the first-order A (and B for inputs) and the modes.")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("--model", help="model to analyse")
-    p.add_argument("--scene", help="scene whose model (and values) to analyse")
+    add_target_args(p, what="analyse")
     p.add_argument("--at", default="equilibrium",
                    help="'equilibrium' (nearest to the start values; steer with --guess), 't=T' (the state "
                         "reached at time T from the start values), 'start', or NAME=VALUE,... (a state; "
                         "der(NAME)=V for speeds)")
-    p.add_argument("--guess", action="append", nargs="+", metavar="NAME=VALUE",
-                   help="starting guess for --at equilibrium")
+    add_guess_arg(p, "starting guess for --at equilibrium, e.g. theta=1.1 or x=1,phi=0.5 (the equilibrium "
+                     "nearest to it is linearized)")
     p.add_argument("--inputs", nargs="+", metavar="NAME",
                    help="parameters (or coordinates: a generalized force on them) treated as inputs u; "
                         "default: the model's `input` parameters")
-    p.add_argument("--set", action="append", nargs="+", metavar="NAME=VALUE", help="change parameter values")
+    add_set_arg(p)
     p.add_argument("--symbolic", action="store_true", help="also print M, C, K derived exactly by sympy")
     p.add_argument("-o", "--output", metavar="OUT.json", help="write the linear model and modes as JSON")
     p.add_argument("--csv", metavar="OUT.csv", help="write the modes as CSV")
     p.add_argument("--plot", metavar="OUT.png", help="draw the mode shapes")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    add_force_arg(p)
     return p
 
 
 def run(args) -> int:
     from ..analysis.linearize import linearize
-    from ..analysis.tables import assignments, load_model
-    from ..fileio import write_atomic
+    from ..fileio import check_figure, check_writable, write_atomic
 
-    for out in (args.output, args.csv, args.plot):
-        if out and out == args.file:
-            raise UsageError("refusing to overwrite the input file")
+    for out in (args.output, args.csv):
+        if out:
+            check_writable(out, args.force)
+    if args.plot:
+        check_figure(args.plot, args.force)
     m = load_model(args)
+    print(target_line(args, m))
     at = args.at.strip()
     if "=" in at and not re.fullmatch(r"t\s*=.*", at):
         at = _state(at)
-    guesses = [assignments(g) for g in (args.guess or [])] or None
+    guesses = [assignments([g], "--guess") for g in args.guess] or None
     inputs = None
     if args.inputs:
         inputs = [s for item in args.inputs for s in item.split(",") if s.strip()]
@@ -53,27 +54,19 @@ def run(args) -> int:
     if args.symbolic:
         print(format_symbolic(lin))
     if args.output:
-        write_atomic(args.output, lin.to_json())
+        write_atomic(args.output, lin.to_json(), overwrite=args.force)
         print(f"wrote {args.output}")
     if args.csv:
-        lin.modes().write_csv(args.csv)
+        lin.modes().write_csv(args.csv, overwrite=args.force)
         print(f"wrote {args.csv}")
     if args.plot:
-        lin.modes().plot(args.plot, title=f"{m.name}: mode shapes")
+        lin.modes().plot(args.plot, title=f"{m.name}: mode shapes", overwrite=args.force)
         print(f"wrote {args.plot}")
     return 0
 
 
 def _state(text: str) -> dict:
-    from ..analysis.tables import number
-
-    out = {}
-    for part in [s for s in re.split(r",(?![^(]*\))", text) if s.strip()]:
-        if "=" not in part:
-            raise UsageError(f"--at expects NAME=VALUE,..., got {part!r}")
-        k, v = part.rsplit("=", 1)
-        out[k.strip()] = number(v)
-    return out
+    return assignments([text], "--at")
 
 
 def format_linearization(name: str, lin) -> str:

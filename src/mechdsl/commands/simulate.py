@@ -1,22 +1,17 @@
 """``mech simulate FILE``: integrate a model (or a scene) and write CSV, JSON and a plot."""
 from __future__ import annotations
 
-import ast
-import math
-import operator
 import sys
 
-from ..diagnostics import UsageError, did_you_mean
+from ..diagnostics import UsageError
+from ._common import add_set_arg, add_target_args, load_model, number, target_line
 
 HELP = "simulate a model and write its results (CSV + JSON sidecar) and a plot"
 
 
 def add_parser(sub):
     p = sub.add_parser("simulate", help=HELP, description=HELP)
-    p.add_argument("file", metavar="FILE", help=".mech file")
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("--model", metavar="M", help="model to simulate (default: the file's main model)")
-    g.add_argument("--scene", metavar="S", help="scene to run (model, overrides and settings)")
+    add_target_args(p, what="simulate")
     p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time, else 10)")
     p.add_argument("--t-start", type=_number_arg, metavar="T0", help="start time [s] (default 0)")
     p.add_argument("--points", type=int, metavar="N", help="output points including both ends (default 501)")
@@ -24,8 +19,14 @@ def add_parser(sub):
     p.add_argument("--atol", type=_number_arg, metavar="A", help="absolute tolerance (default 1e-10)")
     p.add_argument("--method", metavar="M", help="integration method (default auto; see docs/simulate.md)")
     p.add_argument("--dt", type=_number_arg, metavar="H", help="step size of the fixed-step methods")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="override a parameter (m=2) or a start value (theta.start=pi/4, theta.speed=0)")
+    p.add_argument("--formulation", metavar="F",
+                   help="constrained models: auto, projection, ggl, baumgarte or partitioning (docs/constraints.md)")
+    p.add_argument("--reactions", action="store_true", help="constrained models: record every multiplier and reaction")
+    p.add_argument("--budget", type=int, metavar="N",
+                   help="most output points a run may record (default 1000000; fixed steps: 10 N)")
+    p.add_argument("--estimate-error", action="store_true",
+                   help="run again at a 100 times tighter tolerance and report the difference per output")
+    add_set_arg(p)
     p.add_argument("-o", "--output", metavar="OUT.csv", help="write the results as CSV (+ OUT.json sidecar)")
     p.add_argument("--plot", metavar="OUT.png", help="plot coordinates and energy (.png, .svg or .pdf)")
     p.add_argument("--compiled", action="store_true", help="generate C code and compile it (needs a C compiler)")
@@ -35,64 +36,76 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from ..fileio import check_writable
+    from ..fileio import check_figure, check_writable
+    from ..result import sidecar_path
 
-    params, starts = parse_sets(args.set)
-    for path in (args.output, _sidecar(args.output), args.plot):
+    for path in (args.output, args.output and sidecar_path(args.output)):   # before any work is done
         if path:
             check_writable(path, overwrite=args.force)
-    try:
-        from ..api import load
-    except ModuleNotFoundError as e:
-        if e.name and e.name.endswith("api"):
-            raise UsageError("mech simulate needs the .mech front end (mechdsl.api), which this build lacks") from None
-        raise
-
-    model = load(args.file, model=args.model, scene=args.scene)
-    settings = dict(getattr(model, "scene_settings", None) or {})
-    model, pdict = _apply_params(model, params)
-    eom = model.eom
-    x0 = _start_overrides(eom, starts)
-    pv = getattr(model, "parameter_values", None)
-    t_end = args.t_end if args.t_end is not None else settings.get("stop_time")
-    if t_end is None:
+    if args.plot:
+        check_figure(args.plot, overwrite=args.force)
+    model, x0 = load_model(args, starts_in_model=False)
+    t_end = args.t_end
+    if t_end is None and model.scene_settings.get("stop_time") is None:
         t_end = 10.0
         print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
-    tol = settings.get("tolerance")
-    rtol = _first(args.rtol, settings.get("rtol"), tol, 1e-8)
-    atol = _first(args.atol, settings.get("atol"), 1e-10)
-    opts = {}
-    if args.dt is not None or settings.get("dt") is not None:
-        opts["dt"] = _first(args.dt, settings.get("dt"))
-    if args.compiled:
-        opts["compiled"] = True
-    if eom.model is not None and eom.model.contacts:     # scene settings of contacts (docs/contacts.md)
-        opts.update({k: settings[k] for k in ("rest_speed", "impact_order") if settings.get(k) is not None})
-    from ..simulate import simulate
-
-    progress = (not args.no_progress) and sys.stderr.isatty()
-    r = simulate(eom, float(t_end), t_start=_first(args.t_start, settings.get("start_time"), 0.0),
-                 rtol=rtol, atol=atol, method=_first(args.method, settings.get("method"), "auto"),
-                 points=_first(args.points, settings.get("points")), outputs=settings.get("outputs"),
-                 x0=x0 or None, p=(pv if pv is not None and not pdict else pdict or None), progress=progress, **opts)
+    # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
+    # caller (argument > scene > default), so CLI and API give the same run for the same scene
+    r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
+                       progress=(not args.no_progress) and sys.stderr.isatty())
     r.metadata["source"] = str(args.file)
-    if args.scene:
-        r.metadata["scene"] = args.scene
-    written = []
-    if args.output:
-        r.to_csv(args.output, overwrite=args.force)
-        written += [args.output, _sidecar(args.output)]
-    if args.plot:
-        from ..plot import plot_result
-
-        plot_result(r, args.plot, overwrite=args.force)
-        written.append(args.plot)
+    r.metadata["target"] = target_line(args, model)
+    if model.scene is not None:
+        r.metadata["scene"] = model.scene.name
+    written, lost = write_outputs(r, args.output, args.plot, args.force)
     print(summary(r, written))
     if r.events:
         from ..impacts import print_events
 
         print_events(r)
-    return 0 if r.success else 1
+    for line in lost:
+        print(f"mech: error: {line}", file=sys.stderr)
+    return 0 if r.success and not lost else 1
+
+
+def cli_settings(args) -> dict:
+    """The simulation settings given on the command line (None: not given)."""
+    return {"t_start": args.t_start, "rtol": args.rtol, "atol": args.atol, "method": args.method,
+            "points": args.points, "dt": args.dt, "formulation": args.formulation,
+            "compiled": True if args.compiled else None, "reactions": True if args.reactions else None,
+            "budget": args.budget, "estimate_error": True if args.estimate_error else None}
+
+
+def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
+    """Write the results; a file that cannot be written (a full disk, a folder made read-only
+    during the run) is written to a fresh folder under the temporary directory instead, and
+    said so, so a long run is never lost.  Returns (written paths, problems)."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    written: list[str] = []
+    lost: list[str] = []
+    rescue = None
+
+    def attempt(write, path):
+        nonlocal rescue
+        try:
+            return write(path, force)
+        except OSError as e:
+            if rescue is None:
+                rescue = tempfile.mkdtemp(prefix="mechdsl-results-")
+            alt = os.path.join(rescue, Path(path).name)
+            lost.append(f"could not write {path} ({e.strerror or e}); wrote {alt} instead")
+            return write(alt, True)
+
+    if csv_path:
+        written += attempt(lambda p, f: r.to_csv(p, overwrite=f), csv_path)
+    if plot_path:
+        from ..plot import plot_result
+
+        written.append(str(attempt(lambda p, f: plot_result(r, p, overwrite=f), plot_path)))
+    return written, lost
 
 
 # --------------------------------------------------------------------------- pieces
@@ -101,21 +114,46 @@ def run(args) -> int:
 def summary(r, written=()) -> str:
     m = r.metadata
     s = r.stats
-    lines = [f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)"]
+    lines = [m["target"]] if m.get("target") else []
+    if r.failure is not None and len(r.t) <= 1:
+        t0 = r.t[0] if len(r.t) else m.get("options", {}).get("t_start", r.failure.time)
+        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {t0:g} was reached")
+    else:
+        lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)")
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
+    ran = m.get("run") or {}
+    if ran:
+        lines.append(f"ran: {ran.get('problem')} problem, formulation {ran.get('formulation')}, integrator "
+                     f"{ran.get('integrator')}, rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}"
+                     + (", compiled" if ran.get("compiled") else ""))
     parts = []
-    for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians")):
+    for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians"),
+                       ("rejected_steps", "rejected steps"), ("events", "events")):
         if s.get(key) is not None:
             parts.append(f"{s[key]} {label}")
+    if s.get("cpu_time") is not None:
+        parts.append(f"{s['cpu_time']:.3g} s CPU")
     if s.get("wall_time") is not None:
         parts.append(f"{s['wall_time']:.3g} s")
     if parts:
         lines.append("statistics: " + ", ".join(parts))
-    if "energy_drift" in s:
+    if s.get("energy_drift") is not None:
         cons = m.get("conservative")
         kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
         lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
                      f"(relative {s['energy_drift_relative']:.3g})")
+    inv = {k: v for k, v in (s.get("invariant_drift") or {}).items() if k != "energy"}
+    if inv:
+        lines.append("invariant drift: " + ", ".join(f"{k} {v:.3g}" for k, v in inv.items()))
+    if s.get("constraint_drift") is not None:
+        lines.append(f"constraint drift: max ||g|| = {s['constraint_drift']:.3g}")
+    est = m.get("error_estimate")
+    if est and est.get("unavailable"):
+        lines.append(f"error estimate unavailable: {est['unavailable']}")
+    elif est:
+        lines.append(f"error estimate (max difference to a run at {est['reference']}):")
+        for k, v in est["max_abs_difference"].items():
+            lines.append(f"  {k}: {v:.3g}")
     for w in m.get("warnings", []):
         lines.append(f"warning: {w}")
     for n in m.get("notes", []):
@@ -123,101 +161,28 @@ def summary(r, written=()) -> str:
     if r.failure is not None:
         f = r.failure
         lines.append(f"FAILED at t = {f.time:.10g}: {f.cause}" + (f" ({f.detail})" if f.detail else ""))
-        lines.append(f"results kept up to t = {r.t[-1]:.10g}")
+        if len(r.t):
+            lines.append(f"results kept up to t = {r.t[-1]:.10g}; last good state there: " + _state_text(r))
+        else:
+            lines.append("no results to keep: the run failed at its start")
     for w in written:
         lines.append(f"wrote {w}")
     return "\n".join(lines)
 
 
-def _sidecar(path):
-    if not path:
-        return None
-    return path[:-4] + ".json" if path.endswith(".csv") else path + ".json"
-
-
-def _first(*vals):
-    for v in vals:
-        if v is not None:
-            return v
-    return None
-
-
-def parse_sets(items) -> tuple[dict[str, float], dict[str, float]]:
-    """NAME=VALUE pairs -> (parameters, start values); start keys are 'c' or 'der(c)'."""
-    params: dict[str, float] = {}
-    starts: dict[str, float] = {}
-    for item in items:
-        if "=" not in item:
-            raise UsageError(f"--set expects NAME=VALUE (got {item!r})")
-        name, text = (s.strip() for s in item.split("=", 1))
-        value = eval_number(text, what=f"--set {name}")
-        if name.endswith(".start"):
-            starts[name[: -len(".start")]] = value
-        elif name.endswith(".speed"):
-            starts[f"der({name[: -len('.speed')]})"] = value
-        elif not name:
-            raise UsageError(f"--set expects NAME=VALUE (got {item!r})")
-        else:
-            params[name] = value
-    return params, starts
-
-
-def _apply_params(model, params):
-    if not params:
-        return model, {}
-    if hasattr(model, "with_params"):
-        return model.with_params(**params), {}
-    return model, dict(params)  # no Model.with_params: plain overrides of the parameter vector
-
-
-def _start_overrides(eom, starts):
-    out = {}
-    for key, v in starts.items():
-        name = key[4:-1] if key.startswith("der(") else key
-        if name not in eom.coords:
-            hint = did_you_mean(name, eom.coords)
-            raise UsageError(f"--set {name}.start/.speed: '{name}' is not a coordinate of {eom.name}"
-                             + (f"; {hint}" if hint else f" (coordinates: {', '.join(eom.coords)})"))
-        out[key] = v
-    return out
-
-
-_OPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
-        ast.Pow: operator.pow, ast.USub: operator.neg, ast.UAdd: operator.pos}
-_NAMES = {"pi": math.pi, "e": math.e, "inf": math.inf}
-_FUNCS = {"sin": math.sin, "cos": math.cos, "tan": math.tan, "sqrt": math.sqrt, "exp": math.exp,
-          "log": math.log, "deg": math.radians}
-
-
-def eval_number(text: str, what: str = "value") -> float:
-    """A number or a small arithmetic expression: 1.5, 2e-3, pi/4, 2*pi, deg(30), sqrt(2)."""
-    try:
-        tree = ast.parse(text.replace("^", "**"), mode="eval")
-        return float(_ev(tree.body))
-    except (SyntaxError, ValueError, TypeError, ZeroDivisionError, OverflowError, KeyError):
-        raise UsageError(f"{what}: cannot read {text!r} as a number "
-                         "(use e.g. 1.5, 2e-3, pi/4, deg(30))") from None
-
-
-def _ev(n):
-    if isinstance(n, ast.Constant) and isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
-        return n.value
-    if isinstance(n, ast.BinOp) and type(n.op) in _OPS:
-        return _OPS[type(n.op)](_ev(n.left), _ev(n.right))
-    if isinstance(n, ast.UnaryOp) and type(n.op) in _OPS:
-        return _OPS[type(n.op)](_ev(n.operand))
-    if isinstance(n, ast.Name):
-        return _NAMES[n.id]
-    if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUNCS and len(n.args) == 1 \
-            and not n.keywords:
-        return _FUNCS[n.func.id](_ev(n.args[0]))
-    raise ValueError("not an arithmetic expression")
+def _state_text(r, limit: int = 8) -> str:
+    if not len(r.t):
+        return "none"
+    pairs = [(c, r.q[-1, i]) for i, c in enumerate(r.coordinates)]
+    pairs += [(f"der({c})", r.qd[-1, i]) for i, c in enumerate(r.coordinates)]
+    text = ", ".join(f"{n} = {v:.6g}" for n, v in pairs[:limit])
+    return text + (f", ... ({len(pairs) - limit} more in the CSV)" if len(pairs) > limit else "")
 
 
 def _number_arg(text: str) -> float:
     import argparse
 
     try:
-        return eval_number(text)
+        return number(text)
     except UsageError as e:
         raise argparse.ArgumentTypeError(str(e)) from None

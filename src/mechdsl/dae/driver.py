@@ -356,6 +356,10 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
         opts.method = "bdf"
     if opts.method != "auto":
         return "requested"
+    if opts.formulation == "partitioning":
+        opts.method = "bdf"
+        return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
+                "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there")
     ev = system.eigenvalues(q, qd, t0)
     damped = [-z.real for z in ev if z.real < 0 and -z.real > abs(z.imag)]
     rate = max(damped, default=0.0)

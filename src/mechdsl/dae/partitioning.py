@@ -33,7 +33,7 @@ from ..integrators import make_integrator
 import numpy as np
 
 from .dof import dependent_columns
-from .stepper import Stepper, StepError, build_timer, call_integrator, integrator_options
+from .stepper import Stepper, StepError, build_timer, call_integrator, integrator_options, ode_plugin
 from .system import scale_jacobian
 
 
@@ -142,7 +142,8 @@ class PartitioningStepper(Stepper):
         udd = ca.vertcat(*[qdd[i] for i in ind]) if k else ca.MX.zeros(0, 1)
         dae = {"x": ca.vertcat(u, ud), "t": s, "p": ca.vertcat(p, t0, h, vk, vdk, vddk),
                "ode": h * ca.vertcat(ud, udd)}
-        F = make_integrator("partitioned", "cvodes", dae, 0.0, 1.0, integrator_options(self.opts, "cvodes"))
+        plugin = ode_plugin(self.opts)          # the method asked for (metadata names it)
+        F = make_integrator("partitioned", plugin, dae, 0.0, 1.0, integrator_options(self.opts, plugin))
         recover = ca.Function("recover", [u, ud, s, p, t0, h, vk, vdk, vddk], [q, qd])
         return F, recover
 

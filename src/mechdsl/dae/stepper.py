@@ -14,7 +14,6 @@ from ..integrators import make_integrator
 
 import abc
 import contextlib
-import io
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,9 +106,10 @@ def call_integrator(F, **args):
     CasADi and SUNDIALS print to Python's stdout/stderr while they retry (e.g. a Newton
     solve inside a right-hand side that did not converge); that is captured here and only
     its last line is kept, as the detail of a failure."""
-    buf = io.StringIO()
+    from ..integrators import captured_messages
+
     try:
-        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+        with captured_messages() as buf:    # this thread's output only (no global swap)
             return F(**args)
     except RuntimeError as e:
         msg = [ln.strip() for ln in str(e).strip().splitlines() if ln.strip()]

@@ -17,6 +17,7 @@ class ContactOptions:
     event_offset: float | None = None   # m: events fire at gap = -event_offset (default atol)
     impact_order: str = "simultaneous"
     max_events: int = 100000
+    max_steps: int = 2_000_000      # integrator steps in one run: a collapsed step size fails instead of spinning
     max_step: float | None = None
     proj_tol: float | None = None   # drift of active constraints that triggers a projection (default 100 atol)
     samples: int = 4                # sub-intervals per step on which event functions are sampled

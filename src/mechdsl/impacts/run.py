@@ -382,7 +382,10 @@ class Run:
             pending_times = {tf for tf, _ in pending}
             rows = list(self.active)
             jac = s.jacobian(rows) if self.method_cls in ("Radau", "BDF", "LSODA") else None
-            solver = make_solver(self.method_cls, s.rhs(rows), t, y, t_stop, o.rtol, o.atol, o.max_step, jac=jac)
+            if not np.all(np.isfinite(y)):
+                raise RunFailure(t, "non-finite state", _first_bad(s.eom.coords, y))
+            solver = make_solver(self.method_cls, _finite(s.rhs(rows), s.eom.coords), t, y, t_stop, o.rtol,
+                                 o.atol, o.max_step, jac=jac)
             self.stats["restarts"] += 1
             restart = False
             while solver.status == "running":
@@ -391,6 +394,10 @@ class Run:
                     where = ", ".join(f"{c} = {v:.6g}" for c, v in zip(s.eom.coords, solver.y[:n]))
                     raise RunFailure(solver.t, "integrator failed", f"{msg}; at {where}")
                 self.stats["steps"] += 1
+                if self.stats["steps"] > o.max_steps:
+                    raise RunFailure(solver.t, f"more than {o.max_steps} steps",
+                                     "the step size collapsed (a very stiff or singular model?); raise max_steps "
+                                     "if the run really needs them")
                 ta, tb = solver.t_old, solver.t
                 self.t_now = ta
                 if self.progress is not None:
@@ -429,6 +436,32 @@ class Run:
             self._store(self.gi, self.grid[self.gi], y)
             self.gi += 1
         return y
+
+
+def _first_bad(coords, y) -> str:
+    """Which state component is not finite first (coordinates, then speeds)."""
+    names = list(coords) + [f"der({c})" for c in coords]
+    i = int(np.flatnonzero(~np.isfinite(y))[0])
+    return f"{names[i] if i < len(names) else f'component {i}'} = {y[i]}"
+
+
+def _finite(f, coords):
+    """The right-hand side, failing the run (with the time and the first bad coordinate) when it is
+    not finite, instead of letting a one-step solver shrink its step for ever on NaN."""
+    n = len(coords)
+
+    def g(t, y):
+        d = f(t, y)
+        if not np.all(np.isfinite(d)):
+            names = [f"der({c})" for c in coords] + [f"der(der({c}))" for c in coords]
+            i = int(np.flatnonzero(~np.isfinite(d))[0])
+            raise RunFailure(t, "non-finite right-hand side",
+                             f"{names[i] if i < 2 * n else i} = {d[i]} at the state "
+                             + ", ".join(f"{c} = {v:.6g}" for c, v in zip(coords, y[:n]))
+                             + " (an overflow: parameter values near the floating-point limit?)")
+        return d
+
+    return g
 
 
 def _one(xs):

@@ -13,6 +13,7 @@ from .run import Run, RunFailure
 from .stepper import resolve_method
 from .system import ContactSystem
 from ..eom import parameter_vector  # noqa: F401  (re-exported)
+from ..simulation.inputs import start_vector
 
 # options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
 # the simulator can pass its options through unchanged
@@ -78,7 +79,8 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     wall = _time.perf_counter()
     failure = None
     try:
-        run.run(t_start, t_end, qs, qds)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # non-finite values fail the run
+            run.run(t_start, t_end, qs, qds)
     except RunFailure as f:
         failure = R.Failure(time=float(f.time), cause=f.cause, detail=f.detail)
     except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as ex:
@@ -157,27 +159,6 @@ def output_names(eom, gaps, outputs) -> list[str]:
     return [w for w in want if w in eom.outputs]
 
 
-
-
-def start_vector(eom, x0, pv) -> np.ndarray:
-    q0, qd0 = eom.start(pv)
-    base = np.r_[q0, qd0]
-    if x0 is None:
-        out = base
-    elif isinstance(x0, dict):
-        out = base.copy()
-        for k, v in x0.items():
-            name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
-            if name not in eom.coords:
-                raise UsageError(f"'{name}' is not a coordinate of {eom.name}")
-            out[list(eom.coords).index(name) + (eom.n if speed else 0)] = float(v)
-    else:
-        out = np.array(x0, float).ravel()
-        if out.size != 2 * eom.n:
-            raise UsageError(f"x0 has {out.size} entries; expected {2 * eom.n} (coordinates then their speeds)")
-    if not np.isfinite(out).all():
-        raise UsageError("start values are not finite")
-    return out
 
 
 def _no_span():

@@ -1,0 +1,174 @@
+"""What every ``mech`` command shares: the model-selection options, ONE ``--set`` grammar, one
+number reader, one loader, and the line that says which scene (or none) a command used.
+
+``--set`` (and ``--guess``) take one ``NAME=VALUE`` per option, and one option may hold several
+comma-separated assignments: ``--set m=2 --set L=1`` and ``--set m=2,L=1`` mean the same in every
+command.  An option never takes more than one argument, so it cannot swallow the FILE that
+follows it.  ``NAME.start`` / ``NAME.speed`` set a coordinate's start value / speed.
+
+Values are numbers or small arithmetic expressions (``pi/4``, ``2*pi/3``, ``deg(30)``,
+``sqrt(2)``, ``2^3``), evaluated in floating point with a bounded text length, so that no value
+can hang the reader (``9**9**9`` is an overflow, not a 370-million-digit integer) and every value
+is finite.
+"""
+from __future__ import annotations
+
+import ast
+import math
+import operator
+import re
+
+from ..diagnostics import UsageError, did_you_mean
+
+MAX_VALUE_TEXT = 200          # characters in one value: enough for any expression a person types
+
+_OPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
+        ast.Pow: operator.pow, ast.USub: operator.neg, ast.UAdd: operator.pos}
+_NAMES = {"pi": math.pi, "e": math.e}
+_FUNCS = {"sin": math.sin, "cos": math.cos, "tan": math.tan, "asin": math.asin, "acos": math.acos,
+          "atan": math.atan, "sqrt": math.sqrt, "exp": math.exp, "log": math.log, "abs": abs,
+          "deg": math.radians}
+_TOP_COMMA = re.compile(r",(?![^(]*\))")        # commas outside parentheses
+
+
+# --------------------------------------------------------------------------- argparse pieces
+
+
+def add_target_args(p, *, what: str = "use") -> None:
+    """FILE, --model and --scene (exclusive)."""
+    p.add_argument("file", metavar="FILE", help=".mech file")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--model", metavar="M", help=f"model to {what} (default: the file's first scene, else its last model)")
+    g.add_argument("--scene", metavar="S", help=f"scene to {what} (its model, overrides and settings)")
+
+
+def add_set_arg(p) -> None:
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE[,...]",
+                   help="change a parameter (m=2) or a start value (theta.start=pi/4, theta.speed=0); "
+                        "repeat it or separate assignments by commas")
+
+
+def add_force_arg(p) -> None:
+    p.add_argument("--force", action="store_true",
+                   help="replace existing output files that mechdsl did not write (its own are replaced anyway)")
+
+
+def add_guess_arg(p, help_text: str) -> None:
+    p.add_argument("--guess", action="append", default=[], metavar="NAME=VALUE[,...]", help=help_text)
+
+
+# --------------------------------------------------------------------------- values
+
+
+def number(text: str, what: str = "value") -> float:
+    """A finite number from the command line: 1.5, 2e-3, -pi/2, 2*pi/3, sqrt(2), deg(30), 2^3."""
+    s = str(text).strip()
+    hint = "(numbers, pi, e, + - * / ^, sqrt, sin, cos, tan, asin, acos, atan, exp, log, abs, deg)"
+    if len(s) > MAX_VALUE_TEXT:
+        raise UsageError(f"{what}: a value of {len(s)} characters is too long (at most {MAX_VALUE_TEXT})")
+    try:
+        v = float(_ev(ast.parse(s.replace("^", "**"), mode="eval").body))
+    except OverflowError:
+        raise UsageError(f"{what}: {s!r} is out of the floating-point range (|x| < 1.8e308)") from None
+    except (SyntaxError, ValueError, TypeError, ZeroDivisionError, KeyError, RecursionError, MemoryError):
+        raise UsageError(f"{what}: cannot read {s!r} as a number {hint}") from None
+    if not math.isfinite(v):
+        raise UsageError(f"{what}: {s!r} is not a finite number")
+    return v
+
+
+def _ev(n) -> float:
+    """Floating-point evaluation of a tiny arithmetic tree (ints become floats first, so a power
+    overflows instead of building a huge integer)."""
+    if isinstance(n, ast.Constant) and isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
+        return float(n.value)
+    if isinstance(n, ast.BinOp) and type(n.op) in _OPS:
+        a, b = _ev(n.left), _ev(n.right)
+        v = _OPS[type(n.op)](a, b)
+        if isinstance(v, complex):
+            raise ValueError("complex result")
+        return v
+    if isinstance(n, ast.UnaryOp) and type(n.op) in _OPS:
+        return _OPS[type(n.op)](_ev(n.operand))
+    if isinstance(n, ast.Name):
+        return _NAMES[n.id]
+    if (isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUNCS and len(n.args) == 1
+            and not n.keywords):
+        return float(_FUNCS[n.func.id](_ev(n.args[0])))
+    raise ValueError("not an arithmetic expression")
+
+
+def assignments(items, option: str = "--set") -> dict[str, float]:
+    """``NAME=VALUE`` items (several per item, comma-separated) -> {name: value}, in order."""
+    out: dict[str, float] = {}
+    for item in items or []:
+        for part in item if isinstance(item, (list, tuple)) else [item]:
+            for piece in [s for s in _TOP_COMMA.split(str(part)) if s.strip()]:
+                if "=" not in piece:
+                    raise UsageError(f"{option} expects NAME=VALUE, got {piece.strip()!r}")
+                name, text = (s.strip() for s in piece.split("=", 1))
+                if not name:
+                    raise UsageError(f"{option} expects NAME=VALUE, got {piece.strip()!r}")
+                out[name] = number(text, what=f"{option} {name}")
+    return out
+
+
+def split_starts(values: dict[str, float]) -> tuple[dict[str, float], dict[str, float]]:
+    """{name: value} -> (parameters, start values); start keys are 'c' or 'der(c)'."""
+    params: dict[str, float] = {}
+    starts: dict[str, float] = {}
+    for name, v in values.items():
+        if name.endswith(".start"):
+            starts[name[: -len(".start")]] = v
+        elif name.endswith(".speed"):
+            starts[f"der({name[: -len('.speed')]})"] = v
+        else:
+            params[name] = v
+    return params, starts
+
+
+def start_overrides(coords, model_name: str, starts: dict[str, float]) -> dict[str, float]:
+    """Check start-value keys against the coordinates (did-you-mean on a typo)."""
+    for key in starts:
+        name = key[4:-1] if key.startswith("der(") else key
+        if name not in coords:
+            hint = did_you_mean(name, list(coords))
+            raise UsageError(f"--set {name}.start/.speed: '{name}' is not a coordinate of {model_name}"
+                             + (f"; {hint}" if hint else f" (coordinates: {', '.join(coords)})"))
+    return dict(starts)
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_model(args, *, starts_in_model: bool = True):
+    """mechdsl.load with --model/--scene/--no-units and --set applied.
+
+    starts_in_model=True: start values go into the model (a new analysis), for commands that read
+    the model's start state; False: returns ``(model, x0)`` with the start values as overrides of
+    the state vector (no re-derivation), for runs.
+    """
+    from ..api import load
+
+    m = load(args.file, model=getattr(args, "model", None), scene=getattr(args, "scene", None),
+             units=not getattr(args, "no_units", False))
+    params, starts = split_starts(assignments(getattr(args, "set", None)))
+    if starts_in_model:
+        values = dict(params)
+        for key, v in starts.items():
+            values[f"{key[4:-1]}.speed" if key.startswith("der(") else f"{key}.start"] = v
+        if starts:
+            start_overrides(m.coordinates, m.name, starts)
+        return m.with_params(**values) if values else m
+    if params:
+        m = m.with_params(**params)
+    return m, start_overrides(m.coordinates, m.name, starts)
+
+
+def target_line(args, m) -> str:
+    """Which model and scene a command used, said in its output (no scene applied silently)."""
+    if m.scene is not None:
+        how = "" if getattr(args, "scene", None) else \
+            f" (the file's first scene; --model {m.name} for the model without it)"
+        return f"scene {m.scene.name} of model {m.name}{how}"
+    return f"model {m.name} (no scene)"

@@ -1,0 +1,98 @@
+"""The one simulation layer: ``simulate(eom, settings) -> Result`` = formulate, then solve.
+
+    settings (SimulationSettings, validated once)  -- settings.py
+      -> formulate(eom, settings) -> Problem         -- problem.py (mech compile --emit problem)
+      -> solve(problem) -> Result                    -- the template below:
+           progress -> backend.run -> non-finite check -> statistics schema
+           -> accuracy report -> metadata (what ran) -> [error estimate]
+
+Every caller goes through here: ``mechdsl.simulate.simulate``, ``Model.simulate`` (and so
+``mech simulate``) and ``mech bench``.  Back ends are plug-ins (backends.py); method names
+live in one registry (registry.py).  See docs/internals/simulation.md.
+"""
+from __future__ import annotations
+
+import time
+
+from ..result import Result
+from .problem import Problem, dump, formulate
+from .settings import SimulationSettings, from_kwargs, resolve
+
+
+def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
+    """Formulate and solve one run."""
+    return solve(formulate(eom, settings), progress=progress)
+
+
+def solve(problem: Problem, progress=None) -> Result:
+    from .. import integrators as I
+    from . import accuracy as A
+    from .backends import BACKENDS, ignored_settings
+
+    s = problem.settings
+    backend = BACKENDS[problem.backend]
+    bar = None
+    callback = progress if callable(progress) else None
+    if progress is True:
+        bar = I.Progress(True, s.t_start, s.t_end, label=f"{problem.model} ({s.method})")
+        callback = lambda t, t1: bar.update(float(t))   # noqa: E731
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        r = backend.run(problem, callback)
+    finally:
+        if bar is not None:
+            bar.close()
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    A.check_finite(r)
+    A.normalize_stats(r, cpu, wall)
+    A.accuracy_report(r, problem, fixed_step=problem.backend == "fixed-step")
+    meta = r.metadata
+    meta.setdefault("warnings", [])
+    meta.setdefault("notes", [])
+    meta.setdefault("conservative", "energy" in problem.invariants)
+    unused = ignored_settings(backend, s)
+    if unused:
+        what = {"ode": "an ODE", "dae": "a DAE", "hybrid": "a contact", "canonical": "a fixed-step"}[problem.kind]
+        meta["notes"].append(f"settings without effect on {what} problem: " + ", ".join(unused))
+    ran = backend.describe(r)
+    meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
+                   "rtol": s.rtol, "atol": s.atol,
+                   "compiled": bool(meta.get("compiled", (meta.get("options") or {}).get("compiled", False))),
+                   "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
+    if "versions" not in meta:
+        from ..simulate import versions
+
+        meta["versions"] = versions()
+    if s.estimate_error:
+        _estimate_error(r, problem)
+    return r
+
+
+def _estimate_error(r: Result, problem: Problem) -> None:
+    """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter)."""
+    from . import accuracy as A
+    from .settings import MIN_RTOL
+
+    s = problem.settings
+    if problem.backend == "fixed-step":
+        dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
+        tighter = s.replace(dt=dt / 4, estimate_error=False, budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
+        how = f"dt = {dt / 4:g}"
+    elif s.rtol / 100 < MIN_RTOL:
+        r.metadata["error_estimate"] = {
+            "reference": None, "max_abs_difference": {},
+            "unavailable": f"rtol = {s.rtol:g}: a run 100 times tighter would be below {MIN_RTOL:g}, which double "
+                           "precision cannot deliver; estimate at a looser rtol"}
+        return
+    else:
+        tighter = s.replace(rtol=s.rtol / 100, atol=s.atol / 100, estimate_error=False)
+        how = f"rtol = {tighter.rtol:g}, atol = {tighter.atol:g}"
+    if problem.backend == "fixed-step" and s.points is None:
+        tighter = tighter.replace(points=len(r.t)) if len(r.t) >= 2 else tighter
+    tight = solve(formulate(problem.eom, tighter.validated()))
+    est = A.error_estimate(r, tight)
+    r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
+                                    "reference_failed": None if tight.success else str(tight.failure)}
+
+
+__all__ = ["SimulationSettings", "Problem", "formulate", "solve", "simulate", "resolve", "from_kwargs", "dump"]

@@ -1,0 +1,143 @@
+"""What every run reports the same way: one statistics schema, the check for non-finite
+values, invariant drift and the accuracy warning, and the error estimate by a second run.
+
+Statistics schema (``Result.stats``; None where a back end cannot count):
+
+    steps, rhs_evals, jac_evals, rejected_steps, events, points, cpu_time, wall_time,
+    energy_drift, energy_drift_relative, invariant_drift {name: max |v - v(0)|},
+    constraint_drift (max ||g|| over the run, constrained models)
+
+Back ends may add their own keys beside these (e.g. ``nsteps`` from CVODES in DAE runs).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..result import Failure, Result
+
+SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
+          "energy_drift", "energy_drift_relative", "invariant_drift", "constraint_drift")
+# a back end's name for a count -> the schema's name (first found wins)
+ALIASES = {"steps": ("steps", "nsteps", "n_steps"),
+           "rhs_evals": ("rhs_evals", "nfevals", "rhs_evaluations", "n_rhs"),
+           "jac_evals": ("jac_evals", "njev", "n_call_jacF", "n_jac"),
+           "rejected_steps": ("rejected_steps", "error_test_failures", "netfails", "n_reject",
+                              "rejected_subsegments"),
+           "constraint_drift": ("constraint_drift", "max_constraint_drift")}
+DRIFT_FACTOR = 1e3     # invariant drift this many times the tolerance: the accuracy warning
+
+
+def check_finite(r: Result) -> None:
+    """A run whose state became inf/nan fails at the first such time (results before it are
+    kept); a recorded output that is not finite where the state is gets a warning."""
+    _check_states(r)
+    bad = []
+    for name, v in r.signals.items():
+        if isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "f" and len(v) == len(r.t):
+            idx = np.flatnonzero(~np.isfinite(v))
+            if idx.size:
+                bad.append(f"{name} is {v[idx[0]]} at t = {float(r.t[idx[0]]):.10g}")
+    if bad:
+        r.metadata.setdefault("warnings", []).append(
+            "recorded values are not finite (the model's expressions, e.g. a square root of a negative "
+            "number): " + "; ".join(bad[:3]) + (f"; and {len(bad) - 3} more" if len(bad) > 3 else ""))
+
+
+def _check_states(r: Result) -> None:
+    if r.q.size == 0 and r.qd.size == 0:
+        return
+    X = np.hstack([r.q, r.qd])
+    bad = ~np.isfinite(X)
+    rows = np.flatnonzero(bad.any(axis=1))
+    if rows.size == 0:
+        return
+    k = int(rows[0])
+    names = list(r.coordinates) + [f"der({c})" for c in r.coordinates]
+    col = int(np.flatnonzero(bad[k])[0])
+    t_bad = float(r.t[k])
+    keep = max(k, 1)
+    value = X[k, col]
+    if r.failure is None or r.failure.time > t_bad:
+        r.failure = Failure(time=t_bad, cause="non-finite state",
+                            detail=f"{names[col]} became {value} at t = {t_bad:.10g}; results kept up to "
+                                   f"t = {float(r.t[keep - 1]):.10g}")
+    r.t = r.t[:keep].copy()
+    r.q = r.q[:keep].copy()
+    r.qd = r.qd[:keep].copy()
+    r.signals = {k2: (v[:keep].copy() if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) >= keep else v)
+                 for k2, v in r.signals.items()}
+    r.events = [e for e in r.events if float(e.get("time", -math.inf)) <= float(r.t[-1])]
+
+
+def normalize_stats(r: Result, cpu_time: float, wall_time: float) -> None:
+    st = r.stats
+    for key, names in ALIASES.items():
+        if st.get(key) is None:
+            st[key] = next((st[n] for n in names if st.get(n) is not None), None)
+    ev = st.get("events")
+    st["events"] = len(r.events) if not isinstance(ev, (int, np.integer)) else int(ev)
+    st["points"] = int(len(r.t))
+    st["cpu_time"] = float(cpu_time)            # both over the whole back-end call (set-up included)
+    st["wall_time"] = float(wall_time)
+    if st.get("energy_drift") is None:
+        st.update(energy_drift(r.signals))
+    for key in SCHEMA:
+        st.setdefault(key, None)
+
+
+def energy_drift(signals) -> dict:
+    E = signals.get("energy")
+    if E is None or len(E) == 0 or not np.isfinite(E).all():
+        return {"energy_drift": None, "energy_drift_relative": None}
+    dE = float(np.abs(E - E[0]).max())
+    scale = max(abs(float(E[0])), float(np.abs(signals.get("kinetic_energy", E)).max()),
+                float(np.abs(signals.get("potential_energy", E)).max()), 1e-300)
+    return {"energy_drift": dE, "energy_drift_relative": dE / scale}
+
+
+def accuracy_report(r: Result, problem, fixed_step: bool) -> None:
+    """Invariant drift of every run; a warning when it shows the result is worse than the
+    tolerance suggests (adaptive methods: drift above DRIFT_FACTOR x rtol, relative)."""
+    s = problem.settings
+    drift, report = {}, {}
+    names = list(problem.invariants) + [n for n in (r.stats.get("first_integral_drift") or {})]
+    for name in names:
+        v = r.signals.get(name)
+        if v is None or len(v) == 0 or not np.isfinite(v).all():
+            continue
+        d = float(np.abs(v - v[0]).max())
+        scale = float(np.abs(v).max())
+        if name == "energy":
+            scale = max(scale, float(np.abs(r.signals.get("kinetic_energy", v)).max()),
+                        float(np.abs(r.signals.get("potential_energy", v)).max()))
+        rel = d / scale if scale > 1e-300 else d
+        drift[name] = d
+        report[name] = {"drift": d, "relative": rel}
+        if not fixed_step and rel > DRIFT_FACTOR * s.rtol and d > DRIFT_FACTOR * s.atol:
+            msg = (f"{name} should stay constant but drifted by {rel:.3g} (relative), more than {DRIFT_FACTOR:g} "
+                   f"times rtol = {s.rtol:g}: the results are less accurate than the tolerance suggests; tighten "
+                   f"rtol/atol or check them with --estimate-error")
+            r.metadata.setdefault("warnings", []).append(msg)
+            report[name]["warning"] = True
+    r.stats["invariant_drift"] = drift
+    r.metadata["accuracy"] = {"invariants": report, "rtol": s.rtol, "atol": s.atol}
+
+
+def error_estimate(r: Result, tight: Result) -> dict:
+    """Per recorded quantity: max |x - x_tight| over the common output points."""
+    n = min(len(r.t), len(tight.t))
+    out = {}
+    if n == 0:
+        return out
+    for j, c in enumerate(r.coordinates):
+        out[c] = float(np.abs(r.q[:n, j] - tight.q[:n, j]).max())
+        out[f"der({c})"] = float(np.abs(r.qd[:n, j] - tight.qd[:n, j]).max())
+    for name, v in r.signals.items():
+        w = tight.signals.get(name)
+        if isinstance(v, np.ndarray) and isinstance(w, np.ndarray) and v.ndim == 1 and w.ndim == 1 \
+                and len(v) >= n and len(w) >= n:
+            with np.errstate(invalid="ignore"):
+                out[name] = float(np.nanmax(np.abs(v[:n] - w[:n]))) if n else 0.0
+    return out

@@ -1,0 +1,45 @@
+"""The start vector and the parameter vector of a run, one builder each.
+
+``state_key`` reads a start-value key (``"theta"`` or ``"der(theta)"``) in one place;
+``start_vector`` applies overrides (a full [q; qd] vector or {key: value}) to the model's
+start values; ``parameter_vector`` (mechdsl.eom) does the same for parameters.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..diagnostics import UsageError, did_you_mean
+from ..eom import parameter_vector
+
+__all__ = ["state_key", "start_vector", "parameter_vector"]
+
+
+def state_key(eom, key: str) -> int:
+    """Index in [q; qd] of a start-value key: a coordinate name or ``der(name)``."""
+    name, speed = (key[4:-1], True) if key.startswith("der(") and key.endswith(")") else (key, False)
+    if name not in eom.coords:
+        hint = did_you_mean(name, list(eom.coords))
+        raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
+    return list(eom.coords).index(name) + (eom.n if speed else 0)
+
+
+def start_vector(eom, x0, pv) -> np.ndarray:
+    """[q0; qd0] of the model at parameters ``pv`` with the overrides ``x0`` applied."""
+    n = eom.n
+    q0, qd0 = eom.start(pv)
+    base = np.r_[np.asarray(q0, float).ravel(), np.asarray(qd0, float).ravel()]
+    if x0 is None:
+        out = base
+    elif isinstance(x0, dict):
+        out = base.copy()
+        for k, v in x0.items():
+            out[state_key(eom, str(k))] = float(v)
+    else:
+        out = np.array(x0, float).ravel()
+        if out.size != 2 * n:
+            raise UsageError(f"x0 has {out.size} entries; expected {2 * n} (coordinates then their speeds)")
+    if not np.isfinite(out).all():
+        names = list(eom.coords) + [f"der({c})" for c in eom.coords]
+        bad = [names[i] for i in np.flatnonzero(~np.isfinite(out))]
+        raise UsageError(f"start values are not finite: {', '.join(bad)}")
+    return out

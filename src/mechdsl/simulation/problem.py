@@ -1,0 +1,112 @@
+"""The problem: the named form between the equations of motion and the integrators.
+
+``formulate(eom, settings) -> Problem`` decides once what kind of problem a run solves
+(an ODE in minimal coordinates, a DAE with a formulation, a hybrid system with contacts,
+or a fixed-step canonical integration) and which back end solves it; ``dump(problem)``
+prints it deterministically (``mech compile --emit problem``).  ``inputs`` is empty until
+the language has ``input`` declarations (u(t) signals); back ends then read them from here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .settings import SimulationSettings
+
+KINDS = {"ode": "ODE in minimal coordinates: M(q) q'' = bias(q, q', t, p)",
+         "dae": "index-3 DAE with multipliers: M q'' + G' lambda = bias, g(q, t) = 0",
+         "hybrid": "ODE with unilateral contacts: events and impact maps",
+         "canonical": "fixed-step integration in canonical variables (q, p)"}
+
+
+@dataclass(frozen=True)
+class Problem:
+    kind: str                              # one of KINDS
+    backend: str                           # name in backends.BACKENDS
+    model: str
+    states: tuple[str, ...]                # q then der(q)
+    parameters: tuple[tuple[str, float], ...]
+    settings: SimulationSettings
+    formulation: str | None = None         # DAE formulation as asked ('auto' resolved by the back end)
+    inputs: tuple[str, ...] = ()           # u(t): none yet
+    invariants: tuple[str, ...] = ()       # quantities that should stay constant (their drift is reported)
+    constraints: tuple[str, ...] = ()
+    contacts: tuple[str, ...] = ()         # events
+    outputs: tuple[str, ...] = ()
+    eom: object = field(default=None, repr=False, compare=False)
+
+
+def formulate(eom, settings: SimulationSettings) -> Problem:
+    """Build the problem of a run (settings already validated)."""
+    from .registry import FIXED, check_method
+
+    model = getattr(eom, "model", None)
+    contacts = tuple(c.name for c in (model.contacts if model is not None else ()) or ())
+    constrained = eom.g is not None and getattr(eom, "m", 0) > 0
+    info = check_method(settings.method)
+    if contacts:
+        kind, backend = "hybrid", "events"
+    elif FIXED in info.backends:
+        kind, backend = "canonical", "fixed-step"
+    elif constrained:
+        kind, backend = "dae", "dae"
+    else:
+        kind, backend = "ode", "ode"
+    states = tuple(eom.coords) + tuple(f"der({c})" for c in eom.coords)
+    from ..eom import parameter_vector
+
+    pv = parameter_vector(eom, settings.p)
+    params = tuple((n, float(v)) for n, v in zip(eom.params, pv))
+    outputs = settings.outputs if settings.outputs is not None else tuple(getattr(eom, "outputs", {}) or ())
+    return Problem(kind=kind, backend=backend, model=eom.name, states=states, parameters=params,
+                   settings=settings, formulation=settings.formulation if kind == "dae" else None,
+                   invariants=invariant_names(eom),
+                   constraints=tuple(eom.constraint_names) if constrained else (), contacts=contacts,
+                   outputs=tuple(outputs), eom=eom)
+
+
+def invariant_names(eom) -> tuple[str, ...]:
+    """The energy when the model conserves it, and the model's declared invariants."""
+    from ..simulate import is_conservative
+
+    names = []
+    if conserves_energy(eom, is_conservative):
+        names.append("energy")
+    names += list((getattr(eom, "invariants", None) or {}))
+    return tuple(names)
+
+
+def conserves_energy(eom, is_conservative) -> bool:
+    import casadi as ca
+
+    if getattr(getattr(eom, "model", None), "contacts", None):
+        return False
+    if not is_conservative(eom):
+        return False
+    if eom.g is not None and ca.depends_on(ca.SX(eom.g), eom.t):   # moving constraints do work
+        return False
+    return True
+
+
+def dump(problem: Problem) -> str:
+    """Deterministic text of a problem (``mech compile --emit problem``)."""
+    s = problem.settings
+    lines = [f"problem {problem.model}", f"  kind: {problem.kind} ({KINDS[problem.kind]})",
+             f"  backend: {problem.backend}"]
+    if problem.formulation is not None:
+        lines.append(f"  formulation: {problem.formulation}")
+    lines.append(f"  states ({len(problem.states)}): " + ", ".join(problem.states))
+    lines.append(f"  parameters ({len(problem.parameters)}): "
+                 + ", ".join(f"{n} = {v!r}" for n, v in problem.parameters))
+    lines.append("  inputs: " + (", ".join(problem.inputs) or "none"))
+    lines.append("  invariants: " + (", ".join(problem.invariants) or "none"))
+    lines.append("  constraints: " + (", ".join(problem.constraints) or "none"))
+    lines.append("  contacts: " + (", ".join(problem.contacts) or "none"))
+    lines.append("  outputs: " + (", ".join(problem.outputs) or "none"))
+    lines.append("  settings:")
+    for k, v in s.as_dict().items():
+        if v is None or v == {} or k == "extra":
+            continue
+        lines.append(f"    {k} = {v!r}")
+    for k in sorted(s.extra):
+        lines.append(f"    {k} = {s.extra[k]!r}")
+    return "\n".join(lines) + "\n"
