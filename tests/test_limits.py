@@ -62,6 +62,8 @@ def first_error(err: str, path) -> tuple[str, int, int]:
     # a million-character name: unit parsing hung, and its CSV did not parse back (900,000 here:
     # a file of a million characters is over the file_bytes limit, E005)
     ("double_pendulum.mech", "output Real x2(", "output Real " + "x" * 900_000 + "(", "E314", 22),
+    # a unit string of 500,000 characters: pint's parser ran for minutes
+    ("pendulum.mech", '(unit = "kg")', '(unit = "' + "x" * 500_000 + '")', "E314", 12),
 ])
 def test_budget_examples_stop_with_a_located_error(tmp_path, model, old, new, code, line):
     path = mutant(tmp_path, model, old, new)

@@ -346,6 +346,10 @@ class Flattener(Evaluator):
         v = self.eval(u.value)
         if not isinstance(v, Str):
             fail("E404", "a unit must be a string", u.value.span, 'write unit = "m/s2"')
+        if len(v.value) > limits.get("name_length"):  # pint's parser takes minutes on huge strings
+            fail("E314", f"unit string is too long ({len(v.value):,} characters, more than "
+                         f"{limits.get('name_length')})", u.value.span,
+                 'units look like "kg", "m/s2", "N.m"; ' + limits.hint("name_length"))
         try:
             factor, dim = U.parse_unit(v.value)
         except ValueError:
