@@ -181,14 +181,14 @@ class Program:
             except MechError as e:
                 diags.extend(e.diagnostics)
         diags.raise_if_errors()
-        _check_run_settings(s, out)
+        _check_run_settings(s, out, model)
         if "tolerance" in out:
             out.setdefault("rtol", out["tolerance"])
             out.setdefault("atol", out["tolerance"])
         return list(out.items())
 
 
-def _check_run_settings(s: ast.SceneDef, out: dict[str, object]) -> None:
+def _check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model) -> None:
     """The simulation's own rules for the settings a scene gives (simulation/settings.py and
     registry.py), reported as E604 at the setting: `check` finds what `simulate` would refuse."""
     from ..diagnostics import UsageError
@@ -207,6 +207,13 @@ def _check_run_settings(s: ast.SceneDef, out: dict[str, object]) -> None:
                 check(out[name].lower())
             except UsageError as e:
                 diags.error("E604", str(e), spans[name], "see docs/simulate.md for the names")
+    method = str(out.get("method", "")).lower()
+    if method in R.FIXED_METHODS and (model.loops or model.constraints):
+        from ..symplectic import CONSTRAINED
+
+        if method not in CONSTRAINED:
+            bad("method", f"= \"{method}\" ignores the constraints of {model.name}",
+                'use method = "rattle" (constrained Stormer-Verlet) or an adaptive method (docs/constraints.md)')
     for name in ("tolerance", "rtol", "atol"):
         v = out.get(name)
         if isinstance(v, float) and not 0 < v < 1:
