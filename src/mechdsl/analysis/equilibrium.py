@@ -34,9 +34,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..diagnostics import UsageError, did_you_mean
+from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from . import charts
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
-from .core import dense, param_vector, structure, wrap_angle
+from .core import dense, param_vector, parts, structure, wrap_angle
 from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
 
@@ -78,6 +79,9 @@ class Equilibrium:
     constraint_names: tuple[str, ...] = ()
     active_constraints: tuple[str, ...] = ()
     tangent_basis: np.ndarray | None = None
+    # rotation joints: the classification was made in a chart (analysis.charts) whose
+    # coordinates are these; hessian, symmetry_directions and the eigenvalues refer to them
+    chart_coords: tuple[str, ...] = ()
 
     @property
     def lambdas(self) -> dict[str, float]:
@@ -109,8 +113,10 @@ class Equilibrium:
         if self.linear_eigenvalues is not None:
             d["linear_eigenvalues"] = [[float(v.real), float(v.imag)] for v in self.linear_eigenvalues]
         if self.symmetry_directions is not None and self.symmetry_directions.size:
-            d["symmetry_directions"] = [{c: float(v) for c, v in zip(self.coords, col)}
+            d["symmetry_directions"] = [{c: float(v) for c, v in zip(self.chart_coords or self.coords, col)}
                                         for col in self.symmetry_directions.T]
+        if self.chart_coords:
+            d["chart_coordinates"] = list(self.chart_coords)
         if self.multipliers is not None:
             d["multipliers"] = self.lambdas
             d["active_constraints"] = list(self.active_constraints)
@@ -118,8 +124,44 @@ class Equilibrium:
         return d
 
 
+@dataclass
+class Search:
+    """How the search went, for saying why nothing was found: starting guesses tried, how many
+    converged, the smallest force at rest reached (relative to the force scale) and where, and
+    how many runs ran off to coordinates far beyond their start (a force that decays without
+    vanishing, as a central attraction's)."""
+
+    guesses: int = 0
+    converged: int = 0
+    best_residual: float = math.inf
+    best_q: np.ndarray | None = None
+    runaway: int = 0
+
+    def why_none(self, coords) -> str:
+        """The reason no equilibrium was found, in words (empty when nothing is known)."""
+        if not self.guesses:
+            return ""
+        out = f"none of {self.guesses} starting guesses converged"
+        if self.best_q is not None and math.isfinite(self.best_residual):
+            where = ", ".join(f"{c} = {v:.4g}" for c, v in zip(coords, self.best_q))
+            out += (f"; the smallest force at rest reached was {self.best_residual:.3g} of the force "
+                    f"scale (at {where})")
+        if self.runaway:
+            out += (f"; {self.runaway} of the searches ran off to coordinates more than {RUNAWAY:g} times "
+                    "farther out than their start: the force at rest decays without vanishing, so the model "
+                    "has no static equilibrium (a central attraction, e.g. the Kepler problem, has none: "
+                    "bodies released at rest fall towards each other)")
+        return out
+
+
+class Equilibria(list):
+    """The equilibria found (a list of :class:`Equilibrium`) with ``search``, a :class:`Search`."""
+
+    search: Search
+
+
 def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = MAX_GUESSES
-               ) -> list[Equilibrium]:
+               ) -> Equilibria:
     """Distinct equilibria of the model, each classified (see the module docstring).
 
     guesses: None, a dict {coordinate: value} (missing coordinates take their start values),
@@ -139,6 +181,12 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     k = N.shape[1]
     ma = 0 if con is None else con.ma
     notes = [] if con is None else list(con.notes)
+    blocks = charts.quaternion_blocks(eom)
+    if blocks and con is not None:
+        raise MechError(Diagnostic("E909", f"equilibria of '{eom.name}' are not sought: quaternion joints "
+                                           f"({', '.join(j for j, _ in blocks)}) together with constraints are "
+                                           "not supported by the analyses",
+                                   help="use Euler angles for these joints, or simulate the model instead"))
     if not st.autonomous:
         notes.append(f"the equations depend explicitly on time: equilibrium at t = {t:g} only")
     if st.force_scale == 0.0:
@@ -146,7 +194,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         e = _classify(eom, st, pv, qref, np.zeros(k), t, 0.0, notes + ["no generalized force acts at rest: "
                                                                        "every configuration is an equilibrium"],
                       con=con, lam=np.zeros(ma))
-        return [e]
+        return _result([e], Search())
 
     # unknowns w = (q, mu, alpha), lambda = lam_scale * mu:
     # bias(q, 0, t) - G(q)' lambda - M(q) N alpha ; g(q) / |G row| ; N'(q - q_ref)
@@ -168,15 +216,23 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     if k:
         parts_[0] = parts_[0] - ca.mtimes(Mq, ca.mtimes(N, alpha))
         parts_.append(ca.mtimes(N.T, qw - qr))
+    for _, idx in blocks:       # unit quaternions: the norm is a constraint, |q| = 1
+        parts_.append(ca.sumsqr(qw[idx]) - 1)
     r = ca.substitute(ca.vertcat(*parts_), eom.t, ca.SX(float(t)))
     args = [w, qr, eom.p]
     F = ca.Function("eq_res", args, [r])
     JF = ca.Function("eq_jac", args, [ca.jacobian(r, w)])
-    rs = np.concatenate([np.full(n, scale), np.ones(ma), np.full(k, scale)])
+    rs = np.concatenate([np.full(n, scale), np.ones(ma), np.full(k, scale), np.ones(len(blocks))])
 
     tol = 1e-8 * scale
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
+    search = Search()
+    # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
+    families = con is None and bool(blocks or charts.euler_blocks(eom))
     for g in _guesses(eom, guesses, q0, st, max_guesses, con):
+        if blocks:
+            g = charts.normalize_blocks(g, blocks, fallback=q0)
+        search.guesses += 1
         x0 = np.concatenate([g, _start_multipliers(eom, con, g, t, pv, lam_scale), np.zeros(k)])
         try:
             x = levenberg_marquardt(lambda x: dense(F(x, qref, pv)).ravel() / rs,
@@ -190,16 +246,29 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             continue
         resid = float(np.max(np.abs(res[:n])))
         if resid > tol:
+            _note_failure(search, x[:n], g, resid / scale)
             continue
+        if _decayed(x, g, n, JF, qref, pv, st):
+            search.runaway += 1
+            continue
+        search.converged += 1
         qs = x[:n].copy()
+        if blocks:
+            qs = charts.normalize_blocks(qs, blocks)
+            x = np.concatenate([qs, x[n:]])
+            resid = float(np.max(np.abs(dense(F(x, qref, pv)).ravel()[:n])))
         if con is not None and np.max(con.distances(qs), initial=0.0) > 1e-9 * (1.0 + np.max(np.abs(qs))):
             continue
         for i in range(n):
             if st.periodic[i]:
                 qs[i] = wrap_angle(qs[i])
+        if con is None and eom.singularity_monitors and _lock_artefact(eom, qs, t, pv, tol):
+            continue
         qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
         for i, f_ in enumerate(found):
-            if _same(qs, f_[0], st.periodic) or _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic):
+            if _same(qs, f_[0], st.periodic, blocks) or _euler_same(eom, qs, f_[0], st) or \
+                    _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic, blocks, families) or \
+                    (families and _rotation_joined(eom, qs, f_[0], t, pv, tol)):
                 if resid < f_[2]:
                     found[i] = (qs, x[n:].copy(), resid)
                 break
@@ -207,9 +276,192 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
             found.append((qs, x[n:].copy(), resid))
 
     found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
-    return [_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
-                      lam=_clean(lam_scale * rest[:ma], lam_scale))
-            for qs, rest, resid in found]
+    out = []
+    for qs, rest, resid in found:
+        locked = charts.locked_joints(eom, qs, t, pv) if con is None else []
+        if blocks or locked:
+            e = _classify_in_chart(eom, st, pv, qs, rest[ma:], t, resid, list(notes), blocks, locked)
+            if e is not None:       # None: a critical point of the Euler chart only (gimbal lock)
+                out.append(e)
+        elif families:
+            st_f, a_f, more = _with_families(eom, st, pv, qs, t, rest[ma:])
+            out.append(_classify(eom, st_f, pv, qs, a_f, t, resid, list(notes) + more))
+        else:
+            out.append(_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
+                                 lam=_clean(lam_scale * rest[:ma], lam_scale)))
+    return _result(out, search)
+
+
+def chart_of(eom, q, t, pv):
+    """(EOM in the chart about q, its structure, chart reference point, basis Z with dq = Z dz
+    in the coordinates of the chart's EOM, the EOM the chart belongs to, notes) for a model with
+    quaternion joints or Euler angles at gimbal lock; None for a regular point of ordinary
+    coordinates."""
+    from .charts import chart, locked_joints, quaternion_blocks, quaternion_model, tangent_basis as zbasis
+
+    blocks = quaternion_blocks(eom)
+    locked = locked_joints(eom, q, t, pv) if not constrained(eom) else []
+    if not blocks and not locked:
+        return None
+    notes = []
+    base, qb = eom, np.asarray(q, float)
+    if locked:
+        base, to_new = quaternion_model(eom, locked)
+        qb = to_new(qb)
+        blocks = quaternion_blocks(base)
+        notes.append(f"the Euler angles of {', '.join(locked)} are at gimbal lock here: analysed in a "
+                     "quaternion chart instead (rotation vectors <joint>.rx, .ry, .rz in child axes)")
+    else:
+        notes.append("quaternion joint(s): analysed in the tangent space of the unit quaternion(s) "
+                     "(rotation vectors <joint>.rx, .ry, .rz in child axes)")
+    ch = chart(base, qb)
+    st0 = structure(base, pv)
+    keep = [i for i in range(base.n) if not any(i in idx for _, idx in blocks)]
+    N = st0.symmetry
+    cols = [c for c in N.T if np.max(np.abs(np.delete(c, keep)), initial=0.0) <= 1e-12]
+    Z = zbasis(qb, blocks, base.n)
+    Nc = np.array([Z.T @ c for c in cols]).T if cols else np.zeros((ch.n, 0))
+    per = [False] * ch.n
+    ang = [False] * ch.n
+    j = 0
+    for i in range(base.n):
+        if i in keep:
+            per[j], ang[j] = st0.periodic[i], st0.angle_unit[i]
+            j += 1
+        elif any(i == idx[0] for _, idx in blocks):
+            j += 3
+    import dataclasses
+
+    st = dataclasses.replace(st0, n=ch.n, periodic=tuple(per), angle_unit=tuple(ang), symmetry=Nc)
+    return ch, st, qb, Z, base, notes
+
+
+def _lock_artefact(eom, q, t, pv, tol) -> bool:
+    """q is at gimbal lock and only a critical point of the Euler angles: the same configuration
+    in quaternions has a force at rest (dV/d(angles) = J' grad V vanishes where J loses rank)."""
+    locked = charts.locked_joints(eom, q, t, pv)
+    if not locked:
+        return False
+    base, to_new = charts.quaternion_model(eom, locked)
+    _, bias = parts(base).M_bias(to_new(q), np.zeros(base.n), t, pv)
+    return not np.max(np.abs(bias), initial=0.0) <= tol
+
+
+def _classify_in_chart(eom, st, pv, qs, alpha, t, resid, notes, blocks, locked) -> Equilibrium:
+    """Classification in the chart of :func:`chart_of`; continuous families of equilibria
+    through the point (a top's rotation about the vertical) are neutral directions, like
+    symmetry directions."""
+    ch, stc, qb, Z, base, more = chart_of(eom, qs, t, pv)
+    nz = ch.n
+    k = stc.symmetry.shape[1]
+    if locked and not k:
+        # at gimbal lock dV/d(angles) = J' grad V vanishes where J loses rank: a point that is
+        # no equilibrium in a regular chart is an artefact of the Euler angles
+        _, bias = parts(ch).M_bias(np.zeros(nz), np.zeros(nz), t, pv)
+        if np.max(np.abs(bias), initial=0.0) > 1e-8 * max(st.force_scale, 1e-300):
+            return None
+    a = np.zeros(k)
+    if k and len(alpha) == st.symmetry.shape[1]:
+        a = np.linalg.lstsq(stc.symmetry, Z.T @ (st.symmetry @ alpha) if base is eom else np.zeros(nz),
+                            rcond=None)[0]
+    stc, a, fam_notes = _with_families(ch, stc, pv, np.zeros(nz), t, a)
+    e = _classify(ch, stc, pv, np.zeros(nz), a, t, resid, notes + more + fam_notes)
+    e.coords, e.q, e.chart_coords = tuple(eom.coords), np.asarray(qs, float), tuple(ch.coords)
+    e.tangent_basis = Z if base is eom else None
+    e.acceleration = np.zeros(eom.n) if not k else (st.symmetry @ alpha)
+    return e
+
+
+def _with_families(eom, st, pv, q, t, alpha):
+    """(structure, alpha, notes) with the directions along a continuous family of equilibria
+    through q added to the symmetry directions (neutral)."""
+    import dataclasses
+
+    fam = _family_directions(eom, st, pv, t, alpha, q)
+    if not fam.shape[1]:
+        return st, alpha, []
+    Nold = st.symmetry
+    k = Nold.shape[1]
+    Nall = np.linalg.qr(np.hstack([Nold, fam]))[0] if k else fam
+    a = np.linalg.lstsq(Nall, Nold @ alpha, rcond=None)[0] if k else np.zeros(Nall.shape[1])
+    return (dataclasses.replace(st, symmetry=Nall), a,
+            [f"{fam.shape[1]} direction(s) along a continuous family of equilibria through this point: neutral"])
+
+
+def _family_directions(ch, st, pv, t, alpha, q=None) -> np.ndarray:
+    """Orthonormal directions v of zero stiffness (transverse to the symmetry directions) along
+    which the point q (default 0: a chart's centre) continues as a curve of equilibria: from
+    q + s v (s = 0.2) Levenberg-Marquardt with the gauge v'(z - q) = s converges to an
+    equilibrium.  Not for accelerated references."""
+    import casadi as ca
+
+    n = ch.n
+    q = np.zeros(n) if q is None else np.asarray(q, float)
+    N = st.symmetry
+    if N.size and np.any(alpha):
+        return np.zeros((n, 0))
+    M, C, K, _, _ = second_order(ch, q, np.zeros(n), t, pv, acc=np.zeros(n))
+    P = complement(N)
+    Kr = sym(P.T @ K @ P)
+    if not Kr.size:
+        return np.zeros((n, 0))
+    w, V = np.linalg.eigh(Kr)
+    kscale = max(np.max(np.abs(K), initial=0.0), st.stiffness_scale, 1e-300)
+    null = [P @ V[:, i] for i in range(len(w)) if abs(w[i]) <= 1e-9 * kscale]
+    if not null:
+        return np.zeros((n, 0))
+    scale = max(st.force_scale, 1e-300)
+    z = ca.SX.sym("z", n)
+    rest = ca.substitute(ca.substitute(ch.bias, ch.qd, ca.SX.zeros(n)), ch.t, ca.SX(float(t)))
+    f = ca.Function("fam", [z, ch.p], [ca.substitute(rest, ch.q, z)])
+    keep = []
+    for v in null:
+        s = 0.2
+        vv = ca.DM(v)
+        r = ca.vertcat(ca.substitute(rest, ch.q, z) / scale, ca.mtimes(vv.T, z - ca.DM(q)) - s)
+        F = ca.Function("famr", [z, ch.p], [r])
+        JF = ca.Function("famj", [z, ch.p], [ca.jacobian(r, z)])
+        try:
+            x = levenberg_marquardt(lambda x: dense(F(x, pv)).ravel(), lambda x: dense(JF(x, pv)), q + s * v)
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            x = None
+        if x is None:
+            continue
+        res = dense(f(x, pv)).ravel()
+        if np.all(np.isfinite(res)) and np.max(np.abs(res), initial=0.0) <= 1e-8 * scale \
+                and abs(float(v @ (x - q)) - s) <= 1e-6:
+            keep.append(v)
+    if not keep:
+        return np.zeros((n, 0))
+    Q = np.linalg.qr(np.array(keep).T)[0]
+    return Q
+
+
+def _result(eqs, search: Search) -> Equilibria:
+    out = Equilibria(eqs)
+    out.search = search
+    return out
+
+
+RUNAWAY = 10.0           # a failed run that ends this many times farther out than its start ran away
+
+
+def _decayed(x, g, n, JF, qref, pv, st) -> bool:
+    """A run that went far out (RUNAWAY / 2) to where both the force and its derivative have decayed
+    below tolerance (V0 exp(-x) at x = 34) found no equilibrium, only a vanishing force."""
+    size = 1.0 + float(np.max(np.abs(g), initial=0.0))
+    if float(np.max(np.abs(x[:n]), initial=0.0)) <= 0.5 * RUNAWAY * size:
+        return False
+    J = dense(JF(x, qref, pv))[:n, :n]
+    return float(np.max(np.abs(J), initial=0.0)) <= 1e-8 * max(st.stiffness_scale, 1e-300)
+
+
+def _note_failure(search: Search, q, g, rel_resid: float) -> None:
+    size = 1.0 + float(np.max(np.abs(g), initial=0.0))
+    if float(np.max(np.abs(q), initial=0.0)) > RUNAWAY * size:
+        search.runaway += 1
+    if rel_resid < search.best_residual:
+        search.best_residual, search.best_q = rel_resid, np.asarray(q, float).copy()
 
 
 def _clean(lam, lam_scale):
@@ -229,8 +481,14 @@ def _start_multipliers(eom, con, q, t, pv, lam_scale) -> np.ndarray:
     return np.where(np.isfinite(out), out, 0.0)
 
 
-def _same(a: np.ndarray, b: np.ndarray, periodic) -> bool:
-    for x, y, per in zip(a, b, periodic):
+def _same(a: np.ndarray, b: np.ndarray, periodic, blocks=()) -> bool:
+    quat = {i for _, idx in blocks for i in idx}
+    for _, idx in blocks:
+        if charts.block_distance(a, b, idx) > 1e-6:
+            return False
+    for i, (x, y, per) in enumerate(zip(a, b, periodic)):
+        if i in quat:
+            continue
         d = x - y
         if per:
             d = wrap_angle(d)
@@ -239,15 +497,88 @@ def _same(a: np.ndarray, b: np.ndarray, periodic) -> bool:
     return True
 
 
-def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic) -> bool:
-    """Two nearby solutions of one degenerate equilibrium (slow convergence at a multiple root):
-    the residual stays below tol along the segment between them."""
+def _euler_same(eom, a, b, st) -> bool:
+    """a and b describe the same configuration through the other Euler angles of a joint's
+    rotation, up to a shift along the symmetry directions (angles modulo 2 pi)."""
+    eb = charts.euler_blocks(eom)
+    if not eb:
+        return False
+    N = st.symmetry
+    for block in eb:
+        tw = charts.euler_twin(b, block)
+        d = np.array([wrap_angle(x - y) if (per or i in block[0]) else x - y
+                      for i, (x, y, per) in enumerate(zip(a, tw, st.periodic))])
+        if N.size:
+            d = d - N @ (N.T @ d)
+            d = np.array([wrap_angle(x) if (per or i in block[0]) else x
+                          for i, (x, per) in enumerate(zip(d, st.periodic))])
+        if np.max(np.abs(d), initial=0.0) <= 1e-6 * (1.0 + np.max(np.abs(a), initial=0.0)):
+            return True
+    return False
+
+
+def _rotation_joined(eom, a, b, t, pv, tol) -> bool:
+    """Euler-angle models: a and b are one configuration or on one family of equilibria as
+    rotations: the same model in quaternions is at rest along the great circle between them
+    (Euler coordinates cannot say so near gimbal lock, where a line of angles is one rotation)."""
+    eb = charts.euler_blocks(eom)
+    if not eb:
+        return False
+    try:
+        base, to_new = charts.quaternion_model(eom, [blk[2] for blk in eb])
+    except MechError:
+        return False
+    qa, qb = to_new(a), to_new(b)
+    blocks = charts.quaternion_blocks(base)
+    quat = [i for _, idx in blocks for i in idx]
+    rest = [i for i in range(base.n) if i not in quat]
+    per = structure(eom, pv).periodic
+    da = np.zeros(base.n)
+    for i in rest:
+        c = base.coords[i]
+        j = eom.coords.index(c)
+        da[i] = wrap_angle(qa[i] - qb[i]) if per[j] else qa[i] - qb[i]
+    if np.max(np.abs(da), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(qa[rest]), initial=0.0)):
+        return False
+    for _, idx in blocks:
+        if np.dot(qa[idx], qb[idx]) < 0:
+            qb[idx] = -qb[idx]
+    pt = parts(base)
+    for s in (0.0, 0.25, 0.5, 0.75, 1.0):
+        w = qb + s * (qa - qb)
+        w[rest] = qb[rest] + s * da[rest]
+        for _, idx in blocks:
+            nb = np.linalg.norm(w[idx])
+            if nb < 1e-6:
+                return False
+            w[idx] = w[idx] / nb
+        _, bias = pt.M_bias(w, np.zeros(base.n), t, pv)
+        if not np.max(np.abs(bias), initial=0.0) <= tol:
+            return False
+    return True
+
+
+def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic, blocks=(), families=False) -> bool:
+    """Two solutions of one degenerate equilibrium (slow convergence at a multiple root) or, with
+    quaternion joints, of one continuous family (a rotation about the vertical): the residual
+    stays below tol along the path between them (quaternion blocks: the great circle)."""
     d = np.array([wrap_angle(x - y) if per else x - y for x, y, per in zip(a, b, periodic)])
-    if np.max(np.abs(d), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(a), initial=0.0)):
+    quat = [i for _, idx in blocks for i in idx]
+    if not (blocks or families) and np.max(np.abs(d), initial=0.0) > 1e-3 * (1.0 + np.max(np.abs(a), initial=0.0)):
         return False
     n = len(a)
+    bb = np.array(b, float)
+    for _, idx in blocks:     # the same sign for the path (q and -q are one rotation)
+        if np.dot(a[idx], bb[idx]) < 0:
+            bb[idx] = -bb[idx]
+    d[quat] = (a - bb)[quat]
     for s in (0.25, 0.5, 0.75):
-        w = np.concatenate([b + s * d, alpha_b + s * (alpha_a - alpha_b)])
+        w = np.concatenate([bb + s * d, alpha_b + s * (alpha_a - alpha_b)])
+        for _, idx in blocks:
+            nb = np.linalg.norm(w[idx])
+            if nb < 1e-6:
+                return False
+            w[idx] = w[idx] / nb
         r = dense(F(w, q0, pv)).ravel()[:n]
         if not np.all(np.isfinite(r)) or np.max(np.abs(r), initial=0.0) > tol:
             return False
@@ -263,6 +594,10 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     k = N.shape[1]
     acc = N @ alpha if k else np.zeros(n)
     M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
+    if k and np.linalg.norm(M @ acc) <= 1e-8 * max(st.force_scale, 1e-300) and np.any(acc):
+        # no force along N: alpha is arbitrary where N carries no inertia; the reference is at rest
+        acc = np.zeros(n)
+        M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
     Z = None
     if con is not None:
         K = K + con.geometric_stiffness(q, lam)
@@ -270,6 +605,10 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         Mt, Ct, Kt, Nt = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ K @ Z, Z.T @ N
     else:
         Mt, Ct, Kt, Nt = M, C, K, N
+    Mt, Ct, Kt, Nt, inert = drop_inert(Mt, Ct, Kt, Nt)
+    if inert:
+        notes = notes + [f"{inert} direction(s) carry neither inertia nor force here (the spin of a point "
+                         "mass about its own axis): left out"]
     P = complement(Nt)
     Kr = P.T @ Kt @ P
     accel = bool(k) and np.linalg.norm(M @ acc) > 1e-8 * max(st.force_scale, 1e-300)
@@ -285,7 +624,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     if con is not None:      # the geometric stiffness is of the order force scale x curvature
         kscale = max(kscale, st.force_scale * con.curvature_scale(q))
     circulatory = np.max(np.abs(Kt - Kt.T), initial=0.0) > 1e-7 * kscale
-    A = reduced_first_order(Mt, Ct, Kt, Nt)
+    massless = singular_mass(Mt)
+    A = reduced_first_order(Mt, Ct, Kt, Nt) if not massless else np.zeros((0, 0))
     ev = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)
     ev = ev[np.lexsort((ev.imag, ev.real))]
     lscale = max(1.0, np.max(np.abs(ev), initial=0.0))
@@ -304,6 +644,10 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
 
     if not st.autonomous:
         stable, reason = None, "explicitly time-dependent equations: stability is not decided here"
+    elif massless:
+        stable, reason = None, (f"the mass matrix is singular here ({massless}) while forces act in that "
+                                "direction: the equations of motion do not determine the motion, stability "
+                                "is not decided")
     elif singular:
         stable, reason = None, "singular configuration of the constraints: stability is not decided here"
     elif growth > 1e-6 * lscale:
@@ -344,6 +688,49 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
                        hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,
                        acceleration=acc if k else np.zeros(n), linear_eigenvalues=ev,
                        symmetry_directions=N if k else None, t=float(t), notes=list(notes), **extra)
+
+
+def drop_inert(M, C, K, N):
+    """Leave out the directions that carry neither inertia nor force (M v = 0, K v = K'v = 0,
+    C v = C'v = 0: a point mass spinning about its own axis); (M, C, K, N, count) in an
+    orthonormal basis of the rest."""
+    R = active_basis(M, C, K)
+    if R is None:
+        return M, C, K, N, 0
+    Nr = R.T @ N
+    if Nr.size:
+        U, sv, _ = np.linalg.svd(Nr, full_matrices=False)
+        Nr = U[:, sv > 1e-8]
+    return R.T @ M @ R, R.T @ C @ R, R.T @ K @ R, Nr, M.shape[0] - R.shape[1]
+
+
+def active_basis(M, C, K):
+    """Orthonormal basis of the complement of the directions without inertia or force (None
+    when there are none); columns that are coordinate axes are kept exactly."""
+    n = M.shape[0]
+    if n == 0:
+        return None
+    from .core import null_space
+
+    scale = max(np.max(np.abs(M), initial=0.0), 1e-300)
+    ks = max(np.max(np.abs(K), initial=0.0), np.max(np.abs(C), initial=0.0), 1e-300)
+    J = np.vstack([M / scale, K / ks, K.T / ks, C / ks, C.T / ks])
+    inert = null_space(J, rel=1e-10)
+    if inert.shape[1] == 0:
+        return None
+    R = complement(inert)
+    R[np.abs(R) <= 1e-12] = 0.0
+    return R
+
+
+def singular_mass(M) -> str:
+    """'' when M is invertible, else a description of its null direction."""
+    if M.size == 0:
+        return ""
+    w, V = np.linalg.eigh(sym(M))
+    if w[0] > 1e-12 * max(abs(w[-1]), 1e-300):
+        return ""
+    return f"smallest eigenvalue {w[0]:.3g} of {w[-1]:.3g}"
 
 
 def _fmt_list(v) -> str:

@@ -24,6 +24,7 @@ from .core import Probe, dense, param_vector, parts, structure
 
 SYMBOLIC_MAX_N = 3            # sympy inverts M up to this size
 SYMBOLIC_MAX_OPS = 400        # ... and when its entries are this small
+SIMPLIFY_MAX_N = 12           # entries are simplified (sympy, ~0.05 s each) up to this many coordinates
 
 
 @dataclass
@@ -156,10 +157,12 @@ def format_hamiltonian(model, latex: bool = False) -> str:
     """
     import sympy as sp
 
-    from .symbolic import simplify_small
+    from .symbolic import simplify_small as simplify
 
     lg, eom = _lagrangian_for(model)
     n = len(lg.q)
+    # a size limit, not a clock: larger models print their entries as derived (deterministic)
+    simplify_small = simplify if n <= SIMPLIFY_MAX_N else (lambda e, angles=(): e)
     P = [sp.Symbol(_momentum_name(c, lg), real=True) for c in lg.coords]
     L = lg.L
     pexpr = [simplify_small(sp.diff(L, v), lg.q) for v in lg.qd]
@@ -223,6 +226,8 @@ def format_hamiltonian(model, latex: bool = False) -> str:
                                                  else r"\partial L/\partial q + Q - \partial D/\partial \dot q")
                                                 + lam_term(None))]))
         how = f"Legendre transform in matrix form ({n} coordinates: M is inverted numerically)"
+        if n > SIMPLIFY_MAX_N:
+            how += f"; entries not simplified (more than {SIMPLIFY_MAX_N} coordinates)"
     scleronomic = all(e == 0 for e in bsym) and sp.simplify(T0) == 0 and not lg.T.has(lg.t)
     note = ("H equals the energy T + V (scleronomic)" if scleronomic else
             "H = T2 - T0 + V is the Jacobi integral, not the energy T + V (moving frame)")

@@ -16,7 +16,8 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from .constraints import constrained, setup
 from .core import dense, param_vector, parts, structure, wrap_angle
-from .matrices import first_order, second_order, skew, sym
+from .charts import chart_speeds, normalize_blocks, quaternion_blocks
+from .matrices import first_order, second_order, singular_mass_error, skew, sym
 from .modes import Modes, modes_of
 
 
@@ -143,7 +144,7 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
     None: the parameters the model declares ``input``; () for none.
     """
-    from .equilibrium import Equilibrium
+    from .equilibrium import Equilibrium, active_basis, chart_of, singular_mass
 
     pv = param_vector(eom, p)
     if constrained(eom):
@@ -166,43 +167,106 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
         q, qd, t = _state(eom, at, q0, qd0, pv, t)
         kind = "state"
 
-    M, C, K, bias, acc = second_order(eom, q, qd, t, pv, acc=acc)
+    # quaternion joints and Euler angles at gimbal lock: the linear model lives in a chart
+    # (analysis.charts); base is the EOM whose coordinates the result reports
+    base, work, qw, qdw, accw, Zc = eom, eom, q, qd, acc, None
+    blocks = quaternion_blocks(eom)
+    if blocks:
+        q = qw = normalize_blocks(q, blocks, fallback=q0)
+    ch = chart_of(eom, q, t, pv)
+    if ch is not None:
+        work, _, qb, Zc, base, more = ch
+        notes.extend(more)
+        if base is not eom and np.any(qd):
+            raise MechError(Diagnostic("E911", f"the Euler angles of '{eom.name}' are at gimbal lock in this "
+                                               "state and the angle rates do not carry over to another chart",
+                                       help="linearize about a state at rest here, or use a quaternion joint"))
+        qdb = np.zeros(base.n) if base is not eom else qd
+        qw, qdw = np.zeros(work.n), chart_speeds(qb, qdb, quaternion_blocks(base), base.n)
+        accw = None if acc is None else np.linalg.lstsq(Zc, _to_base(acc, base, eom), rcond=None)[0]
+        q, qd = qb, qdb
+    nw = work.n
+    M, C, K, bias, accw = second_order(work, qw, qdw, t, pv, acc=accw)
     if kind == "state":
-        r = bias - M @ np.zeros(n)
         st = structure(eom, pv)
-        if np.max(np.abs(qd), initial=0.0) == 0 and np.max(np.abs(r), initial=0.0) <= 1e-8 * max(st.force_scale, 1e-300):
+        if np.max(np.abs(qdw), initial=0.0) == 0 and np.max(np.abs(bias), initial=0.0) <= 1e-8 * max(st.force_scale, 1e-300):
             kind = "equilibrium"
-            acc = np.zeros(n)
-            M, C, K, bias, acc = second_order(eom, q, qd, t, pv, acc=acc)
+            accw = np.zeros(nw)
+            M, C, K, bias, accw = second_order(work, qw, qdw, t, pv, acc=accw)
         else:
             notes.append("not an equilibrium: the linear model describes deviations from the motion "
                          "through this state at this instant (frozen time, reference acceleration "
                          "included in K)")
-    A = first_order(M, C, K)
     if inputs is None:
         inputs = declared_inputs(eom)
-    names, Bq = _inputs(eom, inputs, q, qd, t, pv)
-    B = np.vstack([np.zeros((n, Bq.shape[1])), np.linalg.solve(M, Bq)]) if n else np.zeros((0, Bq.shape[1]))
-    return Linearization(coords=tuple(eom.coords), M=M, C=C, K=K, A=A, B=B, Bq=Bq, inputs=names,
+    names, Bq = _inputs(base, inputs, q, qd, t, pv)
+    stiffness = K
+    R = active_basis(M, C, K) if singular_mass(M) else None
+    if R is not None:
+        notes.append(f"{nw - R.shape[1]} direction(s) carry neither inertia nor force (the spin of a point "
+                     "mass about its own axis): left out of the linear model")
+        M, C, K = R.T @ M @ R, R.T @ C @ R, R.T @ K @ R
+    if singular_mass(M):
+        w, V = np.linalg.eigh(sym(M))
+        raise singular_mass_error(work, (V[:, 0] if R is None else R @ V[:, 0]), "at the linearization point")
+    basis = Zc if R is None else (R if Zc is None else Zc @ R)
+    if basis is not None:
+        Bq = basis.T @ Bq
+    m = M.shape[0]
+    A = first_order(M, C, K)
+    B = np.vstack([np.zeros((m, Bq.shape[1])), np.linalg.solve(M, Bq)]) if m else np.zeros((0, Bq.shape[1]))
+    acc_out = np.asarray(accw, float) if Zc is None else Zc @ np.asarray(accw, float)
+    extra = {}
+    if basis is not None:
+        rnames = tuple(work.coords) if R is None else _names(work.coords, R)
+        extra = dict(basis=basis, reduced_coords=rnames, stiffness=stiffness)
+    return Linearization(coords=tuple(base.coords), M=M, C=C, K=K, A=A, B=B, Bq=Bq, inputs=names,
                          q=np.asarray(q, float), qd=np.asarray(qd, float), t=float(t),
-                         acceleration=np.asarray(acc, float), kind=kind, p=pv, equilibrium=eq,
-                         notes=notes, eom=eom)
+                         acceleration=acc_out, kind=kind, p=pv, equilibrium=eq,
+                         notes=notes, eom=eom, **extra)
+
+
+def _to_base(v, base, eom) -> np.ndarray:
+    """A vector over eom's coordinates carried to base's (those of the same name; 0 elsewhere)."""
+    if base is eom:
+        return np.asarray(v, float)
+    out = np.zeros(base.n)
+    for i, c in enumerate(base.coords):
+        if c in eom.coords:
+            out[i] = v[eom.coords.index(c)]
+    return out
+
+
+def _names(coords, R) -> tuple[str, ...]:
+    """Names of the columns of R: a coordinate's name when the column is its axis, else z<k>."""
+    out = []
+    for j in range(R.shape[1]):
+        nz = np.flatnonzero(np.abs(R[:, j]) > 1e-12)
+        out.append(coords[nz[0]] if len(nz) == 1 and abs(abs(R[nz[0], j]) - 1) < 1e-12 else f"z{j + 1}")
+    return tuple(out)
 
 
 def nearest_equilibrium(eom, guesses, t, pv, q0, notes: list, other: str):
-    """The equilibrium nearest to q0 (angles compared modulo 2 pi), noted when there are several;
-    E903 with the hint `other` when there is none."""
-    from .equilibrium import equilibria
+    """The equilibrium nearest to the first guess (without guesses: to q0; angles compared
+    modulo 2 pi), noted when there are several; E903 saying why and with the hint `other` when
+    there is none."""
+    from .equilibrium import equilibria, parse_guesses
 
     eqs = equilibria(eom, guesses, t=t, p=pv)
     if not eqs:
-        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found",
-                                   help=f"give a starting guess (--guess NAME=VALUE) or {other}"))
+        why = eqs.search.why_none(eom.coords)
+        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found" + (f": {why}" if why else ""),
+                                   help=f"{other}; a steady motion (a circular orbit, a spinning top) is a "
+                                        "relative equilibrium, not a rest state: linearize about a state on "
+                                        "it with --at NAME=VALUE,der(NAME)=SPEED; or give a starting guess "
+                                        "(--guess NAME=VALUE)"))
     periodic = structure(eom, pv).periodic
-    eq = min(eqs, key=lambda e: _distance(e.q, q0, periodic))
+    user = parse_guesses(eom, guesses, q0)
+    target, what = (user[0], "the guess") if user else (q0, "the start values")
+    eq = min(eqs, key=lambda e: _distance(e.q, target, periodic))
     if len(eqs) > 1:
-        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to the start "
-                     "values: " + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to {what}: "
+                     + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
     return eq
 
 
@@ -254,7 +318,12 @@ def _integrate(eom, q0, qd0, pv, T):
 
     def f(tt, x):
         M, b = pt.M_bias(x[:n], x[n:], tt, pv)
-        return np.concatenate([x[n:], np.linalg.solve(M, b)])
+        try:
+            return np.concatenate([x[n:], np.linalg.solve(M, b)])
+        except np.linalg.LinAlgError:
+            raise MechError(Diagnostic("E904", f"could not reach t = {T} from the start values: the mass "
+                                               f"matrix is singular at t = {tt:.6g}",
+                                       help="linearize about an earlier time or about the start (--at start)")) from None
 
     sol = solve_ivp(f, (0.0, T), np.concatenate([q0, qd0]), method="DOP853", rtol=1e-11, atol=1e-12)
     if not sol.success:

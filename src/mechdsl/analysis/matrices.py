@@ -25,11 +25,38 @@ def second_order(eom, q, qd, t: float, pv, acc=None):
     qd = np.asarray(qd, float)
     M, bias = pt.M_bias(q, qd, t, pv)
     if acc is None:
-        acc = np.linalg.solve(M, bias) if n else np.zeros(0)
+        acc = solve_mass(eom, M, bias) if n else np.zeros(0)
     M, bias, dbq, dbqd, dMa = (dense(o) for o in pt.fn("lin")(q, qd, t, pv, np.asarray(acc, float)))
     K = dMa - dbq + 0.0          # + 0.0: no negative zeros in tables
     C = 0.0 - dbqd
     return M, C, K, bias.ravel(), np.asarray(acc, float)
+
+
+def solve_mass(eom, M, rhs) -> np.ndarray:
+    """M^-1 rhs; a singular M is E910 naming the coordinates of its null direction."""
+    w, V = np.linalg.eigh(sym(M))
+    if w.size and w[0] > 1e-13 * max(abs(w[-1]), 1e-300):
+        return np.linalg.solve(M, rhs)
+    # singular: fine when no force acts along the null directions (they carry nothing at all)
+    a = np.linalg.lstsq(M, rhs, rcond=1e-13)[0]
+    if np.max(np.abs(M @ a - rhs), initial=0.0) <= 1e-9 * max(np.max(np.abs(rhs), initial=0.0), 1e-300):
+        return a
+    raise singular_mass_error(eom, V[:, 0] if w.size else None)
+
+
+def singular_mass_error(eom, v, where: str = "at this state"):
+    from ..diagnostics import Diagnostic, MechError
+
+    coords = getattr(eom, "coords", ())
+    dirn = ""
+    if v is not None and len(coords) == len(v):
+        big = [f"{c}" for c, x in zip(coords, v) if abs(x) > 0.1 * np.max(np.abs(v))]
+        dirn = f" (no inertia along {big[0]})" if len(big) == 1 else \
+            f" (no inertia along a combination of {', '.join(big)})"
+    return MechError(Diagnostic("E910", f"the mass matrix of '{getattr(eom, 'name', '?')}' is singular {where}"
+                                        f"{dirn}: the equations of motion do not determine the accelerations",
+                                help="give the bodies involved a mass and a moment of inertia, or use another "
+                                     "state (Euler angles are singular at gimbal lock: use a quaternion joint)"))
 
 
 def first_order(M, C, K) -> np.ndarray:

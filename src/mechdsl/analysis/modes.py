@@ -134,9 +134,13 @@ def modes_of(M, C, K, A, coords) -> Modes:
     if n == 0:
         return Modes(tuple(coords), np.zeros(0), np.zeros(0), np.zeros((0, 0)), np.zeros(0, complex), ())
     if conservative:
-        from scipy.linalg import eigh
+        from scipy.linalg import LinAlgError, eigh
 
-        w2, phi = eigh(0.5 * (K + K.T), 0.5 * (M + M.T))
+        try:
+            w2, phi = eigh(0.5 * (K + K.T), 0.5 * (M + M.T))
+        except LinAlgError:          # M not positive definite: the general route below
+            conservative = False
+    if conservative:
         wscale = max(np.max(np.abs(w2), initial=0.0), 1e-300)
         freqs, zetas, kinds, lam_m, eig = [], [], [], [], []
         for v in w2:

@@ -145,6 +145,12 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
                      "along an orthonormal basis of the tangent space")
     Mr, Cr, Kr = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ Kfull @ Z
     k = Z.shape[1]
+    from .equilibrium import singular_mass
+    from .matrices import singular_mass_error
+
+    if k and singular_mass(Mr):
+        w, V = np.linalg.eigh(0.5 * (Mr + Mr.T))
+        raise singular_mass_error(eom, Z @ V[:, 0], "on the constraint manifold at the linearization point")
     A = first_order(Mr, Cr, Kr) if k else np.zeros((0, 0))
     if inputs is None:
         inputs = declared_inputs(eom)

@@ -47,8 +47,10 @@ def format_equilibria(name: str, coords, eqs) -> str:
     from ..analysis.tables import num, table
 
     if not eqs:
-        return (f"{name}: no equilibrium found (no starting guess converged)\n"
-                "  hint: give a guess with --guess NAME=VALUE")
+        why = eqs.search.why_none(coords) if hasattr(eqs, "search") else ""
+        return (f"{name}: no equilibrium found" + (f": {why}" if why else " (no starting guess converged)") + "\n"
+                "  hint: give a guess with --guess NAME=VALUE; a steady motion (a circular orbit, a "
+                "spinning top) is a relative equilibrium, not a rest state")
     kinds = sorted({e.kind for e in eqs})
     lines = [f"{name}: {len(eqs)} equilibri{'um' if len(eqs) == 1 else 'a'} ({', '.join(kinds)})"]
     rows = []

@@ -79,11 +79,14 @@ def format_linearization(name: str, lin) -> str:
     lines = [f"{name}: linear model {where}",
              "  " + ", ".join(f"{k} = {num(v)}" for k, v in lin.values.items())
              + ("" if not any(lin.qd) else "; " + ", ".join(f"der({k}) = {num(v)}" for k, v in zip(c, lin.qd)))]
-    if lin.constrained:
+    if lin.multipliers is not None:
         lines.append("  constraint multipliers: " + ", ".join(f"lambda[{k}] = {num(lin.lambdas[k])}"
                                                             for k in lin.active_constraints))
         lines.append(f"  on the constraint manifold: {len(c)} independent coordinate(s) dz = ({', '.join(c)}), "
                      "dq = Z dz; K includes the geometric stiffness sum lambda_l d2g_l/dq2")
+    elif lin.constrained:
+        lines.append(f"  in {len(c)} coordinate(s) dz = ({', '.join(c)}) of the tangent space, dq = Z dz")
+    if lin.constrained:
         lines.append(matrix("Z (basis of the tangent space)", lin.basis, list(lin.coords), c))
     if lin.equilibrium is not None:
         lines.append(f"  stability: {lin.equilibrium.stability} ({lin.equilibrium.reason})")

@@ -2,47 +2,20 @@
 
     d/dt (dL/d der(q_i)) - dL/dq_i + dD/d der(q_i) = Q_i,    L = T - V
 
-Small models (at most MAX_COORDS coordinates and expressions below MAX_OPS operations) are
-printed simplified (trigsimp, accelerations collected); anything larger, or anything whose
-simplification outruns the time budget, is described by its structure instead (which
-accelerations, coordinates and speeds each equation involves, and its size), computed from
-the CasADi equations so it never hangs.
+Small models (at most MAX_COORDS coordinates, every expression below MAX_OPS operations and
+all the expressions handed to sympy's simplification together below MAX_TOTAL_OPS) are printed
+simplified (trigsimp, accelerations collected); anything larger is described by its structure
+instead (which accelerations, coordinates and speeds each equation involves, and its size),
+computed from the CasADi equations so it never hangs.  The limits count operations, never
+seconds: what is printed depends on the model only, not on the machine or its load.
 """
 from __future__ import annotations
-
-import signal
-import threading
-from contextlib import contextmanager
 
 from .. import ir
 
 MAX_COORDS = 6
-MAX_OPS = 3000
-TIME_BUDGET = 20.0        # seconds for all sympy work on one model
-
-
-class _Timeout(Exception):
-    pass
-
-
-@contextmanager
-def _deadline(seconds: float):
-    """Raise _Timeout after `seconds` (main thread on POSIX only; elsewhere no limit)."""
-    usable = threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
-    if not usable or seconds <= 0:
-        yield
-        return
-
-    def handler(signum, frame):
-        raise _Timeout()
-
-    old = signal.signal(signal.SIGALRM, handler)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
+MAX_OPS = 3000            # operations (sympy count_ops) of one expression
+MAX_TOTAL_OPS = 8000      # operations of everything simplified for one model (shipped models: <= 4300)
 
 
 def _text_printer(names: dict[str, str]):
@@ -72,17 +45,14 @@ def _text_printer(names: dict[str, str]):
 
 
 def format_equations(model: ir.Model, latex: bool = False, max_coords: int = MAX_COORDS,
-                     max_ops: int = MAX_OPS, budget: float = TIME_BUDGET) -> str:
+                     max_ops: int = MAX_OPS, max_total_ops: int = MAX_TOTAL_OPS) -> str:
     n = len(model.coordinates)
     if n == 0:
         return f"{model.name}: no coordinates, nothing to integrate\n"
     if n > max_coords:
         return format_structure(model, f"{n} coordinates (more than {max_coords}): too large to print readably")
     try:
-        with _deadline(budget):
-            return _format_small(model, latex, max_ops)
-    except _Timeout:
-        return format_structure(model, f"simplifying the equations took longer than {budget:g} s")
+        return _format_small(model, latex, max_ops, max_total_ops)
     except _TooLarge as e:
         return format_structure(model, str(e))
 
@@ -91,9 +61,23 @@ class _TooLarge(Exception):
     pass
 
 
-def lagrange_equations(model: ir.Model, max_ops: int = MAX_OPS):
+class _Budget:
+    """Operations handed to sympy's simplification so far, against a fixed limit."""
+
+    def __init__(self, limit: int):
+        self.limit, self.used = limit, 0
+
+    def spend(self, ops: int) -> None:
+        self.used += ops
+        if self.used > self.limit:
+            raise _TooLarge(f"simplifying the equations needs more than {self.limit} operations: "
+                            "too large to print readably")
+
+
+def lagrange_equations(model: ir.Model, max_ops: int = MAX_OPS, max_total_ops: int = MAX_TOTAL_OPS):
     """(symbolic model, T, V, D, Q, [(acceleration terms, rest, Q_i)]) with T, V, D, Q
-    simplified; each equation reads  acceleration terms + rest = Q_i."""
+    simplified; each equation reads  acceleration terms + rest = Q_i.  _TooLarge when one
+    expression exceeds max_ops operations or all of them together max_total_ops."""
     import sympy as sp
 
     from .symbolic import symbolic_model
@@ -103,11 +87,16 @@ def lagrange_equations(model: ir.Model, max_ops: int = MAX_OPS):
     q = sm.coords
     qd = [sp.diff(x, t) for x in q]
     qdd = [sp.diff(x, t, 2) for x in q]
+    budget = _Budget(max_total_ops)
+
+    def trigsimp(e):
+        budget.spend(sp.count_ops(e))
+        return sp.trigsimp(e)
 
     def simp(e):
         if sp.count_ops(e) > max_ops:
             raise _TooLarge(f"an expression has more than {max_ops} operations: too large to print readably")
-        return sp.trigsimp(sp.expand(e))
+        return trigsimp(sp.expand(e))
 
     def quadratic(T):
         """T = 1/2 qd^T M qd + b qd + T0 with every coefficient simplified on its own (far
@@ -120,12 +109,12 @@ def lagrange_equations(model: ir.Model, max_ops: int = MAX_OPS):
             for j in range(i, len(qd)):
                 c = sp.diff(T, qd[i], qd[j])
                 if c != 0:
-                    c = sp.factor_terms(sp.trigsimp(c))
+                    c = sp.factor_terms(trigsimp(c))
                     out += (c / 2 if i == j else c) * qd[i] * qd[j]
         zero = {x: 0 for x in qd}
         lin = [sp.diff(T, x).subs(zero) for x in qd]
-        out += sum(sp.trigsimp(c) * x for c, x in zip(lin, qd) if c != 0)
-        return out + sp.trigsimp(T.subs(zero))
+        out += sum(trigsimp(c) * x for c, x in zip(lin, qd) if c != 0)
+        return out + trigsimp(T.subs(zero))
 
     T, V, D = quadratic(sm.T), simp(sm.V), simp(sm.D)
     Q = [simp(x) for x in sm.Q]
@@ -140,14 +129,14 @@ def lagrange_equations(model: ir.Model, max_ops: int = MAX_OPS):
         terms = []
         for a in qdd:
             if a in parts:
-                terms.append(sp.trigsimp(parts[a]) * a)
+                terms.append(trigsimp(parts[a]) * a)
         rest = parts.get(sp.S.One, sp.S.Zero)
-        eqs.append((sp.Add(*terms, evaluate=False) if terms else sp.S.Zero, sp.trigsimp(rest), Q[i]))
+        eqs.append((sp.Add(*terms, evaluate=False) if terms else sp.S.Zero, trigsimp(rest), Q[i]))
     return sm, T, V, D, Q, eqs
 
 
-def _format_small(model: ir.Model, latex: bool, max_ops: int) -> str:
-    sm, T, V, D, Q, eqs = lagrange_equations(model, max_ops)
+def _format_small(model: ir.Model, latex: bool, max_ops: int, max_total_ops: int) -> str:
+    sm, T, V, D, Q, eqs = lagrange_equations(model, max_ops, max_total_ops)
     q = sm.coords
     names = [c.name for c in model.coordinates]
     if latex:
