@@ -198,8 +198,9 @@ ENTRIES = [
           "Use e.g. `\"zyx\"` (Cardan) or `\"zxz\"` (Euler).", corpus="E312_bad_euler_sequence.mech"),
     Entry("E313", "outside min/max", "A parameter value below its `min` or above its `max` attribute.",
           "Change the value (or the bound).", corpus="E313_parameter_below_min.mech"),
-    Entry("E314", "name too long", "An identifier longer than the `name_length` limit (256 characters): "
-                                   "such names come from generators gone wrong and make unreadable output.",
+    Entry("E314", "name too long", "An identifier or a unit string longer than the `name_length` limit (256 "
+                                   "characters): such names come from generators gone wrong, make unreadable "
+                                   "output, and a huge unit string takes pint minutes to parse.",
           "Use a shorter name (or `--limit name_length=N`).", corpus="E314_name_too_long.mech"),
     Entry("E315", "Integer parameter too large", "An Integer parameter beyond the `integers` limit (1,000,000 in "
                                                  "magnitude). Integer parameters are structural: they size arrays "
