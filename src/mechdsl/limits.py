@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import math
 from dataclasses import dataclass
 from typing import Iterator, Mapping
 
@@ -82,8 +83,8 @@ def parse_setting(text: str) -> tuple[str, int]:
     try:
         value = int(raw) if raw.isdigit() else float(raw)
     except ValueError:
-        value = None
-    if value is None or value != value or value in (float("inf"),) or value < 1 or int(value) != value:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 1 and value == int(value)):
         raise ValueError(f"--limit {name}: '{raw}' is not a positive whole number")
     return name, int(value)
 
