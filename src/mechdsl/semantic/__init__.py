@@ -14,7 +14,9 @@ from .. import limits
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
 from ..printer import expr as print_expr
 from . import mods as Mods
+from .cycles import containment_cycles
 from .flatten import Flattener
+from .run_settings import check_run_settings
 
 # scene settings: name -> kind; later phases may register more (extend, never rename)
 SCENE_SETTINGS: dict[str, str] = {
@@ -47,50 +49,9 @@ class Program:
                 continue
             table[item.name] = item
         diags.raise_if_errors()
-        self._check_cycles()
-
-    def _check_cycles(self) -> None:
-        """E207 for every model that extends or contains itself, directly or through others.
-
-        Checked for the whole file (not only when a model is flattened), so `mech check` finds
-        mutual instances (A has a B, B has an A) even though both are parts it checks nowhere else."""
-        uses = {name: [el.name if isinstance(el, ast.Extends) else el.type_name for el in m.elements
-                       if isinstance(el, ast.Extends) or el.type_name in self._models]
-                for name, m in self._models.items()}
-        order = {name: i for i, name in enumerate(self._models)}
-        cycles: dict[frozenset, list[str]] = {}
-        state: dict[str, int] = {}   # 1 on the path, 2 done
-        for root in self._models:
-            if root in state:
-                continue
-            path, stack = [root], [iter(uses[root])]
-            state[root] = 1
-            while stack:  # iterative depth-first search: chains of parts may be long
-                nxt = next(stack[-1], None)
-                if nxt is None:
-                    state[path.pop()] = 2
-                    stack.pop()
-                elif nxt not in self._models or state.get(nxt) == 2:
-                    continue
-                elif state.get(nxt) == 1:
-                    cyc = path[path.index(nxt):]
-                    k = min(range(len(cyc)), key=lambda i: order[cyc[i]])  # start at the first in the file
-                    cycles.setdefault(frozenset(cyc), cyc[k:] + cyc[:k])
-                else:
-                    state[nxt] = 1
-                    path.append(nxt)
-                    stack.append(iter(uses[nxt]))
-        diags = DiagnosticBag()
-        for cyc in cycles.values():
-            m = self._models[cyc[0]]
-            closed = list(zip(cyc, cyc[1:] + cyc[:1]))
-            extends_only = all(any(isinstance(el, ast.Extends) and el.name == b for el in self._models[a].elements)
-                               and not any(isinstance(el, ast.Declaration) and el.type_name == b
-                                           for el in self._models[a].elements) for a, b in closed)
-            what = "extends" if extends_only else "extends or contains"
-            diags.error("E207", f"model '{m.name}' {what} itself (through {' -> '.join(cyc + [cyc[0]])})",
-                        m.name_span, "remove one of the extends clauses or instances in the cycle")
-        diags.raise_if_errors()
+        cycles = containment_cycles(self._models)
+        if cycles:
+            raise MechError(cycles)
 
     # ------------------------------------------------------------------ names
     def model_def(self, name: str) -> ast.ModelDef | None:
@@ -181,51 +142,11 @@ class Program:
             except MechError as e:
                 diags.extend(e.diagnostics)
         diags.raise_if_errors()
-        _check_run_settings(s, out, model)
+        check_run_settings(s, out, model)
         if "tolerance" in out:
             out.setdefault("rtol", out["tolerance"])
             out.setdefault("atol", out["tolerance"])
         return list(out.items())
-
-
-def _check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model) -> None:
-    """The simulation's own rules for the settings a scene gives (simulation/settings.py and
-    registry.py), reported as E604 at the setting: `check` finds what `simulate` would refuse."""
-    from ..diagnostics import UsageError
-    from ..simulation import registry as R
-    from ..simulation import settings as S
-
-    spans = {it.name: it.value.span for it in s.items if isinstance(it, ast.Setting)}
-    diags = DiagnosticBag()
-
-    def bad(name, msg, help=None):
-        diags.error("E604", f"'{name}' {msg}", spans[name], help)
-
-    for name, check in (("method", R.check_method), ("formulation", R.check_formulation)):
-        if isinstance(out.get(name), str):
-            try:
-                check(out[name].lower())
-            except UsageError as e:
-                diags.error("E604", str(e), spans[name], "see docs/simulate.md for the names")
-    method = str(out.get("method", "")).lower()
-    if method in R.FIXED_METHODS and (model.loops or model.constraints):
-        from ..symplectic import CONSTRAINED
-
-        if method not in CONSTRAINED:
-            bad("method", f"= \"{method}\" ignores the constraints of {model.name}",
-                'use method = "rattle" (constrained Stormer-Verlet) or an adaptive method (docs/constraints.md)')
-    for name in ("tolerance", "rtol", "atol"):
-        v = out.get(name)
-        if isinstance(v, float) and not 0 < v < 1:
-            bad(name, f"must lie in (0, 1) (got {v:g})", f"e.g. {name} = 1e-8;")
-        elif isinstance(v, float) and name != "atol" and v < S.MIN_RTOL:
-            bad(name, f"= {v:g} is below what double precision can deliver", f"use at least {S.MIN_RTOL:g}")
-    t0, t1 = out.get("start_time", 0.0), out.get("stop_time")
-    if isinstance(t1, float) and isinstance(t0, float) and t1 <= t0 and "stop_time" in spans:
-        bad("stop_time", f"must come after the start time {t0:g} (got {t1:g})", "e.g. stop_time = 10;")
-    if isinstance(out.get("points"), int) and out["points"] < 2:
-        bad("points", f"must be at least 2 (the start and the end; got {out['points']})", "e.g. points = 501;")
-    diags.raise_if_errors()
 
 
 def _setting_value(it: ast.Setting, kind: str, values: dict[str, float], model: ir.Model):
