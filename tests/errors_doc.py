@@ -206,7 +206,7 @@ ENTRIES = [
                                                  "magnitude). Integer parameters are structural: they size arrays "
                                                  "and loops.",
           "Use a smaller value (or `--limit integers=N`).", corpus="E315_integer_parameter_too_large.mech"),
-    Entry("E316", "model too large", "The model has more generalized coordinates (1,000), output scalars "
+    Entry("E316", "model too large", "The model has more generalized coordinates (500), output scalars "
                                      "(10,000), component instances (10,000) or scalars in all (20,000) than "
                                      "the front end accepts: every one is derived and compiled symbolically, "
                                      "and far larger models would run for hours or exhaust memory.",

@@ -37,7 +37,7 @@ _ALL = (
     Limit("arrays", 100_000, "E303", "elements of one array, range or built array"),
     Limit("iterations", 200_000, "E303", "for-loop and comprehension iterations of a model, all loops together"),
     Limit("integers", 1_000_000, "E315", "magnitude of an Integer parameter (they are structural)"),
-    Limit("coordinates", 1_000, "E316", "generalized coordinates of a model"),
+    Limit("coordinates", 500, "E316", "generalized coordinates of a model"),
     Limit("outputs", 10_000, "E316", "output scalars of a model"),
     Limit("components", 10_000, "E316", "component instances of a model (bodies, points, joints, forces)"),
     Limit("scalars", 20_000, "E316", "scalars of a model: parameters, coordinates and outputs together"),
