@@ -212,8 +212,20 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   spaces). Defaults: non-stiff models `erk,cvodes-adams,cvodes-bdf,scipy-dop853`; stiff ones
   (what `method = auto` calls stiff) `cvodes-bdf,rosenbrock,scipy-radau,erk`; constrained
   ones every formulation with its automatic integrator.
+- **Default plan**: what is not given is chosen in proportion to the model and printed
+  (`plan:` lines). The end time is the scene's stop time, else 10 s (as for `mech simulate`).
+  A pilot run (the simulator's own method at 1e-6, stopped after 2 s of CPU) measures the
+  cost of one run: up to 0.1 s, tolerances `1e-2..1e-10` one a decade and `--repeats`
+  (default 3) timed runs; up to 1 s, `1e-3..1e-9` and one timed run; costlier models
+  `1e-3..1e-8`, one timed run, and a horizon shortened (to 1, 2 or 5 x 10^k s) so that a
+  run at 1e-6 costs about 1 s, or to half the time the pilot reached when it failed. Each
+  run has a budget of 5 s of CPU and the whole sweep 25 s; the sweep goes tolerance by
+  tolerance across the methods, so a spent budget cuts the tightest tolerances of every
+  method (`skipped` rows say so). With defaults every shipped model finishes in about a
+  minute; give `--t-end`, `--tolerances`, `--repeats` or `--budget` to choose yourself
+  (with both `--t-end` and `--tolerances` there is no pilot and no sweep budget).
 - **Tolerances** (`--tolerances`): a list `1e-3,1e-6`, a range in half decades
-  `1e-2..1e-12` (the default: 21 values) or with k values a decade `1e-2..1e-12/4`. Each run
+  `1e-2..1e-12` (21 values) or with k values a decade `1e-2..1e-12/4`. Each run
   uses rtol = atol = tolerance. Fixed-step methods take their step from the tolerance by
   the simulator's rule h omega = 0.5 tol^(1/order) (order 4 for `rk`, 5 for `collocation`,
   2 for Stormer-Verlet and the midpoint rule, 4 for Gauss-Legendre), shortened so that a
@@ -223,7 +235,13 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   is allowed), or `auto`: two runs at a tolerance two decades below the tightest of the
   sweep (within [1e-13, 1e-8]) with different methods (non-stiff: `scipy-dop853` and
   `erk`; stiff: `rosenbrock` and `scipy-radau`; constrained: `projection+cvodes-adams` and
-  `ggl+idas`; `--reference-methods A,B` to choose). The first is the reference; the
+  `ggl+idas`; `--reference-methods A,B` to choose). A method that fails is replaced by
+  the next candidate (non-stiff `cvodes-adams`; stiff `cvodes-bdf`; constrained
+  `projection+cvodes-bdf`, `baumgarte+cvodes-adams`), and when no two succeed the
+  tolerance is loosened a decade at a time (at most twice, not above 1e-8); the runs not
+  used are printed (`not used: ...`). When no pair succeeds (or a pair given with
+  `--reference-methods` fails) it is a simulation error: `error[E880]` at the scene, exit 1.
+  The first is the reference; the
   difference between the two is printed and drawn as its estimated accuracy, and errors
   within 3x of it are starred: the reference cannot resolve them. (scipy's Radau steps in
   Python: at 1e-12 on the stiff pendulum below it took over a minute; choose other methods or
@@ -239,8 +257,8 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   CasADi integrators run in a worker thread), the minimum over `--repeats` runs after one
   warm-up run (one timed run when the warm-up took over 5 s). A run is a whole
   `simulate()` call: set-up after the warm-up, integration, and the recorded signals.
-  A run longer than `--budget` CPU seconds ends its method's sweep; the tighter tolerances
-  appear as `skipped`.
+  A run longer than `--budget` CPU seconds (default 30 with given `--t-end` and
+  `--tolerances`, else 5) ends its method's sweep; the tighter tolerances appear as `skipped`.
 - **Failures** are rows with status `failed` (when and why), `n/a` (a combination the
   simulator refuses, e.g. a formulation on an unconstrained model), `error` or `skipped`:
   nothing is dropped. In the chart a failed run is a cross on the upper edge at its CPU time.

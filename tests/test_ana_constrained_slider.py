@@ -81,7 +81,7 @@ def test_linear_model_matches_minimal_coordinates(loop_model):
         assert ref.kind == lin.kind == "equilibrium"
         z = lin.reduced_coords[0]
         scale = lin.basis[0, 0]                 # d(j1.phi)/dz
-        assert lin.basis[lin.coords.index(z), 0] == 1.0
+        assert lin.basis[lin.coords.index(z), 0] == pytest.approx(1.0, abs=1e-12)
         assert lin.M[0, 0] == pytest.approx(ref.M[0, 0] * scale ** 2, rel=1e-9)
         assert lin.K[0, 0] == pytest.approx(ref.K[0, 0] * scale ** 2, rel=1e-9)
         assert lin.modes().frequencies == pytest.approx(ref.modes().frequencies, rel=1e-9)

@@ -7,6 +7,7 @@ k = sin(a/2), w = sqrt(g/L).
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -67,7 +68,7 @@ def test_bad_variants(bad):
 
 def test_tolerances():
     default = parse_tolerances(None)
-    assert len(default) == 21 and default[0] == 1e-2 and default[-1] == 1e-12
+    assert len(default) == 21 and default[0] == pytest.approx(1e-2) and default[-1] == pytest.approx(1e-12)
     assert np.allclose(np.diff(np.log10(default)), -0.5)
     assert parse_tolerances("1e-4,1e-2,1e-4") == [1e-2, 1e-4]
     assert parse_tolerances("1e-3..1e-5/1") == [1e-3, 1e-4, 1e-5]
@@ -141,7 +142,7 @@ def test_errors_against_the_closed_form(tmp_path, setup):
 def test_auto_reference_estimates_its_own_accuracy(setup):
     res = run_bench(setup, variants=parse_variants("erk"), tolerances=[1e-6], repeats=1)
     ref = res.reference
-    assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == 1e-8
+    assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == pytest.approx(1e-8, rel=1e-12)
     true_err = np.abs(ref.values["theta"] - exact_theta(ref.t)).max() / np.abs(exact_theta(ref.t)).max()
     est = ref.accuracy["final"]
     assert true_err < 1e-7 and 0 < est < 1e-6
@@ -207,7 +208,7 @@ def test_cli_bench(tmp_path, capsys):
     assert text.count("erk ") >= 2 and "cvodes-adams" in text and "wrote" in text
     rows = (out / "bench.csv").read_text().splitlines()
     assert rows[0].startswith("method,") and len(rows) == 5
-    assert main(args) == 0                    # re-run over its own outputs
+    assert main(args + ["--no-chart"]) == 0   # re-run over its own outputs (charts: test_outputs_written...)
 
 
 @pytest.mark.parametrize("extra", [["--tolerances", "3"], ["--methods", "erk+"], ["--repeats", "0"],
@@ -242,3 +243,165 @@ def test_constrained_bench_against_cash_reference(tmp_path):
     assert by[("ggl+erk", 1e-5)].status == "n/a"          # GGL is integrated by IDAS only
     # the unstabilized index-1 ODE lets the constraint drift more than the stabilized GGL form
     assert by[("index1-ode+scipy-dop853", 1e-5)].invariants["residual"] > by[("ggl+idas", 1e-5)].invariants["residual"]
+
+
+# --------------------------------------------------------------------------- the default plan (issue 11)
+
+
+def _pilot_result(success=True, t_fail=None):
+    from types import SimpleNamespace
+
+    failure = None if success else SimpleNamespace(time=t_fail, cause="integrator failure", detail="")
+    return SimpleNamespace(success=success, failure=failure, t=np.array([0.0, t_fail or 0.0]))
+
+
+def test_nice_below():
+    from mechdsl.bench.plan import nice_below
+
+    for x, want in [(0.318, 0.2), (7.0, 5.0), (1.0, 1.0), (0.0999, 0.05), (20.0, 20.0), (1999.0, 1000.0)]:
+        assert nice_below(x) == pytest.approx(want, rel=1e-12)
+
+
+@pytest.mark.parametrize("cost, level, t_end, repeats", [(0.01, "cheap", T_END, None), (0.5, "moderate", T_END, 1),
+                                                         (30.0, "costly", 0.1, 1)])
+def test_default_plan_is_proportionate_to_the_pilot(setup, monkeypatch, cost, level, t_end, repeats):
+    from mechdsl.bench import plan as P
+
+    monkeypatch.setattr(P, "pilot", lambda s, cap=P.PILOT_CAP: (cost, s.t_end, _pilot_result()))
+    plan = P.default_plan(setup, t_end_given=False, tolerances_given=False, repeats_given=False, budget_given=False)
+    assert plan.t_end == pytest.approx(t_end, rel=1e-12)          # 3 s x 1 s / 30 s = 0.1 s for the costly one
+    assert plan.tolerances == P.TOLERANCES[level] and plan.repeats == repeats
+    assert plan.budget == P.RUN_BUDGET and plan.sweep_budget == P.SWEEP_BUDGET
+    text = "\n".join(plan.notes)
+    assert level in text and ("horizon shortened to t = 0.1 (from 3)" in text) == (level == "costly")
+
+
+def test_default_plan_ends_before_the_pilots_failure_and_keeps_what_is_given(setup, monkeypatch):
+    from mechdsl.bench import plan as P
+
+    monkeypatch.setattr(P, "pilot", lambda s, cap=P.PILOT_CAP: (0.01, 1.0, _pilot_result(False, 1.0)))
+    plan = P.default_plan(setup, t_end_given=False, tolerances_given=True, repeats_given=True, budget_given=True)
+    assert plan.t_end == pytest.approx(0.5, rel=1e-12)
+    assert plan.tolerances is None and plan.repeats is None and plan.budget is None and plan.sweep_budget is None
+    assert any("failed at t = 1" in n for n in plan.notes) and any("before the pilot's failure" in n for n in plan.notes)
+
+    def no_pilot(*a, **k):
+        raise AssertionError("no pilot when the end time and the tolerances are given")
+
+    monkeypatch.setattr(P, "pilot", no_pilot)
+    plan = P.default_plan(setup, t_end_given=True, tolerances_given=True, repeats_given=False, budget_given=False)
+    assert plan.t_end == setup.t_end and plan.notes == []
+
+
+def test_pilot_stops_at_its_cap():
+    from mechdsl.bench.plan import pilot
+
+    st = Setup.from_model(mechdsl.load(str(MODELS / "bouncing_ball.mech"), scene="Bounce"))
+    cost, reached, result = pilot(st, cap=0.0)              # stopped at the first progress report
+    assert result is None and 0 < reached < st.t_end and 0 < cost < 1e3
+
+
+def test_sweep_budget_skips_the_remaining_runs(setup, tmp_path):
+    res = run_bench(setup, variants=parse_variants("erk,cvodes-adams"), tolerances=[1e-3, 1e-6],
+                    reference=exact_csv(tmp_path / "e.csv"), repeats=1, sweep_budget=0.0)
+    # tolerance by tolerance: only the first run fits a budget of 0 s
+    assert [(r.label, r.tolerance, r.status) for r in res.rows] == [
+        ("erk", 1e-3, "ok"), ("erk", 1e-6, "skipped"), ("cvodes-adams", 1e-3, "skipped"),
+        ("cvodes-adams", 1e-6, "skipped")]
+    assert "budget of 0 s" in res.rows[-1].message
+
+
+def test_no_stop_time_means_ten_seconds_as_for_simulate():
+    """Before: a usage error demanding --t-end on the three models without a scene."""
+    st = Setup.from_model(mechdsl.load(str(MODELS / "two_masses_spring.mech")))
+    assert st.t_end == pytest.approx(10.0, rel=1e-15) and "t_end = 10 s" in st.notes[0]
+
+
+def test_andrews_reference_falls_back_to_a_method_that_works(capsys):
+    """Before: the automatic reference (ggl+idas at 1e-13) hit IDA_CONV_FAIL at t = 0.0115 and
+    the bench ended with a usage error (exit 2).  Now the next candidate replaces it."""
+    args = ["bench", str(MODELS / "andrews.mech"), "--methods", "projection+auto", "--tolerances", "1e-3,1e-11",
+            "--repeats", "1", "--quiet"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "reference: auto: projection+cvodes-adams at rtol = atol = 1e-1" in out
+    acc = re.search(r"estimated accuracy .*: final ([0-9.e+-]+)", out)
+    assert acc and float(acc.group(1)) < 1e-6
+
+
+def test_reference_candidates_replace_a_failing_method(setup, monkeypatch):
+    """A candidate that cannot run is replaced by the next one, and the note says why."""
+    from mechdsl.bench import reference as R
+
+    monkeypatch.setattr(R, "auto_candidates", lambda kind: ("nosuch-method", "scipy-dop853", "erk"))
+    res = run_bench(setup, variants=parse_variants("erk"), tolerances=[1e-4], repeats=1)
+    ref = res.reference
+    assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == pytest.approx(1e-8, rel=1e-12)
+    assert len(ref.notes) == 1 and ref.notes[0].startswith("not used: nosuch-method at tolerance 1e-08: ")
+    # against the closed form: the reference is accurate to its estimate
+    t = np.linspace(0, T_END, POINTS)
+    assert np.max(np.abs(ref.values["theta"] - exact_theta(t))) < 1e-4
+
+
+def test_reference_tolerance_is_loosened_when_no_pair_succeeds(setup, monkeypatch):
+    from mechdsl.bench import reference as R
+    from mechdsl.bench import runner
+
+    assert R.reference_ladder(1e-12) == [1e-12, 1e-11, 1e-10] and R.reference_ladder(1e-8) == [1e-8]
+    real = runner.simulate_variant
+
+    def fails_below_1e11(st, v, tol, *a, **k):
+        if tol < 1e-11 and v.method in ("erk", "cvodes-adams"):
+            raise UsageError(f"{v.method} refuses tolerances below 1e-11 here")
+        return real(st, v, tol, *a, **k)
+
+    monkeypatch.setattr(runner, "simulate_variant", fails_below_1e11)
+    res = run_bench(setup, variants=parse_variants("scipy-dop853"), tolerances=[1e-10], repeats=1)
+    assert res.reference.tolerance == pytest.approx(1e-11, rel=1e-12)          # one decade looser than 1e-12
+    assert res.reference.methods == ("scipy-dop853", "erk")
+    assert [n.split(":")[1].strip() for n in res.reference.notes] == ["erk at tolerance 1e-12",
+                                                                         "cvodes-adams at tolerance 1e-12"]
+
+
+BLOWUP = """model Blowup "pulled into a singular potential: x reaches 1 at t = pi/2 - 1"
+  coordinate Real x(start = 0, speed = 1);
+equation
+  kinetic = 1/2*der(x)^2;
+  potential = -1/(1 - x);
+end Blowup;
+
+scene Run "ten seconds"
+  model Blowup;
+  stop_time = 10;
+end Run;
+"""
+
+
+def test_reference_that_no_method_computes_is_a_located_simulation_error(tmp_path, capsys):
+    """Before: a usage error (exit 2).  A failed simulation is exit 1 with a coded diagnostic."""
+    f = tmp_path / "blowup.mech"
+    f.write_text(BLOWUP)
+    assert main(["bench", str(f), "--t-end", "10", "--tolerances", "1e-3", "--methods", "erk", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert f"{f}:8:1: error[E880]: cannot compute the automatic reference" in err
+    assert "scipy-dop853 at tolerance 1e-08: failed at t = 0.5707" in err and "help:" in err
+
+
+def test_cli_bench_defaults_on_a_small_model(capsys):
+    """mech bench with defaults: the plan is chosen and said (cart_pole: about a second of CPU)."""
+    assert main(["bench", str(MODELS / "cart_pole.mech"), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "plan: default plan for a model that is cheap" in out and "plan: methods: the default set" in out
+    assert "reference: auto: scipy-dop853" in out and "t = 0 .. 3" in out
+
+
+def test_a_run_is_stopped_after_its_cpu_seconds():
+    """The default plan stops a run after STOP_AFTER s of CPU where the simulator reports
+    progress (here: the bouncing ball's first output point)."""
+    from mechdsl.bench.runner import measure_run
+
+    st = Setup.from_model(mechdsl.load(str(MODELS / "bouncing_ball.mech"), scene="Bounce"))
+    row = measure_run(st, parse_variants("erk")[0], 1e-6, st.points, None, None, ("drop.s",), 1, False,
+                      stop_after=0.0)
+    assert row.status == "skipped" and "stopped at t = " in row.message and "after 0 s" in row.message
+    assert 0 < row.t_reached < st.t_end and row.cpu > 0

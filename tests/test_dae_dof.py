@@ -60,8 +60,8 @@ def test_bricard_simulates_on_all_constraints_with_constant_energy():
     assert np.ptp(r.q[:, 0]) > 0.1            # it does move
 
 
-@pytest.mark.parametrize("formulation", FORMULATIONS)
-def test_parallelogram_stops_at_the_singular_configuration(formulation):
+@pytest.mark.parametrize("formulation", [f for f in FORMULATIONS if f != "augmented"])   # augmented crosses:
+def test_parallelogram_stops_at_the_singular_configuration(formulation):                  # test_dae_singular.py
     t_star = parallelogram_singular_time()
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")

@@ -70,7 +70,7 @@ def test_loop_closure_from_approximate_start():
 def test_redundant_constraints_initialize():
     rep = initialize(bricard_eom())      # 5 constraints of rank 4; only J1 speed fixed
     assert rep.velocity_residual < 1e-13
-    assert rep.qd[0] == 1.0
+    assert rep.qd[0] == pytest.approx(1.0, abs=1e-13)
 
 
 def test_check_report_lines():

@@ -104,7 +104,7 @@ def test_nlink_energy_outputs_and_start():
     out = ca.Function("o", [e.q, e.qd, e.t, e.p], [e.outputs["x_tip"], e.outputs["E"], e.T, e.V])
     x, E, T, V = (float(v) for v in out(q0, qd0, 0.0, e.param_values))
     assert x == pytest.approx(3.0, abs=1e-14)        # all links horizontal along +x
-    assert T == 0 and V == pytest.approx(0.0, abs=1e-12) and E == pytest.approx(T + V)
+    assert T == pytest.approx(0.0, abs=1e-15) and V == pytest.approx(0.0, abs=1e-12) and E == pytest.approx(T + V)
     # hanging down at rest: V = -m g (0.5 + 1.5 + 2.5)
     _, E, T, V = (float(v) for v in out([0, 0, 0], [0, 0, 0], 0.0, e.param_values))
     assert V == pytest.approx(-9.81 * 4.5)

@@ -71,7 +71,7 @@ def test_scene_settings_are_used(tmp_path, files, capsys):
     assert "scene Swing of model Pendulum" in capsys.readouterr().out
     lines = out.read_text().splitlines()
     assert len(lines) == 12 and lines[0].split(",")[3] == "x" and "y" not in lines[0].split(",")
-    assert float(lines[-1].split(",")[0]) == 2.0
+    assert float(lines[-1].split(",")[0]) == pytest.approx(2.0, rel=1e-14)
 
 
 def test_failure_exits_1_and_keeps_partial_results(tmp_path, files, capsys):

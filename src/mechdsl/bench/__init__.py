@@ -7,7 +7,8 @@
                     tolerances=parse_tolerances("1e-3..1e-9"))
     print(format_table(res)); write_tables(res, "out/"); write_chart(res, "out/")
 
-Modules: spec (method specifications, tolerance sweeps), reference (file or computed
+Modules: spec (method specifications, tolerance sweeps), plan (the default plan of mech
+bench, proportionate to the model), reference (file or computed
 reference with its estimated accuracy), measure (error norms, invariant drift), timing (CPU
 time, min over repeats after a warm-up), runner (the sweep), report (table, CSV, JSON),
 chart (the work-precision chart).  Design: docs/internals/bench.md; use: docs/performance.md.

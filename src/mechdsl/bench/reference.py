@@ -8,7 +8,10 @@ is allowed: the final-time error is then all there is).
 ``auto`` integrates the model twice at a tolerance below the sweep's tightest, with two
 different methods (the pair depends on the model: non-stiff, stiff or constrained); the
 first run is the reference, the difference between the two estimates its accuracy, in the
-same norms as the benchmark errors.  Errors below that estimate are not resolved.
+same norms as the benchmark errors.  Errors below that estimate are not resolved.  A
+method that fails is replaced by the kind's next candidate, and when no two succeed the
+tolerance is loosened a decade at a time (``reference_ladder``); the runs not used are
+kept in ``notes``.  No pair at all is a simulation error (E880, exit 1).
 """
 from __future__ import annotations
 
@@ -22,6 +25,8 @@ import numpy as np
 from ..diagnostics import UsageError
 from . import measure
 
+CODE_REFERENCE = "E880"         # no automatic reference could be computed (a simulation error: exit 1)
+
 
 @dataclass(kw_only=True)
 class Reference:
@@ -32,6 +37,7 @@ class Reference:
     tolerance: float | None = None                  # auto: rtol = atol of both runs
     accuracy: dict[str, float] = field(default_factory=dict)   # estimated error: final, l2
     cpu: dict[str, float] = field(default_factory=dict)        # auto: CPU seconds of each run
+    notes: list[str] = field(default_factory=list)             # auto: runs tried and not used, and why
 
     def grid_points(self, t_start: float) -> tuple[int, np.ndarray]:
         """Number of output points of a grid from t_start to the last reference time that
@@ -86,11 +92,44 @@ def check_columns(ref: Reference, columns) -> None:
         raise UsageError(f"the reference column {bad[0]!r} is not finite")
 
 
+def auto_candidates(kind: str) -> tuple[str, ...]:
+    """Reference and check methods by kind of model, in order of preference: the first two
+    that succeed are the reference and its check."""
+    return {"ode": ("scipy-dop853", "erk", "cvodes-adams"),
+            "stiff": ("rosenbrock", "scipy-radau", "cvodes-bdf"),
+            "dae": ("projection+cvodes-adams", "ggl+idas", "projection+cvodes-bdf", "baumgarte+cvodes-adams")}[kind]
+
+
 def auto_pair(kind: str) -> tuple[str, str]:
-    """Reference and check methods by kind of model."""
-    return {"ode": ("scipy-dop853", "erk"),
-            "stiff": ("rosenbrock", "scipy-radau"),
-            "dae": ("projection+cvodes-adams", "ggl+idas")}[kind]
+    """The preferred reference and check methods."""
+    a, b = auto_candidates(kind)[:2]
+    return a, b
+
+
+def reference_ladder(tol: float, steps: int = 3) -> list[float]:
+    """The reference tolerance, then up to ``steps - 1`` decades looser, not above 1e-8."""
+    out = [tol]
+    while len(out) < steps and out[-1] * 10 <= 1e-8 * (1 + 1e-9):
+        out.append(float(f"{out[-1] * 10:.6g}"))
+    return out
+
+
+def failure_text(result) -> str:
+    f = result.failure
+    if f is None:
+        return "failed"
+    return f"failed at t = {f.time:.6g}: {f.cause}" + (f" ({f.detail})" if f.detail else "")
+
+
+def reference_failed(failures, span, given: bool):
+    """The MechError (E880) of an automatic reference that no method could compute."""
+    from ..diagnostics import Diagnostic, MechError, Span
+
+    what = "the given reference methods" if given else "no pair of reference methods"
+    msg = f"cannot compute the automatic reference: {what} succeeded (" + "; ".join(failures) + ")"
+    hint = ("choose other methods with --reference-methods, a shorter --t-end, or give a reference file "
+            "with --reference")
+    return MechError(Diagnostic(CODE_REFERENCE, msg, span or Span(), hint))
 
 
 def reference_tolerance(tolerances) -> float:
@@ -102,8 +141,7 @@ def from_runs(primary, check, columns, t_start_rows: np.ndarray, labels, tol, cp
     """A computed reference from two Results (primary, check) on the same grid."""
     for r, lab in ((primary, labels[0]), (check, labels[1])):
         if not r.success:
-            raise UsageError(f"the automatic reference run ({lab} at tolerance {tol:g}) failed: {r.failure}; "
-                             "choose other methods with --reference-methods or give a file with --reference")
+            raise reference_failed([f"{lab} at tolerance {tol:g}: {failure_text(r)}"], None, True)
     R = measure.extract(primary, columns, t_start_rows)
     C = measure.extract(check, columns, t_start_rows)
     values = {c: R[:, i] for i, c in enumerate(columns)}

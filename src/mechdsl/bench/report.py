@@ -61,7 +61,8 @@ def summary(res, table_name: str = "bench.csv") -> dict:
         "tolerances": list(res.tolerances), "rtol_equals_atol": True,
         "timer": res.timer, "repeats": res.repeats, "timing": "minimum over repeats after one warm-up run",
         "reference": {"source": ref.source, "methods": list(ref.methods), "tolerance": ref.tolerance,
-                      "accuracy": ref.accuracy, "cpu_s": ref.cpu, "times": len(ref.t)},
+                      "accuracy": ref.accuracy, "cpu_s": ref.cpu, "times": len(ref.t), "notes": list(ref.notes)},
+        "plan": list(s.notes),
         "machine": res.machine,
         "rows": [_row_dict(r) for r in res.rows],
     }
@@ -109,6 +110,8 @@ def header_lines(res) -> list[str]:
     cpu = "".join(f"; {k} {v:.3g} s" for k, v in ref.cpu.items()) if ref.cpu else ""
     lines.append(f"reference: {ref.source}{cpu}")
     lines.append(f"  {fmt_accuracy(ref)}")
+    lines += [f"  {n}" for n in ref.notes]
+    lines += [f"plan: {n}" for n in s.notes]
     load = res.machine.get("load_average")
     lines.append(f"CPU time: {res.timer}, minimum of {res.repeats} run(s) after a warm-up; rtol = atol = tolerance"
                  + (f"; load average {load[0]:g} on {res.machine.get('cpus')} cores" if load else ""))

@@ -19,14 +19,15 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..diagnostics import MechError, UsageError
+from ..diagnostics import MechError, Span, UsageError
 from . import measure, reference as R
 from .index1 import FORMULATION as INDEX1
 from .spec import SYMPLECTIC_ORDER, Variant, parse_variant
-from .timing import TIMER, timed
+from .timing import TIMER, OverBudget, timed
 
 DEFAULT_POINTS = 101
 DEFAULT_BUDGET = 30.0      # CPU seconds: a run longer than this ends the variant's sweep
+DEFAULT_T_END = 10.0       # s: without a scene stop time, as mech simulate
 
 
 @dataclass(kw_only=True)
@@ -44,21 +45,28 @@ class Setup:
     scene: str | None = None
     source: str | None = None
     default_formulation: str | None = None     # the scene's formulation (constrained models)
+    span: Span | None = None                   # the scene's (else the model's) declaration: where errors point
+    notes: list[str] = field(default_factory=list)     # how the settings were chosen (printed, kept in the JSON)
 
     @classmethod
     def from_model(cls, model, *, t_end=None, t_start=None, points=None, x0=None, compiled=False,
                    source=None) -> "Setup":
-        """From a mechdsl.api.Model (scene settings fill what is not given)."""
+        """From a mechdsl.api.Model (scene settings fill what is not given).  The end time
+        follows mech simulate: the given one, else the scene's stop time, else DEFAULT_T_END."""
         s = dict(getattr(model, "scene_settings", None) or {})
+        notes = []
         t_end = t_end if t_end is not None else s.get("stop_time")
         if t_end is None:
-            raise UsageError("give the end time (--t-end): the model has no scene stop_time")
+            t_end = DEFAULT_T_END
+            notes.append(f"no --t-end and no scene stop_time: t_end = {DEFAULT_T_END:g} s, as for mech simulate")
+        scene = getattr(model, "scene", None)
+        span = getattr(scene, "span", None) or getattr(getattr(model, "model", None), "span", None)
         return cls(eom=model.eom, t_end=float(t_end),
                    t_start=float(t_start if t_start is not None else s.get("start_time", 0.0)),
                    points=int(points or s.get("points") or DEFAULT_POINTS), p=model.parameter_values, x0=x0,
                    compiled=bool(compiled or s.get("compiled", False)), name=model.name,
-                   scene=getattr(getattr(model, "scene", None), "name", None), source=source,
-                   default_formulation=s.get("formulation"))
+                   scene=getattr(scene, "name", None), source=source,
+                   default_formulation=s.get("formulation"), span=span, notes=notes)
 
     @property
     def constrained(self) -> bool:
@@ -178,10 +186,16 @@ def symplectic_dt(setup: Setup, method: str, tol: float, points: int) -> float:
     return (setup.t_end - setup.t_start) / (per * (points - 1))
 
 
-def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: int, outputs, dt=None):
+def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: int, outputs, dt=None,
+                     stop_after: float | None = None):
+    """One run; ``stop_after``: CPU seconds after which it is stopped (timing.OverBudget)
+    where the simulator reports progress."""
     from ..simulate import simulate
+    from .timing import cpu_cap
 
     kw = variant.kwargs
+    if stop_after is not None:
+        kw["progress"] = cpu_cap(stop_after)
     if variant.formulation is None and setup.constrained and setup.default_formulation:
         kw["formulation"] = setup.default_formulation
     if dt is not None:
@@ -213,7 +227,7 @@ def _stat(st: dict, *keys):
 
 
 def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Reference, columns,
-                repeats: int, conservative) -> Row:
+                repeats: int, conservative, stop_after: float | None = None) -> Row:
     row = Row(label=variant.label, method=variant.method, formulation=variant.formulation, tolerance=tol)
     outputs = _outputs_for(setup.eom, columns)
     dt = variant.fixed_dt
@@ -227,9 +241,13 @@ def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Re
         row.dt = dt
 
         def once():
-            return simulate_variant(setup, variant, tol, points, outputs, dt)
+            return simulate_variant(setup, variant, tol, points, outputs, dt, stop_after)
 
         tm = timed(once, repeats, ok=lambda r: r.success)
+    except OverBudget as e:
+        row.status, row.message = "skipped", f"{e} (a run is stopped after {stop_after:g} s)"
+        row.cpu, row.t_reached = e.cpu, e.t
+        return row
     except UsageError as e:
         row.status, row.message = "n/a", str(e)
         return row
@@ -286,33 +304,64 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
             raise UsageError(f"the reference ends at t = {T:g}, the benchmark at {setup.t_end:g} (set --t-end {T:g})")
         points, idx = ref.grid_points(setup.t_start)
         return ref, points, idx
-    labels = tuple(reference_methods or R.auto_pair(kind))
-    if len(labels) != 2:
+    if reference_methods is not None and len(reference_methods) != 2:
         raise UsageError("--reference-methods takes two methods: the reference and its check")
     tol = R.reference_tolerance(tolerances)
     points = setup.points
     idx = np.arange(points)
     outputs = _outputs_for(setup.eom, columns)
-    results, cpu = [], []
-    for lab in labels:
+    from .timing import cpu_call
+
+    given = reference_methods is not None
+
+    def attempt(lab, t):
         v = parse_variant(lab)
         if log:
-            log(f"reference: {lab} at tolerance {tol:g}")
-        from .timing import cpu_call
-
+            log(f"reference: {lab} at tolerance {t:g}")
         dt = v.fixed_dt
         if dt is None and v.method in SYMPLECTIC_ORDER:
-            dt = symplectic_dt(setup, v.method, tol, points)
-        c, r = cpu_call(lambda: simulate_variant(setup, v, tol, points, outputs, dt))
-        results.append(r)
-        cpu.append(c)
-    ref = R.from_runs(results[0], results[1], columns, idx, labels, tol, cpu)
-    return ref, points, idx
+            dt = symplectic_dt(setup, v.method, t, points)
+        try:
+            return cpu_call(lambda: simulate_variant(setup, v, t, points, outputs, dt))
+        except (MechError, UsageError) as e:      # a method that cannot run this model: try the next
+            if given and isinstance(e, UsageError):
+                raise
+            return 0.0, str(e)
+
+    # given methods: that pair at the reference tolerance; auto: the kind's candidates in order, at
+    # the reference tolerance and then looser ones (R.reference_ladder) until two of them succeed
+    candidates = tuple(reference_methods) if given else R.auto_candidates(kind)
+    ladder = [tol] if given else R.reference_ladder(tol)
+    failures: list[str] = []
+    for t in ladder:
+        good = []
+        for lab in candidates:
+            c, r = attempt(lab, t)
+            if isinstance(r, str) or not r.success:
+                failures.append(f"{lab} at tolerance {t:g}: " + (r if isinstance(r, str) else R.failure_text(r)))
+                if given:
+                    break
+                continue
+            good.append((lab, r, c))
+            if len(good) == 2:
+                break
+        if len(good) == 2:
+            (l1, r1, c1), (l2, r2, c2) = good
+            ref = R.from_runs(r1, r2, columns, idx, (l1, l2), t, (c1, c2))
+            ref.notes = [f"not used: {f}" for f in failures]
+            return ref, points, idx
+    raise R.reference_failed(failures, setup.span, given)
 
 
 def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="auto", reference_methods=None,
               compare="positions", repeats: int = 3, budget: float = DEFAULT_BUDGET,
+              sweep_budget: float | None = None, stop_after: float | None = None,
               log: Callable[[str], None] | None = None) -> BenchResult:
+    """Every variant over the tolerance sweep against the reference.  budget: CPU seconds of
+    one run beyond which its variant's tighter tolerances are skipped; sweep_budget: CPU
+    seconds of all runs beyond which the remaining ones are skipped (None: no limit);
+    stop_after: CPU seconds after which one run is stopped where the simulator reports
+    progress (its row is skipped, and so are its variant's tighter tolerances)."""
     from ..simulate import is_conservative
 
     if repeats < 1:
@@ -322,25 +371,41 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
     kind = classify_setup(setup)
     ref, points, idx = make_reference(setup, reference, columns, tolerances, kind, reference_methods, log)
     conservative = is_conservative(setup.eom)
-    rows: list[Row] = []
-    for v in variants:
-        sweep = [None] if v.fixed_dt is not None else list(tolerances)
-        over: Row | None = None
-        for tol in sweep:
-            if over is not None:
-                rows.append(Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol,
-                                status="skipped",
-                                message=f"the run at tolerance {over.tolerance:g} took {over.cpu:.3g} s of CPU "
-                                        f"(budget {budget:g} s)"))
+    import time
+
+    sweeps = {v.label: ([None] if v.fixed_dt is not None else list(tolerances)) for v in variants}
+    done: dict[str, list[Row]] = {v.label: [] for v in variants}
+    over: dict[str, Row] = {}              # variant -> its run that exceeded the per-run budget
+    finished: set[str] = set()             # variants whose combination does not exist (n/a)
+    spent = 0.0
+    # tolerance by tolerance across the variants, so that a sweep budget cuts the tightest
+    # tolerances of every variant rather than whole variants
+    for i in range(max(len(sw) for sw in sweeps.values())):
+        for v in variants:
+            sw = sweeps[v.label]
+            if i >= len(sw) or v.label in finished:
                 continue
-            row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative)
-            rows.append(row)
-            if log:
-                log(one_line(row))
-            if row.cpu is not None and row.cpu > budget:
-                over = row
-            if row.status == "n/a":        # the combination does not exist: one row says so
-                break
+            tol = sw[i]
+            if v.label in over:
+                o = over[v.label]
+                row = Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
+                          message=f"the run at tolerance {o.tolerance:g} took {o.cpu:.3g} s of CPU "
+                                  f"(budget {budget:g} s)")
+            elif sweep_budget is not None and spent > sweep_budget:
+                row = Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
+                          message=f"the sweep used its budget of {sweep_budget:g} s of CPU")
+            else:
+                c0 = time.process_time()
+                row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative, stop_after)
+                spent += time.process_time() - c0
+                if log:
+                    log(one_line(row))
+                if row.cpu is not None and row.cpu > budget:
+                    over[v.label] = row
+                if row.status == "n/a":        # the combination does not exist: one row says so
+                    finished.add(v.label)
+            done[v.label].append(row)
+    rows = [r for v in variants for r in done[v.label]]
     return BenchResult(setup=setup, columns=columns, reference=ref, rows=rows, tolerances=tolerances,
                        repeats=repeats, kind=kind, machine=machine())
 

@@ -43,3 +43,28 @@ def timed(fn: Callable[[], Any], repeats: int, *, ok: Callable[[Any], bool] = la
         dt, res = cpu_call(fn)
         runs.append(dt)
     return Timing(best=min(runs), runs=tuple(runs), warmup=warm, result=res)
+
+
+class OverBudget(Exception):
+    """Raised from a run's progress callback when the run has used its CPU seconds."""
+
+    def __init__(self, t: float, cpu: float):
+        super().__init__(f"stopped at t = {t:.6g} after {cpu:.3g} s of CPU")
+        self.t, self.cpu = t, cpu
+
+
+def cpu_cap(seconds: float, marks: list | None = None):
+    """A progress callback (t, t_end) for simulate() that raises OverBudget once the run has
+    used ``seconds`` of CPU since the callback was made.  The simulator calls it between
+    output points (or segments, or events), so a run is stopped there, not inside a
+    CasADi call.  ``marks`` (a list) collects (cpu, t) of every call."""
+    c0 = time.process_time()
+
+    def progress(t, _t_end):
+        c = time.process_time() - c0
+        if marks is not None:
+            marks.append((c, float(t)))
+        if c > seconds:
+            raise OverBudget(float(t), c)
+
+    return progress

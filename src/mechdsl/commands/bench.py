@@ -9,8 +9,8 @@ HELP = "speed against accuracy: run methods over a tolerance sweep, measure erro
 
 
 def add_parser(sub):
+    from ..bench.plan import RUN_BUDGET, SWEEP_BUDGET
     from ..bench.runner import DEFAULT_BUDGET
-    from ..bench.spec import DEFAULT_TOLERANCES
     from ._common import add_set_arg, add_target_args
     from .simulate import _number_arg
 
@@ -23,7 +23,8 @@ def add_parser(sub):
     p.add_argument("--formulations", action="append", default=[], metavar="LIST",
                    help="formulations (constrained models) combined with every method that names none")
     p.add_argument("--tolerances", metavar="SPEC", default=None,
-                   help=f"'1e-2,1e-4', '1e-2..1e-12' (half decades) or '1e-2..1e-12/4' (default {DEFAULT_TOLERANCES}); "
+                   help="'1e-2,1e-4', '1e-2..1e-12' (half decades) or '1e-2..1e-12/4' (default: one a decade from "
+                        "1e-2 or 1e-3 down to 1e-8 .. 1e-10 by the model's cost, see docs/performance.md); "
                         "rtol = atol = tolerance")
     p.add_argument("--reference", metavar="auto|FILE", default="auto",
                    help="reference solution: a CSV in the format of mech simulate -o, or auto (two high-accuracy "
@@ -31,10 +32,14 @@ def add_parser(sub):
     p.add_argument("--reference-methods", metavar="A,B", help="methods of the automatic reference and its check")
     p.add_argument("--compare", metavar="WHAT", default="positions",
                    help="compared columns: positions (coordinates, default), states (and speeds) or a list of names")
-    p.add_argument("--repeats", type=int, default=3, metavar="K", help="timed runs after the warm-up (default 3)")
-    p.add_argument("--budget", type=_number_arg, default=DEFAULT_BUDGET, metavar="S",
-                   help=f"CPU seconds: a run longer than this ends its method's sweep (default {DEFAULT_BUDGET:g})")
-    p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time)")
+    p.add_argument("--repeats", type=int, default=None, metavar="K",
+                   help="timed runs after the warm-up (default 3; 1 for a costly model)")
+    p.add_argument("--budget", type=_number_arg, default=None, metavar="S",
+                   help=f"CPU seconds: a run longer than this ends its method's sweep (default {DEFAULT_BUDGET:g} "
+                        f"with given tolerances and end time, else {RUN_BUDGET:g}, with {SWEEP_BUDGET:g} s for the "
+                        "whole sweep)")
+    p.add_argument("--t-end", type=_number_arg, metavar="T",
+                   help="end time [s] (default: scene stop_time, else 10; shortened for a costly model)")
     p.add_argument("--points", type=int, metavar="N", help="output points (default: scene points, else 101)")
     add_set_arg(p)
     p.add_argument("--compiled", action="store_true", help="generated and compiled C code for every method")
@@ -66,7 +71,7 @@ def run(args) -> int:
     from ..fileio import check_writable, output_folder
     from ._common import load_model, target_line
 
-    if args.repeats < 1:
+    if args.repeats is not None and args.repeats < 1:
         raise UsageError("--repeats must be at least 1")
     tolerances = parse_tolerances(args.tolerances)
     out = output_folder(args.output) if args.output else None
@@ -80,17 +85,42 @@ def run(args) -> int:
     setup = Setup.from_model(model, t_end=args.t_end, points=args.points, x0=x0, compiled=args.compiled,
                              source=str(args.file))
     kind = classify_setup(setup)
-    methods = args.methods or default_methods(kind)
-    variants = parse_variants(methods, args.formulations or None)
     ref_methods = None
     if args.reference_methods:
         from ..bench.spec import split_top
 
         ref_methods = split_top(args.reference_methods)
     log = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    from ..bench.runner import DEFAULT_BUDGET
+
+    repeats = args.repeats or 3
+    budget = DEFAULT_BUDGET if args.budget is None else args.budget
+    sweep_budget = stop_after = None
+    methods = args.methods or default_methods(kind)
+    if args.reference == "auto":           # a file reference fixes the horizon and costs nothing to make
+        from ..bench.plan import default_plan, plan_methods
+
+        plan = default_plan(setup, t_end_given=args.t_end is not None, tolerances_given=args.tolerances is not None,
+                            repeats_given=args.repeats is not None, budget_given=args.budget is not None, log=log)
+        if not args.methods:
+            methods = plan_methods(plan, methods)
+        setup.t_end = plan.t_end
+        setup.notes += plan.notes
+        if plan.tolerances is not None:
+            tolerances = parse_tolerances(plan.tolerances)
+        repeats = plan.repeats or repeats
+        budget = plan.budget if plan.budget is not None else budget
+        sweep_budget, stop_after = plan.sweep_budget, plan.stop_after
+    variants = parse_variants(methods, args.formulations or None)
+    if not args.methods:
+        setup.notes.append(f"methods: the default set for a{'n' if kind == 'ode' else ''} {kind} model "
+                           f"({', '.join(v.label for v in variants)}); give --methods for others")
+    for n in setup.notes:
+        if log:
+            log(f"plan: {n}")
     res = run_bench(setup, variants=variants, tolerances=tolerances, reference=args.reference,
-                    reference_methods=ref_methods, compare=args.compare, repeats=args.repeats, budget=args.budget,
-                    log=log)
+                    reference_methods=ref_methods, compare=args.compare, repeats=repeats, budget=budget,
+                    sweep_budget=sweep_budget, stop_after=stop_after, log=log)
     print(format_table(res))
     from ..bench.report import fastest_lines
 

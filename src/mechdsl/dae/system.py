@@ -207,6 +207,7 @@ class ConstrainedSystem:
             "g": ca.Function("g", [q, t, pp], [g]),
             "G": ca.Function("G", [q, t, pp], [G]),
             "gt": ca.Function("gt", [q, t, pp], [gt]),
+            "geometry": ca.Function("geometry", [q, t, pp], [g, G, gt]),
             "gdot": ca.Function("gdot", [q, qd, t, pp], [gdot]),
             "M": ca.Function("M", [q, t, pp], [M]),
             "accel": accel,
@@ -214,7 +215,7 @@ class ConstrainedSystem:
             "G_all": ca.Function("G_all", [q, t, pp], [G_all]),
             "monitor": ca.Function("monitor", [q, qd, t, pp], [g_all, gdot_all, G, ca.diag(M)]),
         }
-        fn["ode_jac"] = _ode_jacobian(accel, route, q, qd, t, pp)
+        fn["ode_jac"] = None      # built on first use (_jac): seconds for a large model on the MX route
         return ConstrainedSystem(eom=eom, p=pv, active=active, sym=sym, fn=fn, route=route)
 
     def symbols(self):
@@ -243,6 +244,11 @@ class ConstrainedSystem:
 
     def G(self, q, t) -> np.ndarray:
         return np.array(self.fn["G"](q, t, self.p), float).reshape(self.m, self.n)
+
+    def geometry(self, q, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(g, G, g_t) of the active constraints in one (buffer) call."""
+        g, G, gt = self._call_fast("geometry", q, t, self.p)
+        return np.ravel(g).copy(), np.asarray(G, float).reshape(self.m, self.n).copy(), np.ravel(gt).copy()
 
     def gdot(self, q, qd, t) -> np.ndarray:
         return np.array(self.fn["gdot"](q, qd, t, self.p), float).ravel()
@@ -357,15 +363,21 @@ class ConstrainedSystem:
         GD = self.G(q, t) / np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))[None, :]
         return GD * self.row_scale[:, None]
 
+    def _jac(self):
+        if self.fn["ode_jac"] is None:
+            s = self.sym
+            self.fn["ode_jac"] = _ode_jacobian(self.fn["accel"], self.route, s["q"], s["qd"], s["t"], s["p"])
+        return self.fn["ode_jac"]
+
     def eigenvalues(self, q, qd, t) -> np.ndarray:
-        J = np.array(self.fn["ode_jac"](q, qd, t, self.p), float)
+        J = np.array(self._jac()(q, qd, t, self.p), float)
         if not np.all(np.isfinite(J)) or not J.size:
             return np.zeros(0)
         return np.linalg.eigvals(J)
 
     def spectral_radius(self, q, qd, t) -> float:
         """Largest |eigenvalue| of the unstabilized index-1 ODE's Jacobian (a rate, 1/s)."""
-        J = np.array(self.fn["ode_jac"](q, qd, t, self.p), float)
+        J = np.array(self._jac()(q, qd, t, self.p), float)
         if not np.all(np.isfinite(J)):
             return 0.0
         return float(np.max(np.abs(np.linalg.eigvals(J)))) if J.size else 0.0

@@ -22,7 +22,7 @@ class MethodInfo:
 
 # formulations of constrained models (mechdsl.dae.options.FORMULATIONS, checked by a test) and
 # their aliases; 'ode' names the unconstrained problem
-FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
+FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning", "augmented")
 FORMULATION_NAMES = ("auto", "ode", "dae", "index1", *FORMULATIONS)
 
 

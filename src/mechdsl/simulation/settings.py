@@ -43,7 +43,7 @@ class SimulationSettings:
     rtol: float = DEFAULT_RTOL
     atol: float = DEFAULT_ATOL
     method: str = "auto"
-    formulation: str = "auto"          # constrained models: auto | projection | ggl | baumgarte | partitioning
+    formulation: str = "auto"          # constrained models: auto | projection | ggl | baumgarte | partitioning | augmented
     points: int | None = None          # None: 501 (fixed-step methods: every step, at most 20001)
     outputs: tuple[str, ...] | None = None
     x0: Any = None                     # [q; qd] or {coordinate | "der(c)": value}
