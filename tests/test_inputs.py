@@ -271,3 +271,24 @@ end Arr;
     r = m.simulate(1.0, inputs={"tau[1]": 1.0, "tau[2]": lambda t: 2.0 * t}, points=3, rtol=1e-10, atol=1e-12)
     assert r.q[-1] == pytest.approx([0.5, 1.0 / 3.0], rel=1e-7)         # x = t^2/2, y = t^3/3
     assert r["tau[2]"] == pytest.approx([0.0, 1.0, 2.0])
+
+
+def test_public_ode_is_sx_for_a_model_solved_numerically():
+    """models/andrews.mech was an MX Function (numeric QR solve of M qdd = bias), which broke SX
+    glue; Model.casadi() now gives SX (unrolled LDL^T), equal to the numeric solve."""
+    from mechdsl.codegen import casadi_functions
+
+    m = mechdsl.load(str(ROOT / "models" / "andrews.mech"))
+    ode = m.casadi()["ode"]
+    assert ode.class_name() == "SXFunction"
+    numeric = casadi_functions(m.eom)["ode"]
+    assert numeric.class_name() == "MXFunction"          # what the simulator integrates
+    rng = np.random.default_rng(7)
+    p = m.parameter_vector()
+    for _ in range(5):
+        x = rng.uniform(-1, 1, 2 * m.eom.n)
+        a = np.array(ode(0.0, x, [], p)).ravel()
+        b = np.array(numeric(0.0, x, [], p)).ravel()
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    xs = ca.SX.sym("x", 2 * m.eom.n)                       # SX glue: substitute into an SX graph
+    assert ode(0, xs, ca.SX(0, 1), ca.DM(p)).shape == (2 * m.eom.n, 1)

@@ -241,7 +241,9 @@ class Model:
 
         # compiled: with first and second derivatives in the library, so that Jacobians and exact
         # Hessians (IPOPT) work on the compiled Functions as on the virtual-machine ones
-        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0)
+        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates
+        # (SX glue works for all); the simulator keeps its numeric QR solve
+        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True)
 
     def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
                  method: str | None = None, points: int | None = None, progress=None, **kw):
