@@ -462,15 +462,39 @@ def test_threaded_runs_of_distinct_models_match_sequential_runs():
         np.testing.assert_array_equal(results[i]["energy"], alone["energy"])
 
 
-def test_non_finite_output_is_warned_about(tmp_path):
+def test_an_output_not_finite_at_the_start_is_refused_at_the_output(tmp_path):
+    """E757 from check and simulate alike, located at the output's declaration."""
     text = (MODELS / "pendulum.mech").read_text()
-    assert "output" in text
     src = text.replace("end Pendulum;", "  output Real w = sqrt(-1 - cos(theta)*cos(theta));\nend Pendulum;", 1)
     path = tmp_path / "p.mech"
     path.write_text(src)
-    r = mechdsl.load(path, model="Pendulum").simulate(0.2, points=5)
-    assert r.success and not np.isfinite(r["w"]).any()
-    assert any("w is nan at t = 0" in w for w in r.metadata["warnings"])
+    with pytest.raises(mechdsl.MechError) as e:
+        mechdsl.load(path, model="Pendulum").simulate(0.2, points=5)
+    assert e.value.first.code == "E757" and "output 'w'" in e.value.first.message
+    line = src.splitlines().index("  output Real w = sqrt(-1 - cos(theta)*cos(theta));") + 1
+    assert e.value.first.span.line == line
+
+
+def test_an_output_that_becomes_nan_fails_the_run_at_that_time(tmp_path):
+    """w = sqrt(sin(theta)) for the pendulum released at rest from theta = pi/2: theta reaches 0
+    after a quarter period, sqrt(L/g) K(1/sqrt(2)) = 0.5920 s (closed form), and w is nan from
+    there on.  The run fails at the first output time after that, names w, keeps what came before,
+    and its CSV has no nan."""
+    from scipy.special import ellipk
+
+    text = (MODELS / "pendulum.mech").read_text()
+    src = text.replace("end Pendulum;", "  output Real w = sqrt(sin(theta));\nend Pendulum;", 1)
+    path = tmp_path / "p.mech"
+    path.write_text(src)
+    m = mechdsl.load(path, model="Pendulum")
+    L, g = m.parameters["L"], abs(m.parameters.get("g", 9.81))
+    quarter = np.sqrt(L / g) * ellipk(0.5)
+    r = m.simulate(1.0, points=101)
+    assert not r.success and r.failure.cause == "non-finite output" and "w became nan" in r.failure.detail
+    assert quarter < r.failure.time <= quarter + 0.01 + 1e-12
+    assert len(r.t) >= 59 and r.t[-1] < quarter and np.isfinite(r["w"]).all()
+    r.to_csv(tmp_path / "p.csv")
+    assert "nan" not in (tmp_path / "p.csv").read_text()
 
 
 @pytest.mark.parametrize("file, kw, text", [

@@ -23,6 +23,7 @@ In order (the first group that finds something ends the check):
   E745  a spring or damper whose ends coincide at the start (its direction is undefined)
   E744  the accelerations are not finite at the start for another reason
   E756  a contact gap that is not finite at the start          (at the contact)
+  E757  an output that is not finite at the start                (at the output)
 
 Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
 energy, the constraint Jacobian); the mass matrix of the recursive route (CRBA, O(N^2)) is
@@ -150,7 +151,7 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
                            "or choose units that keep the numbers moderate")]
     if not ok_rhs:
         return _force_problems(eom, q, t, pv, rhs)
-    return _gap_problems(eom, q, t, pv)      # (an output that is not finite is a warning of the run)
+    return _gap_problems(eom, q, t, pv) or _output_problems(eom, q, qd, t, pv)
 
 
 def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
@@ -175,6 +176,40 @@ def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
             return [Diagnostic("E756", f"the gap of contact '{g.name}' is not finite at the start ({v:g})",
                                g.span or _model_span(eom),
                                "its sizes and positions overflow with these parameter values: keep them moderate")]
+    return []
+
+
+def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
+    """E757: an output that is not finite at the start (R = 0 in cos_th = y/R): every run
+    would fail at once on it (a run never writes inf or nan)."""
+    import casadi as ca
+
+    lam = getattr(eom, "lam", None)
+
+    def build():
+        names = [k for k, v in eom.outputs.items()
+                 if lam is None or not ca.depends_on(ca.vec(ca.SX(v)), ca.SX(lam))]   # reactions need lambda
+        exprs = [ca.vec(ca.SX(eom.outputs[k])) for k in names]
+        sizes = [int(e.numel()) for e in exprs]
+        return names, sizes, ca.Function("start_outputs", [eom.q, eom.qd, eom.t, eom.p],
+                                         [ca.vertcat(*exprs)] if exprs else [ca.SX(0, 1)])
+
+    names, sizes, fn = eom.cached("preflight_outputs", build)
+    if not names:
+        return []
+    vals = _value(fn, q, qd, t, pv)
+    row = 0
+    for name, k in zip(names, sizes):
+        v = vals[row:row + k]
+        row += k
+        if not np.all(np.isfinite(v)):
+            bad = float(v[~np.isfinite(v)][0])
+            span = next((o.span for o in (eom.model.outputs if eom.model is not None else ()) if o.name == name),
+                        None)
+            return [Diagnostic("E757", f"output '{name}' is not finite at the start ({bad:g})",
+                               span or _model_span(eom),
+                               "its expression divides by zero or leaves its domain (a square root or logarithm "
+                               "of a negative number) at the start values: check it and the parameters")]
     return []
 
 

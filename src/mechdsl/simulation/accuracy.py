@@ -30,19 +30,26 @@ DRIFT_FACTOR = 1e3     # invariant drift this many times the tolerance: the accu
 
 
 def check_finite(r: Result) -> None:
-    """A run whose state became inf/nan fails at the first such time (results before it are
-    kept); a recorded output that is not finite where the state is gets a warning."""
+    """A run whose state or a recorded signal (an output, an energy) became inf/nan fails at
+    the first such time, naming it; the results before that time are kept.  A CSV never
+    carries inf or nan from a run that says it succeeded."""
     _check_states(r)
-    bad = []
+    first = None
     for name, v in r.signals.items():
         if isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype.kind == "f" and len(v) == len(r.t):
             idx = np.flatnonzero(~np.isfinite(v))
-            if idx.size:
-                bad.append(f"{name} is {v[idx[0]]} at t = {float(r.t[idx[0]]):.10g}")
-    if bad:
-        r.metadata.setdefault("warnings", []).append(
-            "recorded values are not finite (the model's expressions, e.g. a square root of a negative "
-            "number): " + "; ".join(bad[:3]) + (f"; and {len(bad) - 3} more" if len(bad) > 3 else ""))
+            if idx.size and (first is None or idx[0] < first[0]):
+                first = (int(idx[0]), name, v[idx[0]])
+    if first is None:
+        return
+    k, name, value = first
+    t_bad = float(r.t[k])
+    if r.failure is None:        # a run that failed already keeps its diagnosis (the nan follows from it)
+        r.failure = Failure(time=t_bad, cause="non-finite output",
+                            detail=f"{name} became {value} at t = {t_bad:.10g} (the model's expression for it, "
+                                   "e.g. a square root of a negative number or a division by zero); results kept "
+                                   + (f"up to t = {float(r.t[k - 1]):.10g}" if k else "from no time"))
+    _truncate(r, k)
 
 
 def _check_states(r: Result) -> None:
@@ -57,18 +64,23 @@ def _check_states(r: Result) -> None:
     names = list(r.coordinates) + [f"der({c})" for c in r.coordinates]
     col = int(np.flatnonzero(bad[k])[0])
     t_bad = float(r.t[k])
-    keep = max(k, 1)
     value = X[k, col]
     if r.failure is None or r.failure.time > t_bad:
         r.failure = Failure(time=t_bad, cause="non-finite state",
-                            detail=f"{names[col]} became {value} at t = {t_bad:.10g}; results kept up to "
-                                   f"t = {float(r.t[keep - 1]):.10g}")
+                            detail=f"{names[col]} became {value} at t = {t_bad:.10g}; results kept "
+                                   + (f"up to t = {float(r.t[k - 1]):.10g}" if k else "from no time"))
+    _truncate(r, k)
+
+
+def _truncate(r: Result, keep: int) -> None:
+    """Keep the first ``keep`` output times of the result (signals and events with them)."""
     r.t = r.t[:keep].copy()
     r.q = r.q[:keep].copy()
     r.qd = r.qd[:keep].copy()
     r.signals = {k2: (v[:keep].copy() if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) >= keep else v)
                  for k2, v in r.signals.items()}
-    r.events = [e for e in r.events if float(e.get("time", -math.inf)) <= float(r.t[-1])]
+    last = float(r.t[-1]) if keep else -math.inf
+    r.events = [e for e in r.events if float(e.get("time", -math.inf)) <= last]
 
 
 def normalize_stats(r: Result, cpu_time: float, wall_time: float) -> None:
