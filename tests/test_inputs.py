@@ -292,3 +292,11 @@ def test_public_ode_is_sx_for_a_model_solved_numerically():
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
     xs = ca.SX.sym("x", 2 * m.eom.n)                       # SX glue: substitute into an SX graph
     assert ode(0, xs, ca.SX(0, 1), ca.DM(p)).shape == (2 * m.eom.n, 1)
+
+
+def test_an_output_may_use_an_input():
+    src = SLIDER.replace("equation", '  output Real push(unit = "N") = F + G;\nequation')
+    m = mechdsl.loads(src, model="Slider")
+    r = m.simulate(1.0, inputs={"F": lambda t: 2.0 * t}, points=3)
+    assert r["push"] == pytest.approx([1.5, 2.5, 3.5])
+    assert r["push"] == pytest.approx(r["F"] + r["G"])

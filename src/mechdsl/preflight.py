@@ -191,13 +191,14 @@ def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
                  if lam is None or not ca.depends_on(ca.vec(ca.SX(v)), ca.SX(lam))]   # reactions need lambda
         exprs = [ca.vec(ca.SX(eom.outputs[k])) for k in names]
         sizes = [int(e.numel()) for e in exprs]
-        return names, sizes, ca.Function("start_outputs", [eom.q, eom.qd, eom.t, eom.p],
+        u = eom.u if getattr(eom, "u", None) is not None else ca.SX(0, 1)      # outputs may use inputs
+        return names, sizes, ca.Function("start_outputs", [eom.q, eom.qd, eom.t, u, eom.p],
                                          [ca.vertcat(*exprs)] if exprs else [ca.SX(0, 1)])
 
     names, sizes, fn = eom.cached("preflight_outputs", build)
     if not names:
         return []
-    vals = _value(fn, q, qd, t, pv)
+    vals = _value(fn, q, qd, t, _u(eom), pv)
     row = 0
     for name, k in zip(names, sizes):
         v = vals[row:row + k]
