@@ -4,7 +4,7 @@ For the N-link chain (Lagrange route, numeric QR solve of M qdd = bias) this pri
 the time of one `ode` evaluation through
   plain      f(t, x, p)                    (CasADi's Python call: DM conversions)
   fast       codegen.FastFunction          (Function.buffer(), copies in and out)
-  bound      FastFunction.bind(p=p)        (what the scipy integrators call: rhs(t, x))
+  bound      FastFunction.bind(u=, p=)      (what the scipy integrators call: rhs(t, x))
   buffer     the bare buffer eval          (lower bound from Python)
   c-plain    compiled library, plain call
   c-fast     compiled library, FastFunction
@@ -56,16 +56,16 @@ def main(argv=None):
         cfun = cf["ode"]
         fast = FastFunction(vm)
         raw = FastFunction(vm, copy=False)
-        fast.__call__(0.0, x, p)
+        fast.__call__(0.0, x, [], p)
         ev = raw._eval
         cfast = FastFunction(cfun)
-        t_plain = per_call(lambda: vm(0.0, x, p))
-        t_fast = per_call(lambda: fast(0.0, x, p))
-        bound = FastFunction(vm).bind(p=p)
+        t_plain = per_call(lambda: vm(0.0, x, [], p))
+        t_fast = per_call(lambda: fast(0.0, x, [], p))
+        bound = FastFunction(vm).bind(u=[], p=p)
         t_bound = per_call(lambda: bound(0.0, x))
         t_buf = per_call(ev)
-        t_cplain = per_call(lambda: cfun(0.0, x, p))
-        t_cfast = per_call(lambda: cfast(0.0, x, p))
+        t_cplain = per_call(lambda: cfun(0.0, x, [], p))
+        t_cfast = per_call(lambda: cfast(0.0, x, [], p))
         tag = "" if cf.compiled else "  (no compiler: c-* are the VM)"
         print(f"{N:3d} {t_plain * 1e6:9.2f} {t_fast * 1e6:9.2f} {t_bound * 1e6:9.2f} {t_buf * 1e6:9.2f} {t_cplain * 1e6:9.2f} "
               f"{t_cfast * 1e6:9.2f}   {t_plain / t_bound:11.1f} {t_fast / t_cfast:11.1f}{tag}", flush=True)

@@ -70,7 +70,7 @@ end Nested;
 def _qdd(m, x):
     ode = m.casadi()["ode"]
     n = len(m.coordinates)
-    return np.array(ode(0.0, x, m.parameter_values)).ravel()[n:]
+    return np.array(ode(0.0, x, [], m.parameter_values)).ravel()[n:]
 
 
 def test_chain_of_link_instances_matches_sympy_mechanics():

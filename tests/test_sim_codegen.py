@@ -28,7 +28,7 @@ def double_pendulum_accelerations(x, m1=1.0, m2=1.0, L1=1.0, L2=1.0, g=9.81):
 def test_function_names_and_signatures():
     f = casadi_functions(chain(3))
     assert list(f) == ["ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "start"]
-    assert f["ode"].name_in() == ["t", "x", "p"] and f["ode"].name_out() == ["xdot"]
+    assert f["ode"].name_in() == ["t", "x", "u", "p"] and f["ode"].name_out() == ["xdot"]
     assert f["mass_matrix"].name_in() == ["q", "t", "p"] and f["mass_matrix"].name_out() == ["M"]
     assert f["energy"].name_out() == ["T", "V", "E"]
     assert f["outputs"].name_out() == ["x_tip", "y_tip"]
@@ -42,7 +42,7 @@ def test_ode_against_textbook_double_pendulum():
     p = np.array([1.0, 1.0, 9.81])
     for _ in range(20):
         x = RNG.uniform(-3, 3, 4)
-        xd = ff(0.0, x, p)
+        xd = ff(0.0, x, [], p)
         np.testing.assert_array_equal(xd[:2], x[2:])
         np.testing.assert_allclose(xd[2:], double_pendulum_accelerations(x), rtol=1e-12, atol=1e-12)
 
@@ -54,8 +54,8 @@ def test_numeric_qr_solve_matches_lapack(N):
     mm, bias, ode = FastFunction(f["mass_matrix"]), FastFunction(f["bias"]), FastFunction(f["ode"])
     for _ in range(5):
         x = RNG.uniform(-2, 2, 2 * N)
-        M, b = mm(x[:N], 0.0, e.param_values), bias(0.0, x, e.param_values)
-        qdd = ode(0.0, x, e.param_values)[N:]
+        M, b = mm(x[:N], 0.0, e.param_values), bias(0.0, x, [], e.param_values)
+        qdd = ode(0.0, x, [], e.param_values)[N:]
         ref = np.linalg.solve(M, b)
         assert np.abs(qdd - ref).max() <= 1e-12 * np.abs(ref).max()
         assert np.linalg.norm(M @ qdd - b) <= 1e-14 * np.linalg.cond(M) * np.linalg.norm(b)
@@ -66,9 +66,9 @@ def test_ode_jacobian_matches_finite_differences():
     f = casadi_functions(e)
     ode, jac = FastFunction(f["ode"]), FastFunction(f["ode_jacobian"])
     x = RNG.uniform(-1, 1, 6)
-    J = jac(0.0, x, e.param_values)
+    J = jac(0.0, x, [], e.param_values)
     h = 1e-6
-    Jfd = np.column_stack([(ode(0.0, x + h * ei, e.param_values) - ode(0.0, x - h * ei, e.param_values)) / (2 * h)
+    Jfd = np.column_stack([(ode(0.0, x + h * ei, [], e.param_values) - ode(0.0, x - h * ei, [], e.param_values)) / (2 * h)
                            for ei in np.eye(6)])
     np.testing.assert_allclose(J, Jfd, rtol=1e-6, atol=1e-6)
 
@@ -91,9 +91,9 @@ def test_fast_function_equals_plain_calls():
         fast = FastFunction(f[name])
         for _ in range(3):
             x = RNG.uniform(-2, 2, 6)
-            plain = f[name](0.3, x, p)
+            plain = f[name](0.3, x, [], p)
             plain = plain if isinstance(plain, (list, tuple)) else [plain]
-            got = fast(0.3, x, p)
+            got = fast(0.3, x, [], p)
             got = got if isinstance(got, tuple) else (got,)
             for a, b in zip(got, plain):
                 np.testing.assert_array_equal(np.asarray(a).reshape(np.array(b).shape), np.array(b))
@@ -128,7 +128,7 @@ def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
     for _ in range(10):
         x = RNG.uniform(-3, 3, 4)
         for name in ("ode", "ode_jacobian", "energy", "outputs"):
-            a, b = cf[name](0.0, x, p), vm[name](0.0, x, p)
+            a, b = cf[name](0.0, x, [], p), vm[name](0.0, x, [], p)
             for u, v in zip(a if isinstance(a, (list, tuple)) else [a], b if isinstance(b, (list, tuple)) else [b]):
                 np.testing.assert_allclose(np.array(u), np.array(v), rtol=1e-13, atol=1e-13)
     # same right-hand side values -> the explicit method takes the same steps
@@ -164,15 +164,15 @@ def test_missing_compiler_falls_back_with_a_note(monkeypatch, tmp_path):
 def test_bound_fast_function_equals_plain_calls():
     e = chain(2)
     f = casadi_functions(e)
-    rhs = FastFunction(f["ode"]).bind(p=e.param_values)
-    jac = FastFunction(f["ode_jacobian"]).bind(p=e.param_values)
+    rhs = FastFunction(f["ode"]).bind(u=[], p=e.param_values)
+    jac = FastFunction(f["ode_jacobian"]).bind(u=[], p=e.param_values)
     for _ in range(3):
         x = RNG.uniform(-2, 2, 4)
         a = rhs(0.5, x)
         b = rhs(0.7, x + 1)
-        np.testing.assert_array_equal(a, np.array(f["ode"](0.5, x, e.param_values)).ravel())
-        np.testing.assert_array_equal(b, np.array(f["ode"](0.7, x + 1, e.param_values)).ravel())
-        np.testing.assert_array_equal(jac(0.5, x), np.array(f["ode_jacobian"](0.5, x, e.param_values)))
+        np.testing.assert_array_equal(a, np.array(f["ode"](0.5, x, [], e.param_values)).ravel())
+        np.testing.assert_array_equal(b, np.array(f["ode"](0.7, x + 1, [], e.param_values)).ravel())
+        np.testing.assert_array_equal(jac(0.5, x), np.array(f["ode_jacobian"](0.5, x, [], e.param_values)))
     with pytest.raises(KeyError):
         FastFunction(f["ode"]).bind(q=1)
 
@@ -202,5 +202,5 @@ def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == [Path(next(iter(libs))).name]   # no debris
     x = np.array([0.3, -0.2])
     for loaded, _, _ in results:
-        np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, e.param_values)),
-                                      np.array(casadi_functions(e)["ode"](0.0, x, e.param_values)))
+        np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, [], e.param_values)),
+                                      np.array(casadi_functions(e)["ode"](0.0, x, [], e.param_values)))

@@ -156,7 +156,7 @@ def _slow_pendulum_run(**kw):
             self.construct("slow_ode", {})
 
         def get_n_in(self):
-            return 3
+            return 4
 
         def get_n_out(self):
             return 1

@@ -31,7 +31,7 @@ def run(size: str = "small") -> Case:
     pts = 101
     case = Case(name="stiff", title="Stiff spring pendulum", size=size)
     pv = parameter_vector(e, None)
-    J = np.array(casadi_functions(e, names=("ode", "ode_jacobian"))["ode_jacobian"](0.0, start_vector(e, None, pv), pv))
+    J = np.array(casadi_functions(e, names=("ode", "ode_jacobian"))["ode_jacobian"](0.0, start_vector(e, None, pv), [], pv))
     lam = float(np.abs(np.linalg.eigvals(J)).max())
     ref = simulate(e, T, rtol=1e-11, atol=1e-11, method="rosenbrock", points=pts)
     chk = simulate(e, T, rtol=1e-11, atol=1e-11, method="scipy-radau", points=pts)

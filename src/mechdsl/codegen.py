@@ -3,16 +3,20 @@
 ``casadi_functions(eom, compiled=False)`` returns a lazy mapping name -> ``casadi.Function``;
 a Function is built the first time it is asked for.  Names, inputs and outputs:
 
-    ode            (t, x, p) -> xdot            x = [q; qd], xdot = [qd; qdd]
-    ode_jacobian   (t, x, p) -> J               d xdot / d x, dense
-    mass_matrix    (q, t, p) -> M
-    bias           (t, x, p) -> bias            M qdd = bias
-    energy         (t, x, p) -> T, V, E
-    outputs        (t, x, p) -> one output per EOM.outputs entry (named as the entry)
-    constraints    (t, x, p) -> g, gdot         only when EOM.g exists
+    ode            (t, x, u, p) -> xdot         x = [q; qd], xdot = [qd; qdd]
+    ode_jacobian   (t, x, u, p) -> J            d xdot / d x, dense
+    mass_matrix    (q, t, p) -> M               ((t, x, u, p) when M depends on the speeds)
+    bias           (t, x, u, p) -> bias         M qdd = bias
+    energy         (t, x, u, p) -> T, V, E
+    outputs        (t, x, u, p) -> one output per EOM.outputs entry (named as the entry)
+    constraints    (t, x, u, p) -> g, gdot      only when EOM.g exists
     start          (p) -> q0, qd0
-    singularity    (t, x, p) -> one per EOM.singularity_monitors entry (when there are any)
-    invariants     (t, x, p) -> one per EOM.invariants entry (when there are any)
+    singularity    (t, x, u, p) -> one per EOM.singularity_monitors entry (when there are any)
+    invariants     (t, x, u, p) -> one per EOM.invariants entry (when there are any)
+
+u is the vector of the model's control inputs (``input`` declarations, in declaration order;
+an empty (0, 1) column when there are none: pass ``[]`` or ``np.zeros(0)``).  The signature is
+the same for every model, so glue written against it works for all.
 
 Forward dynamics: EOM.qdd when the recursive route produced it; otherwise M qdd = bias is
 solved NUMERICALLY at every call by CasADi's sparse Householder QR linear solver ('qr'),
@@ -57,25 +61,30 @@ def _ca():
     return ca
 
 
+TXUP = ["t", "x", "u", "p"]
+
+
 class _Symbols:
-    """SX symbols of an EOM: x = [q; qd] as one input, t, p."""
+    """SX symbols of an EOM: x = [q; qd] as one input, t, u (inputs), p."""
 
     def __init__(self, eom):
         ca = _ca()
         self.q, self.qd, self.t, self.p = eom.q, eom.qd, eom.t, eom.p
+        self.u = eom.u_sym
         self.x = ca.vertcat(eom.q, eom.qd)
         self.n = eom.n
+        self.txup = [self.t, self.x, self.u, self.p]
 
 
 def _function(name, ins, outs, names_in, names_out):
     ca = _ca()
     try:  # an output may be named like an input ("x"): allowed, they live in separate schemes
         return ca.Function(name, ins, outs, names_in, names_out, {"allow_duplicate_io_names": True})
-    except RuntimeError as e:  # free symbols: an expression outside (q, qd, t, p)
+    except RuntimeError as e:  # free symbols: an expression outside (q, qd, t, u, p)
         msg = str(e).strip().splitlines()[-1]
         raise MechError(Diagnostic("E801", f"cannot build the CasADi Function '{name}': {msg}",
                                    help="every expression of the equations of motion must depend "
-                                        "only on coordinates, their speeds, time and parameters")) from None
+                                        "only on coordinates, their speeds, time, inputs and parameters")) from None
 
 
 def _check_mass_matrix(eom):
@@ -93,66 +102,67 @@ def _check_mass_matrix(eom):
 
 
 def build_ode(eom):
-    """The ``ode`` Function (t, x, p) -> xdot."""
+    """The ``ode`` Function (t, x, u, p) -> xdot."""
     ca = _ca()
     s = _Symbols(eom)
     n = eom.n
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
-        return _function("ode", [s.t, s.x, s.p], [xdot], ["t", "x", "p"], ["xdot"])
+        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
     _check_mass_matrix(eom)
     if n == 1:  # one coordinate: the "solve" is a division, exact in SX
         xdot = ca.vertcat(s.qd, eom.bias / eom.M)
-        return _function("ode", [s.t, s.x, s.p], [xdot], ["t", "x", "p"], ["xdot"])
-    mb = _function("mass_bias", [s.t, s.x, s.p], [eom.M, eom.bias], ["t", "x", "p"], ["M", "bias"])
+        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+    mb = _function("mass_bias", s.txup, [eom.M, eom.bias], TXUP, ["M", "bias"])
     t = ca.MX.sym("t")
     x = ca.MX.sym("x", 2 * n)
+    u = ca.MX.sym("u", s.u.numel())
     p = ca.MX.sym("p", s.p.numel())
-    M, b = mb(t, x, p)
+    M, b = mb(t, x, u, p)
     qdd = ca.solve(M, b, LINSOL)
-    return ca.Function("ode", [t, x, p], [ca.vertcat(x[n:], qdd)], ["t", "x", "p"], ["xdot"])
+    return ca.Function("ode", [t, x, u, p], [ca.vertcat(x[n:], qdd)], TXUP, ["xdot"])
 
 
 def jacobian_of(ode):
-    """Dense d xdot/dx as a Function (t, x, p) -> J, built on ``ode``'s own Jacobian."""
+    """Dense d xdot/dx as a Function (t, x, u, p) -> J, built on ``ode``'s own Jacobian."""
     ca = _ca()
-    t, x, p = (ca.MX.sym(nm, ode.sparsity_in(i)) for i, nm in enumerate(("t", "x", "p")))
+    t, x, u, p = (ca.MX.sym(nm, ode.sparsity_in(i)) for i, nm in enumerate(TXUP))
     jac = ode.jacobian()
-    out = jac(t, x, p, ca.MX(ode.size1_out(0), 0))
+    out = jac(t, x, u, p, ca.MX(ode.size1_out(0), 0))
     jx = out[jac.name_out().index("jac_xdot_x")] if isinstance(out, (list, tuple)) else out
-    return ca.Function("ode_jacobian", [t, x, p], [ca.densify(jx)], ["t", "x", "p"], ["J"])
+    return ca.Function("ode_jacobian", [t, x, u, p], [ca.densify(jx)], TXUP, ["J"])
 
 
 def _build(eom, name, outputs):
     ca = _ca()
     s = _Symbols(eom)
-    txp = [s.t, s.x, s.p]
+    txup = s.txup
     if name == "ode":
         return build_ode(eom)
     if name == "mass_matrix":
         if ca.depends_on(ca.SX(eom.M), s.qd):
-            return _function("mass_matrix", txp, [eom.M], ["t", "x", "p"], ["M"])
+            return _function("mass_matrix", txup, [eom.M], TXUP, ["M"])
         return _function("mass_matrix", [s.q, s.t, s.p], [eom.M], ["q", "t", "p"], ["M"])
     if name == "bias":
-        return _function("bias", txp, [eom.bias], ["t", "x", "p"], ["bias"])
+        return _function("bias", txup, [eom.bias], TXUP, ["bias"])
     if name == "energy":
-        return _function("energy", txp, [eom.T, eom.V, eom.T + eom.V], ["t", "x", "p"], ["T", "V", "E"])
+        return _function("energy", txup, [eom.T, eom.V, eom.T + eom.V], TXUP, ["T", "V", "E"])
     if name == "outputs":
         names = list(eom.outputs) if outputs is None else list(outputs)
         exprs = [ca.SX(eom.outputs[k]) for k in names]
-        return _function("outputs", txp, exprs, ["t", "x", "p"], names)
+        return _function("outputs", txup, exprs, TXUP, names)
     if name == "constraints":
         g = ca.SX(eom.g)
         gdot = ca.jtimes(g, s.q, s.qd) + ca.jacobian(g, s.t)
-        return _function("constraints", txp, [g, gdot], ["t", "x", "p"], ["g", "gdot"])
+        return _function("constraints", txup, [g, gdot], TXUP, ["g", "gdot"])
     if name == "start":
         return _function("start", [s.p], [ca.SX(eom.q0), ca.SX(eom.qd0)], ["p"], ["q0", "qd0"])
     if name == "singularity":
         mons = dict(singularity_monitors(eom))
-        return _function("singularity", txp, [ca.SX(v) for v in mons.values()], ["t", "x", "p"], list(mons))
+        return _function("singularity", txup, [ca.SX(v) for v in mons.values()], TXUP, list(mons))
     if name == "invariants":
         inv = dict(eom.invariants)
-        return _function("invariants", txp, [ca.SX(v) for v in inv.values()], ["t", "x", "p"], list(inv))
+        return _function("invariants", txup, [ca.SX(v) for v in inv.values()], TXUP, list(inv))
     raise KeyError(name)
 
 
@@ -240,7 +250,7 @@ class FunctionSet(Mapping):
             self._cache["ode_jacobian"] = jacobian_of(loaded["ode"])
 
 
-_STRUCTURE = ("q", "qd", "t", "p", "T", "V", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
+_STRUCTURE = ("q", "qd", "t", "u", "p", "T", "V", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
               "singularity_monitors", "invariants")
 
 
@@ -432,7 +442,7 @@ class FastFunction:
     def bind(self, **fixed):
         """A faster callable of the remaining inputs, with ``fixed`` inputs (by name) set once.
 
-        E.g. ``rhs = FastFunction(f["ode"]).bind(p=p)`` gives ``rhs(t, x)`` for scipy.  The
+        E.g. ``rhs = FastFunction(f["ode"]).bind(u=u, p=p)`` gives ``rhs(t, x)`` for scipy.  The
         closure shares this object's buffers: do not mix it with direct calls.
         """
         names = self.function.name_in()

@@ -60,6 +60,20 @@ class EOM:
     # `reactions` may depend on; the DAE simulator substitutes the computed multipliers.
     lam: object | None = None
     reactions: dict[str, object] = field(default_factory=dict)   # name -> SX in q, qd, t, p, lam
+    # control inputs (``input Real F``): an SX symbol (n_u,) the forces may depend on, and names
+    u: object | None = None
+    inputs: tuple[str, ...] = ()
+
+    @property
+    def u_sym(self):
+        """The input symbol u (an empty SX column when the model has no inputs)."""
+        import casadi as ca
+
+        return ca.SX(0, 1) if self.u is None else self.u
+
+    @property
+    def nu(self) -> int:
+        return len(self.inputs)
 
     @property
     def n(self) -> int:

@@ -1,6 +1,7 @@
 """Integrator back ends: CasADi integrator plugins and scipy's solve_ivp steppers.
 
-Both runners integrate x' = ode(t, x, p) from x0 over a given output grid and return a
+Both runners integrate x' = ode(t, x, u, p) (u constant during the run: the model's input
+values, empty without inputs; time-varying inputs are closed into ``ode`` beforehand) from x0 over a given output grid and return a
 ``Run``: the states at the grid points reached (rows after a failure are NaN), the raw
 statistics, and, on failure, the error text.  They never raise for a numerical failure.
 
@@ -175,7 +176,9 @@ _CACHE_LOCK = threading.Lock()
 
 
 def dae_function(ode):
-    """Wrap an (t, x, p) -> xdot Function in CasADi's DAE scheme (t, x, z, p, u) -> (ode, alg, quad, zero).
+    """Wrap an (t, x, u, p) -> xdot Function in CasADi's DAE scheme (t, x, z, p, u) -> (ode, alg, quad, zero).
+
+    The scheme's parameter is [u; p]: the model's inputs are constant during one integration.
 
     Cached per ``ode`` Function: CasADi caches derivatives on the Function object, so later
     integrators over the same model reuse the Jacobian instead of rebuilding it (0.3-0.5 s on a
@@ -190,9 +193,10 @@ def dae_function(ode):
 
     t = ca.MX.sym("t")
     x = ca.MX.sym("x", ode.size1_in(1))
-    p = ca.MX.sym("p", ode.size1_in(2))
+    nu = ode.size1_in(2)
+    p = ca.MX.sym("p", nu + ode.size1_in(3))
     e = ca.MX(0, 1)
-    dae = ca.Function("dae", [t, x, e, p, e], [ode(t, x, p), e, e, e], ca.dyn_in(), ca.dyn_out())
+    dae = ca.Function("dae", [t, x, e, p, e], [ode(t, x, p[:nu], p[nu:]), e, e, e], ca.dyn_in(), ca.dyn_out())
     with _CACHE_LOCK:                # runs in several threads share the caches
         if len(_DAE_CACHE) > 64:
             _DAE_CACHE.clear()
@@ -219,7 +223,8 @@ def casadi_options(method: str, rtol: float, atol: float, max_steps: int, fixed_
 
 
 def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray, opts: dict,
-               progress: Progress) -> Run:
+               progress: Progress, u=None) -> Run:
+    """Integrate ode(t, x, u, p) over ``grid``; u: the constant input values (None: none)."""
     import casadi as ca
 
     integ = _integrator(method, ode, grid, opts)
@@ -227,7 +232,7 @@ def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
     nx = x0.size
     X = np.full((len(grid), nx), np.nan)
     xin = np.ascontiguousarray(x0, float)
-    pin = np.ascontiguousarray(p, float)
+    pin = np.ascontiguousarray(np.r_[np.zeros(0) if u is None else np.ravel(u), np.ravel(p)], float)
     buf.set_arg(0, memoryview(xin))
     buf.set_arg(2, memoryview(pin))
     buf.set_res(0, memoryview(X))
@@ -433,7 +438,7 @@ class IntegratorPlugin:
     zoom = False
 
     def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress,
-                hmin) -> Run:  # pragma: no cover - abstract
+                hmin, u=None) -> Run:  # pragma: no cover - abstract
         raise NotImplementedError
 
     def counts(self, method: str, raw: dict) -> dict:
@@ -443,20 +448,23 @@ class IntegratorPlugin:
 class CasadiPlugin(IntegratorPlugin):
     zoom = True
 
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin):
+    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
+                u=None):
         opts = casadi_options(method, rtol, atol, max_steps, fixed_steps, extra, hmin=hmin)
-        return run_casadi(method, funcs["ode"], grid, x0, p, opts, progress)
+        return run_casadi(method, funcs["ode"], grid, x0, p, opts, progress, u=u)
 
     def counts(self, method, raw):
         return casadi_counts(method, raw)
 
 
 class ScipyPlugin(IntegratorPlugin):
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin):
+    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
+                u=None):
         from .codegen import FastFunction
 
-        rhs = FastFunction(funcs["ode"]).bind(p=p)
-        jac = None if method in NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(p=p)
+        uv = np.zeros(0) if u is None else np.ravel(u)
+        rhs = FastFunction(funcs["ode"]).bind(u=uv, p=p)
+        jac = None if method in NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(u=uv, p=p)
         return run_scipy(method, rhs, jac, grid, x0, rtol, atol, max_steps, progress, extra, hmin=hmin)
 
 

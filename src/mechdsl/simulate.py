@@ -26,6 +26,7 @@ DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
+NO_U = np.zeros(0)                   # the input vector u of a model without inputs
 KNOWN_OPTS = ("singularity_threshold", "functions")   # back-end options of the ODE runs (besides the settings)
 
 
@@ -168,7 +169,7 @@ def _check_outputs(eom, outputs) -> tuple[str, ...]:
 # --------------------------------------------------------------------------- method choice
 
 
-def choose_method(eom, funcs, x0, pv, t0, t1, rtol) -> tuple[str, str, dict]:
+def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, dict]:
     """method=auto: stiffness from the Jacobian's eigenvalues at the start, then the tolerance.
 
     Rules (docs/internals/numerics.md): stiff (a decay rate much faster than the slowest
@@ -179,7 +180,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol) -> tuple[str, str, dict]:
     span = t1 - t0
     info: dict[str, Any] = {}
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, pv)
+        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
         lam = np.linalg.eigvals(J) if np.isfinite(J).all() else None
     except Exception:  # noqa: BLE001
         lam = None
@@ -202,7 +203,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol) -> tuple[str, str, dict]:
             f"benchmarks/integrators.py", info)
 
 
-def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000) -> tuple[int, str]:
+def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000, u=NO_U) -> tuple[int, str]:
     """Steps for the fixed-step methods: h = dt, or h * omega = 0.5 rtol^(1/order), omega the
     fastest rate seen at the start: the spectral radius of the Jacobian, sqrt(max |qdd|) and
     max |qd| (coordinates in units of order 1), and 2 pi / horizon."""
@@ -214,9 +215,9 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000)
         return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
     rho, omega_acc = 0.0, 0.0
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, pv)
+        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
         rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
-        f = FastFunction(funcs["ode"])(t0, x0, pv)
+        f = FastFunction(funcs["ode"])(t0, x0, u, pv)
         n = len(x0) // 2
         if np.isfinite(f).all():  # time scales of the motion itself: sqrt(|qdd|) and |qd| (units of 1)
             omega_acc = max(float(np.sqrt(np.abs(f[n:]).max(initial=0.0))), float(np.abs(x0[n:]).max(initial=0.0)))
@@ -229,18 +230,20 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000)
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
 
 
-def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget):
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget,
+         u=NO_U):
     """One run of the integrator plug-in of ``method`` over the output grid."""
     fixed, steps = None, None
     if method in I.FIXED_STEP:
         steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
-                                      xs, pv, t0, t1, rtol, dt, budget)
+                                      xs, pv, t0, t1, rtol, dt, budget, u=u)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
         meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
     try:
         run = I.plugin(method).advance(method, funcs, grid, xs, pv, rtol=rtol, atol=atol, max_steps=max_steps,
-                                       fixed_steps=steps, extra=extra, progress=bar, hmin=min_step(t0, t1))
+                                       fixed_steps=steps, extra=extra, progress=bar, hmin=min_step(t0, t1),
+                                       u=u)
     except RuntimeError as e:  # bad integrator options
         raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
     return run, fixed
@@ -258,7 +261,7 @@ def _counts(method, raw):
 # --------------------------------------------------------------------------- failure
 
 
-def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra) -> Failure:
+def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=NO_U) -> Failure:
     """Say when and why a run stopped: locate the failure inside the last output interval
     (re-integrating it on a fine grid) and look at the state there."""
     k = max(run.reached - 1, 0)
@@ -278,7 +281,7 @@ def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps,
                 if b - a <= 100 * hmin:
                     break
                 fine = np.linspace(a, b, 51)
-                sub = I.run_casadi(zoom, funcs["ode"], fine, xa, pv, opts, I.Progress(False, 0, 1))
+                sub = I.run_casadi(zoom, funcs["ode"], fine, xa, pv, opts, I.Progress(False, 0, 1), u=u)
                 if sub.error is None:
                     unstable = level == 0 and zoom != method
                     break
@@ -300,12 +303,12 @@ def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps,
         x_fail = x_last
     if t_fail is None:
         t_fail = float(grid[min(k + 1, len(grid) - 1)])
-    cause, detail = _classify(eom, post, funcs, run.error or "", x_fail, xs, pv, t_fail)
+    cause, detail = _classify(eom, post, funcs, run.error or "", x_fail, xs, pv, t_fail, u)
     where = f"last output point reached: t = {t_last:.10g}"
     return Failure(time=float(t_fail), cause=cause, detail=f"{detail}; {where}" if detail else where)
 
 
-def _classify(eom, post, funcs, error, x, x0, pv, t):
+def _classify(eom, post, funcs, error, x, x0, pv, t, u=NO_U):
     n = eom.n
     err = error.upper()
     if not np.isfinite(x).all():
@@ -313,8 +316,8 @@ def _classify(eom, post, funcs, error, x, x0, pv, t):
     try:
         mm = FastFunction(post["mass_matrix"])
         arg = x[:n] if post["mass_matrix"].name_in(0) == "q" else x
-        M = mm(arg, t, pv) if post["mass_matrix"].name_in(0) == "q" else mm(t, arg, pv)
-        M0 = mm(x0[:n], t, pv) if post["mass_matrix"].name_in(0) == "q" else mm(t, x0, pv)
+        M = mm(arg, t, pv) if post["mass_matrix"].name_in(0) == "q" else mm(t, arg, u, pv)
+        M0 = mm(x0[:n], t, pv) if post["mass_matrix"].name_in(0) == "q" else mm(t, x0, u, pv)
         M = np.atleast_2d(M)
         M0 = np.atleast_2d(M0)
         ev = np.linalg.eigvalsh(0.5 * (M + M.T))
@@ -331,7 +334,7 @@ def _classify(eom, post, funcs, error, x, x0, pv, t):
     except Exception:  # noqa: BLE001
         pass
     try:
-        f = FastFunction(funcs["ode"])(t, x, pv)
+        f = FastFunction(funcs["ode"])(t, x, u, pv)
         if not np.isfinite(f).all():
             return "non-finite right-hand side", f"accelerations are not finite at t = {t:.6g}"
     except Exception:  # noqa: BLE001
@@ -365,9 +368,10 @@ def _short(error: str) -> str:
 # --------------------------------------------------------------------------- signals
 
 
-def compute_signals(eom, post, t, X, pv, out_names) -> dict[str, np.ndarray]:
+def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
     """Outputs, energies (and constraint residuals / singularity monitors when present)
-    on the sample times: one vectorized (mapped) call per Function."""
+    on the sample times: one vectorized (mapped) call per Function.  U: the inputs on the
+    sample times (rows = times; None: the model's input values are all zero / there are none)."""
     import casadi as ca
 
     N = len(t)
@@ -377,9 +381,10 @@ def compute_signals(eom, post, t, X, pv, out_names) -> dict[str, np.ndarray]:
     T = t.reshape(1, N)
     XT = X.T
     P = np.asarray(pv, float).reshape(-1, 1)
+    UT = np.zeros((eom.nu, N)) if U is None else np.asarray(U, float).reshape(N, -1).T
 
     def mapped(f):
-        res = f.map(N)(T, XT, P)
+        res = f.map(N)(T, XT, UT, P)
         return [np.array(r, float) for r in (res if isinstance(res, (list, tuple)) else [res])]
 
     if out_names:

@@ -51,10 +51,11 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     qdd, _ = system.fn["accel"](q, qd, t, pp, alpha, beta)
     x = ca.vertcat(q, qd)
     xdot = ca.vertcat(qd, qdd)
-    ode = ca.Function("ode", [t, x, pp], [xdot], ["t", "x", "p"], ["xdot"])
+    u = type(x)(0, 1)                          # codegen's signature (t, x, u, p), no inputs
+    ode = ca.Function("ode", [t, x, u, pp], [xdot], ["t", "x", "u", "p"], ["xdot"])
     funcs = {"ode": ode}
     if method not in _no_jacobian():
-        funcs["ode_jacobian"] = ca.Function("ode_jacobian", [t, x, pp], [ca.jacobian(xdot, x)], ["t", "x", "p"],
+        funcs["ode_jacobian"] = ca.Function("ode_jacobian", [t, x, u, pp], [ca.jacobian(xdot, x)], ["t", "x", "u", "p"],
                                             ["jac"])
     compiled_note, native_code = None, False
     if kw.pop("compiled", False):

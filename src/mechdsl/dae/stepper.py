@@ -148,7 +148,8 @@ class GridIntegrators:
             self.note = "compiled code is used for the ODE formulations only; this one runs in the virtual machine"
             return
         with build_timer(self.stats):
-            f = ca.Function("ode", [d["t"], d["x"], d["p"]], [d["ode"]], ["t", "x", "p"], ["xdot"])
+            u = ca.SX(0, 1) if isinstance(d["x"], ca.SX) else ca.MX(0, 1)    # codegen's (t, x, u, p)
+            f = ca.Function("ode", [d["t"], d["x"], u, d["p"]], [d["ode"]], ["t", "x", "u", "p"], ["xdot"])
             funcs, note, _lib = compile_functions([f], tag=self.name, jacobian=self.plugin != "erk")
         if not funcs or funcs.get("ode") is None:
             self.note = note or "compiled code unavailable"
