@@ -153,6 +153,8 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
     if names.structural:
         return (f"{', '.join(names.structural)} is an Integer/Boolean parameter: it changes the model's "
                 "structure, so the runs do not share one integrator")
+    if getattr(problem.eom, "nu", 0):
+        return "the model has inputs"
     if problem.kind != "ode":
         return {"dae": "the model has constraints (a DAE)", "hybrid": "the model has contacts (events)",
                 "canonical": f"method {problem.settings.method} is a fixed-step canonical method"}[problem.kind]

@@ -152,6 +152,14 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
     return hit[1]
 
 
+def scheme_parameter(pv) -> np.ndarray:
+    """The integrator's parameter input [u; p] (integrators.dae_function); u is empty: the
+    vectorized path serves models without inputs only."""
+    from ..simulate import NO_U
+
+    return np.r_[NO_U, np.asarray(pv, float).ravel()]
+
+
 def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
     from .. import integrators as I
@@ -164,7 +172,7 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     eom0, s0 = prepared[todo[0]]
     k = len(todo)
     X0 = np.column_stack([prepared[i][1].x0 for i in todo])
-    P = np.column_stack([prepared[i][1].p for i in todo])
+    P = np.column_stack([scheme_parameter(prepared[i][1].p) for i in todo])
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         F = mapped_integrator(eom0, s0, job.grid, k, job.threads)
