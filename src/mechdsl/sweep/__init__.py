@@ -29,7 +29,7 @@ __all__ = ["sweep", "table", "to_frame", "first_time"]
 
 def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None = None, out: str | None = None,
           progress=None, workers: int | None = None, chunk_size: int | None = None, frame: bool = False,
-          **options):
+          overwrite: bool = False, connect_timeout: float = 10.0, **options):
     """Run the model over a grid, a table or a sample; returns an ``xarray.Dataset``
     (dimensions run, time; swept values as coordinates on run; per-run status variables)
     or, with ``frame=True``, a long pandas DataFrame.  See docs/sweeps.md."""
@@ -51,7 +51,7 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1):
         raise UsageError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
     if out is not None:
-        _check_out(out)
+        _check_out(out, overwrite)
     from ..simulate import DEFAULT_POINTS
 
     settings = model.settings(t_end=t_end, **options)
@@ -78,13 +78,14 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     workers = workers or default_threads()
     job.threads = workers if scheduler == "vectorized" else 1
     job.variables = _variables(model, problem)
-    states = tuple(model.coordinates) + tuple(f"der({c})" for c in model.coordinates)
+    states = _states(model, d, names)
+    job.states = states
     size = chunk_size or _chunk_size(d.n, scheduler, workers)
     chunks = [(a, {k: v[a:a + size] for k, v in d.values.items()}) for a in range(0, d.n, size)]
 
     from .store import Store
 
-    store = Store(d.n, job.grid, states, job.variables, out)
+    store = Store(d.n, job.grid, states, job.variables, out, overwrite)
     bar = _bar(progress, d.n)
     engine = None
     interrupted = False
@@ -96,7 +97,7 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
             engine = S.Pool(workers)
             it = engine.run(job, chunks)
         else:
-            engine = S.Dask(scheduler, workers)
+            engine = S.Dask(scheduler, workers, connect_timeout)
             it = engine.run(job, chunks)
         try:
             for chunk in it:
@@ -136,6 +137,25 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     attrs["grid_axes"] = ",".join(labels[n] for n, _ in d.axes)
     ds = store.finish({labels[n]: v for n, v in d.values.items()}, attrs)
     return to_frame(ds) if frame else ds
+
+
+def _states(model, d, names) -> tuple[str, ...]:
+    """Every state name of the sweep: Integer parameters may change the coordinates."""
+    models = [model]
+    if names.structural:
+        combos = sorted({tuple(float(d.values[n][i]) for n in names.structural) for i in range(d.n)})
+        for combo in combos:
+            try:
+                models.append(model.with_params(**{n: int(v) if v.is_integer() else v
+                                                   for n, v in zip(names.structural, combo)}))
+            except Exception:  # noqa: BLE001 - that run becomes an 'invalid run' row
+                pass
+    out: list[str] = []
+    for m in models:
+        for c in list(m.coordinates) + [f"der({c})" for c in m.coordinates]:
+            if c not in out:
+                out.append(c)
+    return tuple(out)
 
 
 def _label(name: str, starts: dict) -> str:
@@ -212,14 +232,12 @@ def _bar(progress, n):
     return tqdm(total=n, unit="run", file=sys.stderr, leave=False, mininterval=0.5)
 
 
-def _check_out(out: str) -> None:
-    import os
+def _check_out(out: str, overwrite: bool) -> None:
+    from ..fileio import check_writable
 
     if not str(out).endswith(".nc"):
         raise UsageError(f"sweep out= must be a .nc file (got {out!r}); write CSV from the Dataset with to_frame")
-    folder = os.path.dirname(os.path.abspath(out))
-    if not os.path.isdir(folder):
-        raise UsageError(f"cannot write {out}: the folder {folder} does not exist")
+    check_writable(out, overwrite)
     _need("h5netcdf")
 
 

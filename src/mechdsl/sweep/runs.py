@@ -40,6 +40,7 @@ class Job:
     starts: dict                         # sweep name -> start key
     variables: tuple[str, ...]           # recorded signals kept per run
     grid: np.ndarray                     # the output times
+    states: tuple[str, ...] = ()         # every state name over the sweep (Integer parameters change them)
     vectorized: bool = False
     threads: int = 1                     # threads of the mapped integrator
 
@@ -55,7 +56,7 @@ class Chunk:
 
 def run_chunk(job: Job, first: int, values: dict) -> Chunk:
     k = len(next(iter(values.values())))
-    nt, nx = len(job.grid), 2 * len(job.model.coordinates)
+    nt, nx = len(job.grid), len(job.states)
     out = Chunk(first, np.full((k, nt, nx), np.nan), np.full((k, nt, len(job.variables)), np.nan),
                 [None] * k)
     todo = []
@@ -110,7 +111,9 @@ def _store(job: Job, out: Chunk, i: int, r) -> None:
         out.status[i] = _invalid(r)
         return
     n = len(r.t)
-    out.X[i, :n, :] = np.hstack([r.q, r.qd])
+    names = list(r.coordinates) + [f"der({c})" for c in r.coordinates]
+    cols = [job.states.index(c) for c in names]
+    out.X[i, :n][:, cols] = np.hstack([r.q, r.qd])
     for j, name in enumerate(job.variables):
         v = r.signals.get(name)
         if isinstance(v, np.ndarray) and v.ndim == 1:

@@ -2,7 +2,7 @@
 
 ``Store.put(chunk)`` takes chunks in any order; ``Store.finish(...)`` adds the per-run status
 table, the swept values and the summary, and returns the ``xarray.Dataset`` (read lazily
-from the file when streaming).  A file is written under ``NAME.part`` and renamed when
+from the file when streaming).  A file is written under a temporary name in the same folder and renamed when
 complete, so no half-written file ever carries the final name.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 
 
 class Store:
-    def __init__(self, n: int, grid, states, variables, path: str | None = None):
+    def __init__(self, n: int, grid, states, variables, path: str | None = None, overwrite: bool = False):
         self.n, self.grid, self.states, self.variables = n, np.asarray(grid, float), tuple(states), tuple(variables)
         self.path = path
         self.status: list = [None] * n
@@ -27,7 +27,9 @@ class Store:
         else:
             import h5netcdf
 
-            self.part = path + ".part"
+            from ..fileio import atomic_target
+
+            self.part, self.final = atomic_target(path, overwrite)     # renamed when complete
             self._f = h5netcdf.File(self.part, "w")
             self._f.dimensions = {"run": n, "time": nt}
             chunks = (1, nt)
@@ -62,7 +64,7 @@ class Store:
         self._f.close()
         self._f = None
         xr.Dataset(status, coords=c, attrs=attrs).to_netcdf(self.part, mode="a", engine="h5netcdf")
-        os.replace(self.part, self.path)
+        os.replace(self.part, self.final)
         return xr.open_dataset(self.path, engine="h5netcdf")
 
     def abandon(self) -> None:
