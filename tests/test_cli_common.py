@@ -55,3 +55,25 @@ def test_guess_steers_linearize_grammar(capsys):
     """--guess takes one NAME=VALUE[,...] per option (it must not swallow FILE either)."""
     assert main(["linearize", "--guess", "theta=3", PENDULUM, "--model", "Pendulum"]) == 0
     capsys.readouterr()
+
+
+NO_REST = """model Slope
+  parameter Real m(unit = "kg") = 1;
+  parameter Real V0(unit = "J") = 1;
+  parameter Real a(unit = "m") = 1;
+  coordinate Real x(start = 0, unit = "m");
+equation
+  kinetic = 1/2*m*der(x)^2;
+  potential = V0*exp(-x/a);
+end Slope;
+"""
+
+
+def test_a_later_phase_error_is_located_at_the_model(tmp_path, capsys):
+    """E903 (no equilibrium: V0 exp(-x/a) has no rest state) carries no position of its own:
+    the command locates it at the model it worked on, so the error reads file:line:col."""
+    f = tmp_path / "slope.mech"
+    f.write_text(NO_REST)
+    assert main(["linearize", str(f)]) == 1
+    err = capsys.readouterr().err
+    assert f"{f}:1:1: error[E903]" in err and "model Slope" in err

@@ -69,9 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     except MechError as e:
         from .report import print_diagnostics
 
-        # diagnostics of later phases carry no source position: name the file being worked on
+        # diagnostics of later phases that carry no source position are located at the model
+        # (or scene) the command worked on, else at the file
         path = getattr(args, "file", None) or (getattr(args, "files", None) or [None])[0]
-        print_diagnostics([_with_file(d, path) for d in e.diagnostics])
+        print_diagnostics([_locate(d, path, getattr(args, "_where", None)) for d in e.diagnostics])
         return 1
     except KeyboardInterrupt:
         print("mech: interrupted", file=sys.stderr)
@@ -87,10 +88,14 @@ def main(argv: list[str] | None = None) -> int:
         return 3
 
 
-def _with_file(d, path):
+def _locate(d, path, where=None):
     import dataclasses
 
-    if path and d.span.line == 0 and d.span.file in ("<input>", ""):
+    if d.span.line > 0:
+        return d
+    if where is not None and where.line > 0:
+        return dataclasses.replace(d, span=where)
+    if path and d.span.file in ("<input>", ""):
         return dataclasses.replace(d, span=dataclasses.replace(d.span, file=str(path)))
     return d
 

@@ -152,6 +152,8 @@ def load_model(args, *, starts_in_model: bool = True):
 
     m = load(args.file, model=getattr(args, "model", None), scene=getattr(args, "scene", None),
              units=not getattr(args, "no_units", False))
+    # where a later phase's diagnostic without a position of its own is shown (cli._locate)
+    args._where = (m.scene or m.model).span
     params, starts = split_starts(assignments(getattr(args, "set", None)))
     if starts_in_model:
         values = dict(params)

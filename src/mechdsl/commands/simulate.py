@@ -51,8 +51,17 @@ def run(args) -> int:
         print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
     # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
     # caller (argument > scene > default), so CLI and API give the same run for the same scene
-    r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
-                       progress=(not args.no_progress) and sys.stderr.isatty())
+    interrupted = False
+    try:
+        r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
+                           progress=(not args.no_progress) and sys.stderr.isatty())
+    except KeyboardInterrupt as e:
+        # Ctrl-C: a back end that kept its results up to there (mechdsl.dae.RunInterrupted)
+        # hands them over; they are written like a failed run's, and the exit code is 130
+        r = getattr(e, "result", None)
+        if r is None:
+            raise
+        interrupted = True
     r.metadata["source"] = str(args.file)
     r.metadata["target"] = target_line(args, model)
     if model.scene is not None:
@@ -65,6 +74,9 @@ def run(args) -> int:
         print_events(r)
     for line in lost:
         print(f"mech: error: {line}", file=sys.stderr)
+    if interrupted:
+        print("mech: interrupted", file=sys.stderr)
+        return 130
     return 0 if r.success and not lost else 1
 
 

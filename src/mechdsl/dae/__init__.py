@@ -4,6 +4,7 @@
 
 Public API:
     simulate_dae(eom, t_end, **options) -> Result      (see docs/constraints.md)
+    RunInterrupted                                      (Ctrl-C: a KeyboardInterrupt with .result)
     dof_report(eom, q=None, t=0.0, p=None) -> DofReport
     initialize(eom, q0=None, qd0=None, t=0.0, p=None) -> InitReport
     check_report(eom, p=None) -> list[str]              (lines for `mech check`)
@@ -11,10 +12,10 @@ Public API:
     FORMULATIONS, DEFAULT_FORMULATION
 """
 from .dof import DofReport, dof_report
-from .driver import simulate_dae
+from .driver import RunInterrupted, simulate_dae
 from .index import dae_index, guarded_idas
 from .init import InitReport, check_report, initialize
 from .options import DEFAULT_FORMULATION, FORMULATIONS
 
-__all__ = ["simulate_dae", "dof_report", "DofReport", "initialize", "InitReport", "check_report",
+__all__ = ["simulate_dae", "RunInterrupted", "dof_report", "DofReport", "initialize", "InitReport", "check_report",
            "dae_index", "guarded_idas", "FORMULATIONS", "DEFAULT_FORMULATION"]

@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from .stepper import (GridIntegrators, Stepper, StepError, call_integrator, chunk_span, integrator_options,
-                      ode_plugin, scaled_dae)
+from .stepper import (GridIntegrators, NonFiniteError, Stepper, StepError, call_integrator, chunk_span,
+                      integrator_options, ode_plugin, scaled_dae, state_names)
 
 RATE_FACTOR = 10.0
 
@@ -74,26 +74,29 @@ class BaumgarteStepper(Stepper):
             return self.user_rates
         return automatic_rates(self.system, self.q, self.qd, self.t, self.span, self.rate_factor)
 
-    def integrate(self, times):
-        """States at ``times`` (equally spaced after the current time): (n, K) arrays q, qd."""
-        h, K = chunk_span(self.t, times)
+    def integrate(self, times, monitor=None):
+        """States at ``times`` (increasing, after the current time): (n, K) arrays q, qd."""
+        h, grid = chunk_span(self.t, times, monitor)
+        K = len(np.atleast_1d(times))
         self.rates = self._rates()
         alpha, beta = self.rates
         p = np.concatenate([self.system.p, [alpha, beta, self.t, h]])
-        F = self.F.get(K)
+        F = self.F.get(grid, self.step_budget)
         r = call_integrator(F, x0=np.concatenate([self.q, self.qd]), p=p)
         self._count(F)
         x = np.array(r["xf"], float).reshape(2 * self.system.n, K)
         if not np.all(np.isfinite(x)):
-            raise StepError("the state became non-finite")
+            j = int(np.argmax(~np.all(np.isfinite(x), axis=0)))       # first output with inf/nan
+            which = int(np.argmax(~np.isfinite(x[:, j])))
+            raise NonFiniteError(float(np.atleast_1d(times)[j]), state_names(self.system)[which])
         self.stats["baumgarte_alpha"] = alpha
         self.stats["baumgarte_beta"] = beta
         n = self.system.n
         return x[:n], x[n:]
 
-    def advance(self, times):
+    def advance(self, times, monitor=None):
         times = np.atleast_1d(np.asarray(times, float))
-        Q, QD = self.integrate(times)
+        Q, QD = self.integrate(times, monitor)
         self.t, self.q, self.qd = float(times[-1]), Q[:, -1].copy(), QD[:, -1].copy()
         return times, Q.T, QD.T
 

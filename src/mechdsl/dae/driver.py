@@ -9,14 +9,15 @@
          drift measurement (||g||, ||G q' + g_t||)
     -> outputs, multipliers and reactions at the output times -> Result
 
-Chunks.  One integrator call covers up to CHUNK output intervals (the integrator returns
-the states at each output time); a formulation may accept only a prefix (projection does
-when the drift grows).  A chunk that fails is retried one output interval at a time, and
+Chunks.  One integrator call covers up to CHUNK monitoring intervals (the integrator returns
+the states at each monitoring and output time); a formulation may accept only a prefix
+(projection does when the drift grows).  A chunk that fails is retried one monitoring interval at a time, and
 a failing interval is halved up to MAX_RETRIES times before the run stops with a Failure.
 
 Singular configurations.  At every accepted state the ratio sigma_min / sigma_max of the
-scaled G is computed (at MONITOR_POINTS or more times per run: the output grid is refined
-for the integration by an integer factor).  Once the ratio falls below SINGULAR_WATCH and
+scaled G is computed (at the MONITOR_POINTS equally spaced monitoring times, refined near
+trouble; output times in between are only extra output times of the integrator calls, so
+they change no number).  Once the ratio falls below SINGULAR_WATCH and
 keeps falling, or its linear extrapolation reaches zero within two grid steps, the run
 rewinds to that state and continues in single segments, each ending halfway to the time
 at which the ratio, extrapolated linearly, would reach zero; so a singular configuration
@@ -36,14 +37,16 @@ from .dof import dof_report, short_list, singular_ratio, singular_ratios
 from .init import initialize
 from .options import DaeOptions, parse_options
 from .record import evaluate_signals, select_signals, standard_signals
-from .stepper import StepError
+from .stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
 from .system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
 SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
-MONITOR_POINTS = 61       # least number of checks (of drift and conditioning) per run
+MONITOR_POINTS = 61       # the monitoring grid (drift, conditioning, projection), whatever the output points
 MAX_RETRIES = 12           # halvings of a failing segment before giving up
-FIRST_CHUNK = 8            # ggl, partitioning: intervals of the first segment, doubled after each full one
+FIRST_CHUNK = 8            # intervals of the first segment (ggl, partitioning: doubled after each full one)
+BUDGET_MARGIN = 8.0        # a call may take this many times the steps per unit time seen before
+MAX_CALLS = 100_000        # integrator calls per run: a bound on every loop of the driver
 CHUNK = 64                 # most output intervals per integrator call (one integrator is built
                            # per segment length and kept with the system, so reruns reuse it)
 
@@ -94,6 +97,42 @@ def _start(eom, x0, pv):
     return q0, qd0, tuple(fq), tuple(fqd)
 
 
+FIRST_PERIODS = 50         # the first segment of an ODE formulation spans at most this many periods
+
+
+def first_chunk(system, stepper, grid) -> int:
+    """Monitoring intervals of the first segment of the ODE formulations: all (CHUNK) unless
+    the run is long against the model's time scale 2 pi / rate, rate = sqrt(|q''| / |q|) at
+    the start (no Jacobian: it can take seconds to build); then about FIRST_PERIODS periods.  A segment is
+    integrated to its end before the drift check cuts it, so a first segment through a whole
+    long run (IFToMM A01: 2000 s, cut after ~100 s) doubled the work."""
+    q, qd, t = stepper.q, stepper.qd, stepper.t
+    try:
+        qdd, _ = system.accel(q, qd, t)
+        rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
+    except Exception:  # noqa: BLE001 -- no estimate: the default
+        return CHUNK
+    if not np.isfinite(rate) or rate <= 0:
+        return CHUNK
+    dt = float(grid[1] - grid[0])
+    return int(max(1, min(CHUNK, np.ceil(FIRST_PERIODS * 2 * np.pi / rate / dt))))
+
+
+def with_outputs(times, outs, t_now: float, tiny: float):
+    """The segment's times with the output times strictly inside it added, and a flag per time:
+    True for the segment's own (monitoring) times."""
+    times = np.atleast_1d(np.asarray(times, float))
+    inner = outs[(outs > t_now + tiny) & (outs < times[-1] - tiny)]
+    if inner.size:
+        inner = inner[np.min(np.abs(inner[:, None] - times[None, :]), axis=1) > tiny]
+    if not inner.size:
+        return times, np.ones(len(times), bool)
+    allt = np.concatenate([times, inner])
+    mon = np.concatenate([np.ones(len(times), bool), np.zeros(len(inner), bool)])
+    order = np.argsort(allt, kind="stable")
+    return allt[order], mon[order]
+
+
 def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
     f = opts.formulation
     if f == "baumgarte":
@@ -138,10 +177,11 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     if not t_end > t0:
         raise UsageError(f"stop time {t_end:g} must be after the start time {t0:g}")
     points = opts.points or DEFAULT_POINTS
-    # the integration/monitoring grid: the output grid, refined by an integer factor so that
-    # conditioning and drift are checked at MONITOR_POINTS or more times per run
-    refine = max(1, int(np.ceil((MONITOR_POINTS - 1) / (points - 1))))
-    grid = np.linspace(t0, t_end, (points - 1) * refine + 1)
+    # the monitoring grid (drift, conditioning, projection, segment ends) does not depend on the
+    # output grid: output times between its points are extra integrator output times only, so the
+    # numbers at a time do not depend on how many points were asked for
+    grid = np.linspace(t0, t_end, MONITOR_POINTS)
+    out_t = np.linspace(t0, t_end, points)
     span = t_end - t0
     chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
 
@@ -166,6 +206,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     T, Qs, QDs, D, VD = [], [], [], [], []
     events: list[dict] = []
     failure = None
+    failure_code = None
     rank = system.m
 
     def ratio_at(q, t):
@@ -180,6 +221,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         VD.append(v)
 
     record(t0, stepper.q, stepper.qd)
+    j_out = 1              # next output time to record
     ratio_prev, t_prev = ratio_at(stepper.q, t0), t0
     min_ratio = ratio_prev
     seen_d, seen_v = 0.0, 0.0
@@ -192,97 +234,146 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
     cautious = opts.formulation in ("ggl", "partitioning")
     crossing = getattr(stepper, "crosses_singular", False)   # augmented: passes through singular configurations
-    chunk = FIRST_CHUNK if cautious else CHUNK
+    # step budget per integrator output interval (CasADi's max_num_steps): max_steps until a segment
+    # succeeded (a model with absurd time scales then fails within seconds), afterwards also up to
+    # BUDGET_MARGIN times the steps per unit time seen there (long monitoring intervals of long runs)
+    chunk = FIRST_CHUNK if cautious else first_chunk(system, stepper, grid)
+    density = None         # integrator steps per unit time of the last successful segment
     tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
     tiny = 1e-13 * max(abs(t_end), span)
-    while k < len(grid) and failure is None:
-        single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
-        if single:
-            target = grid[k]
-            h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
-            times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
-        else:
-            K = min(chunk, len(grid) - k)     # the tail in one segment (integrators are cached per K)
-            # a segment stops well before an extrapolated loss of rank: an integrator driven into a
-            # singular configuration grinds (IDAS: minutes) before it fails
-            if cautious and np.isfinite(tau_pred):
-                K = max(1, min(K, int(0.5 * tau_pred / (grid[1] - grid[0]))))
-            if opts.max_interval:
-                K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
-            times = grid[k:k + K]
-            if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
-                times = np.array([stepper.t + opts.max_interval])
-        saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
-        try:
-            T_acc, Q_acc, QD_acc = stepper.advance(times)
-        except StepError as e:
-            stepper.reset(*saved)
-            if len(times) > 1:          # retry the chunk one output interval at a time
-                chunk = 1
-                continue
-            if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
+    interrupted = False
+    guard = interrupt_guard()
+    guard.__enter__()
+    try:
+        calls = 0
+        while k < len(grid) and failure is None:
+            calls += 1
+            if calls > MAX_CALLS:
+                failure, failure_code = Failure(stepper.t, f"{opts.formulation} integrator failed",
+                                                f"[{CODE_INTEGRATOR}] the run needed more than {MAX_CALLS} integrator "
+                                                "calls (segments shortened near a singular configuration or after "
+                                                "failures without end)"), CODE_INTEGRATOR
+                if stepper.t > T[-1]:
+                    record(stepper.t, stepper.q, stepper.qd)
+                break
+            single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
+            if single:
+                target = grid[k]
+                h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
+                times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
+            else:
+                K = min(chunk, len(grid) - k)     # the tail in one segment (integrators are cached per K)
+                # a segment stops well before an extrapolated loss of rank: an integrator driven into a
+                # singular configuration grinds (IDAS: minutes) before it fails
+                if cautious and np.isfinite(tau_pred):
+                    K = max(1, min(K, int(0.5 * tau_pred / (grid[1] - grid[0]))))
+                if opts.max_interval:
+                    K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
+                times = grid[k:k + K]
+                if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
+                    times = np.array([stepper.t + opts.max_interval])
+            saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
+            times, is_mon = with_outputs(times, out_t[j_out:], stepper.t, tiny)
+            H = float(times[-1] - stepper.t)
+            budget = opts.steps
+            if density is not None:
+                budget = max(budget, int(np.ceil(BUDGET_MARGIN * density * H / max(1, int(np.sum(is_mon))))))
+            stepper.step_budget = budget if budget > opts.steps else None     # None: max_steps exactly
+            steps_before = stepper.stats.get("nsteps", 0)
+            try:
+                try:
+                    T_acc, Q_acc, QD_acc = stepper.advance(times, is_mon)
+                except np.linalg.LinAlgError as la:   # degenerate linear algebra: a failed segment, retried
+                    raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
+            except StepError as e:
+                stepper.reset(*saved)
+                if getattr(e, "stats", None):     # a failed call's work counts too
+                    stepper.count_stats(e.stats)
+                if int(np.sum(is_mon)) > 1:     # retry the chunk one monitoring interval at a time
+                    chunk = 1
+                    continue
+                if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
+                    retries += 1
+                    continue
                 retries += 1
+                h_fail = (times[-1] - saved[0]) / 2
+                r_now = ratio_at(saved[1], saved[0])
+                near_singular = r_now < 100 * opts.singular_tol
+                if retries > MAX_RETRIES or h_fail < tiny or near_singular:
+                    # (near a singular configuration, halving the step only makes the solver retry
+                    # ever more ill-conditioned systems: stop at once)
+                    if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
+                        failure = Failure(saved[0], "singular configuration",
+                                          f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
+                                          f"and the {opts.formulation} integrator failed: {e}")
+                    else:
+                        failure, failure_code = integrator_failure(system, opts, saved, times[-1] - saved[0], e)
+                    if saved[0] > T[-1]:        # keep the last good state (between output times)
+                        record(*saved)
                 continue
-            retries += 1
-            h_fail = (times[-1] - saved[0]) / 2
-            r_now = ratio_at(saved[1], saved[0])
-            near_singular = r_now < 100 * opts.singular_tol
-            if retries > MAX_RETRIES or h_fail < tiny or near_singular:
-                # (near a singular configuration, halving the step only makes the solver retry
-                # ever more ill-conditioned systems: stop at once)
-                if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
-                    failure = Failure(saved[0], "singular configuration",
-                                      f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
-                                      f"and the {opts.formulation} integrator failed: {e}")
-                else:
-                    failure = Failure(saved[0], f"{opts.formulation} integrator failed", str(e))
-                if saved[0] > T[-1]:        # keep the last good state (between output times)
-                    record(*saved)
-            continue
-        retries = 0
-        h_fail = np.inf
-        if opts.progress is not None:
-            opts.progress(float(T_acc[-1]), t_end)
-        if not single:
-            chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, len(T_acc))
-        elif chunk == 1 and not np.isfinite(h_sing):
-            chunk = 2
-        d_all, v_all, Gs_all = system.monitor_many(Q_acc, QD_acc, T_acc)   # one call per segment
-        ratios = singular_ratios(Gs_all, rank)
-        for i in range(len(T_acc)):
-            t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
-            d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
-            min_ratio = min(min_ratio, ratio)
-            seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
-            on_grid = abs(t_now - grid[k]) <= tiny
-            if ratio < opts.singular_tol and not crossing:
-                events.append({"time": t_now, "kind": "singular", "contact": "-",
-                               "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
-                failure = Failure(t_now, "singular configuration",
-                                  f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
-                                  f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
-                                  "determined by the equations (a dead point or change point of the mechanism)")
-                record(t_now, q_now, qd_now, (d_now, v_now))
-                break
-            h_sing = np.inf
-            if t_now > t_prev:
-                tau_pred = np.inf
-            if ratio < ratio_prev and t_now > t_prev and not crossing:
-                tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
-                tau_pred = tau
-                if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
-                    h_sing = max(0.5 * tau, 1e3 * tiny)
-            ratio_prev, t_prev = ratio, t_now
-            if crossing:
-                stepper.watch(t_now, ratio)
-            if on_grid:
-                if k % refine == 0:
+            retries = 0
+            h_fail = np.inf
+            density = (stepper.stats.get("nsteps", 0) - steps_before) / H
+            if opts.progress is not None:
+                opts.progress(float(T_acc[-1]), t_end)
+            n_mon = int(np.sum(is_mon[:len(T_acc)]))
+            if not single:
+                chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, n_mon)
+            elif chunk == 1 and not np.isfinite(h_sing):
+                chunk = 2
+            d_all, v_all, Gs_all = system.monitor_many(Q_acc, QD_acc, T_acc)   # one call per segment
+            ratios = singular_ratios(Gs_all, rank)
+            for i in range(len(T_acc)):
+                t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
+                d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
+                is_output = j_out < len(out_t) and abs(t_now - out_t[j_out]) <= tiny
+                if not is_mon[i]:       # an output time between checks: recorded, never acted upon
+                    min_ratio = min(min_ratio, ratio)
+                    if crossing:        # (augmented: passages are reported from every state seen)
+                        stepper.watch(t_now, ratio)
+                    if is_output:
+                        record(t_now, *stepper.for_record(t_now, q_now, qd_now))
+                        j_out += 1
+                    continue
+                min_ratio = min(min_ratio, ratio)
+                seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
+                on_grid = abs(t_now - grid[k]) <= tiny
+                if ratio < opts.singular_tol and not crossing:
+                    events.append({"time": t_now, "kind": "singular", "contact": "-",
+                                   "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
+                    failure = Failure(t_now, "singular configuration",
+                                      f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
+                                      f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
+                                      "determined by the equations (a dead point or change point of the mechanism)")
                     record(t_now, q_now, qd_now, (d_now, v_now))
-                k += 1
-            if np.isfinite(h_sing) and i < len(T_acc) - 1:
-                # approaching a singular configuration: rewind to here, continue in short segments
-                stepper.reset(t_now, q_now, qd_now)
-                break
+                    break
+                h_sing = np.inf
+                if t_now > t_prev:
+                    tau_pred = np.inf
+                if ratio < ratio_prev and t_now > t_prev and not crossing:
+                    tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
+                    tau_pred = tau
+                    if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
+                        h_sing = max(0.5 * tau, 1e3 * tiny)
+                ratio_prev, t_prev = ratio, t_now
+                if crossing:
+                    stepper.watch(t_now, ratio)
+                if is_output:
+                    record(t_now, q_now, qd_now, (d_now, v_now))
+                    j_out += 1
+                if on_grid:
+                    k += 1
+                if np.isfinite(h_sing) and i < len(T_acc) - 1:
+                    # approaching a singular configuration: rewind to here, continue in short segments
+                    stepper.reset(t_now, q_now, qd_now)
+                    break
+    except KeyboardInterrupt:      # Ctrl-C: stop now, keep what was recorded, raise it below
+        interrupted = True
+        n_rec = min(map(len, (T, Qs, QDs, D, VD)))      # a record() cut short in the middle
+        del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
+        failure = Failure(T[-1], "interrupted", "the run was interrupted (Ctrl-C); results up to here are kept")
+    finally:
+        guard.__exit__(None, None, None)
 
     solve_cpu = _time.process_time() - cpu0 - stepper.stats.get("build_cpu_time", 0.0)
     t = np.array(T)
@@ -301,6 +392,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     signals["velocity_drift"] = np.array(VD)
     signals.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, Q, QD, LAM, pv))
 
+    energy = energy_check(eom, signals, opts, failure is None)
     bound = opts.bound
     # maxima over every checked state (the monitoring grid), not only the recorded ones
     max_d = max(float(np.max(D)) if D else 0.0, seen_d)
@@ -311,6 +403,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                   "drift_ok": drift_ok, "min_singular_ratio": float(min_ratio),
                   "wall_time": _time.perf_counter() - wall0, "setup_wall_time": setup_wall,
                   "solve_cpu_time": solve_cpu})
+    stats.update(common_stats(stats, energy))
     metadata = {"model": eom.name, "formulation": opts.formulation,
                 "formulation_reason": "requested" if (kw.get("formulation") or "auto") != "auto" else
                 "default: index-1 ODE with Baumgarte terms and projection onto both constraint manifolds "
@@ -333,6 +426,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                            "start": {**dict(zip(eom.coords, map(float, init.q))),
                                      **{f"der({c})": float(v) for c, v in zip(eom.coords, init.qd)}}}
     metadata["warnings"] = []
+    if failure_code:
+        metadata["failure_code"] = failure_code
     try:
         from ..simulate import versions
 
@@ -346,9 +441,104 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         metadata["drift_warning"] = msg
         metadata["warnings"].append(msg)
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    if energy.get("energy_warning"):
+        msg = energy["energy_warning"]
+        metadata["energy_warning"] = msg
+        metadata["warnings"].append(msg)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+    metadata["conservative"] = energy.get("conservative")
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
-    return Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
-                  metadata=metadata, events=events, failure=failure)
+    result = Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
+                    metadata=metadata, events=events, failure=failure)
+    if interrupted:
+        metadata["interrupted"] = True
+        raise RunInterrupted(result)
+    return result
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a constrained run: a KeyboardInterrupt that carries the partial Result
+    (``.result``: failure "interrupted", metadata["interrupted"] = True), so a caller may
+    write what was computed before it stops."""
+
+    def __init__(self, result: Result):
+        super().__init__("interrupted")
+        self.result = result
+
+
+CODE_INTEGRATOR = "E824"    # the integrator gave up (step budget, step size collapse, Newton)
+CODE_NONFINITE = "E825"     # the equations or the state became inf/nan
+
+
+def integrator_failure(system, opts: DaeOptions, saved, h: float, e: StepError):
+    """The Failure (and its code) of a segment that failed for good, from the last good state
+    ``saved`` = (t, q, q'): a non-finite state or right-hand side is named with its time and
+    coordinate; otherwise the integrator's own message and the work it did."""
+    t, q, qd = saved
+    where = (e.t, e.name) if isinstance(e, NonFiniteError) else locate_nonfinite(system, t, q, qd, h)
+    if where is not None:
+        tw, name = where
+        return Failure(t, "non-finite state",
+                       f"[{CODE_NONFINITE}] {name} is inf or nan at t = {tw:.10g} (after the last good state at "
+                       f"t = {t:.10g}); the model's equations are not defined there"), CODE_NONFINITE
+    return Failure(t, f"{opts.formulation} integrator failed",
+                   f"[{CODE_INTEGRATOR}] {e}; the step budget is max_steps = {opts.steps} steps per interval until "
+                   "a segment succeeded, then 8 times the steps per unit time seen; failing intervals were halved "
+                   f"up to {MAX_RETRIES} times; a model with time scales far shorter than the run (check its masses "
+                   "and lengths) or a stiff one (method = \"bdf\") ends here"), CODE_INTEGRATOR
+
+
+ENERGY_FACTOR = 1e4     # a conservative model whose relative energy drift exceeds this many rtol warns
+ENERGY_FLOOR = 1e-6      # ... and never below this relative drift
+ENERGY_CAP = 0.05        # ... and always above this one (a loose tolerance does not excuse 80 %)
+
+
+def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
+    """Energy drift of the recorded states; for a conservative model (no damping, no other
+    generalized forces, no explicit time in T, V or the constraints) a drift far above the
+    tolerance means a wrong answer (e.g. a jump to another assembly branch), so it warns."""
+    from ..simulate import _energy_drift, is_conservative
+
+    import casadi as ca
+
+    out = dict(_energy_drift(signals))
+
+    def conservative():
+        try:
+            return bool(is_conservative(eom)) and not ca.depends_on(ca.SX(eom.g), eom.t)
+        except Exception:  # noqa: BLE001 -- a non-SX model: make no claim
+            return None
+
+    cons = eom.cached("dae_conservative", conservative)
+    out["conservative"] = cons
+    if cons and "energy_drift_relative" in out:
+        limit = min(ENERGY_CAP, max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol))
+        out["energy_bound_relative"] = limit
+        if out["energy_drift_relative"] > limit:
+            out["energy_warning"] = (
+                f"the model is conservative but its energy changed by {out['energy_drift']:.3g} "
+                f"(relative {out['energy_drift_relative']:.2e}, more than {limit:.1e} = "
+                f"min({ENERGY_CAP:g}, max({ENERGY_FLOOR:g}, {ENERGY_FACTOR:g} rtol))): the results are not to be "
+                "trusted; "
+                f"tighten rtol/atol or use formulation = \"projection\" (formulation {opts.formulation})")
+    return out
+
+
+def common_stats(st: dict, energy: dict) -> dict:
+    """The statistics under the names every simulator uses (steps, rhs_evals, jacobian_evals,
+    rejected_steps, cpu_time, energy_drift, constraint_drift)."""
+    out = {"steps": int(st.get("nsteps", 0)), "rhs_evals": int(st.get("nfevals", 0)),
+           # CVODES/IDAS: linear-solver setups (each evaluates the Jacobian); erk: none
+           "jacobian_evals": int(st.get("nlinsetups", 0)),
+           "jac_evals": int(st.get("nlinsetups", 0)),          # the simulation layer's name (SCHEMA)
+           "rejected_steps": int(st.get("netfails", 0)) + int(st.get("nncfails", 0)),
+           "cpu_time": float(st.get("solve_cpu_time", 0.0)),
+           "constraint_drift": float(st.get("max_constraint_drift", 0.0))}
+    for k in ("energy_drift", "energy_drift_relative", "energy_bound_relative"):
+        if k in energy:
+            out[k] = energy[k]
+    out["energy_ok"] = "energy_warning" not in energy
+    return out
 
 
 STIFF = 1e4   # an overdamped mode decaying this many times within the run makes 'auto' pick BDF

@@ -117,17 +117,18 @@ class GGLStepper(Stepper):
         w = self.opts.rtol * np.abs(x0) + self.opts.atol
         return np.concatenate([self.system.p, [t, h], x0, xd0, w])
 
-    def advance(self, times):
+    def advance(self, times, monitor=None):
         times = np.atleast_1d(np.asarray(times, float))
-        h, K = chunk_span(self.t, times)
+        h, grid = chunk_span(self.t, times, monitor)
+        K = len(times)
         n = self.system.n
         p = self._p(self.t, h, self.q, self.qd)
-        F = self.F.get(K)
+        F = self.F.get(grid, self.step_budget)
         r = call_integrator(F, x0=np.zeros(2 * n), z0=self._z0(self.t, self.q, self.qd), p=p)
         self._count(F)
         e = np.array(r["xf"], float).reshape(2 * n, K)
         x0, xd0, w = p[-6 * n:-4 * n], p[-4 * n:-2 * n], p[-2 * n:]
-        s = (times - self.t) / h
+        s = np.linspace(0.0, 1.0, K + 1)[1:] if isinstance(grid, int) else np.array(grid)
         X = x0[:, None] + xd0[:, None] * s[None, :] + w[:, None] * e
         if not np.all(np.isfinite(X)):
             raise StepError("the state became non-finite")

@@ -25,6 +25,7 @@ from ..eom import EOM
 
 CODE_POSITION = "E821"
 CODE_VELOCITY = "E822"
+CODE_UNDEFINED = "E826"       # a constraint or its Jacobian is inf/nan at the start values
 
 
 @dataclass
@@ -112,6 +113,23 @@ def _span(eom: EOM, index: int):
     return eom.model.span
 
 
+def check_defined(eom: EOM, g: np.ndarray, G: np.ndarray, where: str = "at the start values") -> None:
+    """A MechError (E826) naming the first constraint whose residual or gradient is inf/nan."""
+    bad = [i for i in range(len(g)) if not (np.isfinite(g[i]) and np.all(np.isfinite(G[i])))]
+    if bad:
+        labels = constraint_labels(eom)
+        i = bad[0]
+        what = "residual" if not np.isfinite(g[i]) else "gradient"
+        raise MechError(Diagnostic(
+            CODE_UNDEFINED,
+            f"the constraint {labels[i]} is not defined {where}: its {what} is "
+            f"{'nan' if np.any(np.isnan(np.r_[g[i], G[i]])) else 'infinite'}"
+            + (f" (also {', '.join(labels[j] for j in bad[1:4])})" if len(bad) > 1 else ""),
+            span=_span(eom, i),
+            help="check the start values and parameters against the constraint's domain (square roots, "
+                 "divisions, logarithms); a constraint must be differentiable where the mechanism is"))
+
+
 def _distances(g, G):
     norms = np.linalg.norm(G, axis=1)
     return np.abs(g) / np.where(norms > 0, norms, 1.0)
@@ -146,6 +164,7 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
     it = 0
     g = ev(fg, q, t, pv)
     G = ev(fG, q, t, pv, shape=(m, n))
+    check_defined(eom, g, G)
     scale = 1.0 + np.max(np.abs(q))
     if free:
         d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
@@ -161,12 +180,15 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
                 trial = q.copy()
                 trial[free] += lam * step
                 g_trial = ev(fg, trial, t, pv)
-                if np.linalg.norm(g_trial) < g_norm or lam < 1e-4:
+                G_trial = ev(fG, trial, t, pv, shape=(m, n))
+                ok = np.all(np.isfinite(g_trial)) and np.all(np.isfinite(G_trial))
+                if (ok and np.linalg.norm(g_trial) < g_norm) or lam < 1e-4:
                     break
                 lam *= 0.5
+            if not ok:          # the step leaves the constraints' domain: keep the last point
+                break
             q = trial
-            g = g_trial
-            G = ev(fG, q, t, pv, shape=(m, n))
+            g, G = g_trial, G_trial
             if np.max(np.abs(lam * step)) <= 1e-15 * scale:
                 break
     dist = _distances(g, G)
@@ -229,6 +251,9 @@ def check_report(eom: EOM, p=None, t: float = 0.0) -> list[str]:
         lines = dof_report(eom, init.q, t, p).lines()
         lines += init.lines()
     except MechError as e:
-        lines = dof_report(eom, None, t, p).lines()
+        try:
+            lines = dof_report(eom, None, t, p).lines()
+        except (MechError, np.linalg.LinAlgError):
+            lines = []
         lines += [f"error[{d.code}]: {d.message}" + (f" (help: {d.help})" if d.help else "") for d in e.diagnostics]
     return lines

@@ -16,6 +16,7 @@ DEFAULT_FORMULATION = "projection"
 # method names (those of mechdsl.integrators included) -> the CVODES multistep method
 ODE_METHODS = {"auto": "auto", "bdf": "bdf", "cvodes": "bdf", "cvodes-bdf": "bdf", "adams": "adams",
                "cvodes-adams": "adams", "erk": "erk"}
+STEPS_PER_INTERVAL = 5000     # default step budget per monitoring interval (>= 60 intervals per run)
 DAE_METHODS = {"auto": "idas", "idas": "idas"}
 
 # options of the ODE simulator that have no meaning here (reported in the metadata notes)
@@ -38,7 +39,7 @@ class DaeOptions:
     outputs: tuple[str, ...] | None = None
     baumgarte: object = None             # None (automatic), rate omega, or (alpha, beta)
     singular_tol: float = 1e-6           # sigma_min / sigma_max of the scaled G below this: singular
-    max_steps: int | None = None         # integrator steps per call (default 500000)
+    max_steps: int | None = None         # integrator steps per interval at the start (default 5000)
     max_interval: float | None = None    # longest segment between checks (default: monitoring grid)
     drift_bound: float | None = None     # default max(10 atol, 1e-10)
     repartition_cond: float = 10.0       # partitioning: re-partition when cond(G_v) grows by this factor
@@ -51,7 +52,9 @@ class DaeOptions:
 
     @property
     def steps(self) -> int:
-        return int(self.max_steps or 500_000)
+        """Integrator steps allowed per output interval of an integrator call until a segment
+        succeeded; then also up to 8 times the steps per unit time seen (see the driver)."""
+        return int(self.max_steps or STEPS_PER_INTERVAL)
 
 
 def parse_options(kw: dict) -> tuple[DaeOptions, dict]:

@@ -26,20 +26,26 @@ from .system import kkt_solve
 
 
 def project_positions(system, q, t, tol: float, max_iter: int = 20) -> np.ndarray:
-    """Newton iterations of the M-orthogonal projection onto g(q, t) = 0."""
+    """Newton iterations of the M-orthogonal projection onto g(q, t) = 0 (at most max_iter;
+    they stop when ||g|| no longer decreases).  A StepError when ||g|| is still above
+    1000 tol (the drift bound) at the end: the projection failed, the segment is redone."""
     q = np.array(q, float)
     g = system.g(q, t)
     last = np.inf
+    gn = float(np.max(np.abs(g))) if g.size else 0.0
     for _ in range(max_iter):
-        gn = float(np.max(np.abs(g))) if g.size else 0.0
         if gn <= tol or gn >= last:
             break
         last = gn
         dq, _ = kkt_solve(system.M(q, t), system.G(q, t), np.zeros_like(q), -g)
         q = q + dq
         g = system.g(q, t)
+        gn = float(np.max(np.abs(g))) if g.size else 0.0
     if g.size and not np.all(np.isfinite(g)):
         raise StepError("position projection diverged")
+    if gn > 1e3 * tol:
+        raise StepError(f"position projection did not converge (max |g| = {gn:.3g} after at most {max_iter} "
+                        "Newton iterations)")
     return q
 
 
@@ -77,19 +83,37 @@ class ProjectionStepper(BaumgarteStepper):
     def project(self, q, qd, t, tol):
         return project(self.system, q, qd, t, tol)
 
-    def advance(self, times):
+    def for_record(self, t, q, qd):
+        """An output state between projections, projected when its drift is above the level
+        that triggers a projection (for the record only: the integration goes on unchanged)."""
+        d, v = self.system.drift(q, qd, t)
+        limit = self.PROJECT_AT * self.opts.bound
+        if d > limit or v > limit:
+            try:
+                return self.project(q, qd, t, 1e-3 * self.opts.bound)
+            except StepError:       # recorded as integrated; the drift statistics show it
+                return q, qd
+        return q, qd
+
+    def advance(self, times, monitor=None):
+        """``monitor`` (bool per time, default all) marks the checking times: only there is the
+        drift judged and the chunk cut, so output times in between change nothing."""
         times = np.atleast_1d(np.asarray(times, float))
-        Q, QD = self.integrate(times)
+        mon = np.ones(len(times), bool) if monitor is None else np.asarray(monitor, bool)
+        Q, QD = self.integrate(times, monitor)
         limit = self.PROJECT_AT * self.opts.bound
         keep = len(times)
         D, V = self.system.drift_many(Q, QD, times)       # one mapped call for the whole segment
-        for i in range(len(times)):
+        last_ok = None
+        for i in np.flatnonzero(mon):
             d, v = float(D[i]), float(V[i])
             self.stats["drift_before_projection"] = max(self.stats["drift_before_projection"], d)
             self.stats["velocity_drift_before_projection"] = max(self.stats["velocity_drift_before_projection"], v)
             if d > limit or v > limit:
-                keep = max(i, 1)
+                # cut after the last checking time with a small drift (at least the first one)
+                keep = (last_ok if last_ok is not None else i) + 1
                 break
+            last_ok = i
         times, Q, QD = times[:keep], Q[:, :keep].copy(), QD[:, :keep].copy()
         q, qd = self.project(Q[:, -1], QD[:, -1], times[-1], 1e-3 * self.opts.bound)
         self.stats["projections"] += 1

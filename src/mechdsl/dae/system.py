@@ -207,6 +207,7 @@ class ConstrainedSystem:
             "g": ca.Function("g", [q, t, pp], [g]),
             "G": ca.Function("G", [q, t, pp], [G]),
             "gt": ca.Function("gt", [q, t, pp], [gt]),
+            "geometry": ca.Function("geometry", [q, t, pp], [g, G, gt]),
             "gdot": ca.Function("gdot", [q, qd, t, pp], [gdot]),
             "M": ca.Function("M", [q, t, pp], [M]),
             "accel": accel,
@@ -243,6 +244,11 @@ class ConstrainedSystem:
 
     def G(self, q, t) -> np.ndarray:
         return np.array(self.fn["G"](q, t, self.p), float).reshape(self.m, self.n)
+
+    def geometry(self, q, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(g, G, g_t) of the active constraints in one (buffer) call."""
+        g, G, gt = self._call_fast("geometry", q, t, self.p)
+        return np.ravel(g).copy(), np.asarray(G, float).reshape(self.m, self.n).copy(), np.ravel(gt).copy()
 
     def gdot(self, q, qd, t) -> np.ndarray:
         return np.array(self.fn["gdot"](q, qd, t, self.p), float).ravel()

@@ -1,0 +1,125 @@
+"""A constrained run that cannot go on stops with a coded failure, says when and why, and
+keeps its results up to there (issue 12/18 DAE items).
+
+Scenarios: a Cartesian pendulum (1 kg, 1 m, g = 9.81, released at rest horizontally) with
+a generalized force sqrt(1.5 - t) on x, which is nan for t > 1.5 s; the shipped four-bar
+(models/four_bar.mech) with a crank of length a = 1e-12 m, which hung for minutes in the
+projection stepping on main (each integrator call could take 500000 steps, and a failing
+interval was halved 12 times).
+"""
+import subprocess
+import sys
+import textwrap
+import warnings
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from dae_models import _syms
+from mechdsl.dae import simulate_dae
+from mechdsl.eom import from_lagrangian
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def nan_pendulum():
+    coords, params = ("x", "y"), ("m", "g", "L")
+    q, qd, t, p, P = _syms(coords, params)
+    T = 0.5 * P["m"] * ca.dot(qd, qd)
+    V = P["m"] * P["g"] * q[1]
+    Q = ca.vertcat(ca.sqrt(1.5 - t), 0)          # nan after t = 1.5
+    g = 0.5 * (q[0] ** 2 + q[1] ** 2 - P["L"] ** 2)
+    return from_lagrangian("NanPendulum", coords, params, [1.0, 9.81, 1.0], q, qd, t, p, T, V, Q=Q, g=g,
+                           q0=[1.0, 0.0], qd0=[0.0, 0.0], constraint_names=["rod"])
+
+
+@pytest.mark.parametrize("formulation", ["projection", "baumgarte", "partitioning",
+                                         pytest.param("ggl", marks=pytest.mark.slow)])
+def test_nonfinite_equations_fail_with_time_and_coordinate(formulation):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = simulate_dae(nan_pendulum(), 3.0, points=31, formulation=formulation)
+    assert not r.success
+    f = r.failure
+    assert f.cause == "non-finite state"
+    assert f.time == pytest.approx(1.5, abs=1e-6)
+    assert "der(der(x))" in f.detail and "E825" in f.detail
+    assert r.metadata["failure_code"] == "E825"
+    # results up to there are kept, and they are finite
+    assert r.t[-1] == pytest.approx(1.5, abs=1e-6) and len(r.t) == 16
+    assert np.all(np.isfinite(r.q)) and np.all(np.isfinite(r.qd))
+
+
+def test_nonfinite_state_error_names_the_first_bad_output():
+    from mechdsl.dae.stepper import NonFiniteError
+
+    e = NonFiniteError(1.25, "der(y)")
+    assert e.t == 1.25 and "der(y)" in str(e)
+
+
+@pytest.mark.slow
+def test_four_bar_with_a_tiny_crank_ends_with_a_coded_failure():
+    """main: no end after minutes.  Now a failure (E824) within seconds, in a subprocess so
+    that a regression cannot hang the test run."""
+    code = textwrap.dedent(f"""
+        import time, mechdsl
+        m = mechdsl.load({str(ROOT / "models" / "four_bar.mech")!r}).with_params(a=1e-12)
+        c = time.process_time()
+        r = m.simulate(10.0, points=501)
+        print(r.success, r.metadata.get("failure_code"), round(time.process_time() - c, 2))
+        print(r.failure)
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    first, failure = out.stdout.strip().splitlines()[:2]
+    ok, code_, cpu = first.split()
+    assert ok == "False" and code_ == "E824"
+    assert float(cpu) < 20.0          # a bound on the work, generous for a shared machine (measured 1.5 s)
+    assert "steps" in failure
+
+
+MECH = (ROOT / "models" / "pendulum_cartesian.mech").read_text()
+
+
+def _undefined_model(constraint):
+    src = MECH.replace('bob.x^2 + bob.y^2 = L^2 "rod";', constraint)
+    return src[:src.index("scene Cash")]
+
+
+@pytest.mark.parametrize("constraint, what", [
+    ('sqrt((bob.x - 2*L) * L) + bob.y = 0 "rod";', "residual"),     # nan at the start x = L
+    ('sqrt(abs(bob.x - L) * L) + bob.y = 0 "rod";', "gradient"),    # infinite slope at x = L
+])
+def test_constraint_undefined_at_the_start_is_a_located_error(constraint, what, tmp_path):
+    """main: numpy's LinAlgError ('SVD did not converge') escaped as a traceback."""
+    import mechdsl
+
+    m = mechdsl.loads(_undefined_model(constraint), filename="bad.mech")
+    with pytest.raises(mechdsl.MechError) as info:
+        m.simulate(1.0, points=3)
+    d = info.value.diagnostics[0]
+    assert d.code == "E826" and "'c1' (rod)" in d.message and what in d.message
+    assert d.span.file == "bad.mech" and d.span.line == 29
+    # the command line: exit code 1 and the located message, no traceback
+    f = tmp_path / "bad.mech"
+    f.write_text(_undefined_model(constraint))
+    out = subprocess.run([sys.executable, "-m", "mechdsl", "simulate", str(f), "--no-progress",
+                          "-o", str(tmp_path / "out.csv")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 1, out.stderr
+    assert "error[E826]" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_the_driver_loop_is_bounded(monkeypatch):
+    """Every loop of the driver counts its integrator calls; at the bound the run fails (E824)
+    with the results up to there (here the bound is lowered to 5 calls of 0.1 s)."""
+    from dae_models import pendulum_eom
+    from mechdsl.dae import driver
+
+    monkeypatch.setattr(driver, "MAX_CALLS", 5)
+    r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), 2.0, points=3, max_interval=0.1)
+    assert not r.success and r.metadata["failure_code"] == "E824"
+    assert "more than 5 integrator calls" in r.failure.detail
+    assert 0.0 < r.failure.time <= 5 * 0.1 + 1e-12 and r.t[-1] == r.failure.time
+    assert r.stats["segments"] == 5
