@@ -3,8 +3,11 @@
     m = mechdsl.load(path, model=None, scene=None)      # or mechdsl.loads(text)
     m2 = m.with_params(m=2.0, L=0.5)                     # a new Model; m is unchanged
     r = m.simulate(10.0, rtol=1e-8, atol=1e-10, method="auto", points=501)
-    fns = m.casadi()                                     # CasADi Functions: "ode", "mass_matrix", "energy", ...
+    fns = m.casadi()                                     # CasADi Functions (t, x, u, p): "ode", "energy", ...
     m.parameter_values                                   # numeric vector for the "p" input
+    m.parameter_vector(l=0.5)                            # p with dependent parameters recomputed
+    m.inputs                                             # the control inputs u: name, unit, bounds, default
+    m.simulate(3.0, inputs={"F": lambda t, x: -k @ x})   # inputs: number, table, u(t), u(t, x), Function
 
 Phases: parse -> analyze (here) -> derive (mechdsl.mechanics) -> generate/simulate.  Each
 Model caches its derived equations; models that differ only in parameter values share them.
@@ -120,6 +123,28 @@ class Model:
         return np.array([p.value for p in self.model.real_parameters], dtype=float)
 
     @property
+    def inputs(self) -> tuple["InputInfo", ...]:
+        """The control inputs (``input Real F``): the entries of the CasADi input "u", in order."""
+        return tuple(InputInfo(p.name, p.unit, p.min, p.max, float(p.value), p.doc) for p in self.model.inputs)
+
+    def parameter_vector(self, **overrides) -> np.ndarray:
+        """The full CasADi "p" with ``overrides`` (free parameters by name) applied and every
+        dependent parameter (a binding such as ``I = m * l^2 / 3``) recomputed."""
+        by_name = {p.name: p for p in self.model.parameters}
+        for k in overrides:
+            p = by_name.get(k)
+            if p is not None and p.input:
+                raise UsageError(f"'{k}' is an input of {self.name}, not a parameter: drive it with "
+                                 f"inputs={{'{k}': ...}} or pass it as the CasADi input u")
+            if p is not None and p.binding is not None and not p.integer:
+                raise UsageError(f"'{k}' is a dependent parameter of {self.name} (computed from others); "
+                                 "override the parameters it is computed from")
+            if p is not None and p.integer:
+                raise UsageError(f"'{k}' is an Integer/Boolean parameter: structural, not part of p; "
+                                 "use with_params")
+        return self.with_params(**overrides).parameter_values if overrides else self.parameter_values
+
+    @property
     def scene_settings(self) -> dict[str, Any]:
         return dict(self.scene.settings) if self.scene else {}
 
@@ -222,11 +247,14 @@ class Model:
                     if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
                         _EOM_CACHE.pop(next(iter(_EOM_CACHE)), None)
                     _EOM_CACHE[key] = base
-            self._eom = base.replace(param_values=self.parameter_values, model=self.model)   # keeps lazy fields lazy
+            self._eom = base.replace(param_values=self.parameter_values, model=self.model,   # keeps lazy fields lazy
+                                     input_defaults=tuple(float(p.value) for p in self.model.inputs))
         return self._eom
 
     def casadi(self, compiled: bool = False) -> dict:
-        """CasADi Functions: at least "ode" (t, x=[q; qd], p -> xdot), "mass_matrix", "energy"."""
+        """CasADi Functions (mechdsl.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
+        "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds
+        the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``."""
         from .codegen import casadi_functions
 
         return casadi_functions(self.eom, compiled=compiled)
@@ -323,6 +351,17 @@ def _restore(state) -> "Model":
         _RESTORED[key] = m
     return m
 
+
+
+@dataclasses.dataclass(frozen=True)
+class InputInfo:
+    """One control input: its name, unit, declared bounds (None: none) and default value."""
+    name: str
+    unit: str | None
+    min: float | None
+    max: float | None
+    default: float
+    doc: str = ""
 
 
 def _number(name: str, v) -> float:

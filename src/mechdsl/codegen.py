@@ -11,6 +11,8 @@ a Function is built the first time it is asked for.  Names, inputs and outputs:
     outputs        (t, x, u, p) -> one output per EOM.outputs entry (named as the entry)
     constraints    (t, x, u, p) -> g, gdot      only when EOM.g exists
     start          (p) -> q0, qd0
+    parameters     (free) -> p                  the free parameters (no binding, declaration order)
+                                                to the full p, dependent parameters recomputed
     singularity    (t, x, u, p) -> one per EOM.singularity_monitors entry (when there are any)
     invariants     (t, x, u, p) -> one per EOM.invariants entry (when there are any)
 
@@ -48,7 +50,7 @@ import numpy as np
 from .diagnostics import Diagnostic, MechError
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
-            "start", "singularity", "invariants")
+            "start", "parameters", "singularity", "invariants")
 LINSOL = "qr"          # sparse Householder QR: backward stable, code-generatable
 
 
@@ -157,6 +159,8 @@ def _build(eom, name, outputs):
         return _function("constraints", txup, [g, gdot], TXUP, ["g", "gdot"])
     if name == "start":
         return _function("start", [s.p], [ca.SX(eom.q0), ca.SX(eom.qd0)], ["p"], ["q0", "qd0"])
+    if name == "parameters":
+        return build_parameters(eom)
     if name == "singularity":
         mons = dict(singularity_monitors(eom))
         return _function("singularity", txup, [ca.SX(v) for v in mons.values()], TXUP, list(mons))
@@ -164,6 +168,47 @@ def _build(eom, name, outputs):
         inv = dict(eom.invariants)
         return _function("invariants", txup, [ca.SX(v) for v in inv.values()], TXUP, list(inv))
     raise KeyError(name)
+
+
+def free_parameters(eom) -> tuple[str, ...]:
+    """The parameters without a binding (the inputs of the ``parameters`` Function), in order."""
+    bound = _bindings(eom)
+    return tuple(n for n in eom.params if n not in bound)
+
+
+def _bindings(eom) -> dict:
+    model = getattr(eom, "model", None)
+    if model is None:
+        return {}
+    return {p.name: p.binding for p in model.real_parameters if p.binding is not None and p.name in eom.params}
+
+
+def build_parameters(eom):
+    """(free) -> p: dependent parameters recomputed from their bindings (SX)."""
+    ca = _ca()
+    from . import exprs as X
+    from . import ir
+
+    bound = _bindings(eom)
+    free = free_parameters(eom)
+    syms = {n: ca.SX.sym(n) for n in free}
+    model = getattr(eom, "model", None)
+    known = {p.name: p.value for p in (model.parameters if model is not None else ())}
+    vals: dict = dict(syms)
+
+    def leaf(n):
+        if isinstance(n, ir.Const):
+            return n.value
+        if isinstance(n, ir.Param):
+            return vals[n.name] if n.name in vals else known[n.name]
+        raise ValueError(f"cannot translate {X.to_text(n)} in a parameter binding")
+
+    for name in eom.params:          # declaration order: a binding refers to earlier parameters
+        if name in bound:
+            vals[name] = X._translate(bound[name], leaf, X._casadi_ops, ca)
+    out = ca.vertcat(*[ca.SX(vals[n]) for n in eom.params]) if eom.params else ca.SX(0, 1)
+    free_vec = ca.vertcat(*[syms[n] for n in free]) if free else ca.SX(0, 1)
+    return _function("parameters", [free_vec], [out], ["free"], ["p"])
 
 
 def singularity_monitors(eom) -> dict:
@@ -176,7 +221,7 @@ def singularity_monitors(eom) -> dict:
 
 
 def available(eom) -> tuple[str, ...]:
-    names = ["ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "start"]
+    names = ["ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "start", "parameters"]
     if eom.g is not None:
         names.append("constraints")
     if singularity_monitors(eom):

@@ -63,6 +63,7 @@ class EOM:
     # control inputs (``input Real F``): an SX symbol (n_u,) the forces may depend on, and names
     u: object | None = None
     inputs: tuple[str, ...] = ()
+    input_defaults: tuple[float, ...] = ()     # the value of each input when nothing drives it
 
     @property
     def u_sym(self):
@@ -116,6 +117,21 @@ class EOM:
         f = self.cached("start", lambda: ca.Function("start", [self.p], [self.q0, self.qd0]))
         a, b = f(pv)
         return np.array(a, float).ravel(), np.array(b, float).ravel()
+
+
+def fold_inputs(eom: "EOM", u=None) -> "EOM":
+    """The same equations with the inputs held constant as trailing parameters: p' = [p; u],
+    valued ``u`` (default: the inputs' defaults).  For the phases that treat inputs as
+    constants (equilibria, linearization's B by d bias/dp, the DAE, contact and fixed-step
+    back ends); the structure is built once per EOM."""
+    if not eom.inputs:
+        return eom
+    import casadi as ca
+
+    base = eom.cached("folded", lambda: eom.replace(p=ca.vertcat(eom.p, eom.u), params=eom.params + eom.inputs,
+                                                    u=None, inputs=(), input_defaults=()))
+    uv = np.asarray(eom.input_defaults if u is None else u, float).ravel()
+    return base.replace(param_values=np.r_[np.asarray(eom.param_values, float).ravel(), uv])
 
 
 def parameter_vector(eom: "EOM", p=None) -> np.ndarray:

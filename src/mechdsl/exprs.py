@@ -345,26 +345,31 @@ class CasadiEnv:
     t: object
     p: object
     query: Callable[[Expr], object] | None = None
+    inputs: tuple[str, ...] = ()        # control inputs: their Param leaves translate to u
+    u: object = None
     _ci: dict = field(default_factory=dict)
     _pi: dict = field(default_factory=dict)
+    _ui: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self._ci = {n: i for i, n in enumerate(self.coords)}
         self._pi = {n: i for i, n in enumerate(self.params)}
+        self._ui = {n: i for i, n in enumerate(self.inputs)}
 
     @staticmethod
-    def symbols(coords, params, query=None) -> "CasadiEnv":
+    def symbols(coords, params, query=None, inputs=()) -> "CasadiEnv":
         import casadi as ca
 
         return CasadiEnv(tuple(coords), tuple(params), ca.SX.sym("q", len(coords)),
                          ca.SX.sym("qd", len(coords)), ca.SX.sym("t"), ca.SX.sym("p", len(params)),
-                         query)
+                         query, tuple(inputs), ca.SX.sym("u", len(inputs)))
 
     def leaf(self, n: Expr):
         if isinstance(n, Const):
             return n.value
         if isinstance(n, Param):
-            return self.p[self._pi[n.name]]
+            i = self._ui.get(n.name)
+            return self.p[self._pi[n.name]] if i is None else self.u[i]
         if isinstance(n, Coord):
             return self.q[self._ci[n.name]]
         if isinstance(n, Speed):

@@ -166,7 +166,9 @@ class Parameter:
     doc: str = ""
     integer: bool = False            # Integer parameters are structural: already substituted
     span: Span = field(default_factory=Span)
-    input: bool = False              # declared `input`: a parameter that linearization may treat as an input
+    input: bool = False              # declared `input`: a control input u (value = its default)
+    min: float | None = None         # declared bounds (inputs: checked on the driving signal)
+    max: float | None = None
 
 
 @dataclass(frozen=True)
@@ -422,8 +424,13 @@ class Model:
 
     @property
     def real_parameters(self) -> tuple[Parameter, ...]:
-        """The entries of the parameter vector p, in order."""
-        return tuple(p for p in self.parameters if not p.integer)
+        """The entries of the parameter vector p, in order (inputs are not parameters)."""
+        return tuple(p for p in self.parameters if not p.integer and not p.input)
+
+    @property
+    def inputs(self) -> tuple[Parameter, ...]:
+        """The control inputs (``input Real F``), the entries of u in order."""
+        return tuple(p for p in self.parameters if p.input)
 
     @property
     def tree_joints(self) -> tuple[Joint, ...]:

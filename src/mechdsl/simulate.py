@@ -49,9 +49,10 @@ def simulate(eom, t_end, *, progress=None, **kw) -> Result:
     return run(eom, from_kwargs(t_end, **kw), progress=progress)
 
 
-def simulate_ode(eom, s, progress=None) -> Result:
+def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     """The ODE back end: minimal coordinates, CasADi integrator plugins or scipy (settings
-    ``s`` validated by mechdsl.simulation.settings)."""
+    ``s`` validated by mechdsl.simulation.settings; ``drive``: the inputs' signals,
+    mechdsl.simulation.drive, built by formulate)."""
     wall0 = time.perf_counter()
     opts = dict(s.extra)
     unknown = sorted(set(opts) - set(KNOWN_OPTS))
@@ -67,15 +68,22 @@ def simulate_ode(eom, s, progress=None) -> Result:
     xs = start_vector(eom, s.x0, pv)
     out_names = _check_outputs(eom, s.outputs)
     compiled = s.compiled
-    vm = casadi_functions(eom, names=("ode", "ode_jacobian"))
+    if drive is None:
+        from .simulation.drive import build_drive
+
+        drive = build_drive(eom, s.inputs, t0, t1, xs)
+    uv = drive.vector()
+    vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
     meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
                             "warnings": [], "notes": []}
+    if eom.inputs:
+        meta["inputs"] = drive.describe()
     if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
-        return _no_state_result(eom, post, grid, pv, out_names, meta, wall0)
+        return _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive)
     if method == "auto":
-        method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol)
+        method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
         meta["auto"] = info
     else:
         reason = "requested"
@@ -86,6 +94,7 @@ def simulate_ode(eom, s, progress=None) -> Result:
         funcs = casadi_functions(eom, compiled=True,
                                  names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
         funcs["ode"]  # compile now (notes below)
+        funcs = drive.closed(funcs)
     else:
         funcs = vm
     meta["notes"] += list(getattr(funcs, "notes", []))
@@ -100,19 +109,21 @@ def simulate_ode(eom, s, progress=None) -> Result:
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     try:
         run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
-                          meta["notes"], 10 * s.budget)
+                          meta["notes"], 10 * s.budget, u=uv)
     finally:
         bar.close()
     if fixed is not None:
         meta["fixed_steps"] = fixed
     failure = None
     if run.error is not None or run.reached < len(grid):
-        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra)
+        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=uv)
     n_ok = max(run.reached, 1)
     X = run.X[:n_ok].copy()
     X[0] = xs
     t = grid[:n_ok].copy()
-    signals = compute_signals(eom, post, t, X, pv, out_names)
+    U = drive.values(t, X)
+    signals = compute_signals(eom, post, t, X, pv, out_names, U=U)
+    _record_inputs(drive, U, signals, meta)
     _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
@@ -135,9 +146,18 @@ def simulate_ode(eom, s, progress=None) -> Result:
                   stats=stats, metadata=meta, failure=failure)
 
 
-def _no_state_result(eom, post, grid, pv, out_names, meta, wall0) -> Result:
+def _record_inputs(drive, U, signals, meta) -> None:
+    """The inputs as signals (named as declared); bound violations of run-time signals warn."""
+    for j, name in enumerate(drive.names):
+        signals[name] = U[:, j].copy()
+    meta.setdefault("warnings", []).extend(drive.check_bounds(U))
+
+
+def _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive) -> Result:
     X = np.zeros((len(grid), 0))
-    signals = compute_signals(eom, post, grid, X, pv, out_names)
+    U = drive.values(grid, X)
+    signals = compute_signals(eom, post, grid, X, pv, out_names, U=U)
+    _record_inputs(drive, U, signals, meta)
     meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
                 versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
                                               "points": len(grid), "outputs": list(out_names),
@@ -444,7 +464,8 @@ def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
     so their drift measures the integrator.  The search is cached on the EOM."""
     import casadi as ca
 
-    searchable = eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
+    searchable = (eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
+                  and not eom.inputs)          # driven models: inputs do work, no integral to watch
     f = eom.cached("first_integrals", lambda: _integral_function(eom, pv) if searchable else None)
     if f is None or len(t) == 0:
         return {}

@@ -184,6 +184,9 @@ def structure(eom, p=None) -> Structure:
     """Classify the system numerically at deterministic random states (see module doc).
 
     Cached on the EOM per parameter vector."""
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     pv = param_vector(eom, p)
     cache = eom.__dict__.setdefault("_analysis_cache", {})
     key = ("structure", pv.tobytes(), id(parts(eom)))

@@ -169,6 +169,9 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     Constrained models (scleronomic constraints g(q) = 0): see :mod:`.constraints`; each
     equilibrium carries its multipliers.
     """
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     import casadi as ca
 
     pv = param_vector(eom, p)

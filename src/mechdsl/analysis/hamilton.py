@@ -78,6 +78,9 @@ class Hamiltonian:
 def hamiltonian(eom, p=None) -> Hamiltonian:
     """The CasADi Hamiltonian of an EOM (for a constrained one: of its Lagrangian; the
     constraint forces -G' lambda are added by the integrator, mechdsl.rattle)."""
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     import casadi as ca
 
     pv = param_vector(eom, p)

@@ -64,6 +64,9 @@ class FirstIntegral:
 
 def first_integrals(eom, p=None) -> list[FirstIntegral]:
     """The conserved quantities this analysis can prove (for the given parameter values)."""
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     import casadi as ca
 
     pv = param_vector(eom, p)
@@ -152,6 +155,9 @@ def integral_signals(eom, p=None) -> dict[str, object]:
 
 def describe_integrals(eom, p=None, expressions: bool = False) -> list[str]:
     """Lines for ``mech check`` / ``mech equations``: one per first integral (name, kind, why)."""
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     out = []
     for fi in first_integrals(eom, p):
         line = f"{fi.name} ({fi.kind}): {fi.note}"

@@ -95,6 +95,12 @@ class Linearization:
     def eigenvalues(self) -> np.ndarray:
         return self.modes().eigenvalues
 
+    def lqr(self, Q, R):
+        """The LQR state feedback du = -K dx for this linear model (analysis.lqr)."""
+        from .lqr import lqr
+
+        return lqr(self, Q, R)
+
     def symbolic(self, exact: bool = True):
         """M, C, K derived by sympy from T, V, D, Q at this state (see analysis.symbolic)."""
         from .symbolic import symbolic_linearization
@@ -144,6 +150,9 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
     None: the parameters the model declares ``input``; () for none.
     """
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     from .equilibrium import Equilibrium, active_basis, chart_of, singular_mass
 
     pv = param_vector(eom, p)
@@ -337,7 +346,7 @@ def declared_inputs(eom) -> list[str]:
     model = getattr(eom, "model", None)
     if model is None:
         return []
-    return [p.name for p in model.real_parameters if getattr(p, "input", False) and p.name in eom.params]
+    return [p.name for p in model.inputs if p.name in eom.params]
 
 
 def _inputs(eom, inputs, q, qd, t, pv):

@@ -27,6 +27,9 @@ def add_parser(sub):
     p.add_argument("--estimate-error", action="store_true",
                    help="run again at a 100 times tighter tolerance and report the difference per output")
     add_set_arg(p)
+    p.add_argument("--input", action="append", metavar="NAME=VALUE", dest="inputs",
+                   help="drive an input: NAME=3.0 (constant) or NAME=file.csv (rows: time, value; "
+                        "zero-order hold; NAME=file.csv:linear to interpolate); repeat for several")
     p.add_argument("-o", "--output", metavar="OUT.csv", help="write the results as CSV (+ OUT.json sidecar)")
     p.add_argument("--plot", metavar="OUT.png", help="plot coordinates and energy (.png, .svg or .pdf)")
     p.add_argument("--compiled", action="store_true", help="generate C code and compile it (needs a C compiler)")
@@ -85,7 +88,34 @@ def cli_settings(args) -> dict:
     return {"t_start": args.t_start, "rtol": args.rtol, "atol": args.atol, "method": args.method,
             "points": args.points, "dt": args.dt, "formulation": args.formulation,
             "compiled": True if args.compiled else None, "reactions": True if args.reactions else None,
-            "budget": args.budget, "estimate_error": True if args.estimate_error else None}
+            "budget": args.budget, "estimate_error": True if args.estimate_error else None,
+            "inputs": parse_inputs(getattr(args, "inputs", None))}
+
+
+def parse_inputs(items) -> dict | None:
+    """``--input NAME=VALUE`` options -> {name: number | Table} (None: none given)."""
+    if not items:
+        return None
+    from ..diagnostics import UsageError
+    from ..simulation.drive import read_table
+
+    out: dict = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or not name or not value:
+            raise UsageError(f"--input {item!r}: write NAME=VALUE (a number or a CSV file of time, value rows)")
+        if name in out:
+            raise UsageError(f"--input {name} is given twice")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            path, hold = value, "zoh"
+            for h in ("linear", "zoh"):
+                if value.endswith(":" + h):
+                    path, hold = value[: -len(h) - 1], h
+            out[name] = read_table(path, hold, what=f"--input {name}")
+    return out
 
 
 def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:

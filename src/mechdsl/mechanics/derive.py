@@ -50,7 +50,7 @@ class _Deriver:
         self.model = model
         coords = model.coordinate_names
         params = tuple(p.name for p in model.real_parameters)
-        self.env0 = exprs.CasadiEnv.symbols(coords, params)
+        self.env0 = exprs.CasadiEnv.symbols(coords, params, inputs=tuple(p.name for p in model.inputs))
         e = self.env0
         self.q, self.qd, self.t, self.p = e.q, e.qd, e.t, e.p
         self.n = len(coords)
@@ -61,7 +61,8 @@ class _Deriver:
         tree = self.tree = _guard(lambda: Tree(model, self.env0))
         kin = self.kin = Kinematics(tree)
         query = self.query = Query(model, kin)
-        env = self.env = exprs.CasadiEnv(self.env0.coords, self.env0.params, q, qd, t, self.p, query=query)
+        env = self.env = exprs.CasadiEnv(self.env0.coords, self.env0.params, q, qd, t, self.p, query=query,
+                                         inputs=self.env0.inputs, u=self.env0.u)
         loads = self.loads = _guard(lambda: build_loads(model, kin, env))
         _guard(lambda: add_terms(loads, model, env))
         self._check_inertia(loads)
@@ -136,7 +137,8 @@ class _Deriver:
             fixed_q=tuple(c.fixed for c in model.coordinates),
             fixed_qd=tuple(c.speed_fixed for c in model.coordinates),
             route=route, model=model, point_position=kin.point_pos, point_velocity=kin.point_vel,
-            singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam)
+            singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam,
+            u=e0.u, inputs=e0.inputs, input_defaults=tuple(float(p.value) for p in model.inputs))
 
     # -- energies ---------------------------------------------------------------------
     def _kinetic_tree(self):

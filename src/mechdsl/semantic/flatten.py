@@ -79,6 +79,7 @@ class Flattener(Evaluator):
         self.entries: dict[str, Entry] = {}
         self.equations: list[ast.EquationItem] = []
         self.param_values: dict[str, float] = {}
+        self.input_names: set[str] = set()      # declared inputs (a parameter must not depend on one)
         self.insts: dict[str, CompInst] = {}
         self.constraints: list[ir.Constraint] = []
         self.terms: list[ir.Term] = []
@@ -341,6 +342,8 @@ class Flattener(Evaluator):
         d = e.decl
         self._check_attrs(e.mod, PARAM_ATTRS)
         factor, dim, unit = self._unit(e, e.mod)
+        if e.mod.value is None and e.kind == "input":     # an input's default value is 0
+            e.mod.value = ast.Number(value=0, span=d.name_span)
         if e.mod.value is None:
             fail("E212", f"parameter '{d.name}' has no value", d.name_span,
                  f"give it one: {d.type_name} {d.name} = ...;" if d.type_name != "Real" else f"parameter Real {d.name} = 1;")
@@ -390,14 +393,27 @@ class Flattener(Evaluator):
             if not math.isfinite(value):
                 fail("E303", f"parameter '{name}' evaluates to {value}", e.mod.value.span,
                      "check the formula for division by zero, overflow and arguments outside a function's domain")
-            self._check_range(e, name, value)
+            lo, hi = self._check_range(e, name, value)
+            if e.kind == "input" and not isinstance(binding, ir.Const):
+                fail("E230", f"the default value of input '{name}' must be a constant number",
+                     e.mod.value.span, f"write input Real {d.name} = 0; (a default, used when nothing drives it)")
+            used = {n.name for n in X.leaves_of(binding, ir.Param)} & self.input_names
+            if e.kind == "parameter" and used:
+                bad = sorted(used)[0]
+                fail("E231", f"parameter '{name}' depends on input '{bad}'", e.mod.value.span,
+                     "inputs change during a run; parameters are constant: use the input in the equations or forces")
             self.param_values[name] = value
+            if e.kind == "input":
+                self.input_names.add(name)
             e.params.append(ir.Parameter(name, value, None if isinstance(binding, ir.Const) else binding,
-                                         unit, d.doc or "", False, d.name_span, input=e.kind == "input"))
+                                         unit, d.doc or "", False, d.name_span, input=e.kind == "input",
+                                         min=lo, max=hi))
             out_items.append(Scalar(ir.Param(name), dim if dim is not None else None))
         return _reshape(out_items, dims)
 
-    def _check_range(self, e: Entry, name: str, value: float) -> None:
+    def _check_range(self, e: Entry, name: str, value: float) -> tuple[float | None, float | None]:
+        """Check ``value`` against the declared min and max; returns them (None: not declared)."""
+        found: dict[str, float] = {}
         for attr, bad in (("min", lambda v, b: v < b), ("max", lambda v, b: v > b)):
             m = e.mod.sub.get(attr)
             if m is not None and m.value is not None:
@@ -405,10 +421,12 @@ class Flattener(Evaluator):
                 if not (isinstance(b, Scalar) and b.const is not None):
                     fail("E301", f"'{attr}' of '{e.decl.name}' must be a constant number", m.value.span,
                          f"e.g. {attr} = 0")
+                found[attr] = float(b.const)
                 if bad(value, b.const):
                     fail("E313", f"parameter '{name}' = {X.fmt_num(value)} is {'below its minimum' if attr == 'min' else 'above its maximum'} {X.fmt_num(b.const)}",
                          (e.mod.value.span if e.mod.value is not None else e.decl.span),
                          f"change the value or the {attr} bound")
+        return found.get("min"), found.get("max")
 
     def _coordinate(self, e: Entry, dims: tuple[int, ...]) -> Val:
         d = e.decl

@@ -32,7 +32,7 @@ class OdeBackend(Backend):
     def run(self, problem, progress):
         from ..simulate import simulate_ode
 
-        return simulate_ode(problem.eom, problem.settings, progress)
+        return simulate_ode(problem.eom, problem.settings, progress, drive=problem.drive)
 
     def describe(self, r):
         from .. import integrators as I

@@ -3,13 +3,15 @@
 ``formulate(eom, settings) -> Problem`` decides once what kind of problem a run solves
 (an ODE in minimal coordinates, a DAE with a formulation, a hybrid system with contacts,
 or a fixed-step canonical integration) and which back end solves it; ``dump(problem)``
-prints it deterministically (``mech compile --emit problem``).  ``inputs`` is empty until
-the language has ``input`` declarations (u(t) signals); back ends then read them from here.
+prints it deterministically (``mech compile --emit problem``).  ``inputs`` names the model's
+control inputs and ``drive`` (drive.py) their signals: the ODE back end integrates the
+closed loop; the other back ends take constant inputs only, folded into the parameters.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..diagnostics import UsageError
 from .settings import SimulationSettings
 
 KINDS = {"ode": "ODE in minimal coordinates: M(q) q'' = bias(q, q', t, p)",
@@ -27,12 +29,14 @@ class Problem:
     parameters: tuple[tuple[str, float], ...]
     settings: SimulationSettings
     formulation: str | None = None         # DAE formulation as asked ('auto' resolved by the back end)
-    inputs: tuple[str, ...] = ()           # u(t): none yet
+    inputs: tuple[str, ...] = ()           # control inputs u, in order
+    input_signals: tuple[tuple[str, str], ...] = ()   # (name, what drives it)
     invariants: tuple[str, ...] = ()       # quantities that should stay constant (their drift is reported)
     constraints: tuple[str, ...] = ()
     contacts: tuple[str, ...] = ()         # events
     outputs: tuple[str, ...] = ()
     eom: object = field(default=None, repr=False, compare=False)
+    drive: object = field(default=None, repr=False, compare=False)    # drive.Drive
 
 
 def formulate(eom, settings: SimulationSettings) -> Problem:
@@ -56,12 +60,31 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
 
     pv = parameter_vector(eom, settings.p)
     params = tuple((n, float(v)) for n, v in zip(eom.params, pv))
+    drive, run_eom = None, eom
+    if eom.inputs:
+        from ..eom import fold_inputs
+        from .drive import build_drive
+        from .inputs import start_vector
+
+        drive = build_drive(eom, settings.inputs, settings.t_start, settings.t_end, start_vector(eom, settings.x0, pv))
+        if kind != "ode":
+            if not drive.constant:
+                raise UsageError(f"time-varying inputs ({', '.join(s.name for s in drive.signals if s.kind not in ('default', 'constant'))}) "
+                                 f"are supported for ODE problems only; this run is a {kind} problem ({KINDS[kind]}); "
+                                 "drive the inputs with constants here")
+            run_eom = fold_inputs(eom, drive.vector())      # constant inputs: trailing parameters
+    elif settings.inputs:
+        from .drive import build_drive
+
+        build_drive(eom, settings.inputs, settings.t_start, settings.t_end)     # reports the unknown name
     outputs = settings.outputs if settings.outputs is not None else tuple(getattr(eom, "outputs", {}) or ())
     return Problem(kind=kind, backend=backend, model=eom.name, states=states, parameters=params,
                    settings=settings, formulation=settings.formulation if kind == "dae" else None,
                    invariants=invariant_names(eom),
                    constraints=tuple(eom.constraint_names) if constrained else (), contacts=contacts,
-                   outputs=tuple(outputs), eom=eom)
+                   outputs=tuple(outputs), eom=run_eom, drive=drive,
+                   inputs=tuple(eom.inputs),
+                   input_signals=tuple(drive.describe().items()) if drive is not None else ())
 
 
 def invariant_names(eom) -> tuple[str, ...]:
@@ -97,7 +120,8 @@ def dump(problem: Problem) -> str:
     lines.append(f"  states ({len(problem.states)}): " + ", ".join(problem.states))
     lines.append(f"  parameters ({len(problem.parameters)}): "
                  + ", ".join(f"{n} = {v!r}" for n, v in problem.parameters))
-    lines.append("  inputs: " + (", ".join(problem.inputs) or "none"))
+    sig = dict(problem.input_signals)
+    lines.append("  inputs: " + (", ".join(f"{n} ({sig[n]})" if n in sig else n for n in problem.inputs) or "none"))
     lines.append("  invariants: " + (", ".join(problem.invariants) or "none"))
     lines.append("  constraints: " + (", ".join(problem.constraints) or "none"))
     lines.append("  contacts: " + (", ".join(problem.contacts) or "none"))

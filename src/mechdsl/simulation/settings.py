@@ -48,6 +48,7 @@ class SimulationSettings:
     outputs: tuple[str, ...] | None = None
     x0: Any = None                     # [q; qd] or {coordinate | "der(c)": value}
     p: Any = None                      # parameter vector or {name: value}
+    inputs: dict | None = None         # {input name: number | table | u(t) | u(t, x) | casadi.Function} (drive.py)
     dt: float | None = None            # fixed-step methods
     reactions: bool = False
     compiled: bool = False
@@ -72,6 +73,9 @@ class SimulationSettings:
             v = getattr(self, f.name)
             if f.name in ("x0", "p") and v is not None and not isinstance(v, dict):
                 v = [float(x) for x in v]
+            if f.name == "inputs" and v is not None:     # plain data: numbers, else what kind of signal
+                v = {k: (float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else type(x).__name__)
+                     for k, x in v.items()}
             out[f.name] = list(v) if isinstance(v, tuple) else v
         return out
 
@@ -171,6 +175,8 @@ def validate(s: SimulationSettings) -> SimulationSettings:
             raise UsageError(f"dt = {dt:g} makes {(t1 - t0) / dt:.3g} steps, more than the budget of "
                              f"{STEPS_PER_BUDGET * budget} ({STEPS_PER_BUDGET} x budget); "
                              "pass a larger budget (--budget N, budget=N) or a larger dt")
+    if s.inputs is not None and not (isinstance(s.inputs, dict) and all(isinstance(k, str) for k in s.inputs)):
+        raise UsageError(f"inputs must be a dict {{input name: signal}} (got {type(s.inputs).__name__})")
     method = str(s.method or "auto").lower()
     formulation = str(s.formulation or "auto").lower()
     from .registry import check_formulation, check_method
