@@ -232,6 +232,19 @@ ENTRIES = [
                                                "the triangle inequality I1 + I2 >= I3.",
           "Check the values and signs; each principal moment is at most the sum of the other two.",
           corpus="E509_inertia_triangle_inequality.mech"),
+    Entry("E510", "value not finite", "A component value (a mass, length, inertia, spring coefficient, contact "
+                                      "radius, axis) that evaluates to inf or nan with the parameter values in "
+                                      "force (also after `--set` or `with_params`): a product of huge values that "
+                                      "overflows, or a division by zero.",
+          "Check the parameters the value uses; keep the numbers moderate (choose units).",
+          corpus="E510_mass_not_finite.mech"),
+    Entry("E511", "negative length", "A length, radius or size of a body (Rod, Disk, Cylinder, Sphere, Box), a "
+                                     "contact radius or a rest length that is negative.",
+          "Lengths are >= 0; to turn a body around, reverse its axis.", corpus="E511_negative_length.mech"),
+    Entry("E512", "zero direction", "A joint axis, a body axis or a contact plane's normal that is the zero "
+                                    "vector with the parameter values in force.",
+          "Give a direction with a nonzero component (it is normalized for you).",
+          corpus="E512_zero_normal.mech"),
     # ------------------------------------------------------------------ E6xx
     Entry("E601", "unknown scene setting", "A setting that scenes do not have.",
           "Fix the spelling; the hint suggests the setting.", corpus="E601_unknown_setting.mech"),

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from mechdsl.diagnostics import MechError
 from mechdsl.simulate import simulate
 from sim_models import blowup, chain, singular_bead, stiff_oscillator
 
@@ -80,10 +81,19 @@ def test_non_finite_right_hand_side_at_the_start():
     q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
     # V = -sqrt(q): the force sqrt'(q) is infinite at q = 0, where the run starts
     e = E.from_lagrangian("Root", ["q"], [], [], q, qd, t, p, 0.5 * qd[0] ** 2, -ca.sqrt(q[0]))
-    r = simulate(e, 1.0, points=11)
-    assert not r.success and r.failure.time <= 0.1
-    assert r.failure.cause in ("non-finite right-hand side", "non-finite state"), r.failure
-    assert len(r.t) == 1 and r.q[0, 0] == 0.0
+    # at the start the start check refuses it (mechdsl.preflight): a coded error, no run
+    with pytest.raises(MechError) as ex:
+        simulate(e, 1.0, points=11)
+    assert ex.value.first.code == "E744" and "q" in ex.value.first.message
+    # started at q = 1 towards 0 at speed 20 it reaches q = 0, past which sqrt(q) is nan, at
+    # t = int_0^1 dq / sqrt(2 (199 + sqrt(q))) (energy 1/2 v^2 - sqrt(q) = 199): the run stops there
+    from scipy.integrate import quad
+
+    t_zero = quad(lambda s: 1.0 / np.sqrt(2.0 * (199.0 + np.sqrt(s))), 0.0, 1.0)[0]
+    r = simulate(e, 1.0, points=11, x0=[1.0, -20.0])
+    assert not r.success and r.failure.time == pytest.approx(t_zero, rel=1e-3)
+    assert r.failure.cause in ("non-finite right-hand side", "non-finite state", "integrator failure"), r.failure
+    assert len(r.t) == 1 and r.q[0, 0] == 1.0
 
 
 def test_model_without_coordinates_evaluates_outputs():

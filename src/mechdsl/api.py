@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from . import ast, ir
+from . import display as _display
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 from .parser import parse, parse_file
 from .semantic import Program, analyze
@@ -152,6 +153,9 @@ class Model:
     def warnings(self) -> list[Diagnostic]:
         return list(getattr(self.program, "last_warnings", []))
 
+    _repr_html_ = _display.model_html            # notebook displays (mechdsl.display)
+    _repr_markdown_ = _display.model_markdown
+
     # ------------------------------------------------------------------ pickling
     def __reduce__(self):
         """Pickled by its source text, target, overrides, parameter values and scene settings
@@ -211,13 +215,13 @@ class Model:
             if p.name in values:
                 p = dataclasses.replace(p, value=values[p.name], binding=None)
             elif p.binding is not None and not p.integer:
-                p = dataclasses.replace(p, value=evaluate(p.binding, env))
+                p = dataclasses.replace(p, value=_dependent_value(p, env, evaluate))
             env[p.name] = p.value
             params.append(p)
         model = dataclasses.replace(self.model, parameters=tuple(params))
-        from .semantic.physical import mass_property_problems
+        from .semantic.physical import value_problems
 
-        problems = mass_property_problems(model)
+        problems = value_problems(model)
         if problems:
             raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None
@@ -268,8 +272,10 @@ class Model:
         (t_start, formulation, outputs, dt, reactions, compiled, budget, estimate_error, ...)."""
         from .simulation import simulate
 
-        return simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
-                                                **kw), progress=progress)
+        r = simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
+                                             **kw), progress=progress)
+        r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
+        return r
 
     def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
         """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
@@ -306,6 +312,20 @@ class Model:
         from .analysis.integrals import first_integrals
 
         return first_integrals(self.eom)
+
+    def draw(self, t: float | None = None, q=None, **kw):
+        """The mechanism as a matplotlib Figure: at coordinates q, else at time t of a run from the
+        start values, else at the start (docs/animate.md)."""
+        from .display import draw_model
+
+        return draw_model(self, t, q, **kw)
+
+    def equations(self, form: str = "lagrange"):
+        """The equations of motion as sympy equations: form "lagrange" (M q'' = bias, one per
+        coordinate) or "hamilton" (q' = dH/dp, p' = -dH/dq).  Displays typeset in notebooks."""
+        from .display import equations
+
+        return equations(self, form)
 
     def summary(self, derive: bool = False) -> str:
         """Counts and formulation; derive=True asks the mechanics which route it takes."""
@@ -362,6 +382,26 @@ class InputInfo:
     max: float | None
     default: float
     doc: str = ""
+
+
+def _dependent_value(p: ir.Parameter, env: dict[str, float], evaluate) -> float:
+    """A dependent parameter re-evaluated with new values: a value it cannot have (1/0,
+    sqrt(-1), overflow) is E303 at the parameter, as when the file itself is analyzed."""
+    problem = None
+    try:
+        with np.errstate(all="ignore"):
+            value = float(evaluate(p.binding, env))
+        if not math.isfinite(value):
+            problem = f"evaluates to {value}"
+    except (ValueError, ZeroDivisionError, OverflowError) as ex:
+        problem = f"cannot be evaluated: {ex}"
+    except TypeError:  # a complex number: a negative base to a fractional power
+        problem = "has no real value"
+    if problem is None:
+        return value
+    raise MechError(Diagnostic("E303", f"parameter '{p.name}' {problem} with the values given", p.span,
+                               "it depends on the parameters changed (--set / with_params): check their "
+                               "values against its formula (division by zero, a function's domain)"))
 
 
 def _number(name: str, v) -> float:

@@ -60,6 +60,7 @@ class EOM:
     # `reactions` may depend on; the DAE simulator substitutes the computed multipliers.
     lam: object | None = None
     reactions: dict[str, object] = field(default_factory=dict)   # name -> SX in q, qd, t, p, lam
+    body_rotation: Callable[[str], object] | None = None    # body name -> SX (3, 3) in q, t, p (drawing)
     # control inputs (``input Real F``): an SX symbol (n_u,) the forces may depend on, and names
     u: object | None = None
     inputs: tuple[str, ...] = ()

@@ -76,6 +76,33 @@ def const(v: float) -> Const:
     return Const(float(v))
 
 
+_TOTAL_OPS = frozenset({"add", "sub", "mul", "neg", "sin", "cos", "abs", "sign", "min", "max", "floor", "ceil"})
+
+
+def _always_finite(e: Expr) -> bool:
+    """True when e is finite wherever its leaves are (parameters, coordinates and time are):
+    no division except by a nonzero constant, no function with poles or a restricted domain.
+    Only such an e may vanish from 0*e; 0*(1/(r - r)) must stay an error."""
+    if isinstance(e, Const):
+        return math.isfinite(e.value)
+    for n in walk(e):
+        if isinstance(n, Const):
+            if not math.isfinite(n.value):
+                return False
+        elif isinstance(n, Op):
+            if n.op == "div":
+                d = n.args[1]
+                if not (isinstance(d, Const) and d.value != 0.0 and math.isfinite(d.value)):
+                    return False
+            elif n.op == "pow":
+                k = n.args[1]
+                if not (isinstance(k, Const) and k.value >= 0 and k.value == int(k.value)):
+                    return False
+            elif n.op not in _TOTAL_OPS:
+                return False
+    return True
+
+
 def is_const(e: Expr, v: float | None = None) -> bool:
     return isinstance(e, Const) and (v is None or e.value == v)
 
@@ -101,7 +128,8 @@ def sub(a: Expr, b: Expr) -> Expr:
 
 
 def mul(a: Expr, b: Expr) -> Expr:
-    if is_const(a, 0.0) or is_const(b, 0.0):
+    # 0*x folds to 0 only for a finite constant x: x = 1/(r - r) must stay an error, not vanish
+    if (is_const(a, 0.0) and _always_finite(b)) or (is_const(b, 0.0) and _always_finite(a)):
         return Const(0.0)
     if is_const(a, 1.0):
         return b
@@ -117,9 +145,7 @@ def div(a: Expr, b: Expr) -> Expr:
         return a
     if isinstance(a, Const) and isinstance(b, Const) and b.value != 0.0:
         return Const(a.value / b.value)
-    if is_const(a, 0.0) and not is_const(b, 0.0):
-        return Const(0.0)
-    return Op("div", (a, b))
+    return Op("div", (a, b))   # 0/b is 0 only for b != 0, which a symbolic b does not promise
 
 
 def neg(a: Expr) -> Expr:

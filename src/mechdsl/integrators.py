@@ -83,9 +83,13 @@ class Progress:
                 from tqdm import tqdm
             except ImportError:  # pragma: no cover - tqdm is a core dependency
                 return
-            self.bar = tqdm(total=round(t1 - t0, 12), desc=label, unit="s", delay=delay, file=sys.stderr,
-                            leave=False, bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.4g}/{total:.4g} "
-                                                    "[{elapsed}<{remaining}]")
+            from .display import notebook_bar
+
+            self.bar = notebook_bar(total=round(t1 - t0, 12), desc=label, unit="s", leave=False)   # in Jupyter
+            if self.bar is None:
+                self.bar = tqdm(total=round(t1 - t0, 12), desc=label, unit="s", delay=delay, file=sys.stderr,
+                                leave=False, bar_format="{desc}: {percentage:3.0f}%|{bar}| t = {n:.4g}/{total:.4g} "
+                                                        "[{elapsed}<{remaining}]")
 
     def update(self, t: float) -> None:
         d = min(max(t - self.t0, 0.0), self.t1 - self.t0)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from . import display as _display
 from .fileio import write_atomic_group
 
 
@@ -44,6 +45,9 @@ class Result:
     metadata: dict[str, Any] = field(default_factory=dict)         # model, options, method and why, versions
     events: list[dict[str, Any]] = field(default_factory=list)
     failure: Failure | None = None
+
+    _repr_html_ = _display.result_html            # notebook displays (mechdsl.display)
+    _repr_markdown_ = _display.result_markdown
 
     # -- access -----------------------------------------------------------------------
     @property
@@ -141,6 +145,31 @@ class Result:
 
     def to_json_text(self, **extra) -> str:
         return json.dumps(_jsonable({**self.summary(), **extra}), indent=2, sort_keys=True) + "\n"
+
+    # -- seeing it (mechdsl.display) ------------------------------------------------------
+    def plot(self, *signals, **kw):
+        """A matplotlib Figure: coordinates (one axis per unit), energies, drift (mechdsl.plot)."""
+        from .plot import result_figure
+
+        return result_figure(self, *signals, **kw)
+
+    def animate(self, model=None, **kw):
+        """An Animation of the mechanism (mechdsl.animate); model defaults to the one simulated."""
+        from .display import animate_result
+
+        return animate_result(self, model, **kw)
+
+    def to_pandas(self):
+        """A pandas DataFrame indexed by time, units in ``df.attrs["units"]`` (needs the 'table' extra)."""
+        from .display import to_pandas
+
+        return to_pandas(self)
+
+    def to_xarray(self):
+        """An xarray Dataset over time, each variable's unit in its attrs (needs the 'table' extra)."""
+        from .display import to_xarray
+
+        return to_xarray(self)
 
 
 def sidecar_path(path) -> str:

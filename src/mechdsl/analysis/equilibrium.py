@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import display as _display
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from . import charts
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
@@ -93,6 +94,9 @@ class Equilibrium:
     @property
     def values(self) -> dict[str, float]:
         return {c: float(v) for c, v in zip(self.coords, self.q)}
+
+    _repr_html_ = _display.equilibrium_html          # notebook displays (mechdsl.display)
+    _repr_markdown_ = _display.equilibrium_markdown
 
     @property
     def stability(self) -> str:

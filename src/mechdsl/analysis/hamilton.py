@@ -166,15 +166,9 @@ def format_hamiltonian(model, latex: bool = False) -> str:
     n = len(lg.q)
     # a size limit, not a clock: larger models print their entries as derived (deterministic)
     simplify_small = simplify if n <= SIMPLIFY_MAX_N else (lambda e, angles=(): e)
-    P = [sp.Symbol(_momentum_name(c, lg), real=True) for c in lg.coords]
+    s = symbolic_hamilton(lg)
+    P, pexpr, Msym, bsym, T0, small = s["P"], s["momenta"], s["M"], s["b"], s["T0"], s["small"]
     L = lg.L
-    pexpr = [simplify_small(sp.diff(L, v), lg.q) for v in lg.qd]
-    Msym = sp.Matrix(pexpr).jacobian(lg.qd)
-    zero = {v: 0 for v in lg.qd}
-    bsym = sp.Matrix([e.subs(zero) for e in pexpr])
-    T0 = lg.T.subs(zero)
-    Qtot = [lg.Q[i] - sp.diff(lg.D, lg.qd[i]) for i in range(n)]
-    small = n <= SYMBOLIC_MAX_N and all(sp.count_ops(e) <= SYMBOLIC_MAX_OPS for e in Msym)
     out = []
     title = getattr(model, "name", None) or (eom.name if eom is not None else "model")
     fmt = (lambda e: _latex(e, lg, P)) if latex else (lambda e: _text(e))
@@ -193,19 +187,7 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         return t if text != "0" else "-" + t[3:]
 
     if small:
-        det = simplify_small(Msym.det(), lg.q)
-        fdet = sp.factor(det)
-        det = fdet if sp.count_ops(fdet) <= sp.count_ops(det) else det
-        small = det != 0
-    if small:
-        adj = Msym.adjugate().applyfunc(lambda e: simplify_small(e, lg.q))
-        dp = sp.Matrix(P) - bsym
-        qd_sol = [_compact(simplify_small(sp.expand(e), lg.q) / det) for e in adj * dp]
-        sub = dict(zip(lg.qd, qd_sol))
-        H = (_compact(simplify_small(sp.expand((dp.T * adj * dp)[0, 0]), lg.q) / (2 * det))
-             + simplify_small(lg.V - T0, lg.q))
-        dLdq = [simplify_small(sp.diff(L, qi), lg.q) for qi in lg.q]
-        pdot = [(a + Qi).xreplace(sub) for a, Qi in zip(dLdq, Qtot)]
+        qd_sol, H, pdot = s["qd"], s["H"], s["pdot"]
         lines.append(("momenta", [(pname(c), fmt(e)) for c, e in zip(lg.coords, pexpr)]))
         lines.append(("Hamiltonian", [("H", fmt(H))]))
         lines.append(("Hamilton's equations", [(qdname(c), fmt(e)) for c, e in zip(lg.coords, qd_sol)]
@@ -252,6 +234,45 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         out += [f"    {k.ljust(w)} = {v}" for k, v in items]
     out.append(f"  note: {note}")
     return "\n".join(out) + "\n"
+
+
+def symbolic_hamilton(lg) -> dict:
+    """The Legendre transform of a SymbolicLagrangian in sympy: momentum symbols "P", "momenta"
+    dL/dqd, "M", "b", "T0"; and when M is small enough to invert ("small"), "qd" = M^-1 (p - b),
+    "H" and "pdot" = dL/dq + Q - dD/dqd at qd(q, p)."""
+    import sympy as sp
+
+    from .symbolic import simplify_small as simplify
+
+    n = len(lg.q)
+    # a size limit, not a clock: larger models keep their entries as derived (deterministic)
+    simplify_small = simplify if n <= SIMPLIFY_MAX_N else (lambda e, angles=(): e)
+    P = [sp.Symbol(_momentum_name(c, lg), real=True) for c in lg.coords]
+    pexpr = [simplify_small(sp.diff(lg.L, v), lg.q) for v in lg.qd]
+    Msym = sp.Matrix(pexpr).jacobian(lg.qd)
+    zero = {v: 0 for v in lg.qd}
+    bsym = sp.Matrix([e.subs(zero) for e in pexpr])
+    T0 = lg.T.subs(zero)
+    out = {"P": P, "momenta": pexpr, "M": Msym, "b": bsym, "T0": T0,
+           "small": n <= SYMBOLIC_MAX_N and all(sp.count_ops(e) <= SYMBOLIC_MAX_OPS for e in Msym)}
+    if out["small"]:
+        det = simplify_small(Msym.det(), lg.q)
+        fdet = sp.factor(det)
+        det = fdet if sp.count_ops(fdet) <= sp.count_ops(det) else det
+        out["small"] = det != 0
+    if not out["small"]:
+        return out
+    Qtot = [lg.Q[i] - sp.diff(lg.D, lg.qd[i]) for i in range(n)]
+    adj = Msym.adjugate().applyfunc(lambda e: simplify_small(e, lg.q))
+    dp = sp.Matrix(P) - bsym
+    qd_sol = [_compact(simplify_small(sp.expand(e), lg.q) / det) for e in adj * dp]
+    sub = dict(zip(lg.qd, qd_sol))
+    out["qd"] = qd_sol
+    out["H"] = (_compact(simplify_small(sp.expand((dp.T * adj * dp)[0, 0]), lg.q) / (2 * det))
+                + simplify_small(lg.V - T0, lg.q))
+    dLdq = [simplify_small(sp.diff(lg.L, qi), lg.q) for qi in lg.q]
+    out["pdot"] = [(a + Qi).xreplace(sub) for a, Qi in zip(dLdq, Qtot)]
+    return out
 
 
 def _constraint_items(eom, lg, fmt) -> list[tuple[str, str]]:

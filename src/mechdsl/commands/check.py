@@ -1,4 +1,5 @@
-"""``mech check FILE...``: parse and analyze; print each model's formulation, or the diagnostics."""
+"""``mech check FILE...``: parse, analyze, derive and check the start state (mechdsl.preflight);
+print each model's formulation, or the diagnostics."""
 from __future__ import annotations
 
 import sys
@@ -22,6 +23,7 @@ def add_parser(sub):
 def run(args) -> int:
     from ..api import Model
     from ..parser import parse_file
+    from ..preflight import check_start
     from ..semantic import analyze
 
     status = 0
@@ -44,6 +46,10 @@ def run(args) -> int:
                 lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
+                settings = m.scene_settings
+                atol = settings.get("atol", 1e-10)
+                check_start(m.eom, t=float(settings.get("start_time", 0.0)),
+                            drift_bound=settings.get("drift_bound") or max(10 * float(atol), 1e-10))
                 for w in m.warnings:
                     print(format_diagnostics([w]), file=sys.stderr)
                 if kind == "scene":

@@ -130,6 +130,24 @@ def check_defined(eom: EOM, g: np.ndarray, G: np.ndarray, where: str = "at the s
                  "divisions, logarithms); a constraint must be differentiable where the mechanism is"))
 
 
+def _lstsq(eom: EOM, A, b, labels) -> np.ndarray:
+    """Minimum-norm least squares; values that are not finite (or a solver that fails on
+    them) are a located error naming the constraints (E826), never a numpy exception."""
+    bad = [i for i in range(A.shape[0]) if not (np.isfinite(b[i]) and np.all(np.isfinite(A[i])))]
+    if not bad and np.all(np.isfinite(A)):
+        try:
+            return np.linalg.lstsq(A, b, rcond=1e-12)[0]
+        except np.linalg.LinAlgError:
+            pass
+    bad = bad or list(range(A.shape[0]))
+    raise MechError(Diagnostic(
+        CODE_UNDEFINED, "the constraint" + ("s " if len(bad) > 1 else " ") + ", ".join(labels[i] for i in bad)
+        + " cannot be solved for during consistent initialization: the values are not finite "
+        "(the constraints' gradients or the mass matrix)", span=_span(eom, bad[0]),
+        help="check the lengths, masses and start values of the bodies in the loop for zero, huge or "
+             "undefined values"))
+
+
 def _distances(g, G):
     norms = np.linalg.norm(G, axis=1)
     return np.abs(g) / np.where(norms > 0, norms, 1.0)
@@ -139,6 +157,11 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
                max_iter: int = 50, fixed_q=None, fixed_qd=None) -> InitReport:
     """Make (q0, q0') consistent with g = 0 and G q' + g_t = 0, holding the fixed values
     (``EOM.fixed_q`` / ``EOM.fixed_qd``, or the flags given here)."""
+    with np.errstate(all="ignore"):      # values that are not finite are reported (E826), not warned
+        return _initialize(eom, q0, qd0, t, p, tol, max_iter, fixed_q, fixed_qd)
+
+
+def _initialize(eom, q0, qd0, t, p, tol, max_iter, fixed_q, fixed_qd) -> InitReport:
     pv = eom.param_values if p is None else np.asarray(p, float)
     if q0 is None or qd0 is None:
         a, b = eom.start(pv)
@@ -172,7 +195,7 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
             if np.max(_distances(g, G)) <= 1e-3 * tol * scale:
                 break
             A = G[:, free] * d[free][None, :]
-            y = np.linalg.lstsq(A, -g, rcond=1e-12)[0]
+            y = _lstsq(eom, A, -g, labels)
             step = d[free] * y
             # backtracking on ||g|| keeps Gauss-Newton from overshooting far from the surface
             lam, g_norm = 1.0, np.linalg.norm(g)
@@ -210,7 +233,7 @@ def initialize(eom: EOM, q0=None, qd0=None, t: float = 0.0, p=None, tol: float =
     if freev:
         d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
         A = G[:, freev] * d[freev][None, :]
-        y = np.linalg.lstsq(A, -r, rcond=1e-12)[0]
+        y = _lstsq(eom, A, -r, labels)
         qd[freev] += d[freev] * y
         r = G @ qd + gt
     vscale = 1.0 + np.max(np.abs(qd))

@@ -115,6 +115,8 @@ class _Deriver:
         g_list += lr
         g_names += ln
         self.constrained = bool(g_list)
+        if self.constrained:
+            self._check_quadratic(M)
         g = ca.vertcat(*[ca.SX(x) for x in g_list]) if g_list else None
         self.g = g
         self.lam = ca.SX.sym("lam", len(g_list)) if g_list else None
@@ -137,6 +139,7 @@ class _Deriver:
             fixed_q=tuple(c.fixed for c in model.coordinates),
             fixed_qd=tuple(c.speed_fixed for c in model.coordinates),
             route=route, model=model, point_position=kin.point_pos, point_velocity=kin.point_vel,
+            body_rotation=kin.body_rot,
             singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam,
             u=e0.u, inputs=e0.inputs, input_defaults=tuple(float(p.value) for p in model.inputs))
 
@@ -341,6 +344,19 @@ class _Deriver:
             c = missing[0]
             raise MechError(Diagnostic("E731", f"coordinate '{c.name}' has no inertia: it drives no joint "
                                                "and appears in no kinetic energy term", c.span))
+
+    def _check_quadratic(self, M) -> None:
+        """The constrained formulations solve M(q) q'' + G^T lambda = bias: a kinetic energy that
+        is not quadratic in the speeds (M depends on them) has no such form (E754)."""
+        if isinstance(M, _Lazy) or not isinstance(M, ca.SX) or not ca.depends_on(M, self.qd):
+            return
+        spans = [t.span for t in self.model.terms if t.kind == "kinetic"]
+        raise MechError(Diagnostic("E754", "the kinetic energy is not quadratic in the speeds (its second "
+                                           "derivative in them depends on the speeds): a model with "
+                                           "constraints needs T = 1/2 der(q)' M(q) der(q)",
+                                   spans[0] if spans else self.model.span,
+                                   "write the kinetic energy as a quadratic form of der(...), or remove the "
+                                   "constraints (an unconstrained model accepts any kinetic energy)"))
 
     def _route_note(self) -> str:
         tree = self.tree

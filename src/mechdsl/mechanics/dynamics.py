@@ -41,6 +41,13 @@ def _p1(tree: Tree, kin: Kinematics, fext: dict):
     return out
 
 
+def _no_mass_hint(tree: Tree, joint) -> str:
+    from ..preflight import point_rotation_hint
+
+    hint = point_rotation_hint(tree.model, joint)
+    return hint or "a joint variable needs inertia beyond it (or prescribe its motion)"
+
+
 def aba(tree: Tree, kin: Kinematics, fext: dict, tau) -> tuple[ca.SX, list]:
     """Forward dynamics: returns (nu', link accelerations [(aw, av)])."""
     links = tree.links
@@ -58,7 +65,7 @@ def aba(tree: Tree, kin: Kinematics, fext: dict, tau) -> tuple[ca.SX, list]:
         Ap, Bp, Cp, pn, pf, Uw, Uv, Di, u = out
         if lk.k == 1 and Di.is_constant() and not Di.is_regular():
             raise MechError(Diagnostic("E730", f"joint '{lk.joint.name}' moves no mass", lk.joint.span,
-                                       "a joint variable needs inertia beyond it (or prescribe its motion)"))
+                                       _no_mass_hint(tree, lk.joint)))
         saved[i] = (Uw, Uv, Di, u)
         lam = lk.parent
         if lam >= 0:

@@ -94,9 +94,9 @@ def check_model(model: ir.Model, diags: DiagnosticBag) -> ir.Model:
         diags.error("E506", f"model '{model.name}' has no coordinates (no degrees of freedom)", model.span,
                     "declare `coordinate Real q(start = ...);` or add a joint with a free variable")
     _warn_unused_coordinates(model, diags)
-    from .physical import mass_property_problems
+    from .physical import value_problems
 
-    diags.extend(mass_property_problems(model))
+    diags.extend(value_problems(model))
     diags.raise_if_errors()
     return dataclasses.replace(model, joints=joints, loops=loops)
 

@@ -20,7 +20,12 @@ from .settings import SimulationSettings, from_kwargs, resolve
 
 
 def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
-    """Formulate and solve one run."""
+    """Formulate and solve one run, after the start check (mechdsl.preflight: what
+    `mech check` accepts can start here; `p`, `x0` and `--set` values are judged too)."""
+    from ..preflight import check_start
+
+    drift = settings.extra.get("drift_bound") or max(10 * settings.atol, 1e-10)   # the DAE's default
+    check_start(eom, p=settings.p, x0=settings.x0, t=settings.t_start, drift_bound=drift)
     return solve(formulate(eom, settings), progress=progress)
 
 

@@ -1,0 +1,88 @@
+"""``mech animate FILE -o OUT.gif|.html|.mp4``: simulate and draw the mechanism moving."""
+from __future__ import annotations
+
+import sys
+
+from ._common import add_force_arg, add_set_arg, add_target_args, load_model, number, target_line
+
+HELP = "simulate a model and write an animation of the mechanism (.gif, .html or .mp4)"
+
+
+def add_parser(sub):
+    from ..animate import VIEWS
+
+    p = sub.add_parser("animate", help=HELP, description=HELP + ". Bodies are drawn from their shapes; plane "
+                       "mechanisms are drawn in their plane, spatial ones projected (see docs/animate.md).")
+    add_target_args(p, what="animate")
+    p.add_argument("-o", "--output", metavar="OUT", required=True,
+                   help="animation file: .gif, .html (play/pause and a scrubber) or .mp4 (needs ffmpeg)")
+    p.add_argument("--fps", type=_num("--fps"), default=30.0, metavar="F", help="frames per second (default 30)")
+    p.add_argument("--speed", type=_num("--speed"), default=1.0, metavar="X",
+                   help="model seconds per second of playback (default 1: real time)")
+    p.add_argument("--trail", action="append", default=[], metavar="POINT",
+                   help="draw the path of a point (e.g. rod2.b); repeat for several")
+    p.add_argument("--view", default="auto", metavar="V",
+                   help=f"{' | '.join(VIEWS)} (default auto: the plane of a plane mechanism, else 3d)")
+    p.add_argument("--t-end", type=_num("--t-end"), metavar="T", help="end time [s] (default: scene stop_time, else 10)")
+    p.add_argument("--size", default="480x400", metavar="WxH", help="frame size in pixels (default 480x400)")
+    add_set_arg(p)
+    p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
+    add_force_arg(p)
+    return p
+
+
+def run(args) -> int:
+    from ..animate import animate, check_output, check_view, frame_times
+
+    check_output(args.output, args.force)            # format and place, before any work
+    check_view(args.view)
+    size = _size(args.size)
+    m = load_model(args)
+    print(target_line(args, m))
+    t_end = args.t_end if args.t_end is not None else m.scene_settings.get("stop_time")
+    if t_end is None:
+        t_end = 10.0
+        print("mech: no --t-end and no scene stop_time: animating 10 s", file=sys.stderr)
+    t0 = float(m.scene_settings.get("start_time", 0.0))
+    if not t_end > t0:
+        from ..diagnostics import UsageError
+
+        raise UsageError(f"--t-end {t_end:g} must be after the start time {t0:g}")
+    times = frame_times(t0, float(t_end), args.fps, args.speed)
+    from ..animate.geometry import build
+
+    build(m.eom, traces=tuple(args.trail))            # bad --trail names fail before the run
+    r = m.simulate(float(times[-1]), points=len(times))
+    anim = animate(r, m, fps=args.fps, speed=args.speed, view=args.view, trails=args.trail, size=size)
+    path = anim.save(args.output, overwrite=args.force)
+    what = "bars of the coordinates (no bodies to draw)" if anim.view == "bars" else f"view {anim.view}"
+    print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps, {anim.times[-1] - anim.times[0]:g} s of model time, {what}")
+    if r.failure is not None:
+        print(f"mech: error: {r.failure}; animated up to t = {r.t[-1]:.6g}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _num(option):
+    def parse(text):
+        import argparse
+
+        from ..diagnostics import UsageError
+
+        try:
+            return number(text, what=option)
+        except UsageError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    return parse
+
+
+def _size(text: str) -> tuple[int, int]:
+    from ..diagnostics import UsageError
+
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise UsageError(f"--size expects WIDTHxHEIGHT in pixels, e.g. 480x400 (got {text!r})") from None
+    if not (32 <= w <= 4000 and 32 <= h <= 4000):
+        raise UsageError(f"--size {w}x{h}: each side must be between 32 and 4000 pixels")
+    return w, h

@@ -1,0 +1,438 @@
+"""The start check: the numbers of a derived model at its start state, before any step.
+
+``preflight(eom, p, x0, t)`` returns the problems (Diagnostics, empty when the model can
+start); ``check_start`` raises them.  ``mech check`` runs it on every model and scene, and
+``simulation.simulate`` (the entry of every run) before it formulates, so that `--set`,
+`with_params`, `p` and `x0` values are judged too: what ``check`` accepts, ``simulate`` can
+start (docs/simulate.md, "The start check").
+
+In order (the first group that finds something ends the check):
+
+  E740  a parameter value that is not finite, or subnormal (below 2.2e-308)  (at the parameter)
+  E508-E512  the component values (semantic/physical.py)  (at the component)
+  E741  a start value that is not finite                  (at the coordinate's joint)
+  E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
+  E826  a constraint residual or gradient that is not finite at the start (dae/init.py)
+  E821/E822  consistent initialization (dae/init.py)      (constrained models)
+  E749  a loop whose positions double precision cannot resolve to the drift bound (lengths 1e16)
+  E742  the mass matrix is not finite at the start
+  E743  the mass matrix is singular (or not positive definite) at the start, on the motions
+        the constraints allow: a coordinate moves no inertia (a point mass on a Spherical
+        joint, a rod of length 0), or a negative mass in the equation layer
+  E746  the energy is not finite at the start (overflow: a product of huge values)
+  E745  a spring or damper whose ends coincide at the start (its direction is undefined)
+  E744  the accelerations are not finite at the start for another reason
+  E756  a contact gap that is not finite at the start          (at the contact)
+
+Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
+energy, the constraint Jacobian); the mass matrix of the recursive route (CRBA, O(N^2)) is
+built only to explain non-finite accelerations.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .diagnostics import Diagnostic, MechError, Span
+
+SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
+ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
+COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
+DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
+
+_HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
+                        "or give the body a Sphere/Body inertia")
+
+
+def check_start(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_BOUND) -> None:
+    """Raise a MechError with the start problems of ``eom`` (see the module docstring)."""
+    problems = preflight(eom, p, x0, t, drift_bound)
+    if problems:
+        raise MechError(problems)
+
+
+def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:
+    """The problems of ``eom`` at its start state with parameters ``p`` (vector or overrides)
+    and start overrides ``x0`` (as ``simulate`` takes them); empty when it can start.
+    drift_bound: the constraint drift the DAE simulation will hold (E749)."""
+    from .eom import parameter_vector
+
+    pv = parameter_vector(eom, p)
+    model = eom.model
+    tiny = np.finfo(float).tiny
+    bad = [i for i in range(pv.size) if not math.isfinite(pv[i]) or 0.0 < abs(pv[i]) < tiny]
+    if bad:
+        return [Diagnostic("E740", f"the value of parameter '{eom.params[i]}' is "
+                           + (f"not finite ({pv[i]:g})" if not math.isfinite(pv[i]) else
+                              f"too small to compute with ({pv[i]:g}: below {tiny:.3g}, double precision "
+                              "keeps only a few of its digits)"),
+                           _param_span(model, eom.params[i]),
+                           "check its formula for overflow and division by zero, or the value given "
+                           "with --set / with_params; use 0 for nothing, or other units") for i in bad]
+    own = None if model is None else np.array([q.value for q in model.real_parameters], float)
+    if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
+        # the model's own values were judged when it was analyzed (or by with_params)
+        from .semantic.physical import parameter_env, value_problems
+
+        env = parameter_env(model)
+        env.update(zip(eom.params, map(float, pv)))
+        found = value_problems(model, env)
+        if found:
+            return found
+    if eom.n == 0:
+        return []
+    if not isinstance(drift_bound, (int, float)) or not drift_bound > 0:
+        drift_bound = DRIFT_BOUND          # a bad option is refused by the simulator itself
+    with np.errstate(all="ignore"):
+        return _numbers(eom, pv, x0, float(t), drift_bound)
+
+
+def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
+    q0, qd0 = eom.start(pv)
+    x_model = np.r_[q0, qd0]
+    given = _overridden(eom, x0)            # values x0 replaces are the caller's (UsageError if bad)
+    bad = [i for i in range(2 * eom.n) if i not in given and not math.isfinite(x_model[i])]
+    if bad:
+        return [_start_problem(eom, i, x_model[i]) for i in bad]
+    found = _huge_angles(eom, q0, given)
+    if found:
+        return found
+    if eom.m:
+        from .dae.driver import _start
+        from .dae.init import initialize
+
+        q, qd, fq, fqd = _start(eom, x0, pv)
+        g_problem = _constraint_problem(eom, q, t, pv)
+        if g_problem:
+            return g_problem
+        try:
+            init = initialize(eom, q, qd, t, pv, fixed_q=fq, fixed_qd=fqd)
+        except MechError as e:
+            return e.diagnostics
+        q, qd = init.q, init.qd
+        found = _loop_resolution(eom, q, t, pv, drift_bound)
+        if found:
+            return found
+    else:
+        from .simulate import start_vector
+
+        x = start_vector(eom, x0, pv)
+        q, qd = x[:eom.n], x[eom.n:]
+    return _dynamics_problems(eom, q, qd, t, pv)
+
+
+def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
+    from .codegen import casadi_functions
+
+    x = np.r_[q, qd]
+    fs = casadi_functions(eom, names=("energy", "mass_matrix", "bias"))
+    if eom.m:
+        M = _mass(fs, t, x, pv, eom.n)
+        rhs = _value(fs["bias"], t, x, pv)
+        G = _jacobian(eom, q, t, pv)
+    else:
+        M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
+        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, pv)   # simulate's own
+        G = None
+    ok_rhs = bool(np.all(np.isfinite(rhs)))
+    if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix
+        M = _mass(fs, t, x, pv, eom.n)
+    if M is not None:
+        found = _mass_problems(eom, M, G)
+        if found:
+            return found
+    T, V, _ = (float(v) for v in fs["energy"](t, x, pv))
+    if not (math.isfinite(T) and math.isfinite(V)):
+        return [Diagnostic("E746", f"the energy at the start is not finite (kinetic {T:g}, potential {V:g})",
+                           _model_span(eom),
+                           "a product of huge values overflows: check the parameters for values near 1e308, "
+                           "or choose units that keep the numbers moderate")]
+    if not ok_rhs:
+        return _force_problems(eom, q, t, pv, rhs)
+    return _gap_problems(eom, q, t, pv)      # (an output that is not finite is a warning of the run)
+
+
+def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
+    """E756: a contact whose gap is not finite at the start can never be located (the
+    newtons_cradle with r = 1e308: inf gaps in the results of a run that 'succeeded')."""
+    if eom.model is None or not eom.model.contacts:
+        return []
+    import casadi as ca
+
+    from .impacts.gaps import contact_gaps
+
+    def build():
+        gaps = contact_gaps(eom)[0]
+        return gaps, ca.Function("start_gaps", [eom.q, eom.t, eom.p],
+                                 [ca.vertcat(*[ca.SX(g.gap) for g in gaps])] if gaps else [ca.SX(0, 1)])
+
+    gaps, fn = eom.cached("preflight_gaps", build)
+    if not gaps:
+        return []
+    for g, v in zip(gaps, _value(fn, q, t, pv)):
+        if not math.isfinite(v):
+            return [Diagnostic("E756", f"the gap of contact '{g.name}' is not finite at the start ({v:g})",
+                               g.span or _model_span(eom),
+                               "its sizes and positions overflow with these parameter values: keep them moderate")]
+    return []
+
+
+# ----------------------------------------------------------------------------- the parts
+
+
+def _mass_problems(eom, M, G) -> list[Diagnostic]:
+    """E742 (not finite) or E743 (singular on the speeds the constraints allow, judged after
+    scaling each coordinate by its own inertia, so that units do not matter)."""
+    bad_rows = [i for i in range(eom.n) if not np.all(np.isfinite(M[i]))]
+    if bad_rows:
+        names = ", ".join(eom.coords[i] for i in bad_rows)
+        return [Diagnostic("E742", f"the mass matrix is not finite at the start (in the equation of {names})",
+                           _coord_span(eom, eom.coords[bad_rows[0]]),
+                           "check the masses, lengths and inertias of the bodies these coordinates move "
+                           "for overflow and division by zero")]
+    Ms = 0.5 * M + 0.5 * M.T             # (no overflow near 1e308)
+    d = np.sqrt(np.abs(np.diag(Ms)))
+    scale = float(np.max(d)) if d.size else 0.0
+    if scale == 0.0:
+        return [_singular(eom, np.ones(eom.n), G is not None)]
+    dinv = 1.0 / np.where(d > 1e-150 * scale, d, scale)     # a coordinate with no inertia keeps a 0
+    Z = np.eye(eom.n)
+    if G is not None and G.size:
+        Gs = G * dinv[None, :]
+        _, sv, vt = np.linalg.svd(Gs, full_matrices=Gs.shape[0] < Gs.shape[1])   # V in full, U not
+        rank = int(np.sum(sv > 1e-10 * max(float(sv[0]), 1e-300))) if sv.size else 0
+        Z = vt[rank:].T                      # the (scaled) speeds the constraints allow
+        if Z.shape[1] == 0:
+            return []
+    A = Z.T @ (dinv[:, None] * Ms * dinv[None, :]) @ Z
+    ev, vecs = np.linalg.eigh(0.5 * (A + A.T))
+    top = max(float(np.max(np.abs(ev))), 1.0)    # the scaled matrix has a unit diagonal: its scale is 1
+    if ev[0] < -SINGULAR_RCOND * top:
+        return [_singular(eom, Z @ vecs[:, 0], Z.shape[1] < eom.n, negative=True)]
+    if ev[0] <= SINGULAR_RCOND * top:
+        return [_singular(eom, Z @ vecs[:, 0], Z.shape[1] < eom.n)]
+    return []
+
+
+def _singular(eom, v, constrained: bool, negative: bool = False) -> Diagnostic:
+    """E743 for the null direction v (or one of negative kinetic energy), named by its
+    coordinates and joints."""
+    v = np.abs(np.asarray(v, float))
+    top = float(np.max(v)) if v.size else 0.0
+    idx = [i for i in range(eom.n) if v[i] > 1e-6 * top] or list(range(eom.n))
+    coords = [eom.coords[i] for i in idx]
+    joint = _owner_joint(eom, coords[0])
+    model = eom.model
+    hint = ("every coordinate needs inertia beyond it: give the bodies it moves a mass and (for rotations) "
+            "an extent, or prescribe its motion") if joint is not None else (
+        "the kinetic energy must grow with every speed at the start: check the masses it uses (not 0) "
+        "and that it is quadratic in der(...) (1/2 m der(q)^2, not der(q)^4)")
+    if joint is not None and model is not None:
+        hint = point_rotation_hint(model, joint) or hint
+    where = f" (joint '{joint.name}')" if joint is not None else ""
+    allowed = " on the motions the constraints allow" if constrained else ""
+    if negative:
+        return Diagnostic("E743", f"the mass matrix is not positive definite at the start{allowed}: a motion of "
+                                  f"{', '.join(coords)}{where} has a negative kinetic energy",
+                          joint.span if joint is not None else _coord_span(eom, coords[0]),
+                          "masses and moments of inertia are positive: check the signs of the masses in the "
+                          "kinetic energy and of the parameters they use")
+    return Diagnostic("E743", f"the mass matrix is singular at the start{allowed}: "
+                              f"{', '.join(coords)}{where} move{'s' if len(coords) == 1 else ''} no inertia",
+                      joint.span if joint is not None else _coord_span(eom, coords[0]), hint)
+
+
+def point_rotation_hint(model, joint) -> str | None:
+    """The hint for rotations of a point mass (no inertia about any axis through it), else None."""
+    child = _body(model, joint.child_body)
+    if joint.kind in ("spherical", "free") and child is not None and child.kind == "point":
+        return _HINT_POINT_ROTATION.format(kind=joint.kind.capitalize())
+    return None
+
+
+def _force_problems(eom, q, t, pv, rhs) -> list[Diagnostic]:
+    found = _coincident_ends(eom, q, t, pv)
+    if found:
+        return found
+    n = eom.n
+    rows = [i % n for i in range(rhs.size) if not math.isfinite(rhs[i])]
+    rows = list(dict.fromkeys(rows)) or list(range(n))
+    names = ", ".join(eom.coords[i] for i in rows)
+    return [Diagnostic("E744", f"the accelerations are not finite at the start (in the equation of {names})",
+                       _coord_span(eom, eom.coords[rows[0]]),
+                       "a force law or a term is not defined at the start state (a division by zero, a "
+                       "square root of a negative number, an overflow); check the forces on these coordinates")]
+
+
+def _coincident_ends(eom, q, t, pv) -> list[Diagnostic]:
+    from . import ir
+
+    model = eom.model
+    if model is None or eom.point_position is None:
+        return []
+    import casadi as ca
+
+    out = []
+    for f in model.forces:
+        if not isinstance(f, ir.SpringDamper):
+            continue
+        try:
+            fn = ca.Function("ends", [eom.q, eom.t, eom.p],
+                             [ca.vertcat(eom.point_position(f.a), eom.point_position(f.b))])
+        except Exception:  # noqa: BLE001 - cannot judge this one: the generic message follows
+            continue
+        ab = np.array(fn(q, t, pv), float).ravel()
+        size = max(1.0, float(np.max(np.abs(ab))))
+        if np.all(np.isfinite(ab)) and np.linalg.norm(ab[3:] - ab[:3]) <= COINCIDE_REL * size:
+            out.append(Diagnostic("E745", f"the ends of {f.kind} '{f.name}' coincide at the start ('{f.a}' and "
+                                          f"'{f.b}'): its direction, and so its force, is undefined", f.span,
+                                  "start the bodies apart (set a start value), or attach the ends to other points"))
+    return out
+
+
+def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
+    """E749: loop closures compare positions; when double precision resolves the positions of
+    the loop's points only to more than the drift bound, no projection can hold them."""
+    model = eom.model
+    if model is None or eom.point_position is None:
+        return []
+    import casadi as ca
+
+    cut = [j for j in model.joints if j.closes_loop]
+    if not cut:
+        return []
+    fn = eom.cached("preflight_loop_points", lambda: ca.Function(
+        "loop_points", [eom.q, eom.t, eom.p],
+        [ca.vertcat(*[eom.point_position(n) for j in cut for n in (j.parent, j.child)])]))
+    xyz = np.abs(_value(fn, q, t, pv))
+    if not xyz.size or not np.all(np.isfinite(xyz)):
+        return []
+    k = int(np.argmax(xyz)) // 6
+    res = float(np.max(xyz)) * np.finfo(float).eps
+    if res <= drift_bound:
+        return []
+    j = cut[k]
+    return [Diagnostic("E749", f"the loop closed by joint '{j.name}' lies {np.max(xyz):.3g} from the origin: "
+                               f"double precision resolves its positions only to {res:.2g}, more than the "
+                               f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
+                       "choose units (or an origin) that keep the positions moderate, or raise atol")]
+
+
+def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
+    """E826 (dae/init.py): a constraint residual or gradient that is inf/nan at the start."""
+    from .dae.init import check_defined
+
+    if not np.all(np.isfinite(q)):
+        return []
+    try:
+        check_defined(eom, _value(_constraint_fns(eom)[0], q, t, pv), _jacobian(eom, q, t, pv))
+    except MechError as e:
+        return e.diagnostics
+    return []
+
+
+def _constraint_fns(eom):
+    from .dae.init import _functions
+
+    return _functions(eom)
+
+
+def _jacobian(eom, q, t, pv) -> np.ndarray:
+    return _value(_constraint_fns(eom)[1], q, t, pv).reshape(eom.m, eom.n)
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _mass(fs, t, x, pv, n) -> np.ndarray:
+    """M at the start: (q, t, p), or (t, x, p) when it depends on the speeds (codegen)."""
+    f = fs["mass_matrix"]
+    args = (t, x, pv) if f.name_in(0) == "t" else (x[:n], t, pv)
+    return _value(f, *args).reshape(n, n)
+
+
+def _value(f, *args) -> np.ndarray:
+    out = f(*args)
+    if isinstance(out, (tuple, list)):
+        out = out[0]
+    return np.array(out, float).ravel()
+
+
+def _overridden(eom, x0) -> set[int]:
+    """Indices of [q; qd] that the start overrides x0 replace."""
+    if x0 is None:
+        return set()
+    if not isinstance(x0, dict):
+        return set(range(2 * eom.n))
+    out = set()
+    for k in x0:
+        name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+        if name in eom.coords:
+            out.add(eom.coords.index(name) + (eom.n if speed else 0))
+    return out
+
+
+def _huge_angles(eom, q0, given=frozenset()) -> list[Diagnostic]:
+    """An angle so large that double precision resolves it to worse than ANGLE_RESOLUTION:
+    sin and cos of it are noise, and constraints on it cannot be held."""
+    if eom.model is None:
+        return []
+    out = []
+    for i, c in enumerate(eom.model.coordinates[:eom.n]):
+        res = abs(float(q0[i])) * np.finfo(float).eps
+        if c.unit == "rad" and res > ANGLE_RESOLUTION and i not in given:
+            out.append(Diagnostic("E748", f"the start angle of {c.name} ({q0[i]:.6g} rad) is too large to compute "
+                                          f"with: double precision resolves it only to {res:.2g} rad",
+                                  _coord_span(eom, c.name),
+                                  "give the angle modulo 2 pi (between -pi and pi)"))
+    return out
+
+
+def _start_problem(eom, i: int, value: float) -> Diagnostic:
+    name = eom.coords[i % eom.n]
+    what = name if i < eom.n else f"der({name})"
+    return Diagnostic("E741", f"the start value of {what} is not finite ({value:g})", _coord_span(eom, name),
+                      "check its start/speed formula for a function outside its domain (asin of more than 1, "
+                      "sqrt of a negative number) or a division by zero, with the parameter values in force")
+
+
+def _param_span(model, name: str) -> Span:
+    if model is not None:
+        for p in model.parameters:
+            if p.name == name:
+                return p.span
+    return Span()
+
+
+def _owner_joint(eom, coord: str):
+    model = eom.model
+    if model is None:
+        return None
+    owner = next((c.owner for c in model.coordinates if c.name == coord), None)
+    for j in model.joints:       # the joint that declared it, else one that it drives (phi = theta)
+        if j.name == owner or (owner is None and any(v.coordinate == coord for v in j.variables)):
+            return j
+    return None
+
+
+def _coord_span(eom, coord: str) -> Span:
+    j = _owner_joint(eom, coord)
+    if j is not None:
+        return j.span
+    if eom.model is not None:
+        for c in eom.model.coordinates:
+            if c.name == coord:
+                return c.span
+    return _model_span(eom)
+
+
+def _model_span(eom) -> Span:
+    return eom.model.span if eom.model is not None else Span()
+
+
+def _body(model, name: str):
+    for b in model.bodies:
+        if b.name == name:
+            return b
+    return None
