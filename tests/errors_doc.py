@@ -154,6 +154,13 @@ ENTRIES = [
     Entry("E219", "unknown attribute", "`a.b` where `a` has no attribute `b` (points have `r v x y z`, bodies "
                                        "also `R w`, rods `a b`, joints their variables).",
           "Fix the spelling (the hint lists the attributes).", corpus="E219_unknown_attribute_of_body.mech"),
+    Entry("E230", "input default not constant", "An `input`'s default value (`input Real F = ...`) that is "
+                                                "not a constant number.",
+          "Give a number (`= 0` when omitted); drive the input at run time (docs/control.md).",
+          corpus="E230_input_default_not_constant.mech"),
+    Entry("E231", "parameter depends on input", "A parameter computed from an `input`: inputs change during "
+                                               "a run, parameters are constant.",
+          "Use the input directly in the forces or equations.", corpus="E231_parameter_depends_on_input.mech"),
     # ------------------------------------------------------------------ E3xx
     Entry("E301", "shape mismatch", "Scalars, vectors and matrices combined in a way their sizes do not allow, "
                                     "or a value whose shape differs from its declaration.",

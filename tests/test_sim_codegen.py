@@ -27,7 +27,7 @@ def double_pendulum_accelerations(x, m1=1.0, m2=1.0, L1=1.0, L2=1.0, g=9.81):
 
 def test_function_names_and_signatures():
     f = casadi_functions(chain(3))
-    assert list(f) == ["ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "start"]
+    assert list(f) == ["ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "start", "parameters"]
     assert f["ode"].name_in() == ["t", "x", "u", "p"] and f["ode"].name_out() == ["xdot"]
     assert f["mass_matrix"].name_in() == ["q", "t", "p"] and f["mass_matrix"].name_out() == ["M"]
     assert f["energy"].name_out() == ["T", "V", "E"]

@@ -24,4 +24,12 @@ def loads(text, model=None, scene=None, filename="<string>", **kw):
     return _loads(text, model=model, scene=scene, filename=filename, **kw)
 
 
-__all__ = ["load", "loads", "Diagnostic", "MechError", "Span", "UsageError", "__version__"]
+def table(times, values, hold="zoh"):
+    """Samples of an input signal for ``simulate(inputs={name: table(...)})``: hold = "zoh"
+    (zero-order hold) or "linear" (mechdsl.simulation.drive)."""
+    from .simulation.drive import table as _table
+
+    return _table(times, values, hold)
+
+
+__all__ = ["load", "loads", "table", "Diagnostic", "MechError", "Span", "UsageError", "__version__"]

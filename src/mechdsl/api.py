@@ -261,7 +261,9 @@ class Model:
         the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``."""
         from .codegen import casadi_functions
 
-        return casadi_functions(self.eom, compiled=compiled)
+        # compiled: with first and second derivatives in the library, so that Jacobians and exact
+        # Hessians (IPOPT) work on the compiled Functions as on the virtual-machine ones
+        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0)
 
     def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
                  method: str | None = None, points: int | None = None, progress=None, **kw):

@@ -238,8 +238,9 @@ class FunctionSet(Mapping):
     ``library`` is the path of the shared library when compiled.
     """
 
-    def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None):
+    def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None, derivatives: int = 0):
         self.eom = eom
+        self.derivatives = int(derivatives)
         self.outputs = None if outputs is None else tuple(outputs)
         if self.outputs is not None:
             unknown = [o for o in self.outputs if o not in eom.outputs]
@@ -281,7 +282,8 @@ class FunctionSet(Mapping):
         funcs = [_build(self.eom, n, self.outputs) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
             funcs.append(build_ode(self.eom))
-        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names)
+        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names,
+                                              derivatives=self.derivatives)
         if note:
             self.notes.append(note)
         if loaded is None:
@@ -299,8 +301,13 @@ _STRUCTURE = ("q", "qd", "t", "u", "p", "T", "V", "M", "bias", "qdd", "g", "outp
               "singularity_monitors", "invariants")
 
 
-def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -> FunctionSet:
+def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, derivatives: int = 0) -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
+
+    derivatives=2 (with compiled=True): the library also holds the first and second
+    derivatives of every Function (jac_, fwd1_, adj1_ and their own jac_/fwd1_/adj1_), which
+    ``casadi.external`` finds by name: Jacobians and the exact Hessian of a Lagrangian (IPOPT)
+    then run in compiled code instead of failing ("Derivatives cannot be calculated").
 
     names: restrict to these Functions (default: all that apply); outputs: restrict the
     ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
@@ -311,12 +318,12 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None) -
     # values) share Functions, compiled libraries and the integrators built on them
     objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
     key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
-           None if outputs is None else tuple(outputs))
+           None if outputs is None else tuple(outputs), int(derivatives))
     hit = _SETS.get(key)
     if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
         _SETS[key] = _SETS.pop(key)            # most recently used last
         return hit[1]
-    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs)
+    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives)
     if len(_SETS) >= _SETS_MAX:
         _SETS.pop(next(iter(_SETS)))
     _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique
@@ -368,7 +375,16 @@ def cflags_for(code_size: int) -> list[str]:
     return ["-O0"]
 
 
-def compile_functions(funcs, tag: str = "model", jacobian: bool = True):
+def derivative_functions(funcs, order: int = 2) -> list:
+    """Derivatives of ``funcs`` up to ``order`` under the names casadi.external looks for."""
+    out, level = [], list(funcs)
+    for _ in range(order):
+        level = [d for f in level for d in (f.jacobian(), f.forward(1), f.reverse(1))]
+        out += level
+    return out
+
+
+def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
@@ -387,7 +403,12 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True):
     for f in funcs:
         main.add(f)
     units.append(main.dump())
-    odes = [f for f in funcs if f.name() == "ode"] if jacobian else []
+    odes = [f for f in funcs if f.name() == "ode"] if jacobian and not derivatives else []
+    if derivatives:
+        dg = ca.CodeGenerator("mechdsl_derivatives.c", {"with_header": False, "verbose": False})
+        for d in derivative_functions(funcs, derivatives):
+            dg.add(d)
+        units.append(dg.dump())
     jac_kind = None
     if odes:
         jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})

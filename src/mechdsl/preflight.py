@@ -129,11 +129,11 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
     fs = casadi_functions(eom, names=("energy", "mass_matrix", "bias"))
     if eom.m:
         M = _mass(fs, t, x, pv, eom.n)
-        rhs = _value(fs["bias"], t, x, pv)
+        rhs = _value(fs["bias"], t, x, _u(eom), pv)
         G = _jacobian(eom, q, t, pv)
     else:
         M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
-        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, pv)   # simulate's own
+        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
         G = None
     ok_rhs = bool(np.all(np.isfinite(rhs)))
     if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix
@@ -142,7 +142,7 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         found = _mass_problems(eom, M, G)
         if found:
             return found
-    T, V, _ = (float(v) for v in fs["energy"](t, x, pv))
+    T, V, _ = (float(v) for v in fs["energy"](t, x, _u(eom), pv))
     if not (math.isfinite(T) and math.isfinite(V)):
         return [Diagnostic("E746", f"the energy at the start is not finite (kinetic {T:g}, potential {V:g})",
                            _model_span(eom),
@@ -348,8 +348,13 @@ def _jacobian(eom, q, t, pv) -> np.ndarray:
 def _mass(fs, t, x, pv, n) -> np.ndarray:
     """M at the start: (q, t, p), or (t, x, p) when it depends on the speeds (codegen)."""
     f = fs["mass_matrix"]
-    args = (t, x, pv) if f.name_in(0) == "t" else (x[:n], t, pv)
+    args = (t, x, np.zeros(f.numel_in(2)), pv) if f.name_in(0) == "t" else (x[:n], t, pv)
     return _value(f, *args).reshape(n, n)
+
+
+def _u(eom) -> np.ndarray:
+    """The inputs u at their defaults (codegen's Functions take (t, x, u, p))."""
+    return np.asarray(getattr(eom, "input_defaults", ()) or (), float)
 
 
 def _value(f, *args) -> np.ndarray:

@@ -199,6 +199,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     """
     span = t1 - t0
     info: dict[str, Any] = {}
+    u = default_inputs(eom, u)
     try:
         J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
         lam = np.linalg.eigvals(J) if np.isfinite(J).all() else None
@@ -223,6 +224,13 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
             f"benchmarks/integrators.py", info)
 
 
+def default_inputs(eom, u):
+    """u as given, or the model's input defaults when none was given (NO_U)."""
+    if u is NO_U and eom is not None and getattr(eom, "inputs", ()):
+        return np.asarray(eom.input_defaults, float)
+    return u
+
+
 def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000, u=NO_U) -> tuple[int, str]:
     """Steps for the fixed-step methods: h = dt, or h * omega = 0.5 rtol^(1/order), omega the
     fastest rate seen at the start: the spectral radius of the Jacobian, sqrt(max |qdd|) and
@@ -234,6 +242,7 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
             raise UsageError(f"dt must be positive (got {dt})")
         return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
     rho, omega_acc = 0.0, 0.0
+    u = default_inputs(getattr(funcs, "eom", None), u)
     try:
         J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
         rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
@@ -391,7 +400,7 @@ def _short(error: str) -> str:
 def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
     """Outputs, energies (and constraint residuals / singularity monitors when present)
     on the sample times: one vectorized (mapped) call per Function.  U: the inputs on the
-    sample times (rows = times; None: the model's input values are all zero / there are none)."""
+    sample times (rows = times; None: the inputs' defaults)."""
     import casadi as ca
 
     N = len(t)
@@ -401,7 +410,8 @@ def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndar
     T = t.reshape(1, N)
     XT = X.T
     P = np.asarray(pv, float).reshape(-1, 1)
-    UT = np.zeros((eom.nu, N)) if U is None else np.asarray(U, float).reshape(N, -1).T
+    UT = (np.tile(np.asarray(eom.input_defaults, float).reshape(-1, 1), (1, N)) if U is None
+          else np.asarray(U, float).reshape(N, -1).T)
 
     def mapped(f):
         res = f.map(N)(T, XT, UT, P)
