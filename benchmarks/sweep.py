@@ -54,6 +54,7 @@ def main():
     ap.add_argument("--compare", type=int, default=1000)
     ap.add_argument("--points", type=int, default=101)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--full-scheduler", default="vectorized")
     a = ap.parse_args()
     m = mechdsl.load(MODEL, model="DoublePendulum")
     st = grid(a.compare)
@@ -66,7 +67,7 @@ def main():
         t, d1 = timed(m, st, a.points, workers=1)
         v1 = min(v1, t)
         h2 = min(h2, hand_map(m, st, a.points, 2)[0])
-        t, d2 = timed(m, st, a.points)
+        t, d2 = timed(m, st, a.points, workers=2)
         v2 = min(v2, t)
     print(f"hand-written Function.map: {h1 * 1e3:.3f} ms/run (1 thread), {h2 * 1e3:.3f} ms/run (2 threads)")
     print(f"vectorized sweep:          {v1 * 1e3:.3f} ms/run (1 thread, {v1 / h1:.2f}x the map), "
@@ -80,10 +81,11 @@ def main():
           f"overhead over processes {(k1 - p1) * 1e3:+.3f} ms/run")
     st = grid(a.runs)
     t0 = time.perf_counter()
-    ds = m.sweep(starts=st, t_end=10.0, rtol=1e-8, method="erk", points=a.points, progress=False)
+    ds = m.sweep(starts=st, t_end=10.0, rtol=1e-8, method="erk", points=a.points, progress=False,
+                 scheduler=a.full_scheduler)
     wall = time.perf_counter() - t0
     print(f"full sweep: {ds.attrs['summary']} in {wall:.1f} s ({wall / ds.sizes['run'] * 1e3:.2f} ms/run, "
-          f"vectorized, {ds.attrs['threads']} threads)")
+          f"{ds.attrs['scheduler']}, {ds.attrs['workers']} workers, {ds.attrs['threads']} threads)")
 
 
 if __name__ == "__main__":

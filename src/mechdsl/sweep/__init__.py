@@ -75,8 +75,11 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
         raise UsageError(f"the vectorized scheduler cannot run this sweep: {vector_why}; use "
                          "scheduler='processes' (--scheduler processes) or 'dask'")
     job.vectorized = vector_why is None
+    # threads of the mapped integrator only when asked (workers=): on the 2-core test machine
+    # CasADi's thread map of the erk integrator used 1.8 cores for no gain in wall time
+    # (benchmarks/sweep.py, docs/performance.md); processes do use both cores
+    job.threads = (workers or 1) if scheduler == "vectorized" else 1
     workers = workers or default_threads()
-    job.threads = workers if scheduler == "vectorized" else 1
     job.variables = _variables(model, problem)
     states = _states(model, d, names)
     job.states = states
