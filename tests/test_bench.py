@@ -333,7 +333,7 @@ def test_reference_candidates_replace_a_failing_method(setup, monkeypatch):
     """A candidate that cannot run is replaced by the next one, and the note says why."""
     from mechdsl.bench import reference as R
 
-    monkeypatch.setattr(R, "auto_candidates", lambda kind: ("nosuch-method", "scipy-dop853", "erk"))
+    monkeypatch.setattr(R, "auto_candidates", lambda kind, formulation=None: ("nosuch-method", "scipy-dop853", "erk"))
     res = run_bench(setup, variants=parse_variants("erk"), tolerances=[1e-4], repeats=1)
     ref = res.reference
     assert ref.methods == ("scipy-dop853", "erk") and ref.tolerance == pytest.approx(1e-8, rel=1e-12)
@@ -405,3 +405,13 @@ def test_a_run_is_stopped_after_its_cpu_seconds():
                       stop_after=0.0)
     assert row.status == "skipped" and "stopped at t = " in row.message and "after 0 s" in row.message
     assert 0 < row.t_reached < st.t_end and row.cpu > 0
+
+
+def test_reference_of_a_scene_formulation_comes_first():
+    """A02's scene chooses `augmented` (the only formulation that crosses its singular
+    configurations): the automatic reference tries that formulation before the default ones."""
+    from mechdsl.bench import reference as R
+
+    c = R.auto_candidates("dae", "augmented")
+    assert c[:3] == ("augmented+cvodes-adams", "augmented+erk", "augmented+cvodes-bdf")
+    assert "ggl+idas" in c and R.auto_candidates("ode", "augmented") == R.auto_candidates("ode")

@@ -14,15 +14,7 @@ import pytest
 import mechdsl
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
-from test_sim_cli import BLOWUP, PENDULUM
-
-
-@pytest.fixture
-def files(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / "pendulum.mech").write_text(PENDULUM)
-    (tmp_path / "blowup.mech").write_text(BLOWUP)
-    return tmp_path
+from test_sim_cli import files  # noqa: F401 - the fixture: pendulum.mech and blowup.mech in a fresh folder
 
 
 @pytest.mark.parametrize("mask", [0o022, 0o077, 0o002])

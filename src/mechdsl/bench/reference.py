@@ -92,12 +92,18 @@ def check_columns(ref: Reference, columns) -> None:
         raise UsageError(f"the reference column {bad[0]!r} is not finite")
 
 
-def auto_candidates(kind: str) -> tuple[str, ...]:
+def auto_candidates(kind: str, formulation: str | None = None) -> tuple[str, ...]:
     """Reference and check methods by kind of model, in order of preference: the first two
-    that succeed are the reference and its check."""
-    return {"ode": ("scipy-dop853", "erk", "cvodes-adams"),
+    that succeed are the reference and its check.  A constrained model whose scene chooses a
+    formulation is referenced in that formulation first (the A02 scene's `augmented` is the
+    only one that crosses its singular configurations: the others cannot reach its horizon)."""
+    base = {"ode": ("scipy-dop853", "erk", "cvodes-adams"),
             "stiff": ("rosenbrock", "scipy-radau", "cvodes-bdf"),
             "dae": ("projection+cvodes-adams", "ggl+idas", "projection+cvodes-bdf", "baumgarte+cvodes-adams")}[kind]
+    if kind != "dae" or not formulation:
+        return base
+    first = tuple(f"{formulation}+{m}" for m in ("cvodes-adams", "erk", "cvodes-bdf"))
+    return first + tuple(c for c in base if c not in first)
 
 
 def auto_pair(kind: str) -> tuple[str, str]:

@@ -330,7 +330,7 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
 
     # given methods: that pair at the reference tolerance; auto: the kind's candidates in order, at
     # the reference tolerance and then looser ones (R.reference_ladder) until two of them succeed
-    candidates = tuple(reference_methods) if given else R.auto_candidates(kind)
+    candidates = tuple(reference_methods) if given else R.auto_candidates(kind, setup.default_formulation)
     ladder = [tol] if given else R.reference_ladder(tol)
     failures: list[str] = []
     for t in ladder:

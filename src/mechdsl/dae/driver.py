@@ -27,7 +27,6 @@ rather than stepped over.
 from __future__ import annotations
 
 import time as _time
-import warnings
 
 import numpy as np
 
@@ -440,12 +439,10 @@ def simulate_dae(eom, t_end, **kw) -> Result:
                "tighten atol or use formulation = \"projection\"")
         metadata["drift_warning"] = msg
         metadata["warnings"].append(msg)
-        warnings.warn(msg, RuntimeWarning, stacklevel=2)
     if energy.get("energy_warning"):
         msg = energy["energy_warning"]
         metadata["energy_warning"] = msg
         metadata["warnings"].append(msg)
-        warnings.warn(msg, RuntimeWarning, stacklevel=2)
     metadata["conservative"] = energy.get("conservative")
     events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
     result = Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
