@@ -234,3 +234,40 @@ end Bad;
     with pytest.raises(MechError) as ei:
         mechdsl.loads(src, model="Bad")
     assert code in str(ei.value)
+
+
+def test_input_in_a_prescribed_motion_is_refused():
+    """phi = a (an input) in a joint: the velocities would miss da/dt (before: a silent wrong
+    answer, the body turned without angular velocity); now E760 at the input."""
+    src = """model PM
+  input Real a = 0;
+  Gravity gravity(g = {0, -9.81, 0});
+  Body b(m = 1, I = identity(3));
+  Body c(m = 1, I = identity(3));
+  Revolute hinge(parent = world, child = b, axis = {0, 0, 1}, phi = a);
+  Prismatic s(parent = b, child = c, axis = {1, 0, 0}, s(start = 0.1));
+end PM;
+"""
+    m = mechdsl.loads(src, model="PM")
+    with pytest.raises(MechError) as ei:
+        m.eom
+    assert "E760" in str(ei.value) and "input 'a' moves part of the mechanism" in str(ei.value)
+    assert ":2:14:" in str(ei.value)
+
+
+def test_an_array_of_inputs_defaults_to_zero_and_is_driven_entrywise():
+    src = """model Arr
+  input Real tau[2](unit = "N") "pushes";
+  coordinate Real x(start = 0);
+  coordinate Real y(start = 0);
+equation
+  kinetic = 0.5*(der(x)^2 + der(y)^2);
+  force(x) = tau[1];
+  force(y) = tau[2];
+end Arr;
+"""
+    m = mechdsl.loads(src, model="Arr")
+    assert [(i.name, i.default) for i in m.inputs] == [("tau[1]", 0.0), ("tau[2]", 0.0)]
+    r = m.simulate(1.0, inputs={"tau[1]": 1.0, "tau[2]": lambda t: 2.0 * t}, points=3, rtol=1e-10, atol=1e-12)
+    assert r.q[-1] == pytest.approx([0.5, 1.0 / 3.0], rel=1e-7)         # x = t^2/2, y = t^3/3
+    assert r["tau[2]"] == pytest.approx([0.0, 1.0, 2.0])

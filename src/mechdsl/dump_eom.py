@@ -46,6 +46,10 @@ NOISE = 1e-12            # relative size below which a value prints as 0 (see _n
 def dump_eom(eom) -> str:
     import casadi as ca
 
+    from .eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs print as trailing parameters at their defaults
+
     names = _symbol_names(eom)
     entries = _entries(eom)                 # [(label, SX scalar)] in print order
     ins = [eom.q, eom.qd, eom.t, eom.p] + ([eom.lam] if eom.lam is not None else [])

@@ -438,7 +438,8 @@ def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndar
         f = casadi_functions(eom, names=("invariants",))["invariants"]
         for name, val in zip(f.name_out(), mapped(f)):
             sig[name] = np.asarray(val, float).reshape(-1)
-    for name, val in _first_integrals(eom, t, X, pv).items():
+    steady = UT[:, 0] if UT.size and np.all(UT == UT[:, :1]) else (UT[:, 0] if N and not UT.size else None)
+    for name, val in _first_integrals(eom, t, X, pv, steady).items():
         sig.setdefault(name, val)
     if singularity_monitors(eom):
         f = post["singularity"]
@@ -469,13 +470,20 @@ def _singularity_report(eom, signals, t, meta, threshold):
 MAX_INTEGRAL_SEARCH = 20   # coordinates: beyond this the search costs more than a typical run
 
 
-def _first_integrals(eom, t, X, pv) -> dict[str, np.ndarray]:
+def _first_integrals(eom, t, X, pv, u=None) -> dict[str, np.ndarray]:
     """Values of the model's first integrals (cyclic momenta, Jacobi integral) on the samples,
-    so their drift measures the integrator.  The search is cached on the EOM."""
+    so their drift measures the integrator.  The search is cached on the EOM.  u: the inputs'
+    constant values (None: time-varying, then no integrals are searched)."""
     import casadi as ca
 
-    searchable = (eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
-                  and not eom.inputs)          # driven models: inputs do work, no integral to watch
+    if eom.inputs:      # constant inputs: the integrals of the model with them as parameters
+        if u is None:
+            return {}
+        from .eom import fold_inputs
+
+        key = ("folded", tuple(float(v) for v in u))
+        return _first_integrals(eom.cached(key, lambda: fold_inputs(eom, u)), t, X, np.r_[pv, u])
+    searchable = eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
     f = eom.cached("first_integrals", lambda: _integral_function(eom, pv) if searchable else None)
     if f is None or len(t) == 0:
         return {}
@@ -535,9 +543,13 @@ def _integral_function(eom, pv):
 
 
 def _integral_drift(signals, eom) -> dict:
-    f = eom.cached("first_integrals", lambda: None)
+    fs = [eom.cached("first_integrals", lambda: None)]
+    if eom.inputs:      # the integrals were searched on the model with constant inputs folded in
+        cache = eom.__dict__.get("_fn_cache", {})
+        fs = [v.cached("first_integrals", lambda: None) for k, v in cache.items()
+              if isinstance(k, tuple) and k and k[0] == "folded"]
     out = {}
-    for name in (f.name_out() if f is not None else []):
+    for name in [n for f in fs if f is not None for n in f.name_out()]:
         v = signals.get(name)
         if v is not None and len(v) and np.isfinite(v).all():
             out[name] = float(np.abs(v - v[0]).max())

@@ -131,6 +131,7 @@ class _Deriver:
             qb = ca.vertcat(*[q[i] for i in idx])
             invariants[f"{joint.name}.quaternion_norm"] = ca.norm_2(qb) - 1
         notes = [self._route_note()]
+        self._check_inputs(T, g)
         return LazyEOM(
             name=model.name, coords=model.coordinate_names, params=e0.params,
             param_values=np.array([p.value for p in model.real_parameters], float),
@@ -142,6 +143,25 @@ class _Deriver:
             body_rotation=kin.body_rot,
             singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam,
             u=e0.u, inputs=e0.inputs, input_defaults=tuple(float(p.value) for p in model.inputs))
+
+    def _check_inputs(self, T, g):
+        """An input in the kinematics (a prescribed motion, a moving frame) would need its time
+        derivatives, which a signal u(t) does not give: refused (E760) instead of a silent
+        wrong answer (d/dt would miss du/dt)."""
+        u = self.env0.u
+        if u is None or u.numel() == 0:
+            return
+        kin = self.kin
+        poses = [ca.SX(x) for i in range(len(kin.R)) for x in (kin.R[i], kin.o[i]) if x is not None]
+        moving = [ca.SX(T)] + ([ca.SX(g)] if g is not None else []) + poses
+        for j, p in enumerate(self.model.inputs):
+            if any(ca.depends_on(e, u[j]) for e in moving):
+                raise MechError(Diagnostic(
+                    "E760", f"input '{p.name}' moves part of the mechanism (a prescribed motion, a moving "
+                            "frame or a constraint): its time derivatives would be needed, which an input "
+                            "signal does not provide", p.span,
+                    "inputs act through forces, torques and generalized forces; for a driven motion use a "
+                    "coordinate driven by a stiff spring or a force, or a prescribed function of time"))
 
     # -- energies ---------------------------------------------------------------------
     def _kinetic_tree(self):

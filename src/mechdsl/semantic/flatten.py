@@ -343,7 +343,10 @@ class Flattener(Evaluator):
         self._check_attrs(e.mod, PARAM_ATTRS)
         factor, dim, unit = self._unit(e, e.mod)
         if e.mod.value is None and e.kind == "input":     # an input's default value is 0
-            e.mod.value = ast.Number(value=0, span=d.name_span)
+            sp = d.name_span
+            e.mod.value = ast.Number(value=0, span=sp) if not dims else ast.Call(
+                func=ast.Ref(parts=(ast.RefPart(name="fill", span=sp),), span=sp),
+                args=(ast.Number(value=0, span=sp), *[ast.Number(value=n, span=sp) for n in dims]), span=sp)
         if e.mod.value is None:
             fail("E212", f"parameter '{d.name}' has no value", d.name_span,
                  f"give it one: {d.type_name} {d.name} = ...;" if d.type_name != "Real" else f"parameter Real {d.name} = 1;")

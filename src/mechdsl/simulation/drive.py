@@ -190,9 +190,16 @@ def _mx(s: Signal, t, x):
             expr = ca.pw_lin(ts, ca.DM(tb.times), ca.DM(tb.values))
         else:  # zero-order hold: value k on [t_k, t_k+1)
             expr = ca.pw_const(ts, ca.DM(tb.times[1:]), ca.DM(tb.values))
-        return ca.Function(f"table_{s.name}", [ts], [expr])(t)
+        return ca.Function(_fname("table", s.name), [ts], [expr])(t)
     f = s.fn
     return f(t, x) if s.feedback else f(t)
+
+
+def _fname(prefix: str, name: str) -> str:
+    """A valid CasADi Function name for an input ("tau[2]" -> "input_tau_2")."""
+    import re
+
+    return re.sub(r"_+", "_", f"{prefix}_" + re.sub(r"[^A-Za-z0-9]", "_", name)).rstrip("_")
 
 
 def build_drive(eom, spec, t0: float, t1: float, x0=None) -> Drive:
@@ -306,7 +313,7 @@ def _callback(name, fn, feedback, nx):
     class PySignal(ca.Callback):
         def __init__(self):
             ca.Callback.__init__(self)
-            self.construct(f"input_{name}", {"enable_fd": True})
+            self.construct(_fname("input", name), {"enable_fd": True})
 
         def get_n_in(self):
             return 2 if feedback else 1
