@@ -221,3 +221,24 @@ def test_vectorized_refused_for_a_dae_with_the_reason():
     m = mechdsl.load(mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/four_bar.mech")
     with pytest.raises(UsageError, match="constraints"):
         m.sweep(params={m.parameter_names[0]: [1.0, 2.0]}, t_end=0.1, scheduler="vectorized")
+
+
+def test_results_larger_than_the_memory_limit_must_stream(dp, tmp_path):
+    with pytest.raises(UsageError, match="stream them to disk"):
+        dp.sweep(params={"m": [1.0, 2.0]}, t_end=0.1, points=11, memory_limit=1000)
+    ds = dp.sweep(params={"m": [1.0, 2.0]}, t_end=0.1, points=11, memory_limit=1000, out=str(tmp_path / "s.nc"),
+                  progress=False)
+    assert ds.attrs["n_failed"] == 0 and ds.sizes["run"] == 2
+    ds.close()
+
+
+def test_basic_cli_does_not_import_the_sweep_libraries():
+    import subprocess
+    import sys
+
+    code = ("import sys; from mechdsl.cli import main\n"
+            "try:\n    main(['check', sys.argv[1]])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('xarray', 'pandas', 'dask', 'distributed', 'h5netcdf') if m in sys.modules))")
+    path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/pendulum.mech"
+    out = subprocess.run([sys.executable, "-c", code, path], capture_output=True, text=True, timeout=120)
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr

@@ -26,10 +26,13 @@ from .spec import Table, table  # noqa: F401  (public: mechdsl.sweep.table)
 
 __all__ = ["sweep", "table", "to_frame", "first_time"]
 
+MEMORY_LIMIT = 2e9      # bytes of results a sweep may hold in memory; beyond, stream with out="x.nc"
+
 
 def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None = None, out: str | None = None,
           progress=None, workers: int | None = None, chunk_size: int | None = None, frame: bool = False,
-          overwrite: bool = False, connect_timeout: float = 10.0, **options):
+          overwrite: bool = False, connect_timeout: float = 10.0, memory_limit: float = MEMORY_LIMIT,
+          **options):
     """Run the model over a grid, a table or a sample; returns an ``xarray.Dataset``
     (dimensions run, time; swept values as coordinates on run; per-run status variables)
     or, with ``frame=True``, a long pandas DataFrame.  See docs/sweeps.md."""
@@ -86,6 +89,11 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     size = chunk_size or _chunk_size(d.n, scheduler, workers)
     chunks = [(a, {k: v[a:a + size] for k, v in d.values.items()}) for a in range(0, d.n, size)]
 
+    need = d.n * len(job.grid) * (len(states) + len(job.variables)) * 8
+    if out is None and need > memory_limit:
+        raise UsageError(f"the sweep's results would take {need / 1e9:.3g} GB in memory (limit {memory_limit / 1e9:.3g} "
+                         "GB): pass out='sweep.nc' (-o sweep.nc) to stream them to disk, fewer points, or a "
+                         "larger memory_limit")
     from .store import Store
 
     store = Store(d.n, job.grid, states, job.variables, out, overwrite)
