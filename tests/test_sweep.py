@@ -242,3 +242,30 @@ def test_basic_cli_does_not_import_the_sweep_libraries():
     path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/pendulum.mech"
     out = subprocess.run([sys.executable, "-c", code, path], capture_output=True, text=True, timeout=120)
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr
+
+
+@pytest.mark.slow
+def test_ctrl_c_on_the_process_pool_keeps_finished_runs(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    xr = pytest.importorskip("xarray")
+    path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/double_pendulum.mech"
+    out = tmp_path / "s.nc"
+    p = subprocess.Popen([sys.executable, "-m", "mechdsl", "sweep", path, "--model", "DoublePendulum", "--grid",
+                          "j1.phi.start=0.1:3:4000", "--t-end", "20", "--points", "11", "--scheduler", "processes",
+                          "--workers", "2", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, start_new_session=True)
+    time.sleep(8)
+    os.killpg(p.pid, signal.SIGINT)            # as a terminal's Ctrl-C: the whole process group
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 1, stdout + stderr
+    assert "interrupted" in stdout and "Traceback" not in stderr
+    ds = xr.open_dataset(out, engine="h5netcdf")
+    ok = ds["success"].values
+    assert ds.attrs["interrupted"] == 1 and 0 < ok.sum() < 4000
+    assert set(ds["cause"].values[~ok]) == {"not run"}
+    ds.close()

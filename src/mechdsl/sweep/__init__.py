@@ -117,6 +117,8 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
                     bar.update(len(chunk.status))
         except KeyboardInterrupt:
             interrupted = True
+            for chunk in (engine.drain() if engine is not None else ()):     # the runs finished meanwhile
+                store.put(chunk)
     except BaseException:
         if engine is not None:
             engine.close(cancel=True)

@@ -40,17 +40,41 @@ class Pool:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        self.ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        self.ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                      initializer=_ignore_sigint)
 
     def run(self, job, chunks):
         from concurrent.futures import as_completed
 
-        futures = [self.ex.submit(run_chunk, job, first, values) for first, values in chunks]
-        for f in as_completed(futures):
+        self._futures = [self.ex.submit(run_chunk, job, first, values) for first, values in chunks]
+        self._seen: set = set()
+        for f in as_completed(self._futures):
+            self._seen.add(f)
             yield f.result()
+
+    def drain(self):
+        """After Ctrl-C: drop the chunks not started, let the running ones finish, and yield
+        every finished chunk not yet yielded."""
+        self.ex.shutdown(wait=True, cancel_futures=True)
+        yield from _finished(getattr(self, "_futures", []), getattr(self, "_seen", set()),
+                             lambda f: f.done() and not f.cancelled() and f.exception() is None)
 
     def close(self, cancel: bool = False):
         self.ex.shutdown(wait=True, cancel_futures=cancel)
+
+
+def _finished(futures, seen, ok):
+    for f in futures:
+        if f not in seen and ok(f):
+            yield f.result()
+
+
+def _ignore_sigint():
+    """In a worker process: Ctrl-C is the parent's to handle (it cancels the runs not yet
+    started and keeps the finished ones); the worker finishes its chunk."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class Dask:
@@ -79,10 +103,23 @@ class Dask:
         from distributed import as_completed
 
         remote = self.client.scatter(job, broadcast=True)
-        futures = [self.client.submit(run_chunk, remote, first, values, pure=False) for first, values in chunks]
-        self._futures = futures
-        for f in as_completed(futures):
+        self._futures = [self.client.submit(run_chunk, remote, first, values, pure=False)
+                         for first, values in chunks]
+        self._seen: set = set()
+        for f in as_completed(self._futures):
+            self._seen.add(f.key)
             yield f.result()
+
+    def drain(self):
+        """After Ctrl-C: cancel what has not finished; yield the finished chunks not yet yielded."""
+        futures = getattr(self, "_futures", [])
+        pending = [f for f in futures if f.status != "finished"]
+        if pending:
+            self.client.cancel(pending)
+        seen = getattr(self, "_seen", set())
+        for f in futures:
+            if f.key not in seen and f.status == "finished":
+                yield f.result()
 
     def close(self, cancel: bool = False):
         if cancel and getattr(self, "_futures", None):
