@@ -70,8 +70,13 @@ ENTRIES = [
           "Pass the files inside it: `mech check models/*.mech`.", command="mech check models"),
     Entry("E004", "no model", "The file is empty, or holds only comments and blank lines.",
           "Write at least one `model Name ... end Name;`.", corpus="E004_only_comments.mech"),
-    Entry("E005", "file too large", "The file is larger than 20 MB: not a hand-written model.",
-          "Split it, or generate smaller models.", command="mech check big.mech"),
+    Entry("E005", "file too large", "The file is larger than the `file_bytes` limit (1 MB; checked before "
+                                    "reading): not a hand-written model.",
+          "Split it, or generate smaller models; `--limit file_bytes=N` raises the limit.",
+          command="mech check big.mech"),
+    Entry("E006", "not a regular file", "The path names a FIFO, a device (such as `/dev/zero`) or a socket: "
+                                        "reading it could block or never end, so it is refused before opening.",
+          "Save the model to an ordinary file and check that.", command="mech check /dev/zero"),
     # ------------------------------------------------------------------ E1xx
     Entry("E101", "unexpected character", "A character that cannot start any token, such as `$`, `'` or `×`.",
           "Remove it. Strings use double quotes; multiplication is `*`.", corpus="E101_dollar.mech"),
@@ -200,7 +205,25 @@ ENTRIES = [
           "Use e.g. `\"zyx\"` (Cardan) or `\"zxz\"` (Euler).", corpus="E312_bad_euler_sequence.mech"),
     Entry("E313", "outside min/max", "A parameter value below its `min` or above its `max` attribute.",
           "Change the value (or the bound).", corpus="E313_parameter_below_min.mech"),
+    Entry("E314", "name too long", "An identifier or a unit string longer than the `name_length` limit (256 "
+                                   "characters): such names come from generators gone wrong, make unreadable "
+                                   "output, and a huge unit string takes pint minutes to parse.",
+          "Use a shorter name (or `--limit name_length=N`).", corpus="E314_name_too_long.mech"),
+    Entry("E315", "Integer parameter too large", "An Integer parameter beyond the `integers` limit (1,000,000 in "
+                                                 "magnitude). Integer parameters are structural: they size arrays "
+                                                 "and loops.",
+          "Use a smaller value (or `--limit integers=N`).", corpus="E315_integer_parameter_too_large.mech"),
+    Entry("E316", "model too large", "The model has more generalized coordinates (500), output scalars "
+                                     "(10,000), component instances (10,000) or scalars in all (20,000) than "
+                                     "the front end accepts: every one is derived and compiled symbolically, "
+                                     "and far larger models would run for hours or exhaust memory.",
+          "Make the model smaller, or raise the budget the message names with `--limit NAME=N` (see "
+          "docs/language.md, Limits).", corpus="E316_too_many_coordinates.mech"),
     # ------------------------------------------------------------------ E4xx
+    Entry("E317", "too many models", "The file holds more models and scenes than the `models` limit (500): "
+                                     "`mech check` analyzes and derives each of them.",
+          "Split the file (or `--limit models=N`).", corpus="E317_too_many_models.mech",
+          shown="model M1\nend M1;\n...\nmodel M501\nend M501;\n"),
     Entry("E401", "incompatible units", "Two quantities with different units added, subtracted, compared or "
                                         "given as the branches of an `if`.",
           "Check the formula and the parameters' units.", corpus="E401_kg_plus_m.mech"),
@@ -278,6 +301,7 @@ def corpus_text(name: str) -> bytes:
 
 def run(entry: Entry) -> tuple[str, str]:
     """(text shown as the example, output of the command), produced in a temporary folder."""
+    from mechdsl import limits
     from mechdsl import parser as P
     from mechdsl.cli import main
     from mechdsl.diagnostics import MechError
@@ -295,9 +319,11 @@ def run(entry: Entry) -> tuple[str, str]:
             elif entry.code == "E003":
                 os.mkdir("models")
                 args = ["check", "models"]
+            elif entry.code == "E006":
+                args = ["check", "/dev/zero"]
             elif entry.code == "E005":
                 with open("big.mech", "wb") as f:
-                    f.truncate(P.MAX_FILE_BYTES + 1)
+                    f.truncate(limits.get("file_bytes") + 1)
                 args = ["check", "big.mech"]
             err, out = io.StringIO(), io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
@@ -357,7 +383,7 @@ def generate() -> str:
             shown, output = run(e)
             cmd = e.command or f"mech check {FILE}"
             out += [f"### {e.code} {e.title}", "", e.meaning, ""]
-            if e.code not in ("E001", "E003", "E005") or e.shown:
+            if e.code not in ("E001", "E003", "E005", "E006") or e.shown:
                 out += ["```mech", shown.rstrip("\n"), "```", ""]
             where = f" (tests/corpus/{e.corpus})" if e.corpus else ""
             out += [f"`{cmd}`{where}:", "", "```text", output, "```", "", f"**Fix:** {e.fix}", ""]

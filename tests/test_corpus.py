@@ -6,6 +6,7 @@ documented in docs/errors.md.
 """
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from mechdsl import limits
 from mechdsl import parser as P
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError
@@ -31,6 +33,7 @@ NOT_FROM_A_FILE = {
     "E001": "test_missing_file",
     "E003": "test_directory",
     "E005": "test_file_too_large",
+    "E006": "test_not_a_regular_file",
     "E602": "test_unknown_scene_via_api",
 }
 
@@ -126,14 +129,47 @@ def test_directory(tmp_path, capsys):
     assert "help: " in err and "Traceback" not in err
 
 
+def test_not_a_regular_file(tmp_path, capsys):
+    # a FIFO would block at open() and /dev/zero never ends: both refused from stat(), before opening
+    fifo = tmp_path / "model.mech"
+    os.mkfifo(fifo)
+    for path in (fifo, Path("/dev/zero")):
+        rc, out, err = run_check(path, capsys)
+        assert rc == 1 and err.startswith(f"{path}: error[E006]: {path} is not a regular file ("), err
+        assert "help: " in err and "Traceback" not in err
+
+
+def test_file_size_checked_before_reading(tmp_path, capsys, monkeypatch):
+    # a sparse file one byte over the limit: refused from its size, never read
+    path = tmp_path / "huge.mech"
+    with open(path, "wb") as f:
+        f.truncate(limits.get("file_bytes") + 1)
+    def no_reading(*a, **k):
+        pytest.fail("the file was opened before the size check")
+
+    monkeypatch.setattr(Path, "read_bytes", no_reading)
+    monkeypatch.setattr(P, "open", no_reading, raising=False)  # the module's open() shadows the builtin
+    rc, out, err = run_check(path, capsys)
+    assert rc == 1 and f"error[E005]: file is too large ({limits.get('file_bytes') + 1:,} bytes" in err
+
+
+def test_file_size_limit_can_be_raised(tmp_path, capsys):
+    path = tmp_path / "m.mech"
+    path.write_text("model A\n  coordinate Real q(start = 0);\nequation\n  kinetic = der(q)^2/2;\nend A;\n")
+    with limits.override(file_bytes=40):
+        assert run_check(path, capsys)[0] == 1
+    assert main(["check", "--limit", "file_bytes=40", str(path)]) == 1
+    assert main(["check", "--limit", "file_bytes=1e3", str(path)]) == 0
+
+
 def test_file_too_large(tmp_path, capsys, monkeypatch):
     path = tmp_path / "big.mech"
     path.write_text("model A\n  coordinate Real q(start = 0);\nequation\n  kinetic = der(q)^2/2;\nend A;\n")
     assert run_check(path, capsys)[0] == 0
-    monkeypatch.setattr(P, "MAX_FILE_BYTES", 40)  # the real limit is 20 MB; the check is the same
-    rc, out, err = run_check(path, capsys)
+    with limits.override(file_bytes=40):  # the real limit is 1 MB; the check is the same
+        rc, out, err = run_check(path, capsys)
     assert rc == 1 and err.startswith(f"{path}: error[E005]: file is too large (")
-    assert "help: the limit is 40 bytes" in err
+    assert "the limit is 40;" in err and "--limit file_bytes=N" in err
 
 
 def test_unknown_scene_via_api():
@@ -240,3 +276,13 @@ def test_generalized_force_field_can_be_written(capsys):
 
     r = mechdsl.loads(src).simulate(1.0, points=3)      # q'' = Q = 1
     assert abs(r["q"][-1] - 0.5) < 1e-8
+
+
+def test_mutual_instances_are_found_by_check(capsys):
+    # A has a B and B has an A: both are parts, which check used to skip ("checked there"),
+    # so check passed while simulate refused the file.  The whole-file check names the cycle.
+    path = CORPUS / "E207_mutual_instances.mech"
+    for command in (["check"], ["simulate", "--t-end", "0.01"]):
+        assert main([*command, str(path)]) == 1
+        err = capsys.readouterr().err
+        assert "error[E207]: model 'A' extends or contains itself (through A -> B -> A)" in err, err

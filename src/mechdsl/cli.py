@@ -44,8 +44,20 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
                 continue  # command not built (yet)
             raise
         p = mod.add_parser(sub)
+        p.add_argument("--limit", action="append", default=[], metavar="NAME=N", type=_limit,
+                       help="raise a size budget of the front end, e.g. coordinates=5000 "
+                            "(names and defaults: docs/language.md, Limits)")
         p.set_defaults(_run=mod.run)
     return ap
+
+
+def _limit(text: str) -> tuple[str, int]:
+    from .limits import parse_setting
+
+    try:
+        return parse_setting(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,7 +72,10 @@ def main(argv: list[str] | None = None) -> int:
         if not getattr(args, "_run", None):
             ap.print_help(sys.stderr)
             return 2
-        return int(args._run(args) or 0)
+        from .limits import override
+
+        with override(dict(getattr(args, "limit", None) or [])):
+            return int(args._run(args) or 0)
     except SystemExit as e:
         return int(e.code) if isinstance(e.code, int) else (0 if e.code is None else 2)
     except UsageError as e:

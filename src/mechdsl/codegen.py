@@ -37,6 +37,7 @@ loop.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -434,7 +435,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
     d = cache_dir()
     lib = d / f"{digest}.so"
     size_kb = sum(len(c) for c in units) // 1000
-    if lib.exists():
+    problem = _cache_problem(lib) if lib.exists() else None
+    if lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
     else:
         try:
@@ -446,7 +448,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
                     src.write_text(code)
                     obj = Path(tmp) / f"unit{i}.o"
                     objs.append(obj)
-                    procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", str(src), "-o", str(obj)],
+                    # relative names in the build folder: the library does not embed the folder's
+                    # random name, so concurrent builds of one model give the same bytes (and hash)
+                    procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", src.name, "-o", obj.name], cwd=tmp,
                                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
                 errors = []
                 for pr in procs:
@@ -455,21 +459,68 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
                         errors.append((err or out).strip())
                 out = Path(tmp) / "lib.so"
                 if not errors:
-                    r = subprocess.run([cc, "-shared", *map(str, objs), "-o", str(out), "-lm"],
-                                       capture_output=True, text=True)
+                    r = subprocess.run([cc, "-shared", *(o.name for o in objs), "-o", out.name, "-lm"],
+                                       capture_output=True, text=True, cwd=tmp)
                     if r.returncode != 0:
                         errors.append((r.stderr or r.stdout).strip())
                 if errors:
                     tail = " | ".join(errors[0].splitlines()[-3:])
                     return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
+                _record_digest(out, lib)  # the hash first: a library in place always has its hash
                 os.replace(out, lib)
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
                 f"({', '.join(' '.join(f) for f in flags)}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
+        if problem:
+            note = f"the cached library {lib} {problem}: rebuilt; " + note
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     return loaded, note, str(lib)
+
+
+def _digest_path(lib: Path) -> Path:
+    return lib.with_suffix(".sha256")
+
+
+def _file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _record_digest(built: Path, lib: Path) -> None:
+    """Write the hash of the library `built` next to its cache place `lib` (``<name>.sha256``), atomically."""
+    side = _digest_path(lib)
+    fd, tmp = tempfile.mkstemp(prefix=f".{side.name}.", suffix=".tmp", dir=str(lib.parent))
+    try:
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(_file_sha256(built) + "\n")
+        os.replace(tmp, side)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _cache_problem(lib: Path) -> str | None:
+    """None if the cached library is the one built here, else what is wrong with it.
+
+    A truncated library kills the process that loads it (SIGBUS); another library under the
+    right name gives wrong numbers.  The hash recorded at build time catches both."""
+    try:
+        recorded = _digest_path(lib).read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return "has no recorded content hash"
+    try:
+        actual = _file_sha256(lib)
+    except OSError as e:
+        return f"cannot be read ({e.strerror or e})"
+    if actual != recorded:
+        return "does not match its recorded content hash (truncated or replaced)"
+    return None
 
 
 # --------------------------------------------------------------------------- fast calls

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import re
+import stat
 from functools import lru_cache
 from pathlib import Path
 
@@ -15,11 +16,9 @@ from lark.visitors import Transformer_NonRecursive
 from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
 
 from . import ast
+from . import limits
 from .diagnostics import Diagnostic, InternalError, MechError, Span
 
-MAX_NESTING = 200          # brackets deep
-MAX_DEPTH = 600            # syntax tree depth (long operator chains)
-MAX_FILE_BYTES = 20_000_000
 
 KEYWORDS = {
     "model", "end", "equation", "extends", "parameter", "coordinate", "output", "input", "constant",
@@ -71,21 +70,42 @@ def read_source(path: str | os.PathLike) -> tuple[str, str]:
     if p.is_dir():
         raise MechError(Diagnostic("E003", f"{name} is a directory, not a .mech file", Span(name),
                                    f"pass the files inside it, e.g. {name.rstrip('/')}/*.mech"))
+    limit = limits.get("file_bytes")
     try:
-        data = p.read_bytes()
+        # stat before opening: opening a FIFO blocks, reading a device never ends
+        st = os.stat(p)
+        if not stat.S_ISREG(st.st_mode):
+            raise MechError(Diagnostic("E006", f"{name} is not a regular file ({_file_kind(st.st_mode)})", Span(name),
+                                       "models are read from ordinary .mech files; save the text to a file first"))
+        if st.st_size > limit:
+            raise MechError(_too_large(name, st.st_size))
+        with open(p, "rb") as f:
+            data = f.read(limit + 1)  # the file may grow after stat: never read more than the limit
     except OSError as e:
         raise MechError(Diagnostic("E001", f"cannot read {name}: {e.strerror or e}", Span(name),
                                    "check the file's permissions")) from None
     return name, decode_source(data, name)
 
 
+def _too_large(name: str, size: int) -> Diagnostic:
+    return Diagnostic("E005", f"file is too large ({size:,} bytes, more than {limits.get('file_bytes'):,})", Span(name),
+                      "mechdsl reads hand-written models; " + limits.hint("file_bytes"))
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return kind
+    return "not an ordinary file"
+
+
 def decode_source(data: bytes, name: str = "<input>") -> str:
     from .report import forget_source
 
     forget_source(name)  # an older text of the same name must not be shown under these errors
-    if len(data) > MAX_FILE_BYTES:
-        raise MechError(Diagnostic("E005", f"file is too large ({len(data)} bytes)", Span(name),
-                                   f"the limit is {MAX_FILE_BYTES} bytes"))
+    if len(data) > limits.get("file_bytes"):
+        raise MechError(_too_large(name, len(data)))
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -211,14 +231,15 @@ def _recovery_region(code: str, pos: int) -> tuple[int, int] | None:
 
 
 def _check_depth(root: ast.Node) -> None:
-    """Reject syntax trees deeper than MAX_DEPTH (e.g. sums of thousands of terms) with E104."""
+    """Reject syntax trees deeper than the `depth` limit (e.g. sums of thousands of terms) with E104."""
+    max_depth = limits.get("depth")
     stack = [(root, 1)]
     while stack:
         node, d = stack.pop()
-        if d > MAX_DEPTH:
-            raise MechError(Diagnostic("E104", f"expression is too deeply nested (more than {MAX_DEPTH} levels)",
+        if d > max_depth:
+            raise MechError(Diagnostic("E104", f"expression is too deeply nested (more than {max_depth} levels)",
                                        node.span, "split it with intermediate `Real` variables, or use sum() "
-                                                  "over an array"))
+                                                  "over an array; " + limits.hint("depth")))
         stack.extend((c, d + 1) for c in node.child_nodes())
 
 
@@ -229,8 +250,14 @@ def _only_comments(text: str) -> bool:
     return not stripped.strip()
 
 
+_WORD = re.compile(r"\w+")
+
+
 def _check_nesting(text: str, filename: str) -> None:
-    """Reject absurd bracket nesting before the parser builds a deep tree (E104)."""
+    """Reject absurd bracket nesting (E104) and over-long names (E314) before the parser sees them.
+
+    One linear scan that skips strings and comments."""
+    max_nesting, max_name = limits.get("nesting"), limits.get("name_length")
     depth, line, col = 0, 1, 0
     i, n = 0, len(text)
     while i < n:
@@ -257,13 +284,23 @@ def _check_nesting(text: str, filename: str) -> None:
             i = j
         elif ch in "([{":
             depth += 1
-            if depth > MAX_NESTING:
+            if depth > max_nesting:
                 raise MechError(Diagnostic(
-                    "E104", f"brackets nested more than {MAX_NESTING} deep",
+                    "E104", f"brackets nested more than {max_nesting} deep",
                     Span(filename, line, col, line, col + 1),
-                    "split the expression with intermediate `Real` variables"))
+                    "split the expression with intermediate `Real` variables; " + limits.hint("nesting")))
         elif ch in ")]}":
             depth = max(0, depth - 1)
+        elif ch.isalnum() or ch == "_":  # a name or a number: one run of word characters
+            m = _WORD.match(text, i)
+            j = m.end() if m else i + 1
+            if j - i > max_name and not ch.isdigit():
+                raise MechError(Diagnostic(
+                    "E314", f"name is too long ({j - i:,} characters, more than {max_name})",
+                    Span(filename, line, col, line, col + 1),
+                    "use a shorter name; " + limits.hint("name_length")))
+            col += j - i - 1
+            i = j - 1
         i += 1
 
 

@@ -68,6 +68,8 @@ def run(args) -> int:
 
 
 def _extra_lines(m) -> list[str]:
+    from ..simulate import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
+
     """Lines other phases contribute (loops, first integrals, ...), each guarded: check never fails on them."""
     out = []
     for lp in m.model.loops:
@@ -79,7 +81,7 @@ def _extra_lines(m) -> list[str]:
             out += ["    " + s for s in check_report(m.eom)]
         except MechError:
             pass
-    if not m.model.loops and not m.model.constraints:
+    if not m.model.loops and not m.model.constraints and len(m.model.coordinates) <= MAX_INTEGRAL_SEARCH:
         try:
             from ..analysis.integrals import describe_integrals
 

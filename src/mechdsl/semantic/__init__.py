@@ -10,10 +10,13 @@ import math
 
 from .. import ast
 from .. import ir
+from .. import limits
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
 from ..printer import expr as print_expr
 from . import mods as Mods
+from .cycles import containment_cycles
 from .flatten import Flattener
+from .run_settings import check_run_settings
 
 # scene settings: name -> kind; later phases may register more (extend, never rename)
 SCENE_SETTINGS: dict[str, str] = {
@@ -32,6 +35,11 @@ class Program:
         self._models: dict[str, ast.ModelDef] = {}
         self._scenes: dict[str, ast.SceneDef] = {}
         diags = DiagnosticBag()
+        if len(file.items) > limits.get("models"):
+            item = file.items[limits.get("models")]
+            raise MechError(Diagnostic("E317", f"the file holds more than {limits.get('models'):,} models and scenes "
+                                               f"({len(file.items):,})", item.name_span,
+                                       "split it into several files; " + limits.hint("models")))
         for item in file.items:
             table = self._models if isinstance(item, ast.ModelDef) else self._scenes
             other = self._scenes if isinstance(item, ast.ModelDef) else self._models
@@ -41,6 +49,9 @@ class Program:
                 continue
             table[item.name] = item
         diags.raise_if_errors()
+        cycles = containment_cycles(self._models)
+        if cycles:
+            raise MechError(cycles)
 
     # ------------------------------------------------------------------ names
     def model_def(self, name: str) -> ast.ModelDef | None:
@@ -131,6 +142,7 @@ class Program:
             except MechError as e:
                 diags.extend(e.diagnostics)
         diags.raise_if_errors()
+        check_run_settings(s, out, model)
         if "tolerance" in out:
             out.setdefault("rtol", out["tolerance"])
             out.setdefault("atol", out["tolerance"])

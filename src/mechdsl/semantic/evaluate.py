@@ -11,6 +11,7 @@ import math
 from .. import ast
 from .. import exprs as X
 from .. import ir
+from .. import limits
 from .. import units as U
 from ..diagnostics import MechError, Diagnostic, Span
 from . import values as V
@@ -24,7 +25,6 @@ KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_e
 ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
 
 
-MAX_ITERATIONS = 200_000   # loop and comprehension iterations per model, all loops together
 
 
 class EvalError(Exception):
@@ -199,13 +199,14 @@ class Evaluator(abc.ABC):
         if step == 0:
             fail("E303", "a range step must not be zero", rng.span, "write start:step:stop with a non-zero step, e.g. 1:2:9")
         n = (b - a) // step + 1
-        if n > V.MAX_ELEMENTS:
-            fail("E303", f"range {a}:{b} has {n} elements (limit {V.MAX_ELEMENTS})", rng.span, "use a shorter range")
+        if n > limits.get("arrays"):
+            fail("E303", f"range {a}:{b} has {n} elements (limit {limits.get('arrays')})", rng.span,
+                 "use a shorter range; " + limits.hint("arrays"))
         # nested loops multiply: bound the total work of a model, not only each range
         self._iterations = getattr(self, "_iterations", 0) + max(n, 0)
-        if self._iterations > MAX_ITERATIONS:
-            fail("E303", f"the loops of this model run more than {MAX_ITERATIONS} times", rng.span,
-                 "use smaller ranges")
+        if self._iterations > limits.get("iterations"):
+            fail("E303", f"the loops of this model run more than {limits.get('iterations')} times", rng.span,
+                 "use smaller ranges; " + limits.hint("iterations"))
         return list(range(a, b + (1 if step > 0 else -1), step))
 
     # ------------------------------------------------------------------ calls
@@ -301,8 +302,8 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
 
     def count(v: Val, what: str) -> int:
         if isinstance(v, Scalar) and v.const is not None and float(v.const).is_integer() and v.const >= 0:
-            if v.const > V.MAX_ELEMENTS:
-                fail("E303", f"{what} {X.fmt_num(v.const)} is too large (limit {V.MAX_ELEMENTS})", e.span,
+            if v.const > limits.get("arrays"):
+                fail("E303", f"{what} {X.fmt_num(v.const)} is too large (limit {limits.get('arrays')})", e.span,
                      "use a smaller size")
             return int(v.const)
         fail("E307", f"{what} must be a non-negative Integer constant", e.span,
@@ -310,8 +311,9 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
         raise AssertionError
 
     def check_total(dims: list[int]) -> list[int]:
-        if math.prod(dims) > V.MAX_ELEMENTS:
-            fail("E303", f"{name}() would build more than {V.MAX_ELEMENTS} elements", e.span, "use smaller sizes")
+        if math.prod(dims) > limits.get("arrays"):
+            fail("E303", f"{name}() would build more than {limits.get('arrays')} elements", e.span,
+                 "use smaller sizes; " + limits.hint("arrays"))
         return dims
 
     if name == "cross":

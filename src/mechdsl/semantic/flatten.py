@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from .. import ast
 from .. import exprs as X
 from .. import ir
+from .. import limits
 from .. import units as U
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
 from ..printer import expr as print_expr
@@ -49,6 +50,9 @@ class Entry:
     cache: dict = field(default_factory=dict)   # evaluated array-level modifier values
 
 
+_BUDGET = {"coordinate": "coordinates", "output": "outputs", "component": "components"}  # kind -> limit
+
+
 @dataclass
 class CompInst:
     name: str
@@ -75,6 +79,7 @@ class Flattener(Evaluator):
         self.program = program
         self.model = model
         self.diags = DiagnosticBag()
+        self.used: dict[str, int] = {}  # budgets charged so far (limits.py): coordinates, outputs, ...
         self.loop_vars: dict[str, int] = {}
         self.entries: dict[str, Entry] = {}
         self.equations: list[ast.EquationItem] = []
@@ -302,11 +307,27 @@ class Flattener(Evaluator):
                 if n < 0:
                     fail("E307", f"array size {n} is negative", d.span, "array sizes are 0 or more")
                 dims.append(n)
-                if math.prod(dims) > V.MAX_ELEMENTS:
-                    fail("E303", f"array '{entry.decl.name}' would have more than {V.MAX_ELEMENTS} elements",
-                         d.span, "use a smaller size")
+                if math.prod(dims) > limits.get("arrays"):
+                    fail("E303", f"array '{entry.decl.name}' would have more than {limits.get('arrays')} elements",
+                         d.span, "use a smaller size; " + limits.hint("arrays"))
+            span = entry.decl.dims[-1].span if entry.decl.dims else entry.decl.name_span
+            for budget in (_BUDGET.get(entry.kind), None if entry.kind == "component" else "scalars"):
+                if budget:
+                    self.charge(budget, math.prod(dims), span)
             entry.dims = tuple(dims)
         return entry.dims
+
+    def charge(self, budget: str, n: int, span: Span, total: int | None = None) -> None:
+        """Count `n` more coordinates/outputs/components/scalars against the model's budget.
+
+        `total` replaces the running count (the built model's exact number).  An excess (E316)
+        stops the analysis of the model at once: going on is the work the budget bounds."""
+        used = self.used[budget] = self.used.get(budget, 0) + n if total is None else total
+        if used > limits.get(budget):
+            self.diags.error("E316", f"model '{self.model.name}' has more than {limits.get(budget):,} "
+                                     f"{limits.LIMITS[budget].meaning.split(' of ')[0]}", span,
+                             "mechdsl derives and compiles every scalar symbolically; " + limits.hint(budget))
+            self.diags.raise_if_errors()
 
     # ================================================================== entries
     def _evaluate_entry(self, e: Entry) -> Val:
@@ -326,6 +347,10 @@ class Flattener(Evaluator):
         v = self.eval(u.value)
         if not isinstance(v, Str):
             fail("E404", "a unit must be a string", u.value.span, 'write unit = "m/s2"')
+        if len(v.value) > limits.get("name_length"):  # pint's parser takes minutes on huge strings
+            fail("E314", f"unit string is too long ({len(v.value):,} characters, more than "
+                         f"{limits.get('name_length')})", u.value.span,
+                 'units look like "kg", "m/s2", "N.m"; ' + limits.hint("name_length"))
         try:
             factor, dim = U.parse_unit(v.value)
         except ValueError:
@@ -378,6 +403,10 @@ class Flattener(Evaluator):
                 if d.type_name == "Integer" and not float(s.const).is_integer():
                     fail("E307", f"Integer parameter '{d.name}' has non-integer value {X.fmt_num(s.const)}", e.mod.value.span,
                          f"give a whole number, or declare it as parameter Real {d.name}")
+                if d.type_name == "Integer" and abs(s.const) > limits.get("integers"):
+                    fail("E315", f"Integer parameter '{name}' = {X.fmt_num(s.const)} is too large for a structural "
+                                 f"parameter (more than {limits.get('integers'):,} in magnitude)", e.mod.value.span,
+                         "Integer parameters size arrays and loops; " + limits.hint("integers"))
                 self._check_range(e, name, s.const)
                 e.params.append(ir.Parameter(name, float(s.const), None, unit, d.doc or "", True, d.name_span))
                 out_items.append(Scalar(ir.Const(float(s.const)), U.ONE if d.type_name == "Boolean" else ANY,
@@ -907,6 +936,8 @@ class Flattener(Evaluator):
                     coords += inst.coords
                     for k in ("bodies", "points", "joints", "forces", "terms", "contacts"):
                         getattr(built, k).extend(getattr(b, k))
+            # joints own coordinates too: the exact count, located at the declaration that passes it
+            self.charge("coordinates", 0, e.decl.span, total=len(coords))
         self.diags.raise_if_errors()
         forces = built.forces + self.gen_forces
         model = ir.Model(

@@ -26,7 +26,6 @@ class _Any:
 ANY = _Any()
 
 
-MAX_ELEMENTS = 100_000   # largest array (and range) a model may build
 
 
 class ValError(Exception):
@@ -310,6 +309,9 @@ def power(a: Val, b: Val) -> Val:
     b = _scalar(b, "an exponent")
     require_dimensionless(b.dim, "an exponent", b.approx)
     a = _scalar(a, "'^' (use element-wise operations for arrays)")
+    if b.const is not None and not math.isfinite(b.const):
+        raise ValError("E303", f"the exponent {X.fmt_num(b.const)} is not a finite number",
+                       "check the exponent for overflow (numbers must stay below about 1.8e308)")
     d = a.dim
     if isinstance(d, U.Dim) and not d.dimensionless:
         if b.const is None:
