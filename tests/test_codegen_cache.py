@@ -41,7 +41,7 @@ if {other!r}:
 else:
     e = pendulum()
 funcs, note, lib = compile_functions([_build(e, "energy", None)], jacobian=False)
-value = float(funcs["energy"](0.0, [0.7, -1.3], e.param_values)[2])  # (T, V, E)
+value = float(funcs["energy"](0.0, [0.7, -1.3], [], e.param_values)[2])  # (t, x, u, p) -> (T, V, E)
 print(json.dumps(dict(note=note, lib=lib, value=value)))
 """
 # the closed form of the pendulum's energy (sim_models.pendulum: m = L = 1, g = 9.81)
