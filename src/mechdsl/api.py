@@ -34,8 +34,15 @@ _EOM_LOCK = threading.Lock()
 
 
 def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True) -> Program:
-    f = parse(path_or_text, filename) if is_text else parse_file(path_or_text)
-    return analyze(f, units=units)
+    if is_text:
+        text = path_or_text
+    else:
+        from .parser import read_source
+
+        filename, text = read_source(path_or_text)
+    program = analyze(parse(text, filename), units=units)
+    program.source_text = text          # a Model pickles by its source text (Model.__reduce__)
+    return program
 
 
 def load(path, model: str | None = None, scene: str | None = None, units: bool = True) -> "Model":
@@ -149,6 +156,21 @@ class Model:
     _repr_html_ = _display.model_html            # notebook displays (mechdsl.display)
     _repr_markdown_ = _display.model_markdown
 
+    # ------------------------------------------------------------------ pickling
+    def __reduce__(self):
+        """Pickled by its source text, target, overrides, parameter values and scene settings
+        (sweeps on worker processes and Dask); the equations are derived again on the other
+        side, once per process (``_restore`` caches by the pickled state)."""
+        text = getattr(self.program, "source_text", None)
+        if text is None:
+            raise TypeError("this Model was not loaded from source text (mechdsl.load/loads) and cannot be pickled")
+        # values of the independent parameters; bound ones are evaluated again from their bindings
+        values = tuple((p.name, float(p.value)) for p in self.model.real_parameters if p.binding is None)
+        settings = tuple(self.scene.settings) if self.scene is not None else None
+        state = (text, self.program.file.filename, bool(self.program.units), self._target,
+                 self._overrides, values, settings)
+        return (_restore, (state,))
+
     def __repr__(self) -> str:
         scene = f", scene {self.scene.name}" if self.scene else ""
         return f"<mechdsl.Model {self.name}{scene}: {len(self.coordinates)} coordinates>"
@@ -259,6 +281,15 @@ class Model:
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
         return r
 
+    def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
+        """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
+        docs/sweeps.md).  params/starts: a grid (dict), mechdsl.sweep.table(...) or a DataFrame,
+        or a sampler (mechdsl.sample.uniform/normal); scheduler: vectorized | processes | dask |
+        tcp://host:port; out: a .nc file streamed chunk by chunk; other keywords: settings."""
+        from .sweep import sweep
+
+        return sweep(self, params, starts, t_end, **kw)
+
     def settings(self, **args):
         """The resolved, validated SimulationSettings of a run (argument > scene > default)."""
         from .simulation import resolve
@@ -314,6 +345,36 @@ class Model:
 
 
 # ---------------------------------------------------------------------------- helpers
+
+_RESTORED: dict = {}
+_RESTORED_MAX = 16
+
+
+def _restore(state) -> "Model":
+    """The Model of a pickled state; rebuilt once per process (a worker gets the same state
+    with every chunk of a sweep and derives the equations once)."""
+    import hashlib
+    import pickle
+
+    key = hashlib.sha256(pickle.dumps(state)).hexdigest()
+    with _EOM_LOCK:
+        hit = _RESTORED.get(key)
+    if hit is not None:
+        return hit
+    text, filename, units, (kind, name), overrides, values, settings = state
+    program = _program(text, True, filename, units)
+    m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None,
+                            overrides or None)
+    m = m._with_real(dict(values))
+    if settings is not None:
+        base = m.scene or ir.Scene(m.name, m.model)
+        m = Model(m.program, m.model, dataclasses.replace(base, settings=tuple(settings)), m._overrides, m._target)
+    with _EOM_LOCK:
+        if len(_RESTORED) >= _RESTORED_MAX:
+            _RESTORED.pop(next(iter(_RESTORED)))
+        _RESTORED[key] = m
+    return m
+
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,147 @@
+"""``mech sweep FILE``: a parameter sweep or Monte Carlo ensemble -> .nc or .csv (+ a heat map).
+
+    mech sweep models/double_pendulum.mech --grid "j1.phi.start=-3:3:64" --grid "j2.phi.start=-3:3:64" \\
+        --t-end 10 -o flip.nc --plot flip.png --metric "flip:j1.phi+j2.phi"
+
+Imports xarray/pandas (and Dask) only here, never for the other commands.
+"""
+from __future__ import annotations
+
+import sys
+
+from ..diagnostics import UsageError
+from ._common import add_force_arg, add_set_arg, add_target_args, load_model
+
+HELP = "run a model over a grid or a random sample of parameters and start values"
+METRICS = "flip:EXPR (first time |EXPR| > pi), final:VAR, max:VAR (max |VAR|), or a status column " \
+          "(failure_time, energy_drift, steps, cpu_time, ...)"
+
+
+def add_parser(sub):
+    from .simulate import _number_arg
+
+    p = sub.add_parser("sweep", help=HELP, description=HELP)
+    add_target_args(p, what="sweep")
+    add_set_arg(p)
+    p.add_argument("--grid", action="append", default=[], metavar="NAME=A:B:N",
+                   help="sweep NAME over N values from A to B (or NAME=v1,v2,...); several --grid make a "
+                        "Cartesian product; NAME a parameter, c.start or c.speed")
+    p.add_argument("--uniform", action="append", default=[], metavar="NAME=LOW:HIGH",
+                   help="Monte Carlo: NAME uniform in [LOW, HIGH) (with --samples)")
+    p.add_argument("--normal", action="append", default=[], metavar="NAME=MEAN:SD",
+                   help="Monte Carlo: NAME normal (with --samples)")
+    p.add_argument("--samples", type=int, metavar="N", help="Monte Carlo sample size")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="Monte Carlo seed (default 0)")
+    p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time, else 10)")
+    p.add_argument("--points", type=int, metavar="N", help="output points per run (default 501)")
+    p.add_argument("--rtol", type=_number_arg, metavar="R", help="relative tolerance (default 1e-8)")
+    p.add_argument("--atol", type=_number_arg, metavar="A", help="absolute tolerance (default 1e-10)")
+    p.add_argument("--method", metavar="M", help="integration method (default auto, resolved once for the sweep)")
+    p.add_argument("--scheduler", metavar="S",
+                   help="vectorized, processes, dask (a local Dask cluster) or tcp://host:port (an existing "
+                        "Dask scheduler); default: vectorized where it applies, else processes")
+    p.add_argument("--workers", type=int, metavar="N", help="worker processes or threads (default: every core)")
+    p.add_argument("-o", "--output", metavar="OUT", help="results: .nc (netCDF, streamed) or .csv (long table)")
+    p.add_argument("--plot", metavar="PNG", help="heat map of --metric over the two --grid axes")
+    p.add_argument("--metric", metavar="M", help=f"per-run value to plot: {METRICS}")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_force_arg(p)
+    return p
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..fileio import check_figure, check_writable
+    from ..sample import normal, uniform
+    from ..sweep.spec import parse_range
+
+    if args.output and not str(args.output).endswith((".nc", ".csv")):
+        raise UsageError(f"-o {args.output}: the output must end in .nc or .csv")
+    if args.output:
+        check_writable(args.output, overwrite=args.force)
+    if args.plot:
+        check_figure(args.plot, overwrite=args.force)
+        if not args.metric:
+            raise UsageError(f"--plot needs --metric ({METRICS})")
+    grid = dict(parse_range(g) for g in args.grid)
+    params = grid or None
+    sampled = [(uniform, a) for a in args.uniform] + [(normal, a) for a in args.normal]
+    if sampled:
+        if args.samples is None:
+            raise UsageError("--uniform/--normal need --samples N")
+        sampler = None
+        for fn, text in sampled:
+            name, _, rhs = text.partition("=")
+            parts = rhs.split(":")
+            if len(parts) != 2 or not name.strip():
+                raise UsageError(f"{text!r}: expected NAME=A:B")
+            from ._common import number
+
+            s = fn({name.strip(): (number(parts[0]), number(parts[1]))}, n=args.samples, seed=args.seed)
+            sampler = s if sampler is None else sampler & s
+        if grid:
+            raise UsageError("give either --grid or --uniform/--normal, not both")
+        params = sampler
+    elif args.samples is not None:
+        raise UsageError("--samples needs --uniform or --normal")
+    if params is None:
+        raise UsageError("nothing to sweep: give --grid NAME=A:B:N (or --uniform/--normal with --samples)")
+    model, x0 = load_model(args, starts_in_model=False)
+    if x0:
+        raise UsageError("--set of start values is not available in a sweep: sweep them with --grid c.start=...")
+    t_end = args.t_end
+    if t_end is None and model.scene_settings.get("stop_time") is None:
+        t_end = 10.0
+        print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
+    nc = args.output if args.output and args.output.endswith(".nc") else None
+    ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=nc, workers=args.workers,
+                     progress=(not args.no_progress) and sys.stderr.isatty(), overwrite=True,
+                     rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
+    written = [nc] if nc else []
+    if args.output and args.output.endswith(".csv"):
+        from ..fileio import write_atomic
+        from ..sweep import to_frame
+
+        write_atomic(args.output, to_frame(ds).to_csv(index=False), overwrite=True)
+        written.append(args.output)
+    if args.plot:
+        from ..sweep.plot import heat_map, metric
+
+        written.append(str(heat_map(ds, metric(ds, args.metric), args.metric, args.plot)))
+    print(summary(ds, written))
+    return 0 if int(ds.attrs["n_failed"]) == 0 and not int(ds.attrs["interrupted"]) else 1
+
+
+def summary(ds, written=()) -> str:
+    import numpy as np
+
+    a = ds.attrs
+    lines = [f"model {a['model']}: {a['summary']}",
+             f"swept: {a['swept']}; scheduler {a['scheduler']}, method {a['method']}, rtol {a['rtol']:g}, "
+             f"atol {a['atol']:g}, {a['wall_time']:.3g} s"]
+    if a.get("method_note"):
+        lines.append(f"method: {a['method_note']}")
+    ok = np.asarray(ds["success"].values, bool)
+    if (~ok).any():
+        causes: dict[str, int] = {}
+        for c in np.asarray(ds["cause"].values)[~ok]:
+            causes[str(c)] = causes.get(str(c), 0) + 1
+        lines.append("failed runs by cause: " + ", ".join(f"{c} ({k})" for c, k in sorted(causes.items())))
+        first = int(np.flatnonzero(~ok)[0])
+        ft = float(ds["failure_time"].values[first])
+        lines.append(f"first failed run: {first} ({_values(ds, first)}): {ds['cause'].values[first]}"
+                     + (f" at t = {ft:.6g}" if np.isfinite(ft) else "")
+                     + (f" ({ds['detail'].values[first]})" if str(ds['detail'].values[first]) else ""))
+    if int(a.get("n_warnings", 0)):
+        lines.append(f"warnings in {a['n_warnings']} runs; first: " + str(a.get("warnings", "")).splitlines()[0])
+    if int(a.get("interrupted", 0)):
+        lines.append("interrupted: the finished runs are kept; the others are marked 'not run'")
+    for w in written:
+        lines.append(f"wrote {w}")
+    return "\n".join(lines)
+
+
+def _values(ds, i: int) -> str:
+    names = [n for n in str(ds.attrs.get("swept", "")).split(",") if n]
+    return ", ".join(f"{n} = {float(ds[n].values[i]):.6g}" for n in names)

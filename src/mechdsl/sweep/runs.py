@@ -1,0 +1,213 @@
+"""One chunk of runs, the unit every back end executes (in-process, in a worker process,
+on a Dask worker): ``run_chunk(job, first, values) -> Chunk``.
+
+Each run goes through the one simulation layer: its settings are the sweep's resolved
+``SimulationSettings`` with the run's parameter vector and start vector (``p``, ``x0``),
+and its statistics are the layer's schema (``accuracy.SCHEMA``).  Two ways to integrate:
+
+    per run     ``mechdsl.simulation.simulate(eom, settings)``: any problem kind
+    vectorized  one CasADi integrator ``map``-ped over the chunk (ODE problems, CasADi
+                methods); the layer's post steps (non-finite check, statistics schema,
+                accuracy report) then run per run on its trajectory.  A run whose
+                trajectory is not finite (or a chunk the mapped call rejects) is rerun
+                per run, so its failure says when and why exactly as a single run would.
+
+The mapped integrator is the same Function object (``integrators._integrator``, same
+options) a single run uses, so both ways give bit-identical numbers.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..diagnostics import MechError, UsageError
+
+STATUS = ("success", "failure_time", "cause", "detail", "steps", "rhs_evals", "rejected_steps", "points",
+          "cpu_time", "wall_time", "energy_drift", "energy_drift_relative")
+
+
+@dataclass
+class Job:
+    """What a worker needs (pickles: the Model pickles by its source text)."""
+
+    model: object                        # mechdsl.api.Model
+    settings: object                     # SimulationSettings (resolved once for the whole sweep)
+    real: tuple[str, ...]
+    structural: tuple[str, ...]
+    starts: dict                         # sweep name -> start key
+    variables: tuple[str, ...]           # recorded signals kept per run
+    grid: np.ndarray                     # the output times
+    states: tuple[str, ...] = ()         # every state name over the sweep (Integer parameters change them)
+    vectorized: bool = False
+    threads: int = 1                     # threads of the mapped integrator
+
+
+@dataclass
+class Chunk:
+    first: int
+    X: np.ndarray                        # (k, n_t, n_x), NaN after a failure
+    signals: np.ndarray                  # (k, n_t, n_var)
+    status: list = field(default_factory=list)    # one dict per run (STATUS keys)
+    warnings: list = field(default_factory=list)  # (run, text)
+
+
+def run_chunk(job: Job, first: int, values: dict) -> Chunk:
+    k = len(next(iter(values.values())))
+    nt, nx = len(job.grid), len(job.states)
+    out = Chunk(first, np.full((k, nt, nx), np.nan), np.full((k, nt, len(job.variables)), np.nan),
+                [None] * k)
+    todo = []
+    prepared = {}
+    for i in range(k):
+        row = {name: float(v[i]) for name, v in values.items()}
+        try:
+            prepared[i] = _prepare(job, row)
+            todo.append(i)
+        except (UsageError, MechError) as e:
+            out.status[i] = _invalid(str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__)
+    if job.vectorized and todo:
+        todo = _mapped(job, todo, prepared, out)
+    for i in todo:
+        eom, s = prepared[i]
+        _store(job, out, i, _solve_one(eom, s))
+    return out
+
+
+def _prepare(job: Job, row: dict):
+    """The run's EOM and settings (the one place a run's p and x0 are built)."""
+    from ..simulation.inputs import start_vector
+
+    m = job.model
+    if job.structural:
+        m = m.with_params(**{n: int(row[n]) if float(row[n]).is_integer() else row[n] for n in job.structural})
+    if job.real:
+        m = m.with_params(**{n: row[n] for n in job.real})
+    eom = m.eom
+    pv = np.asarray(m.parameter_values, float)
+    x0 = start_vector(eom, {key: row[name] for name, key in job.starts.items()} or None, pv)
+    return eom, job.settings.replace(p=pv, x0=x0)
+
+
+def _solve_one(eom, s):
+    from ..simulation import simulate
+
+    try:
+        return simulate(eom, s)
+    except (UsageError, MechError) as e:
+        return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+
+
+def _invalid(text: str) -> dict:
+    st = {k: None for k in STATUS}
+    st.update(success=False, failure_time=np.nan, cause="invalid run", detail=text, points=0)
+    return st
+
+
+def _store(job: Job, out: Chunk, i: int, r) -> None:
+    if isinstance(r, str):
+        out.status[i] = _invalid(r)
+        return
+    n = len(r.t)
+    names = list(r.coordinates) + [f"der({c})" for c in r.coordinates]
+    cols = [job.states.index(c) for c in names]
+    out.X[i, :n][:, cols] = np.hstack([r.q, r.qd])
+    for j, name in enumerate(job.variables):
+        v = r.signals.get(name)
+        if isinstance(v, np.ndarray) and v.ndim == 1:
+            out.signals[i, :len(v), j] = v
+    st = {k: r.stats.get(k) for k in STATUS if k in r.stats}
+    f = r.failure
+    st.update(success=f is None, failure_time=np.nan if f is None else float(f.time),
+              cause="" if f is None else f.cause, detail="" if f is None else (f.detail or ""))
+    out.status[i] = {k: st.get(k) for k in STATUS}
+    for w in r.metadata.get("warnings", []):
+        out.warnings.append((out.first + i, w))
+
+
+# --------------------------------------------------------------------------- vectorized
+
+
+_MAPS: dict = {}
+
+
+def mapped_integrator(eom, s, grid, k: int, threads: int):
+    """The one place the sweep touches the model's CasADi Functions: the integrator of a
+    single run (same Function, same options as ``simulate_ode``) mapped over k runs."""
+    from .. import integrators as I
+    from ..codegen import casadi_functions
+    from ..simulate import DEFAULT_POINTS, MAX_STEPS_TOTAL, min_step
+
+    npts = s.points or DEFAULT_POINTS
+    max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))      # as simulate_ode
+    opts = I.casadi_options(s.method, s.rtol, s.atol, max_steps, None, dict(s.integrator_options or {}),
+                            hmin=min_step(s.t_start, s.t_end))
+    ode = casadi_functions(eom, compiled=s.compiled, names=("ode", "ode_jacobian"))["ode"]
+    integ = I._integrator(s.method, ode, grid, opts)
+    key = (id(integ), k, threads)
+    hit = _MAPS.get(key)
+    if hit is None or hit[0] is not integ:
+        if len(_MAPS) > 8:
+            _MAPS.clear()
+        hit = _MAPS[key] = (integ, integ.map(k, "thread", threads) if threads > 1 else integ.map(k))
+    return hit[1]
+
+
+def scheme_parameter(pv) -> np.ndarray:
+    """The integrator's parameter input [u; p] (integrators.dae_function); u is empty: the
+    vectorized path serves models without inputs only."""
+    from ..simulate import NO_U
+
+    return np.r_[NO_U, np.asarray(pv, float).ravel()]
+
+
+def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
+    """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
+    from .. import integrators as I
+    from ..result import Result
+    from ..simulate import compute_signals, _check_outputs
+    from ..codegen import casadi_functions
+    from ..simulation import formulate
+    from ..simulation import accuracy as A
+
+    eom0, s0 = prepared[todo[0]]
+    k = len(todo)
+    X0 = np.column_stack([prepared[i][1].x0 for i in todo])
+    P = np.column_stack([scheme_parameter(prepared[i][1].p) for i in todo])
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    try:
+        F = mapped_integrator(eom0, s0, job.grid, k, job.threads)
+        with I.captured_messages():
+            xf = np.asarray(F(x0=X0, p=P)["xf"], float)
+    except Exception:  # noqa: BLE001 - a run failed inside the map: every run of the chunk alone
+        return todo
+    cpu = (time.process_time() - cpu0) / k
+    wall = (time.perf_counter() - wall0) / k
+    nx, nt = X0.shape[0], len(job.grid)
+    traj = xf.reshape(nx, k, nt).transpose(1, 2, 0)        # (run, time, state)
+    out_names = _check_outputs(eom0, s0.outputs)
+    post = casadi_functions(eom0, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
+    problem = formulate(eom0, s0)          # invariants depend on the structure only (none swept here)
+    left = []
+    n = nx // 2
+    for j, i in enumerate(todo):
+        X = traj[j]
+        if not np.isfinite(X).all():
+            left.append(i)
+            continue
+        eom, s = prepared[i]
+        X[0] = s.x0
+        sig = compute_signals(eom, post, job.grid, X, s.p, out_names)
+        r = Result(t=job.grid.copy(), q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=sig,
+                   stats={}, metadata={"warnings": []})
+        A.check_finite(r)
+        A.normalize_stats(r, cpu, wall)
+        A.accuracy_report(r, problem, fixed_step=False)
+        _store(job, out, i, r)
+    return left
+
+
+def default_threads() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
