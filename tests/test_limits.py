@@ -64,7 +64,9 @@ def first_error(err: str, path) -> tuple[str, int, int]:
     ("double_pendulum.mech", "output Real x2(", "output Real " + "x" * 900_000 + "(", "E314", 22),
     # a unit string of 500,000 characters: pint's parser ran for minutes
     ("pendulum.mech", '(unit = "kg")', '(unit = "' + "x" * 500_000 + '")', "E314", 12),
-])
+], ids=["andrews-qq100000", "coupled-big100000", "double-outputs100000", "nfourbar-N10000", "nfourbar-N1000",
+        "double-name900k", "pendulum-unit500k"])   # short ids: pytest puts the id into the environment of
+                                                 # every subprocess (PYTEST_CURRENT_TEST), 128 kB at most
 def test_budget_examples_stop_with_a_located_error(tmp_path, model, old, new, code, line):
     path = mutant(tmp_path, model, old, new)
     rc, err = check_cli(path)
