@@ -300,3 +300,14 @@ def test_an_output_may_use_an_input():
     r = m.simulate(1.0, inputs={"F": lambda t: 2.0 * t}, points=3)
     assert r["push"] == pytest.approx([1.5, 2.5, 3.5])
     assert r["push"] == pytest.approx(r["F"] + r["G"])
+
+
+def test_hamilton_equations_of_a_model_with_an_input(capsys):
+    """The cart-pole's force F is an input: Hamilton's equations show it as the generalized
+    force on the cart, dp_x/dt = F (exactly: x is cyclic in T and V) - was an internal error."""
+    from conftest import MODELS
+    from mechdsl.cli import main
+
+    assert main(["equations", "--hamiltonian", str(MODELS / "cart_pole.mech")]) == 0
+    out = capsys.readouterr().out
+    assert any(" ".join(ln.split()) == "der(p_x) = F" for ln in out.splitlines())

@@ -179,6 +179,9 @@ def make_symbols(coords, params):
 def from_eom(eom) -> SymbolicLagrangian:
     import casadi as ca
 
+    from ..eom import fold_inputs
+
+    eom = fold_inputs(eom)          # inputs appear as symbols, like parameters (F in Q of the cart-pole)
     q, qd, t, p = make_symbols(eom.coords, eom.params)
     T, V, D, Q = sx_to_sympy([eom.T, eom.V, eom.D, ca.SX(eom.Q)], [eom.q, eom.qd, eom.t, eom.p],
                              [q, qd, [t], p])
