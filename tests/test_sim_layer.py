@@ -232,7 +232,9 @@ def test_absurd_times_and_counts_are_usage_errors(args, text, capsys):
     ("points = 100000000;", "budget"),
     ("dt = 1e-12;", "budget"),
 ])
-def test_absurd_scene_settings_are_usage_errors(tmp_path, capsys, setting, text):
+def test_absurd_scene_settings_are_located_model_errors(tmp_path, capsys, setting, text):
+    """Values written in the scene: E604 at the scene (exit 1); the same values given as
+    options are usage errors (exit 2, test_a_scene_value_over_a_budget_is_a_located_model_error)."""
     src = (MODELS / "heavy_top.mech").read_text()
     key = setting.split(" ")[0]
     lines = [ln for ln in src.splitlines() if not ln.strip().startswith(f"{key} =")]
@@ -240,7 +242,7 @@ def test_absurd_scene_settings_are_usage_errors(tmp_path, capsys, setting, text)
     path.write_text("\n".join(lines).replace("stop_time = 2;", f"stop_time = 2;\n  {setting}") + "\n")
     code = main(["simulate", str(path), "--scene", "Spin", "--no-progress"])
     err = capsys.readouterr().err
-    assert code == 2 and text in err and "Traceback" not in err and len(err) < 400
+    assert code == 1 and "error[E604]: scene setting" in err and text in err and "Traceback" not in err
 
 
 def test_budget_can_be_raised():
@@ -514,3 +516,23 @@ def test_no_error_estimate_below_the_precision_floor(capsys):
     r = mechdsl.load(MODELS / "double_pendulum.mech").simulate(0.2, rtol=1e-13, atol=1e-13, points=5,
                                                                estimate_error=True)
     assert r.metadata["error_estimate"]["unavailable"] and not r.metadata["error_estimate"]["max_abs_difference"]
+
+
+def test_a_scene_value_over_a_budget_is_a_located_model_error(tmp_path, capsys):
+    """A scene's dt = 1e-320 (found by the pipeline fuzzer) was a usage error (exit 2) from
+    simulate and passed check: it is the model's value, so it is E604 at the scene, from check
+    and simulate alike; the same value given with --dt stays a usage error, and --dt given on
+    the command line overrides the scene's bad value."""
+    from mechdsl.cli import main
+
+    src = (MODELS / "heavy_top.mech").read_text()
+    assert "  dt = 0.002;" in src
+    path = tmp_path / "top.mech"
+    path.write_text(src.replace("  dt = 0.002;", "  dt = 1e-320;"))
+    for cmd in (["check", str(path)], ["simulate", str(path)]):
+        assert main(cmd) == 1
+        err = capsys.readouterr().err
+        assert "error[E604]: scene setting dt" in err and f"{path}:" in err
+    assert main(["simulate", str(path), "--dt", "0.01", "--t-end", "0.05"]) == 0
+    capsys.readouterr()
+    assert main(["simulate", str(MODELS / "heavy_top.mech"), "--dt", "1e-320"]) == 2

@@ -294,7 +294,7 @@ class Model:
         """The resolved, validated SimulationSettings of a run (argument > scene > default)."""
         from .simulation import resolve
 
-        return resolve(self.scene_settings, args)
+        return resolve(self.scene_settings, args, where=self.scene.span if self.scene is not None else None)
 
     def problem(self, **args):
         """The problem a run would solve (mechdsl.simulation.Problem; ``mech compile --emit problem``)."""

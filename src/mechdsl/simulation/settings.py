@@ -105,11 +105,30 @@ def from_kwargs(t_end, **kw) -> SimulationSettings:
     return validate(SimulationSettings(t_end=t_end, extra=extra, **clean))
 
 
-def resolve(scene_settings: dict | None, args: dict) -> SimulationSettings:
+def resolve(scene_settings: dict | None, args: dict, where=None) -> SimulationSettings:
     """argument > scene > default; ``args`` holds the CLI/API arguments (None = not given).
 
     The scene's ``tolerance`` sets rtol and atol where neither the scene nor an argument
-    sets them (docs/language.md)."""
+    sets them (docs/language.md).  A value the scene gave that fails validation (a scene's
+    ``dt = 1e-320``) is the model's error: E604 located at the scene (``where``, its span);
+    a value given as an argument stays a usage error."""
+    try:
+        return _resolve(scene_settings, args)
+    except SettingError as e:
+        from_scene = {name for key, name in SCENE_KEYS.items() if (scene_settings or {}).get(key) is not None}
+        if (scene_settings or {}).get("tolerance") is not None:
+            from_scene |= {"rtol", "atol"}
+        given = {_ALIASES.get(k, k) for k, v in args.items() if v is not None}
+        if where is None or e.setting not in from_scene or e.setting in given:
+            raise
+        from ..diagnostics import Diagnostic, MechError
+
+        key = next((k for k, n in SCENE_KEYS.items() if n == e.setting), e.setting)
+        raise MechError(Diagnostic("E604", f"scene setting {key}: {e}", where,
+                                   "change the scene's value (or override it on the command line)")) from None
+
+
+def _resolve(scene_settings: dict | None, args: dict) -> SimulationSettings:
     s = dict(scene_settings or {})
     merged: dict[str, Any] = {}
     for key, name in SCENE_KEYS.items():
@@ -127,6 +146,14 @@ def resolve(scene_settings: dict | None, args: dict) -> SimulationSettings:
     return from_kwargs(t_end, **merged)
 
 
+class SettingError(UsageError):
+    """A setting that does not pass validation; ``setting`` names it (SimulationSettings field)."""
+
+    def __init__(self, setting: str, message: str):
+        super().__init__(message)
+        self.setting = setting
+
+
 def _number(name, v) -> float:
     if isinstance(v, bool):
         raise UsageError(f"{name} must be a number (got {v!r})")
@@ -140,9 +167,9 @@ def _count(name, v, least: int) -> int:
     if isinstance(v, float) and math.isfinite(v) and v == int(v):
         v = int(v)
     if isinstance(v, int) and not isinstance(v, bool) and v > 2 ** 53:
-        raise UsageError(f"{name} = {float(v):g} is too large to be a count")
+        raise SettingError(name, f"{name} = {float(v):g} is too large to be a count")
     if isinstance(v, bool) or not isinstance(v, int) or v < least:
-        raise UsageError(f"{name} must be an integer >= {least}; got {v!r}")
+        raise SettingError(name, f"{name} must be an integer >= {least}; got {v!r}")
     return int(v)
 
 
@@ -151,28 +178,29 @@ def validate(s: SimulationSettings) -> SimulationSettings:
     t0, t1 = _number("the start time", s.t_start), _number("the end time", s.t_end)
     rtol, atol = _number("rtol", s.rtol), _number("atol", s.atol)
     if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
-        raise UsageError(f"the end time must be a finite number after the start time (got {t0} .. {t1})")
+        raise SettingError("t_end", f"the end time must be a finite number after the start time (got {t0} .. {t1})")
     if max(abs(t0), abs(t1)) > MAX_TIME:
-        raise UsageError(f"times must lie within +-{MAX_TIME:g} s (got {t0:g} .. {t1:g}): beyond that double "
+        raise SettingError("t_end" if abs(t1) > MAX_TIME else "t_start",
+                           f"times must lie within +-{MAX_TIME:g} s (got {t0:g} .. {t1:g}): beyond that double "
                          "precision cannot resolve a time step")
     if t1 - t0 < 1e-12 * max(abs(t0), abs(t1)):
         raise UsageError(f"the time span {t1 - t0:g} s is below the resolution of double precision at t = {t1:g}")
     if not (0 < rtol < 1) or not (0 < atol < 1):
-        raise UsageError(f"tolerances must lie in (0, 1) (got rtol={rtol}, atol={atol})")
+        raise SettingError("rtol" if not 0 < rtol < 1 else "atol", f"tolerances must lie in (0, 1) (got rtol={rtol}, atol={atol})")
     if rtol < MIN_RTOL:
-        raise UsageError(f"rtol={rtol} is below what double precision can deliver (use at least {MIN_RTOL:g})")
+        raise SettingError("rtol", f"rtol={rtol} is below what double precision can deliver (use at least {MIN_RTOL:g})")
     budget = _count("budget", s.budget, 2)
     points = None if s.points is None else _count("points", s.points, 2)
     if points is not None and points > budget:
-        raise UsageError(f"points = {points} exceeds the budget of {budget} output points; "
+        raise SettingError("points", f"points = {points} exceeds the budget of {budget} output points; "
                          "pass a larger budget (--budget N, budget=N) to allow it")
     dt = s.dt
     if dt is not None:
         dt = _number("dt", dt)
         if not (math.isfinite(dt) and dt > 0):
-            raise UsageError(f"dt must be a positive number (got {dt})")
+            raise SettingError("dt", f"dt must be a positive number (got {dt})")
         if (t1 - t0) / dt > STEPS_PER_BUDGET * budget:
-            raise UsageError(f"dt = {dt:g} makes {(t1 - t0) / dt:.3g} steps, more than the budget of "
+            raise SettingError("dt", f"dt = {dt:g} makes {(t1 - t0) / dt:.3g} steps, more than the budget of "
                              f"{STEPS_PER_BUDGET * budget} ({STEPS_PER_BUDGET} x budget); "
                              "pass a larger budget (--budget N, budget=N) or a larger dt")
     if s.inputs is not None and not (isinstance(s.inputs, dict) and all(isinstance(k, str) for k in s.inputs)):
