@@ -141,7 +141,10 @@ def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
             # the values before the first step with a coded, located error, as `mech check` does
             assert "error[E746]" in p.stderr and "falling_rod.mech:16:1" in p.stderr
         else:
-            assert "non-finite right-hand side" in p.stdout and out.read_text().startswith("time,")
+            # g = 1e308: the swing is so fast (sqrt(g/L) = 1e154 rad/s) that the work estimate
+            # refuses it before the overflow is met; either way the run fails at t = 0, says why
+            assert "FAILED at t = 0" in p.stdout and out.read_text().startswith("time,")
+            assert "too many steps needed" in p.stdout or "non-finite right-hand side" in p.stdout
         assert "Traceback" not in p.stderr and "RuntimeWarning" not in p.stderr
     # past the start check (as a run that overflows later meets it): the run itself fails at once
     import mechdsl
@@ -150,3 +153,22 @@ def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
     r = simulate_with_contacts(m.eom, None, 0.1, points=11)
     assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-9)
     assert r.failure.cause == "non-finite right-hand side" and "fly.x" in r.failure.detail
+
+
+def test_a_run_that_needs_too_many_steps_fails_at_once(tmp_path):
+    """pendulum_wall with a rod of 1e-14 m swings at sqrt(g cos(1) / L) = 2.3e7 rad/s: 0.05 s is
+    1.8e5 periods, at least 1.8e6 steps, over the contact stepper's budget.  The run fails at its
+    start naming the time scale (a fuzzer mutant of this kind stepped in Python for hours)."""
+    import subprocess
+    import sys
+
+    from conftest import MODELS
+
+    src = (MODELS / "pendulum_wall.mech").read_text()
+    assert "r = {0, L, 0}" in src
+    path = tmp_path / "tiny.mech"
+    path.write_text(src.replace("r = {0, L, 0}", "r = {0, 1e-14, 0}"))
+    p = subprocess.run([sys.executable, "-m", "mechdsl", "simulate", str(path), "--t-end", "0.05", "--points", "5"],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 1, p.stdout + p.stderr
+    assert "FAILED at t = 0: too many steps needed" in p.stdout and "time scale of 4.3" in p.stdout
