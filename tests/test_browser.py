@@ -40,7 +40,7 @@ def test_html_animation_plays_in_headless_chromium(page_file):
     browser_path = _chromium()
     if browser_path is None:
         pytest.skip("no Chromium on the PATH (apt-get install chromium)")
-    sync_api = pytest.importorskip("playwright.sync_api")
+    from playwright import sync_api as sync_api
     problems: list[str] = []
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=browser_path, headless=True,

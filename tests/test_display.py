@@ -113,8 +113,8 @@ def test_hamilton_equations_of_the_pendulum():
 
 
 def test_to_pandas_and_to_xarray_carry_units():
-    pytest.importorskip("pandas")
-    pytest.importorskip("xarray")
+    import pandas  # noqa: F401 - the test extra installs it
+    import xarray  # noqa: F401 - the test extra installs it
     r = _load("slider_crank").simulate(0.2, points=11)
     df = r.to_pandas()
     assert df.index.name == "time" and len(df) == 11
