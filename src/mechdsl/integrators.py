@@ -18,6 +18,7 @@ through ``codegen.FastFunction`` (buffer calls).
 """
 from __future__ import annotations
 
+import abc
 import contextlib
 import io
 import math
@@ -229,8 +230,6 @@ def casadi_options(method: str, rtol: float, atol: float, max_steps: int, fixed_
 def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray, opts: dict,
                progress: Progress, u=None) -> Run:
     """Integrate ode(t, x, u, p) over ``grid``; u: the constant input values (None: none)."""
-    import casadi as ca
-
     integ = _integrator(method, ode, grid, opts)
     buf, ev = integ.buffer()
     nx = x0.size
@@ -297,8 +296,6 @@ def _integrator(method, ode, grid, opts):
     """casadi.integrator, cached per (model Function, method, grid, options): building one
     derives its Jacobians (0.35 s for a 30-link chain in the VM), which parameter sweeps and
     repeated runs need not pay again.  Integrator Functions are stateless between calls."""
-    import casadi as ca
-
     plugin = METHODS[method][1]
     tgrid = tuple(float(v) for v in grid)
     key = (id(ode), plugin, tgrid, repr(sorted(opts.items())))
@@ -434,16 +431,17 @@ def run_scipy(method: str, rhs: Callable, jac: Callable | None, grid: np.ndarray
 # --------------------------------------------------------------------------- plug-ins
 
 
-class IntegratorPlugin:
+class IntegratorPlugin(abc.ABC):
     """A family of ODE integrators behind one hook: ``advance`` integrates x' = ode(t, x, p)
     over the output grid and returns a :class:`Run`; ``counts`` maps its raw statistics to
     the schema's names; ``zoom``: a failure can be located by re-integrating on finer grids."""
 
     zoom = False
 
+    @abc.abstractmethod
     def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress,
-                hmin, u=None) -> Run:  # pragma: no cover - abstract
-        raise NotImplementedError
+                hmin, u=None) -> Run:
+        """Integrate over the output grid; the Run keeps what was reached and the error."""
 
     def counts(self, method: str, raw: dict) -> dict:
         return dict(raw)

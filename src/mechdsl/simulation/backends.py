@@ -11,15 +11,18 @@ accuracy report, metadata).  The drivers stay where their numerics live: ODE in
 """
 from __future__ import annotations
 
+import abc
+
 from ..result import Result
 
 
-class Backend:
+class Backend(abc.ABC):
     name = ""
     ignores: tuple[str, ...] = ()       # settings without effect here (noted in the metadata when set)
 
-    def run(self, problem, progress) -> Result:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def run(self, problem, progress) -> Result:
+        """Integrate the problem; a failure is kept in Result.failure, never raised."""
 
     def describe(self, result: Result) -> dict:
         return {}
