@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .stage import INK
+from .stage import INK, Blitted
 
 
-class BarStage:
+class BarStage(Blitted):
     view = "bars"
 
     def __init__(self, names, units, t, Q, *, title="", size=(480, 400), dpi=80):
@@ -44,23 +44,3 @@ class BarStage:
     def _update(self, k):
         for b, v in zip(self.bars, self.Q[k]):
             b.set_width(v)
-
-    def frame(self, k: int) -> np.ndarray:
-        canvas = self.figure.canvas
-        if self._background is None:
-            canvas.draw()
-            self._background = canvas.copy_from_bbox(self.figure.bbox)
-        canvas.restore_region(self._background)
-        self._update(k)
-        self.clock.set_text(f"t = {self.t[k]:7.3f} s")
-        for a in self.moving:
-            self.figure.draw_artist(a)
-        return np.asarray(canvas.buffer_rgba())
-
-    def still(self, k: int):
-        self._update(k)
-        self.clock.set_text(f"t = {self.t[k]:.3f} s")
-        for a in self.moving:
-            a.set_animated(False)
-        self._background = None
-        return self.figure

@@ -54,7 +54,38 @@ def check_view(view: str) -> str:
     return view
 
 
-class Stage:
+class Blitted:
+    """Frames by blitting: the static background is rendered once, then each frame restores it
+    and draws only the moving artists.  Subclasses set ``figure``, ``t``, ``clock``, ``moving``
+    and ``_background = None`` and implement ``_update(k)``."""
+
+    def _update(self, k: int) -> None:
+        raise TypeError(f"{type(self).__name__} does not move its artists")
+
+    def frame(self, k: int) -> np.ndarray:
+        """Move every artist to frame k and render; returns the RGBA pixels (H, W, 4)."""
+        canvas = self.figure.canvas
+        if self._background is None:
+            canvas.draw()
+            self._background = canvas.copy_from_bbox(self.figure.bbox)
+        canvas.restore_region(self._background)
+        self._update(k)
+        self.clock.set_text(f"t = {self.t[k]:7.3f} s")
+        for a in sorted(self.moving, key=lambda a: a.get_zorder()):     # stable: ties keep their order
+            self.figure.draw_artist(a)
+        return np.asarray(canvas.buffer_rgba())
+
+    def still(self, k: int):
+        """The Figure showing frame k as ordinary (non-animated) artists: for display and savefig."""
+        self._update(k)
+        self.clock.set_text(f"t = {self.t[k]:.3f} s")
+        for a in self.moving:
+            a.set_animated(False)
+        self._background = None
+        return self.figure
+
+
+class Stage(Blitted):
     """A Figure and its artists for frames k = 0..n_frames-1 of positions X (N, 3, K)."""
 
     def __init__(self, geometry, t, X, *, view="auto", events=(), title="", size=(480, 400), dpi=80):
@@ -99,29 +130,9 @@ class Stage:
         self._background = None
 
     # ------------------------------------------------------------------ frames
-    def frame(self, k: int) -> np.ndarray:
-        """Move every artist to frame k and render; returns the RGBA pixels (H, W, 4)."""
-        canvas = self.figure.canvas
-        if self._background is None:
-            canvas.draw()
-            self._background = canvas.copy_from_bbox(self.figure.bbox)
-        canvas.restore_region(self._background)
+    def _update(self, k: int) -> None:
         for update in self.updaters:
             update(k)
-        self.clock.set_text(f"t = {self.t[k]:7.3f} s")
-        for a in sorted(self.moving, key=lambda a: a.get_zorder()):     # stable: ties keep their order
-            self.figure.draw_artist(a)
-        return np.asarray(canvas.buffer_rgba())
-
-    def still(self, k: int):
-        """The Figure showing frame k as ordinary (non-animated) artists: for display and savefig."""
-        for update in self.updaters:
-            update(k)
-        self.clock.set_text(f"t = {self.t[k]:.3f} s")
-        for a in self.moving:
-            a.set_animated(False)
-        self._background = None
-        return self.figure
 
     # ------------------------------------------------------------------ layout
     def _limits(self, size) -> None:
