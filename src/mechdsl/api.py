@@ -37,7 +37,7 @@ def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True
     if is_text:
         text = path_or_text
     else:
-        from .parser import read_source
+        from .source import read_source
 
         filename, text = read_source(path_or_text)
     program = analyze(parse(text, filename), units=units)
