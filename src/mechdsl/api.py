@@ -250,7 +250,7 @@ class Model:
         m: Model = self
         if structural:
             kind, name = self._target
-            info = self._cache.more(tuple(structural)) if self._cache is not None else None
+            info = self._cache.more(tuple((k, _key_value(v)) for k, v in structural)) if self._cache is not None else None
             m = info.lookup() if info is not None else None      # stored only if the items were valid
             if m is None:
                 tree: dict = {}
@@ -516,6 +516,13 @@ def _add_override(tree: dict, key: str, value, by_name, coords) -> None:
         if i == len(parts) - 1:
             node.value = _literal(value)
         node_dict = node.sub
+
+
+def _key_value(v):
+    """A structural value as the cache key sees it: N=4 and N=4.0 are one model."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return v
+    return float(v)
 
 
 def _overrides_of(items, model: ir.Model) -> dict:

@@ -187,6 +187,7 @@ def unpack_eom(data: dict, model):
     for name in ("outputs", "singularity_monitors", "invariants", "reactions"):
         values.setdefault(name, {})
     values.update(model=model, param_values=None)      # the Model sets its own values (api.Model.eom)
+    values.update({name: None for name in data["pending"]})
     eom = CachedEOM(**{k: v for k, v in values.items() if k in _FIELD_NAMES})
     again = _Again(eom)
     for name in data["pending"]:
