@@ -67,6 +67,11 @@ def main(argv: list[str] | None = None) -> int:
         from .commands import COMMANDS
 
         words = sys.argv[1:] if argv is None else list(argv)
+        if words == ["--version"]:           # without building every command's parser (imports)
+            from . import __version__
+
+            print(f"mechdsl {__version__}")
+            return 0
         ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
         args = ap.parse_args(argv)
         if not getattr(args, "_run", None):

@@ -40,9 +40,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-import shutil
-import subprocess
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -384,6 +381,8 @@ def cache_dir() -> Path:
 
 
 def find_compiler() -> str | None:
+    import shutil
+
     for cand in (os.environ.get("CC"), "gcc", "cc", "clang"):
         if cand:
             path = shutil.which(cand)
@@ -431,6 +430,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
     library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
     built in a temporary folder and renamed into place (safe under concurrency).
     """
+    import subprocess          # (subprocess and tempfile: 10 ms to import; only a compile needs them)
+    import tempfile
+
     ca = _ca()
     cc = find_compiler()
     if cc is None:
@@ -529,6 +531,8 @@ def _file_sha256(path: Path) -> str:
 
 
 def _record_digest(built: Path, lib: Path) -> None:
+    import tempfile
+
     """Write the hash of the library `built` next to its cache place `lib` (``<name>.sha256``), atomically."""
     side = _digest_path(lib)
     fd, tmp = tempfile.mkstemp(prefix=f".{side.name}.", suffix=".tmp", dir=str(lib.parent))
