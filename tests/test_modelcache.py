@@ -51,6 +51,14 @@ def forbid_front_end_and_derivation(monkeypatch):
     monkeypatch.setattr(mechdsl.parser, "parse", boom)
 
 
+def forbid_building_functions(monkeypatch):
+    def boom(*a, **k):
+        raise AssertionError("built a CasADi Function the cache holds")
+
+    monkeypatch.setattr(codegen, "_build", boom)
+    monkeypatch.setattr(codegen, "jacobian_of", boom)
+
+
 def entries(d):
     return sorted(d.glob("*.pkl")) if d.exists() else []
 
@@ -67,6 +75,7 @@ def test_warm_run_is_bit_identical_and_neither_parses_nor_derives(cache, tmp_pat
     assert entries(cache), "the first run wrote no cache entry"
     fresh(monkeypatch)
     forbid_front_end_and_derivation(monkeypatch)
+    forbid_building_functions(monkeypatch)
     warm = simulate_csv(model, tmp_path / "warm.csv")
     assert warm == cold
 

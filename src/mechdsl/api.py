@@ -546,7 +546,7 @@ class _Cache:
         self.request = request
         self.items = items
         self.owner = None           # (ir.Model, ir.Scene, target, warnings) of the Model named by the key
-        self.pending = None         # fields the stored entry lacks (None: nothing stored)
+        self.stored = None          # modelcache.content of the stored entry (None: no equations stored)
         self._key = None
 
     @property
@@ -577,7 +577,7 @@ class _Cache:
         m._cache, m._warnings = self, list(entry.warnings)
         self.owner = (entry.model, entry.scene, tuple(entry.target), list(entry.warnings))
         if base is not None:
-            self.pending = list(entry.eom["pending"])
+            self.stored = modelcache.content(base)
             key = _structure_key(entry.model)
             with _EOM_LOCK:
                 _EOM_CACHE.setdefault(key, base)
@@ -600,16 +600,14 @@ class _Cache:
 
         if self.owner is None:
             return
-        pending = modelcache.pending_fields(eom)
-        if self.pending is not None and set(self.pending) <= set(pending):
-            return
+        now = modelcache.content(eom)
+        if self.stored is not None and now[0] >= self.stored[0] and now[1] <= self.stored[1]:
+            return                      # the entry holds at least as much
         data = modelcache.pack_eom(eom)
-        if data is None:
-            self.pending = pending      # nothing storable: do not try again
-            return
-        model, scene, target, warnings = self.owner
-        modelcache.write(self.key, modelcache.Entry(model, scene, target, list(warnings), data))
-        self.pending = pending
+        if data is not None:
+            model, scene, target, warnings = self.owner
+            modelcache.write(self.key, modelcache.Entry(model, scene, target, list(warnings), data))
+        self.stored = now               # (nothing storable: not tried again)
 
 
 def _merge_overrides(a: dict, b: dict) -> dict:

@@ -293,7 +293,11 @@ class FunctionSet(Mapping):
         if self.want_compiled and not self._compiled_done:
             self._compile_all()
         if name not in self._cache:
-            if name == "ode_jacobian":
+            stored = self.eom.__dict__.get("_stored_functions")     # read from the model cache
+            hit = stored.get((name, self.outputs, self.sx)) if stored else None
+            if hit is not None:
+                self._cache[name] = hit
+            elif name == "ode_jacobian":
                 self._cache[name] = jacobian_of(self["ode"])
             else:
                 self._cache[name] = _build(self.eom, name, self.outputs, self.sx)

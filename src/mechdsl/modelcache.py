@@ -31,7 +31,7 @@ import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-FORMAT = "mechdsl-model-cache 1"
+FORMAT = "mechdsl-model-cache 2"
 _CALLABLES = ("point_position", "point_velocity", "body_rotation")
 _PER_MODEL = ("model", "param_values", "input_defaults")     # set again from the Model on load
 
@@ -119,16 +119,23 @@ def write(k: str, entry: Entry) -> bool:
 # --------------------------------------------------------------------------- equations
 
 
+def _is_lazy(v) -> bool:
+    return hasattr(v, "fn") and hasattr(v, "value") and not isinstance(v, (list, dict, tuple))   # derive._Lazy
+
+
+def _resolved(v, name):
+    """A raw field value with a built lazy one replaced by what it built (else itself)."""
+    if _is_lazy(v) and v.value is not None:
+        r = v.value
+        return (r[0] if name == "M" else r[1]) if name in ("M", "bias") and isinstance(r, tuple) else r
+    return v
+
+
 def _raw(eom, name):
     """A field's value without forcing a lazy one: (value, known)."""
     v = eom.__dict__.get(name)
-    if hasattr(v, "fn") and hasattr(v, "value") and not isinstance(v, (list, dict, tuple)):   # derive._Lazy
-        if v.value is None:
-            return None, False
-        r = v.value
-        if name in ("M", "bias") and isinstance(r, tuple):
-            r = r[0] if name == "M" else r[1]
-        return r, True
+    if _is_lazy(v):
+        return (None, False) if v.value is None else (_resolved(v, name), True)
     return v, True
 
 
@@ -138,6 +145,28 @@ def pending_fields(eom) -> list[str]:
             (f.name in _CALLABLES and eom.__dict__.get(f.name) is not None
              or f.name not in _CALLABLES and not _raw(eom, f.name)[1]
              or type(eom.__dict__.get(f.name)) is _Pending)]
+
+
+def content(eom) -> tuple[frozenset, frozenset]:
+    """What an entry of ``eom`` would hold beyond the always-stored fields: (fields left to
+    derive again, keys of the CasADi Functions built so far).  An entry is rewritten when a
+    run has built more (fewer pending fields or more Functions)."""
+    return frozenset(pending_fields(eom)), frozenset(_functions(eom))
+
+
+def _functions(eom) -> dict:
+    """The virtual-machine Functions mechdsl.codegen built for ``eom``'s structure, by
+    (name, outputs, sx); those read from the cache included."""
+    from . import codegen
+
+    out = dict(eom.__dict__.get("_stored_functions") or {})
+    objs = [_resolved(eom.__dict__.get(f), f) for f in codegen._STRUCTURE]
+    for held, fs in list(codegen._SETS.values()):
+        if fs.want_compiled or not all(_resolved(a, f) is b for a, b, f in zip(held, objs, codegen._STRUCTURE)):
+            continue
+        for name, f in list(fs._cache.items()):
+            out.setdefault((name, fs.outputs, fs.sx), f)
+    return out
 
 
 def pack_eom(eom) -> dict | None:
@@ -169,7 +198,8 @@ def pack_eom(eom) -> dict | None:
             return None
         else:
             plain[f.name] = v
-    return {"plain": plain, "sx": sx, "stream": ser.encode(), "pending": pending}
+    functions = {k: f.serialize() for k, f in _functions(eom).items()}
+    return {"plain": plain, "sx": sx, "stream": ser.encode(), "pending": pending, "functions": functions}
 
 
 def unpack_eom(data: dict, model):
@@ -189,6 +219,9 @@ def unpack_eom(data: dict, model):
     values.update(model=model, param_values=None)      # the Model sets its own values (api.Model.eom)
     values.update({name: None for name in data["pending"]})
     eom = CachedEOM(**{k: v for k, v in values.items() if k in _FIELD_NAMES})
+    # built Functions (codegen.FunctionSet takes them instead of building): the same algorithm,
+    # so the same numbers bit for bit
+    eom.__dict__["_stored_functions"] = {k: ca.Function.deserialize(s) for k, s in data["functions"].items()}
     again = _Again(eom)
     for name in data["pending"]:
         eom.__dict__[name] = _Pending(again, name)
