@@ -228,3 +228,4 @@ def test_a_warm_process_imports_neither_lark_nor_the_front_end_nor_the_mechanics
     heavy = {"lark", "mechdsl.parser", "mechdsl.semantic", "mechdsl.mechanics", "mechdsl.ast"}
     assert heavy <= loaded[0]                 # the cold run needs them: the check can fail
     assert not heavy & loaded[1]
+
