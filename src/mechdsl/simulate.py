@@ -9,7 +9,6 @@ why.  See docs/simulate.md (users) and docs/internals/numerics.md (design).
 from __future__ import annotations
 
 import math
-import platform
 import time
 from typing import Any
 
@@ -593,6 +592,8 @@ def _dedup(text: str) -> list[str]:
 
 
 def versions() -> dict[str, str]:
+    import platform
+
     import casadi
 
     from . import __version__

@@ -124,7 +124,6 @@ def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
     during the run) is written to a fresh folder under the temporary directory instead, and
     said so, so a long run is never lost.  Returns (written paths, problems)."""
     import os
-    import tempfile
     from pathlib import Path
 
     written: list[str] = []
@@ -137,6 +136,8 @@ def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
             return write(path, force)
         except OSError as e:
             if rescue is None:
+                import tempfile      # (tempfile and shutil: 3-20 ms to import; only on a failed write)
+
                 rescue = tempfile.mkdtemp(prefix="mechdsl-results-")
             alt = os.path.join(rescue, Path(path).name)
             lost.append(f"could not write {path} ({e.strerror or e}); wrote {alt} instead")
