@@ -229,3 +229,21 @@ def test_a_warm_process_imports_neither_lark_nor_the_front_end_nor_the_mechanics
     assert heavy <= loaded[0]                 # the cold run needs them: the check can fail
     assert not heavy & loaded[1]
 
+
+
+@pytest.mark.parametrize("real", [False, True])
+def test_a_cached_model_pickles_with_its_structural_overrides(cache, monkeypatch, real):
+    """Sweeps on worker processes pickle a Model by its source and overrides: a Model read
+    from the cache (and its parameter-value siblings) must carry its structural --set values."""
+    import pickle
+
+    model = MODELS / "nlink_pendulum.mech"
+    api.load(model).with_params(N=4).eom
+    fresh(monkeypatch)
+    m = api.load(model).with_params(N=4)
+    assert m._program is None                           # served from the cache
+    if real:
+        m = m.with_params(m=2.0)
+    back = pickle.loads(pickle.dumps(m))
+    assert len(back.coordinates) == 4
+    assert back.parameters["m"] == pytest.approx(2.0 if real else 1.0)

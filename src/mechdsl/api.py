@@ -291,7 +291,7 @@ class Model:
         """A Model of the same structure (other values or settings): same program, overrides,
         cache place (it stores the equations under its origin's key) and warnings."""
         new = Model(self._program, model, scene, self._ov, self._target)
-        new._cache, new._warnings = self._cache, self._warnings
+        new._ov, new._cache, new._warnings = self._ov, self._cache, self._warnings   # _ov may be lazy (None)
         return new
 
     def with_settings(self, **settings) -> "Model":
@@ -574,7 +574,7 @@ class _Cache:
         except Exception:       # a stream this CasADi cannot read: derived again
             return None
         m = Model(None, entry.model, entry.scene, None, tuple(entry.target))
-        m._cache, m._warnings = self, list(entry.warnings)
+        m._ov, m._cache, m._warnings = None, self, list(entry.warnings)     # overrides built from items on use
         self.owner = (entry.model, entry.scene, tuple(entry.target), list(entry.warnings))
         if base is not None:
             self.stored = modelcache.content(base)
