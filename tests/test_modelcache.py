@@ -247,3 +247,12 @@ def test_a_cached_model_pickles_with_its_structural_overrides(cache, monkeypatch
     back = pickle.loads(pickle.dumps(m))
     assert len(back.coordinates) == 4
     assert back.parameters["m"] == pytest.approx(2.0 if real else 1.0)
+
+
+def test_the_cache_keeps_a_bounded_number_of_entries(cache, monkeypatch):
+    monkeypatch.setattr(modelcache, "MAX_ENTRIES", 3)
+    for k in range(5):
+        api.loads(WARNING_MODEL.replace("= 1;", f"= {k + 1};", 1))
+    assert len(entries(cache)) == 3
+    newest = api.loads(WARNING_MODEL.replace("= 1;", "= 5;", 1))._cache.key
+    assert modelcache.read(newest) is not None                # the last written stays

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 FORMAT = "mechdsl-model-cache 2"
+MAX_ENTRIES = 1000          # more: the entries written longest ago are removed
 _CALLABLES = ("point_position", "point_velocity", "body_rotation")
 _PER_MODEL = ("model", "param_values", "input_defaults")     # set again from the Model on load
 
@@ -101,11 +102,14 @@ def write(k: str, entry: Entry) -> bool:
     tmp = None
     try:
         final.parent.mkdir(parents=True, exist_ok=True)
+        new = not final.exists()
         fd, tmp = _new_temp(final)
         with os.fdopen(fd, "wb") as f:
             f.write(f"{FORMAT} {hashlib.sha256(payload).hexdigest()}\n".encode("ascii"))
             f.write(payload)
         os.replace(tmp, final)
+        if new:
+            trim(final.parent)
         return True
     except OSError:
         if tmp is not None:
@@ -114,6 +118,23 @@ def write(k: str, entry: Entry) -> bool:
             except OSError:
                 pass
         return False
+
+
+def trim(folder: Path, keep: int | None = None) -> None:
+    """Keep the ``keep`` (default MAX_ENTRIES) entries written last; the cache never grows
+    without bound (``mechdsl.loads`` of generated texts adds an entry per text)."""
+    keep = MAX_ENTRIES if keep is None else keep
+    try:
+        found = [(e.stat().st_mtime_ns, e.name, e.path) for e in os.scandir(folder) if e.name.endswith(".pkl")]
+    except OSError:
+        return
+    if len(found) <= keep:
+        return
+    for _, _, path in sorted(found)[: len(found) - keep]:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
 
 
 # --------------------------------------------------------------------------- equations
