@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,8 @@ from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
 # (mechdsl.modelcache) never needs it
+if TYPE_CHECKING:
+    from .semantic import Program
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
