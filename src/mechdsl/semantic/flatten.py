@@ -658,19 +658,22 @@ class Flattener(Evaluator):
                  "attributes (.x, .r, .R, .phi, ...) belong to components")
         if value.kind == "world":
             zero = V.const(0.0)
-            table = {"r": Arr((zero,) * 3), "v": Arr((zero,) * 3), "x": zero, "y": zero, "z": zero,
-                     "w": Arr((zero,) * 3), "R": Arr(tuple(Arr(tuple(V.const(float(i == j)) for j in range(3)))
+            table = {"r": Arr((zero,) * 3), "v": Arr((zero,) * 3), "a": Arr((zero,) * 3), "x": zero, "y": zero,
+                     "z": zero, "w": Arr((zero,) * 3), "w_body": Arr((zero,) * 3), "alpha": Arr((zero,) * 3), "R": Arr(tuple(Arr(tuple(V.const(float(i == j)) for j in range(3)))
                                                         for i in range(3)))}
             if name in table:
                 return table[name]
-            fail("E219", f"world has no attribute '{name}'", span, "world has r, v, x, y, z, R, w")
+            fail("E219", f"world has no attribute '{name}'", span, "world has r, v, a, x, y, z, R, w, w_body, alpha")
         if value.kind in ("point", "body"):
+            inst = self.insts.get(value.name)
+            if inst is not None and name in inst.cls.points:   # rod.a is Rod's end point a, not an acceleration
+                return CompRef("point", f"{inst.name}.{name}", "Point")
             kin = _kinematic_attr(value, name)
             if kin is not None:
                 return kin
         inst = self.insts.get(value.name)
         if inst is None:  # a named point of a body (rod.a) or a derived point
-            fail("E219", f"'{value.name}' has no attribute '{name}'", span, "points have r, v, x, y, z")
+            fail("E219", f"'{value.name}' has no attribute '{name}'", span, "points have r, v, a, x, y, z")
         cls = inst.cls
         if name in cls.points:
             return CompRef("point", f"{inst.name}.{name}", "Point")
@@ -688,7 +691,7 @@ class Flattener(Evaluator):
         roles = [jv.role for jv in self.joint_vars(inst)] if cls.category == "joint" else []
         opts = list(cls.points) + [f.name for f in cls.fields] + roles
         if cls.category in ("body", "point", "frame"):
-            opts += ["r", "v", "x", "y", "z"] + (["R", "w"] if cls.category != "point" else [])
+            opts += ["r", "v", "a", "x", "y", "z"] + (["R", "w", "w_body", "alpha"] if cls.category != "point" else [])
         fail("E219", f"{cls.name} '{inst.name}' has no attribute '{name}'", span,
              did_you_mean(name, opts) or ("attributes: " + ", ".join(dict.fromkeys(opts)) if opts else None))
         raise AssertionError
@@ -841,8 +844,8 @@ class Flattener(Evaluator):
             if eq.kind == "potential" and X.has_speed(v.expr):
                 fail("E308", "the potential energy must not depend on speeds", eq.expr.span,
                      "velocity-dependent forces go into force(q) = ... or the dissipation function")
-            if any(isinstance(n, (ir.EnergyRef, ir.ReactionRef)) for n in X.walk(v.expr)):
-                fail("E308", f"the {eq.kind} energy cannot refer to energies or reactions", eq.expr.span,
+            if any(isinstance(n, ir.EnergyRef) for n in X.walk(v.expr)) or X.needs_dynamics(v.expr):
+                fail("E308", f"the {eq.kind} energy cannot refer to energies, reactions or accelerations", eq.expr.span,
                      "write the expression itself; kinetic_energy() etc. are for outputs")
             self.terms.append(ir.Term(eq.kind, v.expr, f"{eq.kind}@{eq.span.line}", eq.span))
             return
@@ -1104,13 +1107,18 @@ def _kinematic_attr(ref: CompRef, name: str) -> Val | None:
         return Arr(tuple(Scalar(ir.PointPos(p, i), U.LENGTH) for i in range(3)))
     if name == "v":
         return Arr(tuple(Scalar(ir.PointVel(p, i), U.VELOCITY) for i in range(3)))
+    if name == "a":
+        return Arr(tuple(Scalar(ir.PointAcc(p, i), U.ACCEL) for i in range(3)))
     if name in ("x", "y", "z"):
         return Scalar(ir.PointPos(p, "xyz".index(name)), U.LENGTH)
     if ref.kind == "body" and ref.type_name not in ("Point",):
         if name == "R":
             return Arr(tuple(Arr(tuple(Scalar(ir.BodyRot(p, i, j), U.ONE) for j in range(3))) for i in range(3)))
-        if name == "w":
-            return Arr(tuple(Scalar(ir.BodyOmega(p, i), U.dim(s=-1)) for i in range(3)))
+        if name in ("w", "w_body"):
+            frame = "world" if name == "w" else "body"
+            return Arr(tuple(Scalar(ir.BodyOmega(p, i, frame), U.dim(s=-1)) for i in range(3)))
+        if name == "alpha":
+            return Arr(tuple(Scalar(ir.BodyAlpha(p, i), U.dim(s=-2)) for i in range(3)))
     return None
 
 
