@@ -159,6 +159,17 @@ ENTRIES = [
     Entry("E219", "unknown attribute", "`a.b` where `a` has no attribute `b` (points have `r v x y z`, bodies "
                                        "also `R w`, rods `a b`, joints their variables).",
           "Fix the spelling (the hint lists the attributes).", corpus="E219_unknown_attribute_of_body.mech"),
+    Entry("E220", "vector start not applicable", "`omega(..)`, `r(..)` or `v(..)` of a Spherical or Free joint "
+                                                 "without `start = {..}`, or on a joint whose variables are bound "
+                                                 "to other coordinates or expressions (or that has no rotation "
+                                                 "coordinates: a Free joint with a point-mass child has no omega).",
+          "Write `omega(start = {wx, wy, wz})`, and set start values on the coordinates a bound joint uses.",
+          corpus="E220_omega_without_start.mech"),
+    Entry("E221", "omega in world axes on a moving parent", '`omega(start = .., frame = "world")` on a joint '
+                                                            "whose parent is not the world: the world axes of "
+                                                            "a relative angular velocity are not defined there.",
+          'Give the angular velocity relative to the parent in the child body\'s axes: `frame = "body"`.',
+          corpus="E221_omega_world_frame_on_moving_parent.mech"),
     Entry("E230", "input default not constant", "An `input`'s default value (`input Real F = ...`) that is "
                                                 "not a constant number.",
           "Give a number (`= 0` when omitted); drive the input at run time (docs/control.md).",

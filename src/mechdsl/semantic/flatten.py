@@ -7,6 +7,7 @@ and reported together.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -27,6 +28,7 @@ from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
 
 SCALAR_TYPES = {"Real", "Integer", "Boolean"}
 PARAM_ATTRS = {"unit", "min", "max", "displayUnit"}
+VECTOR_STARTS = {"Spherical": ("omega",), "Free": ("r", "v", "omega")}   # vector start modifiers (issue 17)
 COORD_ATTRS = {"start", "speed", "fixed", "speed_fixed", "unit", "displayUnit", "min", "max"}
 FIELD_RANK = {"scalar": 0, "vec3": 1, "mat3": 2, "point": 0, "body": 0, "bodies": 1, "coordinate": 0,
               "string": 0, "bool": 0}
@@ -539,7 +541,7 @@ class Flattener(Evaluator):
         d = e.decl
         if len(dims) > 1:
             fail("E301", "arrays of components have one dimension", d.span, f"write {d.type_name} {d.name}[n](...)")
-        allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | (
+        allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | set(VECTOR_STARTS.get(e.cls.name, ())) | (
             {r for r, _ in K.QUATERNION_ROLES} if e.cls.name in ("Spherical", "Free") else set())
         for k, m in e.mod.sub.items():
             if k not in allowed:
@@ -759,10 +761,84 @@ class Flattener(Evaluator):
                                   bool(_constval(vals["speed_fixed"])), unit, "", inst.name, inst.entry.decl.name_span)
                 inst.coords.append(c)
                 out.append(ir.JointVar(role, ir.Coord(name), name))
+            self._vector_starts(inst, out, param)
             inst.jointvars = out
             return out
         finally:
             inst.busy.discard(("jointvars", "busy"))
+
+    def _vector_starts(self, inst: CompInst, jvars: list[ir.JointVar], param: str) -> None:
+        """`r(start = ..)`, `v(start = ..)`, `omega(start = .., frame = ..)` of a spatial joint:
+        the start values and speeds of its own coordinates (semantic/vector_starts.py)."""
+        from . import vector_starts as VS
+
+        given = [(k, inst.entry.mod.sub[k]) for k in VECTOR_STARTS.get(inst.cls.name, ()) if k in inst.entry.mod.sub]
+        if not given:
+            return
+        index = {c.name: i for i, c in enumerate(inst.coords)}
+        own = {jv.role: jv.coordinate for jv in jvars if jv.coordinate == f"{inst.name}.{jv.role}"
+               and jv.coordinate in index}
+        roles = [jv.role for jv in jvars]
+        for key, m in given:
+            allowed = {"start", "frame"} if key == "omega" else {"start"}
+            self._check_attrs(m, allowed)
+            if m.value is not None or "start" not in m.sub:
+                fail("E220", f"'{key}' of '{inst.name}' needs a start vector: {key}(start = {{..}})", m.span,
+                     f"e.g. {key}(start = {{0, 0, 1}})")
+            targets = [r for r in roles if (r in ("x", "y", "z")) == (key != "omega")]
+            if key == "omega" and param == "euler":
+                targets = [r for r in roles if r in ("phi", "theta", "psi")]
+            missing = [r for r in targets if r not in own]
+            if not targets or missing:
+                fail("E220", f"'{key}' of '{inst.name}' sets the start of the joint's own coordinates, but "
+                             + (f"'{missing[0]}' is bound to an expression" if missing else "the joint has none here"),
+                     m.span, "give the start values on the coordinates the joint is bound to, or remove the binding"
+                     if missing else "a Free joint with a point-mass child has no rotation coordinates")
+            attr = "speed" if key in ("v", "omega") else "start"
+            for r in targets:
+                rm = inst.entry.mod.sub.get(r)
+                if rm is not None and attr in rm.sub:
+                    fail("E211", f"the {attr} of '{inst.name}.{r}' is set twice: by {r}({attr} = ..) and by {key}(..)",
+                         rm.sub[attr].span, "remove one of them")
+            sv = self.eval(m.sub["start"].value)
+            want = {"r": U.LENGTH, "v": U.VELOCITY, "omega": U.dim(s=-1)}[key]
+            if not isinstance(sv, Arr) or V.shape_of(sv) != (3,):
+                fail("E301", f"the start of '{key}' of '{inst.name}' must be a vector of 3, got {V.describe_shape(sv)}",
+                     m.sub["start"].value.span, f"write {key}(start = {{x, y, z}})")
+            for s in V.flatten(sv):
+                self.check_dim(s, want, f"the start of '{key}' of '{inst.name}'", m.sub["start"].value.span)
+                if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
+                    fail("E306", "the start value may only depend on parameters", m.sub["start"].value.span,
+                         "start values are numbers or expressions in parameters")
+            vec = tuple(s.expr for s in V.flatten(sv))
+            if key != "omega":
+                new = dict(zip(targets, vec))
+            else:
+                frame = "body"
+                if "frame" in m.sub:
+                    fv = self.eval(m.sub["frame"].value)
+                    frame = fv.value if isinstance(fv, Str) else ""
+                    if frame not in ("body", "world"):
+                        fail("E217", f"'{frame}' is not a valid frame of omega", m.sub["frame"].value.span,
+                             'frame = "body" (child body axes) or "world"')
+                if frame == "world" and self._point_name_of(inst, "parent") != "world":
+                    fail("E221", f"omega(frame = \"world\") of '{inst.name}' needs a joint whose parent is the world",
+                         m.sub["frame"].span, 'give the angular velocity relative to the parent in the child\'s axes: '
+                                              'frame = "body"')
+                starts = [inst.coords[index[own[r]]].start for r in targets]
+                if param == "euler":
+                    seq = self.field_value(inst, "sequence").value  # type: ignore[union-attr]
+                    rates = VS.euler_rates(seq.strip().lower(), starts, vec, frame)
+                else:
+                    rates = VS.quaternion_rates(starts, vec, frame)
+                new = dict(zip(targets, rates))
+            for r, expr in new.items():
+                i = index[own[r]]
+                inst.coords[i] = dataclasses.replace(inst.coords[i], **{attr: expr})
+
+    def _point_name_of(self, inst: CompInst, fname: str) -> str:
+        v = self.field_value(inst, fname)
+        return self.body_of_point(v.name) if isinstance(v, CompRef) else ""
 
     def _body_class_of(self, ref: CompRef) -> str:
         base = ref.name
