@@ -25,3 +25,18 @@ def output_values(model, q, qd, names, t=0.0):
     e = model.eom
     vals = evaluator(e, *[e.outputs[n] for n in names])(q, qd, t)
     return dict(zip(names, vals))
+
+
+def accelerations(eom):
+    """(q, qd) -> qdd of an unconstrained model: the explicit forward dynamics, or M^-1 bias."""
+    if eom.qdd is not None:
+        f = evaluator(eom, eom.qdd)
+        return lambda q, qd, t=0.0: f(q, qd, t)[0]
+    f = evaluator(eom, eom.M, eom.bias)
+    n = len(eom.coords)
+
+    def call(q, qd, t=0.0):
+        M, b = f(q, qd, t)
+        return np.linalg.solve(M.reshape(n, n, order="F"), b)
+
+    return call

@@ -28,7 +28,7 @@ from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
 
 SCALAR_TYPES = {"Real", "Integer", "Boolean"}
 PARAM_ATTRS = {"unit", "min", "max", "displayUnit"}
-VECTOR_STARTS = {"Spherical": ("omega",), "Free": ("r", "v", "omega")}   # vector start modifiers (issue 17)
+VECTOR_STARTS = {"Spherical": ("omega",), "Free": ("r", "v", "omega"), "PointMass": ("r", "v")}   # vector start modifiers (issue 17)
 COORD_ATTRS = {"start", "speed", "fixed", "speed_fixed", "unit", "displayUnit", "min", "max"}
 FIELD_RANK = {"scalar": 0, "vec3": 1, "mat3": 2, "point": 0, "body": 0, "bodies": 1, "coordinate": 0,
               "string": 0, "bool": 0}
@@ -91,6 +91,7 @@ class Flattener(Evaluator):
         self.constraints: list[ir.Constraint] = []
         self.terms: list[ir.Term] = []
         self.gen_forces: list[ir.GeneralizedForce] = []
+        self.joint_frames: set[str] = set()     # joints without a child whose massless frame is used
         self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
         self.instances: dict[str, ast.Declaration] = {}   # model instances, by (prefixed) name
         self._collect(model, outer or {}, [])
@@ -586,6 +587,7 @@ class Flattener(Evaluator):
                 finally:
                     inst.busy.discard((fname, "busy"))
                 val = _pick(inst.entry.cache[key], inst, FIELD_RANK[f.kind], m.each)
+                val = self._frame_of_joint(val, f, m.value.span)
                 self._check_field(inst, f, val, m.value.span)
             elif f.default is K.REQUIRED:
                 hint = None
@@ -605,6 +607,22 @@ class Flattener(Evaluator):
                 val = K.python_to_val(f.default)
         inst.fields[fname] = val
         return val
+
+    def _frame_of_joint(self, val: Val, f: K.Field | None, span: Span) -> Val:
+        """A joint named where a body or point is expected (`parent = turn`) means the joint's
+        own massless frame, when the joint has no child of its own (issue 17)."""
+        if not (isinstance(val, CompRef) and val.kind == "joint") or (f is not None and f.kind not in ("point", "body")):
+            return val
+        inst = self.insts.get(val.name)
+        if inst is None or inst.cls.field("child") is None:
+            return val
+        child = self.field_value(inst, "child")
+        if child is not None:
+            fail("E209", f"joint '{val.name}' has the child '{child.name}' (a joint is not a point)", span,  # type: ignore[union-attr]
+                 f"name its child ({child.name}) or a point on it; a joint without a child is a massless frame"  # type: ignore[union-attr]
+                 " that others can use")
+        self.joint_frames.add(val.name)
+        return CompRef("body", val.name, "JointFrame")
 
     def _check_field(self, inst: CompInst, f: K.Field, val: Val, span: Span) -> None:
         try:
@@ -666,6 +684,8 @@ class Flattener(Evaluator):
             if name in table:
                 return table[name]
             fail("E219", f"world has no attribute '{name}'", span, "world has r, v, a, x, y, z, R, w, w_body, alpha")
+        if value.kind == "joint" and name in ("r", "v", "a", "x", "y", "z", "R", "w", "w_body", "alpha"):
+            value = self._frame_of_joint(value, None, span)
         if value.kind in ("point", "body"):
             inst = self.insts.get(value.name)
             if inst is not None and name in inst.cls.points:   # rod.a is Rod's end point a, not an acceleration
@@ -800,17 +820,7 @@ class Flattener(Evaluator):
                 if rm is not None and attr in rm.sub:
                     fail("E211", f"the {attr} of '{inst.name}.{r}' is set twice: by {r}({attr} = ..) and by {key}(..)",
                          rm.sub[attr].span, "remove one of them")
-            sv = self.eval(m.sub["start"].value)
-            want = {"r": U.LENGTH, "v": U.VELOCITY, "omega": U.dim(s=-1)}[key]
-            if not isinstance(sv, Arr) or V.shape_of(sv) != (3,):
-                fail("E301", f"the start of '{key}' of '{inst.name}' must be a vector of 3, got {V.describe_shape(sv)}",
-                     m.sub["start"].value.span, f"write {key}(start = {{x, y, z}})")
-            for s in V.flatten(sv):
-                self.check_dim(s, want, f"the start of '{key}' of '{inst.name}'", m.sub["start"].value.span)
-                if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
-                    fail("E306", "the start value may only depend on parameters", m.sub["start"].value.span,
-                         "start values are numbers or expressions in parameters")
-            vec = tuple(s.expr for s in V.flatten(sv))
+            vec = self._start_vector(inst, key, m, (3,))
             if key != "omega":
                 new = dict(zip(targets, vec))
             else:
@@ -835,6 +845,52 @@ class Flattener(Evaluator):
             for r, expr in new.items():
                 i = index[own[r]]
                 inst.coords[i] = dataclasses.replace(inst.coords[i], **{attr: expr})
+
+    def _start_vector(self, inst: CompInst, key: str, m: Mod, sizes: tuple[int, ...]) -> tuple[ir.Expr, ...]:
+        """The expressions of `key(start = {..})`: a vector of one of `sizes`, in parameters."""
+        sv = self.eval(m.sub["start"].value)
+        want = {"r": U.LENGTH, "v": U.VELOCITY, "omega": U.dim(s=-1)}[key]
+        if not isinstance(sv, Arr) or len(V.shape_of(sv)) != 1 or V.shape_of(sv)[0] not in sizes:
+            fail("E301", f"the start of '{key}' of '{inst.name}' must be a vector of "
+                         f"{' or '.join(map(str, sizes))}, got {V.describe_shape(sv)}",
+                 m.sub["start"].value.span, f"write {key}(start = {{x, y, z}})")
+        for s in V.flatten(sv):
+            self.check_dim(s, want, f"the start of '{key}' of '{inst.name}'", m.sub["start"].value.span)
+            if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
+                fail("E306", "the start value may only depend on parameters", m.sub["start"].value.span,
+                     "start values are numbers or expressions in parameters")
+        return tuple(s.expr for s in V.flatten(sv))
+
+    def _cartesian_point_mass(self, inst: CompInst, span) -> ir.Joint | None:
+        """A PointMass with `r(start = ..)` / `v(start = ..)` has Cartesian coordinates named after
+        it (`bob.x`, `bob.y`[, `bob.z`]): a translation from the world, no rotation.  Two-vector
+        starts give the plane motion in world x, y."""
+        given = {k: inst.entry.mod.sub[k] for k in ("r", "v") if k in inst.entry.mod.sub}
+        if not given:
+            return None
+        vecs = {}
+        for key, m in given.items():
+            self._check_attrs(m, {"start"})
+            if m.value is not None or "start" not in m.sub:
+                fail("E220", f"'{key}' of '{inst.name}' needs a start vector: {key}(start = {{..}})", m.span,
+                     f"e.g. {key}(start = {{0, 0, 0}}) (a vector of 2 keeps the mass in the x, y plane)")
+            vecs[key] = self._start_vector(inst, key, m, (2, 3))
+        n = {len(v) for v in vecs.values()}
+        if len(n) > 1:
+            fail("E301", f"r and v of '{inst.name}' must have the same size", span, "give both with 2 or both with 3 entries")
+        n = n.pop()
+        zero = X.const(0.0)
+        jvars = []
+        for i, role in enumerate("xyz"[:n]):
+            c = ir.Coordinate(f"{inst.name}.{role}", vecs["r"][i] if "r" in vecs else zero,
+                              vecs["v"][i] if "v" in vecs else zero, True, True, "m", "", f"{inst.name}.cartesian",
+                              inst.entry.decl.name_span)
+            inst.coords.append(c)
+            jvars.append(ir.JointVar(role, ir.Coord(c.name), c.name))
+        z_axis = (zero, zero, X.const(1.0))
+        kind, plane = ("free", None) if n == 3 else ("planar", K.plane_axes(z_axis))
+        return ir.Joint(f"{inst.name}.cartesian", kind, "world", inst.name, "world", inst.name, z_axis, tuple(jvars),
+                        plane, None, None, (("parametrization", "euler"), ("sequence", "zyx")), False, span)
 
     def _point_name_of(self, inst: CompInst, fname: str) -> str:
         v = self.field_value(inst, fname)
@@ -972,7 +1028,7 @@ class Flattener(Evaluator):
             if fname in inst.connections or (inst.entry.mod.sub.get(fname) and inst.entry.mod.sub[fname].value is not None):
                 fail("E211", f"'{fname}' of '{inst.name}' is set twice", ref.span,
                      "set it either with a modifier or with one connect(...)")
-            v = self.eval(ref)
+            v = self._frame_of_joint(self.eval(ref), inst.cls.field(fname), ref.span)
             self._check_field(inst, inst.cls.field(fname), v, ref.span)
             inst.connections[fname] = v
 
@@ -1017,6 +1073,15 @@ class Flattener(Evaluator):
                         getattr(built, k).extend(getattr(b, k))
             # joints own coordinates too: the exact count, located at the declaration that passes it
             self.charge("coordinates", 0, e.decl.span, total=len(coords))
+        for j in built.joints:
+            jinst = self.insts.get(j.name)
+            if (j.child == j.name and j.name not in self.joint_frames and jinst is not None
+                    and not self.connect_failed):
+                cn = jinst.cls.connect_fields
+                self.diags.error("E210", f"{jinst.cls.name} '{j.name}' needs 'child'", jinst.entry.decl.name_span,
+                                 f"set it with child = ..., or connect({cn[0]}, {jinst.entry.decl.name}, {cn[1]}) in the "
+                                 f"equation section; a joint without a child is a massless frame only when another "
+                                 f"joint or point uses it (parent = {j.name})")
         self.diags.raise_if_errors()
         forces = built.forces + self.gen_forces
         model = ir.Model(
@@ -1043,6 +1108,10 @@ class Flattener(Evaluator):
                 if any(n.startswith("I_") and inst.entry.mod.sub.get(n) for n in f):
                     fail("E211", f"give either I or I_11 ... I_32 for '{name}', not both", span, "remove one of them")
             out = K.build_body(cls, name, f, span)
+            if cls.name == "PointMass":
+                j = self._cartesian_point_mass(inst, span)
+                if j is not None:
+                    out.joints.append(j)
         elif cls.category == "point":
             body = f["body"]
             out.points.append(ir.Point(name, self.body_of_point(body.name), K.as_vec3(f["r"], "r"), span))
@@ -1066,7 +1135,7 @@ class Flattener(Evaluator):
                                        name, (z, z, X.const(1.0)), (), None, K.as_vec3(f["r"], "r"), R, (), False,
                                        span))
         elif cls.category == "joint":
-            out.joints.append(self._build_joint(inst, f, span))
+            out.joints.append(self._build_joint(inst, f, span, out))
         elif cls.category == "force":
             out = self._build_force(inst, f, span)
         elif cls.category == "contact":
@@ -1102,9 +1171,21 @@ class Flattener(Evaluator):
                  "add point = ... (and surface, normal, ...) or gap = ... to its modifiers")
         return f["surface"].value
 
-    def _build_joint(self, inst: CompInst, f, span) -> ir.Joint:
+    def _build_joint(self, inst: CompInst, f, span, out: K.Built) -> ir.Joint:
         cls, name = inst.cls, inst.name
+        if cls.name == "RigidLink":
+            a, b = f["a"], f["b"]
+            end = f"{name}.end"
+            out.points.append(ir.Point(end, self.body_of_point(a.name), K.as_vec3(f["r"], "r"), span))
+            z = X.const(0.0)
+            return ir.Joint(name, "fixed", end, _point_name(b), self.body_of_point(a.name), self.body_of_point(b.name),
+                            (z, z, X.const(1.0)), (), None, None, None, (), False, span)
         parent, child = f["parent"], f["child"]
+        if child is None:                   # the joint's own massless frame
+            z = X.const(0.0)
+            out.bodies.append(ir.Body(name, "frame", span=span))
+            out.points.append(ir.Point(name, name, (z, z, z), span))
+            child = CompRef("body", name, "JointFrame")
         pb, cb = self.body_of_point(parent.name), self.body_of_point(child.name)
         kind = cls.name.lower()
         axis = K.normalized(K.as_vec3(f["axis"], "axis"), "axis") if cls.field("axis") else (
