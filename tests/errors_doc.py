@@ -114,8 +114,8 @@ ENTRIES = [
     Entry("E202", "declared twice", "Two declarations, models, scenes, modifiers or settings with one name.",
           "Rename or remove one of them.", corpus="E202_duplicate_declaration.mech"),
     Entry("E203", "unknown type", "A declaration whose type is neither `Real`/`Integer`/`Boolean` nor a "
-                                  "built-in component nor a model of the file; or an array of model instances.",
-          "Fix the spelling (the hint suggests the component or model); declare model instances one by one.",
+                                  "built-in component nor a model of the file.",
+          "Fix the spelling (the hint suggests the component or model).",
           corpus="E203_unknown_type_typo.mech"),
     Entry("E204", "unknown modifier", "A modifier that the component or declaration does not have: a field of "
                                       "a component, an attribute such as `unit` or `start`, or a name modified "

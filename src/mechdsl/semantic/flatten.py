@@ -50,6 +50,7 @@ class Entry:
     outputs: list[ir.Output] = field(default_factory=list)
     elements: list["CompInst"] = field(default_factory=list)
     cache: dict = field(default_factory=dict)   # evaluated array-level modifier values
+    element_mods: dict = field(default_factory=dict)   # "q[2]" -> Mod: an override of one element (API, --set)
 
 
 _BUDGET = {"coordinate": "coordinates", "output": "outputs", "component": "components"}  # kind -> limit
@@ -94,6 +95,7 @@ class Flattener(Evaluator):
         self.joint_frames: set[str] = set()     # joints without a child whose massless frame is used
         self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
         self.instances: dict[str, ast.Declaration] = {}   # model instances, by (prefixed) name
+        self.instance_arrays: dict[str, int] = {}         # arrays of model instances: name -> size
         self._collect(model, outer or {}, [])
         self._check_modified_names(outer or {}, model.name)
 
@@ -140,10 +142,9 @@ class Flattener(Evaluator):
         problem = None
         if d.prefix is not None:
             problem = ("E215", f"'{d.prefix}' cannot be applied to a model instance", d.span, f"remove '{d.prefix}'")
-        elif d.dims:
-            problem = ("E203", f"arrays of model instances ('{d.type_name} {d.name}[...]') are not supported",
-                       d.dims[0].span, "declare the instances one by one, or use arrays of components "
-                                       "(bodies, joints, forces) with a `for` loop")
+        elif len(d.dims) > 1:
+            problem = ("E301", "arrays of model instances have one dimension", d.dims[1].span,
+                       f"write {d.type_name} {d.name}[n](...)")
         elif d.value is not None:
             problem = ("E214", f"a model instance takes modifiers, not a value", d.value.span,
                        f"write {d.type_name} {d.name}(parameter = ...)")
@@ -152,6 +153,9 @@ class Flattener(Evaluator):
         if problem:
             self.diags.error(*problem)
             return
+        if d.dims:
+            self._instance_array(d, outer, chain)
+            return
         self.instances[d.name] = d
         mod = Mods.merge(Mod(sub=Mods.from_ast(d.modification, self.diags), span=d.span, name_span=d.name_span),
                          outer.get(d.name))
@@ -159,9 +163,80 @@ class Flattener(Evaluator):
         self._collect(sub, inner, chain, d.name + ".")  # type: ignore[arg-type]
         self._check_modified_names(inner, sub.name, d.name + ".")  # type: ignore[union-attr]
 
+    def _instance_array(self, d: ast.Declaration, outer: dict[str, Mod], chain: list[str]) -> None:
+        """`Link links[N](mods)`: N instances `links[1]` ... `links[N]` (issue 17). The size is an
+        Integer expression of names declared before the array. A modifier marked `each`, or whose
+        value is not an array of N entries, is given to every element; an array of N entries
+        (a literal, or a name of an array of N) is split, one entry per element."""
+        try:
+            n = self.int_value(d.dims[0], "the size of an array of instances")
+        except EvalError as ex:
+            self.diags.items.append(ex.diag)
+            return
+        except _Failed:
+            return
+        if n > limits.get("components"):
+            self.diags.error("E316", f"{n} instances of {d.type_name} exceed the limit of {limits.get('components')} "
+                                     "components", d.dims[0].span, limits.hint("components"))
+            return
+        self.instance_arrays[d.name] = n
+        mods = self._split_arrays(d.modification, n, d.name, outer)
+        for k in range(1, n + 1):
+            dk = dataclasses.replace(d, name=f"{d.name}[{k}]", dims=(), modification=self._element_mods(mods, k, n))
+            self._instance(dk, outer, chain)
+
+    def _split_arrays(self, mods, n: int, path: str, outer):
+        """Modifier values that are arrays of n (not literal, not `each`) become a hidden array
+        variable `<path>.<modifier>` that each element indexes."""
+        if not mods:
+            return mods
+        out = []
+        for m in mods:
+            value = m.value
+            if (value is not None and not m.each and not isinstance(value, ast.Array)
+                    and self._is_array_of(value, n)):
+                name = f"{path}.{m.name}"
+                if name not in self.entries:
+                    self._declare(ast.Declaration(prefix=None, type_name="Real", name=name,
+                                                  dims=(ast.Number(value=n, span=value.span),), value=value,
+                                                  span=value.span, name_span=value.span), outer)
+                value = ast.Ref(parts=(ast.RefPart(name=name, span=value.span),), span=value.span)
+            sub = m.modification if m.each else self._split_arrays(m.modification, n, f"{path}.{m.name}", outer)
+            out.append(dataclasses.replace(m, value=value, modification=sub))
+        return tuple(out)
+
+    def _element_mods(self, mods, k: int, n: int):
+        """Element k's modifiers: `each` ones as they are, arrays of n entries split."""
+        if not mods:
+            return mods
+        out = []
+        for m in mods:
+            value = m.value
+            if value is not None and not m.each:
+                if isinstance(value, ast.Array) and len(value.items) == n:
+                    value = value.items[k - 1]
+                elif isinstance(value, ast.Ref) and not value.parts[-1].subscripts and self._is_array_of(value, n):
+                    last = value.parts[-1]
+                    index = ast.Number(value=k, span=value.span)
+                    value = dataclasses.replace(value, parts=value.parts[:-1] + (
+                        dataclasses.replace(last, subscripts=(index,)),))
+            sub = self._element_mods(m.modification, k, n) if not m.each else m.modification
+            out.append(dataclasses.replace(m, value=value, modification=sub, each=False))
+        return tuple(out)
+
+    def _is_array_of(self, ref: ast.Ref, n: int) -> bool:
+        try:
+            v = self.eval(ref)
+        except (EvalError, _Failed):
+            return False
+        return isinstance(v, Arr) and len(v.items) == n
+
     def _check_modified_names(self, mods: dict[str, Mod], model_name: str, prefix: str = "") -> None:
         """A modification (scene, extends, API override) must name a declaration of the model."""
         for k, m in mods.items():
+            base = k.split("[", 1)[0]
+            if "[" in k and base in self.entries and self.entries[base].kind == "coordinate":
+                continue                    # an element's start (q[2].start): checked where q is built
             if k not in self.entries and k not in self.instances:
                 local = k[len(prefix):] if k.startswith(prefix) else k
                 own = self._own(prefix[:-1]) if prefix else list(self.entries)
@@ -212,7 +287,8 @@ class Flattener(Evaluator):
                                  f"write {d.type_name} {d.name}(field = ...)")
                 return
             kind = "component"
-        self.entries[d.name] = Entry(d, kind, mod, len(self.entries), cls)
+        self.entries[d.name] = Entry(d, kind, mod, len(self.entries), cls,
+                                     element_mods={k: v for k, v in outer.items() if k.startswith(d.name + "[")})
 
     # ================================================================== lookup
     def known_names(self) -> list[str]:
@@ -254,7 +330,9 @@ class Flattener(Evaluator):
         raise AssertionError
 
     def eval_ref(self, r: ast.Ref) -> Val:
-        """`s.x.y` where `s` is a model instance: the longest declared name `s.x` first, then fields."""
+        """`s.x.y` where `s` is a model instance: the longest declared name `s.x` first, then fields;
+        `links[i].x` where `links` is an array of instances: element i's `x`."""
+        r = self._instance_element(r)
         if len(r.parts) > 1 and r.parts[0].name in self.instances and not r.parts[0].subscripts:
             names = [p.name for p in r.parts]
             for k in range(len(r.parts), 1, -1):
@@ -272,6 +350,26 @@ class Flattener(Evaluator):
             fail("E201", f"model instance '{inst}' has no declaration '{rest}'", r.parts[head].span,
                  did_you_mean(rest, own) or f"declarations of {inst}: {', '.join(own[:8])}")
         return super().eval_ref(r)
+
+    def _instance_element(self, r: ast.Ref) -> ast.Ref:
+        first = r.parts[0]
+        n = self.instance_arrays.get(first.name)
+        if n is None or not first.subscripts:
+            if n is not None and len(r.parts) > 1:
+                fail("E303", f"'{first.name}' is an array of {n} model instances: pick one, e.g. {first.name}[1]",
+                     first.span, f"write {first.name}[i].{r.parts[1].name}")
+            return r
+        if len(first.subscripts) != 1:
+            fail("E303", f"'{first.name}' has one dimension", first.span, f"write {first.name}[i]")
+        k = self.int_value(first.subscripts[0], "an index")
+        if not 1 <= k <= n:
+            fail("E303", f"index {k} is out of range for '{first.name}' (1..{n})", first.subscripts[0].span,
+                 "indices start at 1")
+        if len(r.parts) == 1:
+            fail("E201", f"'{first.name}[{k}]' is a model instance, not a value", first.span,
+                 f"refer to one of its declarations, e.g. {first.name}[{k}].{next(iter(self._own(f'{first.name}[{k}]')), 'x')}")
+        return dataclasses.replace(r, parts=(dataclasses.replace(first, name=f"{first.name}[{k}]", subscripts=()),)
+                                   + r.parts[1:])
 
     def _own(self, inst: str) -> list[str]:
         return [n[len(inst) + 1:] for n in self.entries if n.startswith(inst + ".")]
@@ -476,19 +574,30 @@ class Flattener(Evaluator):
         fixed = self._attr_values(e.mod, "fixed", dims, None, 1.0, default=1.0)
         sfixed = self._attr_values(e.mod, "speed_fixed", dims, None, 1.0, default=1.0)
         items = []
-        for k, (idx, _) in enumerate(_enumerate(None, dims) if dims else [((), None)]):
-            name = d.name + _suffix(idx)
+        names = [d.name + _suffix(idx) for idx, _ in (_enumerate(None, dims) if dims else [((), None)])]
+        for key, em in e.element_mods.items():
+            if key not in names:
+                fail("E204", f"coordinate '{d.name}' has no element '{key}' to modify", em.name_span or d.name_span,
+                     f"elements: {names[0]} ... {names[-1]}" if names else "it has no elements")
+            self._check_attrs(em, {"start", "speed", "fixed", "speed_fixed"})
+            k = names.index(key)
+            for attr, lst, adim, f in (("start", starts, dim, factor),
+                                       ("speed", speeds, V.dim_div(dim, U.TIME) if dim else None, factor),
+                                       ("fixed", fixed, None, 1.0), ("speed_fixed", sfixed, None, 1.0)):
+                lst[k] = (self._attr_values(em, attr, (), adim, f, default=None) or [lst[k]])[0]
+        for k, name in enumerate(names):
             e.coords.append(ir.Coordinate(name, starts[k], speeds[k], bool(_constval(fixed[k])),
                                           bool(_constval(sfixed[k])), unit, d.doc or "", None, d.name_span))
             items.append(Scalar(ir.Coord(name), dim))
         assert len(items) == n
         return _reshape(items, dims)
 
-    def _attr_values(self, mod: Mod, attr: str, dims, dim, factor, default: float = 0.0) -> list[ir.Expr]:
+    def _attr_values(self, mod: Mod, attr: str, dims, dim, factor, default: float | None = 0.0) -> list[ir.Expr]:
+        """One expression per element of `attr` (start, speed, ...); [] when absent and no default."""
         n = math.prod(dims) if dims else 1
         m = mod.sub.get(attr)
         if m is None or m.value is None:
-            return [X.const(default)] * n
+            return [] if default is None else [X.const(default)] * n
         v = self.eval(m.value)
         if isinstance(v, Scalar) and dims:
             vals = [v] * n
