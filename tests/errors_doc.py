@@ -170,6 +170,11 @@ ENTRIES = [
                                                             "a relative angular velocity are not defined there.",
           'Give the angular velocity relative to the parent in the child body\'s axes: `frame = "body"`.',
           corpus="E221_omega_world_frame_on_moving_parent.mech"),
+    Entry("E222", "omega at gimbal lock", "`omega(start = ..)` on an Euler-angle joint whose start orientation is "
+                                          "at (within 1e-8 of) the gimbal lock of its sequence: the angle rates "
+                                          "of an angular velocity are not unique or do not exist there.",
+          'Start away from the lock, or use `parametrization = "quaternion"`.',
+          corpus="E222_omega_at_gimbal_lock.mech"),
     Entry("E230", "input default not constant", "An `input`'s default value (`input Real F = ...`) that is "
                                                 "not a constant number.",
           "Give a number (`= 0` when omitted); drive the input at run time (docs/control.md).",

@@ -127,7 +127,8 @@ def test_vector_start_errors():
            (base.replace("omega(start = {0.7, w2, 1.9}", "omega(speed = {0.7, w2, 1.9}"), "E204"),
            (base.replace("b.w_body;", "b.w_body;\n  Rod arm(m = 1, L = 1);\n  Revolute h(parent = world, child = arm.a);")
                 .replace("parent = world, child = b", "parent = arm.b, child = b").replace('"body"', '"world"'), "E221"),
-           (base.replace("omega(start = {0.7, w2, 1.9}, frame = \"body\")", "omega = {1, 2, 3}"), "E220")]
+           (base.replace("omega(start = {0.7, w2, 1.9}, frame = \"body\")", "omega = {1, 2, 3}"), "E220"),
+           (base.replace("theta(start = 0.7)", "theta(start = -pi/2)"), "E222")]
     for text, code in bad:
         with pytest.raises(MechError) as err:
             mechdsl.loads(text)

@@ -947,13 +947,27 @@ class Flattener(Evaluator):
                 starts = [inst.coords[index[own[r]]].start for r in targets]
                 if param == "euler":
                     seq = self.field_value(inst, "sequence").value  # type: ignore[union-attr]
-                    rates = VS.euler_rates(seq.strip().lower(), starts, vec, frame)
+                    rates, det = VS.euler_rates(seq.strip().lower(), starts, vec, frame)
+                    self._check_not_gimbal_locked(inst, seq, det, m.span)
                 else:
                     rates = VS.quaternion_rates(starts, vec, frame)
                 new = dict(zip(targets, rates))
             for r, expr in new.items():
                 i = index[own[r]]
                 inst.coords[i] = dataclasses.replace(inst.coords[i], **{attr: expr})
+
+    def _check_not_gimbal_locked(self, inst: CompInst, seq: str, det: ir.Expr, span: Span) -> None:
+        """omega at a gimbal-locked start orientation has no Euler rates (or huge cancelling
+        ones): refused with the parameter values of the file (E222)."""
+        try:
+            with _quiet_numpy():
+                d = X.evaluate(det, dict(self.param_values))
+        except (KeyError, ValueError, ZeroDivisionError, OverflowError):   # not known yet: the start check's job
+            return
+        if abs(d) < 1e-8:
+            fail("E222", f"the start orientation of '{inst.name}' is at the gimbal lock of the Euler sequence "
+                         f"'{seq}' (det = {d:.3g}): an angular velocity has no angle rates there", span,
+                 'start away from the lock, or use parametrization = "quaternion"')
 
     def _start_vector(self, inst: CompInst, key: str, m: Mod, sizes: tuple[int, ...]) -> tuple[ir.Expr, ...]:
         """The expressions of `key(start = {..})`: a vector of one of `sizes`, in parameters."""

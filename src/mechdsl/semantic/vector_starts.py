@@ -11,8 +11,8 @@ of the joint's own coordinates:
   (`frame = "body"`) or in the parent's axes (`frame = "world"`; only for a joint whose parent
   is the world), turned into the chart's rates at the start orientation: for an Euler
   sequence abc (R = R_a(phi) R_b(theta) R_c(psi)) w_body = E(q) qd with the columns
-  R_c^T R_b^T e_a, R_c^T e_b, e_c, solved by Cramer's rule (a gimbal-locked start has no
-  solution: its speeds are not finite and the start check says so); for a quaternion
+  R_c^T R_b^T e_a, R_c^T e_b, e_c, solved by Cramer's rule (a gimbal-locked start, det E = 0, is
+  refused by the flattener: E222); for a quaternion
   qd = G(q)^T w_body / 2 (w_body = 2 G qd / |q|^2, G G^T = |q|^2 1).
 """
 from __future__ import annotations
@@ -49,8 +49,9 @@ def _det(a, b, c) -> ir.Expr:
 
 
 def euler_rates(seq: str, angles, w, frame: str):
-    """(phi', theta', psi') of the intrinsic sequence `seq` at `angles` for the angular velocity
-    w (child axes for frame 'body', parent axes for 'world')."""
+    """((phi', theta', psi'), det) of the intrinsic sequence `seq` at `angles` for the angular
+    velocity w (child axes for frame 'body', parent axes for 'world'); det = det E(q), |det| <= 1,
+    vanishes at gimbal lock."""
     a, b, c = (AXES[ch] for ch in seq)
     Ra, Rb, Rc = (rodrigues(E[k], ang) for k, ang in zip((a, b, c), angles))
     if frame == "world":
@@ -62,7 +63,7 @@ def euler_rates(seq: str, angles, w, frame: str):
         cs = list(cols)
         cs[k] = w
         out.append(X.div(_det(*cs), det))
-    return tuple(out)
+    return tuple(out), det
 
 
 def quaternion_rates(q, w, frame: str):
