@@ -8,6 +8,7 @@ import pytest
 import mechdsl
 from mechdsl.diagnostics import MechError
 from reach_util import output_values
+from test_mech_rigid import omega_zyx
 
 TOP = """
 model Top
@@ -26,11 +27,7 @@ end Top;
 
 def omega_body_zyx(q, qd):
     """Body angular velocity of the zyx chart R = Rz(phi) Ry(theta) Rx(psi) (by hand)."""
-    phi, th, psi = q
-    dphi, dth, dpsi = qd
-    return np.array([dpsi - dphi * np.sin(th),
-                     dth * np.cos(psi) + dphi * np.cos(th) * np.sin(psi),
-                     -dth * np.sin(psi) + dphi * np.cos(th) * np.cos(psi)])
+    return omega_zyx(q, qd)
 
 
 def test_diagonal_times_angular_velocity_is_angular_momentum():
