@@ -130,3 +130,17 @@ def test_massless_and_cartesian_errors(text, code):
     with pytest.raises(MechError) as err:
         mechdsl.loads(text)
     assert code in str(err.value)
+
+
+def test_cartesian_coordinates_take_element_overrides(tmp_path):
+    """bob.x.start from a scene, with_params or --set wins over r's entry; z is refused in the plane."""
+    m = mechdsl.loads(CART)
+    starts = {c.name: (c.start, c.speed) for c in m.with_params(**{"bob.y.speed": 0.5}).model.coordinates}
+    assert starts["bob.y"][1].value == 0.5 and starts["bob.x"][1].value == 0.0
+    moved = m.with_params(**{"bob.x.start": 1.5, "bob.y.start": 0.0})
+    assert [c.start.value for c in moved.model.coordinates] == [1.5, 0.0]
+    with pytest.raises(MechError) as err:
+        m.with_params(**{"bob.z.start": 1.0})
+    assert "E204" in str(err.value)
+    scene = CART + "scene S\n  model CartPend(bob(x(start = 1.5), y(start = 0)));\n  stop_time = 0.1;\nend S;\n"
+    assert [c.start.value for c in mechdsl.loads(scene, scene="S").model.coordinates] == [1.5, 0.0]

@@ -651,7 +651,8 @@ class Flattener(Evaluator):
         d = e.decl
         if len(dims) > 1:
             fail("E301", "arrays of components have one dimension", d.span, f"write {d.type_name} {d.name}[n](...)")
-        allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | set(VECTOR_STARTS.get(e.cls.name, ())) | (
+        cartesian = {"x", "y", "z"} if e.cls.name == "PointMass" and ("r" in e.mod.sub or "v" in e.mod.sub) else set()
+        allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | set(VECTOR_STARTS.get(e.cls.name, ())) | cartesian | (
             {r for r, _ in K.QUATERNION_ROLES} if e.cls.name in ("Spherical", "Free") else set())
         for k, m in e.mod.sub.items():
             if k not in allowed:
@@ -865,36 +866,41 @@ class Flattener(Evaluator):
                     coord = v.expr.name if isinstance(v.expr, ir.Coord) else None
                     out.append(ir.JointVar(role, v.expr, coord))
                     continue
-                sub = m.sub if m is not None else {}
-                self._check_attrs(Mod(sub=sub), COORD_ATTRS)
-                name = f"{inst.name}.{role}"
-                default_start = 1.0 if role == "q0" else 0.0
-                vals = {}
-                for attr, default in (("start", default_start), ("speed", 0.0), ("fixed", 1.0), ("speed_fixed", 1.0)):
-                    sm = sub.get(attr)
-                    if sm is None or sm.value is None:
-                        vals[attr] = X.const(default)
-                        continue
-                    key = ("role", role, attr)
-                    if key not in inst.entry.cache:
-                        inst.entry.cache[key] = self.eval(sm.value)
-                    v = _pick(inst.entry.cache[key], inst, 0, sm.each)
-                    if not isinstance(v, Scalar):
-                        fail("E301", f"{attr} of '{name}' must be a scalar", sm.value.span, f"e.g. {role}({attr} = 0)")
-                    if X.depends_on_state(v.expr) or X.depends_on_time(v.expr):
-                        fail("E306", f"the {attr} value may only depend on parameters", sm.value.span,
-                             "start values are numbers or expressions in parameters")
-                    vals[attr] = v.expr
-                unit = "rad" if dim == U.ONE else "m"
-                c = ir.Coordinate(name, vals["start"], vals["speed"], bool(_constval(vals["fixed"])),
-                                  bool(_constval(vals["speed_fixed"])), unit, "", inst.name, inst.entry.decl.name_span)
+                c = self._own_coordinate(inst, role, "rad" if dim == U.ONE else "m", inst.name,
+                                         {"start": X.const(1.0 if role == "q0" else 0.0)})
                 inst.coords.append(c)
-                out.append(ir.JointVar(role, ir.Coord(name), name))
+                out.append(ir.JointVar(role, ir.Coord(c.name), c.name))
             self._vector_starts(inst, out, param)
             inst.jointvars = out
             return out
         finally:
             inst.busy.discard(("jointvars", "busy"))
+
+    def _own_coordinate(self, inst: CompInst, role: str, unit: str, owner: str, defaults: dict) -> ir.Coordinate:
+        """The coordinate `<inst>.<role>` a component owns, with the attributes of its modifier
+        `role(start = .., speed = .., fixed = .., speed_fixed = ..)` over `defaults`."""
+        m = inst.entry.mod.sub.get(role)
+        sub = m.sub if m is not None else {}
+        self._check_attrs(Mod(sub=sub), COORD_ATTRS)
+        name = f"{inst.name}.{role}"
+        vals = {"start": X.const(0.0), "speed": X.const(0.0), "fixed": X.const(1.0), "speed_fixed": X.const(1.0)}
+        vals.update(defaults)
+        for attr in vals:
+            sm = sub.get(attr)
+            if sm is None or sm.value is None:
+                continue
+            key = ("role", role, attr)
+            if key not in inst.entry.cache:
+                inst.entry.cache[key] = self.eval(sm.value)
+            v = _pick(inst.entry.cache[key], inst, 0, sm.each)
+            if not isinstance(v, Scalar):
+                fail("E301", f"{attr} of '{name}' must be a scalar", sm.value.span, f"e.g. {role}({attr} = 0)")
+            if X.depends_on_state(v.expr) or X.depends_on_time(v.expr):
+                fail("E306", f"the {attr} value may only depend on parameters", sm.value.span,
+                     "start values are numbers or expressions in parameters")
+            vals[attr] = v.expr
+        return ir.Coordinate(name, vals["start"], vals["speed"], bool(_constval(vals["fixed"])),
+                             bool(_constval(vals["speed_fixed"])), unit, "", owner, inst.entry.decl.name_span)
 
     def _vector_starts(self, inst: CompInst, jvars: list[ir.JointVar], param: str) -> None:
         """`r(start = ..)`, `v(start = ..)`, `omega(start = .., frame = ..)` of a spatial joint:
@@ -1004,10 +1010,13 @@ class Flattener(Evaluator):
         n = n.pop()
         zero = X.const(0.0)
         jvars = []
-        for i, role in enumerate("xyz"[:n]):
-            c = ir.Coordinate(f"{inst.name}.{role}", vecs["r"][i] if "r" in vecs else zero,
-                              vecs["v"][i] if "v" in vecs else zero, True, True, "m", "", f"{inst.name}.cartesian",
-                              inst.entry.decl.name_span)
+        for role in "xyz"[n:]:
+            if role in inst.entry.mod.sub:
+                fail("E204", f"'{inst.name}' moves in the x, y plane (r and v have 2 entries): it has no '{role}'",
+                     inst.entry.mod.sub[role].name_span, "give r(start = {x, y, z}) for motion in space")
+        for i, role in enumerate("xyz"[:n]):     # x(start = ..) (a scene, --set bob.x.start) wins over r's entry
+            defaults = {attr: vecs[key][i] for key, attr in (("r", "start"), ("v", "speed")) if key in vecs}
+            c = self._own_coordinate(inst, role, "m", f"{inst.name}.cartesian", defaults)
             inst.coords.append(c)
             jvars.append(ir.JointVar(role, ir.Coord(c.name), c.name))
         z_axis = (zero, zero, X.const(1.0))
