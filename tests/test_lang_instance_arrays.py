@@ -92,3 +92,21 @@ def test_instance_array_errors(change, code):
     with pytest.raises(MechError) as err:
         mechdsl.loads(CHAIN.replace(*change), model="Chain")
     assert code in str(err.value)
+
+
+def test_scenes_modify_elements_by_index():
+    text = CHAIN + """
+scene S
+  model Chain(N = 4, links[2](m = 3), links[3].q(start = 0.5));
+  stop_time = 0.1;
+end S;
+"""
+    m = mechdsl.loads(text, scene="S")
+    assert m.parameters["links[2].m"] == 3.0 and m.parameters["links[1].m"] == 1.0
+    assert [c.start.value for c in m.model.coordinates] == pytest.approx([np.pi / 2, 0, 0.5, 0])
+    shipped = SHIPPED.read_text() + "scene S\n  model NLinkPendulum(q[2](start = 0.4), q[3](speed = -1));\nend S;\n"
+    got = [(c.start.value, c.speed.value) for c in mechdsl.loads(shipped, scene="S").model.coordinates]
+    assert got == pytest.approx([(np.pi / 2, 0), (0.4, 0), (0, -1)])
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(shipped.replace("q[2](", "q[2.5]("), scene="S")
+    assert "E102" in str(err.value) and "positive integer" in str(err.value)
