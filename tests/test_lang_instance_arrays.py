@@ -106,7 +106,7 @@ end S;
     assert [c.start.value for c in m.model.coordinates] == pytest.approx([np.pi / 2, 0, 0.5, 0])
     shipped = SHIPPED.read_text() + "scene S\n  model NLinkPendulum(q[2](start = 0.4), q[3](speed = -1));\nend S;\n"
     got = [(c.start.value, c.speed.value) for c in mechdsl.loads(shipped, scene="S").model.coordinates]
-    assert got == pytest.approx([(np.pi / 2, 0), (0.4, 0), (0, -1)])
+    assert np.array(got) == pytest.approx(np.array([(np.pi / 2, 0), (0.4, 0), (0, -1)]))
     with pytest.raises(MechError) as err:
         mechdsl.loads(shipped.replace("q[2](", "q[2.5]("), scene="S")
     assert "E102" in str(err.value) and "positive integer" in str(err.value)
