@@ -7,7 +7,6 @@ and reported together.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -25,10 +24,11 @@ from . import values as V
 from .evaluate import BUILTIN_NAMES, EvalError, Evaluator, fail
 from .mods import Mod
 from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
+from .instance_arrays import InstanceArrays
+from .vector_starts import VECTOR_STARTS, VectorStarts
 
 SCALAR_TYPES = {"Real", "Integer", "Boolean"}
 PARAM_ATTRS = {"unit", "min", "max", "displayUnit"}
-VECTOR_STARTS = {"Spherical": ("omega",), "Free": ("r", "v", "omega"), "PointMass": ("r", "v")}   # vector start modifiers (issue 17)
 COORD_ATTRS = {"start", "speed", "fixed", "speed_fixed", "unit", "displayUnit", "min", "max"}
 FIELD_RANK = {"scalar": 0, "vec3": 1, "mat3": 2, "point": 0, "body": 0, "bodies": 1, "coordinate": 0,
               "string": 0, "bool": 0}
@@ -77,7 +77,9 @@ class _Failed(Exception):
     """An entry already reported an error; dependants stay quiet."""
 
 
-class Flattener(Evaluator):
+class Flattener(InstanceArrays, VectorStarts, Evaluator):
+    Failed = _Failed           # for the mixins (instance_arrays.py, vector_starts.py)
+
     def __init__(self, program, model: ast.ModelDef, outer: dict[str, Mod] | None = None):
         self.program = program
         self.model = model
@@ -162,74 +164,6 @@ class Flattener(Evaluator):
         inner = {f"{d.name}.{k}": v for k, v in mod.sub.items()}
         self._collect(sub, inner, chain, d.name + ".")  # type: ignore[arg-type]
         self._check_modified_names(inner, sub.name, d.name + ".")  # type: ignore[union-attr]
-
-    def _instance_array(self, d: ast.Declaration, outer: dict[str, Mod], chain: list[str]) -> None:
-        """`Link links[N](mods)`: N instances `links[1]` ... `links[N]` (issue 17). The size is an
-        Integer expression of names declared before the array. A modifier marked `each`, or whose
-        value is not an array of N entries, is given to every element; an array of N entries
-        (a literal, or a name of an array of N) is split, one entry per element."""
-        try:
-            n = self.int_value(d.dims[0], "the size of an array of instances")
-        except EvalError as ex:
-            self.diags.items.append(ex.diag)
-            return
-        except _Failed:
-            return
-        if n > limits.get("components"):
-            self.diags.error("E316", f"{n} instances of {d.type_name} exceed the limit of {limits.get('components')} "
-                                     "components", d.dims[0].span, limits.hint("components"))
-            return
-        self.instance_arrays[d.name] = n
-        mods = self._split_arrays(d.modification, n, d.name, outer)
-        for k in range(1, n + 1):
-            dk = dataclasses.replace(d, name=f"{d.name}[{k}]", dims=(), modification=self._element_mods(mods, k, n))
-            self._instance(dk, outer, chain)
-
-    def _split_arrays(self, mods, n: int, path: str, outer):
-        """Modifier values that are arrays of n (not literal, not `each`) become a hidden array
-        variable `<path>.<modifier>` that each element indexes."""
-        if not mods:
-            return mods
-        out = []
-        for m in mods:
-            value = m.value
-            if (value is not None and not m.each and not isinstance(value, ast.Array)
-                    and self._is_array_of(value, n)):
-                name = f"{path}.{m.name}"
-                if name not in self.entries:
-                    self._declare(ast.Declaration(prefix=None, type_name="Real", name=name,
-                                                  dims=(ast.Number(value=n, span=value.span),), value=value,
-                                                  span=value.span, name_span=value.span), outer)
-                value = ast.Ref(parts=(ast.RefPart(name=name, span=value.span),), span=value.span)
-            sub = m.modification if m.each else self._split_arrays(m.modification, n, f"{path}.{m.name}", outer)
-            out.append(dataclasses.replace(m, value=value, modification=sub))
-        return tuple(out)
-
-    def _element_mods(self, mods, k: int, n: int):
-        """Element k's modifiers: `each` ones as they are, arrays of n entries split."""
-        if not mods:
-            return mods
-        out = []
-        for m in mods:
-            value = m.value
-            if value is not None and not m.each:
-                if isinstance(value, ast.Array) and len(value.items) == n:
-                    value = value.items[k - 1]
-                elif isinstance(value, ast.Ref) and not value.parts[-1].subscripts and self._is_array_of(value, n):
-                    last = value.parts[-1]
-                    index = ast.Number(value=k, span=value.span)
-                    value = dataclasses.replace(value, parts=value.parts[:-1] + (
-                        dataclasses.replace(last, subscripts=(index,)),))
-            sub = self._element_mods(m.modification, k, n) if not m.each else m.modification
-            out.append(dataclasses.replace(m, value=value, modification=sub, each=False))
-        return tuple(out)
-
-    def _is_array_of(self, ref: ast.Ref, n: int) -> bool:
-        try:
-            v = self.eval(ref)
-        except (EvalError, _Failed):
-            return False
-        return isinstance(v, Arr) and len(v.items) == n
 
     def _check_modified_names(self, mods: dict[str, Mod], model_name: str, prefix: str = "") -> None:
         """A modification (scene, extends, API override) must name a declaration of the model."""
@@ -350,26 +284,6 @@ class Flattener(Evaluator):
             fail("E201", f"model instance '{inst}' has no declaration '{rest}'", r.parts[head].span,
                  did_you_mean(rest, own) or f"declarations of {inst}: {', '.join(own[:8])}")
         return super().eval_ref(r)
-
-    def _instance_element(self, r: ast.Ref) -> ast.Ref:
-        first = r.parts[0]
-        n = self.instance_arrays.get(first.name)
-        if n is None or not first.subscripts:
-            if n is not None and len(r.parts) > 1:
-                fail("E303", f"'{first.name}' is an array of {n} model instances: pick one, e.g. {first.name}[1]",
-                     first.span, f"write {first.name}[i].{r.parts[1].name}")
-            return r
-        if len(first.subscripts) != 1:
-            fail("E303", f"'{first.name}' has one dimension", first.span, f"write {first.name}[i]")
-        k = self.int_value(first.subscripts[0], "an index")
-        if not 1 <= k <= n:
-            fail("E303", f"index {k} is out of range for '{first.name}' (1..{n})", first.subscripts[0].span,
-                 "indices start at 1")
-        if len(r.parts) == 1:
-            fail("E201", f"'{first.name}[{k}]' is a model instance, not a value", first.span,
-                 f"refer to one of its declarations, e.g. {first.name}[{k}].{next(iter(self._own(f'{first.name}[{k}]')), 'x')}")
-        return dataclasses.replace(r, parts=(dataclasses.replace(first, name=f"{first.name}[{k}]", subscripts=()),)
-                                   + r.parts[1:])
 
     def _own(self, inst: str) -> list[str]:
         return [n[len(inst) + 1:] for n in self.entries if n.startswith(inst + ".")]
@@ -901,132 +815,6 @@ class Flattener(Evaluator):
             vals[attr] = v.expr
         return ir.Coordinate(name, vals["start"], vals["speed"], bool(_constval(vals["fixed"])),
                              bool(_constval(vals["speed_fixed"])), unit, "", owner, inst.entry.decl.name_span)
-
-    def _vector_starts(self, inst: CompInst, jvars: list[ir.JointVar], param: str) -> None:
-        """`r(start = ..)`, `v(start = ..)`, `omega(start = .., frame = ..)` of a spatial joint:
-        the start values and speeds of its own coordinates (semantic/vector_starts.py)."""
-        from . import vector_starts as VS
-
-        given = [(k, inst.entry.mod.sub[k]) for k in VECTOR_STARTS.get(inst.cls.name, ()) if k in inst.entry.mod.sub]
-        if not given:
-            return
-        index = {c.name: i for i, c in enumerate(inst.coords)}
-        own = {jv.role: jv.coordinate for jv in jvars if jv.coordinate == f"{inst.name}.{jv.role}"
-               and jv.coordinate in index}
-        roles = [jv.role for jv in jvars]
-        for key, m in given:
-            allowed = {"start", "frame"} if key == "omega" else {"start"}
-            self._check_attrs(m, allowed)
-            if m.value is not None or "start" not in m.sub:
-                fail("E220", f"'{key}' of '{inst.name}' needs a start vector: {key}(start = {{..}})", m.span,
-                     f"e.g. {key}(start = {{0, 0, 1}})")
-            targets = [r for r in roles if (r in ("x", "y", "z")) == (key != "omega")]
-            if key == "omega" and param == "euler":
-                targets = [r for r in roles if r in ("phi", "theta", "psi")]
-            missing = [r for r in targets if r not in own]
-            if not targets or missing:
-                fail("E220", f"'{key}' of '{inst.name}' sets the start of the joint's own coordinates, but "
-                             + (f"'{missing[0]}' is bound to an expression" if missing else "the joint has none here"),
-                     m.span, "give the start values on the coordinates the joint is bound to, or remove the binding"
-                     if missing else "a Free joint with a point-mass child has no rotation coordinates")
-            attr = "speed" if key in ("v", "omega") else "start"
-            for r in targets:
-                rm = inst.entry.mod.sub.get(r)
-                if rm is not None and attr in rm.sub:
-                    fail("E211", f"the {attr} of '{inst.name}.{r}' is set twice: by {r}({attr} = ..) and by {key}(..)",
-                         rm.sub[attr].span, "remove one of them")
-            vec = self._start_vector(inst, key, m, (3,))
-            if key != "omega":
-                new = dict(zip(targets, vec))
-            else:
-                frame = "body"
-                if "frame" in m.sub:
-                    fv = self.eval(m.sub["frame"].value)
-                    frame = fv.value if isinstance(fv, Str) else ""
-                    if frame not in ("body", "world"):
-                        fail("E217", f"'{frame}' is not a valid frame of omega", m.sub["frame"].value.span,
-                             'frame = "body" (child body axes) or "world"')
-                if frame == "world" and self._point_name_of(inst, "parent") != "world":
-                    fail("E221", f"omega(frame = \"world\") of '{inst.name}' needs a joint whose parent is the world",
-                         m.sub["frame"].span, 'give the angular velocity relative to the parent in the child\'s axes: '
-                                              'frame = "body"')
-                starts = [inst.coords[index[own[r]]].start for r in targets]
-                if param == "euler":
-                    seq = self.field_value(inst, "sequence").value  # type: ignore[union-attr]
-                    rates, det = VS.euler_rates(seq.strip().lower(), starts, vec, frame)
-                    self._check_not_gimbal_locked(inst, seq, det, m.span)
-                else:
-                    rates = VS.quaternion_rates(starts, vec, frame)
-                new = dict(zip(targets, rates))
-            for r, expr in new.items():
-                i = index[own[r]]
-                inst.coords[i] = dataclasses.replace(inst.coords[i], **{attr: expr})
-
-    def _check_not_gimbal_locked(self, inst: CompInst, seq: str, det: ir.Expr, span: Span) -> None:
-        """omega at a gimbal-locked start orientation has no Euler rates (or huge cancelling
-        ones): refused with the parameter values of the file (E222)."""
-        try:
-            with _quiet_numpy():
-                d = X.evaluate(det, dict(self.param_values))
-        except (KeyError, ValueError, ZeroDivisionError, OverflowError):   # not known yet: the start check's job
-            return
-        if abs(d) < 1e-8:
-            fail("E222", f"the start orientation of '{inst.name}' is at the gimbal lock of the Euler sequence "
-                         f"'{seq}' (det = {d:.3g}): an angular velocity has no angle rates there", span,
-                 'start away from the lock, or use parametrization = "quaternion"')
-
-    def _start_vector(self, inst: CompInst, key: str, m: Mod, sizes: tuple[int, ...]) -> tuple[ir.Expr, ...]:
-        """The expressions of `key(start = {..})`: a vector of one of `sizes`, in parameters."""
-        sv = self.eval(m.sub["start"].value)
-        want = {"r": U.LENGTH, "v": U.VELOCITY, "omega": U.dim(s=-1)}[key]
-        if not isinstance(sv, Arr) or len(V.shape_of(sv)) != 1 or V.shape_of(sv)[0] not in sizes:
-            fail("E301", f"the start of '{key}' of '{inst.name}' must be a vector of "
-                         f"{' or '.join(map(str, sizes))}, got {V.describe_shape(sv)}",
-                 m.sub["start"].value.span, f"write {key}(start = {{x, y, z}})")
-        for s in V.flatten(sv):
-            self.check_dim(s, want, f"the start of '{key}' of '{inst.name}'", m.sub["start"].value.span)
-            if X.depends_on_state(s.expr) or X.depends_on_time(s.expr):
-                fail("E306", "the start value may only depend on parameters", m.sub["start"].value.span,
-                     "start values are numbers or expressions in parameters")
-        return tuple(s.expr for s in V.flatten(sv))
-
-    def _cartesian_point_mass(self, inst: CompInst, span) -> ir.Joint | None:
-        """A PointMass with `r(start = ..)` / `v(start = ..)` has Cartesian coordinates named after
-        it (`bob.x`, `bob.y`[, `bob.z`]): a translation from the world, no rotation.  Two-vector
-        starts give the plane motion in world x, y."""
-        given = {k: inst.entry.mod.sub[k] for k in ("r", "v") if k in inst.entry.mod.sub}
-        if not given:
-            return None
-        vecs = {}
-        for key, m in given.items():
-            self._check_attrs(m, {"start"})
-            if m.value is not None or "start" not in m.sub:
-                fail("E220", f"'{key}' of '{inst.name}' needs a start vector: {key}(start = {{..}})", m.span,
-                     f"e.g. {key}(start = {{0, 0, 0}}) (a vector of 2 keeps the mass in the x, y plane)")
-            vecs[key] = self._start_vector(inst, key, m, (2, 3))
-        n = {len(v) for v in vecs.values()}
-        if len(n) > 1:
-            fail("E301", f"r and v of '{inst.name}' must have the same size", span, "give both with 2 or both with 3 entries")
-        n = n.pop()
-        zero = X.const(0.0)
-        jvars = []
-        for role in "xyz"[n:]:
-            if role in inst.entry.mod.sub:
-                fail("E204", f"'{inst.name}' moves in the x, y plane (r and v have 2 entries): it has no '{role}'",
-                     inst.entry.mod.sub[role].name_span, "give r(start = {x, y, z}) for motion in space")
-        for i, role in enumerate("xyz"[:n]):     # x(start = ..) (a scene, --set bob.x.start) wins over r's entry
-            defaults = {attr: vecs[key][i] for key, attr in (("r", "start"), ("v", "speed")) if key in vecs}
-            c = self._own_coordinate(inst, role, "m", f"{inst.name}.cartesian", defaults)
-            inst.coords.append(c)
-            jvars.append(ir.JointVar(role, ir.Coord(c.name), c.name))
-        z_axis = (zero, zero, X.const(1.0))
-        kind, plane = ("free", None) if n == 3 else ("planar", K.plane_axes(z_axis))
-        return ir.Joint(f"{inst.name}.cartesian", kind, "world", inst.name, "world", inst.name, z_axis, tuple(jvars),
-                        plane, None, None, (("parametrization", "euler"), ("sequence", "zyx")), False, span)
-
-    def _point_name_of(self, inst: CompInst, fname: str) -> str:
-        v = self.field_value(inst, fname)
-        return self.body_of_point(v.name) if isinstance(v, CompRef) else ""
 
     def _body_class_of(self, ref: CompRef) -> str:
         base = ref.name
