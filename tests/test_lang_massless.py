@@ -144,3 +144,31 @@ def test_cartesian_coordinates_take_element_overrides(tmp_path):
     assert "E204" in str(err.value)
     scene = CART + "scene S\n  model CartPend(bob(x(start = 1.5), y(start = 0)));\n  stop_time = 0.1;\nend S;\n"
     assert [c.start.value for c in mechdsl.loads(scene, scene="S").model.coordinates] == [1.5, 0.0]
+
+
+def test_joint_variables_win_over_frame_attributes():
+    """`f.x` of a Free or Planar joint is its variable, with or without a child; `turn.x` of a
+    child-less Revolute is its frame's position."""
+    text = """
+model F
+  PointMass jupiter(m = 1);
+  Free f(child = jupiter, r(start = {5, 1, 0}));
+  Body plate(m = 1, I = diagonal({1, 1, 2}));
+  Planar pl(parent = world, child = plate, axis = {0, 0, 1}, x(start = 3));
+  PointMass bob(m = 1);
+  Prismatic p(parent = world, axis = {1, 0, 0}, s(start = 2));
+  Revolute turn(parent = p, phi(start = 0.5));
+  RigidLink arm(a = turn, b = bob, r = {1, 0, 0});
+  output Real fx(unit = "m") = f.x;
+  output Real px(unit = "m") = pl.x;
+  output Real tx(unit = "m") = turn.x;
+end F;
+"""
+    m = mechdsl.loads(text)
+    outs = {o.name: o.expr for o in m.model.outputs}
+    assert outs["fx"].name == "f.x" and outs["px"].name == "pl.x"
+    from reach_util import output_values
+    e = m.eom
+    q = np.zeros(len(e.coords))
+    q[e.coords.index("p.s")] = 2.0
+    assert output_values(m, q, np.zeros(len(e.coords)), ["tx"])["tx"][0] == pytest.approx(2.0)

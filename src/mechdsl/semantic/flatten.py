@@ -709,7 +709,10 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
                 return table[name]
             fail("E219", f"world has no attribute '{name}'", span, "world has r, v, a, x, y, z, R, w, w_body, alpha")
         if value.kind == "joint" and name in ("r", "v", "a", "x", "y", "z", "R", "w", "w_body", "alpha"):
-            value = self._frame_of_joint(value, None, span)
+            jinst = self.insts.get(value.name)     # a child-less joint's frame; a joint variable (f.x) wins
+            if (jinst is not None and jinst.cls.field("child") is not None and self.field_value(jinst, "child") is None
+                    and name not in [jv.role for jv in self.joint_vars(jinst)]):
+                value = self._frame_of_joint(value, None, span)
         if value.kind in ("point", "body"):
             inst = self.insts.get(value.name)
             if inst is not None and name in inst.cls.points:   # rod.a is Rod's end point a, not an acceleration
