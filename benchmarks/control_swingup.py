@@ -6,8 +6,11 @@ with IPOPT (exact Hessian) on
   hand       the cart-pole written out by hand in SX (tests/test_control.py checks that both
              give the same xdot at random states to 1e-12)
   mechdsl    m.casadi()["ode"] of models/cart_pole.mech (an SXFunction: the recursive route
-             gives the accelerations explicitly)
+             gives the accelerations explicitly), the parameters as the input p
+  fixed      m.casadi(fixed_parameters=True)["ode"]: the parameters built in as numbers
+             (what the hand-written model does), p empty
   compiled   m.casadi(compiled=True)["ode"] (C code, derivatives included)
+  comp+fixed m.casadi(compiled=True, fixed_parameters=True)["ode"]
 and prints, for each, the wall time of the solve (best of --repeat, build excluded and
 included), the IPOPT iterations, the ratio to `hand`, and the gap between the optimizer's
 states and the optimal control replayed through m.simulate (rtol 1e-10), for several N.
@@ -98,10 +101,13 @@ def rows(Ns, repeat):
     pv = m.parameter_vector()
     hand, hp = hand_ode()
     variants = [("hand", hand, hp), ("mechdsl", m.casadi()["ode"], pv),
-                ("compiled", m.casadi(compiled=True)["ode"], pv)]
+                ("fixed", m.casadi(fixed_parameters=True)["ode"], np.zeros(0)),
+                ("compiled", m.casadi(compiled=True)["ode"], pv),
+                ("comp+fixed", m.casadi(compiled=True, fixed_parameters=True)["ode"], np.zeros(0))]
     yield (f"cart-pole swing-up, T = {T} s, RK4 x {M_RK} per interval, |F| <= {F_MAX} N; "
-           f"ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in variants)}")
-    yield f"{'N':>4} {'variant':>9} {'solve s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} {'replay gap':>11}"
+           f"ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in variants)}; "
+           f"VM instructions: {', '.join(f'{n}={f.n_instructions()}' for n, f, _ in variants if f.is_a('SXFunction'))}")
+    yield f"{'N':>4} {'variant':>10} {'solve s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} {'replay gap':>11}"
     for N in Ns:
         base = None
         for name, f, p in variants:
@@ -111,7 +117,7 @@ def rows(Ns, repeat):
             r = m.simulate(T, x0={"theta": math.pi}, inputs={"F": mechdsl.table(times, np.r_[u, u[-1]])},
                            rtol=1e-10, atol=1e-12, points=N + 1)
             gap = float(np.abs(np.c_[r.q, r.qd].T - X).max())
-            yield f"{N:>4} {name:>9} {t_solve:>8.3f} {t_total:>9.3f} {iters:>6} {t_solve / base:>7.2f} {gap:>11.2e}"
+            yield f"{N:>4} {name:>10} {t_solve:>8.3f} {t_total:>9.3f} {iters:>6} {t_solve / base:>7.2f} {gap:>11.2e}"
 
 
 if __name__ == "__main__":
