@@ -123,7 +123,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     t = grid[:n_ok].copy()
     U = drive.values(t, X)
     signals = compute_signals(eom, post, t, X, pv, out_names, U=U)
-    _record_inputs(drive, U, signals, meta)
+    record_inputs(drive, U, signals, meta)
     _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
@@ -146,7 +146,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
                   stats=stats, metadata=meta, failure=failure)
 
 
-def _record_inputs(drive, U, signals, meta) -> None:
+def record_inputs(drive, U, signals, meta) -> None:
     """The inputs as signals (named as declared); bound violations of run-time signals warn."""
     for j, name in enumerate(drive.names):
         signals[name] = U[:, j].copy()
@@ -157,7 +157,7 @@ def _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive) -> Resu
     X = np.zeros((len(grid), 0))
     U = drive.values(grid, X)
     signals = compute_signals(eom, post, grid, X, pv, out_names, U=U)
-    _record_inputs(drive, U, signals, meta)
+    record_inputs(drive, U, signals, meta)
     meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
                 versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
                                               "points": len(grid), "outputs": list(out_names),

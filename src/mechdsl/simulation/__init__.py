@@ -48,6 +48,8 @@ def solve(problem: Problem, progress=None) -> Result:
         if bar is not None:
             bar.close()
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    if problem.drive is not None and problem.kind != "ode":
+        _record_inputs(r, problem.drive)
     A.check_finite(r)
     A.normalize_stats(r, cpu, wall)
     A.accuracy_report(r, problem, fixed_step=problem.backend == "fixed-step")
@@ -73,6 +75,18 @@ def solve(problem: Problem, progress=None) -> Result:
     return r
 
 
+def _record_inputs(r: Result, drive) -> None:
+    """The inputs on the recorded times, as signals named after them (the ODE back end records
+    its own), and the bound warnings of signals known only during the run."""
+    import numpy as np
+
+    from ..simulate import record_inputs
+
+    X = np.c_[r.q, r.qd] if len(r.t) else np.zeros((0, 2 * len(r.coordinates)))
+    r.metadata.setdefault("inputs", drive.describe())
+    record_inputs(drive, drive.values(np.asarray(r.t, float), X), r.signals, r.metadata)
+
+
 def _estimate_error(r: Result, problem: Problem) -> None:
     """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter)."""
     from . import accuracy as A
@@ -94,6 +108,8 @@ def _estimate_error(r: Result, problem: Problem) -> None:
         how = f"rtol = {tighter.rtol:g}, atol = {tighter.atol:g}"
     if problem.backend == "fixed-step" and s.points is None:
         tighter = tighter.replace(points=len(r.t)) if len(r.t) >= 2 else tighter
+    if problem.drive is not None and problem.kind != "ode":
+        tighter = tighter.replace(inputs=None)        # problem.eom has the inputs built in
     tight = solve(formulate(problem.eom, tighter.validated()))
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,

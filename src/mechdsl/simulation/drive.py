@@ -12,8 +12,10 @@ and inputs nothing drives keep their declared default.  When every signal is con
 back ends receive u as a constant vector (the integrators' parameter is [u; p]); otherwise
 the ODE back end integrates the closed loop ``ode(t, x, U(t, x), p)``, an MX Function built
 once here (Python callables enter through a ``casadi.Callback`` with finite-difference
-derivatives), so every integrator plug-in runs it unchanged.  The values are recorded as
-signals named after the inputs.
+derivatives), so every integrator plug-in runs it unchanged, and the back ends that read the
+equations themselves (DAE, contacts, fixed step) get ``close_eom``: the equations with u
+replaced by the SX expression U(t, x) (Python signals as call nodes).  The values are
+recorded as signals named after the inputs.
 
 Bounds: a constant or a table outside the declared ``min``/``max`` is an error (known
 before the run); a callable's values are only known during the run, so leaving the bounds
@@ -134,10 +136,34 @@ class Drive:
         return _Closed({"ode": closed, "ode_jacobian": jacobian_of(closed)}, funcs)
 
     def expression(self, t, x):
-        """U(t, x) as an MX column (one entry per input)."""
+        """U(t, x) as a column of the type of ``t`` (MX or SX: in SX, Python signals and MX
+        Functions enter as call nodes), one entry per input."""
         import casadi as ca
 
-        return ca.vertcat(*[_mx(s, t, x) for s in self.signals]) if self.signals else ca.MX(0, 1)
+        sym = ca.SX if isinstance(t, ca.SX) else ca.MX
+        return ca.vertcat(*[_expr(s, t, x, sym) for s in self.signals]) if self.signals else sym(0, 1)
+
+    def close_eom(self, eom):
+        """The equations with every input replaced by its signal U(t, x) (SX): for the back ends
+        that read the equations themselves (DAE, contacts, fixed step), which then see the
+        inputs as functions of time and state, as the ODE back end's closed loop does."""
+        import casadi as ca
+
+        u = eom.u
+        U = self.expression(eom.t, ca.vertcat(eom.q, eom.qd))
+
+        def sub(e):
+            if e is None or isinstance(e, (int, float, np.ndarray)):
+                return e
+            v = ca.SX(e)
+            return ca.substitute(v, u, U) if ca.depends_on(v, u) else e
+
+        def subs(d):
+            return {k: (tuple(sub(a) for a in v) if isinstance(v, tuple) else sub(v)) for k, v in (d or {}).items()}
+
+        changes = {k: sub(getattr(eom, k)) for k in ("T", "V", "D", "Q", "M", "bias", "qdd", "g")}
+        return eom.replace(**changes, outputs=subs(eom.outputs), reactions=subs(eom.reactions),
+                           invariants=subs(eom.invariants), u=None, inputs=(), input_defaults=())
 
     def values(self, t: np.ndarray, X: np.ndarray) -> np.ndarray:
         """The inputs on the sample times: rows = times, columns = inputs."""
@@ -176,11 +202,11 @@ class _Closed(dict):
         return self.base[key]
 
 
-def _mx(s: Signal, t, x):
+def _expr(s: Signal, t, x, sym):
     import casadi as ca
 
     if s.kind in ("default", "constant"):
-        return ca.MX(s.value)
+        return sym(s.value)
     if s.kind == "table":
         tb = s.table
         ts = ca.SX.sym("t")
