@@ -162,15 +162,17 @@ def test_linearization_has_one_column_per_input(slider):
     assert lin.B == pytest.approx(np.array([[0.0, 0.0], [0.5, 0.5]]), rel=1e-14)
 
 
-def test_problem_lists_inputs_and_time_varying_inputs_need_an_ode(slider):
+def test_problem_lists_inputs_and_fixed_step_takes_time_varying_inputs(slider):
     pr = slider.problem(t_end=1.0, inputs={"F": lambda t: 0.0})
     assert pr.inputs == ("F", "G") and dict(pr.input_signals)["F"] == "callable u(t)"
     from mechdsl.simulation import dump
 
     assert "inputs: F (callable u(t)), G (default 1.5)" in dump(pr)
-    with pytest.raises(UsageError, match="ODE problems only"):
-        slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": lambda t: 0.0})
-    r = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": 1.0, "G": 0.0}, points=3)  # constant: fine
+    # time-varying inputs on the fixed-step back end (before: refused, "ODE problems only"):
+    # x'' = (t + 0) / 2 from rest, so x = t^3 / 12 (closed forms per back end: test_inputs_backends.py)
+    r = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": lambda t: t, "G": 0.0}, points=3)
+    assert r.q[-1, 0] == pytest.approx(1.0 / 12.0, rel=1e-9)
+    r = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": 1.0, "G": 0.0}, points=3)  # constant
     assert r.q[-1, 0] == pytest.approx(0.25, rel=1e-9)
 
 

@@ -50,6 +50,8 @@ def solve(problem: Problem, progress=None) -> Result:
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
     if problem.drive is not None and problem.kind != "ode":
         _record_inputs(r, problem.drive)
+    if problem.drive is not None:
+        _signal_failure(r, problem.drive)
     A.check_finite(r)
     A.normalize_stats(r, cpu, wall)
     A.accuracy_report(r, problem, fixed_step=problem.backend == "fixed-step")
@@ -85,6 +87,21 @@ def _record_inputs(r: Result, drive) -> None:
     X = np.c_[r.q, r.qd] if len(r.t) else np.zeros((0, 2 * len(r.coordinates)))
     r.metadata.setdefault("inputs", drive.describe())
     record_inputs(drive, drive.values(np.asarray(r.t, float), X), r.signals, r.metadata)
+
+
+def _signal_failure(r: Result, drive) -> None:
+    """A Python input signal that failed during the run is the cause of the run's failure."""
+    errors = drive.signal_errors()
+    if not errors:
+        return
+    import dataclasses
+
+    if r.failure is not None:
+        r.failure = dataclasses.replace(r.failure, cause="input signal failed",
+                                        detail=f"{'; '.join(errors)} (the back end then reported: "
+                                               f"{r.failure.cause}: {r.failure.detail})")
+    else:
+        r.metadata.setdefault("warnings", []).extend(errors)
 
 
 def _estimate_error(r: Result, problem: Problem) -> None:

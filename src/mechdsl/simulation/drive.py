@@ -97,6 +97,7 @@ class Drive:
     names: tuple[str, ...]
     signals: list[Signal] = field(default_factory=list)
     bounds: tuple = ()        # (min, max) per input, None where not declared
+    span: tuple = (-np.inf, np.inf)     # the run's times: signals are never called outside
 
     @property
     def constant(self) -> bool:
@@ -141,7 +142,7 @@ class Drive:
         import casadi as ca
 
         sym = ca.SX if isinstance(t, ca.SX) else ca.MX
-        return ca.vertcat(*[_expr(s, t, x, sym) for s in self.signals]) if self.signals else sym(0, 1)
+        return ca.vertcat(*[_expr(s, t, x, sym, self.span) for s in self.signals]) if self.signals else sym(0, 1)
 
     def close_eom(self, eom):
         """The equations with every input replaced by its signal U(t, x) (SX): for the back ends
@@ -177,6 +178,10 @@ class Drive:
         f = ca.Function("U", [tt, xx], [self.expression(tt, xx)])
         return np.array(f.map(N)(t.reshape(1, -1), X.T), float).reshape(len(self.signals), N).T
 
+    def signal_errors(self) -> list[str]:
+        """What went wrong in Python signals during the run (each gave NaN from then on)."""
+        return [s.fn.error for s in self.signals if s.kind == "callable" and getattr(s.fn, "error", None)]
+
     def check_bounds(self, U: np.ndarray) -> list[str]:
         """Warnings for recorded values outside the declared bounds (signals known only during a run)."""
         out = []
@@ -202,7 +207,7 @@ class _Closed(dict):
         return self.base[key]
 
 
-def _expr(s: Signal, t, x, sym):
+def _expr(s: Signal, t, x, sym, span):
     import casadi as ca
 
     if s.kind in ("default", "constant"):
@@ -218,7 +223,10 @@ def _expr(s: Signal, t, x, sym):
             expr = ca.pw_const(ts, ca.DM(tb.times[1:]), ca.DM(tb.values))
         return ca.Function(_fname("table", s.name), [ts], [expr])(t)
     f = s.fn
-    return f(t, x) if s.feedback else f(t)
+    # the user's function only at the run's times: integrators may look past the end, and the
+    # fixed-step back end's structure probes (mechdsl.analysis.core) use times of their own
+    tc = ca.fmin(ca.fmax(t, span[0]), span[1]) if np.isfinite(span).all() else t
+    return f(tc, x) if s.feedback else f(tc)
 
 
 def _fname(prefix: str, name: str) -> str:
@@ -249,7 +257,7 @@ def build_drive(eom, spec, t0: float, t1: float, x0=None) -> Drive:
             signals.append(Signal(name, "default", value=default))
             continue
         signals.append(_signal(name, spec[name], t0, t1, x0, nx))
-    drive = Drive(names, signals, bounds)
+    drive = Drive(names, signals, bounds, (float(t0), float(t1)))
     for s, (lo, hi) in zip(signals, bounds):
         vals = (np.array([s.value]) if s.kind in ("default", "constant") else
                 s.table.values if s.kind == "table" else None)
@@ -333,12 +341,17 @@ def _numeric(v) -> bool:
 
 
 def _callback(name, fn, feedback, nx):
-    """A casadi.Callback around a Python signal (finite differences for derivatives)."""
+    """A casadi.Callback around a Python signal (finite differences for derivatives).
+
+    A call that fails or returns anything but one number gives NaN (never a Python exception
+    through CasADi, whose traceback would be printed): the back end stops the run there as
+    for a non-finite right-hand side, and ``error`` keeps the first problem for the report."""
     import casadi as ca
 
     class PySignal(ca.Callback):
         def __init__(self):
             ca.Callback.__init__(self)
+            self.error = None
             self.construct(_fname("input", name), {"enable_fd": True})
 
         def get_n_in(self):
@@ -352,10 +365,18 @@ def _callback(name, fn, feedback, nx):
 
         def eval(self, args):
             t = float(args[0])
-            v = fn(t, np.array(args[1], float).ravel()) if feedback else fn(t)
-            arr = np.asarray(v, dtype=float).ravel()
+            try:
+                v = fn(t, np.array(args[1], float).ravel()) if feedback else fn(t)
+                arr = np.asarray(v, dtype=float).ravel()
+            except Exception as e:  # noqa: BLE001 - the user's code: reported with the run's failure
+                return self._fail(t, f"calling the signal failed: {type(e).__name__}: {e}")
             if arr.size != 1:
-                raise ValueError(f"input '{name}' returned {arr.size} values at t = {t:g}")
+                return self._fail(t, f"the signal returned {arr.size} values, not one number")
             return [ca.DM(float(arr[0]))]
+
+        def _fail(self, t, what):
+            if self.error is None:
+                self.error = f"input '{name}' at t = {t:.6g}: {what}"
+            return [ca.DM(float("nan"))]
 
     return PySignal()
