@@ -103,9 +103,22 @@ class Drive:
     def constant(self) -> bool:
         return all(s.kind in ("default", "constant") for s in self.signals)
 
-    def vector(self) -> np.ndarray:
-        """u of a constant drive (the defaults where a signal is not constant)."""
-        return np.array([s.value if s.value is not None else 0.0 for s in self.signals], float)
+    def vector(self, t: float | None = None) -> np.ndarray:
+        """u of a constant drive; with ``t``, also the value at t of every zero-order-hold table
+        (held until its next sample); 0 for the other signals (closed into ``ode``)."""
+        return np.array([_held(s, t) if _zoh(s) and t is not None else s.value if s.value is not None else 0.0
+                         for s in self.signals], float)
+
+    def breakpoints(self, t0: float, t1: float) -> np.ndarray:
+        """The tables' sample times strictly inside (t0, t1): where a zero-order hold jumps and a
+        linear table has a kink.  The ODE back end restarts its integrator there (an integrator
+        stepping across a jump loses accuracy, and at tight tolerances fails)."""
+        tol = 1e-12 * max(1.0, abs(t0), abs(t1))
+        ts = [s.table.times for s in self.signals if s.kind == "table"]
+        if not ts:
+            return np.zeros(0)
+        allt = np.unique(np.concatenate(ts))
+        return allt[(allt > t0 + tol) & (allt < t1 - tol)]
 
     def describe(self) -> dict:
         out = {}
@@ -119,10 +132,12 @@ class Drive:
         return out
 
     def closed(self, funcs):
-        """{"ode", "ode_jacobian"} of the closed loop ode(t, x, U(t, x), p), signature (t, x, u, p)
-        (u unused: the call sites stay the same), or ``funcs`` itself for a constant drive."""
-        if self.constant:
-            return funcs
+        """{"ode", "ode_jacobian"} of the closed loop ode(t, x, U(t, x), p), signature (t, x, u, p),
+        where u carries only the zero-order-hold tables' current values (``vector(t)``: the back
+        end integrates piece by piece between ``breakpoints``, so a step never sees a jump), or
+        ``funcs`` itself when every signal is a constant or a zero-order hold."""
+        if all(s.kind in ("default", "constant") or _zoh(s) for s in self.signals):
+            return funcs             # zero-order holds come in through u, piece by piece (vector(t))
         import casadi as ca
 
         from ..codegen import TXUP, jacobian_of
@@ -132,17 +147,21 @@ class Drive:
         x = ca.MX.sym("x", ode.size1_in(1))
         u = ca.MX.sym("u", ode.size1_in(2))
         p = ca.MX.sym("p", ode.size1_in(3))
-        U = self.expression(t, x)
+        U = self.expression(t, x, held=u)
         closed = ca.Function("ode", [t, x, u, p], [ode(t, x, U, p)], TXUP, ["xdot"])
         return _Closed({"ode": closed, "ode_jacobian": jacobian_of(closed)}, funcs)
 
-    def expression(self, t, x):
+    def expression(self, t, x, held=None):
         """U(t, x) as a column of the type of ``t`` (MX or SX: in SX, Python signals and MX
-        Functions enter as call nodes), one entry per input."""
+        Functions enter as call nodes), one entry per input; ``held``: a column whose entries
+        stand for the zero-order-hold tables (instead of their expression in t)."""
         import casadi as ca
 
         sym = ca.SX if isinstance(t, ca.SX) else ca.MX
-        return ca.vertcat(*[_expr(s, t, x, sym, self.span) for s in self.signals]) if self.signals else sym(0, 1)
+        if not self.signals:
+            return sym(0, 1)
+        return ca.vertcat(*[held[j] if held is not None and _zoh(s) else _expr(s, t, x, sym, self.span)
+                            for j, s in enumerate(self.signals)])
 
     def close_eom(self, eom):
         """The equations with every input replaced by its signal U(t, x) (SX): for the back ends
@@ -205,6 +224,17 @@ class _Closed(dict):
 
     def __missing__(self, key):
         return self.base[key]
+
+
+def _zoh(s: Signal) -> bool:
+    return s.kind == "table" and s.table.hold == "zoh"
+
+
+def _held(s: Signal, t: float) -> float:
+    """A zero-order-hold table's value on [t, next sample): value k on [t_k, t_k+1)."""
+    tb = s.table
+    k = int(np.searchsorted(tb.times, t + 1e-12 * max(1.0, abs(t)), side="right")) - 1
+    return float(tb.values[min(max(k, 0), tb.values.size - 1)])
 
 
 def _expr(s: Signal, t, x, sym, span):
