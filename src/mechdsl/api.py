@@ -278,6 +278,54 @@ class Model:
         return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True,
                                 fixed=fixed)
 
+    def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
+                   atol: float | None = None, steps: int | None = None, fixed_parameters=None):
+        """The simulation layer's own integrator over one interval, as a CasADi Function
+        ``(x0, u, p) -> xf``: the state ``dt`` after x0 with the inputs u held constant (a
+        zero-order hold, as ``m.simulate(inputs={"F": table(...)})`` integrates each sample
+        interval).  For direct multiple shooting: the optimizer's dynamics are then the
+        simulator's, so the optimal control replayed through ``simulate`` with the same
+        method and tolerances reproduces the optimizer's states (docs/control.md).
+
+        method: an ODE method with a CasADi plug-in (default: the scene's, else "auto"
+        resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
+        steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
+        ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
+        from .simulation.inputs import start_vector
+        from .simulate import choose_method, default_inputs, fixed_step_count, min_step
+        from . import integrators as I
+        from .codegen import casadi_functions
+        import casadi as ca
+
+        if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
+            raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
+                             "models only (multiple shooting on a DAE needs its own formulation)")
+        s = self.settings(t_end=_number("dt", dt), rtol=rtol, atol=atol, method=method)
+        funcs = casadi_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
+                                 fixed=self._fixed_entries(fixed_parameters))
+        m = s.method
+        if m == "auto":
+            pv = self.parameter_values
+            m, _, _ = choose_method(self.eom, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
+                                    start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol)
+        if m not in I.METHODS or I.METHODS[m][0] != "casadi":
+            casadi_methods = [k for k, v in I.METHODS.items() if v[0] == "casadi"]
+            raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
+        if m in I.FIXED_STEP and steps is None:
+            pv = self.parameter_values
+            steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
+                                        start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol, None,
+                                        u=default_inputs(self.eom, np.zeros(0)))
+        opts = I.casadi_options(m, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
+                                hmin=min_step(0.0, s.t_end))
+        ode = funcs["ode"]
+        integ = I.make_integrator("integrator", I.METHODS[m][1], I.dae_function(ode), 0.0, s.t_end, opts)
+        x0 = ca.MX.sym("x0", ode.size1_in(1))
+        u = ca.MX.sym("u", ode.size1_in(2))
+        p = ca.MX.sym("p", ode.size1_in(3))
+        xf = integ(x0=x0, p=ca.vertcat(u, p))["xf"]
+        return ca.Function("integrator", [x0, u, p], [xf], ["x0", "u", "p"], ["xf"])
+
     def _fixed_entries(self, spec) -> tuple:
         """(index in p, value) pairs of ``casadi(fixed_parameters=spec)``."""
         if spec is None or spec is False:
