@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import mechdsl
+from mechdsl.diagnostics import UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "control.md"
@@ -55,6 +56,55 @@ def test_cart_pole_ode_matches_hand_derivation_at_random_states():
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
 
 
+def test_fixed_parameters_give_the_same_functions_with_fewer_instructions():
+    """casadi(fixed_parameters=...): the parameters built in as numbers; the same values as the
+    general Functions at random states, a leaner expression, and p keeps what is not fixed."""
+    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    general, p = m.casadi(), m.parameter_vector()
+    fixed = m.casadi(fixed_parameters=True)
+    assert fixed["ode"].numel_in(3) == 0 and fixed.parameter_names == ()
+    assert fixed["ode"].n_instructions() < general["ode"].n_instructions()       # 61 < 72
+    some = m.casadi(fixed_parameters={"m": 0.2, "g": 9.81})
+    assert some.parameter_names == ("M", "l")
+    other = m.with_params(m=0.2)
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        x, F = rng.uniform(-3, 3, 4), rng.uniform(-20, 20)
+        want = np.array(general["ode"](0.0, x, F, p)).ravel()
+        np.testing.assert_allclose(np.array(fixed["ode"](0.0, x, F, [])).ravel(), want, rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(np.array(fixed["energy"](0.0, x, F, [])[2]).ravel(),
+                                   np.array(general["energy"](0.0, x, F, p)[2]).ravel(), rtol=1e-13)
+        np.testing.assert_allclose(np.array(some["ode"](0.0, x, F, [1.0, 1.0])).ravel(),
+                                   np.array(general["ode"](0.0, x, F, other.parameter_vector())).ravel(),
+                                   rtol=1e-13, atol=1e-13)
+    assert np.array(fixed["parameters"](m.parameter_values)).size == 0
+    with pytest.raises(UsageError, match="'mm' is not a Real parameter.*did you mean 'm'"):
+        m.casadi(fixed_parameters=["mm"])
+    with pytest.raises(UsageError, match="'F' is not an input"):
+        m.casadi(fixed_parameters=["F"])
+
+
+def test_fixing_a_parameter_fixes_the_ones_computed_from_it():
+    src = """
+model Rod
+  parameter Real m = 2;
+  parameter Real l = 3;
+  parameter Real I = m * l^2 / 3;
+  coordinate Real phi(start = 0.1);
+equation
+  kinetic = 0.5*I*der(phi)^2;
+  potential = m*9.81*l/2*(1 - cos(phi));
+end Rod;
+"""
+    m = mechdsl.loads(src, model="Rod")
+    fs = m.casadi(fixed_parameters={"m": 4.0})
+    assert fs.parameter_names == ("l", "I")                 # I depends on l too: stays in p
+    fs = m.casadi(fixed_parameters={"m": 4.0, "l": 1.0})
+    assert fs.parameter_names == ()                         # I = 4/3 built in, not stale 6
+    xd = np.array(fs["ode"](0.0, [0.5, 0.0], [], [])).ravel()
+    assert xd[1] == pytest.approx(-4.0 * 9.81 * 0.5 * math.sin(0.5) / (4.0 / 3.0), rel=1e-13)
+
+
 def test_swing_up_example_coarse(monkeypatch):
     """docs/control.md example 1 on a coarse grid: IPOPT converges, the pole ends upright and
     the replay through m.simulate matches the optimizer's states to its RK4 discretization."""
@@ -77,8 +127,41 @@ def test_swing_up_example_full(monkeypatch):
     assert np.abs(r.q[-1]).max() < 2e-4 and np.abs(r.qd[-1]).max() < 2e-4
 
 
-def test_lqr_example_stabilizes_upright(monkeypatch):
+def test_shooting_on_the_simulators_integrator_replays_to_round_off(monkeypatch):
+    """docs/control.md example 2 on a coarse grid: multiple shooting on m.integrator; the replay
+    through m.simulate with the same method and tolerances reproduces the optimizer's states
+    (before: only to the optimizer's RK4 error), and both are near the exact solution."""
+    env = _run(_examples()[1], monkeypatch, **{"T, N, F_max = 3.0, 60, 20.0": "T, N, F_max = 3.0, 30, 20.0"})
+    assert env["sol"].stats()["success"] and env["r"].success
+    assert env["gap"] < 1e-9                       # same integrator: round-off (measured 4e-12)
+    assert env["gap_exact"] < 1e-4                 # rtol 1e-8 amplified by the unstable pole (measured 8e-7)
+    assert abs(env["r"].q[-1, 1]) < 1e-6
+
+
+@pytest.mark.slow
+def test_shooting_on_the_simulators_integrator_full(monkeypatch):
     env = _run(_examples()[1], monkeypatch)
+    assert env["sol"].stats()["success"] and env["sol"].stats()["iter_count"] == 47
+    assert env["gap"] < 1e-10 and env["gap_exact"] < 1e-6      # measured 3e-14 and 1e-8
+
+
+def test_integrator_function_matches_a_simulated_interval():
+    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    Phi = m.integrator(0.1, method="cvodes-bdf", rtol=1e-10, atol=1e-12)
+    assert Phi.name_in() == ["x0", "u", "p"] and Phi.name_out() == ["xf"]
+    x0 = np.array([0.1, 0.4, -0.2, 0.3])
+    xf = np.array(Phi(x0, 2.5, m.parameter_vector())).ravel()
+    r = m.simulate(0.1, x0=x0, inputs={"F": 2.5}, rtol=1e-12, atol=1e-14, points=2)
+    np.testing.assert_allclose(xf, np.r_[r.q[-1], r.qd[-1]], atol=1e-9)
+    with pytest.raises(UsageError, match="no CasADi integrator plug-in"):
+        m.integrator(0.1, method="scipy-rk45")
+    bead = mechdsl.load(str(ROOT / "models" / "pendulum_cartesian.mech"))
+    with pytest.raises(UsageError, match="constraints or contacts"):
+        bead.integrator(0.1)
+
+
+def test_lqr_example_stabilizes_upright(monkeypatch):
+    env = _run(_examples()[2], monkeypatch)
     reg, r = env["reg"], env["r"]
     assert (reg.closed_loop_eigenvalues.real < 0).all()
     # slowest closed-loop rate 1.26/s: after 6 s the 0.2 rad tilt is down to a few mrad
