@@ -14,8 +14,9 @@ with IPOPT (exact Hessian) on
 and, as a last row per N, docs/control.md example 2:
   integrator multiple shooting on m.integrator(h, method="erk", rtol=1e-8, atol=1e-10,
              fixed_parameters=True): the simulator's own integrator as the OCP's dynamics
-It prints, for each, the wall time of the solve (best of --repeat, the variants interleaved
-so that a change of machine load hits them alike; build excluded and included), the IPOPT
+It prints, for each, the CPU time of the solve (time.process_time, best of --repeat, the
+variants interleaved so that a change of machine load hits them alike; build excluded and
+included), the IPOPT
 iterations, the ratio to `hand`, and two gaps between the optimizer's states and the optimal
 control replayed through m.simulate (zero-order hold): `replay` with the simulator at rtol
 1e-10 (for `integrator`: the same method and tolerances as its OCP), `exact` at rtol 1e-12.
@@ -79,11 +80,11 @@ def build(step, N):
 
 
 def solve_once(make_step, N):
-    t0 = time.perf_counter()
+    t0 = time.process_time()          # CPU time: the shared machine's load does not count
     opti, X, U = build(make_step(N), N)
-    t1 = time.perf_counter()
+    t1 = time.process_time()
     sol = opti.solve()
-    t2 = time.perf_counter()
+    t2 = time.process_time()
     return t2 - t1, t2 - t0, (sol.stats()["iter_count"], np.atleast_1d(sol.value(U)).ravel(), sol.value(X))
 
 
@@ -114,7 +115,7 @@ def rows(Ns, repeat):
     yield (f"cart-pole swing-up, T = {T} s, RK4 x {M_RK} per interval (integrator: {SHOOT['method']} at rtol "
            f"{SHOOT['rtol']:g}), |F| <= {F_MAX} N; ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in odes)}; "
            f"VM instructions: {', '.join(f'{n}={f.n_instructions()}' for n, f, _ in odes if f.is_a('SXFunction'))}")
-    yield (f"{'N':>4} {'variant':>10} {'solve s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} "
+    yield (f"{'N':>4} {'variant':>10} {'CPU s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} "
            f"{'replay gap':>11} {'exact gap':>10}")
     for N in Ns:
         best = {n: [math.inf, math.inf, None] for n, _, _ in variants}
