@@ -307,7 +307,10 @@ class FunctionSet(Mapping):
 
     def _make(self, name):
         f = _build(self.eom, name, self.outputs, self.sx)
-        return specialize(f, self.fixed, len(self.eom.params)) if self.fixed else f
+        if not self.fixed:
+            return f
+        f = specialize(f, self.fixed, len(self.eom.params))
+        return drop_cancelled(f) if name == "ode" else f
 
     def __iter__(self):
         return iter(self._names)
@@ -367,6 +370,61 @@ def specialize(f, fixed, n_p: int):
         outs[k] = outs[k][keep] if keep else ca.SX(0, 1)
         return ca.Function(f.name(), ins, outs, f.name_in(), f.name_out())
     return f
+
+
+_SMOOTH_OPS = ("ASSIGN", "ADD", "SUB", "MUL", "DIV", "NEG", "EXP", "LOG", "POW", "CONSTPOW", "SQRT", "SQ",
+               "TWICE", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "SINH", "COSH", "TANH", "ASINH", "ACOSH",
+               "ATANH", "ATAN2", "CONST", "INPUT", "OUTPUT", "PARAMETER", "INV", "HYPOT", "LOG1P", "EXPM1")
+CANCEL_PROBES = 16
+
+
+def drop_cancelled(f):
+    """``f`` (an SX Function (t, x, u, p) -> xdot) without the terms that cancel: an output entry
+    whose derivative with respect to an input entry is zero (to round-off) at random states
+    does not depend on it; setting that input to 0 in that output lets SX fold the terms that
+    cancelled only numerically (the cart-pole's cart speed in the recursive route's
+    velocity products).  Only for analytic expressions (no if_else, fmin, fabs, ...: a
+    piecewise term can vanish at every probe and not elsewhere); the result must equal ``f``
+    at other random states to 1e-12 relative, else ``f`` is returned unchanged."""
+    ca = _ca()
+    if not f.is_a("SXFunction") or f.n_out() != 1:
+        return f
+    smooth = {getattr(ca, "OP_" + o) for o in _SMOOTH_OPS if hasattr(ca, "OP_" + o)}
+    if any(f.instruction_id(k) not in smooth for k in range(f.n_instructions())):
+        return f
+    ins = [ca.SX.sym(nm, f.sparsity_in(i)) for i, nm in enumerate(f.name_in())]
+    out = f.call(ins)[0]
+    free = [i for i, nm in enumerate(f.name_in()) if nm != "p"]
+    z = ca.vertcat(*[ins[i] for i in free])
+    if z.numel() == 0:
+        return f
+    jac = ca.Function("J", ins, [ca.jacobian(out, z)])
+    rng = np.random.default_rng(20240613)
+
+    def draw():
+        return [rng.uniform(-1.0, 1.0, f.numel_in(i)) + (0.17 if f.name_in(i) != "t" else 1.3) for i in range(f.n_in())]
+
+    scale = np.zeros((out.numel(), z.numel()))
+    seen = 0
+    for _ in range(CANCEL_PROBES):
+        J = np.abs(np.array(jac(*draw()), float))
+        if np.isfinite(J).all():
+            scale, seen = np.maximum(scale, J), seen + 1
+    if seen < CANCEL_PROBES // 2:
+        return f
+    rows = []
+    for i in range(out.numel()):
+        dead = [j for j in range(z.numel()) if scale[i, j] <= 1e-12 * max(scale[i].max(), 1.0)]
+        rows.append(ca.substitute(out[i], z[dead], ca.DM.zeros(len(dead))) if dead else out[i])
+    g = ca.Function(f.name(), ins, [ca.vertcat(*rows)], f.name_in(), f.name_out())
+    if g.n_instructions() >= f.n_instructions():
+        return f
+    for _ in range(CANCEL_PROBES):
+        args = draw()
+        a, b = np.array(f(*args), float), np.array(g(*args), float)
+        if np.isfinite(a).all() and not (np.abs(a - b) <= 1e-12 * (1.0 + np.abs(a))).all():
+            return f
+    return g
 
 
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, derivatives: int = 0,
