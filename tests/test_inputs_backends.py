@@ -231,3 +231,12 @@ def test_cli_drives_a_constrained_model_from_a_csv(tmp_path, capsys):
     capsys.readouterr()
     assert main(["simulate", str(src), "--t-end", "2", "--input", f"F={csv_in}", "--no-progress"]) == 2
     assert "covers t = 0 .. 1, not the run's 0 .. 2" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("signal", [1.0, lambda t: math.sin(t)])
+def test_error_estimate_of_a_driven_constrained_run(rod, signal):
+    """estimate_error reruns the problem tighter; its equations already hold the inputs (before:
+    'F' is not an input of ForcedRod, a usage error, for constant inputs too)."""
+    r = rod.simulate(1.0, inputs={"F": signal}, estimate_error=True, points=5)
+    est = r.metadata["error_estimate"]
+    assert est["reference_failed"] is None and 0 < est["max_abs_difference"]["x"] < 1e-5
