@@ -240,3 +240,14 @@ def test_error_estimate_of_a_driven_constrained_run(rod, signal):
     r = rod.simulate(1.0, inputs={"F": signal}, estimate_error=True, points=5)
     est = r.metadata["error_estimate"]
     assert est["reference_failed"] is None and 0 < est["max_abs_difference"]["x"] < 1e-5
+
+
+def test_compiled_dae_with_a_python_signal_runs_in_the_virtual_machine_and_says_so(rod, capfd):
+    """C cannot call a Python signal: the run uses the virtual machine with a note, and CasADi's
+    'cannot be code generated' warning is never printed (generating C for the equations with
+    the signal's call node printed it, then the compilation failed)."""
+    r = rod.simulate(0.5, inputs={"F": lambda t: math.sin(t)}, compiled=True, points=3)
+    assert r.success and r.metadata["run"]["compiled"] is False
+    assert any("Python functions, which compiled code cannot call" in n for n in r.metadata["notes"])
+    err = capfd.readouterr()
+    assert "cannot be code generated" not in err.err + err.out
