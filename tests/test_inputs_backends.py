@@ -251,3 +251,11 @@ def test_compiled_dae_with_a_python_signal_runs_in_the_virtual_machine_and_says_
     assert any("Python functions, which compiled code cannot call" in n for n in r.metadata["notes"])
     err = capfd.readouterr()
     assert "cannot be code generated" not in err.err + err.out
+
+
+def test_a_signal_failing_where_the_fixed_step_back_end_probes_is_named(slider):
+    """The fixed-step back end probes the equations at sample times within the run before it
+    starts; a signal failing at all of them is the error reported (not E902, 'could not be
+    evaluated at any probe state', naming no input)."""
+    with pytest.raises(UsageError, match="input 'F' at t = .*ZeroDivisionError.*fixed-step back end"):
+        slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": lambda t: 1.0 if t < 0.2 else 1 / 0}, points=3)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import time
 
+from ..diagnostics import MechError
 from ..result import Result
 from .problem import Problem, dump, formulate
 from .settings import SimulationSettings, from_kwargs, resolve
@@ -44,6 +45,9 @@ def solve(problem: Problem, progress=None) -> Result:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         r = backend.run(problem, callback)
+    except MechError:
+        _blame_signals(problem)
+        raise
     finally:
         if bar is not None:
             bar.close()
@@ -87,6 +91,17 @@ def _record_inputs(r: Result, drive) -> None:
     X = np.c_[r.q, r.qd] if len(r.t) else np.zeros((0, 2 * len(r.coordinates)))
     r.metadata.setdefault("inputs", drive.describe())
     record_inputs(drive, drive.values(np.asarray(r.t, float), X), r.signals, r.metadata)
+
+
+def _blame_signals(problem: Problem) -> None:
+    """A back end that could not evaluate the equations before its run (the fixed-step back end
+    probes them): when a Python input signal failed there, that is the error to report."""
+    errors = problem.drive.signal_errors() if problem.drive is not None else []
+    if errors:
+        from ..diagnostics import UsageError
+
+        raise UsageError(f"{'; '.join(errors)} (the {problem.backend} back end evaluates the equations, "
+                         "input signals included, at sample states before it starts)") from None
 
 
 def _signal_failure(r: Result, drive) -> None:
