@@ -171,6 +171,8 @@ def test_integrator_function_matches_a_simulated_interval():
     xf = np.array(Phi(x0, 2.5, m.parameter_vector())).ravel()
     r = m.simulate(0.1, x0=x0, inputs={"F": 2.5}, rtol=1e-12, atol=1e-14, points=2)
     np.testing.assert_allclose(xf, np.r_[r.q[-1], r.qd[-1]], atol=1e-9)
+    with pytest.raises(UsageError, match="dt must be a positive"):
+        m.integrator(-0.1)
     with pytest.raises(UsageError, match="no CasADi integrator plug-in"):
         m.integrator(0.1, method="scipy-rk45")
     bead = mechdsl.load(str(ROOT / "models" / "pendulum_cartesian.mech"))

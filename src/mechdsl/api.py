@@ -300,7 +300,10 @@ class Model:
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
             raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
                              "models only (multiple shooting on a DAE needs its own formulation)")
-        s = self.settings(t_end=_number("dt", dt), rtol=rtol, atol=atol, method=method)
+        dt = _number("dt", dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise UsageError(f"dt must be a positive, finite interval (got {dt!r})")
+        s = self.settings(t_end=dt, rtol=rtol, atol=atol, method=method)
         funcs = casadi_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
                                  fixed=self._fixed_entries(fixed_parameters))
         m = s.method
