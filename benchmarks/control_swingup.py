@@ -110,7 +110,7 @@ def rows(Ns, repeat):
             ("compiled", m.casadi(compiled=True)["ode"], pv),
             ("comp+fixed", m.casadi(compiled=True, fixed_parameters=True)["ode"], np.zeros(0))]
     variants = [(n, (lambda f, p: lambda N: rk4_step(f, p, T / N))(f, p), None) for n, f, p in odes]
-    variants.append(("integrator", lambda N: (lambda F: lambda x, u: F(x, u, []))(
+    variants.append(("integrator", lambda N: (lambda F: lambda x, u: F(0, x, u, []))(   # autonomous: t0 = 0 will do
         m.integrator(T / N, fixed_parameters=True, **SHOOT)), SHOOT))
     yield (f"cart-pole swing-up, T = {T} s, RK4 x {M_RK} per interval (integrator: {SHOOT['method']} at rtol "
            f"{SHOOT['rtol']:g}), |F| <= {F_MAX} N; ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in odes)}; "

@@ -166,9 +166,9 @@ def test_shooting_on_the_simulators_integrator_full(monkeypatch):
 def test_integrator_function_matches_a_simulated_interval():
     m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
     Phi = m.integrator(0.1, method="cvodes-bdf", rtol=1e-10, atol=1e-12)
-    assert Phi.name_in() == ["x0", "u", "p"] and Phi.name_out() == ["xf"]
+    assert Phi.name_in() == ["t0", "x0", "u", "p"] and Phi.name_out() == ["xf"]
     x0 = np.array([0.1, 0.4, -0.2, 0.3])
-    xf = np.array(Phi(x0, 2.5, m.parameter_vector())).ravel()
+    xf = np.array(Phi(0.0, x0, 2.5, m.parameter_vector())).ravel()
     r = m.simulate(0.1, x0=x0, inputs={"F": 2.5}, rtol=1e-12, atol=1e-14, points=2)
     np.testing.assert_allclose(xf, np.r_[r.q[-1], r.qd[-1]], atol=1e-9)
     with pytest.raises(UsageError, match="dt must be a positive"):
@@ -178,6 +178,33 @@ def test_integrator_function_matches_a_simulated_interval():
     bead = mechdsl.load(str(ROOT / "models" / "pendulum_cartesian.mech"))
     with pytest.raises(UsageError, match="constraints or contacts"):
         bead.integrator(0.1)
+
+
+def test_integrator_of_a_time_dependent_model_starts_at_t0():
+    """A mass pushed by sin(3 time): one interval from t0 = 0.7 is the closed form from there
+    (x'' = sin(3 t) / m), not the interval from 0."""
+    m = mechdsl.loads("""
+model Pushed
+  parameter Real m(unit = "kg") = 2;
+  parameter Real w(unit = "1/s") = 3;
+  parameter Real A(unit = "N") = 1;
+  coordinate Real x(start = 0, speed = 0, unit = "m");
+equation
+  kinetic = 0.5*m*der(x)^2;
+  force(x) = A*sin(w*time);
+end Pushed;
+""", model="Pushed")
+    Phi = m.integrator(0.3, method="cvodes-adams", rtol=1e-11, atol=1e-13)
+    a, b, x0, v0 = 0.7, 1.0, 0.2, -0.1
+
+    def exact(t):       # from (x0, v0) at a: v = v0 + (cos 3a - cos 3t) / (3 m), x by integrating once more
+        return (x0 + (v0 + math.cos(3 * a) / 6) * (t - a) - (math.sin(3 * t) - math.sin(3 * a)) / 18,
+                v0 + (math.cos(3 * a) - math.cos(3 * t)) / 6)
+
+    xf = np.array(Phi(a, [x0, v0], [], m.parameter_vector())).ravel()
+    np.testing.assert_allclose(xf, exact(b), atol=1e-9)
+    at0 = np.array(Phi(0.0, [x0, v0], [], m.parameter_vector())).ravel()
+    assert np.abs(at0 - xf).max() > 1e-3                 # the start time matters here
 
 
 def test_lqr_example_stabilizes_upright(monkeypatch):

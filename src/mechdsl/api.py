@@ -281,7 +281,7 @@ class Model:
     def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
                    atol: float | None = None, steps: int | None = None, fixed_parameters=None):
         """The simulation layer's own integrator over one interval, as a CasADi Function
-        ``(x0, u, p) -> xf``: the state ``dt`` after x0 with the inputs u held constant (a
+        ``(t0, x0, u, p) -> xf``: the state at t0 + dt from x0 at t0, the inputs u held constant (a
         zero-order hold, as ``m.simulate(inputs={"F": table(...)})`` integrates each sample
         interval).  For direct multiple shooting: the optimizer's dynamics are then the
         simulator's, so the optimal control replayed through ``simulate`` with the same
@@ -322,12 +322,20 @@ class Model:
         opts = I.casadi_options(m, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
                                 hmin=min_step(0.0, s.t_end))
         ode = funcs["ode"]
-        integ = I.make_integrator("integrator", I.METHODS[m][1], I.dae_function(ode), 0.0, s.t_end, opts)
-        x0 = ca.MX.sym("x0", ode.size1_in(1))
-        u = ca.MX.sym("u", ode.size1_in(2))
-        p = ca.MX.sym("p", ode.size1_in(3))
-        xf = integ(x0=x0, p=ca.vertcat(u, p))["xf"]
-        return ca.Function("integrator", [x0, u, p], [xf], ["x0", "u", "p"], ["xf"])
+        nu = ode.size1_in(2)
+        t0, x0 = ca.MX.sym("t0"), ca.MX.sym("x0", ode.size1_in(1))
+        u, p = ca.MX.sym("u", nu), ca.MX.sym("p", ode.size1_in(3))
+        if ode.is_a("SXFunction") and not ca.depends_on(ode.call(ode.sx_in())[0], ode.sx_in(0)):
+            shifted, args = ode, ca.vertcat(u, p)               # autonomous: t0 changes nothing
+        else:                                                  # the interval starts at t0: ode(t0 + s, ...)
+            ts, xs, us, ps = (ca.MX.sym(nm, ode.sparsity_in(i) if i != 2 else ca.Sparsity.dense(nu + 1, 1))
+                              for i, nm in enumerate(("t", "x", "u", "p")))
+            shifted = ca.Function("ode", [ts, xs, us, ps], [ode(ts + us[nu], xs, us[:nu], ps)],
+                                  ["t", "x", "u", "p"], ["xdot"])
+            args = ca.vertcat(u, t0, p)
+        integ = I.make_integrator("integrator", I.METHODS[m][1], I.dae_function(shifted), 0.0, s.t_end, opts)
+        xf = integ(x0=x0, p=args)["xf"]
+        return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
 
     def _fixed_entries(self, spec) -> tuple:
         """(index in p, value) pairs of ``casadi(fixed_parameters=spec)``."""
