@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import mechdsl
+from conftest import simulate_with_csv_input
 from mechdsl.diagnostics import MechError, UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -198,21 +199,15 @@ end Bead;
 def test_cli_input_constant_and_csv(tmp_path):
     from mechdsl.cli import main
 
-    src = tmp_path / "s.mech"
-    src.write_text(SLIDER)
-    csv_in = tmp_path / "f.csv"
-    csv_in.write_text("time,F\n0,1\n0.5,-1\n1,-1\n")
-    out = tmp_path / "out.csv"
-    rc = main(["simulate", str(src), "--t-end", "1", "--points", "3", "--input", f"F={csv_in}",
-               "--input", "G=0", "-o", str(out), "--no-progress"])
+    rc, head, rows = simulate_with_csv_input(tmp_path, SLIDER, "time,F\n0,1\n0.5,-1\n1,-1\n", "--t-end", "1",
+                                             "--points", "3", "--input", "F={csv}", "--input", "G=0")
     assert rc == 0
-    lines = out.read_text().splitlines()
-    head = lines[0].split(",")
     assert "F" in head and "G" in head
-    col = [float(ln.split(",")[head.index("F")]) for ln in lines[1:]]
+    col = [row[head.index("F")] for row in rows]
     assert col == pytest.approx([1.0, -1.0, -1.0])
-    x = [float(ln.split(",")[head.index("x")]) for ln in lines[1:]]
+    x = [row[head.index("x")] for row in rows]
     assert x[1] == pytest.approx(0.5 * 0.5 * 0.25, rel=1e-6)       # a = 1/2 for 0.5 s
+    src, csv_in = tmp_path / "model.mech", tmp_path / "f.csv"
     assert main(["simulate", str(src), "--t-end", "2", "--input", f"F={csv_in}", "--no-progress"]) == 2
     assert main(["simulate", str(src), "--t-end", "1", "--input", "F", "--no-progress"]) == 2
     assert main(["simulate", str(src), "--t-end", "1", "--input", f"F={tmp_path / 'none.csv'}",

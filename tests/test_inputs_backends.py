@@ -11,6 +11,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import mechdsl
+from conftest import simulate_with_csv_input
 from mechdsl.diagnostics import UsageError
 
 ROD = """
@@ -213,22 +214,17 @@ def test_cli_drives_a_constrained_model_from_a_csv(tmp_path, capsys):
     """mech simulate --input F=file.csv on a DAE model (before: 'ODE problems only', exit 2)."""
     from mechdsl.cli import main
 
-    src = tmp_path / "rod.mech"
-    src.write_text(ROD)
-    csv_in = tmp_path / "f.csv"
-    csv_in.write_text("time,F\n0,0\n0.5,2\n1,-1\n")
-    out = tmp_path / "out.csv"
-    rc = main(["simulate", str(src), "--t-end", "1", "--points", "5", "--input", f"F={csv_in}:linear",
-               "--rtol", "1e-10", "--atol", "1e-12", "-o", str(out), "--no-progress"])
+    rc, head, rows = simulate_with_csv_input(tmp_path, ROD, "time,F\n0,0\n0.5,2\n1,-1\n", "--t-end", "1",
+                                             "--points", "5", "--input", "F={csv}:linear", "--rtol", "1e-10",
+                                             "--atol", "1e-12")
     assert rc == 0, capsys.readouterr().err
-    lines = out.read_text().splitlines()
-    head = lines[0].split(",")
-    col = [float(ln.split(",")[head.index("F")]) for ln in lines[1:]]
+    col = [row[head.index("F")] for row in rows]
     assert col == pytest.approx([0.0, 1.0, 2.0, 0.5, -1.0])          # linear between the samples
-    x = np.array([float(ln.split(",")[head.index("x")]) for ln in lines[1:]])
+    x = np.array([row[head.index("x")] for row in rows])
     ref, _ = _rod_reference(lambda s: float(np.interp(s, [0, 0.5, 1], [0, 2, -1])), np.linspace(0, 1, 5))
     np.testing.assert_allclose(x, ref, atol=1e-7)
     capsys.readouterr()
+    src, csv_in = tmp_path / "model.mech", tmp_path / "f.csv"
     assert main(["simulate", str(src), "--t-end", "2", "--input", f"F={csv_in}", "--no-progress"]) == 2
     assert "covers t = 0 .. 1, not the run's 0 .. 2" in capsys.readouterr().err
 
