@@ -256,3 +256,17 @@ def test_the_cache_keeps_a_bounded_number_of_entries(cache, monkeypatch):
     assert len(entries(cache)) == 3
     newest = api.loads(WARNING_MODEL.replace("= 1;", "= 5;", 1))._cache.key
     assert modelcache.read(newest) is not None                # the last written stays
+
+
+def test_functions_with_fixed_parameters_are_not_served_for_free_ones(cache, monkeypatch):
+    """Model.casadi(fixed_parameters=...) builds Functions with parameters as numbers; the
+    cache must never hand them out where p holds every parameter (or the reverse)."""
+    model = MODELS / "pendulum.mech"
+    m = api.load(model, model="Pendulum")
+    n_p = len(m.parameter_names)
+    assert m.casadi(fixed_parameters=True)["ode"].size1_in(3) == 0
+    m.simulate(0.1, points=3)                           # writes the entry with the run's Functions
+    fresh(monkeypatch)
+    again = api.load(model, model="Pendulum")
+    assert again.casadi()["ode"].size1_in(3) == n_p
+    assert again.casadi(fixed_parameters=True)["ode"].size1_in(3) == 0

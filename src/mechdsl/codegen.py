@@ -296,7 +296,8 @@ class FunctionSet(Mapping):
         if self.want_compiled and not self._compiled_done:
             self._compile_all()
         if name not in self._cache:
-            stored = self.eom.__dict__.get("_stored_functions")     # read from the model cache
+            # read from the model cache (Functions with parameters built in are not stored)
+            stored = None if self.fixed else self.eom.__dict__.get("_stored_functions")
             hit = stored.get((name, self.outputs, self.sx)) if stored else None
             if hit is not None:
                 self._cache[name] = hit

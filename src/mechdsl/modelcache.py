@@ -31,7 +31,7 @@ import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-FORMAT = "mechdsl-model-cache 2"
+FORMAT = "mechdsl-model-cache 3"
 MAX_ENTRIES = 1000          # more: the entries written longest ago are removed
 _CALLABLES = ("point_position", "point_velocity", "body_rotation")
 _PER_MODEL = ("model", "param_values", "input_defaults")     # set again from the Model on load
@@ -183,7 +183,7 @@ def _functions(eom) -> dict:
     out = dict(eom.__dict__.get("_stored_functions") or {})
     objs = [_resolved(eom.__dict__.get(f), f) for f in codegen._STRUCTURE]
     for held, fs in list(codegen._SETS.values()):
-        if fs.want_compiled or not all(_resolved(a, f) is b for a, b, f in zip(held, objs, codegen._STRUCTURE)):
+        if fs.want_compiled or fs.fixed or not all(_resolved(a, f) is b for a, b, f in zip(held, objs, codegen._STRUCTURE)):
             continue
         for name, f in list(fs._cache.items()):
             # SX Functions only: they load in about a millisecond; an MX Function (the Jacobian
