@@ -270,3 +270,22 @@ def test_functions_with_fixed_parameters_are_not_served_for_free_ones(cache, mon
     again = api.load(model, model="Pendulum")
     assert again.casadi()["ode"].size1_in(3) == n_p
     assert again.casadi(fixed_parameters=True)["ode"].size1_in(3) == 0
+
+
+def test_an_edited_mechdsl_is_a_new_key(tmp_path, monkeypatch):
+    """Developers change mechdsl under one version number: the key includes the sources'
+    sizes and modification times, so equations derived by older code are not served."""
+    pkg = tmp_path / "src" / "mechdsl"
+    pkg.mkdir(parents=True)
+    (pkg / "modelcache.py").write_text("# stand-in\n")
+    derive = pkg / "derive.py"
+    derive.write_text("x = 1\n")
+    monkeypatch.setattr(modelcache, "__file__", str(pkg / "modelcache.py"))
+    monkeypatch.setattr(modelcache, "_FINGERPRINT", [])
+    before = modelcache.code_fingerprint()
+    assert modelcache.code_fingerprint() == before              # stable within a process
+    k1 = modelcache.key("text", "f.mech", True, (None, None), ())
+    derive.write_text("x = 22\n")
+    monkeypatch.setattr(modelcache, "_FINGERPRINT", [])
+    assert modelcache.code_fingerprint() != before
+    assert modelcache.key("text", "f.mech", True, (None, None), ()) != k1

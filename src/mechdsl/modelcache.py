@@ -60,12 +60,37 @@ def key(text: str, filename: str, units: bool, target: tuple, items: tuple) -> s
 
     from . import __version__, limits
 
-    parts = (FORMAT, __version__, casadi.__version__, sys.version, filename, bool(units), tuple(target),
-             tuple(items), tuple(sorted(limits.current().items())))
+    parts = (FORMAT, __version__, code_fingerprint(), casadi.__version__, sys.version, filename, bool(units),
+             tuple(target), tuple(items), tuple(sorted(limits.current().items())))
     h = hashlib.sha256(repr(parts).encode("utf-8"))
     h.update(b"\0")
     h.update(text.encode("utf-8"))
     return h.hexdigest()
+
+
+_FINGERPRINT: list = []
+
+
+def code_fingerprint() -> str:
+    """mechdsl's own code as the cache sees it: the names, sizes and modification times of its
+    source files and grammar (an edited mechdsl under the same version number, as while
+    developing, must not be served equations derived by the old code).  Once per process."""
+    if not _FINGERPRINT:
+        here = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        files = [here.parents[1] / "grammar" / "mech.lark", here / "_grammar" / "mech.lark"]
+        for folder, dirs, names in os.walk(here):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            files += [Path(folder, n) for n in sorted(names) if n.endswith((".py", ".lark"))]
+        for f in files:
+            try:
+                st = f.stat()
+            except OSError:
+                continue
+            h.update(f"{f.relative_to(here.parents[1]) if here.parents[1] in f.parents else f}"
+                     f"\0{st.st_size}\0{st.st_mtime_ns}\n".encode())
+        _FINGERPRINT.append(h.hexdigest())
+    return _FINGERPRINT[0]
 
 
 def path_of(k: str) -> Path:
