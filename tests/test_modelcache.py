@@ -68,8 +68,10 @@ def simulate_csv(path, out, *extra):
     return out.read_bytes()
 
 
-def test_warm_run_is_bit_identical_and_neither_parses_nor_derives(cache, tmp_path, monkeypatch, capsys):
-    model = MODELS / "double_pendulum.mech"
+@pytest.mark.parametrize("name", ["double_pendulum", "pendulum_cartesian", "bouncing_ball", "heavy_top"])
+def test_warm_run_is_bit_identical_and_neither_parses_nor_derives(cache, tmp_path, monkeypatch, capsys, name):
+    """ODE, DAE, contact (hybrid) and fixed-step (canonical) problems."""
+    model = MODELS / f"{name}.mech"
     cold = simulate_csv(model, tmp_path / "cold.csv")
     assert entries(cache), "the first run wrote no cache entry"
     fresh(monkeypatch)

@@ -315,6 +315,9 @@ class Model:
                 from .mechanics import derive
 
                 base = derive(self.model)
+                from .modelcache import record_callables
+
+                record_callables(base)       # point positions a run asks for are stored with it
                 with _EOM_LOCK:             # models simulated in several threads
                     if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
                         _EOM_CACHE.pop(next(iter(_EOM_CACHE)), None)
@@ -711,7 +714,8 @@ class _Cache:
         if self.owner is None:
             return
         now = modelcache.content(eom)
-        if self.stored is not None and now[0] >= self.stored[0] and now[1] <= self.stored[1]:
+        if self.stored is not None and now[0] >= self.stored[0] and now[1] <= self.stored[1] \
+                and now[2] <= self.stored[2]:
             return                      # the entry holds at least as much
         data = modelcache.pack_eom(eom)
         if data is not None:

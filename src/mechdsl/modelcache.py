@@ -31,7 +31,7 @@ import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-FORMAT = "mechdsl-model-cache 3"
+FORMAT = "mechdsl-model-cache 4"
 MAX_ENTRIES = 1000          # more: the entries written longest ago are removed
 _CALLABLES = ("point_position", "point_velocity", "body_rotation")
 _PER_MODEL = ("model", "param_values", "input_defaults")     # set again from the Model on load
@@ -185,19 +185,54 @@ def _raw(eom, name):
     return v, True
 
 
+class Recorder:
+    """A point/rotation callable of an EOM (``point_position(name)``, ...) that keeps its
+    results by argument, so that the model cache stores those a run used (contact gaps, loop
+    points, drawing) and a later run asks the mechanics only for new ones."""
+
+    def __init__(self, fn, seen=None):
+        self.fn = fn
+        self.seen = dict(seen or {})
+
+    def __call__(self, *args):
+        try:
+            hit = self.seen.get(args)
+        except TypeError:               # an unhashable argument: not kept
+            return self.fn(*args)
+        if hit is None:
+            hit = self.seen[args] = self.fn(*args)
+        return hit
+
+
+def record_callables(eom) -> None:
+    """Wrap ``eom``'s point/rotation callables in Recorders (in place; copies share them)."""
+    for name in _CALLABLES:
+        v = eom.__dict__.get(name)
+        if v is not None and not isinstance(v, Recorder):
+            eom.__dict__[name] = Recorder(v)
+
+
 def pending_fields(eom) -> list[str]:
-    """The fields ``pack_eom`` would leave to be derived again (lazy ones not yet built)."""
+    """The fields ``pack_eom`` would leave to be derived again (lazy ones not yet built;
+    callables that record nothing)."""
     return [f.name for f in fields(eom) if f.name not in _PER_MODEL and
             (f.name in _CALLABLES and eom.__dict__.get(f.name) is not None
+             and not isinstance(eom.__dict__.get(f.name), Recorder)
              or f.name not in _CALLABLES and not _raw(eom, f.name)[1]
              or type(eom.__dict__.get(f.name)) is _Pending)]
 
 
-def content(eom) -> tuple[frozenset, frozenset]:
+def _recorded(eom) -> dict:
+    return {(name, args): e for name in _CALLABLES if isinstance(eom.__dict__.get(name), Recorder)
+            for args, e in list(eom.__dict__[name].seen.items())}
+
+
+def content(eom) -> tuple[frozenset, frozenset, frozenset]:
     """What an entry of ``eom`` would hold beyond the always-stored fields: (fields left to
-    derive again, keys of the CasADi Functions built so far).  An entry is rewritten when a
-    run has built more (fewer pending fields or more Functions)."""
-    return frozenset(pending_fields(eom)), frozenset(_functions(eom))
+    derive again, keys of the CasADi Functions built so far, callable results recorded).  An
+    entry is rewritten when a run has built more (fewer pending fields, more Functions or
+    more results)."""
+    return frozenset(pending_fields(eom)), frozenset(_functions(eom)), frozenset(_recorded(eom))
 
 
 def _functions(eom) -> dict:
@@ -230,7 +265,13 @@ def pack_eom(eom) -> dict | None:
         if f.name in _PER_MODEL:
             continue
         if f.name in _CALLABLES:
-            if eom.__dict__.get(f.name) is not None:
+            v = eom.__dict__.get(f.name)
+            if isinstance(v, Recorder):
+                for args, e in list(v.seen.items()):
+                    ser.pack(ca.SX(e))
+                    sx.append((f.name, ("call", args)))
+                plain.setdefault("_recorders", []).append(f.name)
+            elif v is not None:
                 pending.append(f.name)
             continue
         v, known = _raw(eom, f.name)
@@ -257,10 +298,13 @@ def unpack_eom(data: dict, model):
 
     des = ca.StringDeserializer(data["stream"])
     values = dict(data["plain"])
+    calls: dict = {name: {} for name in values.pop("_recorders", [])}
     for name, sub in data["sx"]:
         e = des.unpack()
         if sub is None:
             values[name] = e
+        elif isinstance(sub, tuple) and sub[:1] == ("call",):
+            calls[name][sub[1]] = e
         else:
             values.setdefault(name, {})[sub] = e
     for name in ("outputs", "singularity_monitors", "invariants", "reactions"):
@@ -274,6 +318,8 @@ def unpack_eom(data: dict, model):
     again = _Again(eom)
     for name in data["pending"]:
         eom.__dict__[name] = _Pending(again, name)
+    for name, seen in calls.items():    # results a run used; new arguments derive the model again
+        eom.__dict__[name] = Recorder(again.value(name), seen)
     return eom
 
 
@@ -316,13 +362,10 @@ class _Again:
         return ca.substitute(ca.SX(e), ca.vertcat(*old), ca.vertcat(*self.syms))
 
     def value(self, name):
-        full = self._derived()
-        v = getattr(full, name)
-        if v is None:
-            return None
-        if name in _CALLABLES:
-            return lambda *a, _f=v: self._map(_f(*a))
-        return self._map(v)
+        if name in _CALLABLES:          # stored only when not None: derived when first called
+            return lambda *a: self._map(getattr(self._derived(), name)(*a))
+        v = getattr(self._derived(), name)
+        return None if v is None else self._map(v)
 
 
 class CachedEOM(EOM):
