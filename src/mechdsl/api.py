@@ -324,9 +324,13 @@ class Model:
                     _EOM_CACHE[key] = base
             self._eom = base.replace(param_values=self.parameter_values, model=self.model,   # keeps lazy fields lazy
                                      input_defaults=tuple(float(p.value) for p in self.model.inputs))
-            if self._cache is not None:
-                self._cache.remember(self._eom)
         return self._eom
+
+    def _remember(self) -> None:
+        """Store the derived equations (and what a run or an analysis built on them) in the
+        model cache: once after the work, so a first run packs them once."""
+        if self._cache is not None and self._eom is not None:
+            self._cache.remember(self._eom)
 
     def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
         """CasADi Functions (mechdsl.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
@@ -445,8 +449,7 @@ class Model:
             r = simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
                                                  **kw), progress=progress)
         finally:
-            if self._cache is not None and self._eom is not None:
-                self._cache.remember(self._eom)      # what the run derived on the way (lazy M, bias)
+            self._remember()                         # with what the run derived on the way (lazy M, bias)
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
         return r
 
@@ -474,17 +477,26 @@ class Model:
     def equilibria(self, guesses=None, **kw):
         from .analysis.equilibrium import equilibria
 
-        return equilibria(self.eom, guesses, **kw)
+        try:
+            return equilibria(self.eom, guesses, **kw)
+        finally:
+            self._remember()
 
     def linearize(self, at="equilibrium", **kw):
         from .analysis.linearize import linearize
 
-        return linearize(self.eom, at, **kw)
+        try:
+            return linearize(self.eom, at, **kw)
+        finally:
+            self._remember()
 
     def first_integrals(self):
         from .analysis.integrals import first_integrals
 
-        return first_integrals(self.eom)
+        try:
+            return first_integrals(self.eom)
+        finally:
+            self._remember()
 
     def draw(self, t: float | None = None, q=None, **kw):
         """The mechanism as a matplotlib Figure: at coordinates q, else at time t of a run from the
