@@ -47,9 +47,20 @@ def import_times(text: str) -> tuple[float, float | None, dict[str, float]]:
     return sum(top.values()), numpy_ms, top
 
 
+def installed(env: dict | None) -> dict:
+    """The environment of a measured process: bytecode caches written and used, as after
+    ``pip install`` (PYTHONDONTWRITEBYTECODE would compile every mechdsl module from source at
+    each start, while numpy's come compiled)."""
+    e = dict(os.environ if env is None else env)
+    e.pop("PYTHONDONTWRITEBYTECODE", None)
+    return e
+
+
 def measure(args: list[str], runs: int, env: dict | None = None, quiet: bool = False) -> tuple[float, float]:
-    """Median (imports ms, numpy ms) over ``runs`` processes; one warm-up run first (fills the cache)."""
+    """Median (imports ms, numpy ms) over ``runs`` processes; one warm-up run first (fills the
+    model cache and the bytecode caches)."""
     totals, numpys = [], []
+    env = installed(env)
     subprocess.run([sys.executable, "-m", "mechdsl", *args], cwd=ROOT, capture_output=True, env=env)
     for _ in range(runs):
         p = subprocess.run([sys.executable, "-X", "importtime", "-m", "mechdsl", *args], cwd=ROOT,
@@ -74,7 +85,7 @@ def wall(args: list[str], runs: int, env: dict | None = None, fresh_cache: bool 
     """Median wall seconds of ``python -m mechdsl ARGS`` (fresh_cache: a new cache folder each run)."""
     times = []
     for _ in range(runs):
-        e = dict(env or os.environ)
+        e = installed(env)
         tmp = tempfile.mkdtemp(prefix="mechdsl-cold-") if fresh_cache else None
         if tmp:
             e["MECHDSL_CACHE"] = tmp
