@@ -422,8 +422,12 @@ def derivative_functions(funcs, order: int = 2) -> list:
     return out
 
 
-def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0):
+def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0,
+                      extra_units: tuple[str, ...] = ()):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
+
+    ``extra_units``: hand-written C sources linked into the same library (the compiled
+    stepping loop of mechdsl.simulation.crk); they are part of the cache key.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -461,6 +465,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
+    units += list(extra_units)
     flags = [cflags_for(len(code)) for code in units]
     try:
         version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout

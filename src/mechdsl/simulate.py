@@ -88,8 +88,12 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     else:
         reason = "requested"
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    loop_compiled = None
     if opts.get("functions") is not None:
         funcs = opts["functions"]
+    elif method in I.COMPILED_LOOP:     # the loop compiles the model's C together with its own
+        funcs = vm
+        loop_compiled = _compile_loop(eom, funcs, meta)
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
                                  names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
@@ -102,7 +106,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
     if s.reactions:
         meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
-    if compiled and not getattr(funcs, "compiled", False):
+    if compiled and loop_compiled is None and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
@@ -134,7 +138,8 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["integrator_messages"] = _dedup(run.messages)
     meta["conservative"] = is_conservative(eom)
     meta["options"] = {"t_start": t0, "t_end": t1, "rtol": rtol, "atol": atol, "points": npts,
-                       "method": method, "compiled": bool(getattr(funcs, "compiled", False)),
+                       "method": method,
+                       "compiled": bool(getattr(funcs, "compiled", False)) if loop_compiled is None else loop_compiled,
                        "max_steps": max_steps, "outputs": list(out_names),
                        "parameters": dict(zip(eom.params, map(float, pv))),
                        "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
@@ -144,6 +149,21 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     n = eom.n
     return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
                   stats=stats, metadata=meta, failure=failure)
+
+
+def _compile_loop(eom, funcs, meta) -> bool:
+    """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
+    fallback to scipy's stepping in Python is a warning of the run."""
+    from .simulation.crk import library
+
+    fn, note = library(funcs["ode"], tag=eom.name)
+    if fn is None:
+        meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {meta['method']} runs as scipy's "
+                                "same method stepped in Python")
+        return False
+    if note:
+        meta["notes"].append(note)
+    return True
 
 
 def _record_inputs(drive, U, signals, meta) -> None:
