@@ -1,0 +1,132 @@
+"""The compiled stepping loop (mechdsl.simulation.crk): dopri5 and dop853 in C.
+
+Checked against independent references: scipy's RK45/DOP853 stepping in Python (the same
+algorithm, so the same steps), closed-form motions, CasADi's own integrators, and the
+output grid (the dense output must not change the steps)."""
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mechdsl import eom as E
+from mechdsl import integrators as I
+from mechdsl.codegen import find_compiler
+from mechdsl.simulate import simulate
+from mechdsl.simulation import crk
+from sim_models import blowup, chain, pendulum
+
+PAIRS = {"dopri5": "scipy-rk45", "dop853": "scipy-dop853"}
+
+
+def oscillator(w=3.0):
+    """x'' = -w^2 x from x = 1, x' = 0: x = cos(w t)."""
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 1)
+    return E.from_lagrangian("Osc", ["x"], ["k"], [w * w], q, qd, t, p, 0.5 * qd[0] ** 2, 0.5 * p[0] * q[0] ** 2,
+                             q0=[1.0], qd0=[0.0])
+
+
+def _compiled(r):
+    if find_compiler() is None:     # no compiler: the run says so and steps in Python
+        assert any("compiled stepping loop unavailable" in w for w in r.metadata["warnings"])
+        return False
+    assert r.metadata["options"]["compiled"] is True, r.metadata["warnings"]
+    return True
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_compiled_loop_takes_the_steps_of_scipys_same_method(method):
+    e = chain(2)
+    r = simulate(e, 3.0, method=method, rtol=1e-9, atol=1e-9, points=31)
+    ref = simulate(e, 3.0, method=PAIRS[method], rtol=1e-9, atol=1e-9, points=31)
+    assert r.success and ref.success
+    _compiled(r)
+    assert r.stats["steps"] == ref.stats["steps"]
+    assert r.stats["rhs_evals"] == ref.stats["rhs_evals"]
+    assert r.stats["rejected_steps"] >= 0 and r.stats["jac_evals"] == 0
+    # compiled and virtual machine right-hand sides differ by round-off only
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-10)
+    assert r.metadata["method"] == method and "compiled stepping loop" in r.metadata["integrator"]
+
+
+@pytest.mark.parametrize("method,rtol,bound", [("dopri5", 1e-9, 2e-7), ("dop853", 1e-11, 1e-9)])
+def test_harmonic_oscillator_against_the_closed_form_on_every_output_point(method, rtol, bound):
+    w = 3.0
+    r = simulate(oscillator(w), 10.0, method=method, rtol=rtol, atol=rtol, points=777)
+    assert r.success
+    _compiled(r)
+    err = max(np.abs(r.q[:, 0] - np.cos(w * r.t)).max(), np.abs(r.qd[:, 0] + w * np.sin(w * r.t)).max() / w)
+    assert err < bound, err
+    assert err > 0     # not a copy of the closed form
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_output_grid_density_does_not_change_the_solution(method):
+    e = pendulum(theta0=2.5)
+    coarse = simulate(e, 4.0, method=method, rtol=1e-10, atol=1e-10, points=5)
+    fine = simulate(e, 4.0, method=method, rtol=1e-10, atol=1e-10, points=4001)
+    assert coarse.stats["steps"] == fine.stats["steps"]
+    assert coarse.stats["rejected_steps"] == fine.stats["rejected_steps"]
+    assert coarse.q[-1, 0] == pytest.approx(fine.q[-1, 0], abs=1e-14)
+    # the fine grid's points at the coarse times come from the dense output, not from a step end
+    idx = [round(k * 1000) for k in range(5)]
+    np.testing.assert_allclose(fine.q[idx, 0], coarse.q[:, 0], rtol=0, atol=1e-8)
+
+
+def test_agrees_with_casadis_own_integrator():
+    e = chain(3)
+    r = simulate(e, 2.0, method="dop853", rtol=1e-12, atol=1e-12, points=11)
+    ref = simulate(e, 2.0, method="cvodes-adams", rtol=1e-12, atol=1e-12, points=11)
+    assert r.success and ref.success
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_failure_says_when_and_keeps_the_solution_up_to_it(method):
+    r = simulate(blowup(), 2.0, method=method, rtol=1e-10, atol=1e-10, points=201)
+    assert not r.success
+    assert r.failure.time == pytest.approx(math.sqrt(2), abs=0.02)
+    assert r.t[-1] < math.sqrt(2)
+    exact = 1 / (1 - r.t / math.sqrt(2))
+    np.testing.assert_allclose(r.q[:, 0], exact, rtol=1e-5)
+
+
+def test_step_limit_is_a_failure_with_its_cause():
+    r = simulate(chain(2), 5.0, method="dop853", rtol=1e-10, atol=1e-10, points=3, max_steps=5)
+    assert not r.success
+    assert r.failure.cause == "too many steps"
+    assert 0 < r.failure.time < 2.5
+
+
+def test_without_a_compiler_the_same_method_runs_in_python(monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    monkeypatch.setattr(crk, "_LIBS", {})
+    e = oscillator(2.0)
+    r = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
+    assert r.success
+    assert r.metadata["options"]["compiled"] is False
+    assert any("no C compiler" in w for w in r.metadata["warnings"])
+    monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.delenv("CC")
+    c = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
+    _compiled(c)
+    assert c.stats["steps"] == r.stats["steps"]
+    np.testing.assert_allclose(c.q, r.q, rtol=0, atol=1e-12)
+
+
+def test_integrator_options_are_refused_as_a_usage_error():
+    from mechdsl.diagnostics import UsageError
+
+    with pytest.raises(UsageError, match="dop853"):
+        simulate(chain(2), 1.0, method="dop853", integrator_options={"foo": 1})
+
+
+def test_registry_names_and_no_jacobian():
+    from mechdsl.simulation.registry import check_method, methods
+
+    for m in PAIRS:
+        assert m in I.NO_JACOBIAN and m in I.METHODS
+        assert "ode" in check_method(m).backends and "ode" in methods()[m].backends
+    assert "events" in methods()["dop853"].backends      # the contact back end's name is kept
