@@ -82,18 +82,27 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["inputs"] = drive.describe()
     if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
         return _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive)
+    auto_compiled = None
     if method == "auto":
         method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
         meta["auto"] = info
+        if method == "erk" and compiled is None and opts.get("functions") is None:
+            method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
+    if auto_compiled is None:
+        meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
     loop_compiled = None
     if opts.get("functions") is not None:
         funcs = opts["functions"]
     elif method in I.COMPILED_LOOP:     # the loop compiles the model's C together with its own
         funcs = vm
-        loop_compiled = _compile_loop(eom, funcs, meta)
+        loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
+        if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
+            method, loop_compiled = "erk", None
+            meta.update(method=method, integrator=I.METHODS[method][3])
+            meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
                                  names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
@@ -151,19 +160,34 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
                   stats=stats, metadata=meta, failure=failure)
 
 
-def _compile_loop(eom, funcs, meta) -> bool:
+def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
     """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
-    fallback to scipy's stepping in Python is a warning of the run."""
+    fallback to scipy's stepping in Python (or to ``fallback``) is a warning of the run."""
     from .simulation.crk import library
 
     fn, note = library(funcs["ode"], tag=eom.name)
     if fn is None:
-        meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {meta['method']} runs as scipy's "
-                                "same method stepped in Python")
+        instead = (f"{fallback} runs instead" if fallback else
+                   f"{meta['method']} runs as scipy's same method stepped in Python")
+        meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {instead}")
         return False
     if note:
-        meta["notes"].append(note)
+        meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
     return True
+
+
+def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
+    """method = auto on a non-stiff model: erk in the virtual machine, or the compiled dop853
+    loop when compiling pays (simulation.crk.auto_choice); ``meta['compiled']`` says why."""
+    from .simulation.crk import auto_choice
+
+    pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv)
+    meta["auto"]["compile"] = info
+    if pick is None:
+        meta["compiled"] = f"no: auto ({why})"
+        return "erk", reason, None
+    meta["compiled"] = f"auto ({why})"
+    return pick, (reason.split(";")[0] + f"; compiled stepping loop {pick} (Dormand-Prince, C): {why}"), True
 
 
 def _record_inputs(drive, U, signals, meta) -> None:
@@ -261,6 +285,18 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
         if not dt > 0:
             raise UsageError(f"dt must be positive (got {dt})")
         return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
+    omega, rho = time_scale(funcs, x0, pv, t0, t1, u)
+    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
+    steps = min(max(1, math.ceil(span / h)), int(budget))
+    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
+                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+
+
+def time_scale(funcs, x0, pv, t0, t1, u=NO_U) -> tuple[float, float]:
+    """(omega, rho): the fastest rate seen at the start, max of the Jacobian's spectral radius
+    rho, sqrt(max |qdd|) and max |qd| (coordinates in units of order one: the Jacobian alone is
+    ~0 for a pendulum released from the horizontal), and 2 pi / horizon."""
+    span = t1 - t0
     rho, omega_acc = 0.0, 0.0
     u = default_inputs(getattr(funcs, "eom", None), u)
     try:
@@ -272,11 +308,7 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
             omega_acc = max(float(np.sqrt(np.abs(f[n:]).max(initial=0.0))), float(np.abs(x0[n:]).max(initial=0.0)))
     except Exception:  # noqa: BLE001
         pass
-    omega = max(rho, omega_acc, 2 * math.pi / span)
-    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
-    steps = min(max(1, math.ceil(span / h)), int(budget))
-    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
-                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+    return max(rho, omega_acc, 2 * math.pi / span), rho
 
 
 def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget,

@@ -18,6 +18,7 @@ The outcome is a ``mechdsl.integrators.Run`` like every other integrator plug-in
 from __future__ import annotations
 
 import ctypes
+import math
 import threading
 from pathlib import Path
 
@@ -132,6 +133,65 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
             run.error = f"step size below the minimum {hmin:.3g} (min_step_size)"
         run.fail_time, run.fail_state = t_end, xfail.copy()
     return run
+
+
+# --------------------------------------------------------------------------- when compiling pays
+
+# Cost model (measured on this project's 2-core machine, N-link chains N = 2..30, rtol 1e-8,
+# docs/internals/numerics.md): erk in the virtual machine costs about 3 us of step machinery
+# plus 2 ns per operation of the right-hand side per evaluation; the compiled dop853 loop
+# 0.3 us + 0.6 ns per operation and 0.65x erk's evaluations; gcc 0.35 s + 0.17 ms per
+# operation.  erk's evaluations ~ 2.6 sqrt(n) * span * omega * rtol^(-1/5), omega the time
+# scale at the start (simulate.time_scale); the sqrt(n) is the chains' whip (faster motion
+# than at the start), fitted within 2x on N = 2..30 and the shipped double pendulum.
+VM_CALL, VM_OP = 3e-6, 2e-9
+C_CALL, C_OP, C_EVALS = 0.3e-6, 0.6e-9, 0.65
+GCC_FIXED, GCC_OP = 0.35, 1.7e-4
+PAYBACK_RUNS = 10     # the library is cached on disk by the model's structure: later runs reuse it
+
+
+def rhs_cost(f) -> int:
+    """Operations of one evaluation of a CasADi Function: SX instructions, through calls, plus
+    n^3 for a linear solve of size n (deterministic: no timing)."""
+    import casadi as ca
+
+    if f.is_a("SXFunction"):
+        return int(f.n_instructions())
+    total = 0
+    for i in range(f.n_instructions()):
+        total += 1
+        op = f.instruction_id(i)
+        if op == ca.OP_CALL:
+            total += rhs_cost(f.instruction_MX(i).which_function())
+        elif op == ca.OP_SOLVE:
+            total += int(f.instruction_MX(i).dep(1).size1()) ** 3
+    return total
+
+
+def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u) -> tuple[str | None, str, dict]:
+    """(method or None, reason, numbers): compile the dop853 loop (dopri5 at rtol >= 1e-5) when
+    the time it saves per run, estimated from the model's size and the run's length, repays the
+    estimated compile time within PAYBACK_RUNS runs."""
+    from ..codegen import find_compiler
+    from ..simulate import time_scale
+
+    if find_compiler() is None:
+        return None, "no C compiler", {}
+    ops = rhs_cost(funcs["ode"])
+    omega, _ = time_scale(funcs, x0, pv, t0, t1, u)
+    span = t1 - t0
+    evals = 2.6 * math.sqrt(max(eom.n, 1)) * span * omega * rtol ** -0.2
+    vm = evals * (VM_CALL + VM_OP * ops)
+    comp = C_EVALS * evals * (C_CALL + C_OP * ops)
+    gcc = GCC_FIXED + GCC_OP * ops
+    info = {"rhs_operations": ops, "estimated_rhs_evals": round(evals), "estimated_vm_time": vm,
+            "estimated_compiled_time": comp, "estimated_compile_time": gcc}
+    numbers = (f"estimated {vm * 1e3:.3g} ms a run in the virtual machine, {comp * 1e3:.3g} ms compiled; "
+               f"compiling ~{gcc:.2g} s once, cached on disk")
+    if (vm - comp) * PAYBACK_RUNS < gcc:
+        return None, numbers + f": does not pay back within {PAYBACK_RUNS} runs", info
+    method = "dopri5" if rtol >= 1e-5 else "dop853"
+    return method, numbers + f": pays back within {PAYBACK_RUNS} runs", info
 
 
 class CrkPlugin(I.IntegratorPlugin):
