@@ -130,3 +130,67 @@ def test_registry_names_and_no_jacobian():
         assert m in I.NO_JACOBIAN and m in I.METHODS
         assert "ode" in check_method(m).backends and "ode" in methods()[m].backends
     assert "events" in methods()["dop853"].backends      # the contact back end's name is kept
+
+
+# --------------------------------------------------------------------------- method auto compiles when it pays
+
+
+def test_auto_compiles_a_long_run_and_says_why():
+    e = pendulum(theta0=2.5)
+    r = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301)
+    if find_compiler() is None:
+        assert r.metadata["method"] == "erk" and "no C compiler" in r.metadata["compiled"]
+        return
+    assert r.metadata["method"] == "dop853"
+    assert r.metadata["compiled"].startswith("auto (estimated") and "pays back" in r.metadata["compiled"]
+    assert "compiled stepping loop" in r.metadata["method_reason"]
+    assert r.metadata["options"]["compiled"] is True
+    est = r.metadata["auto"]["compile"]
+    assert est["estimated_vm_time"] > est["estimated_compiled_time"] > 0
+    # opting out keeps the virtual machine's erk; both within the tolerance of each other
+    off = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301, compiled=False)
+    assert off.metadata["method"] == "erk" and off.metadata["compiled"] == "off (requested)"
+    assert off.metadata["options"]["compiled"] is False
+    np.testing.assert_allclose(r.q[:, 0], off.q[:, 0], rtol=0, atol=1e-4)
+
+
+def test_auto_does_not_compile_a_short_run_of_a_small_model():
+    r = simulate(pendulum(), 2.0, rtol=1e-8, atol=1e-8)
+    assert r.metadata["method"] == "erk"
+    assert r.metadata["compiled"].startswith("no: auto (")
+    assert r.metadata["options"]["compiled"] is False
+
+
+def test_auto_without_a_compiler_stays_in_the_virtual_machine(monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    r = simulate(pendulum(theta0=2.5), 300.0, rtol=1e-8, atol=1e-8, points=11)
+    assert r.success and r.metadata["method"] == "erk"
+    assert r.metadata["compiled"] == "no: auto (no C compiler)"
+
+
+def test_rhs_cost_counts_instructions_and_the_linear_solve():
+    from mechdsl.codegen import casadi_functions
+
+    sx = casadi_functions(pendulum(), names=("ode",))["ode"]
+    assert sx.is_a("SXFunction") and crk.rhs_cost(sx) == sx.n_instructions()
+    mx = casadi_functions(chain(3), names=("ode",))["ode"]      # M qdd = bias solved numerically (QR)
+    assert not mx.is_a("SXFunction")
+    assert crk.rhs_cost(mx) > 3 ** 3 + mx.n_instructions()
+
+
+def test_cli_no_compile_opts_out(tmp_path, monkeypatch, capsys):
+    import json
+
+    from mechdsl.cli import main
+
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)
+
+    model = Path(__file__).resolve().parents[1] / "models" / "pendulum.mech"
+    out = tmp_path / "p.csv"
+    assert main(["simulate", str(model), "--t-end", "300", "--points", "11", "--no-compile", "-o", str(out),
+                 "--no-progress"]) == 0
+    meta = json.loads((tmp_path / "p.json").read_text())["metadata"]
+    assert meta["compiled"] == "off (requested)" and meta["method"] != "dop853"
+    assert main(["simulate", str(model), "--compiled", "--no-compile"]) == 2

@@ -90,7 +90,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
             method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
-    if auto_compiled is None:
+    if "compiled" not in meta:
         meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
     loop_compiled = None

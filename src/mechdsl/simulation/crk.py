@@ -147,7 +147,7 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
 VM_CALL, VM_OP = 3e-6, 2e-9
 C_CALL, C_OP, C_EVALS = 0.3e-6, 0.6e-9, 0.65
 GCC_FIXED, GCC_OP = 0.35, 1.7e-4
-PAYBACK_RUNS = 10     # the library is cached on disk by the model's structure: later runs reuse it
+PAYBACK_RUNS = 20     # the library is cached on disk by the model's structure: later runs reuse it
 
 
 def rhs_cost(f) -> int:
