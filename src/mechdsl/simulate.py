@@ -181,7 +181,7 @@ def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
     loop when compiling pays (simulation.crk.auto_choice); ``meta['compiled']`` says why."""
     from .simulation.crk import auto_choice
 
-    pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv)
+    pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv, rho=meta["auto"].get("spectral_radius"))
     meta["auto"]["compile"] = info
     if pick is None:
         meta["compiled"] = f"no: auto ({why})"
@@ -292,16 +292,20 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
 
 
-def time_scale(funcs, x0, pv, t0, t1, u=NO_U) -> tuple[float, float]:
+def time_scale(funcs, x0, pv, t0, t1, u=NO_U, rho=None) -> tuple[float, float]:
     """(omega, rho): the fastest rate seen at the start, max of the Jacobian's spectral radius
     rho, sqrt(max |qdd|) and max |qd| (coordinates in units of order one: the Jacobian alone is
-    ~0 for a pendulum released from the horizontal), and 2 pi / horizon."""
+    ~0 for a pendulum released from the horizontal), and 2 pi / horizon.  ``rho``: the spectral
+    radius when known (choose_method computed it; eigenvalues of a 400 x 400 Jacobian cost
+    0.05-0.5 s of CPU)."""
     span = t1 - t0
-    rho, omega_acc = 0.0, 0.0
+    omega_acc = 0.0
     u = default_inputs(getattr(funcs, "eom", None), u)
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
-        rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
+        if rho is None:
+            rho = 0.0
+            J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+            rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
         f = FastFunction(funcs["ode"])(t0, x0, u, pv)
         n = len(x0) // 2
         if np.isfinite(f).all():  # time scales of the motion itself: sqrt(|qdd|) and |qd| (units of 1)

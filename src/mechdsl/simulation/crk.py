@@ -168,7 +168,7 @@ def rhs_cost(f) -> int:
     return total
 
 
-def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u) -> tuple[str | None, str, dict]:
+def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | None, str, dict]:
     """(method or None, reason, numbers): compile the dop853 loop (dopri5 at rtol >= 1e-5) when
     the time it saves per run, estimated from the model's size and the run's length, repays the
     estimated compile time within PAYBACK_RUNS runs."""
@@ -178,7 +178,7 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u) -> tuple[str | None, str, d
     if find_compiler() is None:
         return None, "no C compiler", {}
     ops = rhs_cost(funcs["ode"])
-    omega, _ = time_scale(funcs, x0, pv, t0, t1, u)
+    omega, _ = time_scale(funcs, x0, pv, t0, t1, u, rho=rho)
     span = t1 - t0
     evals = 2.6 * math.sqrt(max(eom.n, 1)) * span * omega * rtol ** -0.2
     vm = evals * (VM_CALL + VM_OP * ops)
