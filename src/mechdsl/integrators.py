@@ -56,6 +56,9 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
 NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853", "dopri5", "dop853")
 # the compiled stepping loop (mechdsl.simulation.crk): it compiles the model itself
 COMPILED_LOOP = ("dopri5", "dop853")
+# methods that must be able to differentiate the right-hand side but never evaluate its Jacobian
+# (CVODES-Adams with functional iteration): compiled code holds the forward derivative only
+FORWARD_ONLY = ("cvodes-adams",)
 FIXED_STEP = ("rk", "collocation")
 # order of accuracy used to pick a fixed step from the tolerance (h * omega = 0.5 * rtol^(1/order))
 FIXED_ORDER = {"rk": 4, "collocation": 5}

@@ -105,7 +105,8 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
             meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
-                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
+                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"),
+                                 jacobian="forward" if method in I.FORWARD_ONLY else "full")
         funcs["ode"]  # compile now (notes below)
         funcs = drive.closed(funcs)
     else:
