@@ -215,3 +215,11 @@ def test_cvodes_adams_compiled_holds_no_dense_jacobian(tmp_path, monkeypatch):
     lib = ctypes.CDLL(str(libs[0]))
     assert hasattr(lib, "fwd1_ode") and not hasattr(lib, "jac_ode")
     np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[vm.q, vm.qd], rtol=0, atol=1e-8)
+
+
+def test_run_record_says_whether_compiled_code_ran():
+    small = simulate(pendulum(), 1.0)
+    assert small.metadata["compiled"].startswith("no: auto") and small.metadata["run"]["compiled"] is False
+    r = simulate(pendulum(), 1.0, method="dopri5")
+    assert r.metadata["run"]["compiled"] is _compiled(r)
+    assert r.metadata["run"]["integrator"] == "crk:dopri5"
