@@ -223,3 +223,20 @@ def test_run_record_says_whether_compiled_code_ran():
     r = simulate(pendulum(), 1.0, method="dopri5")
     assert r.metadata["run"]["compiled"] is _compiled(r)
     assert r.metadata["run"]["integrator"] == "crk:dopri5"
+
+
+def test_jacobian_eigenvalues_of_the_second_order_form_equal_the_full_decomposition():
+    from mechdsl.simulate import jacobian_eigenvalues
+
+    rng = np.random.default_rng(7)
+    for n in (1, 3, 8):
+        A = rng.normal(size=(n, n))
+        J = np.block([[np.zeros((n, n)), np.eye(n)], [A, np.zeros((n, n))]])
+        fast, full = jacobian_eigenvalues(J), np.linalg.eigvals(J)
+        assert len(fast) == 2 * n
+        for lam in full:      # every eigenvalue of J is found (and vice versa)
+            assert np.abs(fast - lam).min() < 1e-9 * max(1.0, abs(lam))
+        for lam in fast:
+            assert np.abs(full - lam).min() < 1e-9 * max(1.0, abs(lam))
+    damped = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.eye(2), -0.5 * np.eye(2)]])
+    np.testing.assert_allclose(np.sort_complex(jacobian_eigenvalues(damped)), np.sort_complex(np.linalg.eigvals(damped)))
