@@ -324,6 +324,12 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
     double h = 0.0, t_new = t;
     while (!accepted) {
       if (h_abs < min_step) { status = CRK_TOO_SMALL; goto done; }
+      if (hmin > 0 && h_abs < hmin && t + hmin < tb) {
+        /* hmin bounds the step from below: a proposal under it (the initial step's heuristic,
+           a growth step) is raised to it; error control rejecting a step down below it fails */
+        if (was_rejected) { status = CRK_HMIN; goto done; }
+        h_abs = hmin;
+      }
       h = h_abs;
       t_new = t + h;
       if (t_new > tb) t_new = tb;
@@ -407,7 +413,6 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
       steps_here = 0;
     }
     if (steps_here >= max_steps) { status = CRK_MAX_STEPS; break; }
-    if (hmin > 0 && h > 0 && h < hmin && t < tb) { status = CRK_HMIN; break; }
   }
 done:
   stats[0] = (double)steps; stats[1] = (double)r.nfev; stats[2] = (double)rejected; stats[3] = t;

@@ -30,7 +30,7 @@ from .. import integrators as I
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
 SOURCE = Path(__file__).with_name("crk.c")
 STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)",
-          2: "step size {h:.3g} below the minimum {hmin:.3g} (min_step_size)",
+          2: "error control needs a step below the minimum {hmin:.3g} (min_step_size)",
           3: "Required step size is less than spacing between numbers.",
           4: "non-finite state",
           5: "cancelled",
@@ -128,9 +128,7 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
     run = I.Run(X=X, reached=reached, stats=raw)
     if status != 0 or reached < len(grid):
         t_end = float(stats[3])
-        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, h=0.0, hmin=hmin)
-        if status == 2:
-            run.error = f"step size below the minimum {hmin:.3g} (min_step_size)"
+        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
         run.fail_time, run.fail_state = t_end, xfail.copy()
     return run
 
@@ -150,19 +148,25 @@ GCC_FIXED, GCC_OP = 0.35, 1.7e-4
 PAYBACK_RUNS = 20     # the library is cached on disk by the model's structure: later runs reuse it
 
 
-def rhs_cost(f) -> int:
+def rhs_cost(f) -> int | None:
     """Operations of one evaluation of a CasADi Function: SX instructions, through calls, plus
-    n^3 for a linear solve of size n (deterministic: no timing)."""
+    n^3 for a linear solve of size n (deterministic: no timing).  None when it calls a Function
+    that has no C code (a Python callback: a time-varying input given as a callable)."""
     import casadi as ca
 
     if f.is_a("SXFunction"):
         return int(f.n_instructions())
+    if not f.is_a("MXFunction"):
+        return None
     total = 0
     for i in range(f.n_instructions()):
         total += 1
         op = f.instruction_id(i)
         if op == ca.OP_CALL:
-            total += rhs_cost(f.instruction_MX(i).which_function())
+            inner = rhs_cost(f.instruction_MX(i).which_function())
+            if inner is None:
+                return None
+            total += inner
         elif op == ca.OP_SOLVE:
             total += int(f.instruction_MX(i).dep(1).size1()) ** 3
     return total
@@ -178,6 +182,8 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     if find_compiler() is None:
         return None, "no C compiler", {}
     ops = rhs_cost(funcs["ode"])
+    if ops is None:
+        return None, "the right-hand side calls Python (an input given as a callable): no C code for it", {}
     omega, _ = time_scale(funcs, x0, pv, t0, t1, u, rho=rho)
     span = t1 - t0
     evals = 2.6 * math.sqrt(max(eom.n, 1)) * span * omega * rtol ** -0.2
