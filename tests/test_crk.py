@@ -240,3 +240,20 @@ def test_jacobian_eigenvalues_of_the_second_order_form_equal_the_full_decomposit
             assert np.abs(full - lam).min() < 1e-9 * max(1.0, abs(lam))
     damped = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.eye(2), -0.5 * np.eye(2)]])
     np.testing.assert_allclose(np.sort_complex(jacobian_eigenvalues(damped)), np.sort_complex(np.linalg.eigvals(damped)))
+
+
+@pytest.mark.slow
+def test_twelve_link_chain_compiled_loop_equals_scipy_dop853_on_the_virtual_machine():
+    import re
+    from pathlib import Path
+
+    import mechdsl
+
+    text = (Path(__file__).resolve().parents[1] / "models" / "nlink_pendulum.mech").read_text()
+    m = mechdsl.loads(re.sub(r"parameter Integer N = \d+", "parameter Integer N = 12", text))
+    r = m.simulate(t_end=5, rtol=1e-8, method="dop853")
+    ref = m.simulate(t_end=5, rtol=1e-8, method="scipy-dop853")
+    assert r.success and ref.success
+    _compiled(r)
+    assert r.stats["steps"] == ref.stats["steps"]
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-9)
