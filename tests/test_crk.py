@@ -257,3 +257,14 @@ def test_twelve_link_chain_compiled_loop_equals_scipy_dop853_on_the_virtual_mach
     _compiled(r)
     assert r.stats["steps"] == ref.stats["steps"]
     np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-9)
+
+
+def test_structurally_zero_accelerations_free_particle():
+    """xdot = (qd, 0): the output of ode is sparse; the loop reads it densified.  x = x0 + v t."""
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    e = E.from_lagrangian("Free", ["x"], [], [], q, qd, t, p, 0.5 * qd[0] ** 2, 0 * q[0], q0=[1.0], qd0=[0.25])
+    r = simulate(e, 4.0, method="dopri5", rtol=1e-10, atol=1e-10, points=9)
+    assert r.success
+    _compiled(r)
+    np.testing.assert_allclose(r.q[:, 0], 1.0 + 0.25 * r.t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(r.qd[:, 0], 0.25, rtol=0, atol=1e-12)
