@@ -268,3 +268,18 @@ def test_structurally_zero_accelerations_free_particle():
     _compiled(r)
     np.testing.assert_allclose(r.q[:, 0], 1.0 + 0.25 * r.t, rtol=0, atol=1e-12)
     np.testing.assert_allclose(r.qd[:, 0], 0.25, rtol=0, atol=1e-12)
+
+
+def test_concurrent_runs_share_one_library_and_give_the_same_numbers():
+    from concurrent.futures import ThreadPoolExecutor
+
+    e = chain(2)
+    one = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
+    starts = [{"theta1": 0.5 + 0.1 * k} for k in range(4)]
+    alone = [simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21, x0=s).q for s in starts]
+    with ThreadPoolExecutor(4) as ex:
+        together = list(ex.map(lambda s: simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21,
+                                                   x0=s).q, starts))
+    for a, b in zip(alone, together):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
+    assert not np.allclose(alone[0], one.q)      # the starts differ: the runs are not copies
