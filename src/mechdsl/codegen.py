@@ -131,13 +131,40 @@ def ldl_solve(M, b):
     return ca.vertcat(*x)
 
 
-def build_ode(eom, sx: bool = False):
+LOOP_OPS = 8000    # compiled code loops over per-link kernels when the unrolled qdd has more SX operations
+
+
+def looped_ode(eom, force: bool = False):
+    """The ``ode`` Function as loops over per-link kernels (mechanics/chain.py), or None.
+
+    Only for the recursive route with a run of identical links (``EOM.qdd_loop``) and, unless
+    ``force``, an unrolled qdd of more than LOOP_OPS operations: the looped C compiles in about a
+    second at any N but evaluates 2-3x slower than the unrolled C, and 10-20x slower in the
+    virtual machine (benchmarks/chain_kernel.py), so it is used for compiled code only."""
+    if eom.qdd is None:
+        return None
+    plan = getattr(eom, "qdd_loop", None)
+    if plan is None:
+        return None
+    if not force:
+        s = _Symbols(eom)
+        if _function("qdd", s.txup, [eom.qdd], TXUP, ["qdd"]).n_instructions() <= LOOP_OPS:
+            return None
+    return plan.ode(eom)
+
+
+def build_ode(eom, sx: bool = False, loop: bool = False):
     """The ``ode`` Function (t, x, u, p) -> xdot.  sx=True: an SX Function also when M qdd =
     bias must be solved (``ldl_solve``, up to SX_SOLVE_MAX coordinates) instead of the MX
-    Function around the numeric QR solve."""
+    Function around the numeric QR solve.  loop=True (not with sx): the looped form of
+    ``looped_ode`` where it applies and pays."""
     ca = _ca()
     s = _Symbols(eom)
     n = eom.n
+    if loop and not sx:
+        f = looped_ode(eom)
+        if f is not None:
+            return f
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
         return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
@@ -168,12 +195,12 @@ def jacobian_of(ode):
     return ca.Function("ode_jacobian", [t, x, u, p], [ca.densify(jx)], TXUP, ["J"])
 
 
-def _build(eom, name, outputs, sx=False):
+def _build(eom, name, outputs, sx=False, loop=False):
     ca = _ca()
     s = _Symbols(eom)
     txup = s.txup
     if name == "ode":
-        return build_ode(eom, sx)
+        return build_ode(eom, sx, loop)
     if name == "mass_matrix":
         if ca.depends_on(ca.SX(eom.M), s.qd):
             return _function("mass_matrix", txup, [eom.M], TXUP, ["M"])
@@ -289,6 +316,7 @@ class FunctionSet(Mapping):
         self.notes: list[str] = []
         self._cache: dict = {}
         self._compiled_done = False
+        self.looped = False
 
     def __getitem__(self, name):
         if name not in self._names:
@@ -314,15 +342,19 @@ class FunctionSet(Mapping):
 
     def _compile_all(self):
         self._compiled_done = True
-        funcs = [_build(self.eom, n, self.outputs, self.sx) for n in self._names if n != "ode_jacobian"]
+        funcs = [_build(self.eom, n, self.outputs, self.sx, loop=True) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
-            funcs.append(build_ode(self.eom, self.sx))
+            funcs.append(build_ode(self.eom, self.sx, loop=True))
+        ode = next((f for f in funcs if f.name() == "ode"), None)
+        self.looped = ode is not None and ode.is_a("MXFunction") and self.eom.qdd is not None
         loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names,
-                                              derivatives=self.derivatives)
+                                              derivatives=self.derivatives, forward_only=self.looped)
         if note:
             self.notes.append(note)
         if loaded is None:
             return
+        if self.looped:
+            self.notes.append("the ode loops over per-link kernels (a chain of identical links)")
         self.compiled = True
         self.library = lib
         for f in funcs:
@@ -422,8 +454,13 @@ def derivative_functions(funcs, order: int = 2) -> list:
     return out
 
 
-def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0):
+def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0,
+                      forward_only: bool = False):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
+
+    forward_only: compile the forward derivative of 'ode' instead of its Jacobian (CasADi
+    assembles the Jacobian from it); for the looped ode, whose Jacobian as C would unroll the
+    loops over every direction (3.3 MB of C at N = 50 against 0.11 MB for the derivative).
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -449,11 +486,13 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
         units.append(dg.dump())
     jac_kind = None
     if odes:
-        jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
-        jg.add(odes[0].jacobian())
-        code = jg.dump()
-        jac_kind = "jacobian"
-        if len(code) > JAC_MAX_CODE:
+        code = ""
+        if not forward_only:
+            jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
+            jg.add(odes[0].jacobian())
+            code = jg.dump()
+            jac_kind = "jacobian"
+        if forward_only or len(code) > JAC_MAX_CODE:
             # a huge Jacobian compiles for minutes and, at -O0, runs slower than the virtual
             # machine: generate the forward derivative instead (CasADi assembles J by sweeps)
             jg = ca.CodeGenerator("mechdsl_fwd.c", {"with_header": False, "verbose": False})

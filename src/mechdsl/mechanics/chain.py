@@ -40,7 +40,7 @@ LOOP_MIN = 4          # links in a run below which nothing is looped
 _NPOSE = 18           # carry of pass 1: vec(R), o, w, v
 _NART = 33            # carry of pass 2: vec(A), vec(B), vec(C), pn, pf
 _NACC = 6             # carry of pass 3: aw, av
-_BASE = {"base": 4}   # mapaccum nests loops of 4 calls: the smallest C measured (2, 4, 10 tried)
+_BASE = {"base": 8}   # mapaccum nests loops of 8 calls (base 4: smaller C, slower; 16: larger C)
 
 
 class _Placeholders:
@@ -89,35 +89,76 @@ def _form(lk, nu, tau, fext, ph: _Placeholders) -> _Form:
     return _Form(lk.k, data, xi, loc_f, force_f, key)
 
 
-def _rows(x: ca.SX) -> tuple:
-    """The entries of a column that are not structurally zero."""
-    x = ca.densify(x)
-    return tuple(r for r in range(x.numel()) if not x[r].is_zero())
+class _Layout:
+    """Which entries of a column of ``size`` travel: zero entries and constant entries do not
+    (the receiving kernel knows them), only the others ("rows") are packed."""
+
+    def __init__(self, size: int, rows=(), consts=()):
+        self.size = size
+        self.rows = tuple(rows)
+        self.consts = tuple(consts)          # (row, value)
+
+    @staticmethod
+    def of(x: ca.SX) -> "_Layout":
+        x = ca.densify(x)
+        rows, consts = [], []
+        for r in range(x.numel()):
+            e = x[r]
+            if e.is_zero():
+                continue
+            if e.is_constant():
+                consts.append((r, float(e)))
+            else:
+                rows.append(r)
+        return _Layout(x.numel(), rows, consts)
+
+    def _state(self):
+        st = dict(self.consts)
+        st.update({r: None for r in self.rows})       # None: not a constant
+        return st
+
+    def join(self, o: "_Layout") -> "_Layout":
+        """The layout holding both: an entry stays constant only where both have that constant."""
+        a, b = self._state(), o._state()
+        rows, consts = [], []
+        for r in sorted(set(a) | set(b)):
+            if r in a and r in b and a[r] is not None and a[r] == b[r]:
+                consts.append((r, a[r]))
+            else:
+                rows.append(r)
+        return _Layout(self.size, rows, consts)
+
+    def __eq__(self, o):
+        return (self.size, self.rows, self.consts) == (o.size, o.rows, o.consts)
+
+    def __hash__(self):
+        return hash((self.size, self.rows, self.consts))
+
+    def symbol(self, name: str):
+        """(packed symbol, the full column with zeros and constants in place)."""
+        c = ca.SX.sym(name, len(self.rows))
+        full = [ca.SX(0)] * self.size
+        for r, v in self.consts:
+            full[r] = ca.SX(v)
+        for j, r in enumerate(self.rows):
+            full[r] = c[j]
+        return c, (ca.vertcat(*full) if self.size else ca.SX(0, 1))
+
+    def pack(self, x: ca.SX) -> ca.SX:
+        x = ca.densify(x)
+        return ca.vertcat(*[x[r] for r in self.rows]) if self.rows else ca.SX(0, 1)
 
 
-def _packed(name: str, rows: tuple, size: int):
-    """A symbol holding only the entries ``rows`` of a column of ``size``: (symbol, full column)."""
-    c = ca.SX.sym(name, len(rows))
-    full = [ca.SX(0)] * size
-    for j, r in enumerate(rows):
-        full[r] = c[j]
-    return c, ca.vertcat(*full) if size else ca.SX(0, 1)
-
-
-def _pack(x: ca.SX, rows: tuple) -> ca.SX:
-    x = ca.densify(x)
-    return ca.vertcat(*[x[r] for r in rows]) if rows else ca.SX(0, 1)
-
-
-def _repack(a: tuple, b: tuple, size: int) -> ca.Function:
-    """Packed with rows a -> packed with rows b (a subset of b)."""
-    c, full = _packed("c", a, size)
-    return ca.Function("repack", [c], [_pack(full, b)])
+def _repack(a: _Layout, b: _Layout) -> ca.Function:
+    """Packed in layout a -> packed in layout b (b holds a)."""
+    c, full = a.symbol("c")
+    return ca.Function("repack", [c], [b.pack(full)])
 
 
 class _Kernels:
     """The three pass kernels of one class of links.  Carries and the values handed from one
-    pass to the next are *packed*: only their structurally nonzero entries travel."""
+    pass to the next travel packed (``_Layout``); the joint transform E is computed once, in
+    pass 1, and handed on (it holds the trigonometry of a revolute joint)."""
 
     def __init__(self, form: _Form):
         self.form = form
@@ -126,57 +167,75 @@ class _Kernels:
     def _locals(self):
         return self.form.loc(self.form.xi)
 
-    # pass 1: (pose carry, xi) -> (pose carry, y1 = (pn, pf, cw, cv))
-    def pass1(self, rows):
-        c, cd = _packed("c", rows, _NPOSE)
+    # pass 1: (pose carry, xi) -> (pose carry, y1 = (pn, pf, cw, cv, vec(E)))
+    def pass1(self, lay):
+        c, cd = lay.symbol("c")
         Rl, ol, wl, vl = ca.reshape(cd[0:9], 3, 3), cd[9:12], cd[12:15], cd[15:18]
         E, r, Sw, Sv, nu, jw0, jv0, aw0, av0, A, B, C, _ = self._locals()
         R, o, w, v, jw, jv = tpl.kin_step(self.k, False)(E, r, Rl, ol, wl, vl, Sw, Sv, nu, jw0, jv0)
         fn, ff = self.form.force(self.form.xi, ca.vertcat(ca.vec(R), o, w, v))
         pn, pf, cw, cv = tpl.aba_p1()(w, v, A, B, C, fn, ff, jw, jv, aw0, av0)
-        return c, [], ca.vertcat(ca.vec(R), o, w, v), [ca.vertcat(pn, pf, cw, cv)]
+        return c, [], ca.vertcat(ca.vec(R), o, w, v), [ca.vertcat(pn, pf, cw, cv, ca.vec(E))]
+
+    def _y1(self, lay):
+        y1s, y1 = lay.symbol("y1")
+        return y1s, y1[0:3], y1[3:6], y1[6:9], y1[9:12], ca.reshape(y1[12:21], 3, 3)
 
     # pass 2: (articulated carry, xi, y1) -> (articulated carry, y2 = (Uw, Uv, Di, u))
-    def pass2(self, rows, rows_y1):
-        c, cd = _packed("c", rows, _NART)
-        y1s, y1 = _packed("y1", rows_y1, 12)
+    def pass2(self, lay, lay_y1):
+        c, cd = lay.symbol("c")
+        y1s, pn, pf, cw, cv, E = self._y1(lay_y1)
         Ac, Bc, Cc = ca.reshape(cd[0:9], 3, 3), ca.reshape(cd[9:18], 3, 3), ca.reshape(cd[18:27], 3, 3)
-        E, r, Sw, Sv, _, _, _, _, _, A, B, C, tau = self._locals()
-        out = tpl.aba_p2(self.k)(A + Ac, B + Bc, C + Cc, y1[0:3] + cd[27:30], y1[3:6] + cd[30:33], y1[6:9],
-                                 y1[9:12], Sw, Sv, tau, E, r)
+        _, r, Sw, Sv, _, _, _, _, _, A, B, C, tau = self._locals()
+        out = tpl.aba_p2(self.k)(A + Ac, B + Bc, C + Cc, pn + cd[27:30], pf + cd[30:33], cw, cv, Sw, Sv, tau, E, r)
         Ap, Bp, Cp, ppn, ppf, Uw, Uv, Di, u = out
         y2 = ca.vertcat(ca.vec(Uw), ca.vec(Uv), ca.vec(Di), u)
         return c, [y1s], ca.vertcat(ca.vec(Ap), ca.vec(Bp), ca.vec(Cp), ppn, ppf), [y2]
 
     # pass 3: (acceleration carry, xi, y1, y2) -> (acceleration carry, nu')
-    def pass3(self, rows, rows_y1, rows_y2):
+    def pass3(self, lay, lay_y1, lay_y2):
         k = self.k
-        c, cd = _packed("c", rows, _NACC)
-        y1s, y1 = _packed("y1", rows_y1, 12)
-        y2s, y2 = _packed("y2", rows_y2, 7 * k + k * k)
-        E, r, Sw, Sv, *_ = self._locals()
+        c, cd = lay.symbol("c")
+        y1s, _, _, cw, cv, E = self._y1(lay_y1)
+        y2s, y2 = lay_y2.symbol("y2")
+        _, r, Sw, Sv, *_ = self._locals()
         Uw, Uv = ca.reshape(y2[0:3 * k], 3, k), ca.reshape(y2[3 * k:6 * k], 3, k)
         Di, u = ca.reshape(y2[6 * k:6 * k + k * k], k, k), y2[6 * k + k * k:]
-        nd, aw, av = tpl.aba_p3(k, False)(E, r, cd[0:3], cd[3:6], y1[6:9], y1[9:12], Uw, Uv, Di, u, Sw, Sv)
+        nd, aw, av = tpl.aba_p3(k, False)(E, r, cd[0:3], cd[3:6], cw, cv, Uw, Uv, Di, u, Sw, Sv)
         return c, [y1s, y2s], ca.vertcat(aw, av), [nd]
 
 
-def _settle(build, rows_in: tuple, xi, name: str, dense_extra=False):
-    """The kernel whose carry pattern is the fixpoint containing rows_in.
+@dataclass
+class _Kernel:
+    """A settled kernel: (carry, xi_j for j in ``used``, *others) -> (carry, *others)."""
 
-    build(rows) -> (carry symbol, other inputs, carry out, other outputs); returns
-    (Function (carry, xi, *other inputs) -> (carry, *other outputs), carry rows, rows of the
-    other outputs).  The other outputs are packed too unless dense_extra."""
-    rows = tuple(rows_in)
+    f: ca.Function
+    carry: _Layout                   # of its carry (in and out)
+    extra: list                      # layouts of its other outputs
+    used: list                       # the data rows it reads
+
+
+def _settle(build, lay_in: _Layout, xi, name: str, dense_extra=False) -> _Kernel:
+    """The kernel whose carry layout is the fixpoint holding lay_in.
+
+    build(layout) -> (carry symbol, other inputs, carry out, other outputs).  Only the data
+    rows the kernel reads become inputs; the other outputs are packed unless dense_extra."""
+    lay = lay_in
     while True:
-        c, ins, carry, extra = build(rows)
-        out = _rows(carry)
-        if set(out) <= set(rows):
+        c, ins, carry, extra = build(lay)
+        nxt = lay.join(_Layout.of(carry))
+        if nxt == lay:
             break
-        rows = tuple(sorted(set(rows) | set(out)))
-    extra_rows = [tuple(range(e.numel())) if dense_extra else _rows(e) for e in extra]
-    outs = [_pack(carry, rows)] + [_pack(e, r) for e, r in zip(extra, extra_rows)]
-    return ca.Function(name, [c, xi, *ins], outs), rows, extra_rows
+        lay = nxt
+    if dense_extra:
+        extra_lay = [_Layout(e.numel(), range(e.numel())) for e in extra]
+    else:
+        extra_lay = [_Layout.of(e) for e in extra]
+    outs = [lay.pack(carry)] + [el.pack(e) for el, e in zip(extra_lay, extra)]
+    allout = ca.veccat(*outs)
+    used = [j for j in range(xi.numel()) if ca.depends_on(allout, xi[j])]
+    f = ca.Function(name, [c, *[xi[j] for j in used], *ins], outs)
+    return _Kernel(f, lay, extra_lay, used)
 
 
 @dataclass
@@ -184,9 +243,9 @@ class _Segment:
     links: list                      # consecutive link indices, each the parent of the next
     kern: _Kernels
     data: list                       # per link: the model's symbols in the kernel's order
-    f1: ca.Function | None = None
-    f2: ca.Function | None = None
-    f3: ca.Function | None = None
+    k1: _Kernel | None = None
+    k2: _Kernel | None = None
+    k3: _Kernel | None = None
 
     @property
     def top(self):
@@ -197,7 +256,7 @@ class _Segment:
         return self.links[-1]
 
 
-_WORLD = (0, 4, 8)         # the world's pose carry: R = 1 (packed: its diagonal), o = w = v = 0
+_WORLD = _Layout(_NPOSE, (), ((0, 1.0), (4, 1.0), (8, 1.0)))   # R = 1, o = w = v = 0
 
 
 class ChainPlan:
@@ -216,27 +275,27 @@ class ChainPlan:
         return max(len(s.links) for s in self.segments)
 
     def _kernels(self):
-        """Each segment's three kernels, the carry patterns settled pass by pass in the order
-        the values flow (a parent's pattern is part of its children's)."""
+        """Each segment's three kernels, the carry layouts settled pass by pass in the order
+        the values flow (a parent's layout is held by its children's)."""
         out1, out2, out3 = {}, {}, {}
         for s in self.segments:                              # pass 1, top-down
             lam = self.parent[s.top]
-            s.in1 = out1[lam] if lam >= 0 else _WORLD
-            s.f1, out1[s.bottom], (s.y1,) = _settle(s.kern.pass1, s.in1, s.kern.form.xi, "aba_fwd")
-            s.c1 = out1[s.bottom]
+            xi = s.kern.form.xi
+            s.k1 = _settle(s.kern.pass1, out1[lam] if lam >= 0 else _WORLD, xi, "aba_fwd")
+            out1[s.bottom] = s.k1.carry
         for s in reversed(self.segments):                    # pass 2, bottom-up
-            s.in2 = tuple(sorted(set().union(*out2.pop(s.bottom, [()]))))
-            s.f2, c2, (s.y2,) = _settle(lambda r, s=s: s.kern.pass2(r, s.y1), s.in2, s.kern.form.xi, "aba_bwd")
-            s.c2 = c2
+            lay = _Layout(_NART)
+            for c in out2.pop(s.bottom, []):
+                lay = lay.join(c)
+            s.k2 = _settle(lambda la, s=s: s.kern.pass2(la, s.k1.extra[0]), lay, s.kern.form.xi, "aba_bwd")
             lam = self.parent[s.top]
             if lam >= 0:
-                out2.setdefault(lam, []).append(c2)
+                out2.setdefault(lam, []).append(s.k2.carry)
         for s in self.segments:                              # pass 3, top-down
             lam = self.parent[s.top]
-            s.in3 = out3[lam] if lam >= 0 else ()
-            s.f3, out3[s.bottom], _ = _settle(lambda r, s=s: s.kern.pass3(r, s.y1, s.y2), s.in3, s.kern.form.xi,
-                                              "aba_acc", dense_extra=True)
-            s.c3 = out3[s.bottom]
+            s.k3 = _settle(lambda la, s=s: s.kern.pass3(la, s.k1.extra[0], s.k2.extra[0]),
+                           out3[lam] if lam >= 0 else _Layout(_NACC), s.kern.form.xi, "aba_acc", dense_extra=True)
+            out3[s.bottom] = s.k3.carry
 
     def ode(self, eom) -> ca.Function | None:
         """(t, x, u, p) -> xdot with the loops, or None if ``eom`` is not what the plan was made for."""
@@ -271,67 +330,69 @@ class ChainPlan:
         return ca.Function("ode", [t, x, u, p], [ca.vertcat(x[n:], qdd)], ["t", "x", "u", "p"], ["xdot"])
 
     @staticmethod
-    def _data(xall, index, seg):
-        """The data of a segment as an m x n MX matrix (one column per link), gathered row by
-        row: a symbol shared by every link is repeated, a run of consecutive inputs is a slice;
-        only other rows need an index table (so the C size does not grow with n)."""
-        n, m = len(seg.links), len(seg.data[0])
-        if m == 0:
-            return ca.MX(0, n)
-        cols = []
-        for j in range(m):
+    def _rows(xall, index, seg, used, reverse=False):
+        """The data rows ``used`` of a segment, each 1 x n (one column per link): a symbol shared
+        by every link is repeated, consecutive inputs are a slice, other rows a gather."""
+        n = len(seg.links)
+        out = []
+        for j in used:
             idx = [index[col[j].element_hash()] for col in seg.data]
+            if reverse:
+                idx.reverse()
             if all(i == idx[0] for i in idx):
-                cols.append(ca.repmat(xall[idx[0]], n, 1))
+                out.append(ca.repmat(xall[idx[0]], 1, n))
             elif idx == list(range(idx[0], idx[0] + n)):
-                cols.append(xall[idx[0]:idx[0] + n])
+                out.append(ca.reshape(xall[idx[0]:idx[0] + n], 1, n))
             else:
-                cols.append(xall[idx])
-        return ca.horzcat(*cols).T
+                out.append(ca.reshape(xall[idx], 1, n))
+        return out
 
     @staticmethod
-    def _flip(n):
-        """The n x n exchange matrix: X @ J reverses the columns of X."""
-        return ca.DM(ca.Sparsity.triplet(n, n, list(range(n)), list(reversed(range(n)))), 1.0)
+    def _flip(Y):
+        """Y with its columns in reverse order."""
+        m, n = Y.shape
+        if n <= 1 or m == 0:
+            return Y
+        return ca.reshape(ca.vec(Y)[[(n - 1 - j) * m + r for j in range(n) for r in range(m)]], m, n)
 
     def _nud(self, xall, index):
         segs = self.segments
         seg_of = {s.bottom: s for s in segs}
-        data, y1, y2, pose, acc, art = {}, {}, {}, {}, {}, {}
+        y1, y2, pose, acc, art = {}, {}, {}, {}, {}
 
-        def carry(val, rows, want, size):      # a packed carry into a kernel's (larger) pattern
-            return val if rows == want else _repack(rows, want, size)(val)
+        def into(val, have: _Layout, want: _Layout):
+            return val if have == want else _repack(have, want)(val)
 
         for s in segs:                                   # pass 1, top-down
             lam = self.parent[s.top]
-            if lam >= 0:
-                cin = carry(pose[lam], seg_of[lam].c1, s.c1, _NPOSE)
-            else:
-                cin = carry(ca.MX(ca.DM.ones(len(_WORLD), 1)), _WORLD, s.c1, _NPOSE)
             nl = len(s.links)
-            data[id(s)] = D = self._data(xall, index, s)
-            C, y1[id(s)] = _loop(s.f1, nl)(cin, D)
+            if lam >= 0:
+                cin = into(pose[lam], seg_of[lam].k1.carry, s.k1.carry)
+            else:
+                cin = into(ca.MX(0, 1), _WORLD, s.k1.carry)
+            C, y1[id(s)] = _loop(s.k1.f, nl)(cin, *self._rows(xall, index, s, s.k1.used))
             pose[s.bottom] = C[:, nl - 1]
         for s in reversed(segs):                         # pass 2, bottom-up: columns reversed
             nl = len(s.links)
-            cin = ca.MX.zeros(len(s.c2), 1)
-            for val, rows in art.pop(s.bottom, []):
-                cin = cin + carry(val, rows, s.c2, _NART)
-            if nl > 1:
-                J = self._flip(nl)
-                C, Y = _loop(s.f2, nl)(cin, ca.mtimes(data[id(s)], J), ca.mtimes(y1[id(s)], J))
-                y2[id(s)] = ca.mtimes(Y, J)
-            else:
-                C, y2[id(s)] = s.f2(cin, data[id(s)], y1[id(s)])
+            cin = ca.MX.zeros(len(s.k2.carry.rows), 1)
+            for val, lay in art.pop(s.bottom, []):
+                cin = cin + into(val, lay, s.k2.carry)
+            rows = self._rows(xall, index, s, s.k2.used, reverse=True)
+            C, Y = _loop(s.k2.f, nl)(cin, *rows, self._flip(y1[id(s)]))
+            y2[id(s)] = self._flip(Y)
             lam = self.parent[s.top]
             if lam >= 0:
-                art.setdefault(lam, []).append((C[:, nl - 1], s.c2))
+                art.setdefault(lam, []).append((C[:, nl - 1], s.k2.carry))
         parts = []
         for s in segs:                                   # pass 3, top-down
             lam = self.parent[s.top]
-            cin = carry(acc[lam], seg_of[lam].c3, s.c3, _NACC) if lam >= 0 else ca.MX.zeros(len(s.c3), 1)
             nl = len(s.links)
-            C, Y = _loop(s.f3, nl)(cin, data[id(s)], y1[id(s)], y2[id(s)])
+            if lam >= 0:
+                cin = into(acc[lam], seg_of[lam].k3.carry, s.k3.carry)
+            else:
+                cin = into(ca.MX(0, 1), _Layout(_NACC), s.k3.carry)
+            rows = self._rows(xall, index, s, s.k3.used)
+            C, Y = _loop(s.k3.f, nl)(cin, *rows, y1[id(s)], y2[id(s)])
             acc[s.bottom] = C[:, nl - 1]
             if s.kern.k:
                 parts.append(ca.vec(Y))
@@ -340,7 +401,7 @@ class ChainPlan:
 
 def _loop(f: ca.Function, n: int) -> ca.Function:
     """f applied n times, its first output fed back as its first input (C: nested loops)."""
-    return f.mapaccum(f.name() + "_loop", n, 1, _BASE)
+    return f.mapaccum(f.name() + "_loop", n, 1, _BASE) if n > 1 else f
 
 
 def plan(tree: Tree, fext_of, tau, qdd, qdd_of) -> ChainPlan | None:
