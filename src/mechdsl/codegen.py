@@ -299,8 +299,9 @@ class FunctionSet(Mapping):
     """
 
     def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None, derivatives: int = 0,
-                 sx: bool = False):
+                 sx: bool = False, jacobian_evaluated: bool = True):
         self.eom = eom
+        self.jacobian_evaluated = bool(jacobian_evaluated)
         self.derivatives = int(derivatives)
         self.sx = bool(sx)
         self.outputs = None if outputs is None else tuple(outputs)
@@ -348,7 +349,8 @@ class FunctionSet(Mapping):
         ode = next((f for f in funcs if f.name() == "ode"), None)
         self.looped = ode is not None and ode.is_a("MXFunction") and self.eom.qdd is not None
         loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names,
-                                              derivatives=self.derivatives, forward_only=self.looped)
+                                              derivatives=self.derivatives,
+                                              forward_only=self.looped or not self.jacobian_evaluated)
         if note:
             self.notes.append(note)
         if loaded is None:
@@ -369,7 +371,7 @@ _STRUCTURE = ("q", "qd", "t", "u", "p", "T", "V", "M", "bias", "qdd", "g", "outp
 
 
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, derivatives: int = 0,
-                     sx: bool = False) -> FunctionSet:
+                     sx: bool = False, jacobian_evaluated: bool = True) -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
 
     derivatives=2 (with compiled=True): the library also holds the first and second
@@ -378,6 +380,11 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     then run in compiled code instead of failing ("Derivatives cannot be calculated").
     sx=True: ``ode`` is an SX Function for every model up to SX_SOLVE_MAX coordinates (see
     ``build_ode``); the simulator keeps the numeric QR solve (sx=False).
+
+    jacobian_evaluated=False (with compiled=True): ``ode_jacobian`` is only constructed, never
+    evaluated (CVODES with functional iteration sets it up): the library holds the forward
+    derivative of ``ode``, from which CasADi can assemble it, instead of the Jacobian's C (774 kB
+    and most of a minute of gcc for the 12-link chain).
 
     names: restrict to these Functions (default: all that apply); outputs: restrict the
     ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
@@ -388,12 +395,13 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     # values) share Functions, compiled libraries and the integrators built on them
     objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
     key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
-           None if outputs is None else tuple(outputs), int(derivatives), bool(sx))
+           None if outputs is None else tuple(outputs), int(derivatives), bool(sx), bool(jacobian_evaluated))
     hit = _SETS.get(key)
     if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
         _SETS[key] = _SETS.pop(key)            # most recently used last
         return hit[1]
-    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives, sx=sx)
+    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives, sx=sx,
+                     jacobian_evaluated=jacobian_evaluated)
     if len(_SETS) >= _SETS_MAX:
         _SETS.pop(next(iter(_SETS)))
     _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique

@@ -52,6 +52,9 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
 # methods that never evaluate the Jacobian of the right-hand side (compiled code can omit it;
 # CVODES asks for derivatives when it is set up, even with functional iteration)
 NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853")
+# methods that set the Jacobian up but never evaluate it (functional iteration): compiled code
+# holds the ode's forward derivative, from which CasADi can build it, not the Jacobian's C
+JACOBIAN_SETUP_ONLY = ("cvodes-adams",)
 FIXED_STEP = ("rk", "collocation")
 # order of accuracy used to pick a fixed step from the tolerance (h * omega = 0.5 * rtol^(1/order))
 FIXED_ORDER = {"rk": 4, "collocation": 5}

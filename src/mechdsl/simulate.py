@@ -92,7 +92,8 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         funcs = opts["functions"]
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
-                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
+                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"),
+                                 jacobian_evaluated=method not in I.JACOBIAN_SETUP_ONLY)
         funcs["ode"]  # compile now (notes below)
         funcs = drive.closed(funcs)
     else:
