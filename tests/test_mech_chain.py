@@ -163,13 +163,13 @@ def _code_size(f):
 
 
 def test_c_code_grows_with_log_n():
-    # CasADi nests mapaccum in base 8: 4x the links add at most one level of 8 calls per pass
+    # CasADi nests mapaccum in base 8 (over groups of 8 links): 4x the links add at most one level
     small, big = derive(nlink(30)), derive(nlink(120))
     loop_small, loop_big = _code_size(small.qdd_loop.ode(small)), _code_size(big.qdd_loop.ode(big))
     unrolled_small, unrolled_big = _code_size(build_ode(small)), _code_size(build_ode(big))
     assert unrolled_big >= 3.5 * unrolled_small
     assert loop_big <= 1.6 * loop_small
-    assert loop_big <= 0.25 * unrolled_big
+    assert loop_big <= 0.3 * unrolled_big
 
 
 def test_looped_only_where_it_pays():

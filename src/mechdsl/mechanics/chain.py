@@ -40,6 +40,7 @@ LOOP_MIN = 4          # links in a run below which nothing is looped
 _NPOSE = 18           # carry of pass 1: vec(R), o, w, v
 _NART = 33            # carry of pass 2: vec(A), vec(B), vec(C), pn, pf
 _NACC = 6             # carry of pass 3: aw, av
+GROUP = 8             # links per inlined kernel call (4: 1.2x the instructions, 16: 1.5x the C)
 _BASE = {"base": 8}   # mapaccum nests loops of 8 calls (base 4: smaller C, slower; 16: larger C)
 
 
@@ -330,32 +331,17 @@ class ChainPlan:
         return ca.Function("ode", [t, x, u, p], [ca.vertcat(x[n:], qdd)], ["t", "x", "u", "p"], ["xdot"])
 
     @staticmethod
-    def _rows(xall, index, seg, used, reverse=False):
-        """The data rows ``used`` of a segment, each 1 x n (one column per link): a symbol shared
-        by every link is repeated, consecutive inputs are a slice, other rows a gather."""
-        n = len(seg.links)
+    def _indices(index, seg, used, reverse=False):
+        """Per data row in ``used``: the positions in (t, x, u, p) of its value for each link."""
         out = []
         for j in used:
             idx = [index[col[j].element_hash()] for col in seg.data]
-            if reverse:
-                idx.reverse()
-            if all(i == idx[0] for i in idx):
-                out.append(ca.repmat(xall[idx[0]], 1, n))
-            elif idx == list(range(idx[0], idx[0] + n)):
-                out.append(ca.reshape(xall[idx[0]:idx[0] + n], 1, n))
-            else:
-                out.append(ca.reshape(xall[idx], 1, n))
+            out.append(idx[::-1] if reverse else idx)
         return out
 
-    @staticmethod
-    def _flip(Y):
-        """Y with its columns in reverse order."""
-        m, n = Y.shape
-        if n <= 1 or m == 0:
-            return Y
-        return ca.reshape(ca.vec(Y)[[(n - 1 - j) * m + r for j in range(n) for r in range(m)]], m, n)
-
     def _nud(self, xall, index):
+        """Three passes over the segments.  Values handed from pass to pass are flat vectors,
+        link by link in the order the pass produced them (pass 2 runs bottom-up)."""
         segs = self.segments
         seg_of = {s.bottom: s for s in segs}
         y1, y2, pose, acc, art = {}, {}, {}, {}, {}
@@ -365,43 +351,120 @@ class ChainPlan:
 
         for s in segs:                                   # pass 1, top-down
             lam = self.parent[s.top]
-            nl = len(s.links)
             if lam >= 0:
                 cin = into(pose[lam], seg_of[lam].k1.carry, s.k1.carry)
             else:
                 cin = into(ca.MX(0, 1), _WORLD, s.k1.carry)
-            C, y1[id(s)] = _loop(s.k1.f, nl)(cin, *self._rows(xall, index, s, s.k1.used))
-            pose[s.bottom] = C[:, nl - 1]
-        for s in reversed(segs):                         # pass 2, bottom-up: columns reversed
-            nl = len(s.links)
+            pose[s.bottom], (y1[id(s)],) = _run(s.k1, len(s.links), cin, xall,
+                                                self._indices(index, s, s.k1.used), [])
+        for s in reversed(segs):                         # pass 2, bottom-up
             cin = ca.MX.zeros(len(s.k2.carry.rows), 1)
             for val, lay in art.pop(s.bottom, []):
                 cin = cin + into(val, lay, s.k2.carry)
-            rows = self._rows(xall, index, s, s.k2.used, reverse=True)
-            C, Y = _loop(s.k2.f, nl)(cin, *rows, self._flip(y1[id(s)]))
-            y2[id(s)] = self._flip(Y)
+            top, (y2[id(s)],) = _run(s.k2, len(s.links), cin, xall, self._indices(index, s, s.k2.used, reverse=True),
+                                     [(y1[id(s)], True)])
             lam = self.parent[s.top]
             if lam >= 0:
-                art.setdefault(lam, []).append((C[:, nl - 1], s.k2.carry))
+                art.setdefault(lam, []).append((top, s.k2.carry))
         parts = []
         for s in segs:                                   # pass 3, top-down
             lam = self.parent[s.top]
-            nl = len(s.links)
             if lam >= 0:
                 cin = into(acc[lam], seg_of[lam].k3.carry, s.k3.carry)
             else:
                 cin = into(ca.MX(0, 1), _Layout(_NACC), s.k3.carry)
-            rows = self._rows(xall, index, s, s.k3.used)
-            C, Y = _loop(s.k3.f, nl)(cin, *rows, y1[id(s)], y2[id(s)])
-            acc[s.bottom] = C[:, nl - 1]
+            acc[s.bottom], (nd,) = _run(s.k3, len(s.links), cin, xall, self._indices(index, s, s.k3.used),
+                                        [(y1[id(s)], False), (y2[id(s)], True)])
             if s.kern.k:
-                parts.append(ca.vec(Y))
+                parts.append(nd)
         return ca.vertcat(*parts) if parts else ca.MX(0, 1)
+
+
+def _row(xall, idx: list):
+    """The values xall[idx] as a 1 x len(idx) row: repeated, a (strided) slice, or a gather."""
+    n = len(idx)
+    if all(i == idx[0] for i in idx):
+        return ca.repmat(xall[idx[0]], 1, n)
+    step = idx[1] - idx[0] if n > 1 else 1
+    if step > 0 and idx == list(range(idx[0], idx[0] + step * n, step)):
+        return ca.reshape(xall[idx[0]:idx[0] + step * (n - 1) + 1:step], 1, n)
+    return ca.reshape(xall[idx], 1, n)
+
+
+def _stepper(k: _Kernel, U: int, shared: tuple) -> ca.Function:
+    """U consecutive steps of kernel k as one SX Function (inlined: one call per U links).
+
+    The data rows at positions ``shared`` (of k.used) hold one value for every link: they ride
+    in the carry (passed through unchanged) instead of being repeated per link.  Signature:
+    (carry + shared, varying rows per step ..., other inputs stacked) -> (carry + shared,
+    other outputs stacked)."""
+    f = k.f
+    nd = len(k.used)
+    c = ca.SX.sym("c", f.size1_in(0))
+    sh = ca.SX.sym("s", len(shared))
+    data = [[sh[shared.index(j)] if j in shared else ca.SX.sym(f"d{u}_{j}") for j in range(nd)] for u in range(U)]
+    varying = [data[u][j] for u in range(U) for j in range(nd) if j not in shared]
+    ins = [ca.SX.sym(f"i{i}", U * f.size1_in(1 + nd + i)) for i in range(f.n_in() - 1 - nd)]
+    outs = [[] for _ in range(f.n_out() - 1)]
+    cur = c
+    for u in range(U):
+        args = [cur, *data[u]]
+        for i, x in enumerate(ins):
+            m = f.size1_in(1 + nd + i)
+            args.append(x[u * m:(u + 1) * m])
+        res = f(*args)
+        cur = res[0]
+        for o, r in zip(outs, res[1:]):
+            o.append(r)
+    return ca.Function(f"{f.name()}_x{U}", [ca.vertcat(c, sh), *varying, *ins],
+                       [ca.vertcat(cur, sh), *[ca.vertcat(*o) for o in outs]])
 
 
 def _loop(f: ca.Function, n: int) -> ca.Function:
     """f applied n times, its first output fed back as its first input (C: nested loops)."""
     return f.mapaccum(f.name() + "_loop", n, 1, _BASE) if n > 1 else f
+
+
+def _steps(flat, m: int, n: int, lo: int, hi: int, U: int, reverse: bool):
+    """Steps lo..hi-1 of a flat link-by-link vector of n links (m values each; step s is link
+    n-1-s when reverse) as the matrix a loop maps over: (U m) x ((hi - lo) / U)."""
+    if m == 0:
+        return ca.MX(0, (hi - lo) // U)
+    if not reverse:
+        block = flat[lo * m:hi * m]
+    else:
+        block = flat[[(n - 1 - s) * m + r for s in range(lo, hi) for r in range(m)]]
+    return ca.reshape(block, U * m, (hi - lo) // U)
+
+
+def _run(k: _Kernel, n: int, cin, xall, rows: list, ys: list):
+    """Kernel k over a sequence of n links, from carry cin: (last carry, [outputs flat, step by
+    step]).  rows: per data row of k, its index into xall for every step; ys: per other input,
+    (flat vector of a pass's outputs, whether its steps run in reverse to this one's).  Groups
+    of GROUP links run as one inlined call in a loop, the remaining n mod GROUP one by one."""
+    f = k.f
+    nd = len(k.used)
+    sizes = [f.size1_in(1 + nd + i) for i in range(len(ys))]
+    shared = tuple(j for j, idx in enumerate(rows) if all(i == idx[0] for i in idx))
+    vary = [idx for j, idx in enumerate(rows) if j not in shared]
+    nc = f.size1_in(0)
+    carry = ca.vertcat(cin, *[xall[rows[j][0]] for j in shared])
+    U = GROUP if n >= 2 * GROUP else 1
+    G = n // U
+    outs = []
+    spans = [(0, G * U, U)] if U > 1 else []
+    if n - G * U or U == 1:
+        spans.append((G * U if U > 1 else 0, n, 1))
+    for lo, hi, u_ in spans:
+        cnt = (hi - lo) // u_
+        args = [carry]
+        for u in range(u_):
+            args += [_row(xall, idx[lo + u:hi:u_]) for idx in vary]
+        args += [_steps(y, m, n, lo, hi, u_, rev) for (y, rev), m in zip(ys, sizes)]
+        res = _loop(_stepper(k, u_, shared), cnt)(*args)
+        carry = res[0][:, cnt - 1]
+        outs.append([ca.vec(Y) for Y in res[1:]])
+    return carry[:nc], [ca.vertcat(*parts) for parts in zip(*outs)]
 
 
 def plan(tree: Tree, fext_of, tau, qdd, qdd_of) -> ChainPlan | None:
