@@ -161,6 +161,27 @@ def nlink_table(quick):
     return r.stdout.strip()
 
 
+def chain_table(quick):
+    """benchmarks/chain_kernel.py (unrolled vs looped ode per N), run as a subprocess."""
+    sizes = "2,12,50" if quick else "2,12,50,100,200"
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    log("== chain_kernel.py " + sizes)
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "chain_kernel.py"), "--sizes", sizes],
+                       capture_output=True, text=True, env=env, cwd=ROOT)
+    if r.returncode != 0:
+        return f"benchmarks/chain_kernel.py failed:\n\n```\n{r.stderr[-2000:]}\n```\n"
+    return r.stdout.strip()
+
+
+CHAIN_TEXT = ("`benchmarks/chain_kernel.py` (issue 16): the N-rod chain's `ode` unrolled (one SX expression) "
+              "and looped (per-link kernels chained by `mapaccum`, mechanics/chain.py; none below a run of 4 "
+              "identical links); C bytes of the ode alone (in parentheses without the static index tables), "
+              "wall time of `codegen.compile_functions` (gcc at mechdsl's flags by size), one evaluation "
+              "through `FastFunction` compiled and in the virtual machine, and the ratios looped / unrolled. "
+              "The simulator compiles the looped form for chains over 8000 SX operations (`codegen.LOOP_OPS`) "
+              "and always evaluates the unrolled form in the virtual machine.")
+
+
 def simulation_scaling(quick):
     """CPU time of simulating the N-link chain for 5 s at rtol = atol = 1e-8 (erk and
     cvodes-adams, virtual machine), min of 3 after a warm-up."""
@@ -338,7 +359,8 @@ def page(ctx) -> str:
               "one right-hand-side evaluation in the virtual machine and compiled, against Pinocchio's ABA "
               "(C++) and sympy.physics.mechanics, with the accuracy against both.", "", ctx["nlink"], "",
               "Simulating the chain for 5 s at rtol = atol = 1e-8 (virtual machine, CPU time, min of 3 "
-              "after a warm-up):", "", ctx["simscale"], ""]
+              "after a warm-up):", "", ctx["simscale"], "",
+              "### Chains as loops over per-link kernels", "", CHAIN_TEXT, "", ctx["chain"], ""]
     if ctx.get("control"):
         parts += ["## Optimal control: cart-pole swing-up", "", CONTROL_TEXT, "", "```", *ctx["control"], "```", ""]
     return "\n".join(parts).rstrip() + "\n"
@@ -385,6 +407,7 @@ def main(argv=None) -> int:
     log("== stability suite")
     ctx["cases"] = run_cases(available_cases(), "small" if a.quick else "full", figs, log=log)
     ctx["nlink"] = "(left out: --no-nlink)" if a.no_nlink else nlink_table(a.quick)
+    ctx["chain"] = "(left out: --no-nlink)" if a.no_nlink else chain_table(a.quick)
     log("== simulation cost against N")
     ctx["simscale"] = simulation_scaling(a.quick)
     from control_swingup import rows as control_rows
