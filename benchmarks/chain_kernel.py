@@ -36,8 +36,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import casadi as ca  # noqa: E402
 
 import mechdsl  # noqa: E402
+from mechdsl.bench.report import markdown_table  # noqa: E402
 from mechdsl.codegen import FastFunction, build_ode, compile_functions  # noqa: E402
-from nlink import mech_text  # noqa: E402
+from nlink import fmt, mech_text  # noqa: E402
 
 
 def c_sizes(f) -> tuple[int, int]:
@@ -83,10 +84,6 @@ def measure(f, N, pv, compile_it: bool) -> dict:
     return row
 
 
-def fmt(x, spec):
-    return "n/a" if x is None else format(x, spec)
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", default="2,12,50,100,200")
@@ -116,19 +113,18 @@ def main(argv=None) -> int:
         a_, b_ = r["l"].get(k), r["u"].get(k)
         return None if a_ is None or b_ is None else a_ / b_
 
-    head = ("| N | unrolled SX ops | C bytes unrolled / looped (code) | gcc s unrolled / looped (flags) | ratio gcc "
-            "| compiled us unrolled / looped | ratio compiled | VM us unrolled / looped | ratio VM "
-            "| looped - unrolled |")
-    print(head)
-    print("|" + "|".join("---" for _ in range(head.count("|") - 1)) + "|")
+    head = ["N", "unrolled SX ops", "C bytes unrolled / looped (code)", "gcc s unrolled / looped (flags)",
+            "ratio gcc", "compiled us unrolled / looped", "ratio compiled", "VM us unrolled / looped", "ratio VM",
+            "looped - unrolled"]
+    body = []
     for r in rows:
         u, lo = r["u"], r["l"]
         flags = "/".join(x for x in (u.get("flags"), lo.get("flags")) if x)
-        print(f"| {r['N']} | {r['ops']} | {u['bytes']} / {fmt(lo.get('bytes'), 'd')} ({fmt(lo.get('code'), 'd')}) "
-              f"| {fmt(u.get('gcc'), '.2f')} / {fmt(lo.get('gcc'), '.2f')} ({flags}) | {fmt(ratio(r, 'gcc'), '.2f')} "
-              f"| {fmt(u.get('comp'), '.3g')} / {fmt(lo.get('comp'), '.3g')} | {fmt(ratio(r, 'comp'), '.2f')} "
-              f"| {u['vm']:.3g} / {fmt(lo.get('vm'), '.3g')} | {fmt(ratio(r, 'vm'), '.1f')} "
-              f"| {fmt(r['err'], '.1e')} |")
+        body.append([r["N"], r["ops"], f"{u['bytes']} / {fmt(lo.get('bytes'), 'd')} ({fmt(lo.get('code'), 'd')})",
+                     f"{fmt(u.get('gcc'), '.2f')} / {fmt(lo.get('gcc'), '.2f')} ({flags})", fmt(ratio(r, "gcc"), ".2f"),
+                     f"{fmt(u.get('comp'), '.3g')} / {fmt(lo.get('comp'), '.3g')}", fmt(ratio(r, "comp"), ".2f"),
+                     f"{u['vm']:.3g} / {fmt(lo.get('vm'), '.3g')}", fmt(ratio(r, "vm"), ".1f"), fmt(r["err"], ".1e")])
+    print(markdown_table(head, body))
     by = {r["N"]: r for r in rows}
     if 50 in by and 200 in by and by[50]["l"] and by[200]["l"]:
         g50, g200 = by[50]["l"]["gcc"], by[200]["l"]["gcc"]
