@@ -108,6 +108,8 @@ def test_one_odd_link_splits_the_run():
     # link 6 is shorter (a constant length instead of l): it and the link hanging from it differ
     e = derive(rod_tree(chain(12, L=lambda i: const(0.5) if i == 6 else P("l"))))
     assert agree(e) == [1, 4, 1, 1, 5]
+    segs = e.qdd_loop.segments
+    assert segs[1].k2 is segs[4].k2 and segs[1].k3 is segs[4].k3     # one kernel (one C function) for both runs
 
 
 def test_odd_axis_in_the_middle():
@@ -148,6 +150,8 @@ def test_inputs_and_folded_inputs():
 
 def test_no_plan_without_a_run_or_for_a_changed_qdd():
     assert derive(nlink(3)).qdd_loop is None                 # too short to loop
+    bushy = chain(4) + [lk for b in range(6) for lk in chain(2, f"b{b}x", parent="r2")]
+    assert derive(rod_tree(bushy)).qdd_loop is None          # a run of 4 among 16 links: not worth it
     assert derive(rod_tree(chain(8, axis=lambda i: (0, 0, 1) if i % 2 else (1, 0, 0)))).qdd_loop is None
     e = derive(nlink(8))
     assert e.qdd_loop is not None

@@ -27,10 +27,10 @@ layout being the fixpoint of the kernel's own output, so a planar chain loops ov
 kernels.  The joint transform is computed once, in pass 1 (it holds a revolute joint's
 trigonometry), and handed on.
 
-``plan`` returns None when the looped form would not pay (no run of ``LOOP_MIN`` links) or
-does not apply; callers then use the unrolled expression.  ``ChainPlan.ode(eom)`` assembles
-the MX Function ``(t, x, u, p) -> xdot`` (or None when the EOM's fields are no longer the
-ones the plan was made for).  Cost (benchmarks/chain_kernel.py): about 2x the instructions of
+``plan`` returns None when the looped form would not pay (runs of ``LOOP_MIN`` or more links
+hold less than half of the links) or does not apply; callers then use the unrolled
+expression.  ``ChainPlan.ode(eom)`` assembles the MX Function ``(t, x, u, p) -> xdot`` (or
+None when the EOM's fields are no longer the ones the plan was made for).  Cost (benchmarks/chain_kernel.py): about 2x the instructions of
 the unrolled C per evaluation and 10-20x the time in the virtual machine, so ``codegen`` uses
 it for compiled code of big chains only.
 """
@@ -125,25 +125,37 @@ class ChainPlan:
 
     def _kernels(self):
         """Each segment's three kernels, the carry layouts settled pass by pass in the order
-        the values flow (a parent's layout is held by its children's)."""
+        the values flow (a parent's layout is held by its children's).  Segments of one class
+        with the same layouts share their kernels (one C function each)."""
+        cache: dict = {}
+
+        def kernel(s, which, build, lay, *key):
+            k = (id(s.kern), which, lay, *key)
+            if k not in cache:
+                got = settle(build, lay, s.kern.form.xi, which, dense_extra=which == "aba_acc")
+                settled = (id(s.kern), which, got.carry, *key)   # another start may settle alike
+                cache[k] = cache.setdefault(settled, got)
+            return cache[k]
+
         out1, out2, out3 = {}, {}, {}
         for s in self.segments:                              # pass 1, top-down
             lam = self.parent[s.top]
-            xi = s.kern.form.xi
-            s.k1 = settle(s.kern.pass1, out1[lam] if lam >= 0 else _WORLD, xi, "aba_fwd")
+            s.k1 = kernel(s, "aba_fwd", s.kern.pass1, out1[lam] if lam >= 0 else _WORLD)
             out1[s.bottom] = s.k1.carry
         for s in reversed(self.segments):                    # pass 2, bottom-up
             lay = Layout(NART)
             for c in out2.pop(s.bottom, []):
                 lay = lay.join(c)
-            s.k2 = settle(lambda la, s=s: s.kern.pass2(la, s.k1.extra[0]), lay, s.kern.form.xi, "aba_bwd")
+            y1 = s.k1.extra[0]
+            s.k2 = kernel(s, "aba_bwd", lambda la, s=s, y1=y1: s.kern.pass2(la, y1), lay, y1)
             lam = self.parent[s.top]
             if lam >= 0:
                 out2.setdefault(lam, []).append(s.k2.carry)
         for s in self.segments:                              # pass 3, top-down
             lam = self.parent[s.top]
-            s.k3 = settle(lambda la, s=s: s.kern.pass3(la, s.k1.extra[0], s.k2.extra[0]),
-                           out3[lam] if lam >= 0 else Layout(NACC), s.kern.form.xi, "aba_acc", dense_extra=True)
+            y1, y2 = s.k1.extra[0], s.k2.extra[0]
+            s.k3 = kernel(s, "aba_acc", lambda la, s=s, y1=y1, y2=y2: s.kern.pass3(la, y1, y2),
+                          out3[lam] if lam >= 0 else Layout(NACC), y1, y2)
             out3[s.bottom] = s.k3.carry
 
     def ode(self, eom) -> ca.Function | None:
@@ -229,7 +241,8 @@ class ChainPlan:
 
 
 def plan(tree: Tree, fext_of, tau, qdd, qdd_of) -> ChainPlan | None:
-    """The looped form of the ABA over ``tree``, or None when no run of LOOP_MIN identical links.
+    """The looped form of the ABA over ``tree``, or None unless runs of at least LOOP_MIN
+    identical links hold at least half of the links.
 
     fext_of(kin) -> {link: (n, f)}: the external forces on a kinematics object; tau: the joint
     forces (SX, one per speed); qdd: the unrolled q'' the plan reproduces; qdd_of(nud) -> q''."""
@@ -259,7 +272,8 @@ def plan(tree: Tree, fext_of, tau, qdd, qdd_of) -> ChainPlan | None:
             continue
         kern = kernels.setdefault(fm.key, LinkKernels(fm))
         segments.append(_Segment([lk.index], kern, [fm.data]))
-    if max(len(s.links) for s in segments) < LOOP_MIN:
+    looped = sum(len(s.links) for s in segments if len(s.links) >= LOOP_MIN)
+    if 2 * looped < len(links):      # mostly other links: the unrolled expression is smaller
         return None
     nud = ca.SX.sym("nud", len(tree.dofs))
     expr = qdd_of(nud)
