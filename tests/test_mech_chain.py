@@ -177,7 +177,9 @@ def test_c_code_grows_with_log_n():
 
 
 def test_looped_only_where_it_pays():
-    assert looped_ode(derive(nlink(12))) is None        # small: the unrolled C is faster and compiles fast
+    small = derive(nlink(12))
+    assert looped_ode(small) is None        # small: the unrolled C is faster and compiles fast
+    assert not small.__dict__["qdd_loop"].done            # ... and its plan is not even built
     big = derive(nlink(80))
     assert looped_ode(big) is not None
     assert build_ode(big, loop=True).is_a("MXFunction")

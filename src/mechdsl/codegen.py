@@ -141,16 +141,14 @@ def looped_ode(eom, force: bool = False):
     ``force``, an unrolled qdd of more than LOOP_OPS operations: the looped C compiles in about a
     second at any N but evaluates 2-3x slower than the unrolled C, and 10-20x slower in the
     virtual machine (benchmarks/chain_kernel.py), so it is used for compiled code only."""
-    if eom.qdd is None:
-        return None
-    plan = getattr(eom, "qdd_loop", None)
-    if plan is None:
+    if eom.qdd is None or eom.__dict__.get("qdd_loop") is None:    # (not forcing a lazy plan)
         return None
     if not force:
         s = _Symbols(eom)
         if _function("qdd", s.txup, [eom.qdd], TXUP, ["qdd"]).n_instructions() <= LOOP_OPS:
             return None
-    return plan.ode(eom)
+    plan = eom.qdd_loop
+    return None if plan is None else plan.ode(eom)
 
 
 def build_ode(eom, sx: bool = False, loop: bool = False):
