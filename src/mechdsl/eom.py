@@ -65,6 +65,9 @@ class EOM:
     u: object | None = None
     inputs: tuple[str, ...] = ()
     input_defaults: tuple[float, ...] = ()     # the value of each input when nothing drives it
+    # qdd as loops over per-link kernels (mechanics/chain.py ChainPlan: ``.ode(eom)`` gives the
+    # MX Function), or None where the topology has no run of identical links
+    qdd_loop: object | None = None
 
     @property
     def u_sym(self):
