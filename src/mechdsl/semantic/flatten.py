@@ -8,6 +8,7 @@ and reported together.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 from .. import ast
@@ -24,6 +25,8 @@ from . import values as V
 from .evaluate import BUILTIN_NAMES, EvalError, Evaluator, fail
 from .mods import Mod
 from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
+
+_CONSTRAINT_WORD = re.compile(r"[^0-9A-Za-z_]+")
 
 SCALAR_TYPES = {"Real", "Integer", "Boolean"}
 PARAM_ATTRS = {"unit", "min", "max", "displayUnit"}
@@ -873,11 +876,23 @@ class Flattener(Evaluator):
                 if not any(isinstance(n, (ir.Coord, ir.PointPos, ir.BodyRot)) for n in X.walk(s.expr)):
                     fail("E309", "this equation involves no coordinate", eq.span,
                          "an equation is a constraint on coordinates; to define a quantity use `Real x = ...;`")
-                nm = f"c{len(self.constraints) + 1}"
+                alias = f"c{len(self.constraints) + 1}"
+                nm = self._constraint_name(eq.doc, k if len(items) > 1 else None) or alias
                 self.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
-                                                      eq.span))
+                                                      eq.span, alias=alias))
             return
         raise AssertionError(type(eq))
+
+    def _constraint_name(self, doc: str, item: int | None) -> str | None:
+        """A constraint's name from its description ("rod" -> rod; words joined by _, loop indices
+        and vector items appended: "rod" in `for i` -> rod_1, rod_2), or None (then c<k>) when the
+        description is empty, not a word, or the name is taken."""
+        base = _CONSTRAINT_WORD.sub("_", (doc or "").strip()).strip("_")
+        if not base or not base.isidentifier() or len(base) > 40:
+            return None
+        parts = [base] + [str(v) for v in self.loop_vars.values()] + ([str(item + 1)] if item is not None else [])
+        nm = "_".join(parts)
+        return None if any(c.name == nm or c.alias == nm for c in self.constraints) else nm
 
     def _connect(self, eq: ast.Connect) -> None:
         el = self.eval(eq.element)
