@@ -315,6 +315,8 @@ class GeneralizedForce:
     coordinate: str
     Q: Expr
     span: Span = field(default_factory=Span)
+    note: str = ""            # what it is when built from a component (Friction: the law)
+    regularization: Expr | None = None   # Friction: v_eps (an expression in parameters)
 
 
 @dataclass(frozen=True)

@@ -140,6 +140,12 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    "a torque applied to a body"),
     ComponentClass("GeneralizedForce", "force", (_f("coordinate", "coordinate"), _f("Q", "scalar")),
                    "a generalized force on one coordinate"),
+    ComponentClass("Friction", "force", (
+        _f("coordinate", "coordinate", doc="the joint variable or coordinate the friction acts on"),
+        _f("F", "scalar", doc="Coulomb friction force or torque while sliding (mu N; may depend on the state)"),
+        _f("v_eps", "scalar", 1e-3, doc="regularization speed (coordinate units per second): "
+                                         "Q = -F tanh(der(q)/v_eps)")),
+        "regularized Coulomb friction on one coordinate (joint friction, a block sliding on a guide)"),
     ComponentClass("Gravitation", "force", (_f("bodies", "bodies"), _f("G", "scalar", 6.6743e-11, U.GRAV_CONST)),
                    "mutual Newtonian gravitation between bodies (at their mass centres)"),
     ComponentClass("Potential", "force", (_f("V", "scalar", dim=U.ENERGY),),

@@ -1085,6 +1085,8 @@ class Flattener(Evaluator):
             out.forces.append(ir.AppliedTorque(name, f["body"].name, K.as_vec3(f["tau"], "tau"), f["frame"].name, span))
         elif cls.name == "GeneralizedForce":
             out.forces.append(ir.GeneralizedForce(name, f["coordinate"].expr.name, e(f["Q"], "Q"), span))
+        elif cls.name == "Friction":
+            out.forces.append(self._friction(name, f, span))
         elif cls.name == "Gravitation":
             names = tuple(b.name for b in f["bodies"].items)
             if len(set(names)) != len(names):
@@ -1097,6 +1099,24 @@ class Flattener(Evaluator):
                      "velocity-dependent forces go into a Force, GeneralizedForce or the dissipation function")
             out.terms.append(ir.Term("potential", v.expr, name, span))
         return out
+
+
+    def _friction(self, name: str, f, span) -> ir.GeneralizedForce:
+        """Regularized Coulomb friction: Q = -F tanh(der(q) / v_eps) (docs/mechanics.md#friction)."""
+        c = f["coordinate"]
+        coord = c.expr.name
+        F, v_eps = f["F"], f.get("v_eps")
+        if isinstance(c.dim, U.Dim):
+            self.check_dim(F, U.ENERGY / c.dim, f"'F' of '{name}'", span)
+            if v_eps is not None:
+                self.check_dim(v_eps, c.dim / U.TIME, f"'v_eps' of '{name}'", span)
+        eps = K.as_expr(v_eps, "v_eps") if v_eps is not None else X.const(1e-3)
+        if X.is_const(eps) and not eps.value > 0:
+            fail("E241", f"the regularization speed v_eps of '{name}' must be positive, got {eps.value:g}", span,
+                 "v_eps > 0: friction is -F tanh(v / v_eps); a smaller v_eps is closer to dry friction, stiffer")
+        Q = X.neg(X.mul(K.as_expr(F, "F"), X.func("tanh", X.div(ir.Speed(coord), eps))))
+        return ir.GeneralizedForce(name, coord, Q, span, note=f"Coulomb friction on {coord}: -F tanh(der({coord})/v_eps)",
+                                   regularization=eps)
 
 
 # ---------------------------------------------------------------------------- helpers

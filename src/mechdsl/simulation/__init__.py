@@ -64,6 +64,13 @@ def solve(problem: Problem, progress=None) -> Result:
                    "rtol": s.rtol, "atol": s.atol,
                    "compiled": bool(meta.get("compiled", (meta.get("options") or {}).get("compiled", False))),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
+    from ..eom import parameter_vector
+    from ..friction import friction_notes
+
+    eom = problem.eom
+    notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
+    if notes:
+        meta["friction"] = notes          # regularized laws and their regularization (issue 17)
     if "versions" not in meta:
         from ..simulate import versions
 
