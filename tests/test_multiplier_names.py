@@ -59,3 +59,11 @@ end Three;
     m = mechdsl.loads(src, filename="three.mech")
     assert [c.name for c in m.model.constraints] == ["tie_rod_1", "tie_rod_2", "c3"]
     assert [c.alias for c in m.model.constraints] == ["c1", "c2", "c3"]
+
+
+def test_old_names_still_read_from_results():
+    r = _model("squared").simulate(0.5, points=6, reactions=True)
+    assert "lambda[c1]" in r and "residual(c1)" in r
+    assert np.array_equal(r["lambda[c1]"], r["lambda[rod]"])
+    assert np.array_equal(r["residual(c1)"], r["residual(rod)"])
+    assert r.metadata["aliases"]["lambda[c1]"] == "lambda[rod]"

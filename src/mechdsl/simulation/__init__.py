@@ -71,6 +71,11 @@ def solve(problem: Problem, progress=None) -> Result:
     notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
     if notes:
         meta["friction"] = notes          # regularized laws and their regularization (issue 17)
+    renamed = [c for c in (eom.model.constraints if getattr(eom, "model", None) is not None else ())
+               if c.alias and c.alias != c.name]
+    if renamed:                           # constraints named after their description: old names still read
+        meta["aliases"] = {**{f"lambda[{c.alias}]": f"lambda[{c.name}]" for c in renamed},
+                           **{f"residual({c.alias})": f"residual({c.name})" for c in renamed}}
     if "versions" not in meta:
         from ..simulate import versions
 
