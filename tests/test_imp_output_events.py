@@ -70,3 +70,21 @@ def test_output_events_cli_flag(tmp_path):
     col = header.index("event")
     sides = [float(line.split(",")[col]) for line in lines[1:]]
     assert sides == [0, -1, 1, 0, 0]                 # t = 0, the impact (before, after), t = 0.5, 1
+
+
+def test_output_events_scene_setting_and_other_problems():
+    src = BALL.read_text() + """
+scene Events "rows at every event"
+  model BouncingBall(e = 0.5);
+  stop_time = 1;
+  points = 3;
+  output_events = true;
+end Events;
+"""
+    r = mechdsl.loads(src, scene="Events").simulate()
+    t1 = math.sqrt(2 * 1.0 / 9.81)                      # impacts at t1 and t1 (1 + 2 e) = 2 t1
+    assert list(r["event"]) == [0, -1, 1, 0, -1, 1, 0]
+    assert r.t[[1, 2, 4, 5]] == pytest.approx([t1, t1, 2 * t1, 2 * t1], rel=1e-9)
+    # an ODE problem has no events: the setting is reported as without effect, not silently dropped
+    plain = mechdsl.load(MODELS / "pendulum.mech").simulate(1, points=3, output_events=True)
+    assert "settings without effect on an ODE problem: output_events = True" in plain.metadata["notes"]
