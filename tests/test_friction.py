@@ -75,3 +75,52 @@ def test_friction_force_needs_force_units():
     with pytest.raises(mechdsl.MechError) as info:
         mechdsl.loads(_bad('Friction f(coordinate = j.s, F = 1*j.s);'), filename="b.mech").eom
     assert info.value.diagnostics[0].code.startswith("E4")
+
+
+SLIDE = """
+model Slide "a point mass sliding down an incline plane: a persistent contact with friction"
+  parameter Real m(unit = "kg") = 2;
+  parameter Real g(unit = "m/s2") = 9.81;
+  parameter Real alpha(unit = "rad") = 0.3;
+  parameter Real mu = 0.5;
+  parameter Real v0(unit = "m/s") = 2;
+  Gravity gravity(g = {0, -g, 0});
+  PointMass block(m = m);
+  Planar plane(parent = world, child = block, axis = {0, 0, 1},
+               x(start = 0, speed = v0*cos(alpha)), y(start = 0, speed = -v0*sin(alpha)));
+  Contact slope(point = block, surface = "plane", normal = {sin(alpha), cos(alpha), 0}, e = 0,
+                mu = mu, v_eps = 1e-2);
+end Slide;
+"""
+
+
+def test_block_sliding_on_a_contact_with_friction():
+    """The contact's normal force N = m g cos(alpha) carries the friction mu N: the same stop time
+    as the block on the guide, found by the contact simulator with the normal force it computes."""
+    g, alpha, mu, v0, m, v_eps = 9.81, 0.3, 0.5, 2.0, 2.0, 1e-2
+    a = g * (mu * math.cos(alpha) - math.sin(alpha))
+    r = mechdsl.loads(SLIDE, filename="slide.mech").simulate(1.5, points=151, rtol=1e-9, atol=1e-11)
+    assert r.success and [e["kind"] for e in r.events] == ["close"]
+    t = r.t
+    v = r["der(plane.x)"] / math.cos(alpha)                    # speed down the slope
+    assert r["der(plane.y)"] == pytest.approx(-math.tan(alpha) * r["der(plane.x)"], abs=1e-9)   # stays on it
+    sliding = v > 0.2
+    assert v[sliding] == pytest.approx(v0 - a * t[sliding], abs=1e-7)
+    assert r["slope.force"] == pytest.approx(m * g * math.cos(alpha), rel=1e-9)
+    assert v[-1] == pytest.approx(v_eps * math.atanh(math.tan(alpha) / mu), rel=1e-4)      # the creep
+    assert r.metadata["conservative"] is False and not r.metadata["warnings"]   # no claim of conservation
+
+
+def test_contact_friction_needs_a_point():
+    src = """
+model G
+  coordinate Real y(start = 1);
+  Contact c(gap = y, e = 0.5, mu = 0.3);
+equation
+  kinetic = 1/2*der(y)^2;
+  potential = 9.81*y;
+end G;
+"""
+    with pytest.raises(mechdsl.MechError) as info:
+        mechdsl.loads(src, filename="g.mech").simulate(1.0, points=3)
+    assert info.value.diagnostics[0].code == "E862" and "friction" in info.value.diagnostics[0].message

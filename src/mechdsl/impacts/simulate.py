@@ -104,7 +104,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
         res.signals["event"] = side
     res.stats = dict(run.stats, rhs_evals=system.n_rhs, points=m, wall_time=wall, events=len(run.events),
                      impacts=sum(1 for e in run.events if e["kind"] == "impact"))
-    conservative = _conservative(eom)
+    conservative = _conservative(eom) and not system.friction
     if conservative and m:
         res.stats.update(_drift_between_events(res, run.events, side))
     reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")

@@ -161,6 +161,8 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
         _f("surface_radius", "scalar", 0.0, U.LENGTH),
         _f("inside", "bool", 0.0, doc="sphere: the point stays inside"),
         _f("e", "scalar", 1.0, U.ONE, "coefficient of restitution"),
+        _f("mu", "scalar", 0.0, U.ONE, "coefficient of sliding friction while the contact persists"),
+        _f("v_eps", "scalar", 1e-3, U.VELOCITY, "regularization speed of the sliding friction"),
         _f("gap", "scalar", None, U.LENGTH, "the gap as an expression of coordinates and time (>= 0 allowed); "
                                             "instead of point and surface, e.g. in equation-layer models")),
         "a unilateral frictionless contact with restitution"),
