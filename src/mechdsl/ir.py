@@ -123,7 +123,27 @@ class BodyRot(Expr):
 
 @dataclass(frozen=True)
 class BodyOmega(Expr):
-    """Component i of a body's angular velocity in world coordinates."""
+    """Component i of a body's angular velocity in world coordinates (frame "world", the
+    attribute ``b.w``) or in body coordinates (frame "body", ``b.w_body``)."""
+
+    body: str
+    i: int
+    frame: str = "world"
+
+
+@dataclass(frozen=True)
+class PointAcc(Expr):
+    """Component i of a point's absolute acceleration in world coordinates (``p.a``): it needs
+    the forward dynamics, so it may appear in outputs only."""
+
+    point: str
+    i: int
+
+
+@dataclass(frozen=True)
+class BodyAlpha(Expr):
+    """Component i of a body's angular acceleration in world coordinates (``b.alpha``; outputs
+    only, like PointAcc)."""
 
     body: str
     i: int

@@ -105,6 +105,7 @@ class _Deriver:
 
         query.energies = {"kinetic": T, "potential": V, "dissipation": D, "energy": T + V}
         query.reaction = self._reaction
+        query.acceleration = self._acceleration
 
         g_list, g_names = [], []
         for c in model.constraints:
@@ -307,6 +308,36 @@ class _Deriver:
         if ref.what not in ("force", "torque") or not 0 <= ref.i < 3:
             raise MechError(Diagnostic("E753", f"bad reaction component {ref.what}[{ref.i + 1}]"))
         return (f if ref.what == "force" else n)[ref.i]
+
+    # -- accelerations (p.a, b.alpha) ----------------------------------------------------
+    def _acceleration(self, key, velocity):
+        """d/dt of a velocity-level SX (a point's velocity, a body's angular velocity) along
+        the motion: (dv/dq) qd + (dv/dqd) qdd + dv/dt with qdd of the forward dynamics (SX in
+        EOM.lam in a constrained model, which the DAE solver substitutes)."""
+        memo = self.__dict__.setdefault("_accelerations", {})
+        if key not in memo:
+            v = velocity()
+            qdd = self._qdd_all(key)
+            memo[key] = (ca.mtimes(ca.jacobian(v, self.q), self.qd) + ca.mtimes(ca.jacobian(v, self.qd), qdd)
+                         + ca.jacobian(v, self.t))
+        return memo[key]
+
+    def _qdd_all(self, key):
+        if not hasattr(self, "_qdd_memo"):
+            if self.route == "aba" and not self.constrained:
+                self._qdd_memo = self.qdd
+            elif self.n <= SMALL_SOLVE:
+                M, bias = (self.M, self.bias) if self.route == "lagrange" else self._tmt()
+                if self.constrained:
+                    bias = bias - ca.mtimes(ca.jacobian(self.g, self.q).T, self.lam)
+                self._qdd_memo = ca.solve(M, bias)
+            else:
+                what = f"{key[1]}.{key[0]}"
+                raise MechError(Diagnostic("E750", f"the acceleration {what} needs the explicit forward dynamics, "
+                                                   f"not available on route '{self.route}' with {self.n} coordinates",
+                                           help="accelerations are available for trees of joints and for models "
+                                                f"with at most {SMALL_SOLVE} coordinates"))
+        return self._qdd_memo
 
     def _all_reactions(self, ref) -> dict:
         tree, kin = self.tree, self.kin

@@ -44,6 +44,8 @@ class ComponentClass:
 
     @property
     def connect_fields(self) -> tuple[str, str] | None:
+        if self.name == "RigidLink":
+            return ("a", "b")
         if self.category == "joint":
             return ("parent", "child")
         if self.name in ("Spring", "Damper", "SpringDamper"):
@@ -61,7 +63,8 @@ def _f(*a, **k) -> Field:
 
 
 _JOINT_COMMON = (_f("parent", "point", doc="point on the parent body (or world)"),
-                 _f("child", "point", doc="point on the child body"))
+                 _f("child", "point", None, doc="point on the child body (omitted: the joint's own massless frame, "
+                                                "named after the joint)"))
 _SPATIAL = (_f("sequence", "string", "zyx", doc="Euler/Cardan sequence of the three angles (intrinsic)"),
             _f("parametrization", "string", "euler", choices=("euler", "quaternion"),
                doc="'euler' (three angles, singular at gimbal lock) or 'quaternion' (singularity-free)"))
@@ -117,10 +120,14 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    roles=(("x", LEN), ("y", LEN), ("phi", ROT))),
     ComponentClass("Spherical", "joint", _JOINT_COMMON + _SPATIAL, "a ball joint (three rotations)",
                    roles=(("phi", ROT), ("theta", ROT), ("psi", ROT))),
-    ComponentClass("Free", "joint", (_f("parent", "point", "world"), _f("child", "point")) + _SPATIAL,
+    ComponentClass("Free", "joint", (_f("parent", "point", "world"), _JOINT_COMMON[1]) + _SPATIAL,
                    "six degrees of freedom (three for a point mass)",
                    roles=(("x", LEN), ("y", LEN), ("z", LEN), ("phi", ROT), ("theta", ROT), ("psi", ROT))),
     ComponentClass("Fixed", "joint", _JOINT_COMMON, "a rigid connection (no freedom)"),
+    ComponentClass("RigidLink", "joint", (_f("a", "body", doc="the body (or joint frame, or world) the link starts on"),
+                                          _f("b", "point", doc="the body or point it carries"),
+                                          _f("r", "vec3", dim=U.LENGTH, doc="where b sits, in a's axes")),
+                   "a massless rigid link: b is held at r from a's origin, with a's axes"),
     # ------------------------------------------------------------------ forces
     ComponentClass("Gravity", "force", (_f("g", "vec3", (0.0, -9.81, 0.0), U.ACCEL, "gravitational acceleration"),),
                    "uniform gravity on every body"),
