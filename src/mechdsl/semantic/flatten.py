@@ -8,7 +8,6 @@ and reported together.
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field
 
 from .. import ast
@@ -23,12 +22,12 @@ from . import instances as Inst
 from . import mods as Mods
 from . import values as V
 from .evaluate import BUILTIN_NAMES, EvalError, Evaluator, fail
+from .constraint_names import constraint_name
+from .friction import friction_force
 from .mods import Mod
 from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
 from .instance_arrays import InstanceArrays
 from .vector_starts import VECTOR_STARTS, VectorStarts
-
-_CONSTRAINT_WORD = re.compile(r"[^0-9A-Za-z_]+")
 
 SCALAR_TYPES = {"Real", "Integer", "Boolean"}
 PARAM_ATTRS = {"unit", "min", "max", "displayUnit"}
@@ -935,22 +934,12 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
                     fail("E309", "this equation involves no coordinate", eq.span,
                          "an equation is a constraint on coordinates; to define a quantity use `Real x = ...;`")
                 alias = f"c{len(self.constraints) + 1}"
-                nm = self._constraint_name(eq.doc, k if len(items) > 1 else None) or alias
+                nm = constraint_name(eq.doc, self.loop_vars.values(), k if len(items) > 1 else None,
+                                     self.constraints) or alias
                 self.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
                                                       eq.span, alias=alias))
             return
         raise AssertionError(type(eq))
-
-    def _constraint_name(self, doc: str, item: int | None) -> str | None:
-        """A constraint's name from its description ("rod" -> rod; words joined by _, loop indices
-        and vector items appended: "rod" in `for i` -> rod_1, rod_2), or None (then c<k>) when the
-        description is empty, not a word, or the name is taken."""
-        base = _CONSTRAINT_WORD.sub("_", (doc or "").strip()).strip("_")
-        if not base or not base.isidentifier() or len(base) > 40:
-            return None
-        parts = [base] + [str(v) for v in self.loop_vars.values()] + ([str(item + 1)] if item is not None else [])
-        nm = "_".join(parts)
-        return None if any(c.name == nm or c.alias == nm for c in self.constraints) else nm
 
     def _connect(self, eq: ast.Connect) -> None:
         el = self.eval(eq.element)
@@ -1169,7 +1158,7 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
         elif cls.name == "GeneralizedForce":
             out.forces.append(ir.GeneralizedForce(name, f["coordinate"].expr.name, e(f["Q"], "Q"), span))
         elif cls.name == "Friction":
-            out.forces.append(self._friction(name, f, span))
+            out.forces.append(friction_force(self, name, f, span))
         elif cls.name == "Gravitation":
             names = tuple(b.name for b in f["bodies"].items)
             if len(set(names)) != len(names):
@@ -1182,24 +1171,6 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
                      "velocity-dependent forces go into a Force, GeneralizedForce or the dissipation function")
             out.terms.append(ir.Term("potential", v.expr, name, span))
         return out
-
-
-    def _friction(self, name: str, f, span) -> ir.GeneralizedForce:
-        """Regularized Coulomb friction: Q = -F tanh(der(q) / v_eps) (docs/mechanics.md#friction)."""
-        c = f["coordinate"]
-        coord = c.expr.name
-        F, v_eps = f["F"], f.get("v_eps")
-        if isinstance(c.dim, U.Dim):
-            self.check_dim(F, U.ENERGY / c.dim, f"'F' of '{name}'", span)
-            if v_eps is not None:
-                self.check_dim(v_eps, c.dim / U.TIME, f"'v_eps' of '{name}'", span)
-        eps = K.as_expr(v_eps, "v_eps") if v_eps is not None else X.const(1e-3)
-        if X.is_const(eps) and not eps.value > 0:
-            fail("E241", f"the regularization speed v_eps of '{name}' must be positive, got {eps.value:g}", span,
-                 "v_eps > 0: friction is -F tanh(v / v_eps); a smaller v_eps is closer to dry friction, stiffer")
-        Q = X.neg(X.mul(K.as_expr(F, "F"), X.func("tanh", X.div(ir.Speed(coord), eps))))
-        return ir.GeneralizedForce(name, coord, Q, span, note=f"Coulomb friction on {coord}: -F tanh(der({coord})/v_eps)",
-                                   regularization=eps)
 
 
 # ---------------------------------------------------------------------------- helpers
