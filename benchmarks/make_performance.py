@@ -345,12 +345,18 @@ def page(ctx) -> str:
 
 
 CONTROL_TEXT = ("benchmarks/control_swingup.py: the swing-up of docs/control.md solved by IPOPT (exact "
-                "Hessian) on a hand-written CasADi cart-pole and on mechdsl's `ode` (virtual machine and "
-                "compiled), side by side in one run; solve = best wall time of the IPOPT solve, x hand = "
-                "ratio to the hand-written model's, replay gap = max |x_replay - x_optimizer| over the grid "
-                "when the optimal control is replayed through `m.simulate` (rtol 1e-10): the optimizer's "
-                "own RK4 discretization error, shrinking as h^4. Goals (issue 13): at most 1.5x the "
-                "hand-written time, the same iterations.")
+                "Hessian) on a hand-written CasADi cart-pole (parameters as numbers) and on mechdsl's `ode`: "
+                "with the parameters as the input p (`mechdsl`), built in (`fixed`: "
+                "`m.casadi(fixed_parameters=True)`), compiled, and both; RK4 multiple shooting; the last row "
+                "per N shoots on the simulator's own integrator (`m.integrator`, erk at rtol 1e-8, "
+                "docs/control.md example 2). Side by side in one run, variants interleaved; CPU s = best "
+                "CPU time (time.process_time) of the IPOPT solve, x hand = ratio to the hand-written "
+                "model's; replay gap = max |x_replay - x_optimizer| over the grid when the optimal control "
+                "is replayed through `m.simulate` (zero-order hold; rtol 1e-10, for the integrator row the "
+                "OCP's own method and tolerances), exact gap = the same against a replay at rtol 1e-12. "
+                "The RK4 rows' gaps are the optimizer's RK4 discretization error (h^4); the integrator "
+                "row's replay gap is round-off. Goals (issue 13): at most 1.5x the hand-written time, the "
+                "same iterations, the replay matching to the integrator tolerance.")
 
 
 def main(argv=None) -> int:

@@ -72,7 +72,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         from .simulation.drive import build_drive
 
         drive = build_drive(eom, s.inputs, t0, t1, xs)
-    uv = drive.vector()
+    uv = drive.vector(t0)
     vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
@@ -107,23 +107,29 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
+    breaks = drive.breakpoints(t0, t1)
     try:
-        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
-                          meta["notes"], 10 * s.budget, u=uv)
+        if breaks.size:
+            run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom,
+                                     t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
+        else:
+            run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
+                              meta["notes"], 10 * s.budget, u=uv)
     finally:
         bar.close()
     if fixed is not None:
         meta["fixed_steps"] = fixed
     failure = None
     if run.error is not None or run.reached < len(grid):
-        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=uv)
+        u_fail = drive.vector(float(grid[max(run.reached - 1, 0)]))
+        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=u_fail)
     n_ok = max(run.reached, 1)
     X = run.X[:n_ok].copy()
     X[0] = xs
     t = grid[:n_ok].copy()
     U = drive.values(t, X)
     signals = compute_signals(eom, post, t, X, pv, out_names, U=U)
-    _record_inputs(drive, U, signals, meta)
+    record_inputs(drive, U, signals, meta)
     _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
@@ -146,7 +152,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
                   stats=stats, metadata=meta, failure=failure)
 
 
-def _record_inputs(drive, U, signals, meta) -> None:
+def record_inputs(drive, U, signals, meta) -> None:
     """The inputs as signals (named as declared); bound violations of run-time signals warn."""
     for j, name in enumerate(drive.names):
         signals[name] = U[:, j].copy()
@@ -157,7 +163,7 @@ def _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive) -> Resu
     X = np.zeros((len(grid), 0))
     U = drive.values(grid, X)
     signals = compute_signals(eom, post, grid, X, pv, out_names, U=U)
-    _record_inputs(drive, U, signals, meta)
+    record_inputs(drive, U, signals, meta)
     meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
                 versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
                                               "points": len(grid), "outputs": list(out_names),
@@ -276,6 +282,54 @@ def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom
     except RuntimeError as e:  # bad integrator options
         raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
     return run, fixed
+
+
+MAX_PIECES = 100_000      # input-table breakpoints a run restarts at (one integrator call each)
+
+
+def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, notes, budget,
+                drive, breaks):
+    """``_run`` piece by piece between the input tables' breakpoints, each piece from the state
+    where the last ended, the zero-order holds' values as the constant u of the piece: no step
+    crosses a jump (or a kink of a linear table).  Returns one Run over ``grid``."""
+    if breaks.size > MAX_PIECES:
+        raise UsageError(f"the input tables have {breaks.size} samples inside the run; at most {MAX_PIECES} "
+                         "(each is a restart of the integrator): resample the table")
+    edges = np.r_[t0, breaks, t1]
+    if method in I.FIXED_STEP and dt is None:    # the step of the whole run, not of each piece's span
+        steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")), xs, pv, t0, t1,
+                                      rtol, None, budget, u=drive.vector(t0))
+        dt = (t1 - t0) / steps
+    else:
+        why = None
+    full = np.union1d(grid, edges)
+    on_grid = np.isin(full, grid)
+    Xf = np.full((full.size, xs.size), np.nan)
+    Xf[0] = xs
+    stats: dict = {}
+    messages, fixed, x = [], None, xs
+    error = fail_time = fail_state = None
+    for a, b in zip(edges[:-1], edges[1:]):
+        idx = np.flatnonzero((full >= a) & (full <= b))
+        run, fx = _run(method, funcs, full[idx], x, pv, rtol, atol, max_steps, dt, extra, bar, eom, a, b,
+                       notes if fixed is None else [], budget, u=drive.vector(a))
+        fixed = fixed or fx
+        Xf[idx[1:run.reached]] = run.X[1:run.reached]
+        for k, v in (run.stats or {}).items():
+            stats[k] = stats.get(k, 0) + v if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+        messages.append(run.messages)
+        if run.error is not None or run.reached < idx.size:
+            error, fail_time, fail_state = run.error or "integration stopped", run.fail_time, run.fail_state
+            break
+        x = run.X[-1]
+    X = Xf[on_grid]
+    reached = I._count_filled(X, 0)
+    if fixed is not None:
+        fixed = {**fixed, "pieces": int(edges.size - 1), **({"why": why} if why else {})}
+    notes.append(f"integrated in {edges.size - 1} pieces, restarting at the input tables' samples inside the run "
+                 "(no step crosses a jump of a zero-order hold)")
+    return I.Run(X=X, reached=reached, stats=stats, error=error, messages="".join(messages),
+                 fail_time=fail_time, fail_state=fail_state), fixed
 
 
 def min_step(t0, t1) -> float:

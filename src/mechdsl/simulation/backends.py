@@ -46,6 +46,28 @@ class OdeBackend(Backend):
         return {"formulation": "ode", "integrator": plugin, "method": method}
 
 
+def python_signals(problem) -> tuple[str, ...]:
+    """Inputs driven by Python callables: call nodes in the equations, which C cannot hold."""
+    drive = problem.drive
+    return tuple(sg.name for sg in drive.signals if sg.kind == "callable") if drive is not None else ()
+
+
+def _compiled(problem) -> tuple[bool, str | None]:
+    """compiled as asked, unless Python signals are in the equations (then a note why not)."""
+    s = problem.settings
+    names = python_signals(problem) if problem.kind != "ode" else ()
+    if s.compiled and names:
+        return False, (f"compiled = true not applied: the input signal(s) {', '.join(names)} are Python "
+                       "functions, which compiled code cannot call; the run used the virtual machine")
+    return bool(s.compiled), None
+
+
+def _noted(r: Result, note: str | None) -> Result:
+    if note:
+        r.metadata.setdefault("notes", []).append(note)
+    return r
+
+
 class DaeBackend(Backend):
     name = "dae"
     ignores = ("rest_speed", "impact_order", "output_events")
@@ -58,10 +80,11 @@ class DaeBackend(Backend):
         for key in ("dt", "integrator_options"):
             if getattr(s, key):
                 kw[key] = getattr(s, key)
-        return simulate_dae(problem.eom, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol, method=s.method,
-                            points=s.points, outputs=s.outputs, x0=s.x0, p=s.p, progress=progress,
-                            formulation=s.formulation, reactions=s.reactions, compiled=s.compiled,
-                            max_steps=s.max_steps, **kw)
+        compiled, note = _compiled(problem)
+        return _noted(simulate_dae(problem.eom, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol,
+                                   method=s.method, points=s.points, outputs=s.outputs, x0=s.x0, p=s.p,
+                                   progress=progress, formulation=s.formulation, reactions=s.reactions,
+                                   compiled=compiled, max_steps=s.max_steps, **kw), note)
 
     def describe(self, r):
         f = r.metadata.get("formulation")
