@@ -33,7 +33,8 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "mechdsl.simulate" in names
-    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "shutil", "difflib", "mechdsl.display", "numpy.ma"}
+    # (shutil: method auto looks for a C compiler with shutil.which, simulation/crk.py)
+    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma"}
     assert unwanted & names == set()
 
 
