@@ -1,0 +1,84 @@
+"""mechdsl.records.record: the same class as @dataclass(frozen=True), made cheaply (issue 12).
+Each behaviour is compared with a real frozen dataclass of the same fields."""
+import dataclasses
+import math
+import pickle
+
+import pytest
+
+from mechdsl import ir
+from mechdsl.diagnostics import Span
+from mechdsl.records import record
+
+
+def pair(body):
+    """(record class, dataclass) from the same class body."""
+    ns: dict = {}
+    exec("from __future__ import annotations\nimport dataclasses\nfrom mechdsl.diagnostics import Span\n"
+         "class C:\n" + body, ns)
+    r = record(ns["C"])
+    ns2: dict = {}
+    exec("from __future__ import annotations\nimport dataclasses\nfrom mechdsl.diagnostics import Span\n"
+         "class C:\n" + body, ns2)
+    return r, dataclasses.dataclass(frozen=True)(ns2["C"])
+
+
+BODY = ("    name: str\n    i: int = 2\n    span: Span = dataclasses.field(default_factory=Span)\n"
+        "    xs: tuple = ()\n")
+
+
+def test_record_behaves_as_a_frozen_dataclass():
+    R, D = pair(BODY)
+    for args, kw in (((("a",)), {}), (("a", 3), {"xs": (1.0,)}), ((), {"name": "b", "i": 5})):
+        r, d = R(*args, **kw), D(*args, **kw)
+        assert repr(r) == repr(d)
+        assert [(f.name, f.type, f.default, f.default_factory) for f in dataclasses.fields(r)] == \
+               [(f.name, f.type, f.default, f.default_factory) for f in dataclasses.fields(d)]
+        assert dataclasses.asdict(r) == dataclasses.asdict(d)
+        assert hash(r) == hash(d)
+        assert R.__match_args__ == D.__match_args__
+        r2 = dataclasses.replace(r, i=7)
+        assert (type(r2), r2.i, r2.name, r2.span) == (R, 7, r.name, r.span) and r2 != r
+        assert r == R(*args, **kw) and r != d and (r == d) is False
+        for action in (lambda: setattr(r, "i", 1), lambda: setattr(r, "new", 1), lambda: delattr(r, "i")):
+            with pytest.raises(dataclasses.FrozenInstanceError):
+                action()
+    assert dataclasses.is_dataclass(R) and R.i == 2 and "span" not in R.__dict__
+    with pytest.raises(TypeError):
+        R()
+    with pytest.raises(TypeError):
+        R("a", 1, Span(), (), 5)
+    assert R("a").span is not R("a").span and R("a").span == Span()   # a factory call per instance
+
+
+def test_record_equality_is_tuple_equality():
+    """A NaN field: equal when it is the same object (tuple comparison), as in a dataclass."""
+    nan = math.nan
+    R, D = pair("    value: float\n")
+    assert (R(nan) == R(nan)) == (D(nan) == D(nan)) is True
+    assert (R(float("nan")) == R(float("nan"))) == (D(float("nan")) == D(float("nan")))
+    assert hash(R(1.0)) == hash(D(1.0)) == hash((1.0,))
+    E, F = pair("    pass\n")
+    assert E() == E() and hash(E()) == hash(F()) == hash(()) and repr(E()) == repr(F())
+
+
+def test_record_refuses_what_it_does_not_do():
+    for body in ("    x: int = dataclasses.field(default=1, compare=False)\n",
+                 "    x: int = 1\n    y: int\n",
+                 "    x: typing.ClassVar[int] = 1\n",
+                 "    x: int\n    def __post_init__(self):\n        pass\n"):
+        with pytest.raises(TypeError):
+            pair(body)
+
+
+def test_ir_classes_are_records_with_their_methods():
+    j = ir.Joint("j", "revolute", "a", "b", "A", "B", options=(("sequence", "zyx"),))
+    assert j.option("sequence") == "zyx" and j.axis == (ir.ZERO, ir.ZERO, ir.ONE)
+    m = ir.Model("m", coordinates=(ir.Coordinate("q"),))
+    assert m.coordinate_names == ("q",) and m.coordinate("q").start == ir.ZERO
+    assert repr(ir.Op("add", (ir.Param("a"), ir.Const(1.0)))) == \
+        "Op(op='add', args=(Param(name='a'), Const(value=1.0)))"
+    assert {ir.Coord("q"): 1}[ir.Coord("q")] == 1 and ir.Coord("q") != ir.Speed("q")
+    assert ir.BodyOmega("b", 0).frame == "world" and isinstance(ir.Const(1.0), ir.Expr)
+    back = pickle.loads(pickle.dumps(m))
+    assert back == m and type(back.coordinates[0]) is ir.Coordinate and hash(back) == hash(m)
