@@ -11,16 +11,15 @@ from mechdsl.diagnostics import Span
 from mechdsl.records import record
 
 
-def pair(body):
+def pair(body, **options):
     """(record class, dataclass) from the same class body."""
-    ns: dict = {}
-    exec("from __future__ import annotations\nimport dataclasses\nfrom mechdsl.diagnostics import Span\n"
-         "class C:\n" + body, ns)
-    r = record(ns["C"])
-    ns2: dict = {}
-    exec("from __future__ import annotations\nimport dataclasses\nfrom mechdsl.diagnostics import Span\n"
-         "class C:\n" + body, ns2)
-    return r, dataclasses.dataclass(frozen=True)(ns2["C"])
+    made = []
+    for decorate in (record(**options), dataclasses.dataclass(**{"frozen": True, **options})):
+        ns: dict = {}
+        exec("from __future__ import annotations\nimport dataclasses, typing\nfrom mechdsl.diagnostics import Span\n"
+             "class C:\n" + body, ns)
+        made.append(decorate(ns["C"]))
+    return tuple(made)
 
 
 BODY = ("    name: str\n    i: int = 2\n    span: Span = dataclasses.field(default_factory=Span)\n"
@@ -63,12 +62,29 @@ def test_record_equality_is_tuple_equality():
 
 
 def test_record_refuses_what_it_does_not_do():
-    for body in ("    x: int = dataclasses.field(default=1, compare=False)\n",
+    for body in ("    x: int = dataclasses.field(default=1, hash=True)\n",
                  "    x: int = 1\n    y: int\n",
                  "    x: typing.ClassVar[int] = 1\n",
                  "    x: int\n    def __post_init__(self):\n        pass\n"):
         with pytest.raises(TypeError):
             pair(body)
+
+
+def test_mutable_ordered_and_uncompared_fields_as_in_a_dataclass():
+    R, D = pair("    a: int\n    b: list = dataclasses.field(default_factory=list)\n", frozen=False)
+    r, d = R(1), D(1)
+    r.a, d.a = 2, 2
+    r.b.append(3)
+    d.b.append(3)
+    assert repr(r) == repr(d) == "C(a=2, b=[3])" and r.b is not R(1).b and R.__hash__ is D.__hash__ is None
+    assert r == R(2, [3]) and r != R(2)
+    R, D = pair("    line: int = 0\n    col: int = 0\n", order=True)
+    pairs = [(1, 2), (1, 3), (0, 9), (1, 2)]
+    assert sorted(R(*p) for p in pairs) == sorted(R(*p) for p in sorted(pairs))
+    assert [R(*a) < R(*b) for a in pairs for b in pairs] == [D(*a) < D(*b) for a in pairs for b in pairs]
+    assert [R(*a) >= R(*b) for a in pairs for b in pairs] == [D(*a) >= D(*b) for a in pairs for b in pairs]
+    R, D = pair("    a: int\n    note: object = dataclasses.field(default=None, repr=False, compare=False)\n")
+    assert R(1, "x") == R(1, "y") and hash(R(1, "x")) == hash(D(1, "y")) and repr(R(1, "x")) == repr(D(1, "x"))
 
 
 def test_ir_classes_are_records_with_their_methods():

@@ -579,8 +579,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
     built in a temporary folder and renamed into place (safe under concurrency).
     """
-    import subprocess          # (subprocess and tempfile: 10 ms to import; only a compile needs them)
-    import tempfile
+    import subprocess          # (subprocess: the compiler's version is part of the key)
 
     ca = _ca()
     cc = find_compiler()
@@ -630,6 +629,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     if lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
     else:
+        import tempfile        # only a build needs it (a warm run loads the cached library)
+
         try:
             d.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:

@@ -11,10 +11,12 @@ makes the same class: frozen, ``__eq__`` and ``__hash__`` on the tuple of the fi
 ``__init__`` is compiled once per signature (field names, which ones have a default factory)
 and bound to each class's defaults.
 
-Supported: annotated fields with a plain default or ``dataclasses.field(default=...)`` /
-``field(default_factory=...)``; a record base class with no fields.  Anything else
-(``ClassVar``, ``InitVar``, ``__post_init__``, ``field(compare=False)``, fields inherited
-from a base) is refused with TypeError: use ``@dataclass`` for those.
+``@record(frozen=False)`` is ``@dataclass`` (mutable, unhashable); ``@record(order=True)``
+adds the comparisons of ``@dataclass(order=True)``.  Supported: annotated fields with a plain
+default or ``dataclasses.field(default=..., default_factory=..., repr=..., compare=...)``; a
+record base class with no fields.  Anything else (``ClassVar``, ``InitVar``,
+``__post_init__``, fields inherited from a base, ``hash``/``init``/``kw_only`` options) is
+refused with TypeError: use ``@dataclass`` for those.
 """
 from __future__ import annotations
 
@@ -60,6 +62,19 @@ def _eq(self, other):
     return NotImplemented
 
 
+def _order(test):
+    def compare(self, other):
+        if other.__class__ is self.__class__:
+            key = self.__class__._record_key
+            return test(key(self), key(other))
+        return NotImplemented
+    return compare
+
+
+_ORDER = {"__lt__": _order(lambda a, b: a < b), "__le__": _order(lambda a, b: a <= b),
+          "__gt__": _order(lambda a, b: a > b), "__ge__": _order(lambda a, b: a >= b)}
+
+
 def _hash(self):
     return hash(self.__class__._record_key(self))
 
@@ -67,34 +82,40 @@ def _hash(self):
 @recursive_repr()
 def _repr(self):
     cls = self.__class__
-    return f"{cls.__qualname__}(" + ", ".join(f"{n}={getattr(self, n)!r}" for n in cls.__match_args__) + ")"
+    return f"{cls.__qualname__}(" + ", ".join(f"{n}={getattr(self, n)!r}" for n in cls._record_repr) + ")"
 
 
 def _setattr(self, name, value):
-    if "_record_key" in type(self).__dict__ or name in self.__dataclass_fields__:
+    if "_record_frozen" in type(self).__dict__ or name in self.__dataclass_fields__:
         raise dataclasses.FrozenInstanceError(f"cannot assign to field {name!r}")
     object.__setattr__(self, name, value)
 
 
 def _delattr(self, name):
-    if "_record_key" in type(self).__dict__ or name in self.__dataclass_fields__:
+    if "_record_frozen" in type(self).__dict__ or name in self.__dataclass_fields__:
         raise dataclasses.FrozenInstanceError(f"cannot delete field {name!r}")
     object.__delattr__(self, name)
 
 
-def record(cls):
-    """The class as a frozen dataclass (see the module docstring)."""
+def record(cls=None, /, *, frozen: bool = True, order: bool = False):
+    """The class as a dataclass (frozen unless ``frozen=False``; see the module docstring)."""
+    if cls is None:
+        return lambda c: _make(c, frozen, order)
+    return _make(cls, frozen, order)
+
+
+def _make(cls, frozen: bool, order: bool):
     if getattr(cls, "__dataclass_fields__", None) or "__post_init__" in cls.__dict__:
         raise TypeError(f"record {cls.__name__}: fields inherited or __post_init__: use @dataclass")
     fields: dict[str, dataclasses.Field] = {}
     defaults: list = []
-    globs = {"_set": object.__setattr__, "_FACTORY": _FACTORY}
+    globs = {"_set": object.__setattr__ if frozen else setattr, "_FACTORY": _FACTORY}
     for name, kind in cls.__dict__.get("__annotations__", {}).items():
         if "ClassVar" in str(kind) or "InitVar" in str(kind):
             raise TypeError(f"record {cls.__name__}.{name}: ClassVar/InitVar: use @dataclass")
         value = cls.__dict__.get(name, _MISSING)
         f = value if isinstance(value, dataclasses.Field) else dataclasses.field(default=value)
-        if not (f.init and f.repr and f.compare and f.hash is None and f.kw_only in (False, _MISSING)):
+        if not (f.init and f.hash is None and f.kw_only in (False, _MISSING)):
             raise TypeError(f"record {cls.__name__}.{name}: field options: use @dataclass")
         f.name, f.type, f._field_type = name, kind, _FIELD
         fields[name] = f
@@ -117,11 +138,17 @@ def record(cls):
     cls.__init__ = init
     cls.__dataclass_fields__ = fields
     cls.__match_args__ = names
-    cls._record_key = _key(names)
-    for k, fn in (("__eq__", _eq), ("__hash__", _hash), ("__repr__", _repr),
-                  ("__setattr__", _setattr), ("__delattr__", _delattr)):
-        if k not in cls.__dict__ or k == "__hash__":
+    cls._record_key = _key(tuple(n for n, f in fields.items() if f.compare))
+    cls._record_repr = tuple(n for n, f in fields.items() if f.repr)
+    methods = {"__eq__": _eq, "__repr__": _repr, **(_ORDER if order else {})}
+    if frozen:
+        cls._record_frozen = True
+        methods.update(__setattr__=_setattr, __delattr__=_delattr)
+    for k, fn in methods.items():
+        if k not in cls.__dict__:
             setattr(cls, k, fn)
+    if "__hash__" not in cls.__dict__ or cls.__dict__["__hash__"] is None:
+        cls.__hash__ = _hash if frozen else None
     if cls.__doc__ is None:
         cls.__doc__ = f"{cls.__name__}({', '.join(names)})"
     return cls
