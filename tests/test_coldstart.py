@@ -33,9 +33,23 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "mechdsl.simulate" in names
-    # (shutil: method auto looks for a C compiler with shutil.which, simulation/crk.py)
-    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma"}
+    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma", "shutil"}
     assert unwanted & names == set()
+
+
+def test_a_warm_compiled_run_starts_no_process(tmp_path):
+    """Issue 12's command, compiled stepping loop loaded from the cache: the compiler's version
+    is remembered (codegen.compiler_version) and its path found without shutil, so the run
+    imports neither subprocess nor tempfile nor shutil (with lzma and bz2)."""
+    env = {**os.environ, "MECHDSL_CACHE": str(tmp_path)}
+    args = ("simulate", str(MODELS / "double_pendulum.mech"), "--no-progress", "-o", str(tmp_path / "r.csv"),
+            "--force")
+    imported(*args, env=env)                    # fills the model cache and compiles
+    r, names = imported(*args, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "loaded compiled model from cache" in r.stdout + r.stderr
+    assert {"subprocess", "tempfile", "shutil", "lzma", "bz2"} & names == set()
+    assert "mechdsl.ir" in names and "mechdsl.parser" not in names
 
 
 def test_scipy_version_without_importing_scipy(monkeypatch):
