@@ -35,7 +35,8 @@ def test_record_behaves_as_a_frozen_dataclass():
                [(f.name, f.type, f.default, f.default_factory) for f in dataclasses.fields(d)]
         assert dataclasses.asdict(r) == dataclasses.asdict(d)
         assert hash(r) == hash(d)
-        assert R.__match_args__ == D.__match_args__
+        assert R.__match_args__ == D.__match_args__ and R.__doc__ == D.__doc__
+        assert repr(R.__dataclass_params__) == repr(D.__dataclass_params__)
         r2 = dataclasses.replace(r, i=7)
         assert (type(r2), r2.i, r2.name, r2.span) == (R, 7, r.name, r.span) and r2 != r
         assert r == R(*args, **kw) and r != d and (r == d) is False
@@ -77,7 +78,8 @@ def test_mutable_ordered_and_uncompared_fields_as_in_a_dataclass():
     r.b.append(3)
     d.b.append(3)
     assert repr(r) == repr(d) == "C(a=2, b=[3])" and r.b is not R(1).b and R.__hash__ is D.__hash__ is None
-    assert r == R(2, [3]) and r != R(2)
+    assert r == R(2, [3]) and r != R(2) and R.__doc__ == D.__doc__
+    assert repr(R.__dataclass_params__) == repr(D.__dataclass_params__)
     R, D = pair("    line: int = 0\n    col: int = 0\n", order=True)
     pairs = [(1, 2), (1, 3), (0, 9), (1, 2)]
     assert sorted(R(*p) for p in pairs) == sorted(R(*p) for p in sorted(pairs))

@@ -149,6 +149,34 @@ def _make(cls, frozen: bool, order: bool):
             setattr(cls, k, fn)
     if "__hash__" not in cls.__dict__ or cls.__dict__["__hash__"] is None:
         cls.__hash__ = _hash if frozen else None
-    if cls.__doc__ is None:
-        cls.__doc__ = f"{cls.__name__}({', '.join(names)})"
+    cls.__dataclass_params__ = _params(frozen, order)
+    if cls.__doc__ is None:             # dataclass's docstring: the signature of __init__
+        cls.__doc__ = f"{cls.__name__}({', '.join(_shown(f) for f in fields.values())})"
     return cls
+
+
+def _shown(f: dataclasses.Field) -> str:
+    """A parameter as inspect.signature shows it (the annotations are strings here)."""
+    if isinstance(f.type, str):
+        text = f"{f.name}: {f.type!r}"
+    else:
+        import inspect
+
+        text = f"{f.name}: {inspect.formatannotation(f.type)}"
+    if f.default_factory is not _MISSING:
+        return text + " = <factory>"
+    return text if f.default is _MISSING else f"{text} = {f.default!r}"
+
+
+_PARAMS: dict[tuple[bool, bool], object] = {}
+
+
+def _params(frozen: bool, order: bool):
+    """The ``__dataclass_params__`` of @dataclass(frozen=frozen, order=order) (dask reads it)."""
+    p = _PARAMS.get((frozen, order))
+    if p is None:
+        cls = dataclasses._DataclassParams
+        given = dict(init=True, repr=True, eq=True, order=order, unsafe_hash=False, frozen=frozen,
+                     match_args=True, kw_only=False, slots=False, weakref_slot=False)
+        p = _PARAMS[(frozen, order)] = cls(**{k: v for k, v in given.items() if k in cls.__slots__})
+    return p
