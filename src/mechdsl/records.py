@@ -7,7 +7,8 @@ makes the same class: frozen, ``__eq__`` and ``__hash__`` on the tuple of the fi
 ``__repr__``, ``__match_args__`` and real ``dataclasses.Field`` objects in
 ``__dataclass_fields__``, so ``dataclasses.fields``, ``replace``, ``asdict`` and
 ``is_dataclass`` work as on a dataclass.  The methods are shared: ``__eq__``, ``__hash__``,
-``__repr__``, ``__setattr__`` and ``__delattr__`` are one function each for every record, and
+``__repr__``, ``__setattr__`` and ``__delattr__`` are one function each for every record (``__eq__``
+and ``__hash__`` one closure per class over its key), and
 ``__init__`` is compiled once per signature (field names, which ones have a default factory)
 and bound to each class's defaults.
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 from operator import attrgetter
 from reprlib import recursive_repr
+from types import FunctionType
 
 _MISSING = dataclasses.MISSING
 _FIELD = dataclasses._FIELD            # the marker dataclasses.fields() selects on
@@ -55,11 +57,16 @@ def _key(names: tuple[str, ...]):
     return lambda self: ()
 
 
-def _eq(self, other):
-    if other.__class__ is self.__class__:
-        key = self.__class__._record_key
-        return key(self) == key(other)
-    return NotImplemented
+def _eq_hash(key):
+    """__eq__ and __hash__ on the tuple ``key(self)`` (closures: no lookup of the key per call)."""
+    def __eq__(self, other):
+        if other.__class__ is self.__class__:
+            return key(self) == key(other)
+        return NotImplemented
+
+    def __hash__(self):
+        return hash(key(self))
+    return __eq__, __hash__
 
 
 def _order(test):
@@ -73,10 +80,6 @@ def _order(test):
 
 _ORDER = {"__lt__": _order(lambda a, b: a < b), "__le__": _order(lambda a, b: a <= b),
           "__gt__": _order(lambda a, b: a > b), "__ge__": _order(lambda a, b: a >= b)}
-
-
-def _hash(self):
-    return hash(self.__class__._record_key(self))
 
 
 @recursive_repr()
@@ -133,14 +136,15 @@ def _make(cls, frozen: bool, order: bool):
                 setattr(cls, name, f.default)
     names = tuple(fields)
     code = _init_code(names, tuple(f.default_factory is not _MISSING for f in fields.values()))
-    init = type(_eq)(code, globs, "__init__", tuple(defaults) or None)
+    init = FunctionType(code, globs, "__init__", tuple(defaults) or None)
     init.__qualname__ = f"{cls.__qualname__}.__init__"
     cls.__init__ = init
     cls.__dataclass_fields__ = fields
     cls.__match_args__ = names
     cls._record_key = _key(tuple(n for n, f in fields.items() if f.compare))
     cls._record_repr = tuple(n for n, f in fields.items() if f.repr)
-    methods = {"__eq__": _eq, "__repr__": _repr, **(_ORDER if order else {})}
+    eq, hash_ = _eq_hash(cls._record_key)
+    methods = {"__eq__": eq, "__repr__": _repr, **(_ORDER if order else {})}
     if frozen:
         cls._record_frozen = True
         methods.update(__setattr__=_setattr, __delattr__=_delattr)
@@ -148,7 +152,7 @@ def _make(cls, frozen: bool, order: bool):
         if k not in cls.__dict__:
             setattr(cls, k, fn)
     if "__hash__" not in cls.__dict__ or cls.__dict__["__hash__"] is None:
-        cls.__hash__ = _hash if frozen else None
+        cls.__hash__ = hash_ if frozen else None
     cls.__dataclass_params__ = _params(frozen, order)
     if cls.__doc__ is None:             # dataclass's docstring: the signature of __init__
         cls.__doc__ = f"{cls.__name__}({', '.join(_shown(f) for f in fields.values())})"
