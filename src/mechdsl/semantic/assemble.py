@@ -45,9 +45,9 @@ def build_model(fl) -> ir.Model:
                 and not fl.connect_failed):
             cn = jinst.cls.connect_fields
             fl.diags.error("E210", f"{jinst.cls.name} '{j.name}' needs 'child'", jinst.entry.decl.name_span,
-                             f"set it with child = ..., or connect({cn[0]}, {jinst.entry.decl.name}, {cn[1]}) in the "
-                             f"equation section; a joint without a child is a massless frame only when another "
-                             f"joint or point uses it (parent = {j.name})")
+                           f"set it with child = ..., or connect({cn[0]}, {jinst.entry.decl.name}, {cn[1]}) in the "
+                           f"equation section; a joint without a child is a massless frame only when another "
+                           f"joint or point uses it (parent = {j.name})")
     fl.diags.raise_if_errors()
     forces = built.forces + fl.gen_forces
     model = ir.Model(

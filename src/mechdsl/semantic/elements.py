@@ -150,7 +150,6 @@ class ComponentElements:
         except ValError as ve:
             fail(ve.code, ve.message, span, ve.help)
 
-
     def _body_class_of(self, ref: CompRef) -> str:
         base = ref.name
         inst = self.insts.get(base)

@@ -31,7 +31,6 @@ class Entry:
     element_mods: dict = field(default_factory=dict)   # "q[2]" -> Mod: an override of one element (API, --set)
 
 
-
 @dataclass
 class CompInst:
     name: str
@@ -51,7 +50,6 @@ class CompInst:
 
 class Failed(Exception):
     """An entry already reported an error; dependants stay quiet."""
-
 
 
 def pick(val: Val, inst: CompInst, rank: int, each: bool) -> Val:

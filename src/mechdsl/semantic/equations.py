@@ -67,7 +67,7 @@ def _equation(fl, eq, connects: bool) -> None:
                  "for a vector v use dot(v, v)")
         want = U.POWER if eq.kind == "dissipation" else U.ENERGY
         fl.check_dim(v, want, f"the {eq.kind} {'function' if eq.kind == 'dissipation' else 'energy'}",
-                       eq.expr.span)
+                     eq.expr.span)
         if eq.kind == "potential" and X.has_speed(v.expr):
             fail("E308", "the potential energy must not depend on speeds", eq.expr.span,
                  "velocity-dependent forces go into force(q) = ... or the dissipation function")
@@ -105,7 +105,7 @@ def _equation(fl, eq, connects: bool) -> None:
                      "an equation is a constraint on coordinates; to define a quantity use `Real x = ...;`")
             nm = f"c{len(fl.constraints) + 1}"
             fl.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
-                                                  eq.span))
+                                                eq.span))
         return
     raise AssertionError(type(eq))
 

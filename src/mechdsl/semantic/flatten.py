@@ -40,8 +40,6 @@ _BUDGET = {"coordinate": "coordinates", "output": "outputs", "component": "compo
 
 class Flattener(Declarations, InstanceArrays, ScalarDeclarations, ComponentElements, Attributes, JointVariables,
                 VectorStarts, Evaluator):
-    Failed = Failed            # for the mixins (instance_arrays.py)
-
     def __init__(self, program, model: ast.ModelDef, outer: dict[str, Mod] | None = None):
         self.program = program
         self.model = model
@@ -183,7 +181,7 @@ class Flattener(Declarations, InstanceArrays, ScalarDeclarations, ComponentEleme
                              "mechdsl derives and compiles every scalar symbolically; " + limits.hint(budget))
             self.diags.raise_if_errors()
 
-    # ================================================================== entries
+    # ================================================================== evaluation of an entry
     def _evaluate_entry(self, e: Entry) -> Val:
         dims = self.entry_dims(e)
         if e.kind in ("parameter", "input"):
@@ -194,7 +192,7 @@ class Flattener(Declarations, InstanceArrays, ScalarDeclarations, ComponentEleme
             return self._output(e, dims)
         return self._component(e, dims)
 
-    # ================================================================== assembly
+    # ================================================================== build
     def build(self) -> ir.Model:
         token = V.WARNINGS.set([])
         try:

@@ -228,12 +228,10 @@ class ScalarDeclarations:
         return val
 
 
-
 def _quiet_numpy():
     import numpy as np
 
     return np.errstate(all="ignore")  # nan/inf are checked and reported as diagnostics
-
 
 
 def _suffix(idx: tuple[int, ...]) -> str:
