@@ -272,8 +272,9 @@ class FunctionSet(Mapping):
     """
 
     def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None, derivatives: int = 0,
-                 sx: bool = False, fixed=()):
+                 sx: bool = False, fixed=(), jacobian: str = "full"):
         self.eom = eom
+        self.jacobian_kind = jacobian     # compiled: "full" Jacobian, or "forward" derivative only
         self.derivatives = int(derivatives)
         self.sx = bool(sx)
         self.fixed = tuple((int(i), float(v)) for i, v in fixed)
@@ -327,7 +328,8 @@ class FunctionSet(Mapping):
         funcs = [self._make(n) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
             funcs.append(self._make("ode"))
-        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names,
+        jac = ("forward" if self.jacobian_kind == "forward" else True) if "ode_jacobian" in self._names else False
+        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian=jac,
                                               derivatives=self.derivatives)
         if note:
             self.notes.append(note)
@@ -428,7 +430,7 @@ def drop_cancelled(f):
 
 
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, derivatives: int = 0,
-                     sx: bool = False, fixed=()) -> FunctionSet:
+                     sx: bool = False, fixed=(), jacobian: str = "full") -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
 
     derivatives=2 (with compiled=True): the library also holds the first and second
@@ -440,6 +442,10 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     fixed: (index in p, value) pairs built into every Function as numbers (``specialize``);
     "p" then holds only the other parameters (``.parameter_names``).
 
+    jacobian="forward" (compiled): compile the forward derivative of ``ode`` instead of its
+    dense Jacobian, for methods that only need derivatives to be available (CVODES-Adams with
+    functional iteration sets up a Jacobian it never evaluates).
+
     names: restrict to these Functions (default: all that apply); outputs: restrict the
     ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
     (per EOM structure), so asking twice costs nothing.
@@ -450,13 +456,13 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
     key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
            None if outputs is None else tuple(outputs), int(derivatives), bool(sx),
-           tuple((int(i), float(v)) for i, v in fixed))
+           tuple((int(i), float(v)) for i, v in fixed), jacobian)
     hit = _SETS.get(key)
     if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
         _SETS[key] = _SETS.pop(key)            # most recently used last
         return hit[1]
     fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives, sx=sx,
-                     fixed=fixed)
+                     fixed=fixed, jacobian=jacobian)
     if len(_SETS) >= _SETS_MAX:
         _SETS.pop(next(iter(_SETS)))
     _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique
@@ -517,8 +523,15 @@ def derivative_functions(funcs, order: int = 2) -> list:
     return out
 
 
-def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0):
+def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
+                      extra_units: tuple[str, ...] = ()):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
+
+    ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
+    from it by sweeps if one is ever evaluated), never the dense Jacobian.
+
+    ``extra_units``: hand-written C sources linked into the same library (the compiled
+    stepping loop of mechdsl.simulation.crk); they are part of the cache key.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -544,11 +557,13 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
         units.append(dg.dump())
     jac_kind = None
     if odes:
-        jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
-        jg.add(odes[0].jacobian())
-        code = jg.dump()
-        jac_kind = "jacobian"
-        if len(code) > JAC_MAX_CODE:
+        code, jac_kind = "", None
+        if jacobian != "forward":
+            jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
+            jg.add(odes[0].jacobian())
+            code = jg.dump()
+            jac_kind = "jacobian"
+        if jacobian == "forward" or len(code) > JAC_MAX_CODE:
             # a huge Jacobian compiles for minutes and, at -O0, runs slower than the virtual
             # machine: generate the forward derivative instead (CasADi assembles J by sweeps)
             jg = ca.CodeGenerator("mechdsl_fwd.c", {"with_header": False, "verbose": False})
@@ -556,6 +571,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
+    units += list(extra_units)
     flags = [cflags_for(len(code)) for code in units]
     try:
         version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout

@@ -82,17 +82,31 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["inputs"] = drive.describe()
     if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
         return _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive)
+    auto_compiled = None
     if method == "auto":
         method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
         meta["auto"] = info
+        if method == "erk" and compiled is None and opts.get("functions") is None:
+            method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
+    if "compiled" not in meta:
+        meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    loop_compiled = None
     if opts.get("functions") is not None:
         funcs = opts["functions"]
+    elif method in I.COMPILED_LOOP:     # the loop compiles the model's C together with its own
+        funcs = vm
+        loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
+        if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
+            method, loop_compiled = "erk", None
+            meta.update(method=method, integrator=I.METHODS[method][3])
+            meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
-                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
+                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"),
+                                 jacobian="forward" if method in I.FORWARD_ONLY else "full")
         funcs["ode"]  # compile now (notes below)
         funcs = drive.closed(funcs)
     else:
@@ -102,7 +116,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
     if s.reactions:
         meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
-    if compiled and not getattr(funcs, "compiled", False):
+    if compiled and loop_compiled is None and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
@@ -140,7 +154,8 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["integrator_messages"] = _dedup(run.messages)
     meta["conservative"] = is_conservative(eom)
     meta["options"] = {"t_start": t0, "t_end": t1, "rtol": rtol, "atol": atol, "points": npts,
-                       "method": method, "compiled": bool(getattr(funcs, "compiled", False)),
+                       "method": method,
+                       "compiled": bool(getattr(funcs, "compiled", False)) if loop_compiled is None else loop_compiled,
                        "max_steps": max_steps, "outputs": list(out_names),
                        "parameters": dict(zip(eom.params, map(float, pv))),
                        "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
@@ -150,6 +165,36 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     n = eom.n
     return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
                   stats=stats, metadata=meta, failure=failure)
+
+
+def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
+    """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
+    fallback to scipy's stepping in Python (or to ``fallback``) is a warning of the run."""
+    from .simulation.crk import library
+
+    fn, note = library(funcs["ode"], tag=eom.name)
+    if fn is None:
+        instead = (f"{fallback} runs instead" if fallback else
+                   f"{meta['method']} runs as scipy's same method stepped in Python")
+        meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {instead}")
+        return False
+    if note:
+        meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
+    return True
+
+
+def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
+    """method = auto on a non-stiff model: erk in the virtual machine, or the compiled dop853
+    loop when compiling pays (simulation.crk.auto_choice); ``meta['compiled']`` says why."""
+    from .simulation.crk import auto_choice
+
+    pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv, rho=meta["auto"].get("spectral_radius"))
+    meta["auto"]["compile"] = info
+    if pick is None:
+        meta["compiled"] = f"no: auto ({why})"
+        return "erk", reason, None
+    meta["compiled"] = f"auto ({why})"
+    return pick, (reason.split(";")[0] + f"; compiled stepping loop {pick} (Dormand-Prince, C): {why}"), True
 
 
 def record_inputs(drive, U, signals, meta) -> None:
@@ -208,7 +253,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     u = default_inputs(eom, u)
     try:
         J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
-        lam = np.linalg.eigvals(J) if np.isfinite(J).all() else None
+        lam = jacobian_eigenvalues(J) if np.isfinite(J).all() else None
     except Exception:  # noqa: BLE001
         lam = None
     if lam is None:
@@ -230,6 +275,20 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
             f"benchmarks/integrators.py", info)
 
 
+def jacobian_eigenvalues(J: np.ndarray) -> np.ndarray:
+    """Eigenvalues of the Jacobian of x' = (qd, qdd(q, qd)).  When d qdd / d qd vanishes (no
+    damping, at rest: every conservative model's start from rest) J = [[0, I], [A, 0]] and its
+    eigenvalues are +-sqrt(mu) for the eigenvalues mu of A: a decomposition of half the size,
+    8x less work (a 400 x 400 eigen decomposition costs 0.05-0.5 s of CPU on a loaded machine,
+    most of it the BLAS threads' spinning)."""
+    n = J.shape[0] // 2
+    if (J.shape[0] == 2 * n and n > 0 and not J[:n, :n].any() and not J[n:, n:].any()
+            and np.array_equal(J[:n, n:], np.eye(n))):
+        root = np.sqrt(np.linalg.eigvals(J[n:, :n]).astype(complex))
+        return np.concatenate([root, -root])
+    return np.linalg.eigvals(J)
+
+
 def default_inputs(eom, u):
     """u as given, or the model's input defaults when none was given (NO_U)."""
     if u is NO_U and eom is not None and getattr(eom, "inputs", ()):
@@ -247,22 +306,34 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
         if not dt > 0:
             raise UsageError(f"dt must be positive (got {dt})")
         return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
-    rho, omega_acc = 0.0, 0.0
+    omega, rho = time_scale(funcs, x0, pv, t0, t1, u)
+    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
+    steps = min(max(1, math.ceil(span / h)), int(budget))
+    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
+                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+
+
+def time_scale(funcs, x0, pv, t0, t1, u=NO_U, rho=None) -> tuple[float, float]:
+    """(omega, rho): the fastest rate seen at the start, max of the Jacobian's spectral radius
+    rho, sqrt(max |qdd|) and max |qd| (coordinates in units of order one: the Jacobian alone is
+    ~0 for a pendulum released from the horizontal), and 2 pi / horizon.  ``rho``: the spectral
+    radius when known (choose_method computed it; eigenvalues of a 400 x 400 Jacobian cost
+    0.05-0.5 s of CPU)."""
+    span = t1 - t0
+    omega_acc = 0.0
     u = default_inputs(getattr(funcs, "eom", None), u)
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
-        rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
+        if rho is None:
+            rho = 0.0
+            J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+            rho = float(np.abs(jacobian_eigenvalues(J)).max()) if np.isfinite(J).all() else 0.0
         f = FastFunction(funcs["ode"])(t0, x0, u, pv)
         n = len(x0) // 2
         if np.isfinite(f).all():  # time scales of the motion itself: sqrt(|qdd|) and |qd| (units of 1)
             omega_acc = max(float(np.sqrt(np.abs(f[n:]).max(initial=0.0))), float(np.abs(x0[n:]).max(initial=0.0)))
     except Exception:  # noqa: BLE001
         pass
-    omega = max(rho, omega_acc, 2 * math.pi / span)
-    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
-    steps = min(max(1, math.ceil(span / h)), int(budget))
-    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
-                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+    return max(rho, omega_acc, 2 * math.pi / span), rho
 
 
 def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget,

@@ -70,7 +70,7 @@ def solve(problem: Problem, progress=None) -> Result:
     ran = backend.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,
-                   "compiled": bool(meta.get("compiled", (meta.get("options") or {}).get("compiled", False))),
+                   "compiled": _ran_compiled(meta),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
     if "versions" not in meta:
         from ..simulate import versions
@@ -146,6 +146,15 @@ def _estimate_error(r: Result, problem: Problem) -> None:
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
+
+
+def _ran_compiled(meta) -> bool:
+    """Whether compiled code ran: the back end's flag (a bool; the ODE back end's
+    ``metadata.compiled`` is the decision's text, its flag is ``options.compiled``)."""
+    flag = meta.get("compiled")
+    if not isinstance(flag, bool):
+        flag = (meta.get("options") or {}).get("compiled", False)
+    return bool(flag)
 
 
 __all__ = ["SimulationSettings", "Problem", "formulate", "solve", "simulate", "resolve", "from_kwargs", "dump"]

@@ -124,6 +124,8 @@ def dump(problem: Problem) -> str:
     lines.append("  outputs: " + (", ".join(problem.outputs) or "none"))
     lines.append("  settings:")
     for k, v in s.as_dict().items():
+        if k == "compiled" and v is None:
+            v = "auto"      # the ODE back end compiles when it pays
         if v is None or v == {} or k == "extra":
             continue
         lines.append(f"    {k} = {v!r}")

@@ -51,7 +51,7 @@ class SimulationSettings:
     inputs: dict | None = None         # {input name: number | table | u(t) | u(t, x) | casadi.Function} (drive.py)
     dt: float | None = None            # fixed-step methods
     reactions: bool = False
-    compiled: bool = False
+    compiled: bool | None = None       # None: automatic (the ODE back end compiles when it pays)
     max_steps: int | None = None
     integrator_options: dict | None = None
     rest_speed: float | None = None    # contacts
@@ -220,12 +220,12 @@ def validate(s: SimulationSettings) -> SimulationSettings:
         outputs = tuple(outputs)
     max_steps = None if s.max_steps is None else _count("max_steps", s.max_steps, 1)
     for name in ("reactions", "compiled", "estimate_error"):
-        if not isinstance(getattr(s, name), (bool, int)):
+        if not isinstance(getattr(s, name), (bool, int)) and not (name == "compiled" and s.compiled is None):
             raise UsageError(f"{name} must be true or false (got {getattr(s, name)!r})")
     return dataclasses.replace(s, t_start=t0, t_end=t1, rtol=rtol, atol=atol, points=points, dt=dt,
                                method=method, formulation=formulation,
                                outputs=outputs, max_steps=max_steps, reactions=bool(s.reactions),
-                               compiled=bool(s.compiled), budget=budget, estimate_error=bool(s.estimate_error))
+                               compiled=None if s.compiled is None else bool(s.compiled), budget=budget, estimate_error=bool(s.estimate_error))
 
 
 def unknown_setting(name: str) -> UsageError:
