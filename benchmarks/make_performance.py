@@ -175,6 +175,20 @@ NLINK_RUN_TEXT = ("The same 5 s with every option at its default (rtol 1e-8 give
                   "N = 30 under 30 ms of CPU.")
 
 
+def chain_table(quick):
+    """benchmarks/chain_kernel.py: the ode unrolled against looped per N."""
+    return script_table("chain_kernel.py", "2,12,50" if quick else "2,12,50,100,200")
+
+
+CHAIN_TEXT = ("`benchmarks/chain_kernel.py` (issue 16): the N-rod chain's `ode` unrolled (one SX expression) "
+              "and looped (per-link kernels chained by `mapaccum`, mechanics/chain.py; none below a run of 4 "
+              "identical links); C bytes of the ode alone (in parentheses without the static index tables), "
+              "wall time of `codegen.compile_functions` (gcc at mechdsl's flags by size), one evaluation "
+              "through `FastFunction` compiled and in the virtual machine, and the ratios looped / unrolled. "
+              "The simulator compiles the looped form for chains over 8000 SX operations (`codegen.LOOP_OPS`) "
+              "and always evaluates the unrolled form in the virtual machine.")
+
+
 def simulation_scaling(quick):
     """CPU time of simulating the N-link chain for 5 s at rtol = atol = 1e-8 (erk and
     cvodes-adams, virtual machine), min of 3 after a warm-up."""
@@ -352,10 +366,21 @@ def page(ctx) -> str:
               "one right-hand-side evaluation in the virtual machine and compiled, against Pinocchio's ABA "
               "(C++) and sympy.physics.mechanics, with the accuracy against both.", "", ctx["nlink"], "",
               "Simulating the chain for 5 s at rtol = atol = 1e-8 (virtual machine, CPU time, min of 3 "
-              "after a warm-up):", "", ctx["simscale"], "", NLINK_RUN_TEXT, "", ctx["nlinkrun"], ""]
+              "after a warm-up):", "", ctx["simscale"], "", NLINK_RUN_TEXT, "", ctx["nlinkrun"], "",
+              "### Chains as loops over per-link kernels", "", CHAIN_TEXT, "", ctx["chain"], ""]
+    if ctx.get("coldstart"):
+        parts += ["## Cold start", "", COLDSTART_TEXT, "", ctx["coldstart"], ""]
     if ctx.get("control"):
         parts += ["## Optimal control: cart-pole swing-up", "", CONTROL_TEXT, "", "```", *ctx["control"], "```", ""]
     return "\n".join(parts).rstrip() + "\n"
+
+
+COLDSTART_TEXT = ("What a fresh `mech` process costs (issues 12 and 16). A run reads its model from the model "
+                  "cache (mechdsl.modelcache, docs/simulate.md) after the first: no parsing, analysis or "
+                  "derivation, and neither lark nor the front end nor the mechanics are imported. Imports are "
+                  "the sum of the top-level cumulative times of `python -X importtime`, numpy's in the same "
+                  "process; goals: imports < 2x numpy, `--version` and `check` well under 0.5 s, the 12-link "
+                  "chain under 0.4 s warm and 1 s cold on an idle machine.")
 
 
 CONTROL_TEXT = ("benchmarks/control_swingup.py: the swing-up of docs/control.md solved by IPOPT (exact "
@@ -405,9 +430,14 @@ def main(argv=None) -> int:
     log("== stability suite")
     ctx["cases"] = run_cases(available_cases(), "small" if a.quick else "full", figs, log=log)
     ctx["nlink"] = "(left out: --no-nlink)" if a.no_nlink else nlink_table(a.quick)
+    ctx["chain"] = "(left out: --no-nlink)" if a.no_nlink else chain_table(a.quick)
     log("== simulation cost against N")
     ctx["simscale"] = simulation_scaling(a.quick)
     ctx["nlinkrun"] = nlink_run_table(a.quick)
+    log("== cold start")
+    from coldstart import section as coldstart_section
+
+    ctx["coldstart"] = coldstart_section(3 if a.quick else 5)
     from control_swingup import rows as control_rows
 
     ctx["control"] = list(control_rows([30, 60] if a.quick else [30, 60, 120], 1 if a.quick else 3))

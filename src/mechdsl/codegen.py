@@ -40,9 +40,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-import shutil
-import subprocess
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -131,13 +128,38 @@ def ldl_solve(M, b):
     return ca.vertcat(*x)
 
 
-def build_ode(eom, sx: bool = False):
+LOOP_OPS = 8000    # compiled code loops over per-link kernels when the unrolled qdd has more SX operations
+
+
+def looped_ode(eom, force: bool = False):
+    """The ``ode`` Function as loops over per-link kernels (mechanics/chain.py), or None.
+
+    Only for the recursive route with a run of identical links (``EOM.qdd_loop``) and, unless
+    ``force``, an unrolled qdd of more than LOOP_OPS operations: the looped C compiles in about a
+    second at any N but evaluates 2-3x slower than the unrolled C, and 10-20x slower in the
+    virtual machine (benchmarks/chain_kernel.py), so it is used for compiled code only."""
+    if eom.qdd is None or eom.__dict__.get("qdd_loop") is None:    # (not forcing a lazy plan)
+        return None
+    if not force:
+        s = _Symbols(eom)
+        if _function("qdd", s.txup, [eom.qdd], TXUP, ["qdd"]).n_instructions() <= LOOP_OPS:
+            return None
+    plan = eom.qdd_loop
+    return None if plan is None else plan.ode(eom)
+
+
+def build_ode(eom, sx: bool = False, loop: bool = False):
     """The ``ode`` Function (t, x, u, p) -> xdot.  sx=True: an SX Function also when M qdd =
     bias must be solved (``ldl_solve``, up to SX_SOLVE_MAX coordinates) instead of the MX
-    Function around the numeric QR solve."""
+    Function around the numeric QR solve.  loop=True (not with sx): the looped form of
+    ``looped_ode`` where it applies and pays."""
     ca = _ca()
     s = _Symbols(eom)
     n = eom.n
+    if loop and not sx:
+        f = looped_ode(eom)
+        if f is not None:
+            return f
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
         return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
@@ -168,12 +190,12 @@ def jacobian_of(ode):
     return ca.Function("ode_jacobian", [t, x, u, p], [ca.densify(jx)], TXUP, ["J"])
 
 
-def _build(eom, name, outputs, sx=False):
+def _build(eom, name, outputs, sx=False, loop=False):
     ca = _ca()
     s = _Symbols(eom)
     txup = s.txup
     if name == "ode":
-        return build_ode(eom, sx)
+        return build_ode(eom, sx, loop)
     if name == "mass_matrix":
         if ca.depends_on(ca.SX(eom.M), s.qd):
             return _function("mass_matrix", txup, [eom.M], TXUP, ["M"])
@@ -293,6 +315,7 @@ class FunctionSet(Mapping):
         self.notes: list[str] = []
         self._cache: dict = {}
         self._compiled_done = False
+        self.looped = False
 
     def __getitem__(self, name):
         if name not in self._names:
@@ -300,14 +323,21 @@ class FunctionSet(Mapping):
         if self.want_compiled and not self._compiled_done:
             self._compile_all()
         if name not in self._cache:
-            if name == "ode_jacobian":
+            # read from the model cache (Functions with parameters built in are not stored)
+            stored = None if self.fixed else self.eom.__dict__.get("_stored_functions")
+            hit = stored.get((name, self.outputs, self.sx)) if stored else None
+            if hit is not None:
+                self._cache[name] = hit
+            elif name == "ode_jacobian":
                 self._cache[name] = jacobian_of(self["ode"])
             else:
                 self._cache[name] = self._make(name)
         return self._cache[name]
 
-    def _make(self, name):
-        f = _build(self.eom, name, self.outputs, self.sx)
+    def _make(self, name, loop: bool = False):
+        # the looped ode (big chains, compiled only) is an MX Function: parameters are not
+        # specialized into it (specialize keeps the Function's kind)
+        f = _build(self.eom, name, self.outputs, self.sx, loop=loop and not self.fixed)
         if not self.fixed:
             return f
         f = specialize(f, self.fixed, len(self.eom.params))
@@ -325,16 +355,21 @@ class FunctionSet(Mapping):
 
     def _compile_all(self):
         self._compiled_done = True
-        funcs = [self._make(n) for n in self._names if n != "ode_jacobian"]
+        funcs = [self._make(n, loop=True) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
-            funcs.append(self._make("ode"))
-        jac = ("forward" if self.jacobian_kind == "forward" else True) if "ode_jacobian" in self._names else False
+            funcs.append(self._make("ode", loop=True))
+        ode = next((f for f in funcs if f.name() == "ode"), None)
+        self.looped = ode is not None and ode.is_a("MXFunction") and self.eom.qdd is not None
+        forward = self.looped or self.jacobian_kind == "forward"
+        jac = ("forward" if forward else True) if "ode_jacobian" in self._names else False
         loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian=jac,
                                               derivatives=self.derivatives)
         if note:
             self.notes.append(note)
         if loaded is None:
             return
+        if self.looped:
+            self.notes.append("the ode loops over per-link kernels (a chain of identical links)")
         self.compiled = True
         self.library = lib
         for f in funcs:
@@ -446,6 +481,9 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     dense Jacobian, for methods that only need derivatives to be available (CVODES-Adams with
     functional iteration sets up a Jacobian it never evaluates).
 
+    A looped ``ode`` (``looped_ode``: big chains, compiled) always gets the forward derivative:
+    its Jacobian as C would unroll the loops over every direction (3.3 MB at N = 50).
+
     names: restrict to these Functions (default: all that apply); outputs: restrict the
     ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
     (per EOM structure), so asking twice costs nothing.
@@ -485,6 +523,8 @@ def cache_dir() -> Path:
 
 
 def find_compiler() -> str | None:
+    import shutil
+
     for cand in (os.environ.get("CC"), "gcc", "cc", "clang"):
         if cand:
             path = shutil.which(cand)
@@ -539,6 +579,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
     built in a temporary folder and renamed into place (safe under concurrency).
     """
+    import subprocess          # (subprocess and tempfile: 10 ms to import; only a compile needs them)
+    import tempfile
+
     ca = _ca()
     cc = find_compiler()
     if cc is None:
@@ -640,6 +683,8 @@ def _file_sha256(path: Path) -> str:
 
 
 def _record_digest(built: Path, lib: Path) -> None:
+    import tempfile
+
     """Write the hash of the library `built` next to its cache place `lib` (``<name>.sha256``), atomically."""
     side = _digest_path(lib)
     fd, tmp = tempfile.mkstemp(prefix=f".{side.name}.", suffix=".tmp", dir=str(lib.parent))

@@ -9,6 +9,7 @@ from .. import ir
 from . import components as K
 from .entries import CompInst, Failed
 from .evaluate import EvalError, fail
+from .friction import friction_force
 from .values import Arr, CompRef, Scalar, Str, Val, ValError
 
 
@@ -201,6 +202,8 @@ def _build_force(fl, inst: CompInst, f, span) -> K.Built:
         out.forces.append(ir.AppliedTorque(name, f["body"].name, K.as_vec3(f["tau"], "tau"), f["frame"].name, span))
     elif cls.name == "GeneralizedForce":
         out.forces.append(ir.GeneralizedForce(name, f["coordinate"].expr.name, e(f["Q"], "Q"), span))
+    elif cls.name == "Friction":
+        out.forces.append(friction_force(fl, name, f, span))
     elif cls.name == "Gravitation":
         names = tuple(b.name for b in f["bodies"].items)
         if len(set(names)) != len(names):

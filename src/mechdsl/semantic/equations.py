@@ -11,6 +11,7 @@ from .. import units as U
 from ..diagnostics import Span
 from ..printer import expr as print_expr
 from . import values as V
+from .constraint_names import constraint_name
 from .entries import Failed
 from .evaluate import EvalError, fail
 from .values import Arr, CompRef, Scalar, ValError
@@ -103,9 +104,11 @@ def _equation(fl, eq, connects: bool) -> None:
             if not any(isinstance(n, (ir.Coord, ir.PointPos, ir.BodyRot)) for n in X.walk(s.expr)):
                 fail("E309", "this equation involves no coordinate", eq.span,
                      "an equation is a constraint on coordinates; to define a quantity use `Real x = ...;`")
-            nm = f"c{len(fl.constraints) + 1}"
+            alias = f"c{len(fl.constraints) + 1}"
+            nm = constraint_name(eq.doc, fl.loop_vars.values(), k if len(items) > 1 else None,
+                                 fl.constraints) or alias
             fl.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
-                                                eq.span))
+                                                eq.span, alias=alias))
         return
     raise AssertionError(type(eq))
 
