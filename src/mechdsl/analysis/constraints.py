@@ -55,12 +55,8 @@ class Fns:
 
 
 def fns(eom) -> Fns:
-    cache = eom.__dict__.setdefault("_analysis_cache", {})
-    key = ("constraint_fns", id(eom.g), id(eom.q))
-    f = cache.get(key)
-    if f is None:
-        f = cache[key] = Fns(eom)
-    return f
+    # shared with EOM.replace copies: keyed by the symbolic content
+    return eom.workspace.shared(("constraint_fns", id(eom.g), id(eom.q)), lambda: Fns(eom))
 
 
 @dataclass

@@ -67,7 +67,7 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
             funcs = {k: native[k] for k in funcs}
             compiled_note, native_code = None, True
     free = eom.replace(g=None)
-    free.cached("first_integrals", lambda: None)   # the free system's symmetries are not the model's
+    free.workspace.first_integrals(lambda: None)   # the free system's symmetries are not the model's
     r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
     r.metadata["compiled"] = native_code
     if compiled_note:

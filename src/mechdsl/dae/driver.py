@@ -35,7 +35,7 @@ from ..result import Failure, Result
 from .dof import dof_report, short_list, singular_ratio, singular_ratios
 from .init import initialize
 from .options import DaeOptions, parse_options
-from .record import evaluate_signals, select_signals, standard_signals
+from .record import constrained_signals, multipliers, select_signals
 from .stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
 from .system import ConstrainedSystem
 
@@ -378,18 +378,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     t = np.array(T)
     Q = np.array(Qs).reshape(len(T), eom.n)
     QD = np.array(QDs).reshape(len(T), eom.n)
-    LAM = None
-    if need_lam:
-        LAM = np.zeros((len(T), eom.m))
-        for i in range(len(T)):
-            _, lam = system.accel(Q[i], QD[i], t[i])
-            LAM[i, list(system.active)] = lam
-    plain = {k: v for k, v in chosen.items() if k in eom.outputs}
-    signals = evaluate_signals(eom, plain, t, Q, QD, LAM, pv)
-    signals.update(evaluate_signals(eom, standard_signals(eom), t, Q, QD, LAM, pv))
-    signals["constraint_drift"] = np.array(D)
-    signals["velocity_drift"] = np.array(VD)
-    signals.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, Q, QD, LAM, pv))
+    LAM = multipliers(system, t, Q, QD) if need_lam else None
+    signals = constrained_signals(eom, chosen, t, Q, QD, LAM, pv, drift=(D, VD))
 
     energy = energy_check(eom, signals, opts, failure is None)
     bound = opts.bound

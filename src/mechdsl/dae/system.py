@@ -159,13 +159,11 @@ class ConstrainedSystem:
             raise ValueError("ConstrainedSystem needs an EOM with constraints (eom.g)")
         pv = eom.param_values if p is None else np.asarray(p, float)
         active = tuple(range(eom.m)) if active is None else tuple(active)
-        cache = eom.__dict__.setdefault("_constrained_systems", {})
         route = eom.cached(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
                            lambda: _kkt_route(eom, pv, len(active)))
-        key = (active, route)     # the active set and the linear-algebra route
-        if key not in cache:
-            cache[key] = ConstrainedSystem._build(eom, pv, active, route)
-        base = cache[key]
+        # the active set and the linear-algebra route; shared with EOM.replace copies
+        base = eom.workspace.shared(("constrained_system", active, route),
+                                    lambda: ConstrainedSystem._build(eom, pv, active, route))
         return ConstrainedSystem(eom=eom, p=pv, active=active, sym=base.sym, fn=base.fn, route=base.route,
                                  fast=base.fast)
 
