@@ -255,6 +255,12 @@ class Model:
                                      input_defaults=tuple(float(p.value) for p in self.model.inputs))
         return self._eom
 
+    @property
+    def workspace(self):
+        """What is derived from the equations and kept (Functions, the recorder's, searches):
+        ``mechdsl.workspace.Workspace`` of this model's EOM, alive as long as the model."""
+        return self.eom.workspace
+
     def casadi(self, compiled: bool = False) -> dict:
         """CasADi Functions (mechdsl.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
         "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds

@@ -100,10 +100,10 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
     if found:
         return found
     if eom.m:
-        from .dae.driver import _start
         from .dae.init import initialize
+        from .simulation.inputs import fixed_start
 
-        q, qd, fq, fqd = _start(eom, x0, pv)
+        q, qd, fq, fqd = fixed_start(eom, x0, pv)
         g_problem = _constraint_problem(eom, q, t, pv)
         if g_problem:
             return g_problem
@@ -116,7 +116,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         if found:
             return found
     else:
-        from .simulate import start_vector
+        from .simulation.inputs import start_vector
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]

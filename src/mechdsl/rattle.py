@@ -83,14 +83,14 @@ def consistent_start(eom, x0, q0, qd0, t0, pv):
     consistent initialization (overridden values count as fixed) and its choice of
     independent constraints."""
     from .dae import dof_report, initialize
-    from .dae.driver import _start
+    from .simulation.inputs import fixed_start
 
     if q0 is not None or qd0 is not None:
         a, b = eom.start(pv)
         a = a if q0 is None else np.asarray(q0, float).ravel()
         b = b if qd0 is None else np.asarray(qd0, float).ravel()
         x0 = np.concatenate([a, b])
-    qs, qds, fq, fqd = _start(eom, x0, pv)
+    qs, qds, fq, fqd = fixed_start(eom, x0, pv)
     init = initialize(eom, qs, qds, t0, pv, fixed_q=fq, fixed_qd=fqd)
     dof = dof_report(eom, init.q, t0, pv)
     return init.q, init.qd, init, tuple(dof.independent), dof

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from . import integrators as I
-from .codegen import FastFunction, casadi_functions, singularity_monitors
+from .codegen import FastFunction, casadi_functions
 from .diagnostics import UsageError, did_you_mean
 from .result import Failure, Result
 from .eom import parameter_vector
@@ -452,7 +452,15 @@ def _integral_search(eom, pv, u=None):
         folded = eom.workspace.folded(key, lambda: fold_inputs(eom, u))
         return _integral_search(folded, np.r_[pv, u])[0], True
     searchable = eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
-    return eom.workspace.first_integrals(lambda: _integral_function(eom, pv) if searchable else None), False
+
+    def search():
+        # shared by the EOM's replace copies with the same equations (other Models of the same
+        # structure): one Function object, so the recorder's Function is shared too
+        objs = tuple(eom.__dict__.get(k) for k in ("q", "qd", "t", "p", "T", "V", "D", "Q", "g"))
+        key = ("first_integrals", np.asarray(pv, float).tobytes(), tuple(map(id, objs)))
+        return eom.workspace.shared(key, lambda: (objs, _integral_function(eom, pv)))[1]
+
+    return eom.workspace.first_integrals(search if searchable else lambda: None), False
 
 
 INTEGRAL_CACHE_VERSION = "1"

@@ -1,0 +1,154 @@
+"""The frozen EOM, its workspace (mechdsl/workspace.py) and the one recorder (simulation/record.py)."""
+from __future__ import annotations
+
+import dataclasses
+import threading
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import mechdsl
+from mechdsl import workspace
+from mechdsl.eom import EOM
+from mechdsl.simulation import record as R
+
+from sim_models import pendulum
+
+MODELS = Path(__file__).resolve().parent.parent / "models"
+
+
+def _fields_only(eom) -> bool:
+    return set(vars(eom)) <= set(EOM.__dataclass_fields__)
+
+
+def test_setting_an_attribute_on_an_eom_raises():
+    e = pendulum()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        e.g = ca.SX(0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        e._fn_cache = {}                     # not even a private cache
+    derived = mechdsl.load(MODELS / "double_pendulum.mech").eom     # the derive route's lazy EOM
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        derived.M = None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        derived.notes = []
+
+
+@pytest.mark.parametrize("model, kw", [
+    ("double_pendulum.mech", {}),
+    ("pendulum_cartesian.mech", {"reactions": True}),
+    ("pendulum_cartesian.mech", {"method": "rattle", "dt": 0.01}),
+    ("bouncing_ball.mech", {}),
+    ("pendulum.mech", {"method": "stormer-verlet", "dt": 0.01}),
+])
+def test_runs_and_analyses_leave_nothing_on_the_eom(model, kw):
+    m = mechdsl.load(MODELS / model)
+    before = dict(vars(m.eom))
+    m.simulate(0.2, points=11, **kw)
+    if not m.eom.model.contacts:
+        m.first_integrals()
+    assert _fields_only(m.eom)
+    assert all(vars(m.eom)[k] is v for k, v in before.items())        # no field replaced either
+    assert m.workspace is workspace.of(m.eom)
+
+
+def test_replace_copies_share_content_keyed_values_not_their_own():
+    e = pendulum()
+    a = e.workspace.memo("x", lambda: object())
+    s = e.workspace.shared("y", lambda: object())
+    c = e.replace(param_values=np.array([2.0, 1.0, 9.81]))
+    assert c.workspace is not e.workspace
+    assert c.workspace.memo("x", lambda: "fresh") == "fresh" and e.workspace.memo("x", lambda: None) is a
+    assert c.workspace.shared("y", lambda: None) is s
+
+
+def test_recorder_builds_one_function_per_set_of_names_and_reuses_it():
+    m = mechdsl.load(MODELS / "pendulum.mech")
+    r1 = m.simulate(0.5, points=21)
+    keys = [k for k, _ in m.workspace._shared.items() if k[0] == "record"]
+    r2 = m.simulate(0.5, points=21)
+    keys2 = [k for k, _ in m.workspace._shared.items() if k[0] == "record"]
+    assert len(keys) == 1 and keys2 == keys
+    assert list(r1.signals) == list(r2.signals)
+    for k in r1.signals:
+        assert r1.signals[k] == pytest.approx(r2.signals[k], rel=0, abs=0)
+
+
+def test_recorded_columns_against_closed_forms_at_random_states():
+    """Energies and a vector output against numpy formulas of the same pendulum (independent of
+    CasADi), at random states, parameters and inputs; vector columns are 1-based name[i]."""
+    e = pendulum()
+    rng = np.random.default_rng(7)
+    N = 9
+    t = np.sort(rng.uniform(0, 3, N))
+    Q = rng.uniform(-3, 3, (N, 1))
+    QD = rng.uniform(-5, 5, (N, 1))
+    p = np.array([1.7, 0.8, 9.5])                  # m, L, g
+    th, w = Q[:, 0], QD[:, 0]
+    cols = R.merged(R.energies(e), {"tip": ca.vertcat(p_sin(e), p_cos(e))})
+    sig = R.record(e, cols, t, Q, QD, p)
+    assert list(sig) == ["kinetic_energy", "potential_energy", "energy", "tip[1]", "tip[2]"]
+    T = 0.5 * p[0] * p[1] ** 2 * w ** 2
+    V = -p[0] * p[2] * p[1] * np.cos(th)
+    assert sig["kinetic_energy"] == pytest.approx(T, rel=1e-14)
+    assert sig["potential_energy"] == pytest.approx(V, rel=1e-14)
+    assert sig["energy"] == pytest.approx(T + V, rel=1e-13, abs=1e-12)
+    assert sig["tip[1]"] == pytest.approx(p[1] * np.sin(th), rel=1e-14)
+    assert sig["tip[2]"] == pytest.approx(-p[1] * np.cos(th), rel=1e-14)
+    empty = R.record(e, cols, t[:0], Q[:0], QD[:0], p)
+    assert list(empty) == list(sig) and all(len(v) == 0 for v in empty.values())
+
+
+def p_sin(e):
+    return e.p[1] * ca.sin(e.q[0])
+
+
+def p_cos(e):
+    return -e.p[1] * ca.cos(e.q[0])
+
+
+def test_dae_records_multiplier_columns_through_the_recorder():
+    """Reaction columns read lam: the recorder's lam input carries the run's multipliers; at
+    rest at the bottom the rod force balances gravity (m g = 9.81 N with m = 1)."""
+    m = mechdsl.load(MODELS / "pendulum_cartesian.mech")
+    r = m.simulate(0.3, points=5, reactions=True, x0={"plane.x": 0.0, "plane.y": -1.0, "der(plane.x)": 0.0, "der(plane.y)": 0.0})
+    lam = [k for k in r.signals if k.startswith("lambda[")]
+    assert lam
+    L = np.abs(r.signals[lam[0]])
+    assert L == pytest.approx(np.full_like(L, L[0]), rel=1e-6) and L[0] > 0
+    names = list(r.signals)
+    assert names.index("energy") < names.index("constraint_drift") < names.index(lam[0])
+
+
+def test_simulations_of_distinct_models_in_threads_match_sequential_runs():
+    paths = [MODELS / "double_pendulum.mech", MODELS / "pendulum.mech", MODELS / "coupled_pendulums.mech"]
+    seq = [mechdsl.load(p).simulate(0.5, points=21) for p in paths]
+    fresh = [mechdsl.load(p) for p in paths]
+    out = [None] * len(paths)
+
+    def run(i):
+        out[i] = fresh[i].simulate(0.5, points=21)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(len(paths))]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    for a, b in zip(seq, out):
+        assert list(a.signals) == list(b.signals)
+        assert b.q == pytest.approx(a.q, rel=1e-12, abs=1e-12)
+        for k in a.signals:
+            assert b.signals[k] == pytest.approx(a.signals[k], rel=1e-12, abs=1e-12)
+
+
+def test_the_workspace_dies_with_its_eom():
+    import gc
+    import weakref
+
+    e = pendulum()
+    ws = weakref.ref(e.workspace)
+    del e
+    gc.collect()
+    assert ws() is None
