@@ -110,11 +110,6 @@ class EOM:
 
         return workspace.of(self)
 
-    def cached(self, key, build):
-        """A value built once per EOM object (Functions of its fields), kept in its
-        workspace; ``replace`` starts afresh."""
-        return self.workspace.memo(key, build)
-
     @property
     def m(self) -> int:
         return 0 if self.g is None else int(self.g.numel())

@@ -452,7 +452,7 @@ def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
         except Exception:  # noqa: BLE001 -- a non-SX model: make no claim
             return None
 
-    cons = eom.cached("dae_conservative", conservative)
+    cons = eom.workspace.memo("dae_conservative", conservative)
     out["conservative"] = cons
     if cons and "energy_drift_relative" in out:
         limit = min(ENERGY_CAP, max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol))

@@ -102,7 +102,7 @@ def _kkt_route(eom: EOM, pv: np.ndarray, m: int) -> str:
     ca = _sx()
     try:
         q0 = eom.start(pv)[0] if eom.q0 is not None else np.zeros(n)
-        fM = eom.cached("M", lambda: ca.Function("M", [eom.q, eom.t, eom.p], [eom.M]))
+        fM = eom.workspace.memo("M", lambda: ca.Function("M", [eom.q, eom.t, eom.p], [eom.M]))
         M = np.array(fM(q0, 0.0, pv), float)
         d = 1.0 / np.sqrt(np.abs(np.diag(M)) + 1e-300)
         ev = np.linalg.eigvalsh(d[:, None] * M * d[None, :])
@@ -159,7 +159,7 @@ class ConstrainedSystem:
             raise ValueError("ConstrainedSystem needs an EOM with constraints (eom.g)")
         pv = eom.param_values if p is None else np.asarray(p, float)
         active = tuple(range(eom.m)) if active is None else tuple(active)
-        route = eom.cached(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
+        route = eom.workspace.memo(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
                            lambda: _kkt_route(eom, pv, len(active)))
         # the active set and the linear-algebra route; shared with EOM.replace copies
         base = eom.workspace.shared(("constrained_system", active, route),
