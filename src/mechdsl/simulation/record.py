@@ -30,6 +30,7 @@ import numpy as np
 
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
 # the symbolic fields a column may read: the Functions are shared while these are the same objects
+MAPS_KEPT = 8           # mapped Functions kept per recorder Function (by number of points)
 _FIELDS = ("t", "q", "qd", "u", "p", "lam", "T", "V", "g", "outputs", "invariants", "singularity_monitors",
            "reactions")
 
@@ -44,7 +45,7 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
     call only (not cached: the Function is built, used and dropped)."""
     t = np.asarray(t, float).reshape(-1)
     N = len(t)
-    names, F = _function(eom, columns, tuple(using), keep)
+    names, F, maps = _function(eom, columns, tuple(using), keep)
     if not names:
         return {}
     if N == 0:
@@ -58,7 +59,15 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
     QT = np.asarray(Q, float).reshape(N, n).T
     QDT = np.asarray(QD, float).reshape(N, n).T
     P = np.asarray(p, float).reshape(-1, 1)
-    mapped = eom.workspace.shared(("record_map", id(F), N), lambda: F.map(N)) if keep else F.map(N)
+    mapped = maps.get(N)
+    if mapped is None:
+        mapped = F.map(N)
+        if len(maps) >= MAPS_KEPT:             # a few point counts per Function (runs that failed early)
+            try:
+                maps.pop(next(iter(maps)), None)
+            except (RuntimeError, StopIteration):  # another thread changed it meanwhile: keep it
+                pass
+        maps[N] = mapped
     vals = np.array(mapped(t.reshape(1, N), QT, QDT, UT, P, LT), float).reshape(len(names), N)
     return {k: vals[i] for i, k in enumerate(names)}
 
@@ -74,7 +83,8 @@ def lam_symbol(eom):
 
 
 def _function(eom, columns: dict, using: tuple, keep: bool = True):
-    """(column names, Function (t, q, qd, u, p, lam) -> all columns stacked), built once."""
+    """(column names, Function (t, q, qd, u, p, lam) -> all columns stacked, its maps by
+    number of points), built once."""
     objs = tuple(eom.__dict__.get(f) for f in _FIELDS) + using     # raw entries: lazy fields stay lazy
     key = ("record", tuple(columns), tuple(map(id, objs)))
 
@@ -92,10 +102,10 @@ def _function(eom, columns: dict, using: tuple, keep: bool = True):
         ins = [eom.t, eom.q, eom.qd, eom.u_sym, eom.p, lam_symbol(eom)]
         f = ca.Function("record", ins, [ca.vertcat(*exprs) if exprs else ca.SX(0, 1)],
                         ["t", "q", "qd", "u", "p", "lam"], ["signals"])
-        return objs, names, f      # holding objs keeps their ids unique while the entry lives
+        return objs, names, f, {}      # holding objs keeps their ids unique while the entry lives
 
-    _, names, f = eom.workspace.recorder(key, build) if keep else build()
-    return names, f
+    _, names, f, maps = eom.workspace.recorder(key, build) if keep else build()
+    return names, f, maps
 
 
 # --------------------------------------------------------------------------- column sets
