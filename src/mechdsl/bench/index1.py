@@ -15,7 +15,6 @@ supervision, not caching.
 """
 from __future__ import annotations
 
-import numpy as np
 
 from ..diagnostics import UsageError
 
@@ -72,11 +71,10 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     r.metadata["compiled"] = native_code
     if compiled_note:
         r.metadata.setdefault("notes", []).append(compiled_note)
-    if len(r.t):
-        g = ca.Function("g", [eom.t, eom.q, eom.p], [eom.g])
-        G = np.array(g.map(len(r.t))(r.t.reshape(1, -1), r.q.T, pv.reshape(-1, 1)), float)
-        for i, name in enumerate(eom.constraint_names):
-            r.signals[f"residual({name})"] = G[i].reshape(-1)
+    if len(r.t):                     # the constrained model's residuals, as every constrained run records them
+        from ..simulation import record as R
+
+        r.signals.update(R.record(eom, R.residuals(eom), r.t, r.q, r.qd, pv))
     r.metadata["formulation"] = FORMULATION
     r.metadata["baumgarte"] = [alpha, beta]
     r.metadata["active_constraints"] = [eom.constraint_names[i] for i in system.active]
