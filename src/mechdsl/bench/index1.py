@@ -15,7 +15,6 @@ supervision, not caching.
 """
 from __future__ import annotations
 
-
 from ..diagnostics import UsageError
 
 FORMULATION = "index1-ode"
