@@ -277,13 +277,9 @@ def _signals(eom, ham, q, qd, pm, t, pv, out_names, active=None) -> dict[str, np
 
 
 def _energy_drift(signals) -> dict:
-    E = signals.get("energy")
-    if E is None or len(E) == 0 or not np.isfinite(E).all():
-        return {}
-    dE = float(np.abs(E - E[0]).max())
-    scale = max(abs(float(E[0])), float(np.abs(signals.get("kinetic_energy", E)).max()),
-                float(np.abs(signals.get("potential_energy", E)).max()), 1e-300)
-    out = {"energy_drift": dE, "energy_drift_relative": dE / scale}
+    from .simulate import _energy_drift as energy_drift
+
+    out = energy_drift(signals)
     if "H" in signals and np.isfinite(signals["H"]).all():
         out["hamiltonian_drift"] = float(np.abs(signals["H"] - signals["H"][0]).max())
     return out
