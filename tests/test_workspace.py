@@ -19,6 +19,18 @@ from sim_models import pendulum
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
 
+def _unshared_pendulum(tag: str):
+    """models/pendulum.mech with one more output: a structure no other test derives, so its
+    workspace starts empty whatever ran before in the process."""
+    text = (MODELS / "pendulum.mech").read_text().replace(
+        "end Pendulum;", f"  output Real {tag} = 1.2345 * der(theta);\nend Pendulum;", 1)
+    return mechdsl.loads(text)
+
+
+def _record_keys(m) -> list:
+    return [k for k, _ in m.workspace._shared.items() if k[0] == "record"]
+
+
 def _fields_only(eom) -> bool:
     return set(vars(eom)) <= set(EOM.__dataclass_fields__)
 
@@ -65,12 +77,14 @@ def test_replace_copies_share_content_keyed_values_not_their_own():
 
 
 def test_recorder_builds_one_function_per_set_of_names_and_reuses_it():
-    m = mechdsl.load(MODELS / "pendulum.mech")
+    m = _unshared_pendulum("w_reuse")
     r1 = m.simulate(0.5, points=21)
-    keys = [k for k, _ in m.workspace._shared.items() if k[0] == "record"]
+    keys = _record_keys(m)
     r2 = m.simulate(0.5, points=21)
-    keys2 = [k for k, _ in m.workspace._shared.items() if k[0] == "record"]
-    assert len(keys) == 1 and keys2 == keys
+    other = _unshared_pendulum("w_reuse")        # another model of the same structure and values:
+    other.simulate(0.5, points=21)               # its EOM is a copy of the same derivation
+    assert other.eom is not m.eom and other.workspace is not m.workspace
+    assert len(keys) == 1 and _record_keys(m) == keys and _record_keys(other) == keys
     assert list(r1.signals) == list(r2.signals)
     for k in r1.signals:
         assert r1.signals[k] == pytest.approx(r2.signals[k], rel=0, abs=0)
@@ -126,9 +140,7 @@ def test_one_cold_workspace_used_from_several_threads_at_once():
     """Four threads simulate one model whose workspace is empty (a structure no other test
     derives): every value is built concurrently, the first stored wins, and every thread's
     result equals a later sequential run bit for bit."""
-    text = (MODELS / "pendulum.mech").read_text().replace(
-        "end Pendulum;", "  output Real w_ws = 1.2345 * der(theta);\nend Pendulum;", 1)
-    m = mechdsl.loads(text)
+    m = _unshared_pendulum("w_ws")
     out = [None] * 4
     start = threading.Barrier(len(out))
 
@@ -142,7 +154,7 @@ def test_one_cold_workspace_used_from_several_threads_at_once():
     for th in threads:
         th.join()
     alone = m.simulate(0.5, points=21, outputs=("x", "w_ws"))
-    assert len([k for k, _ in m.workspace._shared.items() if k[0] == "record"]) == 1
+    assert len(_record_keys(m)) == 1
     for r in out:
         assert list(r.signals) == list(alone.signals) and "w_ws" in r.signals
         np.testing.assert_array_equal(r.q, alone.q)
