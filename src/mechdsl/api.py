@@ -239,7 +239,9 @@ class Model:
     # ------------------------------------------------------------------ derived forms
     @property
     def eom(self):
-        """The equations of motion (mechdsl.eom.EOM), derived once per model structure."""
+        """The equations of motion (mechdsl.eom.EOM), derived once per model structure.  Frozen:
+        ``eom.replace(field=...)`` makes a changed copy; what is derived from it is kept in
+        ``Model.workspace``."""
         if self._eom is None:
             key = _structure_key(self.model)
             base = _EOM_CACHE.get(key)
