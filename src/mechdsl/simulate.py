@@ -581,9 +581,9 @@ def _integral_search(eom, pv, u=None):
     def search():
         # shared by the EOM's replace copies with the same equations (other Models of the same
         # structure): one Function object, so the recorder's Function is shared too
-        objs = tuple(eom.__dict__.get(k) for k in ("q", "qd", "t", "p", "T", "V", "D", "Q", "g"))
-        key = ("first_integrals", np.asarray(pv, float).tobytes(), tuple(map(id, objs)))
-        return eom.workspace.shared(key, lambda: (objs, _integral_function(eom, pv)))[1]
+        return eom.workspace.by_content(eom, ("q", "qd", "t", "p", "T", "V", "D", "Q", "g"),
+                                        ("first_integrals", np.asarray(pv, float).tobytes()),
+                                        lambda: _integral_function(eom, pv))
 
     return eom.workspace.first_integrals(search if searchable else lambda: None), False
 

@@ -10,9 +10,11 @@ Two levels:
 
 - ``memo(key, build)``: values of *this* EOM object (Functions of its fields, results for its
   parameter values).  ``EOM.replace`` makes a new object and so starts afresh.
-- ``shared(key, build)``: values keyed by symbolic content (ids of SX fields, active sets),
-  shared by the copies ``EOM.replace`` makes of one derived EOM (``inherit``), so
-  ``with_params`` does not rebuild the analyses' Functions.
+- ``by_content(eom, fields, key, build)``: values shared by the copies ``EOM.replace`` makes
+  of one derived EOM (``inherit``) as long as the fields they read are the same objects, so
+  ``with_params`` and another model of the same structure rebuild nothing, while a copy with
+  other equations (``Drive.close_eom``, ``fold_inputs``) builds its own.  (``shared(key,
+  build)`` is the raw store: the key must name the content.)
 
 Thread safety: distinct EOMs have distinct workspaces and never contend; on one workspace a
 value is built outside the lock and the first one stored wins (a race builds twice, never
@@ -73,8 +75,17 @@ class Workspace:
         return self._own.get(key, build)
 
     def shared(self, key: Hashable, build: Callable[[], T]) -> T:
-        """The value for ``key`` shared with the EOM's ``replace`` copies (key by content)."""
+        """The value for ``key`` shared with the EOM's ``replace`` copies; the key must name
+        the content it depends on (see ``by_content``)."""
         return self._shared.get(key, build)
+
+    def by_content(self, eom, fields: tuple, key: Hashable, build: Callable[[], T], extra: tuple = ()) -> T:
+        """A value shared with those ``replace`` copies whose ``fields`` (raw entries: lazy
+        fields stay lazy) and ``extra`` objects are the same objects as this EOM's: a copy
+        with other equations (``Drive.close_eom``, ``fold_inputs``) builds its own.  The
+        entry holds the objects, so their ids stay unique while it lives."""
+        objs = tuple(eom.__dict__.get(f) for f in fields) + tuple(extra)
+        return self._shared.get((key, tuple(map(id, objs))), lambda: (objs, build()))[1]
 
     # -- named accessors ---------------------------------------------------------------------
     def start_function(self, eom):
@@ -100,10 +111,10 @@ class Workspace:
             return self._own.peek("first_integrals")
         return self.memo("first_integrals", build)
 
-    def recorder(self, key: Hashable, build: Callable[[], T]) -> T:
-        """The recorder's Function for a key of column names and the identities of the
-        symbolic fields it reads (simulation/record.py); shared with ``replace`` copies."""
-        return self.shared(key, build)
+    def recorder(self, eom, fields: tuple, names: tuple, build: Callable[[], T], extra: tuple = ()) -> T:
+        """The recorder's Function for a tuple of column names (simulation/record.py), shared
+        with the ``replace`` copies whose ``fields`` it reads are the same objects."""
+        return self.by_content(eom, fields, ("record", names), build, extra)
 
 
 def of(eom) -> Workspace:

@@ -55,8 +55,8 @@ class Fns:
 
 
 def fns(eom) -> Fns:
-    # shared with EOM.replace copies: keyed by the symbolic content
-    return eom.workspace.shared(("constraint_fns", id(eom.g), id(eom.q)), lambda: Fns(eom))
+    # shared with the EOM.replace copies of the same constraints
+    return eom.workspace.by_content(eom, ("g", "q", "t", "p"), "constraint_fns", lambda: Fns(eom))
 
 
 @dataclass

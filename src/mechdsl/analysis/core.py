@@ -103,10 +103,8 @@ class Parts:
 
 def parts(eom) -> Parts:
     """The Parts of an EOM, built once and kept in the EOM's workspace."""
-    # EOM.replace copies share these: key by the symbolic content, not by the object
-    key = ("parts",) + tuple(id(x) for x in (eom.T, eom.V, eom.D, eom.Q, eom.q, eom.qd, eom.t, eom.p))
-    pt = eom.workspace.shared(key, lambda: Parts(eom))
-    return pt
+    # shared with the EOM.replace copies of the same equations
+    return eom.workspace.by_content(eom, ("T", "V", "D", "Q", "M", "q", "qd", "t", "p"), "parts", lambda: Parts(eom))
 
 
 # --------------------------------------------------------------------------- probing

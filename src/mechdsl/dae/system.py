@@ -136,6 +136,8 @@ def equilibrated_kkt_solve(M, G, rhs_q, rhs_c):
     return d * x[:n], s * x[n:]
 
 
+SYSTEM_FIELDS = ("q", "qd", "t", "p", "M", "bias", "g")     # what ConstrainedSystem._build reads
+
 @dataclass
 class ConstrainedSystem:
     """Symbolic and compiled pieces of an EOM with constraints, for numeric parameters p."""
@@ -161,9 +163,10 @@ class ConstrainedSystem:
         active = tuple(range(eom.m)) if active is None else tuple(active)
         route = eom.workspace.memo(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
                            lambda: _kkt_route(eom, pv, len(active)))
-        # the active set and the linear-algebra route; shared with EOM.replace copies
-        base = eom.workspace.shared(("constrained_system", active, route),
-                                    lambda: ConstrainedSystem._build(eom, pv, active, route))
+        # the active set and the linear-algebra route; shared with EOM.replace copies of the
+        # same equations (not with Drive.close_eom's, whose M, bias and g read the signals)
+        base = eom.workspace.by_content(eom, SYSTEM_FIELDS, ("constrained_system", active, route),
+                                        lambda: ConstrainedSystem._build(eom, pv, active, route))
         return ConstrainedSystem(eom=eom, p=pv, active=active, sym=base.sym, fn=base.fn, route=base.route,
                                  fast=base.fast)
 

@@ -85,9 +85,6 @@ def lam_symbol(eom):
 def _function(eom, columns: dict, using: tuple, keep: bool = True):
     """(column names, Function (t, q, qd, u, p, lam) -> all columns stacked, its maps by
     number of points), built once."""
-    objs = tuple(eom.__dict__.get(f) for f in _FIELDS) + using     # raw entries: lazy fields stay lazy
-    key = ("record", tuple(columns), tuple(map(id, objs)))
-
     def build():
         import casadi as ca
 
@@ -102,10 +99,9 @@ def _function(eom, columns: dict, using: tuple, keep: bool = True):
         ins = [eom.t, eom.q, eom.qd, eom.u_sym, eom.p, lam_symbol(eom)]
         f = ca.Function("record", ins, [ca.vertcat(*exprs) if exprs else ca.SX(0, 1)],
                         ["t", "q", "qd", "u", "p", "lam"], ["signals"])
-        return objs, names, f, {}      # holding objs keeps their ids unique while the entry lives
+        return names, f, {}
 
-    _, names, f, maps = eom.workspace.recorder(key, build) if keep else build()
-    return names, f, maps
+    return eom.workspace.recorder(eom, _FIELDS, tuple(columns), build, using) if keep else build()
 
 
 # --------------------------------------------------------------------------- column sets
