@@ -177,3 +177,30 @@ def test_the_workspace_dies_with_its_eom():
     del e
     gc.collect()
     assert ws() is None
+
+
+def test_an_eom_read_from_the_model_cache_is_frozen_and_keeps_its_functions_in_the_workspace(tmp_path, monkeypatch):
+    """modelcache.unpack_eom used to set the fields it did not hold, the Recorders and the
+    stored Functions on the EOM after building it; now they are constructor values and
+    workspace entries, and a warm run gives the cold run's numbers bit for bit."""
+    from mechdsl import api, codegen, modelcache
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(api, "_EOM_CACHE", {})
+    monkeypatch.setattr(codegen, "_SETS", {})
+    cold_model = mechdsl.load(MODELS / "double_pendulum.mech")
+    cold = cold_model.simulate(0.5, points=11)
+    cold_model._remember()
+    monkeypatch.setattr(api, "_EOM_CACHE", {})
+    monkeypatch.setattr(codegen, "_SETS", {})
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    e = m.eom
+    assert isinstance(e, modelcache.CachedEOM)
+    assert e.workspace.stored_functions(e)                  # the Functions the cold run built
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        e.M = None
+    warm = m.simulate(0.5, points=11)
+    assert _fields_only(e)
+    np.testing.assert_array_equal(warm.q, cold.q)
+    for k in cold.signals:
+        np.testing.assert_array_equal(warm.signals[k], cold.signals[k])

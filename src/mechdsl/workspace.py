@@ -87,6 +87,12 @@ class Workspace:
         objs = tuple(eom.__dict__.get(f) for f in fields) + tuple(extra)
         return self._shared.get((key, tuple(map(id, objs))), lambda: (objs, build()))[1]
 
+    def peek_by_content(self, eom, fields: tuple, key: Hashable, default=None):
+        """What ``by_content`` holds for these fields and key, without building (default: none)."""
+        objs = tuple(eom.__dict__.get(f) for f in fields)
+        hit = self._shared.peek((key, tuple(map(id, objs))))
+        return default if hit is None else hit[1]
+
     # -- named accessors ---------------------------------------------------------------------
     def start_function(self, eom):
         """casadi.Function p -> (q0, qd0)."""
@@ -110,6 +116,16 @@ class Workspace:
         if build is None:
             return self._own.peek("first_integrals")
         return self.memo("first_integrals", build)
+
+    def stored_functions(self, eom, functions: dict | None = None) -> dict | None:
+        """The CasADi Functions the model cache read for ``eom``'s structure (modelcache.py),
+        by (name, outputs, sx); ``functions``: keep these.  Shared with the ``replace`` copies
+        of the same structure (codegen's structure fields), never with other equations."""
+        from .codegen import _STRUCTURE
+
+        if functions is not None:
+            return self.by_content(eom, _STRUCTURE, "stored_functions", lambda: functions)
+        return self.peek_by_content(eom, _STRUCTURE, "stored_functions")
 
     def recorder(self, eom, fields: tuple, names: tuple, build: Callable[[], T], extra: tuple = ()) -> T:
         """The recorder's Function for a tuple of column names (simulation/record.py), shared
