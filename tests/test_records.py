@@ -62,11 +62,21 @@ def test_record_equality_is_tuple_equality():
     assert E() == E() and hash(E()) == hash(F()) == hash(()) and repr(E()) == repr(F())
 
 
+def test_identity_equality_and_post_init_as_in_a_dataclass():
+    R, D = pair("    a: int\n    b: dict = dataclasses.field(default_factory=dict)\n"
+                "    def __post_init__(self):\n        object.__setattr__(self, 'b', {'a': self.a})\n", eq=False)
+    r, d = R(1), D(1)
+    assert r.b == d.b == {"a": 1} and repr(r) == repr(d) and R.__doc__ == D.__doc__
+    assert r != R(1) and r == r and hash(r) == id(r) // 16 == object.__hash__(r) and D(1) != d
+    assert repr(R.__dataclass_params__) == repr(D.__dataclass_params__)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        r.a = 2
+
+
 def test_record_refuses_what_it_does_not_do():
     for body in ("    x: int = dataclasses.field(default=1, hash=True)\n",
                  "    x: int = 1\n    y: int\n",
-                 "    x: typing.ClassVar[int] = 1\n",
-                 "    x: int\n    def __post_init__(self):\n        pass\n"):
+                 "    x: typing.ClassVar[int] = 1\n"):
         with pytest.raises(TypeError):
             pair(body)
 

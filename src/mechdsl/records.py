@@ -13,10 +13,11 @@ and ``__hash__`` one closure per class over its key), and
 and bound to each class's defaults.
 
 ``@record(frozen=False)`` is ``@dataclass`` (mutable, unhashable); ``@record(order=True)``
-adds the comparisons of ``@dataclass(order=True)``.  Supported: annotated fields with a plain
+adds the comparisons of ``@dataclass(order=True)``; ``@record(eq=False)`` compares and hashes
+by identity; ``__post_init__`` is called as a dataclass calls it.  Supported: annotated fields with a plain
 default or ``dataclasses.field(default=..., default_factory=..., repr=..., compare=...)``; a
-record base class with no fields.  Anything else (``ClassVar``, ``InitVar``,
-``__post_init__``, fields inherited from a base, ``hash``/``init``/``kw_only`` options) is
+record base class with no fields.  Anything else (``ClassVar``, ``InitVar``, fields
+inherited from a base, ``hash``/``init``/``kw_only`` options) is
 refused with TypeError: use ``@dataclass`` for those.
 """
 from __future__ import annotations
@@ -32,15 +33,17 @@ _FACTORY = object()                    # default of an argument whose field has 
 _INITS: dict[tuple, object] = {}       # (names, factory flags) -> code of __init__
 
 
-def _init_code(names: tuple[str, ...], factory: tuple[bool, ...]):
-    key = (names, factory)
+def _init_code(names: tuple[str, ...], factory: tuple[bool, ...], post: bool):
+    key = (names, factory, post)
     code = _INITS.get(key)
     if code is None:
         lines = [f"def __init__(self, {', '.join(names)}):" if names else "def __init__(self):"]
         for n, fac in zip(names, factory):
             value = f"_f_{n}() if {n} is _FACTORY else {n}" if fac else n
             lines.append(f"    _set(self, {n!r}, {value})")
-        if not names:
+        if post:
+            lines.append("    self.__post_init__()")
+        if not names and not post:
             lines.append("    pass")
         ns: dict = {}
         exec("\n".join(lines), {}, ns)
@@ -100,16 +103,18 @@ def _delattr(self, name):
     object.__delattr__(self, name)
 
 
-def record(cls=None, /, *, frozen: bool = True, order: bool = False):
+def record(cls=None, /, *, frozen: bool = True, order: bool = False, eq: bool = True):
     """The class as a dataclass (frozen unless ``frozen=False``; see the module docstring)."""
     if cls is None:
-        return lambda c: _make(c, frozen, order)
-    return _make(cls, frozen, order)
+        return lambda c: _make(c, frozen, order, eq)
+    return _make(cls, frozen, order, eq)
 
 
-def _make(cls, frozen: bool, order: bool):
-    if getattr(cls, "__dataclass_fields__", None) or "__post_init__" in cls.__dict__:
-        raise TypeError(f"record {cls.__name__}: fields inherited or __post_init__: use @dataclass")
+def _make(cls, frozen: bool, order: bool, eq: bool = True):
+    if getattr(cls, "__dataclass_fields__", None):
+        raise TypeError(f"record {cls.__name__}: fields inherited: use @dataclass")
+    if order and not eq:
+        raise ValueError("eq must be true if order is true")
     fields: dict[str, dataclasses.Field] = {}
     defaults: list = []
     globs = {"_set": object.__setattr__ if frozen else setattr, "_FACTORY": _FACTORY}
@@ -135,7 +140,8 @@ def _make(cls, frozen: bool, order: bool):
             else:
                 setattr(cls, name, f.default)
     names = tuple(fields)
-    code = _init_code(names, tuple(f.default_factory is not _MISSING for f in fields.values()))
+    code = _init_code(names, tuple(f.default_factory is not _MISSING for f in fields.values()),
+                      hasattr(cls, "__post_init__"))
     init = FunctionType(code, globs, "__init__", tuple(defaults) or None)
     init.__qualname__ = f"{cls.__qualname__}.__init__"
     cls.__init__ = init
@@ -143,17 +149,17 @@ def _make(cls, frozen: bool, order: bool):
     cls.__match_args__ = names
     cls._record_key = _key(tuple(n for n, f in fields.items() if f.compare))
     cls._record_repr = tuple(n for n, f in fields.items() if f.repr)
-    eq, hash_ = _eq_hash(cls._record_key)
-    methods = {"__eq__": eq, "__repr__": _repr, **(_ORDER if order else {})}
+    eq_, hash_ = _eq_hash(cls._record_key)
+    methods = {"__repr__": _repr, **({"__eq__": eq_} if eq else {}), **(_ORDER if order else {})}
     if frozen:
         cls._record_frozen = True
         methods.update(__setattr__=_setattr, __delattr__=_delattr)
     for k, fn in methods.items():
         if k not in cls.__dict__:
             setattr(cls, k, fn)
-    if "__hash__" not in cls.__dict__ or cls.__dict__["__hash__"] is None:
-        cls.__hash__ = hash_ if frozen else None
-    cls.__dataclass_params__ = _params(frozen, order)
+    if eq and ("__hash__" not in cls.__dict__ or cls.__dict__["__hash__"] is None):
+        cls.__hash__ = hash_ if frozen else None    # (eq=False: object's, by identity)
+    cls.__dataclass_params__ = _params(frozen, order, eq)
     if cls.__doc__ is None:             # dataclass's docstring: the signature of __init__
         cls.__doc__ = f"{cls.__name__}({', '.join(_shown(f) for f in fields.values())})"
     return cls
@@ -172,15 +178,15 @@ def _shown(f: dataclasses.Field) -> str:
     return text if f.default is _MISSING else f"{text} = {f.default!r}"
 
 
-_PARAMS: dict[tuple[bool, bool], object] = {}
+_PARAMS: dict[tuple[bool, bool, bool], object] = {}
 
 
-def _params(frozen: bool, order: bool):
-    """The ``__dataclass_params__`` of @dataclass(frozen=frozen, order=order) (dask reads it)."""
-    p = _PARAMS.get((frozen, order))
+def _params(frozen: bool, order: bool, eq: bool):
+    """The ``__dataclass_params__`` of @dataclass(frozen=, order=, eq=) (dask reads it)."""
+    p = _PARAMS.get((frozen, order, eq))
     if p is None:
         cls = dataclasses._DataclassParams
-        given = dict(init=True, repr=True, eq=True, order=order, unsafe_hash=False, frozen=frozen,
+        given = dict(init=True, repr=True, eq=eq, order=order, unsafe_hash=False, frozen=frozen,
                      match_args=True, kw_only=False, slots=False, weakref_slot=False)
-        p = _PARAMS[(frozen, order)] = cls(**{k: v for k, v in given.items() if k in cls.__slots__})
+        p = _PARAMS[(frozen, order, eq)] = cls(**{k: v for k, v in given.items() if k in cls.__slots__})
     return p
