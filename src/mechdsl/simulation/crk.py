@@ -91,6 +91,29 @@ def _ptr(a):
     return a.ctypes.data_as(_DP)
 
 
+def call_in_thread(call, ctl, tick):
+    """``call()`` (a ctypes call of the loop, which releases the GIL) in a worker thread; the main
+    thread calls ``tick(rows written)`` every 0.1 s from the progress word ctl[0] and, on Ctrl-C,
+    sets ctl[1] (the loop stops at its next step) and lets the interrupt through.  The status, or
+    7 when the call raised.  ``call`` keeps the buffers it passes alive while the worker runs."""
+    box = {}
+
+    def work():
+        box["status"] = call()
+
+    th = threading.Thread(target=work, name="mechdsl-crk", daemon=True)
+    th.start()
+    try:
+        while th.is_alive():
+            th.join(0.1)
+            if ctl[0]:
+                tick(int(ctl[0]))
+    except BaseException:
+        ctl[1] = 1          # ask the loop to stop at its next step, then let the interrupt through
+        raise
+    return box.get("status", 7)
+
+
 def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress) -> I.Run:
     """One C call over the whole output grid, in a worker thread (progress and Ctrl-C stay live)."""
     grid = np.ascontiguousarray(grid, float)
@@ -102,28 +125,15 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
     stats = np.zeros(4)
     ctl = np.zeros(2, dtype=np.int64)
     xfail = np.zeros(nx)
-    box = {}
-    keep = (grid, X, x0c, pc, uc, stats, ctl, xfail, fn)   # alive while the worker runs
 
-    def work():
-        assert keep
-        box["status"] = fn(CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
-                           float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats),
-                           ctl.ctypes.data_as(_I64P), _ptr(xfail))
+    def call():
+        return fn(CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
+                  float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats),
+                  ctl.ctypes.data_as(_I64P), _ptr(xfail))
 
-    th = threading.Thread(target=work, name="mechdsl-crk", daemon=True)
-    th.start()
-    try:
-        while th.is_alive():
-            th.join(0.1)
-            if ctl[0]:
-                progress.update(float(grid[int(ctl[0]) - 1]))
-    except BaseException:
-        ctl[1] = 1          # ask the loop to stop at its next step, then let the interrupt through
-        raise
+    status = call_in_thread(call, ctl, lambda rows: progress.update(float(grid[rows - 1])))
     reached = int(ctl[0])
     progress.update(float(grid[max(reached, 1) - 1]))
-    status = box.get("status", 7)
     raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status)}
     run = I.Run(X=X, reached=reached, stats=raw)
     if status != 0 or reached < len(grid):
