@@ -92,3 +92,15 @@ def test_every_shipped_contact_scene_compiled_equals_python(file, scene):
     # chaotic scenes (the rod, the cradle's trains) amplify round-off: tolerance scaled by rtol
     tol = 1e3 * opts.get("rtol", 1e-8)
     agree(c, p, tol, tol)
+
+
+@needs_cc
+def test_no_compile_reaches_the_contact_stepper(tmp_path):
+    """`compiled = false` (scene, CLI --no-compile, Model.simulate) steps the contact run in Python;
+    the default compiles its free flights."""
+    m = mechdsl.load(MODELS / "bouncing_ball.mech", scene="BounceElastic")
+    off = m.simulate(t_end=1.0, compiled=False)
+    on = m.simulate(t_end=1.0)
+    assert off.metadata["compiled"] == "off (requested)" and "compiled_segments" not in off.stats
+    assert on.stats["compiled_segments"] >= 1
+    assert [e["time"] for e in on.events] == pytest.approx([e["time"] for e in off.events], abs=1e-12)

@@ -95,7 +95,7 @@ class DaeBackend(Backend):
 
 class EventsBackend(Backend):
     name = "events"
-    ignores = ("dt", "max_steps", "integrator_options", "formulation", "reactions", "compiled")
+    ignores = ("dt", "max_steps", "integrator_options", "formulation", "reactions")
 
     def run(self, problem, progress):
         from ..impacts import simulate_with_contacts
@@ -107,9 +107,10 @@ class EventsBackend(Backend):
                 kw[key] = getattr(s, key)
         if s.formulation not in ("auto",):
             kw["formulation"] = s.formulation
-        for key in ("reactions", "compiled"):
-            if getattr(s, key):
-                kw[key] = True
+        if s.reactions:
+            kw["reactions"] = True
+        if s.compiled is not None:      # False: all in Python; otherwise free flight compiled when it can be
+            kw["compiled"] = bool(s.compiled)
         return simulate_with_contacts(problem.eom, None, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol,
                                       method=s.method, points=s.points, outputs=s.outputs, x0=s.x0, p=s.p,
                                       progress=progress, rest_speed=s.rest_speed, impact_order=s.impact_order,
