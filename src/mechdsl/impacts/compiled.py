@@ -18,7 +18,6 @@ whole run is Python.
 from __future__ import annotations
 
 import ctypes
-import threading
 
 import numpy as np
 
@@ -27,8 +26,6 @@ from ..simulation import crk
 # scipy class (impacts.stepper) -> method of the compiled loop
 COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
 OK, EVENT = 0, 9
-_LIBS: dict = {}
-_LOCK = threading.Lock()
 _VP = ctypes.c_void_p
 
 
@@ -67,7 +64,7 @@ def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     """(CompiledFlight or None, note) for a ContactSystem; the library is cached per model."""
     import casadi as ca
 
-    from ..codegen import casadi_functions, compile_functions, find_compiler
+    from ..codegen import casadi_functions, find_compiler
 
     if find_compiler() is None:
         return None, "no C compiler"
@@ -82,33 +79,14 @@ def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     x = ca.vertcat(eom.q, eom.qd)
     gapv = ca.vertcat(*[ca.SX(g.gap) for g in system.gaps]) if system.gaps else ca.SX.zeros(0, 1)
     gapf = ca.Function("contact_gap", [eom.t, x, eom.p], [gapv], ["t", "x", "p"], ["gap"])
-    key = (id(ode), gapf.serialize())
-    with _LOCK:
-        hit = _LIBS.get(key)
-    if hit is not None and hit[0] is ode:
-        return hit[1], hit[2]
-    fl, note = None, ""
-    try:
-        loaded, note, path = compile_functions([crk.dense_ode(ode), gapf], tag=tag, jacobian=False,
-                                               extra_units=(crk.SOURCE.read_text(),))
-    except Exception as e:  # noqa: BLE001 - a Function CasADi cannot generate C for
-        loaded, note, path = None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})", None
-    if loaded is not None:
-        try:
-            lib = ctypes.CDLL(path)
-            fn = lib.crk_run_events
-            fn.restype = ctypes.c_int
-            D = crk._DP
-            fn.argtypes = [ctypes.c_int, ctypes.c_longlong, D, ctypes.c_longlong, D, D, D, ctypes.c_double,
-                           ctypes.c_double, ctypes.c_double, ctypes.c_longlong, D, D, crk._I64P, D,
-                           _VP, _VP, ctypes.c_longlong, ctypes.c_double, ctypes.c_int, D]
-            addr = ctypes.cast(lib.contact_gap, _VP).value
-            work = ctypes.cast(lib.contact_gap_work, _VP).value
-            fl = CompiledFlight(fn, addr, work, lib)
-        except (OSError, AttributeError) as e:
-            fl, note = None, f"cannot load the compiled contact loop {path}: {e}"
-    with _LOCK:
-        if len(_LIBS) >= 16:
-            _LIBS.pop(next(iter(_LIBS)))
-        _LIBS[key] = (ode, fl, note)
+
+    def load(lib):
+        fn = lib.crk_run_events
+        fn.restype = ctypes.c_int
+        fn.argtypes = crk.RUN_ARGTYPES + [_VP, _VP, ctypes.c_longlong, ctypes.c_double, ctypes.c_int, crk._DP]
+        return CompiledFlight(fn, ctypes.cast(lib.contact_gap, _VP).value,
+                              ctypes.cast(lib.contact_gap_work, _VP).value, lib)
+
+    fl, note = crk.cached_library((id(ode), gapf.serialize()), ode, (gapf,), tag, load,
+                                  "the compiled contact loop")
     return fl, note or ""

@@ -54,9 +54,26 @@ def dense_ode(ode):
     return ca.Function("ode", args, [ca.densify(ode(*args))], [ode.name_in(i) for i in range(4)], ["xdot"])
 
 
+RUN_ARGTYPES = [ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_double,
+                ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P, _DP]
+
+
 def library(ode, tag: str = "model"):
     """(ctypes function crk_run or None, note) for the model Function ``ode``; cached per Function."""
-    key = id(ode)
+
+    def load(lib):
+        fn = lib.crk_run
+        fn.restype = ctypes.c_int
+        fn.argtypes = RUN_ARGTYPES
+        fn._keep = lib
+        return fn
+
+    return cached_library(id(ode), ode, (), tag, load, "the compiled stepping loop")
+
+
+def cached_library(key, ode, extra, tag, load, what):
+    """(load(ctypes library) or None, note): the C of ``ode`` (dense output), of the Functions
+    ``extra`` and of crk.c in one cached shared library; cached in memory under ``key``."""
     with _LOCK:
         hit = _LIBS.get(key)
     if hit is not None and hit[0] is ode:
@@ -64,27 +81,21 @@ def library(ode, tag: str = "model"):
     from ..codegen import compile_functions
 
     try:
-        f = dense_ode(ode)
-        loaded, note, path = compile_functions([f], tag=tag, jacobian=False, extra_units=(SOURCE.read_text(),))
+        loaded, note, path = compile_functions([dense_ode(ode), *extra], tag=tag, jacobian=False,
+                                               extra_units=(SOURCE.read_text(),))
     except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
         loaded, note, path = None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})", None
-    fn = None
+    obj = None
     if loaded is not None:
         try:
-            lib = ctypes.CDLL(path)
-            fn = lib.crk_run
-            fn.restype = ctypes.c_int
-            fn.argtypes = [ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP,
-                           ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong,
-                           _DP, _DP, _I64P, _DP]
-            fn._keep = lib
+            obj = load(ctypes.CDLL(path))
         except (OSError, AttributeError) as e:
-            fn, note = None, f"cannot load the compiled stepping loop {path}: {e}"
+            obj, note = None, f"cannot load {what} {path}: {e}"
     with _LOCK:
         if len(_LIBS) >= 16:
             _LIBS.pop(next(iter(_LIBS)))
-        _LIBS[key] = (ode, fn, note)
-    return fn, note
+        _LIBS[key] = (ode, obj, note)
+    return obj, note
 
 
 def _ptr(a):
