@@ -104,3 +104,19 @@ def test_no_compile_reaches_the_contact_stepper(tmp_path):
     assert off.metadata["compiled"] == "off (requested)" and "compiled_segments" not in off.stats
     assert on.stats["compiled_segments"] >= 1
     assert [e["time"] for e in on.events] == pytest.approx([e["time"] for e in off.events], abs=1e-12)
+
+
+@needs_cc
+def test_progress_is_reported_from_the_compiled_segments():
+    """With a progress callback each compiled segment runs in a worker thread and reports the
+    time it reached: non-decreasing, ending at t_end; the numbers equal a run without one."""
+    eom, floor = ball(1.0, 0.8, G)
+    seen = []
+    r = simulate_with_contacts(eom, [floor], 3.0, points=5, progress=lambda t, t_end: seen.append((t, t_end)))
+    quiet = simulate_with_contacts(eom, [floor], 3.0, points=5)
+    assert r.stats["compiled_segments"] >= 5 and len(seen) >= r.stats["compiled_segments"]
+    times = [t for t, _ in seen]
+    assert all(b >= a for a, b in zip(times, times[1:]))
+    assert times[-1] == pytest.approx(3.0, abs=1e-12) and {te for _, te in seen} == {3.0}
+    assert r.q == pytest.approx(quiet.q, abs=1e-14)
+    assert [e["time"] for e in r.events] == pytest.approx([e["time"] for e in quiet.events], abs=1e-14)

@@ -117,7 +117,8 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     conservative = _conservative(eom) and not system.friction
     if conservative and m:
         res.stats.update(_drift_between_events(res, run.events, side))
-    reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+    reason = ("one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+              + ("; free flights in the compiled loop" if fl is not None else ""))
     res.metadata = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords), "warnings": [],
                     "method": method_cls.lower(), "method_reason": reason, "compiled": compiled_note, "conservative": conservative,
                     "simulator": "mechdsl.impacts",
