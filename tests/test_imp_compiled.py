@@ -120,3 +120,22 @@ def test_progress_is_reported_from_the_compiled_segments():
     assert times[-1] == pytest.approx(3.0, abs=1e-12) and {te for _, te in seen} == {3.0}
     assert r.q == pytest.approx(quiet.q, abs=1e-14)
     assert [e["time"] for e in r.events] == pytest.approx([e["time"] for e in quiet.events], abs=1e-14)
+
+
+@needs_cc
+def test_nan_gap_hands_the_segment_to_python():
+    """A gap that becomes NaN (sqrt of a negative number once the ball is below 0.5 m, so it never
+    reaches zero): the compiled loop stops with an error and the segment is stepped in Python,
+    which behaves as it always did (no event; the ball falls on).  It used to restart the C loop
+    at the last good sample again and again."""
+    import casadi as ca
+
+    from mechdsl.impacts.gaps import ContactGap
+
+    eom, _ = ball(1.0, 0.8, G)
+    gap = ContactGap(name="floor", gap=ca.sqrt(eom.q[0] - 0.5), e=0.8)
+    c, p = both(eom, [gap], 0.6, points=4, rtol=1e-10, atol=1e-12)
+    assert c.stats["python_segments"] >= 1 and c.stats["compiled_segments"] <= 2
+    assert c.events == [] and p.events == []
+    assert c.q[:, 0] == pytest.approx(1.0 - 0.5 * G * c.t ** 2, abs=1e-9)
+    agree(c, p, 0, 1e-12)

@@ -328,7 +328,8 @@ static double event_value(Events *e, const int *only) {
   for (cint i = 0; i < e->k; i++) {
     if (only && !only[i]) continue;
     double gi = only ? e->g[i] : e->g[i] + e->offset;
-    if (!(gi >= v)) v = gi;    /* a NaN gap counts as an event (the run then fails in Python) */
+    if (gi != gi) return gi;   /* a NaN gap: find_event reports an error */
+    if (gi < v) v = gi;
   }
   return v;
 }
@@ -372,14 +373,14 @@ static int find_event(Events *e, const Dense *d, double ea, int *flags, int *err
   for (int j = 1; j <= e->samples; j++) {
     hi = j == e->samples ? tb : ta + (tb - ta) * j / e->samples;
     fhi = event_at(e, d, hi, NULL, err);
-    if (fhi <= 0 || !(fhi == fhi)) { hit = 1; break; }
+    if (!(fhi == fhi)) { *err = 1; return 0; }   /* a NaN gap: the caller fails (Python takes over) */
+    if (fhi <= 0) { hit = 1; break; }
     lo = hi; flo = fhi;
   }
   if (!hit) return 0;
   double xtol = 4e-16 * fmax(fabs(ta), fabs(tb)) + 1e-15 * (tb - ta);
   double a = lo, b = hi, s0 = lo;
-  if (fhi == fhi) bracket_root(e, d, NULL, &a, &b, flo, fhi, xtol, err);
-  else a = lo;
+  bracket_root(e, d, NULL, &a, &b, flo, fhi, xtol, err);
   /* the triggering gaps at b, then the root of those gaps themselves (no offset) */
   event_at(e, d, b, NULL, err);
   cint worst = 0, any = 0;
