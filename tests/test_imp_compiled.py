@@ -139,3 +139,16 @@ def test_nan_gap_hands_the_segment_to_python():
     assert c.events == [] and p.events == []
     assert c.q[:, 0] == pytest.approx(1.0 - 0.5 * G * c.t ** 2, abs=1e-9)
     agree(c, p, 0, 1e-12)
+
+
+@needs_cc
+def test_run_record_names_the_compiled_loop_when_it_ran():
+    """metadata.run names what ran: crk for free flight in the compiled loop, scipy for
+    segments stepped in Python, both when a run used both; run.compiled says whether any
+    compiled code ran (it read False for compiled contact runs)."""
+    m = mechdsl.load(MODELS / "bouncing_ball.mech")
+    on, off = m.simulate(3.0), m.simulate(3.0, compiled=False)
+    assert on.stats["compiled_segments"] > 0 and on.stats["python_segments"] == 0
+    assert on.metadata["run"]["integrator"] == "crk:dop853" and on.metadata["run"]["compiled"] is True
+    assert off.stats.get("compiled_segments", 0) == 0
+    assert off.metadata["run"]["integrator"] == "scipy:DOP853" and off.metadata["run"]["compiled"] is False

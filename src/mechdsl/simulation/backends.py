@@ -120,7 +120,12 @@ class EventsBackend(Backend):
         from ..impacts.stepper import SCIPY_METHODS
 
         m = r.metadata.get("method")
-        return {"formulation": "events", "integrator": f"scipy:{SCIPY_METHODS.get(m, m)}", "method": m}
+        python = f"scipy:{SCIPY_METHODS.get(m, m)}"
+        stats = r.stats or {}
+        compiled, in_python = stats.get("compiled_segments", 0), stats.get("python_segments", 0)
+        # name what ran: free flight in the compiled loop, the rest (or all) in scipy's stepper
+        parts = ([f"crk:{m}"] if compiled else []) + ([python] if in_python or not compiled else [])
+        return {"formulation": "events", "integrator": "+".join(parts), "method": m}
 
 
 class FixedStepBackend(Backend):
