@@ -94,6 +94,21 @@ def test_instance_array_errors(change, code):
     assert code in str(err.value)
 
 
+@pytest.mark.parametrize("mods, n, what", [
+    ("m = {1, 2, 3}, each L = 1", 4, "'m' of the array 'links' has 3 entries for 4 elements"),
+    ("m = {1, 2, 3}, each L = 1", 5, "'m' of the array 'links' has 3 entries for 5 elements"),
+    ("each m = 1, each L = 1, q(start = {1, 0})", 3, "'start' of the array 'links' has 2 entries for 3 elements"),
+], ids=["m-4", "m-5", "start-3"])
+def test_a_literal_array_of_the_wrong_length_is_one_clear_error(mods, n, what):
+    """A literal array modifier whose length is not the instance array's size (say after
+    `--set N=...`) is not split: one E301 that says so, not one shape error per element."""
+    text = CHAIN.replace("each m = 1, each L = 1, q(start = {if i == 1 then pi/2 else 0 for i in 1:N})", mods)
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(text.replace("parameter Integer N = 3", f"parameter Integer N = {n}"), model="Chain")
+    assert [d.code for d in err.value.diagnostics] == ["E301"]
+    assert err.value.first.message == what and "each" in err.value.first.help
+
+
 def test_scenes_modify_elements_by_index():
     text = CHAIN + """
 scene S

@@ -98,6 +98,7 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
         self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
         self.instances: dict[str, ast.Declaration] = {}   # model instances, by (prefixed) name
         self.instance_arrays: dict[str, int] = {}         # arrays of model instances: name -> size
+        self.unsplit_arrays: dict = {}    # span of an array modifier not split over an instance array -> (name, n, reported)
         self._collect(model, outer or {}, [])
         self._check_modified_names(outer or {}, model.name)
 
@@ -397,6 +398,7 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
         want = dims
         got = V.shape_of(val)
         if got != want:
+            self.unsplit_array_mismatch(e.mod.value.span, d.name, want, got)
             fail("E301", f"parameter '{d.name}' is declared with shape {_shape_text(want)} but its value is "
                          f"{V.describe_shape(val)}", e.mod.value.span,
                  "use fill(value, n) for arrays" if want and not got else
@@ -517,6 +519,7 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
             vals = [v] * n
         else:
             if V.shape_of(v) != dims:
+                self.unsplit_array_mismatch(m.value.span, attr, dims, V.shape_of(v))
                 fail("E301", f"'{attr}' has shape {_shape_text(V.shape_of(v))}, expected {_shape_text(dims)}",
                      m.value.span, "give one value for all elements, or one per element")
             vals = V.flatten(v) if dims else [v]

@@ -32,7 +32,7 @@ class InstanceArrays:
         self.instance_arrays[d.name] = n
         mods = self._split_arrays(d.modification, n, d.name, outer)
         for k in range(1, n + 1):
-            dk = dataclasses.replace(d, name=f"{d.name}[{k}]", dims=(), modification=self._element_mods(mods, k, n))
+            dk = dataclasses.replace(d, name=f"{d.name}[{k}]", dims=(), modification=self._element_mods(mods, k, n, d.name))
             self._instance(dk, outer, chain)
 
     def _split_arrays(self, mods, n: int, path: str, outer):
@@ -55,8 +55,10 @@ class InstanceArrays:
             out.append(dataclasses.replace(m, value=value, modification=sub))
         return tuple(out)
 
-    def _element_mods(self, mods, k: int, n: int):
-        """Element k's modifiers: `each` ones as they are, arrays of n entries split."""
+    def _element_mods(self, mods, k: int, n: int, array: str):
+        """Element k's modifiers: `each` ones as they are, arrays of n entries split (a literal
+        array of another length is given whole to every element, and remembered for the error
+        if it does not fit: unsplit_array_mismatch)."""
         if not mods:
             return mods
         out = []
@@ -65,14 +67,32 @@ class InstanceArrays:
             if value is not None and not m.each:
                 if isinstance(value, ast.Array) and len(value.items) == n:
                     value = value.items[k - 1]
+                elif isinstance(value, ast.Array):
+                    self.unsplit_arrays.setdefault(value.span, [array, n, False])
                 elif isinstance(value, ast.Ref) and not value.parts[-1].subscripts and self._is_array_of(value, n):
                     last = value.parts[-1]
                     index = ast.Number(value=k, span=value.span)
                     value = dataclasses.replace(value, parts=value.parts[:-1] + (
                         dataclasses.replace(last, subscripts=(index,)),))
-            sub = self._element_mods(m.modification, k, n) if not m.each else m.modification
+            sub = self._element_mods(m.modification, k, n, array) if not m.each else m.modification
             out.append(dataclasses.replace(m, value=value, modification=sub, each=False))
         return tuple(out)
+
+    def unsplit_array_mismatch(self, span, name: str, want: tuple, got: tuple) -> None:
+        """A parameter of an instance array's element whose value is a literal array that was
+        not split (its length is not the array's size) and does not fit: one error for all the
+        elements, saying why (E301), instead of one shape error per element."""
+        seen = self.unsplit_arrays.get(span)
+        if seen is None:
+            return
+        array, n, reported = seen
+        if reported:
+            raise self.Failed()
+        seen[2] = True
+        attr = name.rsplit(".", 1)[-1]
+        fail("E301", f"'{attr}' of the array '{array}' has {got[0] if got else 1} entries for {n} elements",
+             span, f"give {n} entries, one per element (a comprehension {{... for i in 1:N}} over the array's size "
+                   f"follows it), or `each {attr} = ...` for the same value in every element")
 
     def _is_array_of(self, ref: ast.Ref, n: int) -> bool:
         try:
