@@ -182,6 +182,10 @@ ENTRIES = [
     Entry("E231", "parameter depends on input", "A parameter computed from an `input`: inputs change during "
                                                "a run, parameters are constant.",
           "Use the input directly in the forces or equations.", corpus="E231_parameter_depends_on_input.mech"),
+    Entry("E241", "friction regularization not positive", "A `Friction` whose regularization speed `v_eps` "
+                                                          "is zero or negative (the law is -F tanh(v/v_eps)).",
+          "Give v_eps > 0 (default 1e-3); smaller is closer to dry friction and stiffer.",
+          corpus="E241_friction_nonpositive_v_eps.mech"),
     # ------------------------------------------------------------------ E3xx
     Entry("E301", "shape mismatch", "Scalars, vectors and matrices combined in a way their sizes do not allow, "
                                     "or a value whose shape differs from its declaration.",

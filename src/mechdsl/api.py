@@ -404,6 +404,13 @@ class Model:
 
         return linearize(self.eom, at, **kw)
 
+    def steady_motions(self, pins: dict, **kw):
+        """Steady motions (relative equilibria of the Routh-reduced system): see
+        mechdsl.analysis.steady.steady_motions and docs/analysis.md#steady-motions."""
+        from .analysis.steady import steady_motions
+
+        return steady_motions(self.eom, pins, **kw)
+
     def first_integrals(self):
         from .analysis.integrals import first_integrals
 

@@ -17,6 +17,7 @@ ENERGY_WORDS = ("kinetic", "potential", "dissipation", "force")
 CONSTANTS = ("true", "false")
 TYPES = ("Real", "Integer", "Boolean", "String")
 COMPONENTS = ("Body", "Box", "Contact", "Cylinder", "Cylindrical", "Damper", "Disk", "Fixation", "Fixed", "Force",
+              "Friction",
               "Frame", "Free", "GeneralizedForce", "Gravitation", "Gravity", "Planar", "Point", "PointMass",
               "Potential", "Prismatic", "Revolute", "RigidLink", "Rod", "Sphere", "Spherical", "Spring", "SpringDamper",
               "Torque")

@@ -617,7 +617,7 @@ def _first_integrals(eom, t, X, pv, u=None) -> dict[str, np.ndarray]:
     return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
 
 
-INTEGRAL_CACHE_VERSION = "1"
+INTEGRAL_CACHE_VERSION = "2"          # 2: rotation symmetries (angular momenta, issue 17)
 
 
 def _integral_function(eom, pv):

@@ -23,6 +23,8 @@ def add_parser(sub):
     p.add_argument("--formulation", metavar="F",
                    help="constrained models: auto, projection, ggl, baumgarte or partitioning (docs/constraints.md)")
     p.add_argument("--reactions", action="store_true", help="constrained models: record every multiplier and reaction")
+    p.add_argument("--output-events", action="store_true",
+                   help="models with contacts: also record rows just before and just after every event")
     p.add_argument("--budget", type=int, metavar="N",
                    help="most output points a run may record (default 1000000; fixed steps: 10 N)")
     p.add_argument("--estimate-error", action="store_true",
@@ -94,6 +96,7 @@ def cli_settings(args) -> dict:
             "compiled": True if args.compiled else (False if getattr(args, "no_compile", False) else None),
             "reactions": True if args.reactions else None,
             "budget": args.budget, "estimate_error": True if args.estimate_error else None,
+            "output_events": True if getattr(args, "output_events", False) else None,
             "inputs": parse_inputs(getattr(args, "inputs", None))}
 
 

@@ -147,6 +147,12 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    "a torque applied to a body"),
     ComponentClass("GeneralizedForce", "force", (_f("coordinate", "coordinate"), _f("Q", "scalar")),
                    "a generalized force on one coordinate"),
+    ComponentClass("Friction", "force", (
+        _f("coordinate", "coordinate", doc="the joint variable or coordinate the friction acts on"),
+        _f("F", "scalar", doc="Coulomb friction force or torque while sliding (mu N; may depend on the state)"),
+        _f("v_eps", "scalar", 1e-3, doc="regularization speed (coordinate units per second): "
+                                         "Q = -F tanh(der(q)/v_eps)")),
+        "regularized Coulomb friction on one coordinate (joint friction, a block sliding on a guide)"),
     ComponentClass("Gravitation", "force", (_f("bodies", "bodies"), _f("G", "scalar", 6.6743e-11, U.GRAV_CONST)),
                    "mutual Newtonian gravitation between bodies (at their mass centres)"),
     ComponentClass("Potential", "force", (_f("V", "scalar", dim=U.ENERGY),),
@@ -162,6 +168,8 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
         _f("surface_radius", "scalar", 0.0, U.LENGTH),
         _f("inside", "bool", 0.0, doc="sphere: the point stays inside"),
         _f("e", "scalar", 1.0, U.ONE, "coefficient of restitution"),
+        _f("mu", "scalar", 0.0, U.ONE, "coefficient of sliding friction while the contact persists"),
+        _f("v_eps", "scalar", 1e-3, U.VELOCITY, "regularization speed of the sliding friction"),
         _f("gap", "scalar", None, U.LENGTH, "the gap as an expression of coordinates and time (>= 0 allowed); "
                                             "instead of point and surface, e.g. in equation-layer models")),
         "a unilateral frictionless contact with restitution"),

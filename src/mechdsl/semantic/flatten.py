@@ -22,6 +22,8 @@ from . import instances as Inst
 from . import mods as Mods
 from . import values as V
 from .evaluate import BUILTIN_NAMES, EvalError, Evaluator, fail
+from .constraint_names import constraint_name
+from .friction import friction_force
 from .mods import Mod
 from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
 from .instance_arrays import InstanceArrays
@@ -934,9 +936,11 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
                 if not any(isinstance(n, (ir.Coord, ir.PointPos, ir.BodyRot)) for n in X.walk(s.expr)):
                     fail("E309", "this equation involves no coordinate", eq.span,
                          "an equation is a constraint on coordinates; to define a quantity use `Real x = ...;`")
-                nm = f"c{len(self.constraints) + 1}"
+                alias = f"c{len(self.constraints) + 1}"
+                nm = constraint_name(eq.doc, self.loop_vars.values(), k if len(items) > 1 else None,
+                                     self.constraints) or alias
                 self.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
-                                                      eq.span))
+                                                      eq.span, alias=alias))
             return
         raise AssertionError(type(eq))
 
@@ -1156,6 +1160,8 @@ class Flattener(InstanceArrays, VectorStarts, Evaluator):
             out.forces.append(ir.AppliedTorque(name, f["body"].name, K.as_vec3(f["tau"], "tau"), f["frame"].name, span))
         elif cls.name == "GeneralizedForce":
             out.forces.append(ir.GeneralizedForce(name, f["coordinate"].expr.name, e(f["Q"], "Q"), span))
+        elif cls.name == "Friction":
+            out.forces.append(friction_force(self, name, f, span))
         elif cls.name == "Gravitation":
             names = tuple(b.name for b in f["bodies"].items)
             if len(set(names)) != len(names):

@@ -72,6 +72,18 @@ def solve(problem: Problem, progress=None) -> Result:
                    "rtol": s.rtol, "atol": s.atol,
                    "compiled": _ran_compiled(meta),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
+    from ..eom import parameter_vector
+    from ..friction import friction_notes
+
+    eom = problem.eom
+    notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
+    if notes:
+        meta["friction"] = notes          # regularized laws and their regularization (issue 17)
+    renamed = [c for c in (eom.model.constraints if getattr(eom, "model", None) is not None else ())
+               if c.alias and c.alias != c.name]
+    if renamed:                           # constraints named after their description: old names still read
+        meta["aliases"] = {**{f"lambda[{c.alias}]": f"lambda[{c.name}]" for c in renamed},
+                           **{f"residual({c.alias})": f"residual({c.name})" for c in renamed}}
     if "versions" not in meta:
         from ..simulate import versions
 

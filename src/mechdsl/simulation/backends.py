@@ -30,7 +30,7 @@ class Backend(abc.ABC):
 
 class OdeBackend(Backend):
     name = "ode"
-    ignores = ("rest_speed", "impact_order")
+    ignores = ("rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
         from ..simulate import simulate_ode
@@ -70,7 +70,7 @@ def _noted(r: Result, note: str | None) -> Result:
 
 class DaeBackend(Backend):
     name = "dae"
-    ignores = ("rest_speed", "impact_order")
+    ignores = ("rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
         from ..dae import simulate_dae
@@ -113,7 +113,7 @@ class EventsBackend(Backend):
         return simulate_with_contacts(problem.eom, None, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol,
                                       method=s.method, points=s.points, outputs=s.outputs, x0=s.x0, p=s.p,
                                       progress=progress, rest_speed=s.rest_speed, impact_order=s.impact_order,
-                                      **kw)
+                                      output_events=s.output_events, **kw)
 
     def describe(self, r):
         from ..impacts.stepper import SCIPY_METHODS
@@ -124,7 +124,7 @@ class EventsBackend(Backend):
 
 class FixedStepBackend(Backend):
     name = "fixed-step"
-    ignores = ("max_steps", "integrator_options", "rest_speed", "impact_order")
+    ignores = ("max_steps", "integrator_options", "rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
         from ..symplectic import simulate_symplectic
