@@ -655,7 +655,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
-                f"({', '.join(' '.join(f) for f in flags)}) into {lib}"
+                f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
         if problem:
             note = f"the cached library {lib} {problem}: rebuilt; " + note

@@ -111,13 +111,15 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         funcs = drive.closed(funcs)
     else:
         funcs = vm
-    meta["notes"] += list(getattr(funcs, "notes", []))
+    unavailable = compiled and loop_compiled is None and not getattr(funcs, "compiled", False)
+    if unavailable:     # said once, as a warning (not also as a note)
+        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
+    else:
+        meta["notes"] += list(getattr(funcs, "notes", []))
     if s.formulation not in ("auto", "ode"):
         meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
     if s.reactions:
         meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
-    if compiled and loop_compiled is None and not getattr(funcs, "compiled", False):
-        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
