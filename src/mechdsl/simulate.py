@@ -90,6 +90,11 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
             method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
+    if method in I.COMPILED_LOOP and compiled is False:     # compiled = false wins: never compile
+        from .simulation.crk import scipy_name
+
+        method, reason = scipy_name(method), (f"{method} requested with compiled = false: its loop would compile; "
+                                              f"{scipy_name(method)} is the same method stepped in Python")
     if "compiled" not in meta:
         meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
