@@ -9,7 +9,6 @@ why.  See docs/simulate.md (users) and docs/internals/numerics.md (design).
 from __future__ import annotations
 
 import math
-import platform
 import time
 from typing import Any
 
@@ -725,10 +724,34 @@ def _dedup(text: str) -> list[str]:
 
 
 def versions() -> dict[str, str]:
+    import platform
+
     import casadi
-    import scipy
 
     from . import __version__
 
     return {"mechdsl": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "python": platform.python_version()}
+            "scipy": _scipy_version(), "python": platform.python_version()}
+
+
+def _scipy_version() -> str:
+    """scipy.__version__ without importing scipy (8 ms) when the run did not: its version.py
+    is a file of plain assignments, read on its own."""
+    import sys
+
+    mod = sys.modules.get("scipy")
+    if mod is None:
+        import importlib.util
+        import os
+
+        try:
+            spec = importlib.util.find_spec("scipy")
+            where = os.path.join(os.path.dirname(spec.origin), "version.py")
+            vspec = importlib.util.spec_from_file_location("_mechdsl_scipy_version", where)
+            vmod = importlib.util.module_from_spec(vspec)
+            vspec.loader.exec_module(vmod)
+            return str(vmod.version)
+        except Exception:     # another layout: ask scipy itself
+            pass
+        import scipy as mod
+    return str(mod.__version__)
