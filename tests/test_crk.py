@@ -300,3 +300,19 @@ def test_compiled_false_runs_the_named_loop_method_in_python(method, monkeypatch
     assert r.metadata["options"]["compiled"] is False and r.metadata["compiled"] == "off (requested)"
     assert "compiled = false" in r.metadata["method_reason"]
     np.testing.assert_allclose(r.q[:, 0], np.cos(3.0 * r.t), rtol=0, atol=1e-7)
+
+
+def test_auto_whose_loop_cannot_be_built_says_erk_runs(monkeypatch, tmp_path):
+    """auto decides to compile, the build fails (a cache path that is a file): the run is erk
+    and its reason says so (it kept the reason of the compiled loop it did not run)."""
+    if find_compiler() is None:
+        pytest.skip("needs a C compiler: without one auto never decides to compile")
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    monkeypatch.setenv("MECHDSL_CACHE", str(blocked))
+    monkeypatch.setattr(crk, "_LIBS", {})
+    r = simulate(pendulum(theta0=2.5), 300.0, rtol=1e-8, atol=1e-8, points=11)
+    assert r.success and r.metadata["method"] == "erk"
+    assert r.metadata["compiled"] == "no: auto (the compiled loop could not be built)"
+    assert "could not be built" in r.metadata["method_reason"]
+    assert any("compiled stepping loop unavailable" in w for w in r.metadata["warnings"])

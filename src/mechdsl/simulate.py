@@ -105,7 +105,9 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
         if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
             method, loop_compiled = "erk", None
-            meta.update(method=method, integrator=I.METHODS[method][3])
+            meta.update(method=method, integrator=I.METHODS[method][3],
+                        method_reason=reason.split(";")[0] + "; the compiled stepping loop it would pick could "
+                                                             "not be built (see the warning): erk in the virtual machine")
             meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
