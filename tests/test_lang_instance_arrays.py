@@ -87,6 +87,7 @@ def test_indexed_start_override_of_a_coordinate_array(tmp_path):
     (("links[N](", "links[N, 2]("), "E301"),
     (("connect(world, links[1].j", "connect(world, links[4].j"), "E303"),
     (("links[N].rod.b.x", "links.rod.b.x"), "E303"),
+    (("parameter Integer N = 3;", "parameter Integer N = -1;"), "E307"),   # was accepted: no instances
 ])
 def test_instance_array_errors(change, code):
     with pytest.raises(MechError) as err:

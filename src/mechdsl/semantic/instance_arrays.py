@@ -25,6 +25,9 @@ class InstanceArrays:
             return
         except self.Failed:
             return
+        if n < 0:
+            self.diags.error("E307", f"array size {n} is negative", d.dims[0].span, "array sizes are 0 or more")
+            return
         if n > limits.get("components"):
             self.diags.error("E316", f"{n} instances of {d.type_name} exceed the limit of {limits.get('components')} "
                                      "components", d.dims[0].span, limits.hint("components"))
