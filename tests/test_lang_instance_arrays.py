@@ -11,7 +11,7 @@ import pytest
 
 import mechdsl
 from mechdsl.cli import main
-from mechdsl.diagnostics import MechError
+from mechdsl.diagnostics import MechError, UsageError
 from reach_util import accelerations, evaluator
 
 SHIPPED = Path(__file__).parents[1] / "models" / "nlink_pendulum.mech"
@@ -108,6 +108,11 @@ def test_a_literal_array_of_the_wrong_length_is_one_clear_error(mods, n, what):
         mechdsl.loads(text.replace("parameter Integer N = 3", f"parameter Integer N = {n}"), model="Chain")
     assert [d.code for d in err.value.diagnostics] == ["E301"]
     assert err.value.first.message == what and "each" in err.value.first.help
+
+
+def test_a_structural_parameter_that_is_not_a_number_is_named():
+    with pytest.raises(UsageError, match="value of 'N' must be a number, got 'a'"):    # said 'value'
+        mechdsl.loads(CHAIN, model="Chain").with_params(N="a")
 
 
 def test_scenes_modify_elements_by_index():
