@@ -176,6 +176,7 @@ def test_missing_compiler_falls_back_with_a_note(monkeypatch, tmp_path):
     f = casadi_functions(e, compiled=True)
     assert f["ode"].class_name() != "External"
     assert not f.compiled and "no C compiler" in f.notes[0]
+    assert "$CC = '/nonexistent/cc' is not a program" in f.notes[0]     # not "looked for $CC, gcc, ..."
     r = simulate(e, 1.0, compiled=True, points=3)
     assert r.success and r.metadata["options"]["compiled"] is False
     assert any("compiled code unavailable" in w for w in r.metadata["warnings"])
