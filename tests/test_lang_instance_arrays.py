@@ -56,6 +56,51 @@ def test_chain_of_instances_equals_the_shipped_chain(n):
             assert x == pytest.approx(y, rel=1e-12, abs=1e-12)
 
 
+NESTED = """
+model Sub
+  parameter Real m(unit = "kg") = 1;
+  coordinate Real q(start = 0, unit = "rad");
+  Rod rod(m = m, L = 1, axis = {0, -1, 0});
+  Revolute j(axis = {0, 0, 1}, phi = q);
+end Sub;
+
+model Pair "two links, an array inside a part"
+  Sub subs[2];
+equation
+  connect(subs[1].rod.b, subs[2].j, subs[2].rod.a);
+end Pair;
+
+model Chain4 "a chain of 4 as 2 pairs: elements of an array inside an element"
+  Gravity gravity(g = {0, -9.81, 0});
+  Pair pairs[2];
+  output Real tip_x(unit = "m") = pairs[2].subs[2].rod.b.x;
+equation
+  connect(world, pairs[1].subs[1].j, pairs[1].subs[1].rod.a);
+  connect(pairs[1].subs[2].rod.b, pairs[2].subs[1].j, pairs[2].subs[1].rod.a);
+end Chain4;
+"""
+
+
+def test_an_element_of_an_array_inside_an_element():
+    """`pairs[2].subs[1].j` names element 1 of the array `subs` of element 2 of `pairs` (was
+    E201 "has no declaration 'subs'"); the chain of 2 x 2 has the shipped chain's equations."""
+    mine = mechdsl.loads(NESTED, model="Chain4")
+    ref = mechdsl.load(SHIPPED).with_params(N=4)
+    assert mine.coordinates == ("pairs[1].subs[1].q", "pairs[1].subs[2].q", "pairs[2].subs[1].q", "pairs[2].subs[2].q")
+    a, b = accelerations(mine.eom), accelerations(ref.eom)
+    ta = evaluator(mine.eom, mine.eom.outputs["tip_x"])
+    tb = evaluator(ref.eom, ref.eom.outputs["tip_x"])
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q, qd = rng.uniform(-np.pi, np.pi, 4), rng.uniform(-2, 2, 4)
+        assert a(q, qd) == pytest.approx(b(q, qd), rel=1e-10, abs=1e-10)
+        assert ta(q, qd)[0] == pytest.approx(tb(q, qd)[0], rel=1e-12, abs=1e-12)
+    assert mine.with_params(**{"pairs[2].subs[1].m": 3.0}).parameters["pairs[2].subs[1].m"] == 3.0
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(NESTED.replace("pairs[2].subs[2].rod.b.x", "pairs[2].subs[3].rod.b.x"), model="Chain4")
+    assert "index 3 is out of range for 'pairs[2].subs' (1..2)" in str(err.value)
+
+
 def test_split_and_each_modifiers_and_element_overrides():
     text = CHAIN.replace("each m = 1, each L = 1", "m = {1, 2, 3}, each L = 0.5")
     m = mechdsl.loads(text, model="Chain")

@@ -105,21 +105,31 @@ class InstanceArrays:
         return isinstance(v, Arr) and len(v.items) == n
 
     def _instance_element(self, r: ast.Ref) -> ast.Ref:
-        first = r.parts[0]
-        n = self.instance_arrays.get(first.name)
-        if n is None or not first.subscripts:
-            if n is not None and len(r.parts) > 1:
-                fail("E303", f"'{first.name}' is an array of {n} model instances: pick one, e.g. {first.name}[1]",
-                     first.span, f"write {first.name}[i].{r.parts[1].name}")
-            return r
-        if len(first.subscripts) != 1:
-            fail("E303", f"'{first.name}' has one dimension", first.span, f"write {first.name}[i]")
-        k = self.int_value(first.subscripts[0], "an index")
-        if not 1 <= k <= n:
-            fail("E303", f"index {k} is out of range for '{first.name}' (1..{n})", first.subscripts[0].span,
-                 "indices start at 1")
-        if len(r.parts) == 1:
-            fail("E201", f"'{first.name}[{k}]' is a model instance, not a value", first.span,
-                 f"refer to one of its declarations, e.g. {first.name}[{k}].{next(iter(self._own(f'{first.name}[{k}]')), 'x')}")
-        return dataclasses.replace(r, parts=(dataclasses.replace(first, name=f"{first.name}[{k}]", subscripts=()),)
-                                   + r.parts[1:])
+        """`links[i].x` -> `links[3].x`, also inside parts (`links[2].subs[1].x`): each indexed
+        part that names an array of instances becomes that element's name."""
+        parts, prefix = list(r.parts), ""
+        for j, part in enumerate(parts):
+            path = prefix + part.name
+            n = self.instance_arrays.get(path)
+            if n is None:
+                if part.subscripts or j > 0 and prefix[:-1] not in self.instances:
+                    break           # an indexed value, or no longer inside instances
+                prefix = path + "."
+                continue
+            if not part.subscripts:
+                if j + 1 < len(parts):
+                    fail("E303", f"'{path}' is an array of {n} model instances: pick one, e.g. {path}[1]",
+                         part.span, f"write {path}[i].{parts[j + 1].name}")
+                break
+            if len(part.subscripts) != 1:
+                fail("E303", f"'{path}' has one dimension", part.span, f"write {path}[i]")
+            k = self.int_value(part.subscripts[0], "an index")
+            if not 1 <= k <= n:
+                fail("E303", f"index {k} is out of range for '{path}' (1..{n})", part.subscripts[0].span,
+                     "indices start at 1")
+            if j + 1 == len(parts):
+                fail("E201", f"'{path}[{k}]' is a model instance, not a value", part.span,
+                     f"refer to one of its declarations, e.g. {path}[{k}].{next(iter(self._own(f'{path}[{k}]')), 'x')}")
+            parts[j] = dataclasses.replace(part, name=f"{part.name}[{k}]", subscripts=())
+            prefix = f"{path}[{k}]."
+        return dataclasses.replace(r, parts=tuple(parts))
