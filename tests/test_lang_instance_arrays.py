@@ -160,6 +160,19 @@ def test_a_structural_parameter_that_is_not_a_number_is_named():
         mechdsl.loads(CHAIN, model="Chain").with_params(N="a")
 
 
+@pytest.mark.parametrize("mod, message", [
+    ("links[7](m = 3)", "'links' of model 'Chain' is an array of 3 model instances; links[7] is not one"),
+    ("links(m = 3)", "'links' of model 'Chain' is an array of 3 model instances"),
+])
+def test_a_scene_modifying_the_array_or_a_missing_element_says_so(mod, message):
+    """(was "no declaration 'links[7]'" with the hint "did you mean 'links[3].q'")"""
+    text = CHAIN + f"\nscene S\n  model Chain({mod});\nend S;\n"
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(text, scene="S")
+    assert err.value.first.code == "E204" and err.value.first.message == message
+    assert "links[i](...) with i in 1..3" in err.value.first.help
+
+
 def test_scenes_modify_elements_by_index():
     text = CHAIN + """
 scene S
