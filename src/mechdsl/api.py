@@ -307,7 +307,9 @@ class Model:
     # ------------------------------------------------------------------ derived forms
     @property
     def eom(self):
-        """The equations of motion (mechdsl.eom.EOM), derived once per model structure."""
+        """The equations of motion (mechdsl.eom.EOM), derived once per model structure.  Frozen:
+        ``eom.replace(field=...)`` makes a changed copy; what is derived from it is kept in
+        ``Model.workspace``."""
         if self._eom is None:
             key = _structure_key(self.model)
             base = _EOM_CACHE.get(key)
@@ -317,7 +319,7 @@ class Model:
                 base = derive(self.model)
                 from .modelcache import record_callables
 
-                record_callables(base)       # point positions a run asks for are stored with it
+                base = record_callables(base)     # point positions a run asks for are stored with it
                 with _EOM_LOCK:             # models simulated in several threads
                     if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
                         _EOM_CACHE.pop(next(iter(_EOM_CACHE)), None)
@@ -325,6 +327,12 @@ class Model:
             self._eom = base.replace(param_values=self.parameter_values, model=self.model,   # keeps lazy fields lazy
                                      input_defaults=tuple(float(p.value) for p in self.model.inputs))
         return self._eom
+
+    @property
+    def workspace(self):
+        """What is derived from the equations and kept (Functions, the recorder's, searches):
+        ``mechdsl.workspace.Workspace`` of this model's EOM, alive as long as the model."""
+        return self.eom.workspace
 
     def _remember(self) -> None:
         """Store the derived equations (and what a run or an analysis built on them) in the

@@ -324,7 +324,7 @@ class FunctionSet(Mapping):
             self._compile_all()
         if name not in self._cache:
             # read from the model cache (Functions with parameters built in are not stored)
-            stored = None if self.fixed else self.eom.__dict__.get("_stored_functions")
+            stored = None if self.fixed else self.eom.workspace.stored_functions(self.eom)
             hit = stored.get((name, self.outputs, self.sx)) if stored else None
             if hit is not None:
                 self._cache[name] = hit

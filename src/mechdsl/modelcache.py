@@ -180,6 +180,8 @@ def _resolved(v, name):
 def _raw(eom, name):
     """A field's value without forcing a lazy one: (value, known)."""
     v = eom.__dict__.get(name)
+    if type(v) is _Pending:
+        return (v.value, True) if v.known else (None, False)
     if _is_lazy(v):
         return (None, False) if v.value is None else (_resolved(v, name), True)
     return v, True
@@ -204,12 +206,12 @@ class Recorder:
         return hit
 
 
-def record_callables(eom) -> None:
-    """Wrap ``eom``'s point/rotation callables in Recorders (in place; copies share them)."""
-    for name in _CALLABLES:
-        v = eom.__dict__.get(name)
-        if v is not None and not isinstance(v, Recorder):
-            eom.__dict__[name] = Recorder(v)
+def record_callables(eom):
+    """``eom`` with its point/rotation callables wrapped in Recorders (a copy: the EOM is
+    frozen; the copies made of it share the Recorders)."""
+    wrap = {name: Recorder(v) for name in _CALLABLES
+            if (v := eom.__dict__.get(name)) is not None and not isinstance(v, Recorder)}
+    return eom.replace(**wrap) if wrap else eom
 
 
 def pending_fields(eom) -> list[str]:
@@ -219,7 +221,7 @@ def pending_fields(eom) -> list[str]:
             (f.name in _CALLABLES and eom.__dict__.get(f.name) is not None
              and not isinstance(eom.__dict__.get(f.name), Recorder)
              or f.name not in _CALLABLES and not _raw(eom, f.name)[1]
-             or type(eom.__dict__.get(f.name)) is _Pending)]
+             or f.name in _CALLABLES and type(eom.__dict__.get(f.name)) is _Pending)]
 
 
 def _recorded(eom) -> dict:
@@ -240,7 +242,7 @@ def _functions(eom) -> dict:
     (name, outputs, sx); those read from the cache included."""
     from . import codegen
 
-    out = dict(eom.__dict__.get("_stored_functions") or {})
+    out = dict(eom.workspace.stored_functions(eom) or {})
     objs = [_resolved(eom.__dict__.get(f), f) for f in codegen._STRUCTURE]
     for held, fs in list(codegen._SETS.values()):
         if fs.want_compiled or fs.fixed or not all(_resolved(a, f) is b for a, b, f in zip(held, objs, codegen._STRUCTURE)):
@@ -311,15 +313,14 @@ def unpack_eom(data: dict, model):
         values.setdefault(name, {})
     values.update(model=model, param_values=None)      # the Model sets its own values (api.Model.eom)
     values.update({name: None for name in data["pending"]})
+    again = _Again(values)
+    values.update({name: _Pending(again, name) for name in data["pending"]})
+    # results a run used; new arguments derive the model again
+    values.update({name: Recorder(again.value(name), seen) for name, seen in calls.items()})
     eom = CachedEOM(**{k: v for k, v in values.items() if k in _FIELD_NAMES})
     # built Functions (codegen.FunctionSet takes them instead of building): the same algorithm,
-    # so the same numbers bit for bit
-    eom.__dict__["_stored_functions"] = {k: ca.Function.deserialize(s) for k, s in data["functions"].items()}
-    again = _Again(eom)
-    for name in data["pending"]:
-        eom.__dict__[name] = _Pending(again, name)
-    for name, seen in calls.items():    # results a run used; new arguments derive the model again
-        eom.__dict__[name] = Recorder(again.value(name), seen)
+    # so the same numbers bit for bit; kept in the EOM's workspace
+    eom.workspace.stored_functions(eom, {k: ca.Function.deserialize(s) for k, s in data["functions"].items()})
     return eom
 
 
@@ -330,21 +331,30 @@ _PENDABLE = frozenset(("M", "bias", "Q", "qdd", "g", "q0", "qd0", "lam", "u", *_
 
 
 class _Pending:
-    """A field the cache did not hold; derived again on first use (see _Again)."""
+    """A field the cache did not hold; derived again on first use (see _Again) and kept here
+    (the EOM is frozen: the field keeps this holder)."""
 
     def __init__(self, again: "_Again", name: str):
         self.again = again
         self.name = name
+        self.value = None
+        self.known = False
+
+    def get(self):
+        if not self.known:
+            self.value = self.again.value(self.name)
+            self.known = True
+        return self.value
 
 
 class _Again:
     """The model derived again once (mechdsl.mechanics), its results expressed in the cached
     EOM's symbols by substitution."""
 
-    def __init__(self, eom):
-        self.syms = [s for s in (eom.q, eom.qd, eom.t, eom.p, eom.__dict__.get("u"), eom.__dict__.get("lam"))
-                     if s is not None]
-        self.model = eom.model
+    def __init__(self, values: dict):
+        """values: the cached EOM's fields (None for those not held)."""
+        self.syms = [s for s in (values.get(k) for k in ("q", "qd", "t", "p", "u", "lam")) if s is not None]
+        self.model = values["model"]
         self.full = None
 
     def _derived(self):
@@ -373,9 +383,7 @@ class CachedEOM(EOM):
 
     def __getattribute__(self, name):
         if name in _PENDABLE:
-            d = object.__getattribute__(self, "__dict__")
-            v = d.get(name)
+            v = object.__getattribute__(self, "__dict__").get(name)
             if type(v) is _Pending:
-                d[name] = v.again.value(name)
-                return d[name]
+                return v.get()
         return object.__getattribute__(self, name)

@@ -100,10 +100,10 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
     if found:
         return found
     if eom.m:
-        from .dae.driver import _start
         from .dae.init import initialize
+        from .simulation.inputs import fixed_start
 
-        q, qd, fq, fqd = _start(eom, x0, pv)
+        q, qd, fq, fqd = fixed_start(eom, x0, pv)
         g_problem = _constraint_problem(eom, q, t, pv)
         if g_problem:
             return g_problem
@@ -116,7 +116,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         if found:
             return found
     else:
-        from .simulate import start_vector
+        from .simulation.inputs import start_vector
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]
@@ -168,7 +168,7 @@ def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
         return gaps, ca.Function("start_gaps", [eom.q, eom.t, eom.p],
                                  [ca.vertcat(*[ca.SX(g.gap) for g in gaps])] if gaps else [ca.SX(0, 1)])
 
-    gaps, fn = eom.cached("preflight_gaps", build)
+    gaps, fn = eom.workspace.memo("preflight_gaps", build)
     if not gaps:
         return []
     for g, v in zip(gaps, _value(fn, q, t, pv)):
@@ -195,7 +195,7 @@ def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         return names, sizes, ca.Function("start_outputs", [eom.q, eom.qd, eom.t, u, eom.p],
                                          [ca.vertcat(*exprs)] if exprs else [ca.SX(0, 1)])
 
-    names, sizes, fn = eom.cached("preflight_outputs", build)
+    names, sizes, fn = eom.workspace.memo("preflight_outputs", build)
     if not names:
         return []
     vals = _value(fn, q, qd, t, _u(eom), pv)
@@ -338,7 +338,7 @@ def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
     cut = [j for j in model.joints if j.closes_loop]
     if not cut:
         return []
-    fn = eom.cached("preflight_loop_points", lambda: ca.Function(
+    fn = eom.workspace.memo("preflight_loop_points", lambda: ca.Function(
         "loop_points", [eom.q, eom.t, eom.p],
         [ca.vertcat(*[eom.point_position(n) for j in cut for n in (j.parent, j.child)])]))
     xyz = np.abs(_value(fn, q, t, pv))

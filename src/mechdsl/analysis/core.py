@@ -102,15 +102,9 @@ class Parts:
 
 
 def parts(eom) -> Parts:
-    """The Parts of an EOM, built once and kept on the EOM instance."""
-    cache = eom.__dict__.setdefault("_analysis_cache", {})
-    # EOM.replace copies share this dict: key by the symbolic content, not by the object
-    key = ("parts",) + tuple(id(x) for x in (eom.T, eom.V, eom.D, eom.Q, eom.q, eom.qd, eom.t, eom.p))
-    pt = cache.get(key)
-    if pt is None:
-        pt = Parts(eom)
-        cache[key] = pt
-    return pt
+    """The Parts of an EOM, built once and kept in the EOM's workspace."""
+    # shared with the EOM.replace copies of the same equations
+    return eom.workspace.by_content(eom, ("T", "V", "D", "Q", "M", "q", "qd", "t", "p"), "parts", lambda: Parts(eom))
 
 
 # --------------------------------------------------------------------------- probing
@@ -188,11 +182,7 @@ def structure(eom, p=None) -> Structure:
 
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     pv = param_vector(eom, p)
-    cache = eom.__dict__.setdefault("_analysis_cache", {})
-    key = ("structure", pv.tobytes(), id(parts(eom)))
-    if key not in cache:
-        cache[key] = _structure(eom, pv)
-    return cache[key]
+    return eom.workspace.shared(("structure", pv.tobytes(), id(parts(eom))), lambda: _structure(eom, pv))
 
 
 def _structure(eom, pv) -> Structure:

@@ -7,6 +7,7 @@ import dataclasses
 
 from .. import ast
 from .. import limits
+from .entries import Failed
 from .evaluate import EvalError, fail
 from .mods import Mod
 from .values import Arr
@@ -23,7 +24,7 @@ class InstanceArrays:
         except EvalError as ex:
             self.diags.items.append(ex.diag)
             return
-        except self.Failed:
+        except Failed:
             return
         if n < 0:
             self.diags.error("E307", f"array size {n} is negative", d.dims[0].span, "array sizes are 0 or more")
@@ -90,7 +91,7 @@ class InstanceArrays:
             return
         array, n, reported = seen
         if reported:
-            raise self.Failed()
+            raise Failed()
         seen[2] = True
         attr = name.rsplit(".", 1)[-1]
         fail("E301", f"'{attr}' of the array '{array}' has {got[0] if got else 1} entries for {n} elements",
@@ -100,7 +101,7 @@ class InstanceArrays:
     def _is_array_of(self, ref: ast.Ref, n: int) -> bool:
         try:
             v = self.eval(ref)
-        except (EvalError, self.Failed):
+        except (EvalError, Failed):
             return False
         return isinstance(v, Arr) and len(v.items) == n
 
