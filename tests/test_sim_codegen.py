@@ -223,8 +223,32 @@ def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
     libs = {lib for _, _, lib in results}
     assert len(libs) == 1 and all(loaded is not None for loaded, _, _ in results)
     lib = Path(next(iter(libs)))
-    assert sorted(p.name for p in tmp_path.iterdir()) == [lib.with_suffix(".sha256").name, lib.name]  # no debris
+    # no debris (compilers: the compiler's version, kept for later runs)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [lib.with_suffix(".sha256").name, lib.name, "compilers"]
     x = np.array([0.3, -0.2])
     for loaded, _, _ in results:
         np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, [], e.param_values)),
                                       np.array(casadi_functions(e)["ode"](0.0, x, [], e.param_values)))
+
+
+def test_compiler_version_is_asked_once_per_compiler(tmp_path, monkeypatch):
+    """A warm run starts no `cc --version` process: the answer is kept by the compiler's path,
+    size and time; a changed compiler is asked again."""
+    import os
+    import subprocess
+
+    from mechdsl.codegen import compiler_version
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    cc = tmp_path / "fakecc"
+    cc.write_text("#!/bin/sh\necho fake cc 1.0\n")
+    cc.chmod(0o755)
+    calls = []
+    real = subprocess.run
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: calls.append(a) or real(*a, **k))
+    assert compiler_version(str(cc)) == "fake cc 1.0" and len(calls) == 1
+    assert compiler_version(str(cc)) == "fake cc 1.0" and len(calls) == 1       # kept
+    cc.write_text("#!/bin/sh\necho fake cc 2.0 newer\n")
+    os.utime(cc, ns=(1, 10**18))
+    assert compiler_version(str(cc)) == "fake cc 2.0 newer" and len(calls) == 2
+    assert compiler_version(str(tmp_path / "missing")) == str(tmp_path / "missing")

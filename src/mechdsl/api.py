@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import ir
+from .records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
@@ -575,7 +576,7 @@ def _restore(state) -> "Model":
 
 
 
-@dataclasses.dataclass(frozen=True)
+@record
 class InputInfo:
     """One control input: its name, unit, declared bounds (None: none) and default value."""
     name: str

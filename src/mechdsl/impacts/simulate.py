@@ -9,6 +9,7 @@ from .. import result as R
 from ..diagnostics import Diagnostic, MechError, UsageError
 from .gaps import contact_gaps
 from .options import ContactOptions
+from .compiled import COMPILED_CLASSES, flight
 from .run import Run, RunFailure
 from .stepper import resolve_method
 from .system import ContactSystem
@@ -79,8 +80,17 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                        g.span or _no_span(),
                                        "change the start values so that every gap is >= 0"))
     grid = np.linspace(t_start, t_end, npts)
+    fl, compiled_note = None, "off (requested)"
+    if passed.get("compiled") is False:
+        pass
+    elif method_cls not in COMPILED_CLASSES or max_step is not None:
+        compiled_note = "no: the compiled loop steps dop853 and rk45 without max_step"
+    else:
+        fl, compiled_note = flight(system, tag=eom.name)
+        compiled_note = ("free flight (all contacts open) in the compiled loop; impacts, closed contacts and "
+                         "fixations in Python" if fl is not None else f"no: {compiled_note}")
     run = Run(system, opts, grid, method_cls, progress=progress if callable(progress) else None,
-              output_events=bool(output_events))
+              output_events=bool(output_events), flight=fl)
     wall = _time.perf_counter()
     failure = None
     try:
@@ -107,9 +117,10 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     conservative = _conservative(eom) and not system.friction
     if conservative and m:
         res.stats.update(_drift_between_events(res, run.events, side))
-    reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+    reason = ("one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+              + ("; free flights in the compiled loop" if fl is not None else ""))
     res.metadata = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords), "warnings": [],
-                    "method": method_cls.lower(), "method_reason": reason, "conservative": conservative,
+                    "method": method_cls.lower(), "method_reason": reason, "compiled": compiled_note, "conservative": conservative,
                     "simulator": "mechdsl.impacts",
                     "options": {"t_start": t_start, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol,
                                 "points": npts, "method": method or "auto", "outputs": list(out_names),

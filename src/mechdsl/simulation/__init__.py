@@ -61,6 +61,14 @@ def solve(problem: Problem, progress=None) -> Result:
     A.accuracy_report(r, problem, fixed_step=problem.backend == "fixed-step")
     meta = r.metadata
     meta.setdefault("warnings", [])
+    if problem.backend == "fixed-step" and problem.drive is not None:
+        jumps = [sig.name for sig in problem.drive.signals if _zoh(sig)
+                 and problem.drive.breakpoints(s.t_start, s.t_end).size]
+        if jumps:
+            meta["warnings"].append(
+                f"the fixed-step method steps across the zero-order hold of {', '.join(jumps)}: a stage at a "
+                "step's end that lands on a sample sees the next value, so a jump can add an error of first "
+                "order in dt (the method's own order is lost there); an adaptive method restarts at every jump")
     meta.setdefault("notes", [])
     meta.setdefault("conservative", "energy" in problem.invariants)
     unused = ignored_settings(backend, s)
@@ -70,7 +78,7 @@ def solve(problem: Problem, progress=None) -> Result:
     ran = backend.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,
-                   "compiled": _ran_compiled(meta),
+                   "compiled": _ran_compiled(meta, r.stats),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
     from ..eom import parameter_vector
     from ..friction import friction_notes
@@ -160,9 +168,18 @@ def _estimate_error(r: Result, problem: Problem) -> None:
                                     "reference_failed": None if tight.success else str(tight.failure)}
 
 
-def _ran_compiled(meta) -> bool:
+def _zoh(signal) -> bool:
+    from .drive import _zoh as zoh
+
+    return zoh(signal)
+
+
+def _ran_compiled(meta, stats=None) -> bool:
     """Whether compiled code ran: the back end's flag (a bool; the ODE back end's
-    ``metadata.compiled`` is the decision's text, its flag is ``options.compiled``)."""
+    ``metadata.compiled`` is the decision's text, its flag is ``options.compiled``); a contact
+    run counts its free-flight segments in the compiled loop."""
+    if (stats or {}).get("compiled_segments"):
+        return True
     flag = meta.get("compiled")
     if not isinstance(flag, bool):
         flag = (meta.get("options") or {}).get("compiled", False)
