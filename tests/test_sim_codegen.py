@@ -1,6 +1,7 @@
 """CasADi Functions built from an EOM: names, numbers, laziness, compiled code, fast calls."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -124,6 +125,8 @@ def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
         return
     assert cf["ode"].class_name() == "External" and cf.compiled
     assert "compiled" in cf.notes[0] and cf.library.startswith(str(tmp_path))
+    flags = re.search(r"\(([^)]*)\) into", cf.notes[0]).group(1).split(", ")
+    assert len(flags) == len(set(flags)), cf.notes[0]     # each set of flags once ("-O2, -O2" before)
     p = e.param_values
     for _ in range(10):
         x = RNG.uniform(-3, 3, 4)
@@ -173,9 +176,12 @@ def test_missing_compiler_falls_back_with_a_note(monkeypatch, tmp_path):
     f = casadi_functions(e, compiled=True)
     assert f["ode"].class_name() != "External"
     assert not f.compiled and "no C compiler" in f.notes[0]
+    assert "$CC = '/nonexistent/cc' is not a program" in f.notes[0]     # not "looked for $CC, gcc, ..."
     r = simulate(e, 1.0, compiled=True, points=3)
     assert r.success and r.metadata["options"]["compiled"] is False
     assert any("compiled code unavailable" in w for w in r.metadata["warnings"])
+    # said once, as the warning: not repeated as a note (the command line printed both)
+    assert not any("no C compiler" in n for n in r.metadata["notes"])
 
 
 def test_bound_fast_function_equals_plain_calls():

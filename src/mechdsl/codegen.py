@@ -628,7 +628,10 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     ca = _ca()
     cc = find_compiler()
     if cc is None:
-        return None, ("no C compiler found (looked for $CC, gcc, cc, clang); "
+        env_cc = os.environ.get("CC")
+        looked = (f"$CC = {env_cc!r} is not a program on PATH (CC names one program, without flags)" if env_cc
+                  else "looked for $CC, gcc, cc, clang")
+        return None, (f"no C compiler found ({looked}); "
                       "using the CasADi virtual machine instead of compiled code"), None
     units = []
     main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
@@ -704,7 +707,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
-                f"({', '.join(' '.join(f) for f in flags)}) into {lib}"
+                f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
         if problem:
             note = f"the cached library {lib} {problem}: rebuilt; " + note

@@ -80,7 +80,10 @@ def read_table(path, hold: str = "zoh", what: str = "input table") -> Table:
     if not data:
         raise UsageError(f"{what}: {path} has no (time, value) rows")
     arr = np.array(data, float)
-    return table(arr[:, 0], arr[:, 1], hold)
+    try:
+        return table(arr[:, 0], arr[:, 1], hold)
+    except UsageError as e:
+        raise UsageError(f"{what}: {path}: {e}") from None
 
 
 @record(frozen=False)
