@@ -22,6 +22,10 @@ from mechdsl.dae import RunInterrupted, simulate_dae
 @pytest.mark.parametrize("formulation", ["projection", "baumgarte", "ggl", "partitioning"])
 def test_ctrl_c_stops_a_constrained_run_and_keeps_partial_results(formulation):
     eom = pendulum_eom(gravity=9.81, v0=(0.0, 0.0))
+    # a test run started in the background inherits an ignored SIGINT, and interrupt_main()
+    # does nothing then: give this test Python's own handler, as in a terminal
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         simulate_dae(eom, 0.5, points=3, formulation=formulation)      # build the integrators first
@@ -70,7 +74,10 @@ def test_sigint_to_a_process_stops_the_run():
         "except RunInterrupted as e:\n"
         "    print('interrupted', e.result.t[-1], e.result.failure.cause, flush=True)\n"
         "    sys.exit(130)\n")
-    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # SIG_DFL in the child even when this test run ignores SIGINT (started in the background):
+    # Python then installs its own Ctrl-C handler there, as in a terminal
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert p.stdout.readline().strip() == "ready"
         time.sleep(0.3)
@@ -98,7 +105,8 @@ def test_sigint_to_mech_simulate_writes_partial_results_and_exits_130(tmp_path):
     # A01 over 20000 s at 1e-12: ~40 s of integration after about a second of start-up
     p = subprocess.Popen([sys.executable, "-m", "mechdsl", "simulate", str(root / "models" / "pendulum_cartesian.mech"),
                           "--scene", "A01", "--t-end", "20000", "--points", "20001", "--no-progress", "-o", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(6.0)                            # loaded, derived, integrating
         os.kill(p.pid, signal.SIGINT)

@@ -258,7 +258,8 @@ def test_ctrl_c_on_the_process_pool_keeps_finished_runs(tmp_path):
     p = subprocess.Popen([sys.executable, "-m", "mechdsl", "sweep", path, "--model", "DoublePendulum", "--grid",
                           "j1.phi.start=0.1:3:4000", "--t-end", "20", "--points", "11", "--scheduler", "processes",
                           "--workers", "2", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True, start_new_session=True)
+                         text=True, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # even if we ignore it
     time.sleep(8)
     os.killpg(p.pid, signal.SIGINT)            # as a terminal's Ctrl-C: the whole process group
     stdout, stderr = p.communicate(timeout=120)
