@@ -356,3 +356,46 @@ def test_gaps_not_finite_at_the_start(tmp_path, capsys, model, setting, code, li
                     "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
     assert rc == 1
     _located(err, code, MODELS / model, line)
+
+
+@pytest.mark.parametrize("old,new,line,what", [
+    ('m1(unit = "kg") = 0.04325', 'm1(unit = "kg") = -1', 15, "negative mass"),
+    ('i3(unit = "kg.m2") = 5.255e-06', 'i3(unit = "kg.m2") = -1e-3', 31, "negative moment of inertia"),
+], ids=["mass", "inertia"])
+def test_negative_mass_in_the_equation_layer_of_andrews(tmp_path, capsys, old, new, line, what):
+    """andrews.mech with m1 = -1 ran to the end (exit 0): the reduced mass matrix stays positive
+    definite, so E743 cannot see it.  The parameter is a mass by its unit and because T grows
+    linearly with it; `check`, `simulate` and `--set` refuse it at the parameter (E747)."""
+    path = _edited(tmp_path, "andrews.mech", old, new)
+    rc, err = _cli(["check", str(path)], capsys)
+    assert rc == 1 and what in err
+    _located(err, "E747", path, line)
+    rc, err = _cli(["simulate", str(MODELS / "andrews.mech"), "--set", new.split("(")[0] + "=" + new.split("= ")[-1],
+                    "--t-end", "0.001", "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
+    assert rc == 1 and "error[E747]" in err and not (tmp_path / "o.csv").exists()
+
+
+EQUATION_LAYER = """model Rotor
+  parameter Real A(unit = "kg.m2") = 2;
+  parameter Real B(unit = "kg.m2") = 3;
+  parameter Real C(unit = "kg.m2") = -0.5;
+  parameter Real dm(unit = "kg", min = -0.5) = -0.25;
+  parameter Real m(unit = "kg") = 1;
+  coordinate Real a(start = 0);
+  coordinate Real b(start = 0);
+  coordinate Real x(start = 0);
+equation
+  kinetic = 1/2*(A*der(a)^2 + B*der(b)^2) + C*der(a)*der(b) + 1/2*(m + dm)*der(x)^2;
+  potential = a^2 + b^2 + x^2;
+end Rotor;
+"""
+
+
+def test_negative_mass_check_spares_products_of_inertia_and_declared_ranges():
+    """C is a product of inertia (dT/dC = a'b' is indefinite) and dm declares its range: neither
+    is a negative mass.  Made negative, the moment A is (dT/dA = a'^2/2 >= 0)."""
+    model = mechdsl.loads(EQUATION_LAYER)
+    assert preflight(model.eom) == []
+    found = preflight(model.eom, {"A": -1.0})
+    assert [d.code for d in found] == ["E747"] and "'A'" in found[0].message
+    assert found[0].span.line == 2

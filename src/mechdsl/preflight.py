@@ -10,6 +10,8 @@ In order (the first group that finds something ends the check):
 
   E740  a parameter value that is not finite, or subnormal (below 2.2e-308)  (at the parameter)
   E508-E512  the component values (semantic/physical.py)  (at the component)
+  E747  a negative parameter that is a mass or an inertia: its unit is kg or kg.m2 and the
+        kinetic energy is linear in it with a positive semidefinite coefficient (at the parameter)
   E741  a start value that is not finite                  (at the coordinate's joint)
   E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
   E826  a constraint residual or gradient that is not finite at the start (dae/init.py)
@@ -40,6 +42,7 @@ from .diagnostics import Diagnostic, MechError, Span
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
 COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
+PROBES = 3                 # seeded positions besides the start at which E747 judges dT/dp
 DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
@@ -81,6 +84,9 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
         found = value_problems(model, env)
         if found:
             return found
+    found = _negative_masses(eom, pv)
+    if found:
+        return found
     if eom.n == 0:
         return []
     if not isinstance(drift_bound, (int, float)) or not drift_bound > 0:
@@ -436,6 +442,67 @@ def _start_problem(eom, i: int, value: float) -> Diagnostic:
     return Diagnostic("E741", f"the start value of {what} is not finite ({value:g})", _coord_span(eom, name),
                       "check its start/speed formula for a function outside its domain (asin of more than 1, "
                       "sqrt of a negative number) or a division by zero, with the parameter values in force")
+
+
+def _negative_masses(eom, pv) -> list[Diagnostic]:
+    """E747: a negative parameter that the kinetic energy uses as a mass or an inertia.
+
+    Component models state their masses (E508/E509 judge them); in the equation layer
+    (`kinetic = 1/2*(m1*ra^2 + ...)*der(beta)^2 + ...`) a negative mass need not make the
+    reduced mass matrix indefinite (andrews.mech with m1 = -1 runs on), so it is identified
+    here: a parameter with the unit of a mass (kg) or of a moment of inertia (kg.m2), a
+    negative value and no declared `min`, on which the kinetic energy T depends linearly with
+    a coefficient dT/dp that is a positive semidefinite quadratic form of the speeds (at the
+    start and at PROBES seeded positions around it).  A product of inertia (dT/dp indefinite)
+    and a mass difference with a declared range pass.  Cost: nothing unless such a parameter
+    is negative."""
+    model = eom.model
+    if model is None or eom.n == 0 or eom.T is None:
+        return []
+    from . import units as U
+
+    declared = {par.name: par for par in model.real_parameters}
+    suspects = []
+    for i, name in enumerate(eom.params):
+        par = declared.get(name)
+        if par is None or pv[i] >= 0 or par.min is not None or not par.unit:
+            continue
+        try:
+            dim = U.parse_unit(par.unit)[1]
+        except ValueError:
+            continue
+        if dim in (U.MASS, U.INERTIA):
+            suspects.append((i, par, "mass" if dim == U.MASS else "moment of inertia"))
+    if not suspects:
+        return []
+    import casadi as ca
+
+    T = ca.SX(eom.T)
+    q0, _ = eom.start(pv)
+    rng = np.random.default_rng(20260)
+    probes = [np.asarray(q0, float)] + [np.asarray(q0, float) + rng.normal(size=eom.n) for _ in range(PROBES)]
+    out = []
+    for i, par, what in suspects:
+        dT = ca.jacobian(T, eom.p[i])
+        if ca.depends_on(dT, eom.p[i]) or dT.is_zero():
+            continue
+        H = ca.Function("dT_dp", [eom.q, eom.t, eom.p], [ca.hessian(dT, eom.qd)[0]])
+        try:
+            eigs = [np.linalg.eigvalsh(np.asarray(H(q, 0.0, pv), float)) for q in probes if np.all(np.isfinite(q))]
+        except (RuntimeError, np.linalg.LinAlgError):
+            continue
+        if not eigs or not all(np.all(np.isfinite(e)) for e in eigs):
+            continue
+        scale = max(float(np.max(np.abs(e))) for e in eigs)
+        if scale > 0 and all(float(np.min(e)) >= -1e-12 * scale for e in eigs):
+            out.append(Diagnostic("E747", f"parameter '{par.name}' = {pv[i]:g} is a negative {what}: the kinetic "
+                                          f"energy grows with it (unit {par.unit}), so it gives the motion negative "
+                                          "inertia and the equations of motion no physical meaning",
+                                  par.span,
+                                  f"masses and moments of inertia are >= 0; if '{par.name}' is not one (a difference "
+                                  f"of masses), declare its range: parameter Real {par.name}(unit = \"{par.unit}\", "
+                                  f"min = {pv[i]:g})"))
+    return out
 
 
 def _param_span(model, name: str) -> Span:
