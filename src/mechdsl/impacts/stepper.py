@@ -34,7 +34,7 @@ def resolve_method(method: str | None) -> tuple[str, str]:
         raise UsageError(f"the symplectic method '{method}' cannot step over impacts; "
                          "use a method with error control (e.g. auto, dop853, radau)")
     raise UsageError(f"unknown method '{method}' for a model with contacts; methods: "
-                     + ", ".join(["auto", *SCIPY_METHODS, *ALIASES]))
+                     + ", ".join(dict.fromkeys(["auto", *SCIPY_METHODS, *ALIASES])))
 
 
 def make_solver(cls_name: str, fun, t0: float, y0, t_bound: float, rtol: float, atol: float,
