@@ -23,10 +23,7 @@ import numpy as np
 
 from .impact_map import ImpactError, solve_impact
 from .rootfind import bracket_root
-from .stepper import make_solver
-
-
-STEPS_PER_PERIOD = 10      # the fewest steps a one-step method takes to follow one oscillation
+from .stepper import IMPLICIT, make_solver, steps_per_period
 
 
 class RunFailure(Exception):
@@ -366,24 +363,29 @@ class Run:
 
     def _check_work(self, t0: float, t_end: float, y: np.ndarray) -> None:
         """A run that would need more steps than the budget fails at once, with the time scale
-        named, instead of stepping for hours in Python (a rod of 1e-12 m swings at 3e6 rad/s).
-        The estimate: the fastest motion at the start (spectral radius rho of the free-flight
-        Jacobian) makes rho (t_end - t0) / (2 pi) periods, and a one-step method needs at
-        least STEPS_PER_PERIOD steps a period to follow one."""
+        named, instead of stepping for minutes in Python (a rod of 1e-12 m swings at 2e6 rad/s).
+        The estimate: the fastest motion at the start (the largest eigenvalue modulus rho of the
+        free-flight Jacobian; for the implicit solvers the largest imaginary part, since they
+        step over decaying stiff modes) makes rho (t_end - t0) / (2 pi) periods, and the solver
+        takes at least stepper.steps_per_period(method, rtol) steps a period (measured; 23 for
+        dop853 at rtol 1e-10): a lower bound of the work, so a run it refuses could not finish."""
         jac = self.s.jacobian([])
         if jac is None:
             return
         J = np.asarray(jac(t0, y), float)
         if not np.all(np.isfinite(J)):
             return
-        rho = float(np.max(np.abs(np.linalg.eigvals(J)), initial=0.0))
-        need = rho * (t_end - t0) / (2 * np.pi) * STEPS_PER_PERIOD
+        lam = np.linalg.eigvals(J)
+        rho = float(np.max(np.abs(lam.imag if self.method_cls in IMPLICIT else lam), initial=0.0))
+        per_period = steps_per_period(self.method_cls, self.o.rtol)
+        need = rho * (t_end - t0) / (2 * np.pi) * per_period
         if need > self.o.max_steps:
             raise RunFailure(t0, "too many steps needed",
                              f"the model's fastest motion at the start has a time scale of {1 / rho:.3g} s "
                              f"(spectral radius {rho:.3g} 1/s): following it to t = {t_end:g} takes about "
-                             f"{need:.3g} steps, over the budget of {self.o.max_steps} steps (max_steps); check "
-                             "the sizes and stiffnesses (a tiny length or a huge spring), or shorten the run")
+                             f"{need:.3g} steps ({per_period:.3g} a period at rtol {self.o.rtol:g}), over the "
+                             f"budget of {self.o.max_steps} steps (max_steps); check the sizes and stiffnesses "
+                             "(a tiny length or a huge spring), or shorten the run")
 
     # ------------------------------------------------------------------ the loop
     def run(self, t0: float, t_end: float, q: np.ndarray, qd: np.ndarray):
