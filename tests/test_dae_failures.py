@@ -123,3 +123,18 @@ def test_the_driver_loop_is_bounded(monkeypatch):
     assert "more than 5 integrator calls" in r.failure.detail
     assert 0.0 < r.failure.time <= 5 * 0.1 + 1e-12 and r.t[-1] == r.failure.time
     assert r.stats["segments"] == 5
+
+
+def test_a_jacobian_that_cannot_be_evaluated_is_a_failure_not_a_crash():
+    """Fuzz mutant (issue 18): andrews.mech with m3 = -1e12.  The method choice evaluated the
+    index-1 ODE's Jacobian, whose linear solve fails on the singular KKT matrix: CasADi's
+    "Evaluation failed" escaped as a RuntimeError (exit 3).  The start check now refuses the
+    negative mass (E747); past it (as a state met during a run would be), the estimate falls
+    back and the run fails with the time and the cause."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.dae import simulate_dae
+
+    m = mechdsl.load(MODELS / "andrews.mech", model="Andrews")
+    r = simulate_dae(m.eom, 0.01, points=3, p={"m3": -1e12})
+    assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-12)

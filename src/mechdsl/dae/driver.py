@@ -108,7 +108,8 @@ def first_chunk(system, stepper, grid) -> int:
     q, qd, t = stepper.q, stepper.qd, stepper.t
     try:
         qdd, _ = system.accel(q, qd, t)
-        rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
+        with np.errstate(all="ignore"):     # q = 0: an infinite rate (no warning on stderr), the default
+            rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
     except Exception:  # noqa: BLE001 -- no estimate: the default
         return CHUNK
     if not np.isfinite(rate) or rate <= 0:
