@@ -399,3 +399,20 @@ def test_negative_mass_check_spares_products_of_inertia_and_declared_ranges():
     found = preflight(model.eom, {"A": -1.0})
     assert [d.code for d in found] == ["E747"] and "'A'" in found[0].message
     assert found[0].span.line == 2
+
+
+def test_a_loop_smaller_than_the_constraint_tolerance(tmp_path, capsys):
+    """Fuzz mutant (issue 18): nfourbar.mech with rods of 1e-12 m and 1e-12 kg.  The constraints
+    are held to max(10 atol, 1e-10) = 1e-9 m, a thousand times the mechanism: the run ran away
+    (speeds of 1e12 rad/s after 2e-6 s) and did not return in 300 s.  Refused at the start (E755)
+    at the joint that closes the first loop; a mechanism of 1e-6 m (1000 x the bound) passes."""
+    text = (MODELS / "nfourbar.mech").read_text()
+    for old in ('m(unit = "kg") = 1 ', 'l(unit = "m") = 1 '):
+        assert old in text
+    tiny = text.replace('m(unit = "kg") = 1 ', 'm(unit = "kg") = 1e-12 ').replace('l(unit = "m") = 1 ', 'l(unit = "m") = 1e-12 ')
+    path = _write(tmp_path, tiny, "nfourbar.mech")
+    rc, err = _cli(["check", str(path)], capsys)
+    assert rc == 1 and "measures only 2.27e-12 across" in err
+    _located(err, "E755", path, 29)
+    found = preflight(mechdsl.loads(text, model="NFourBar").eom, {"l": 1e-6})
+    assert found == []

@@ -17,6 +17,7 @@ In order (the first group that finds something ends the check):
   E826  a constraint residual or gradient that is not finite at the start (dae/init.py)
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
   E749  a loop whose positions double precision cannot resolve to the drift bound (lengths 1e16)
+  E755  a mechanism with closed loops smaller than 100 times the drift bound (lengths 1e-12)
   E742  the mass matrix is not finite at the start
   E743  the mass matrix is singular (or not positive definite) at the start, on the motions
         the constraints allow: a coordinate moves no inertia (a point mass on a Spherical
@@ -43,6 +44,7 @@ SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue 
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
 COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
 PROBES = 3                 # seeded positions besides the start at which E747 judges dT/dp
+LOOP_SIZE_FACTOR = 100     # a closed loop must measure this many times the constraint drift bound (E755)
 DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
@@ -118,7 +120,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         except MechError as e:
             return e.diagnostics
         q, qd = init.q, init.qd
-        found = _loop_resolution(eom, q, t, pv, drift_bound)
+        found = _loop_resolution(eom, q, t, pv, drift_bound) or _loop_too_small(eom, q, t, pv, drift_bound)
         if found:
             return found
     else:
@@ -359,6 +361,39 @@ def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
                                f"double precision resolves its positions only to {res:.2g}, more than the "
                                f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
                        "choose units (or an origin) that keep the positions moderate, or raise atol")]
+
+
+def _loop_too_small(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
+    """E755: a closed loop smaller than LOOP_SIZE_FACTOR times the constraint drift the run holds
+    (max(10 atol, 1e-10)): its geometry is lost in the tolerance.  nfourbar with rods of 1e-12 m
+    ran away (speeds of 1e12 rad/s after 2e-6 s) and ground for minutes in CVODES before this.
+    The loop's size: the largest distance between the joint points of the model (at the start)."""
+    model = eom.model
+    if model is None or eom.point_position is None:
+        return []
+    cut = [j for j in model.joints if j.closes_loop]
+    if not cut:
+        return []
+    import casadi as ca
+
+    names = list(dict.fromkeys(n for j in model.joints for n in (j.parent, j.child)))
+    try:
+        fn = eom.cached("preflight_joint_points", lambda: ca.Function(
+            "joint_points", [eom.q, eom.t, eom.p], [ca.horzcat(*[ca.vec(eom.point_position(n)) for n in names])]))
+    except Exception:  # noqa: BLE001 - a point without a position: nothing to judge here
+        return []
+    xyz = np.asarray(fn(q, t, pv), float).reshape(3, -1)
+    if xyz.shape[1] < 2 or not np.all(np.isfinite(xyz)):
+        return []
+    size = float(np.max(np.linalg.norm(xyz - xyz.mean(axis=1, keepdims=True), axis=0))) * 2
+    if size <= 0 or size >= LOOP_SIZE_FACTOR * drift_bound:
+        return []
+    j = cut[0]
+    return [Diagnostic("E755", f"the mechanism closed by joint '{j.name}' measures only {size:.3g} across: the "
+                               f"simulation holds its constraints to {drift_bound:.2g} (max(10 atol, 1e-10)), "
+                               f"more than 1/{LOOP_SIZE_FACTOR:g} of its size, so its geometry is lost in the tolerance",
+                       j.span, "choose units that make the lengths moderate (um or mm instead of m), "
+                               "or check the lengths for a mistake")]
 
 
 def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
