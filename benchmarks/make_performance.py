@@ -148,17 +148,45 @@ def andrews_check(res, digits=7):
 # --------------------------------------------------------------------------- scaling
 
 
-def nlink_table(quick):
-    sizes = "1,2,5,10" if quick else "1,2,5,10,20,50,100"
-    cmd = [sys.executable, str(ROOT / "benchmarks" / "nlink.py"), "--sizes", sizes]
-    if quick:
-        cmd += ["--no-sympy"]
+def script_table(script: str, sizes: str, extra=()) -> str:
+    """Run a benchmark script of this folder with --sizes; its stdout (or its failure) as text."""
+    cmd = [sys.executable, str(ROOT / "benchmarks" / script), "--sizes", sizes, *extra]
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
-    log("== nlink.py " + sizes)
+    log(f"== {script} {sizes}")
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
     if r.returncode != 0:
-        return f"benchmarks/nlink.py failed:\n\n```\n{r.stderr[-2000:]}\n```\n"
+        return f"benchmarks/{script} failed:\n\n```\n{r.stderr[-2000:]}\n```\n"
     return r.stdout.strip()
+
+
+def nlink_table(quick):
+    return script_table("nlink.py", "1,2,5,10" if quick else "1,2,5,10,20,50,100", ["--no-sympy"] if quick else [])
+
+
+def nlink_run_table(quick):
+    """benchmarks/nlink_run.py: 5 s of the chain with default options against scipy DOP853 + pin.aba."""
+    return script_table("nlink_run.py", "2,5,10" if quick else "2,5,10,20,30,50,100,200")
+
+
+NLINK_RUN_TEXT = ("The same 5 s with every option at its default (rtol 1e-8 given): `method = auto` compiles "
+                  "the dop853 stepping loop when its estimate says it pays (docs/simulate.md), against scipy's "
+                  "DOP853 on Pinocchio's ABA (`benchmarks/nlink_run.py`; warm: the first run, which derives "
+                  "and compiles, is the *first run* column). Goals (issue 16): ratio at most 0.5 at every N, "
+                  "N = 30 under 30 ms of CPU.")
+
+
+def chain_table(quick):
+    """benchmarks/chain_kernel.py: the ode unrolled against looped per N."""
+    return script_table("chain_kernel.py", "2,12,50" if quick else "2,12,50,100,200")
+
+
+CHAIN_TEXT = ("`benchmarks/chain_kernel.py` (issue 16): the N-rod chain's `ode` unrolled (one SX expression) "
+              "and looped (per-link kernels chained by `mapaccum`, mechanics/chain.py; none below a run of 4 "
+              "identical links); C bytes of the ode alone (in parentheses without the static index tables), "
+              "wall time of `codegen.compile_functions` (gcc at mechdsl's flags by size), one evaluation "
+              "through `FastFunction` compiled and in the virtual machine, and the ratios looped / unrolled. "
+              "The simulator compiles the looped form for chains over 8000 SX operations (`codegen.LOOP_OPS`) "
+              "and always evaluates the unrolled form in the virtual machine.")
 
 
 def simulation_scaling(quick):
@@ -338,19 +366,26 @@ def page(ctx) -> str:
               "one right-hand-side evaluation in the virtual machine and compiled, against Pinocchio's ABA "
               "(C++) and sympy.physics.mechanics, with the accuracy against both.", "", ctx["nlink"], "",
               "Simulating the chain for 5 s at rtol = atol = 1e-8 (virtual machine, CPU time, min of 3 "
-              "after a warm-up):", "", ctx["simscale"], ""]
+              "after a warm-up):", "", ctx["simscale"], "", NLINK_RUN_TEXT, "", ctx["nlinkrun"], "",
+              "### Chains as loops over per-link kernels", "", CHAIN_TEXT, "", ctx["chain"], ""]
     if ctx.get("control"):
         parts += ["## Optimal control: cart-pole swing-up", "", CONTROL_TEXT, "", "```", *ctx["control"], "```", ""]
     return "\n".join(parts).rstrip() + "\n"
 
 
 CONTROL_TEXT = ("benchmarks/control_swingup.py: the swing-up of docs/control.md solved by IPOPT (exact "
-                "Hessian) on a hand-written CasADi cart-pole and on mechdsl's `ode` (virtual machine and "
-                "compiled), side by side in one run; solve = best wall time of the IPOPT solve, x hand = "
-                "ratio to the hand-written model's, replay gap = max |x_replay - x_optimizer| over the grid "
-                "when the optimal control is replayed through `m.simulate` (rtol 1e-10): the optimizer's "
-                "own RK4 discretization error, shrinking as h^4. Goals (issue 13): at most 1.5x the "
-                "hand-written time, the same iterations.")
+                "Hessian) on a hand-written CasADi cart-pole (parameters as numbers) and on mechdsl's `ode`: "
+                "with the parameters as the input p (`mechdsl`), built in (`fixed`: "
+                "`m.casadi(fixed_parameters=True)`), compiled, and both; RK4 multiple shooting; the last row "
+                "per N shoots on the simulator's own integrator (`m.integrator`, erk at rtol 1e-8, "
+                "docs/control.md example 2). Side by side in one run, variants interleaved; CPU s = best "
+                "CPU time (time.process_time) of the IPOPT solve, x hand = ratio to the hand-written "
+                "model's; replay gap = max |x_replay - x_optimizer| over the grid when the optimal control "
+                "is replayed through `m.simulate` (zero-order hold; rtol 1e-10, for the integrator row the "
+                "OCP's own method and tolerances), exact gap = the same against a replay at rtol 1e-12. "
+                "The RK4 rows' gaps are the optimizer's RK4 discretization error (h^4); the integrator "
+                "row's replay gap is round-off. Goals (issue 13): at most 1.5x the hand-written time, the "
+                "same iterations, the replay matching to the integrator tolerance.")
 
 
 def main(argv=None) -> int:
@@ -385,8 +420,10 @@ def main(argv=None) -> int:
     log("== stability suite")
     ctx["cases"] = run_cases(available_cases(), "small" if a.quick else "full", figs, log=log)
     ctx["nlink"] = "(left out: --no-nlink)" if a.no_nlink else nlink_table(a.quick)
+    ctx["chain"] = "(left out: --no-nlink)" if a.no_nlink else chain_table(a.quick)
     log("== simulation cost against N")
     ctx["simscale"] = simulation_scaling(a.quick)
+    ctx["nlinkrun"] = nlink_run_table(a.quick)
     from control_swingup import rows as control_rows
 
     ctx["control"] = list(control_rows([30, 60] if a.quick else [30, 60, 120], 1 if a.quick else 3))

@@ -40,6 +40,23 @@ def run_stability_case(name: str, size: str):
 GOLDEN_CHANGES = pytest.StashKey[list]()
 
 
+def simulate_with_csv_input(tmp_path, source: str, csv_text: str, *args: str):
+    """``mech simulate`` of ``source`` with input F from a CSV of ``csv_text`` (``{csv}`` in
+    ``args`` is its path), written to out.csv: (exit code, header, rows as floats)."""
+    from mechdsl.cli import main
+
+    src = tmp_path / "model.mech"
+    src.write_text(source)
+    csv_in = tmp_path / "f.csv"
+    csv_in.write_text(csv_text)
+    out = tmp_path / "out.csv"
+    rc = main(["simulate", str(src), *(a.format(csv=csv_in) for a in args), "-o", str(out), "--no-progress"])
+    if rc != 0:
+        return rc, [], []
+    lines = out.read_text().splitlines()
+    return rc, lines[0].split(","), [[float(v) for v in ln.split(",")] for ln in lines[1:]]
+
+
 def pytest_addoption(parser):
     parser.addoption("--update-golden", action="store_true", default=False,
                      help="rewrite tests/golden/*.txt from the current output (tests/test_golden.py) "

@@ -114,8 +114,8 @@ ENTRIES = [
     Entry("E202", "declared twice", "Two declarations, models, scenes, modifiers or settings with one name.",
           "Rename or remove one of them.", corpus="E202_duplicate_declaration.mech"),
     Entry("E203", "unknown type", "A declaration whose type is neither `Real`/`Integer`/`Boolean` nor a "
-                                  "built-in component nor a model of the file; or an array of model instances.",
-          "Fix the spelling (the hint suggests the component or model); declare model instances one by one.",
+                                  "built-in component nor a model of the file.",
+          "Fix the spelling (the hint suggests the component or model).",
           corpus="E203_unknown_type_typo.mech"),
     Entry("E204", "unknown modifier", "A modifier that the component or declaration does not have: a field of "
                                       "a component, an attribute such as `unit` or `start`, or a name modified "
@@ -159,6 +159,22 @@ ENTRIES = [
     Entry("E219", "unknown attribute", "`a.b` where `a` has no attribute `b` (points have `r v x y z`, bodies "
                                        "also `R w`, rods `a b`, joints their variables).",
           "Fix the spelling (the hint lists the attributes).", corpus="E219_unknown_attribute_of_body.mech"),
+    Entry("E220", "vector start not applicable", "`omega(..)`, `r(..)` or `v(..)` of a Spherical or Free joint "
+                                                 "without `start = {..}`, or on a joint whose variables are bound "
+                                                 "to other coordinates or expressions (or that has no rotation "
+                                                 "coordinates: a Free joint with a point-mass child has no omega).",
+          "Write `omega(start = {wx, wy, wz})`, and set start values on the coordinates a bound joint uses.",
+          corpus="E220_omega_without_start.mech"),
+    Entry("E221", "omega in world axes on a moving parent", '`omega(start = .., frame = "world")` on a joint '
+                                                            "whose parent is not the world: the world axes of "
+                                                            "a relative angular velocity are not defined there.",
+          'Give the angular velocity relative to the parent in the child body\'s axes: `frame = "body"`.',
+          corpus="E221_omega_world_frame_on_moving_parent.mech"),
+    Entry("E222", "omega at gimbal lock", "`omega(start = ..)` on an Euler-angle joint whose start orientation is "
+                                          "at (within 1e-8 of) the gimbal lock of its sequence: the angle rates "
+                                          "of an angular velocity are not unique or do not exist there.",
+          'Start away from the lock, or use `parametrization = "quaternion"`.',
+          corpus="E222_omega_at_gimbal_lock.mech"),
     Entry("E230", "input default not constant", "An `input`'s default value (`input Real F = ...`) that is "
                                                 "not a constant number.",
           "Give a number (`= 0` when omitted); drive the input at run time (docs/control.md).",
@@ -166,6 +182,10 @@ ENTRIES = [
     Entry("E231", "parameter depends on input", "A parameter computed from an `input`: inputs change during "
                                                "a run, parameters are constant.",
           "Use the input directly in the forces or equations.", corpus="E231_parameter_depends_on_input.mech"),
+    Entry("E241", "friction regularization not positive", "A `Friction` whose regularization speed `v_eps` "
+                                                          "is zero or negative (the law is -F tanh(v/v_eps)).",
+          "Give v_eps > 0 (default 1e-3); smaller is closer to dry friction and stiffer.",
+          corpus="E241_friction_nonpositive_v_eps.mech"),
     # ------------------------------------------------------------------ E3xx
     Entry("E301", "shape mismatch", "Scalars, vectors and matrices combined in a way their sizes do not allow, "
                                     "or a value whose shape differs from its declaration.",

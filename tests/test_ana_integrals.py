@@ -67,7 +67,8 @@ def test_heavy_top_texts_are_readable():
 def test_two_body_translation_momenta():
     eom = am.two_body()
     fis = {fi.name: fi for fi in first_integrals(eom)}
-    assert set(fis) == {"p_(x1+x2)", "p_(y1+y2)", "energy"}
+    # translations, and (issue 17) the rotation of both bodies about the origin: x p_y - y p_x summed
+    assert set(fis) == {"p_(x1+x2)", "p_(y1+y2)", "L_(x1,y1+x2,y2)", "energy"}
     assert fis["p_(x1+x2)"].direction == {"x1": 1.0, "x2": 1.0}
     t, q, qd = trajectory(eom, 3.0)
     for name in fis:

@@ -100,7 +100,7 @@ def test_constraint_undefined_at_the_start_is_a_located_error(constraint, what, 
     with pytest.raises(mechdsl.MechError) as info:
         m.simulate(1.0, points=3)
     d = info.value.diagnostics[0]
-    assert d.code == "E826" and "'c1' (rod)" in d.message and what in d.message
+    assert d.code == "E826" and "constraint 'rod' is" in d.message and what in d.message
     assert d.span.file == "bad.mech" and d.span.line == 29
     # the command line: exit code 1 and the located message, no traceback
     f = tmp_path / "bad.mech"

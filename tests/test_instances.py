@@ -142,7 +142,7 @@ end OneMore;
     ("Link l(foo = 1);", "E204"),
     ("Link l; output Real y = l.nothing;", "E201"),
     ("Link l; output Real y = l;", "E201"),
-    ("Link l[2];", "E203"),
+    ("Link l[2, 2];", "E301"),            # arrays of instances have one dimension (test_lang_instance_arrays.py)
     ("parameter Link l;", "E215"),
     ("Link l; Link l;", "E202"),
     ("Link l = 3;", "E214"),

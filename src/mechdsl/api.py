@@ -255,17 +255,109 @@ class Model:
                                      input_defaults=tuple(float(p.value) for p in self.model.inputs))
         return self._eom
 
-    def casadi(self, compiled: bool = False) -> dict:
+    def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
         """CasADi Functions (mechdsl.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
         "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds
-        the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``."""
+        the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``.
+
+        fixed_parameters: parameters an optimizer does not vary, built into the Functions as
+        numbers so that CasADi folds the arithmetic on them (a leaner expression: the
+        cart-pole ``ode`` has 53 instructions instead of 72; codegen.drop_cancelled).  True fixes them all at the
+        model's values (p is then empty: pass ``[]``); a list of names fixes those at the
+        model's values, a dict {name: value} at the given values.  A dependent parameter
+        (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
+        recomputed value, so it cannot go stale.  p then holds the other parameters, in
+        order, named by ``.parameter_names`` of the returned mapping."""
         from .codegen import casadi_functions
 
+        fixed = self._fixed_entries(fixed_parameters)
         # compiled: with first and second derivatives in the library, so that Jacobians and exact
         # Hessians (IPOPT) work on the compiled Functions as on the virtual-machine ones
         # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates
         # (SX glue works for all); the simulator keeps its numeric QR solve
-        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True)
+        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True,
+                                fixed=fixed)
+
+    def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
+                   atol: float | None = None, steps: int | None = None, fixed_parameters=None):
+        """The simulation layer's own integrator over one interval, as a CasADi Function
+        ``(t0, x0, u, p) -> xf``: the state at t0 + dt from x0 at t0, the inputs u held constant (a
+        zero-order hold, as ``m.simulate(inputs={"F": table(...)})`` integrates each sample
+        interval).  For direct multiple shooting: the optimizer's dynamics are then the
+        simulator's, so the optimal control replayed through ``simulate`` with the same
+        method and tolerances reproduces the optimizer's states (docs/control.md).
+
+        method: an ODE method with a CasADi plug-in (default: the scene's, else "auto"
+        resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
+        steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
+        ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
+        from .simulation.inputs import start_vector
+        from .simulate import choose_method, default_inputs, fixed_step_count, min_step
+        from . import integrators as I
+        from .codegen import casadi_functions
+        import casadi as ca
+
+        if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
+            raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
+                             "models only (multiple shooting on a DAE needs its own formulation)")
+        dt = _number("dt", dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise UsageError(f"dt must be a positive, finite interval (got {dt!r})")
+        s = self.settings(t_end=dt, rtol=rtol, atol=atol, method=method)
+        funcs = casadi_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
+                                 fixed=self._fixed_entries(fixed_parameters))
+        m = s.method
+        if m == "auto":
+            pv = self.parameter_values
+            m, _, _ = choose_method(self.eom, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
+                                    start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol)
+        if m not in I.METHODS or I.METHODS[m][0] != "casadi":
+            casadi_methods = [k for k, v in I.METHODS.items() if v[0] == "casadi"]
+            raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
+        if m in I.FIXED_STEP and steps is None:
+            pv = self.parameter_values
+            steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
+                                        start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol, None,
+                                        u=default_inputs(self.eom, np.zeros(0)))
+        opts = I.casadi_options(m, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
+                                hmin=min_step(0.0, s.t_end))
+        ode = funcs["ode"]
+        nu = ode.size1_in(2)
+        t0, x0 = ca.MX.sym("t0"), ca.MX.sym("x0", ode.size1_in(1))
+        u, p = ca.MX.sym("u", nu), ca.MX.sym("p", ode.size1_in(3))
+        if ode.is_a("SXFunction") and not ca.depends_on(ode.call(ode.sx_in())[0], ode.sx_in(0)):
+            shifted, args = ode, ca.vertcat(u, p)               # autonomous: t0 changes nothing
+        else:                                                  # the interval starts at t0: ode(t0 + s, ...)
+            ts, xs, us, ps = (ca.MX.sym(nm, ode.sparsity_in(i) if i != 2 else ca.Sparsity.dense(nu + 1, 1))
+                              for i, nm in enumerate(("t", "x", "u", "p")))
+            shifted = ca.Function("ode", [ts, xs, us, ps], [ode(ts + us[nu], xs, us[:nu], ps)],
+                                  ["t", "x", "u", "p"], ["xdot"])
+            args = ca.vertcat(u, t0, p)
+        integ = I.make_integrator("integrator", I.METHODS[m][1], I.dae_function(shifted), 0.0, s.t_end, opts)
+        xf = integ(x0=x0, p=args)["xf"]
+        return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
+
+    def _fixed_entries(self, spec) -> tuple:
+        """(index in p, value) pairs of ``casadi(fixed_parameters=spec)``."""
+        if spec is None or spec is False:
+            return ()
+        names = self.parameter_names
+        if spec is True:
+            return tuple(enumerate(float(v) for v in self.parameter_values))
+        if isinstance(spec, str) or not hasattr(spec, "__iter__"):
+            raise UsageError("fixed_parameters must be True, a list of parameter names or a dict "
+                             f"{{name: value}} (got {spec!r})")
+        chosen = list(spec)
+        for k in chosen:
+            if k not in names:
+                hint = did_you_mean(str(k), list(names))
+                what = "an input" if any(i.name == k for i in self.inputs) else "a Real parameter"
+                raise UsageError(f"fixed_parameters: '{k}' is not {what} of {self.name} (p holds "
+                                 f"{', '.join(names) or 'nothing'})" + (f"; {hint}" if hint else ""))
+        values = self.parameter_vector(**dict(spec)) if isinstance(spec, dict) else self.parameter_values
+        idx = {names.index(k) for k in chosen}
+        idx |= _dependents_of(self.eom, idx)
+        return tuple((i, float(values[i])) for i in sorted(idx))
 
     def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
                  method: str | None = None, points: int | None = None, progress=None, **kw):
@@ -311,6 +403,13 @@ class Model:
         from .analysis.linearize import linearize
 
         return linearize(self.eom, at, **kw)
+
+    def steady_motions(self, pins: dict, **kw):
+        """Steady motions (relative equilibria of the Routh-reduced system): see
+        mechdsl.analysis.steady.steady_motions and docs/analysis.md#steady-motions."""
+        from .analysis.steady import steady_motions
+
+        return steady_motions(self.eom, pins, **kw)
 
     def first_integrals(self):
         from .analysis.integrals import first_integrals
@@ -386,6 +485,22 @@ class InputInfo:
     max: float | None
     default: float
     doc: str = ""
+
+
+def _dependents_of(eom, fixed: set[int]) -> set[int]:
+    """Entries of p computed (by bindings) only from the free parameters among ``fixed``."""
+    from .codegen import casadi_functions, free_parameters
+
+    free = free_parameters(eom)
+    f = casadi_functions(eom, names=("parameters",))["parameters"]
+    sp = f.jac_sparsity(0, 0)           # rows: entries of p, columns: free parameters
+    fixed_free = {j for j, n in enumerate(free) if eom.params.index(n) in fixed}
+    out = set()
+    for i in range(len(eom.params)):
+        cols = {j for j in range(len(free)) if sp.has_nz(i, j)}
+        if eom.params[i] not in free and cols and cols <= fixed_free:
+            out.add(i)
+    return out
 
 
 def _dependent_value(p: ir.Parameter, env: dict[str, float], evaluate) -> float:

@@ -131,13 +131,38 @@ def ldl_solve(M, b):
     return ca.vertcat(*x)
 
 
-def build_ode(eom, sx: bool = False):
+LOOP_OPS = 8000    # compiled code loops over per-link kernels when the unrolled qdd has more SX operations
+
+
+def looped_ode(eom, force: bool = False):
+    """The ``ode`` Function as loops over per-link kernels (mechanics/chain.py), or None.
+
+    Only for the recursive route with a run of identical links (``EOM.qdd_loop``) and, unless
+    ``force``, an unrolled qdd of more than LOOP_OPS operations: the looped C compiles in about a
+    second at any N but evaluates 2-3x slower than the unrolled C, and 10-20x slower in the
+    virtual machine (benchmarks/chain_kernel.py), so it is used for compiled code only."""
+    if eom.qdd is None or eom.__dict__.get("qdd_loop") is None:    # (not forcing a lazy plan)
+        return None
+    if not force:
+        s = _Symbols(eom)
+        if _function("qdd", s.txup, [eom.qdd], TXUP, ["qdd"]).n_instructions() <= LOOP_OPS:
+            return None
+    plan = eom.qdd_loop
+    return None if plan is None else plan.ode(eom)
+
+
+def build_ode(eom, sx: bool = False, loop: bool = False):
     """The ``ode`` Function (t, x, u, p) -> xdot.  sx=True: an SX Function also when M qdd =
     bias must be solved (``ldl_solve``, up to SX_SOLVE_MAX coordinates) instead of the MX
-    Function around the numeric QR solve."""
+    Function around the numeric QR solve.  loop=True (not with sx): the looped form of
+    ``looped_ode`` where it applies and pays."""
     ca = _ca()
     s = _Symbols(eom)
     n = eom.n
+    if loop and not sx:
+        f = looped_ode(eom)
+        if f is not None:
+            return f
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
         return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
@@ -168,12 +193,12 @@ def jacobian_of(ode):
     return ca.Function("ode_jacobian", [t, x, u, p], [ca.densify(jx)], TXUP, ["J"])
 
 
-def _build(eom, name, outputs, sx=False):
+def _build(eom, name, outputs, sx=False, loop=False):
     ca = _ca()
     s = _Symbols(eom)
     txup = s.txup
     if name == "ode":
-        return build_ode(eom, sx)
+        return build_ode(eom, sx, loop)
     if name == "mass_matrix":
         if ca.depends_on(ca.SX(eom.M), s.qd):
             return _function("mass_matrix", txup, [eom.M], TXUP, ["M"])
@@ -272,10 +297,14 @@ class FunctionSet(Mapping):
     """
 
     def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None, derivatives: int = 0,
-                 sx: bool = False):
+                 sx: bool = False, fixed=(), jacobian: str = "full"):
         self.eom = eom
+        self.jacobian_kind = jacobian     # compiled: "full" Jacobian, or "forward" derivative only
         self.derivatives = int(derivatives)
         self.sx = bool(sx)
+        self.fixed = tuple((int(i), float(v)) for i, v in fixed)
+        fixed_at = dict(self.fixed)
+        self.parameter_names = tuple(n for i, n in enumerate(eom.params) if i not in fixed_at)
         self.outputs = None if outputs is None else tuple(outputs)
         if self.outputs is not None:
             unknown = [o for o in self.outputs if o not in eom.outputs]
@@ -289,6 +318,7 @@ class FunctionSet(Mapping):
         self.notes: list[str] = []
         self._cache: dict = {}
         self._compiled_done = False
+        self.looped = False
 
     def __getitem__(self, name):
         if name not in self._names:
@@ -299,8 +329,17 @@ class FunctionSet(Mapping):
             if name == "ode_jacobian":
                 self._cache[name] = jacobian_of(self["ode"])
             else:
-                self._cache[name] = _build(self.eom, name, self.outputs, self.sx)
+                self._cache[name] = self._make(name)
         return self._cache[name]
+
+    def _make(self, name, loop: bool = False):
+        # the looped ode (big chains, compiled only) is an MX Function: parameters are not
+        # specialized into it (specialize keeps the Function's kind)
+        f = _build(self.eom, name, self.outputs, self.sx, loop=loop and not self.fixed)
+        if not self.fixed:
+            return f
+        f = specialize(f, self.fixed, len(self.eom.params))
+        return drop_cancelled(f) if name == "ode" else f
 
     def __iter__(self):
         return iter(self._names)
@@ -314,15 +353,21 @@ class FunctionSet(Mapping):
 
     def _compile_all(self):
         self._compiled_done = True
-        funcs = [_build(self.eom, n, self.outputs, self.sx) for n in self._names if n != "ode_jacobian"]
+        funcs = [self._make(n, loop=True) for n in self._names if n != "ode_jacobian"]
         if "ode_jacobian" in self._names and "ode" not in self._names:
-            funcs.append(build_ode(self.eom, self.sx))
-        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian="ode_jacobian" in self._names,
+            funcs.append(self._make("ode", loop=True))
+        ode = next((f for f in funcs if f.name() == "ode"), None)
+        self.looped = ode is not None and ode.is_a("MXFunction") and self.eom.qdd is not None
+        forward = self.looped or self.jacobian_kind == "forward"
+        jac = ("forward" if forward else True) if "ode_jacobian" in self._names else False
+        loaded, note, lib = compile_functions(funcs, tag=self.eom.name, jacobian=jac,
                                               derivatives=self.derivatives)
         if note:
             self.notes.append(note)
         if loaded is None:
             return
+        if self.looped:
+            self.notes.append("the ode loops over per-link kernels (a chain of identical links)")
         self.compiled = True
         self.library = lib
         for f in funcs:
@@ -336,8 +381,89 @@ _STRUCTURE = ("q", "qd", "t", "u", "p", "T", "V", "M", "bias", "qdd", "g", "outp
               "singularity_monitors", "invariants")
 
 
+def specialize(f, fixed, n_p: int):
+    """``f`` with the parameter entries ``fixed`` ((index in p, value) pairs) built in as numbers:
+    its input "p" (or its output "p", for the ``parameters`` Function) keeps only the other
+    entries, in order.  The Function is rebuilt from its own expression graph (an SX Function
+    stays SX), so CasADi folds the constants: operations on parameters alone disappear."""
+    ca = _ca()
+    at = dict(fixed)
+    keep = [i for i in range(n_p) if i not in at]
+    if "p" in f.name_in():
+        sym = ca.SX if f.is_a("SXFunction") else ca.MX
+        ins = [sym.sym(nm, f.sparsity_in(i)) for i, nm in enumerate(f.name_in())]
+        k = f.name_in().index("p")
+        ins[k] = sym.sym("p", len(keep))
+        rest = iter(ca.vertsplit(ins[k]))
+        full = ca.vertcat(*[sym(at[i]) if i in at else next(rest) for i in range(n_p)]) if n_p else sym(0, 1)
+        outs = f.call([full if i == k else a for i, a in enumerate(ins)])
+        return ca.Function(f.name(), ins, outs, f.name_in(), f.name_out(), {"allow_duplicate_io_names": True})
+    if "p" in f.name_out():               # parameters: free -> p, the kept entries of p
+        ins = [ca.SX.sym(nm, f.sparsity_in(i)) for i, nm in enumerate(f.name_in())]
+        outs = f.call(ins)
+        k = f.name_out().index("p")
+        outs[k] = outs[k][keep] if keep else ca.SX(0, 1)
+        return ca.Function(f.name(), ins, outs, f.name_in(), f.name_out())
+    return f
+
+
+_SMOOTH_OPS = ("ASSIGN", "ADD", "SUB", "MUL", "DIV", "NEG", "EXP", "LOG", "POW", "CONSTPOW", "SQRT", "SQ",
+               "TWICE", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "SINH", "COSH", "TANH", "ASINH", "ACOSH",
+               "ATANH", "ATAN2", "CONST", "INPUT", "OUTPUT", "PARAMETER", "INV", "HYPOT", "LOG1P", "EXPM1")
+CANCEL_PROBES = 16
+
+
+def drop_cancelled(f):
+    """``f`` (an SX Function (t, x, u, p) -> xdot) without the terms that cancel: an output entry
+    whose derivative with respect to an input entry is zero (to round-off) at random states
+    does not depend on it; setting that input to 0 in that output lets SX fold the terms that
+    cancelled only numerically (the cart-pole's cart speed in the recursive route's
+    velocity products).  Only for analytic expressions (no if_else, fmin, fabs, ...: a
+    piecewise term can vanish at every probe and not elsewhere); the result must equal ``f``
+    at other random states to 1e-12 relative, else ``f`` is returned unchanged."""
+    ca = _ca()
+    if not f.is_a("SXFunction") or f.n_out() != 1:
+        return f
+    smooth = {getattr(ca, "OP_" + o) for o in _SMOOTH_OPS if hasattr(ca, "OP_" + o)}
+    if any(f.instruction_id(k) not in smooth for k in range(f.n_instructions())):
+        return f
+    ins = [ca.SX.sym(nm, f.sparsity_in(i)) for i, nm in enumerate(f.name_in())]
+    out = f.call(ins)[0]
+    free = [i for i, nm in enumerate(f.name_in()) if nm != "p"]
+    z = ca.vertcat(*[ins[i] for i in free])
+    if z.numel() == 0:
+        return f
+    jac = ca.Function("J", ins, [ca.jacobian(out, z)])
+    rng = np.random.default_rng(20240613)
+
+    def draw():
+        return [rng.uniform(-1.0, 1.0, f.numel_in(i)) + (0.17 if f.name_in(i) != "t" else 1.3) for i in range(f.n_in())]
+
+    scale = np.zeros((out.numel(), z.numel()))
+    seen = 0
+    for _ in range(CANCEL_PROBES):
+        J = np.abs(np.array(jac(*draw()), float))
+        if np.isfinite(J).all():
+            scale, seen = np.maximum(scale, J), seen + 1
+    if seen < CANCEL_PROBES // 2:
+        return f
+    rows = []
+    for i in range(out.numel()):
+        dead = [j for j in range(z.numel()) if scale[i, j] <= 1e-12 * max(scale[i].max(), 1.0)]
+        rows.append(ca.substitute(out[i], z[dead], ca.DM.zeros(len(dead))) if dead else out[i])
+    g = ca.Function(f.name(), ins, [ca.vertcat(*rows)], f.name_in(), f.name_out())
+    if g.n_instructions() >= f.n_instructions():
+        return f
+    for _ in range(CANCEL_PROBES):
+        args = draw()
+        a, b = np.array(f(*args), float), np.array(g(*args), float)
+        if np.isfinite(a).all() and not (np.abs(a - b) <= 1e-12 * (1.0 + np.abs(a))).all():
+            return f
+    return g
+
+
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, derivatives: int = 0,
-                     sx: bool = False) -> FunctionSet:
+                     sx: bool = False, fixed=(), jacobian: str = "full") -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
 
     derivatives=2 (with compiled=True): the library also holds the first and second
@@ -346,6 +472,15 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     then run in compiled code instead of failing ("Derivatives cannot be calculated").
     sx=True: ``ode`` is an SX Function for every model up to SX_SOLVE_MAX coordinates (see
     ``build_ode``); the simulator keeps the numeric QR solve (sx=False).
+    fixed: (index in p, value) pairs built into every Function as numbers (``specialize``);
+    "p" then holds only the other parameters (``.parameter_names``).
+
+    jacobian="forward" (compiled): compile the forward derivative of ``ode`` instead of its
+    dense Jacobian, for methods that only need derivatives to be available (CVODES-Adams with
+    functional iteration sets up a Jacobian it never evaluates).
+
+    A looped ``ode`` (``looped_ode``: big chains, compiled) always gets the forward derivative:
+    its Jacobian as C would unroll the loops over every direction (3.3 MB at N = 50).
 
     names: restrict to these Functions (default: all that apply); outputs: restrict the
     ``outputs`` Function to these EOM.outputs entries (default: all).  Results are cached
@@ -356,12 +491,14 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     # values) share Functions, compiled libraries and the integrators built on them
     objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
     key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
-           None if outputs is None else tuple(outputs), int(derivatives), bool(sx))
+           None if outputs is None else tuple(outputs), int(derivatives), bool(sx),
+           tuple((int(i), float(v)) for i, v in fixed), jacobian)
     hit = _SETS.get(key)
     if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
         _SETS[key] = _SETS.pop(key)            # most recently used last
         return hit[1]
-    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives, sx=sx)
+    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives, sx=sx,
+                     fixed=fixed, jacobian=jacobian)
     if len(_SETS) >= _SETS_MAX:
         _SETS.pop(next(iter(_SETS)))
     _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique
@@ -422,8 +559,15 @@ def derivative_functions(funcs, order: int = 2) -> list:
     return out
 
 
-def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivatives: int = 0):
+def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
+                      extra_units: tuple[str, ...] = ()):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
+
+    ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
+    from it by sweeps if one is ever evaluated), never the dense Jacobian.
+
+    ``extra_units``: hand-written C sources linked into the same library (the compiled
+    stepping loop of mechdsl.simulation.crk); they are part of the cache key.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -449,11 +593,13 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
         units.append(dg.dump())
     jac_kind = None
     if odes:
-        jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
-        jg.add(odes[0].jacobian())
-        code = jg.dump()
-        jac_kind = "jacobian"
-        if len(code) > JAC_MAX_CODE:
+        code, jac_kind = "", None
+        if jacobian != "forward":
+            jg = ca.CodeGenerator("mechdsl_jac.c", {"with_header": False, "verbose": False})
+            jg.add(odes[0].jacobian())
+            code = jg.dump()
+            jac_kind = "jacobian"
+        if jacobian == "forward" or len(code) > JAC_MAX_CODE:
             # a huge Jacobian compiles for minutes and, at -O0, runs slower than the virtual
             # machine: generate the forward derivative instead (CasADi assembles J by sweeps)
             jg = ca.CodeGenerator("mechdsl_fwd.c", {"with_header": False, "verbose": False})
@@ -461,6 +607,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool = True, derivati
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
+    units += list(extra_units)
     flags = [cflags_for(len(code)) for code in units]
     try:
         version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout

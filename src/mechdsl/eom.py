@@ -65,6 +65,9 @@ class EOM:
     u: object | None = None
     inputs: tuple[str, ...] = ()
     input_defaults: tuple[float, ...] = ()     # the value of each input when nothing drives it
+    # qdd as loops over per-link kernels (mechanics/chain.py ChainPlan: ``.ode(eom)`` gives the
+    # MX Function), or None where the topology has no run of identical links
+    qdd_loop: object | None = None
 
     @property
     def u_sym(self):
@@ -118,6 +121,43 @@ class EOM:
         f = self.cached("start", lambda: ca.Function("start", [self.p], [self.q0, self.qd0]))
         a, b = f(pv)
         return np.array(a, float).ravel(), np.array(b, float).ravel()
+
+
+def explicit_constraints(eom: "EOM") -> tuple[bool, ...]:
+    """Per constraint: True for an explicit constraint equation, False for a loop-closing joint's
+    closure row (whose multiplier already is a reaction component in the joint frame)."""
+    if eom.model is None:
+        return (True,) * eom.m
+    names = {c.name for c in eom.model.constraints}
+    return tuple(n in names for n in eom.constraint_names)
+
+
+def multiplier_scales(eom: "EOM"):
+    """SX (m,) in q, t, p: the factor that turns each raw multiplier into the reaction it reports.
+
+    The constraint force of row i is -G_i' lambda_i = -(|G_i| lambda_i) n_i with n_i = G_i/|G_i|,
+    so the reported multiplier |G_i| lambda_i is the size of the reaction along -n_i, the same
+    however the equation is scaled (x^2 + y^2 = L^2 or sqrt(x^2 + y^2) = L give the rod tension,
+    positive when it pulls towards decreasing lhs - rhs).  Closure rows of cut joints: 1."""
+    import casadi as ca
+
+    def build():
+        G = ca.jacobian(eom.g, eom.q)
+        rows = [ca.norm_2(G[i, :]) if e else ca.SX(1) for i, e in enumerate(explicit_constraints(eom))]
+        return ca.vertcat(*rows) if rows else ca.SX(0, 1)
+    return eom.cached("multiplier_scales", build)
+
+
+def reported_multipliers(eom: "EOM", q, p, lam, t: float = 0.0) -> np.ndarray:
+    """The reported multipliers (see multiplier_scales) of raw multipliers `lam` at (q, t, p)."""
+    import casadi as ca
+
+    if eom.m == 0:
+        return np.zeros(0)
+    f = eom.cached("multiplier_scales_fn",
+                   lambda: ca.Function("scales", [eom.q, eom.t, eom.p], [multiplier_scales(eom)]))
+    s = np.array(f(np.asarray(q, float), t, np.asarray(p, float)), float).ravel()
+    return s * np.asarray(lam, float).ravel()
 
 
 def fold_inputs(eom: "EOM", u=None) -> "EOM":

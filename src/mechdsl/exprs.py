@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterator
 
 from . import ir
-from .ir import (BodyOmega, BodyRot, Const, Coord, EnergyRef, Expr, Op, Param, PointPos,
-                 PointVel, ReactionRef, Speed, Time, TimeDer)
+from .ir import (BodyAlpha, BodyOmega, BodyRot, Const, Coord, EnergyRef, Expr, Op, Param, PointAcc,
+                 PointPos, PointVel, ReactionRef, Speed, Time, TimeDer)
 
 UNARY_FUNCS = ("sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "exp",
                "log", "log10", "sqrt", "abs", "sign", "floor", "ceil")
@@ -46,7 +46,7 @@ def leaves_of(e: Expr, kind) -> list:
 def depends_on_state(e: Expr) -> bool:
     """True when e depends on coordinates, speeds or kinematic queries (not only t, p)."""
     return any(isinstance(n, (Coord, Speed, PointPos, PointVel, BodyRot, BodyOmega, EnergyRef,
-                              ReactionRef, TimeDer)) for n in walk(e))
+                              ReactionRef, TimeDer, PointAcc, BodyAlpha)) for n in walk(e))
 
 
 def depends_on_time(e: Expr) -> bool:
@@ -54,7 +54,13 @@ def depends_on_time(e: Expr) -> bool:
 
 
 def has_speed(e: Expr) -> bool:
-    return any(isinstance(n, (Speed, PointVel, BodyOmega, EnergyRef, ReactionRef)) for n in walk(e))
+    return any(isinstance(n, (Speed, PointVel, BodyOmega, EnergyRef, ReactionRef, PointAcc, BodyAlpha))
+               for n in walk(e))
+
+
+def needs_dynamics(e: Expr) -> bool:
+    """True when e needs the forward dynamics (reactions, accelerations): outputs only."""
+    return any(isinstance(n, (ReactionRef, PointAcc, BodyAlpha)) for n in walk(e))
 
 
 def substitute(e: Expr, fn: Callable[[Expr], Expr | None]) -> Expr:
@@ -217,7 +223,11 @@ def _text(e: Expr) -> tuple[str, int]:
     if isinstance(e, BodyRot):
         return f"{e.body}.R[{e.i + 1},{e.j + 1}]", 5
     if isinstance(e, BodyOmega):
-        return f"{e.body}.w[{e.i + 1}]", 5
+        return f"{e.body}.{'w' if e.frame == 'world' else 'w_body'}[{e.i + 1}]", 5
+    if isinstance(e, PointAcc):
+        return f"{e.point}.a[{e.i + 1}]", 5
+    if isinstance(e, BodyAlpha):
+        return f"{e.body}.alpha[{e.i + 1}]", 5
     if isinstance(e, EnergyRef):
         return f"{e.kind}_energy()" if e.kind in ("kinetic", "potential") else f"{e.kind}()", 5
     if isinstance(e, ReactionRef):

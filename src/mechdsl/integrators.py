@@ -43,6 +43,8 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
     "rosenbrock": ("casadi", "rosenbrock", {}, "adaptive L-stable Rosenbrock-Wanner method of order 5(4)"),
     "rk": ("casadi", "rk", {}, "fixed-step classical Runge-Kutta of order 4"),
     "collocation": ("casadi", "collocation", {}, "fixed-step Radau IIA collocation (order 5)"),
+    "dopri5": ("crk", "dopri5", {}, "Dormand-Prince 5(4), compiled stepping loop (C, one call per run)"),
+    "dop853": ("crk", "dop853", {}, "Dormand-Prince 8(5,3), compiled stepping loop (C, one call per run)"),
     "scipy-rk45": ("scipy", "RK45", {}, "scipy RK45 (Dormand-Prince 5(4))"),
     "scipy-dop853": ("scipy", "DOP853", {}, "scipy DOP853 (Dormand-Prince 8(5,3))"),
     "scipy-radau": ("scipy", "Radau", {}, "scipy Radau IIA order 5 (stiff)"),
@@ -51,7 +53,12 @@ METHODS: dict[str, tuple[str, str, dict, str]] = {
 }
 # methods that never evaluate the Jacobian of the right-hand side (compiled code can omit it;
 # CVODES asks for derivatives when it is set up, even with functional iteration)
-NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853")
+NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853", "dopri5", "dop853")
+# the compiled stepping loop (mechdsl.simulation.crk): it compiles the model itself
+COMPILED_LOOP = ("dopri5", "dop853")
+# methods that must be able to differentiate the right-hand side but never evaluate its Jacobian
+# (CVODES-Adams with functional iteration): compiled code holds the forward derivative only
+FORWARD_ONLY = ("cvodes-adams",)
 FIXED_STEP = ("rk", "collocation")
 # order of accuracy used to pick a fixed step from the tolerance (h * omega = 0.5 * rtol^(1/order))
 FIXED_ORDER = {"rk": 4, "collocation": 5}
@@ -475,4 +482,9 @@ PLUGINS: dict[str, IntegratorPlugin] = {"casadi": CasadiPlugin(), "scipy": Scipy
 
 def plugin(method: str) -> IntegratorPlugin:
     """The plug-in that runs ``method`` (a name of METHODS)."""
-    return PLUGINS[METHODS[method][0]]
+    kind = METHODS[method][0]
+    if kind == "crk" and kind not in PLUGINS:     # imported on first use (ctypes, the C source)
+        from .simulation.crk import PLUGIN
+
+        PLUGINS[kind] = PLUGIN
+    return PLUGINS[kind]

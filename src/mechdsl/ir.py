@@ -123,7 +123,27 @@ class BodyRot(Expr):
 
 @dataclass(frozen=True)
 class BodyOmega(Expr):
-    """Component i of a body's angular velocity in world coordinates."""
+    """Component i of a body's angular velocity in world coordinates (frame "world", the
+    attribute ``b.w``) or in body coordinates (frame "body", ``b.w_body``)."""
+
+    body: str
+    i: int
+    frame: str = "world"
+
+
+@dataclass(frozen=True)
+class PointAcc(Expr):
+    """Component i of a point's absolute acceleration in world coordinates (``p.a``): it needs
+    the forward dynamics, so it may appear in outputs only."""
+
+    point: str
+    i: int
+
+
+@dataclass(frozen=True)
+class BodyAlpha(Expr):
+    """Component i of a body's angular acceleration in world coordinates (``b.alpha``; outputs
+    only, like PointAcc)."""
 
     body: str
     i: int
@@ -315,6 +335,8 @@ class GeneralizedForce:
     coordinate: str
     Q: Expr
     span: Span = field(default_factory=Span)
+    note: str = ""            # what it is when built from a component (Friction: the law)
+    regularization: Expr | None = None   # Friction: v_eps (an expression in parameters)
 
 
 @dataclass(frozen=True)
@@ -345,12 +367,16 @@ Force = Union[Gravity, SpringDamper, AppliedForce, AppliedTorque, GeneralizedFor
 
 @dataclass(frozen=True)
 class Constraint:
-    """An explicit holonomic constraint residual(q, t) = 0."""
+    """An explicit holonomic constraint residual(q, t) = 0 (residual = lhs - rhs).
+
+    `name` comes from the description ("rod") when it is a word, else c<k>; `alias` is always
+    c<k> (k in declaration order), the name before issue 17, still accepted in `outputs`."""
 
     name: str
     residual: Expr
     doc: str = ""
     span: Span = field(default_factory=Span)
+    alias: str = ""
 
 
 @dataclass(frozen=True)

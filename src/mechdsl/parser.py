@@ -537,7 +537,18 @@ class _Builder(Transformer_NonRecursive):
         return tuple(x for x in items if x is not None)
 
     def dotted_name(self, meta, items):
-        return ".".join(str(t) for t in items)
+        return ".".join(items)
+
+    def name_part(self, meta, items):
+        name, index = items
+        if index is None:
+            return str(name)
+        text = str(index)
+        if not text.isdigit():
+            self.problems.append(Diagnostic("E102", f"the element index in '{name}[{text}]' must be a positive integer",
+                                            _tok_span(self.f, index), f"write {name}[2](...)"))
+            return f"{name}[{text}]"
+        return f"{name}[{int(text)}]"
 
     def coordinate_field(self, meta, items):
         return "coordinate"

@@ -99,6 +99,9 @@ class Result:
         for s in self.signals:
             if _plain(s) == name:
                 return "s", s
+        old = (self.metadata.get("aliases") or {}).get(name) if isinstance(self.metadata, dict) else None
+        if old is not None and old != name:
+            return self._resolve(old)      # a signal's name before a rename (constraints: lambda[c1])
         return None
 
     # -- output -----------------------------------------------------------------------

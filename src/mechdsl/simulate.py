@@ -72,7 +72,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         from .simulation.drive import build_drive
 
         drive = build_drive(eom, s.inputs, t0, t1, xs)
-    uv = drive.vector()
+    uv = drive.vector(t0)
     vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
     post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     grid = np.linspace(t0, t1, npts)
@@ -82,17 +82,31 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["inputs"] = drive.describe()
     if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
         return _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive)
+    auto_compiled = None
     if method == "auto":
         method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
         meta["auto"] = info
+        if method == "erk" and compiled is None and opts.get("functions") is None:
+            method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
+    if "compiled" not in meta:
+        meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    loop_compiled = None
     if opts.get("functions") is not None:
         funcs = opts["functions"]
+    elif method in I.COMPILED_LOOP:     # the loop compiles the model's C together with its own
+        funcs = vm
+        loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
+        if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
+            method, loop_compiled = "erk", None
+            meta.update(method=method, integrator=I.METHODS[method][3])
+            meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
-                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"))
+                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"),
+                                 jacobian="forward" if method in I.FORWARD_ONLY else "full")
         funcs["ode"]  # compile now (notes below)
         funcs = drive.closed(funcs)
     else:
@@ -102,28 +116,34 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
     if s.reactions:
         meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
-    if compiled and not getattr(funcs, "compiled", False):
+    if compiled and loop_compiled is None and not getattr(funcs, "compiled", False):
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
+    breaks = drive.breakpoints(t0, t1)
     try:
-        run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
-                          meta["notes"], 10 * s.budget, u=uv)
+        if breaks.size:
+            run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom,
+                                     t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
+        else:
+            run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
+                              meta["notes"], 10 * s.budget, u=uv)
     finally:
         bar.close()
     if fixed is not None:
         meta["fixed_steps"] = fixed
     failure = None
     if run.error is not None or run.reached < len(grid):
-        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=uv)
+        u_fail = drive.vector(float(grid[max(run.reached - 1, 0)]))
+        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=u_fail)
     n_ok = max(run.reached, 1)
     X = run.X[:n_ok].copy()
     X[0] = xs
     t = grid[:n_ok].copy()
     U = drive.values(t, X)
     signals = compute_signals(eom, post, t, X, pv, out_names, U=U)
-    _record_inputs(drive, U, signals, meta)
+    record_inputs(drive, U, signals, meta)
     _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
@@ -134,7 +154,8 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["integrator_messages"] = _dedup(run.messages)
     meta["conservative"] = is_conservative(eom)
     meta["options"] = {"t_start": t0, "t_end": t1, "rtol": rtol, "atol": atol, "points": npts,
-                       "method": method, "compiled": bool(getattr(funcs, "compiled", False)),
+                       "method": method,
+                       "compiled": bool(getattr(funcs, "compiled", False)) if loop_compiled is None else loop_compiled,
                        "max_steps": max_steps, "outputs": list(out_names),
                        "parameters": dict(zip(eom.params, map(float, pv))),
                        "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
@@ -146,7 +167,37 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
                   stats=stats, metadata=meta, failure=failure)
 
 
-def _record_inputs(drive, U, signals, meta) -> None:
+def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
+    """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
+    fallback to scipy's stepping in Python (or to ``fallback``) is a warning of the run."""
+    from .simulation.crk import library
+
+    fn, note = library(funcs["ode"], tag=eom.name)
+    if fn is None:
+        instead = (f"{fallback} runs instead" if fallback else
+                   f"{meta['method']} runs as scipy's same method stepped in Python")
+        meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {instead}")
+        return False
+    if note:
+        meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
+    return True
+
+
+def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
+    """method = auto on a non-stiff model: erk in the virtual machine, or the compiled dop853
+    loop when compiling pays (simulation.crk.auto_choice); ``meta['compiled']`` says why."""
+    from .simulation.crk import auto_choice
+
+    pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv, rho=meta["auto"].get("spectral_radius"))
+    meta["auto"]["compile"] = info
+    if pick is None:
+        meta["compiled"] = f"no: auto ({why})"
+        return "erk", reason, None
+    meta["compiled"] = f"auto ({why})"
+    return pick, (reason.split(";")[0] + f"; compiled stepping loop {pick} (Dormand-Prince, C): {why}"), True
+
+
+def record_inputs(drive, U, signals, meta) -> None:
     """The inputs as signals (named as declared); bound violations of run-time signals warn."""
     for j, name in enumerate(drive.names):
         signals[name] = U[:, j].copy()
@@ -157,7 +208,7 @@ def _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive) -> Resu
     X = np.zeros((len(grid), 0))
     U = drive.values(grid, X)
     signals = compute_signals(eom, post, grid, X, pv, out_names, U=U)
-    _record_inputs(drive, U, signals, meta)
+    record_inputs(drive, U, signals, meta)
     meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
                 versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
                                               "points": len(grid), "outputs": list(out_names),
@@ -202,7 +253,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     u = default_inputs(eom, u)
     try:
         J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
-        lam = np.linalg.eigvals(J) if np.isfinite(J).all() else None
+        lam = jacobian_eigenvalues(J) if np.isfinite(J).all() else None
     except Exception:  # noqa: BLE001
         lam = None
     if lam is None:
@@ -224,6 +275,20 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
             f"benchmarks/integrators.py", info)
 
 
+def jacobian_eigenvalues(J: np.ndarray) -> np.ndarray:
+    """Eigenvalues of the Jacobian of x' = (qd, qdd(q, qd)).  When d qdd / d qd vanishes (no
+    damping, at rest: every conservative model's start from rest) J = [[0, I], [A, 0]] and its
+    eigenvalues are +-sqrt(mu) for the eigenvalues mu of A: a decomposition of half the size,
+    8x less work (a 400 x 400 eigen decomposition costs 0.05-0.5 s of CPU on a loaded machine,
+    most of it the BLAS threads' spinning)."""
+    n = J.shape[0] // 2
+    if (J.shape[0] == 2 * n and n > 0 and not J[:n, :n].any() and not J[n:, n:].any()
+            and np.array_equal(J[:n, n:], np.eye(n))):
+        root = np.sqrt(np.linalg.eigvals(J[n:, :n]).astype(complex))
+        return np.concatenate([root, -root])
+    return np.linalg.eigvals(J)
+
+
 def default_inputs(eom, u):
     """u as given, or the model's input defaults when none was given (NO_U)."""
     if u is NO_U and eom is not None and getattr(eom, "inputs", ()):
@@ -241,22 +306,34 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
         if not dt > 0:
             raise UsageError(f"dt must be positive (got {dt})")
         return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
-    rho, omega_acc = 0.0, 0.0
+    omega, rho = time_scale(funcs, x0, pv, t0, t1, u)
+    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
+    steps = min(max(1, math.ceil(span / h)), int(budget))
+    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
+                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+
+
+def time_scale(funcs, x0, pv, t0, t1, u=NO_U, rho=None) -> tuple[float, float]:
+    """(omega, rho): the fastest rate seen at the start, max of the Jacobian's spectral radius
+    rho, sqrt(max |qdd|) and max |qd| (coordinates in units of order one: the Jacobian alone is
+    ~0 for a pendulum released from the horizontal), and 2 pi / horizon.  ``rho``: the spectral
+    radius when known (choose_method computed it; eigenvalues of a 400 x 400 Jacobian cost
+    0.05-0.5 s of CPU)."""
+    span = t1 - t0
+    omega_acc = 0.0
     u = default_inputs(getattr(funcs, "eom", None), u)
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
-        rho = float(np.abs(np.linalg.eigvals(J)).max()) if np.isfinite(J).all() else 0.0
+        if rho is None:
+            rho = 0.0
+            J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+            rho = float(np.abs(jacobian_eigenvalues(J)).max()) if np.isfinite(J).all() else 0.0
         f = FastFunction(funcs["ode"])(t0, x0, u, pv)
         n = len(x0) // 2
         if np.isfinite(f).all():  # time scales of the motion itself: sqrt(|qdd|) and |qd| (units of 1)
             omega_acc = max(float(np.sqrt(np.abs(f[n:]).max(initial=0.0))), float(np.abs(x0[n:]).max(initial=0.0)))
     except Exception:  # noqa: BLE001
         pass
-    omega = max(rho, omega_acc, 2 * math.pi / span)
-    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
-    steps = min(max(1, math.ceil(span / h)), int(budget))
-    return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
-                   f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")
+    return max(rho, omega_acc, 2 * math.pi / span), rho
 
 
 def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget,
@@ -276,6 +353,54 @@ def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom
     except RuntimeError as e:  # bad integrator options
         raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
     return run, fixed
+
+
+MAX_PIECES = 100_000      # input-table breakpoints a run restarts at (one integrator call each)
+
+
+def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, notes, budget,
+                drive, breaks):
+    """``_run`` piece by piece between the input tables' breakpoints, each piece from the state
+    where the last ended, the zero-order holds' values as the constant u of the piece: no step
+    crosses a jump (or a kink of a linear table).  Returns one Run over ``grid``."""
+    if breaks.size > MAX_PIECES:
+        raise UsageError(f"the input tables have {breaks.size} samples inside the run; at most {MAX_PIECES} "
+                         "(each is a restart of the integrator): resample the table")
+    edges = np.r_[t0, breaks, t1]
+    if method in I.FIXED_STEP and dt is None:    # the step of the whole run, not of each piece's span
+        steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")), xs, pv, t0, t1,
+                                      rtol, None, budget, u=drive.vector(t0))
+        dt = (t1 - t0) / steps
+    else:
+        why = None
+    full = np.union1d(grid, edges)
+    on_grid = np.isin(full, grid)
+    Xf = np.full((full.size, xs.size), np.nan)
+    Xf[0] = xs
+    stats: dict = {}
+    messages, fixed, x = [], None, xs
+    error = fail_time = fail_state = None
+    for a, b in zip(edges[:-1], edges[1:]):
+        idx = np.flatnonzero((full >= a) & (full <= b))
+        run, fx = _run(method, funcs, full[idx], x, pv, rtol, atol, max_steps, dt, extra, bar, eom, a, b,
+                       notes if fixed is None else [], budget, u=drive.vector(a))
+        fixed = fixed or fx
+        Xf[idx[1:run.reached]] = run.X[1:run.reached]
+        for k, v in (run.stats or {}).items():
+            stats[k] = stats.get(k, 0) + v if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+        messages.append(run.messages)
+        if run.error is not None or run.reached < idx.size:
+            error, fail_time, fail_state = run.error or "integration stopped", run.fail_time, run.fail_state
+            break
+        x = run.X[-1]
+    X = Xf[on_grid]
+    reached = I._count_filled(X, 0)
+    if fixed is not None:
+        fixed = {**fixed, "pieces": int(edges.size - 1), **({"why": why} if why else {})}
+    notes.append(f"integrated in {edges.size - 1} pieces, restarting at the input tables' samples inside the run "
+                 "(no step crosses a jump of a zero-order hold)")
+    return I.Run(X=X, reached=reached, stats=stats, error=error, messages="".join(messages),
+                 fail_time=fail_time, fail_state=fail_state), fixed
 
 
 def min_step(t0, t1) -> float:
@@ -492,7 +617,7 @@ def _first_integrals(eom, t, X, pv, u=None) -> dict[str, np.ndarray]:
     return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
 
 
-INTEGRAL_CACHE_VERSION = "1"
+INTEGRAL_CACHE_VERSION = "2"          # 2: rotation symmetries (angular momenta, issue 17)
 
 
 def _integral_function(eom, pv):

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import display as _display
+from ..eom import reported_multipliers
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from . import charts
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
@@ -79,6 +80,9 @@ class Equilibrium:
     multipliers: np.ndarray | None = None
     constraint_names: tuple[str, ...] = ()
     active_constraints: tuple[str, ...] = ()
+    # |dg_i/dq| of explicit constraint equations (1 for cut-joint rows): `lambdas` reports
+    # scale * multiplier, the reaction along -grad g (eom.multiplier_scales)
+    multiplier_scales: np.ndarray | None = None
     tangent_basis: np.ndarray | None = None
     # rotation joints: the classification was made in a chart (analysis.charts) whose
     # coordinates are these; hessian, symmetry_directions and the eigenvalues refer to them
@@ -89,7 +93,8 @@ class Equilibrium:
         """Multipliers by constraint name (empty for unconstrained models)."""
         if self.multipliers is None:
             return {}
-        return {c: float(v) for c, v in zip(self.constraint_names, self.multipliers)}
+        scale = np.ones(len(self.multipliers)) if self.multiplier_scales is None else self.multiplier_scales
+        return {c: float(s * v) for c, s, v in zip(self.constraint_names, scale, self.multipliers)}
 
     @property
     def values(self) -> dict[str, float]:
@@ -690,6 +695,7 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     extra = {}
     if con is not None:
         extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
+                     multiplier_scales=reported_multipliers(eom, q, pv, np.ones(eom.m), t),
                      active_constraints=tuple(eom.constraint_names[i] for i in con.active), tangent_basis=Z)
     return Equilibrium(coords=tuple(eom.coords), q=np.asarray(q, float), stable=stable,
                        hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,

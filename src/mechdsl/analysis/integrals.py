@@ -9,6 +9,8 @@ the Jacobi integral.
 - More generally, a direction N with dL/dq . N == 0 and Q . N == 0 at every state (a
   translation symmetry: two free bodies) conserves p . N (Noether); found as the null space
   of those rows stacked over random states.  Coordinate axes in it are the cyclic coordinates.
+- A rotation of coordinate pairs about their origin (skew A, ``rotations.py``) that leaves L
+  and the forces invariant conserves the angular momentum p . A q (Kepler in x, y: x p_y - y p_x).
 - The Jacobi integral h = sum qd_k dL/dqd_k - L = T2 - T0 + V is conserved when L has no
   explicit time, no dissipation and no non-conservative force act (and the constraints do not
   move).  It is the energy T + V when T = T2 (scleronomic); otherwise the two differ.
@@ -20,6 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .core import N_PROBE, Probe, _is_structural_zero, dense, param_vector, parts, structure, vanishes
+from .rotations import label as rotation_label
+from .rotations import rotation_symmetries
 
 MAX_PRINT_INSTRUCTIONS = 3000      # larger expressions are not converted to text
 
@@ -30,10 +34,11 @@ class FirstIntegral:
     (they call sympy); ``sx`` is ready at once (CasADi SX in eom.q, eom.qd, eom.t, eom.p)."""
 
     name: str
-    kind: str                          # 'momentum' | 'jacobi' | 'energy'
+    kind: str                          # 'momentum' | 'angular_momentum' | 'jacobi' | 'energy'
     sx: object
     coordinate: str | None = None      # the cyclic coordinate (momentum of one coordinate)
     direction: dict | None = None      # coordinate weights of a combined momentum p . N
+    rotation: dict | None = None       # angular momentum p . A q: {"x,y": a_yx} (A skew, A[y, x] = a)
     note: str = ""
     _text: object = field(default=None, repr=False)       # str or a callable producing it
     _verified: object = field(default=None, repr=False)   # 'symbolic' | 'numeric' or a callable
@@ -57,6 +62,8 @@ class FirstIntegral:
             d["coordinate"] = self.coordinate
         if self.direction:
             d["direction"] = self.direction
+        if self.rotation:
+            d["rotation"] = self.rotation
         if self.note:
             d["note"] = self.note
         return d
@@ -127,6 +134,17 @@ def first_integrals(eom, p=None) -> list[FirstIntegral]:
                                      note=f"L and the forces are invariant under the translation "
                                           f"q -> q + s*({label}) (Noether)",
                                      _text=texts.of(sx), _verified="numeric"))
+
+    for A in rotation_symmetries(eom, pt, pv):
+        sx = ca.dot(dLdqd, ca.mtimes(ca.SX(A), eom.q))
+        lab = rotation_label(A, eom.coords)
+        out.append(FirstIntegral(name=f"L_({lab})", kind="angular_momentum", sx=sx,
+                                 rotation={f"{eom.coords[i]},{eom.coords[j]}": float(A[j, i])
+                                           for i in range(n) for j in range(i + 1, n) if A[j, i] != 0},
+                                 note="L and the forces are invariant under the rotation of the coordinate "
+                                      f"pair(s) ({lab}) about their origin (Noether): p . A q, for a pair "
+                                      "(x, y) x p_y - y p_x",
+                                 _text=texts.of(sx), _verified="numeric"))
 
     time_free_constraints = not eom.m or bool(vanishes([r[3] for r in rows], Gscale))
     if st.lagrangian_time_free and st.conservative and time_free_constraints and st.quadratic_T:

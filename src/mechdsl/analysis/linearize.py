@@ -51,6 +51,9 @@ class Linearization:
     multipliers: np.ndarray | None = None
     constraint_names: tuple[str, ...] = ()
     active_constraints: tuple[str, ...] = ()
+    # |dg_i/dq| of explicit constraint equations (1 for cut-joint rows): `lambdas` reports
+    # scale * multiplier, the reaction along -grad g (eom.multiplier_scales)
+    multiplier_scales: np.ndarray | None = None
     stiffness: np.ndarray | None = None
 
     _repr_html_ = _display.linearization_html        # notebook displays (mechdsl.display)
@@ -69,7 +72,8 @@ class Linearization:
     def lambdas(self) -> dict[str, float]:
         if self.multipliers is None:
             return {}
-        return {c: float(v) for c, v in zip(self.constraint_names, self.multipliers)}
+        scale = np.ones(len(self.multipliers)) if self.multiplier_scales is None else self.multiplier_scales
+        return {c: float(s * v) for c, s, v in zip(self.constraint_names, scale, self.multipliers)}
 
     @property
     def n(self) -> int:

@@ -29,6 +29,7 @@ import re
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from ..eom import reported_multipliers
 from .constraints import independent_basis, project, rest_multipliers
 from .core import parts
 from .matrices import first_order, second_order
@@ -162,6 +163,7 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
                          q=np.asarray(q, float), qd=np.zeros(n), t=float(t), acceleration=np.asarray(acc, float),
                          kind=kind, p=pv, equilibrium=eq, notes=notes, eom=eom, basis=Z, reduced_coords=names,
                          multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
+                         multiplier_scales=reported_multipliers(eom, q, pv, np.ones(eom.m), t),
                          active_constraints=tuple(eom.constraint_names[i] for i in con.active),
                          stiffness=Kfull)
 

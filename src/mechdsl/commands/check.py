@@ -71,12 +71,14 @@ def run(args) -> int:
 
 
 def _extra_lines(m) -> list[str]:
+    from ..friction import friction_notes
     from ..simulate import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
 
     """Lines other phases contribute (loops, first integrals, ...), each guarded: check never fails on them."""
     out = []
     for lp in m.model.loops:
         out.append(f"    {lp.name}: closed by joint {lp.joint}: {' -> '.join(lp.bodies)}")
+    out += ["    " + s for s in friction_notes(m.model, m.parameters)]
     if m.model.loops or m.model.constraints:
         try:
             from ..dae import check_report

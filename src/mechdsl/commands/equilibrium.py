@@ -18,6 +18,10 @@ def add_parser(sub):
                      "their start values); repeat --guess for several guesses")
     add_set_arg(p)
     p.add_argument("--time", type=float, default=0.0, help="time at which to evaluate time-dependent models")
+    p.add_argument("--steady", action="append", default=[], metavar="PIN=VALUE",
+                   help="steady motions instead (ignorable coordinates turning at constant speed, the others at "
+                        "rest), one pin per ignorable coordinate: a coordinate (tip.theta=0.6), an ignorable "
+                        "speed (der(tip.psi)=20) or momentum (p_tip.psi=4); docs/analysis.md#steady-motions"),
     p.add_argument("-o", "--output", metavar="OUT.json", help="write the equilibria as JSON")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
     add_force_arg(p)
@@ -33,6 +37,8 @@ def run(args) -> int:
     m = load_model(args)
     print(target_line(args, m))
     guesses = [assignments([g], "--guess") for g in args.guess]
+    if args.steady:
+        return _steady(args, m, guesses)
     eqs = equilibria(m.eom, guesses or None, t=args.time)
     print(format_equilibria(m.name, m.eom.coords, eqs))
     if args.output:
@@ -41,6 +47,39 @@ def run(args) -> int:
         write_atomic(args.output, json.dumps(data, indent=2) + "\n", overwrite=args.force)
         print(f"wrote {args.output}")
     return 0
+
+
+def _steady(args, m, guesses) -> int:
+    from ..analysis.steady import steady_motions
+    from ..fileio import write_atomic
+
+    pins = assignments(args.steady, "--steady")
+    found = steady_motions(m.eom, pins, guesses=guesses or None, t=args.time)
+    print(format_steady(m.name, pins, found))
+    if args.output:
+        data = {"generator": "mechdsl", "model": m.name, "pins": pins, "count": len(found),
+                "steady_motions": [s.to_dict() for s in found]}
+        write_atomic(args.output, json.dumps(data, indent=2) + "\n", overwrite=args.force)
+        print(f"wrote {args.output}")
+    return 0
+
+
+def format_steady(name: str, pins: dict, found) -> str:
+    from ..analysis.tables import num, table
+
+    said = ", ".join(f"{k} = {num(v)}" for k, v in pins.items())
+    if not found:
+        return f"{name}: no steady motion found with {said}\n  hint: give a guess with --guess NAME=VALUE"
+    s0 = found[0]
+    cols = list(s0.values) + list(s0.speeds) + list(s0.momenta)
+    rows = [[str(i)] + [num(v) for v in (*s.values.values(), *s.speeds.values(), *s.momenta.values())]
+            + [{True: "stable", False: "unstable", None: "undetermined"}[s.stable],
+               ", ".join(num(x) for x in s.hessian_eigenvalues)] for i, s in enumerate(found, 1)]
+    lines = [f"{name}: {len(found)} steady motion{'' if len(found) == 1 else 's'} with {said} "
+             f"(ignorable: {', '.join(s0.ignorable)})",
+             table(["#"] + cols + ["stability", "Hessian of V_R"], rows)]
+    lines += [f"  {i}: {s.reason}" for i, s in enumerate(found, 1)]
+    return "\n".join(lines)
 
 
 def format_equilibria(name: str, coords, eqs) -> str:

@@ -22,6 +22,8 @@ def add_parser(sub):
     p.add_argument("--formulation", metavar="F",
                    help="constrained models: auto, projection, ggl, baumgarte or partitioning (docs/constraints.md)")
     p.add_argument("--reactions", action="store_true", help="constrained models: record every multiplier and reaction")
+    p.add_argument("--output-events", action="store_true",
+                   help="models with contacts: also record rows just before and just after every event")
     p.add_argument("--budget", type=int, metavar="N",
                    help="most output points a run may record (default 1000000; fixed steps: 10 N)")
     p.add_argument("--estimate-error", action="store_true",
@@ -32,7 +34,10 @@ def add_parser(sub):
                         "zero-order hold; NAME=file.csv:linear to interpolate); repeat for several")
     p.add_argument("-o", "--output", metavar="OUT.csv", help="write the results as CSV (+ OUT.json sidecar)")
     p.add_argument("--plot", metavar="OUT.png", help="plot coordinates and energy (.png, .svg or .pdf)")
-    p.add_argument("--compiled", action="store_true", help="generate C code and compile it (needs a C compiler)")
+    comp = p.add_mutually_exclusive_group()
+    comp.add_argument("--compiled", action="store_true", help="generate C code and compile it (needs a C compiler)")
+    comp.add_argument("--no-compile", action="store_true",
+                      help="never compile automatically (method auto may otherwise pick the compiled dop853 loop)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
     return p
@@ -87,8 +92,10 @@ def cli_settings(args) -> dict:
     """The simulation settings given on the command line (None: not given)."""
     return {"t_start": args.t_start, "rtol": args.rtol, "atol": args.atol, "method": args.method,
             "points": args.points, "dt": args.dt, "formulation": args.formulation,
-            "compiled": True if args.compiled else None, "reactions": True if args.reactions else None,
+            "compiled": True if args.compiled else (False if getattr(args, "no_compile", False) else None),
+            "reactions": True if args.reactions else None,
             "budget": args.budget, "estimate_error": True if args.estimate_error else None,
+            "output_events": True if getattr(args, "output_events", False) else None,
             "inputs": parse_inputs(getattr(args, "inputs", None))}
 
 

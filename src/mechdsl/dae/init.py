@@ -89,10 +89,11 @@ def _flags(flags, n, default=True):
 
 def constraint_labels(eom: EOM) -> list[str]:
     """'name' or 'name' (doc) for each constraint: explicit constraint equations of a .mech
-    model are named c1, c2, ... and carry their text or documentation string."""
+    model are named after their description (else c1, c2, ...) and carry their text or
+    documentation string, shown when it says more than the name."""
     docs = {}
     if eom.model is not None:
-        docs = {c.name: c.doc for c in eom.model.constraints if c.doc}
+        docs = {c.name: c.doc for c in eom.model.constraints if c.doc and c.doc.replace(" ", "_") != c.name}
     return [f"'{n}' ({docs[n]})" if n in docs else f"'{n}'" for n in eom.constraint_names]
 
 

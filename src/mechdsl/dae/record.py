@@ -7,7 +7,8 @@ Signals (Result.signals), in this order:
 - "constraint_drift"  ||g(q, t)||_inf over all constraints (redundant ones included)
 - "velocity_drift"    ||G q' + g_t||_inf
 - only when asked (option ``reactions=True``, or named in ``outputs``):
-  "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one), and
+  "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one; explicit
+  constraint equations report |dg/dq| lambda, the reaction along -grad g: eom.multiplier_scales), and
   reaction signals: entries of ``EOM.reactions`` (name -> SX in q, q', t, p and EOM.lam),
   and for constraint names of the form
   "<joint>.force[i]" / "<joint>.torque[i]" (the convention of cut joints, whose
@@ -46,15 +47,29 @@ def depends_on(expr, sym) -> bool:
 
 def reaction_sources(eom) -> dict[str, object]:
     """name -> SX in (q, qd, t, p, lam) for every reaction/multiplier signal of the model."""
+    from ..eom import multiplier_scales
+
     lam = lam_symbol(eom)
+    scale = multiplier_scales(eom)
     out = {}
     for i, name in enumerate(eom.constraint_names):
-        out[f"lambda[{name}]"] = lam[i]
+        out[f"lambda[{name}]"] = scale[i] * lam[i]
         if REACTION_NAME.fullmatch(name):
             out[name] = lam[i]
     for name, expr in (getattr(eom, "reactions", None) or {}).items():
         out[name] = expr
     return out
+
+
+def _alias(eom, name: str) -> str:
+    """`lambda[c<k>]` (the name of an explicit constraint before it was named after its
+    description) -> `lambda[<name>]`."""
+    m = re.fullmatch(r"lambda\[(c\d+)\]", name)
+    if m and eom.model is not None:
+        for c in eom.model.constraints:
+            if c.alias == m.group(1):
+                return f"lambda[{c.name}]"
+    return name
 
 
 def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
@@ -75,6 +90,7 @@ def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
             outputs = (outputs,)
         chosen = {}
         for name in outputs:
+            name = _alias(eom, name)
             if name in eom.outputs:
                 chosen[name] = eom.outputs[name]
             elif name in react:

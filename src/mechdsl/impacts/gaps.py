@@ -38,6 +38,10 @@ class ContactGap:
     kind: str = "gap"
     points: tuple[str, ...] = ()
     span: object = None
+    # sliding friction while closed (issue 17): the generalized force per unit normal force,
+    # -mu J' v_t tanh(|v_t|/v_eps)/|v_t| (SX (n,) in q, qd, t, p), or None without friction
+    friction: object = None
+    v_eps: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -129,6 +133,11 @@ def gap_from_ir(eom, c: ir.Contact) -> ContactGap:
         if X.has_speed(expr):
             raise MechError(Diagnostic("E862", f"the gap of contact '{c.name}' may depend on coordinates and time, "
                                                "not on speeds", span))
+        if _has_friction(c):
+            raise MechError(Diagnostic("E862", f"contact '{c.name}' has friction (mu) but a gap expression: "
+                                               "friction needs the contact's point", span,
+                                       "give the contact a point and a surface, or put the friction on a "
+                                       "coordinate with Friction(...)"))
         return ContactGap(name=c.name, gap=tr(expr), e=e, kind="gap", span=span)
     if surface not in SURFACES:
         raise MechError(Diagnostic("E862", f"contact '{c.name}': unknown surface '{surface}'", span,
@@ -142,7 +151,8 @@ def gap_from_ir(eom, c: ir.Contact) -> ContactGap:
         n = ca.vertcat(*[tr(x) for x in _value(c, "normal", (ir.ZERO, ir.ONE, ir.ZERO))])
         n = n / ca.norm_2(n)
         gap = ca.dot(n, xp) - tr(_value(c, "offset", 0.0)) - r
-        return ContactGap(name=c.name, gap=gap, e=e, kind="plane", points=(point,), span=span)
+        return ContactGap(name=c.name, gap=gap, e=e, kind="plane", points=(point,), span=span,
+                          **_friction(eom, c, tr, n, point, None))
     center = _value(c, "center", "world")
     xc = point_position(eom, center)
     R = tr(_value(c, "surface_radius", 0.0))
@@ -153,7 +163,44 @@ def gap_from_ir(eom, c: ir.Contact) -> ContactGap:
         gap = (R - r) - dist
     else:
         gap = dist - (R + r)
-    return ContactGap(name=c.name, gap=gap, e=e, kind=surface, points=(point, center), span=span)
+    return ContactGap(name=c.name, gap=gap, e=e, kind=surface, points=(point, center), span=span,
+                      **_friction(eom, c, tr, (xp - xc) / dist, point, center))
+
+
+def _has_friction(c: ir.Contact) -> bool:
+    mu = _value(c, "mu", 0.0)
+    return not X.is_const(mu, 0.0) if isinstance(mu, ir.Expr) else float(mu) != 0.0
+
+
+def _friction(eom, c: ir.Contact, tr, n, point: str, center: str | None) -> dict:
+    """Regularized Coulomb friction of a persistent contact (fields mu, v_eps): the slip velocity
+    v_t is the tangential part of the velocity of `point` relative to `center` (a sphere's
+    rotation is not included: the contact point is taken to move with the point), and the force
+    on the point is -mu N v_t tanh(|v_t|/v_eps)/|v_t| (N the normal force), the opposite on the
+    center; returned per unit N as a generalized force."""
+    import casadi as ca
+
+    if not _has_friction(c):
+        return {}
+    mu = _value(c, "mu", 0.0)
+    if eom.point_velocity is None:
+        raise MechError(Diagnostic("E862", f"contact '{c.name}' has friction, which needs the point kinematics",
+                                   c.span))
+    mu, v_eps = tr(mu), tr(_value(c, "v_eps", 1e-3))
+    eps_num = X.evaluate(_value(c, "v_eps", 1e-3), param_env(eom)) if isinstance(_value(c, "v_eps", 1e-3), ir.Expr) \
+        else float(_value(c, "v_eps", 1e-3))
+    if not eps_num > 0:
+        raise MechError(Diagnostic("E862", f"the friction regularization speed v_eps of contact '{c.name}' must be "
+                                           f"positive, got {eps_num:g}", c.span))
+    v = eom.point_velocity(point)
+    J = ca.jacobian(point_position(eom, point), eom.q)
+    if center is not None and center != "world":
+        v = v - eom.point_velocity(center)
+        J = J - ca.jacobian(point_position(eom, center), eom.q)
+    vt = v - n * ca.dot(n, v)
+    s = ca.sqrt(ca.dot(vt, vt) + (1e-9 * v_eps) ** 2)
+    force = -mu * vt * ca.tanh(s / v_eps) / s          # per unit normal force, world axes
+    return {"friction": ca.mtimes(J.T, force), "v_eps": eps_num}
 
 
 def fixation_from_ir(eom, c: ir.Contact) -> Fixation:

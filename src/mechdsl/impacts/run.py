@@ -33,7 +33,7 @@ class RunFailure(Exception):
 
 
 class Run:
-    def __init__(self, system, opts, grid: np.ndarray, method_cls: str, progress=None):
+    def __init__(self, system, opts, grid: np.ndarray, method_cls: str, progress=None, output_events: bool = False):
         self.s, self.o = system, opts
         self.grid = np.asarray(grid, float)
         self.method_cls = method_cls
@@ -48,6 +48,9 @@ class Run:
         self.out_force = np.zeros((len(self.grid), k))
         self.out_lam = np.zeros((len(self.grid), system.m))
         self.gi = 0
+        # output_events: rows (t, y, lam, force) just before (side -1) and after (+1) each instant with events
+        self.output_events = output_events
+        self.event_rows: list[tuple[float, int, np.ndarray, np.ndarray, np.ndarray]] = []
         self.stats = {"steps": 0, "rejected_steps": 0, "restarts": 0, "projections": 0, "events": 0,
                       "root_evaluations": 0}
         self._burst = (math.nan, 0)
@@ -85,15 +88,32 @@ class Run:
         return {i: float(lam[pos[self.s.contact_row(i)]]) for i, c in enumerate(self.closed) if c}
 
     # ------------------------------------------------------------------ output
-    def _store(self, gi: int, t: float, y: np.ndarray) -> None:
-        self.out_y[gi] = y
+    def _sample(self, t: float, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Model multipliers and contact forces at a state, with the current active rows."""
+        lam_out, force = np.zeros(self.s.m), np.zeros(self.s.k)
         if self.active:
             _, lam = self.s.accel(t, y[:self.n], y[self.n:], self.active)
             for j, r in enumerate(self.active):
                 if r < self.s.m:
-                    self.out_lam[gi, r] = -lam[j]          # EOM convention: M q'' = bias - g_q^T lam
+                    lam_out[r] = -lam[j]          # EOM convention: M q'' = bias - g_q^T lam
                 elif r < self.s.m + self.s.k:
-                    self.out_force[gi, r - self.s.m] = lam[j]
+                    force[r - self.s.m] = lam[j]
+        return lam_out, force
+
+    def _store(self, gi: int, t: float, y: np.ndarray) -> None:
+        self.out_y[gi] = y
+        self.out_lam[gi], self.out_force[gi] = self._sample(t, y)
+
+    def _event_rows(self, t: float, y_before: np.ndarray, pre, y_after: np.ndarray, count: int) -> None:
+        """With output_events: the rows before and after the events recorded since `count`."""
+        if self.output_events and len(self.events) > count:
+            self.event_rows.append((t, -1, np.array(y_before, float), *pre))
+            self.event_rows.append((t, 1, np.array(y_after, float), *self._sample(t, y_after)))
+
+    def _state(self, q, qd) -> dict[str, float]:
+        """A state as {coordinate: value, "der(coordinate)": value} (event records)."""
+        names = self.s.eom.coords
+        return {**{c: float(v) for c, v in zip(names, q)}, **{f"der({c})": float(v) for c, v in zip(names, qd)}}
 
     def emit(self, sol, t_hi: float, inclusive: bool) -> None:
         g = self.grid
@@ -252,7 +272,8 @@ class Run:
         ev = {"time": float(t), "kind": "impact", "contact": ", ".join(self.names([cands[j] for j in inv])),
               "impulse": _one([sol.impulses[j] for j in inv]), "energy_change": float(dT),
               "speed_before": _one([sol.speeds_before[j] for j in inv]),
-              "speed_after": _one([sol.speeds_after[j] for j in inv])}
+              "speed_after": _one([sol.speeds_after[j] for j in inv]),
+              "state_before": self._state(q, qd), "state_after": self._state(q, sol.qd)}
         if note:
             ev["note"] = note
         self._record(ev)
@@ -284,7 +305,8 @@ class Run:
             if self.closed[i] != before[i]:
                 self._record({"time": float(t), "kind": "close" if self.closed[i] else "release",
                               "contact": s.gaps[i].name, "impulse": 0.0, "energy_change": 0.0,
-                              "speed_before": float(u[i]), "speed_after": float(u[i])})
+                              "speed_before": float(u[i]), "speed_after": float(u[i]),
+                              "state_before": self._state(q, qd), "state_after": self._state(q, qd)})
         return qd
 
     def _force_detail(self, t, q, qd):
@@ -333,7 +355,8 @@ class Run:
         f = s.fixations[j]
         self._record({"time": float(t), "kind": "fixation", "contact": f.label, "impulse": imp,
                       "energy_change": float(dT), "speed_before": _one(list(A[rows] @ qd + ct[rows])),
-                      "speed_after": _one(list(A[rows] @ sol.qd + ct[rows]))})
+                      "speed_after": _one(list(A[rows] @ sol.qd + ct[rows])),
+                      "state_before": self._state(q, qd), "state_after": self._state(q, sol.qd)})
         return self.handle(t, q, sol.qd)
 
     def consistent_start(self, t, q, qd):
@@ -435,8 +458,10 @@ class Run:
                     t_ev, y_ev, _ = ev
                     self.emit(sol, t_ev, inclusive=False)
                     t = t_ev
+                    count, pre = len(self.events), self._sample(t, y_ev)
                     q, qd = self.handle(t, y_ev[:n], y_ev[n:])
                     y = np.concatenate([q, qd])
+                    self._event_rows(t, y_ev, pre, y, count)
                     restart = True
                     break
                 # a grid point at a fixation time shows the state after it (as at impacts)
@@ -455,8 +480,10 @@ class Run:
             t = t_stop
             for tf, j in pending:
                 if tf <= t_stop:
+                    count, y_pre, pre = len(self.events), y, self._sample(t, y)
                     q, qd = self.fixate(t, y[:n], y[n:], j)
                     y = np.concatenate([q, qd])
+                    self._event_rows(t, y_pre, pre, y, count)
                     fixed.add(j)
         # grid points at the final time (after an event there)
         while self.gi < len(self.grid) and self.grid[self.gi] <= t + 1e-12 * max(1.0, abs(t)):

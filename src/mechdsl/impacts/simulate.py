@@ -29,7 +29,8 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                            q0=None, qd0=None, fixations=(), rest_speed: float | None = None,
                            impact_order: str | None = None, gap_tol: float | None = None,
                            event_offset: float | None = None, max_events: int = 100000,
-                           max_step: float | None = None, samples: int = 4, **passed) -> R.Result:
+                           max_step: float | None = None, samples: int = 4, output_events: bool = False,
+                           **passed) -> R.Result:
     """Simulate eom with unilateral contacts from t_start to t_end; output on a uniform grid.
 
     contacts: ``ir.Contact`` / ``ContactGap`` / ``Fixation`` objects (default: the model's);
@@ -38,7 +39,10 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     start values directly.  progress: a callable(t, t_end) called after every step.
     rest_speed (m/s, default 1e-3), impact_order ("simultaneous" | "sequential"): see
     docs/contacts.md.  The events (impacts, contacts closing and releasing, fixations) are
-    in ``result.events``.
+    in ``result.events``, each with the state before and after it (``state_before``,
+    ``state_after``: {coordinate: value, "der(coordinate)": value}).  output_events: the
+    results also get a row just before and one just after every instant with events (same
+    time; the signal ``event`` is -1 before, +1 after, 0 on the grid).
     """
     for k in passed:
         if k not in _PASSED_THROUGH:
@@ -75,7 +79,8 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                        g.span or _no_span(),
                                        "change the start values so that every gap is >= 0"))
     grid = np.linspace(t_start, t_end, npts)
-    run = Run(system, opts, grid, method_cls, progress=progress if callable(progress) else None)
+    run = Run(system, opts, grid, method_cls, progress=progress if callable(progress) else None,
+              output_events=bool(output_events))
     wall = _time.perf_counter()
     failure = None
     try:
@@ -88,16 +93,20 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                             detail=f"{type(ex).__name__}: {ex} (a singular mass matrix or constraint Jacobian?)")
     wall = _time.perf_counter() - wall
     m = run.gi
-    Y = run.out_y[:m]
+    T, Y, force, lam, side = grid[:m], run.out_y[:m], run.out_force[:m], run.out_lam[:m], np.zeros(m)
+    if output_events:
+        T, Y, force, lam, side = _with_event_rows(T, Y, force, lam, run.event_rows)
     n = eom.n
-    res = R.Result(t=grid[:m].copy(), q=Y[:, :n].copy(), qd=Y[:, n:].copy(), coordinates=tuple(eom.coords),
+    res = R.Result(t=T.copy(), q=Y[:, :n].copy(), qd=Y[:, n:].copy(), coordinates=tuple(eom.coords),
                    events=run.events, failure=failure)
-    res.signals = _signals(eom, system, grid[:m], Y, run.out_force[:m], run.out_lam[:m], out_names)
+    res.signals = _signals(eom, system, T, Y, force, lam, out_names)
+    if output_events:
+        res.signals["event"] = side
     res.stats = dict(run.stats, rhs_evals=system.n_rhs, points=m, wall_time=wall, events=len(run.events),
                      impacts=sum(1 for e in run.events if e["kind"] == "impact"))
-    conservative = _conservative(eom)
+    conservative = _conservative(eom) and not system.friction
     if conservative and m:
-        res.stats.update(_drift_between_events(res, run.events))
+        res.stats.update(_drift_between_events(res, run.events, side))
     reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
     res.metadata = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords), "warnings": [],
                     "method": method_cls.lower(), "method_reason": reason, "conservative": conservative,
@@ -106,6 +115,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                 "points": npts, "method": method or "auto", "outputs": list(out_names),
                                 "impact_order": opts.impact_order, "rest_speed": opts.rest_speed,
                                 "gap_tol": opts.touch, "event_offset": opts.offset,
+                                "output_events": bool(output_events),
                                 "parameters": dict(zip(eom.params, map(float, pv))),
                                 "start": {**dict(zip(eom.coords, map(float, qs))),
                                           **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}},
@@ -119,6 +129,20 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     return res
 
 
+def _with_event_rows(T, Y, force, lam, rows):
+    """The grid rows merged with the event rows by time: before-event, after-event, then a grid
+    point at the same time (which shows the state after the event)."""
+    if not rows:
+        return T, Y, force, lam, np.zeros(len(T))
+    t_all = np.r_[T, [r[0] for r in rows]]
+    side = np.r_[np.zeros(len(T)), [r[1] for r in rows]]
+    rank = np.r_[np.full(len(T), 2), [0 if r[1] < 0 else 1 for r in rows]]
+    seq = np.r_[np.arange(len(T)), np.arange(len(rows))]
+    order = np.lexsort((seq, rank, t_all))
+    stack = lambda a, k: np.vstack([a, np.array([r[k] for r in rows]).reshape(len(rows), -1)])[order]  # noqa: E731
+    return t_all[order], stack(Y, 2), stack(force, 4), stack(lam, 3), side[order]
+
+
 def _conservative(eom) -> bool:
     """No dissipation, no other generalized forces, no explicit time (impacts aside)."""
     import casadi as ca
@@ -130,14 +154,17 @@ def _conservative(eom) -> bool:
         return False
 
 
-def _drift_between_events(res, events) -> dict:
-    """Energy drift of the integration alone: E(t) - E(0) minus the changes at the events up to t."""
+def _drift_between_events(res, events, side=None) -> dict:
+    """Energy drift of the integration alone: E(t) - E(0) minus the changes at the events up to t
+    (not including those at t itself for a row just before an event: side -1)."""
     E = res.signals.get("energy")
     if E is None or not len(E) or not np.isfinite(E).all():
         return {}
     times = np.array([e["time"] for e in events])
     jumps = np.cumsum([float(e.get("energy_change", 0.0)) for e in events])
     k = np.searchsorted(times, res.t, side="right")
+    if side is not None and len(side) == len(k):
+        k = np.where(np.asarray(side) < 0, np.searchsorted(times, res.t, side="left"), k)
     expected = E[0] + np.where(k > 0, jumps[np.maximum(k - 1, 0)] if len(jumps) else 0.0, 0.0)
     dE = float(np.max(np.abs(E - expected)))
     scale = max(abs(float(E[0])), float(np.max(np.abs(res.signals["kinetic_energy"]))),

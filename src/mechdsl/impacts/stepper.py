@@ -12,7 +12,7 @@ from ..diagnostics import UsageError
 SCIPY_METHODS = {"dop853": "DOP853", "rk45": "RK45", "rk23": "RK23", "radau": "Radau", "bdf": "BDF",
                  "lsoda": "LSODA"}
 # the ODE simulator's method names (mechdsl.integrators) -> the closest one-step solver here
-ALIASES = {"auto": "dop853", "erk": "dop853", "cvodes-adams": "dop853", "rk": "dop853",
+ALIASES = {"auto": "dop853", "erk": "dop853", "dopri5": "rk45", "cvodes-adams": "dop853", "rk": "dop853",
            "cvodes": "bdf", "cvodes-bdf": "bdf", "idas": "bdf", "rosenbrock": "radau", "collocation": "radau",
            **{f"scipy-{k}": k for k in SCIPY_METHODS}}
 SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre")

@@ -60,6 +60,12 @@ class ContactSystem:
 
             bad = [g.name for g, e in zip(self.gaps, self.e) if not 0 <= e <= 1]
             raise MechError(Diagnostic("E862", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
+        # sliding friction of persistent contacts: column i = generalized force per unit normal force
+        self.friction = [i for i, g in enumerate(self.gaps) if g.friction is not None]
+        self.f_fric = None
+        if self.friction:
+            cols = [ca.SX(self.gaps[i].friction) for i in self.friction]
+            self.f_fric = FastFunction(ca.Function("friction", args, [ca.horzcat(*cols)], names, ["W"]))
         self.anchor = np.zeros(self.n_rows)
         self._gap_maps: dict[int, object] = {}
         self._f_jac = None
@@ -126,9 +132,33 @@ class ContactSystem:
         cf = _cho(M)
         a0 = sla.cho_solve(cf, b)
         X = sla.cho_solve(cf, A.T)
-        W = A @ X
-        lam = -_solve_sym(W, A @ a0 + gam)
-        return a0 + X @ lam, lam
+        B = self._friction_columns(t, q, qd, rows)
+        if B is None:
+            lam = -_solve_sym(A @ X, A @ a0 + gam)
+            return a0 + X @ lam, lam
+        # M q'' = bias + (A' + B) lam: a contact's friction is proportional to its normal force
+        XB = X + sla.cho_solve(cf, B)
+        W = A @ XB
+        try:
+            lam = -np.linalg.solve(W, A @ a0 + gam)
+        except np.linalg.LinAlgError:
+            lam = -np.linalg.lstsq(W, A @ a0 + gam, rcond=1e-12)[0]
+        return a0 + XB @ lam, lam
+
+    def _friction_columns(self, t, q, qd, rows):
+        """(n, len(rows)): the friction generalized force per unit multiplier of each active row
+        (0 for rows without friction), or None when no active row has friction."""
+        if self.f_fric is None:
+            return None
+        cols = {self.contact_row(i): j for j, i in enumerate(self.friction)}
+        if not any(r in cols for r in rows):
+            return None
+        Wf = self.f_fric(t, q, qd, self.p)[0].reshape(self.n, len(self.friction), order="F")
+        B = np.zeros((self.n, len(rows)))
+        for j, r in enumerate(rows):
+            if r in cols:
+                B[:, j] = Wf[:, cols[r]]
+        return B
 
     def rhs(self, rows):
         n = self.n

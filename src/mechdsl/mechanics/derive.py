@@ -21,7 +21,7 @@ import numpy as np
 from .. import eom as eom_mod
 from .. import exprs, ir
 from ..diagnostics import Diagnostic, MechError, UsageError
-from . import dynamics
+from . import chain, dynamics
 from . import templates as tpl
 from .constraints import loop_closures
 from .forces import Loads, add_terms, build_loads
@@ -81,7 +81,7 @@ class _Deriver:
         self.route = route
         self.fext = loads.link_forces(kin)
         self.quats = [idx for _, idx in tree.quaternions]
-        qdd = None
+        qdd = qdd_loop = None
         if route == "lagrange":
             T_body = self._kinetic_ad()
             T = T_body + loads.T_terms
@@ -99,12 +99,14 @@ class _Deriver:
             if route == "aba":
                 qdd = self._aba()
                 M = bias = _Lazy(self._tmt)          # only when someone asks (CRBA is O(N^2))
+                qdd_loop = _Lazy(lambda: chain.plan(tree, loads.link_forces, self.tau, qdd, self._qdd_of))
             else:
                 M, bias = self._tmt()
         self.M, self.bias, self.qdd = M, bias, qdd
 
         query.energies = {"kinetic": T, "potential": V, "dissipation": D, "energy": T + V}
         query.reaction = self._reaction
+        query.acceleration = self._acceleration
 
         g_list, g_names = [], []
         for c in model.constraints:
@@ -139,7 +141,7 @@ class _Deriver:
             constraint_names=tuple(g_names), outputs=outputs, q0=q0, qd0=qd0,
             fixed_q=tuple(c.fixed for c in model.coordinates),
             fixed_qd=tuple(c.speed_fixed for c in model.coordinates),
-            route=route, model=model, point_position=kin.point_pos, point_velocity=kin.point_vel,
+            route=route, model=model, point_position=kin.point_pos, point_velocity=kin.point_vel, qdd_loop=qdd_loop,
             body_rotation=kin.body_rot,
             singularity_monitors=monitors, invariants=invariants, notes=notes, lam=self.lam,
             u=e0.u, inputs=e0.inputs, input_defaults=tuple(float(p.value) for p in model.inputs))
@@ -243,10 +245,14 @@ class _Deriver:
         return tau
 
     def _aba(self):
-        tree, q, qd = self.tree, self.q, self.qd
         self.tau = self._tau()
-        nud, self.acc = dynamics.aba(tree, self.kin, self.fext, self.tau)
+        nud, self.acc = dynamics.aba(self.tree, self.kin, self.fext, self.tau)
         self.nud = nud
+        return self._qdd_of(nud)
+
+    def _qdd_of(self, nud):
+        """q'' from the joint-space accelerations nu' (the identity for plain coordinates)."""
+        tree, q, qd = self.tree, self.q, self.qd
         qdd = ca.SX.zeros(self.n, 1)
         gam = None
         for lk in tree.links:
@@ -307,6 +313,36 @@ class _Deriver:
         if ref.what not in ("force", "torque") or not 0 <= ref.i < 3:
             raise MechError(Diagnostic("E753", f"bad reaction component {ref.what}[{ref.i + 1}]"))
         return (f if ref.what == "force" else n)[ref.i]
+
+    # -- accelerations (p.a, b.alpha) ----------------------------------------------------
+    def _acceleration(self, key, velocity):
+        """d/dt of a velocity-level SX (a point's velocity, a body's angular velocity) along
+        the motion: (dv/dq) qd + (dv/dqd) qdd + dv/dt with qdd of the forward dynamics (SX in
+        EOM.lam in a constrained model, which the DAE solver substitutes)."""
+        memo = self.__dict__.setdefault("_accelerations", {})
+        if key not in memo:
+            v = velocity()
+            qdd = self._qdd_all(key)
+            memo[key] = (ca.mtimes(ca.jacobian(v, self.q), self.qd) + ca.mtimes(ca.jacobian(v, self.qd), qdd)
+                         + ca.jacobian(v, self.t))
+        return memo[key]
+
+    def _qdd_all(self, key):
+        if not hasattr(self, "_qdd_memo"):
+            if self.route == "aba" and not self.constrained:
+                self._qdd_memo = self.qdd
+            elif self.n <= SMALL_SOLVE:
+                M, bias = (self.M, self.bias) if self.route == "lagrange" else self._tmt()
+                if self.constrained:
+                    bias = bias - ca.mtimes(ca.jacobian(self.g, self.q).T, self.lam)
+                self._qdd_memo = ca.solve(M, bias)
+            else:
+                what = f"{key[1]}.{key[0]}"
+                raise MechError(Diagnostic("E750", f"the acceleration {what} needs the explicit forward dynamics, "
+                                                   f"not available on route '{self.route}' with {self.n} coordinates",
+                                           help="accelerations are available for trees of joints and for models "
+                                                f"with at most {SMALL_SOLVE} coordinates"))
+        return self._qdd_memo
 
     def _all_reactions(self, ref) -> dict:
         tree, kin = self.tree, self.kin
@@ -396,20 +432,23 @@ class _Lazy:
 
     def __init__(self, fn):
         self.fn = fn
+        self.done = False
         self.value = None
 
     def get(self):
-        if self.value is None:
+        if not self.done:
             self.value = self.fn()
+            self.done = True
         return self.value
 
 
 class LazyEOM(eom_mod.EOM):
     """An EOM whose expensive fields (M and bias on the 'aba' route, where the simulator
-    needs only qdd; Q) are built on first access.  Behaves as a plain EOM otherwise."""
+    needs only qdd; Q; the looped form qdd_loop) are built on first access.  Behaves as a
+    plain EOM otherwise."""
 
     def __getattribute__(self, name):
-        if name in ("M", "bias", "Q"):
+        if name in ("M", "bias", "Q", "qdd_loop"):
             d = object.__getattribute__(self, "__dict__")
             v = d.get(name)
             if isinstance(v, _Lazy):

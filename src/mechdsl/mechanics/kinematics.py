@@ -68,6 +68,11 @@ class Kinematics:
             self._memo[key] = z3() if i < 0 else ca.mtimes(self.R[i], self.w[i])
         return self._memo[key]
 
+    def body_omega_body(self, body: str) -> ca.SX:
+        """Angular velocity in body axes (a link's axes are its body's axes)."""
+        i = self.tree.body_link[body]
+        return z3() if i < 0 else self.w[i]
+
     def com_link(self, body) -> tuple[int, ca.SX]:
         """(link, centre of mass in link coordinates) of an ir.Body."""
         return self.tree.body_link[body.name], self.tree.vec(body.com) - self.tree.body_offset[body.name]

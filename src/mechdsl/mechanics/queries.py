@@ -1,10 +1,10 @@
 """Resolution of the IR's kinematic leaves (PointPos, PointVel, BodyRot, BodyOmega,
-EnergyRef, ReactionRef) to SX, for exprs.CasadiEnv(query=...)."""
+EnergyRef, ReactionRef, PointAcc, BodyAlpha) to SX, for exprs.CasadiEnv(query=...)."""
 from __future__ import annotations
 
 from typing import Callable
 
-from .. import ir
+from .. import exprs, ir
 from ..diagnostics import Diagnostic, MechError
 from .kinematics import Kinematics
 
@@ -15,6 +15,7 @@ class Query:
         self.kin = kin
         self.energies: dict[str, object] | None = None       # set once T, V, D are known
         self.reaction: Callable[[ir.ReactionRef], object] | None = None
+        self.acceleration: Callable[[object], object] | None = None   # SX (q, qd, t) -> its d/dt
         self._bodies = {b.name for b in model.bodies} | {"world"}
 
     def _point(self, name):
@@ -36,7 +37,16 @@ class Query:
         if isinstance(n, ir.BodyRot):
             return k.body_rot(self._body(n.body))[n.i, n.j]
         if isinstance(n, ir.BodyOmega):
+            if n.frame == "body":
+                return k.body_omega_body(self._body(n.body))[n.i]
             return k.body_omega(self._body(n.body))[n.i]
+        if isinstance(n, (ir.PointAcc, ir.BodyAlpha)):
+            if self.acceleration is None:
+                raise MechError(Diagnostic("E725", f"the acceleration {exprs.to_text(n)} used inside a force or term",
+                                           help="accelerations may appear in outputs only"))
+            if isinstance(n, ir.PointAcc):
+                return self.acceleration(("a", n.point), lambda: k.point_vel(self._point(n.point)))[n.i]
+            return self.acceleration(("alpha", n.body), lambda: k.body_omega(self._body(n.body)))[n.i]
         if isinstance(n, ir.EnergyRef):
             if self.energies is None:
                 raise MechError(Diagnostic("E723", f"{n.kind} energy used inside a force or energy term",

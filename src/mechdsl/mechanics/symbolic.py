@@ -87,7 +87,7 @@ class _Builder:
         if isinstance(n, ir.BodyRot):
             return self.links[n.body][0][n.i, n.j]
         if isinstance(n, ir.BodyOmega):
-            return self.omega_world(n.body)[n.i]
+            return (self.omega_world(n.body) if n.frame == "world" else self.omega_body(n.body))[n.i]
         raise MechError(Diagnostic("E760", f"{exprs.to_text(n)} cannot appear in printed equations"))
 
     def tr(self, e):

@@ -23,7 +23,7 @@ SCENE_SETTINGS: dict[str, str] = {
     "stop_time": "number", "start_time": "number", "tolerance": "number", "rtol": "number", "atol": "number",
     "method": "string", "points": "integer", "outputs": "names", "formulation": "string", "dt": "number",
     "reactions": "bool", "compiled": "bool",
-    "rest_speed": "number", "impact_order": "string",     # contacts (docs/contacts.md)
+    "rest_speed": "number", "impact_order": "string", "output_events": "bool",  # contacts (docs/contacts.md)
 }
 ENERGY_SIGNALS = ("kinetic_energy", "potential_energy", "energy")
 

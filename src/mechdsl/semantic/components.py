@@ -44,6 +44,8 @@ class ComponentClass:
 
     @property
     def connect_fields(self) -> tuple[str, str] | None:
+        if self.name == "RigidLink":
+            return ("a", "b")
         if self.category == "joint":
             return ("parent", "child")
         if self.name in ("Spring", "Damper", "SpringDamper"):
@@ -61,7 +63,8 @@ def _f(*a, **k) -> Field:
 
 
 _JOINT_COMMON = (_f("parent", "point", doc="point on the parent body (or world)"),
-                 _f("child", "point", doc="point on the child body"))
+                 _f("child", "point", None, doc="point on the child body (omitted: the joint's own massless frame, "
+                                                "named after the joint)"))
 _SPATIAL = (_f("sequence", "string", "zyx", doc="Euler/Cardan sequence of the three angles (intrinsic)"),
             _f("parametrization", "string", "euler", choices=("euler", "quaternion"),
                doc="'euler' (three angles, singular at gimbal lock) or 'quaternion' (singularity-free)"))
@@ -117,10 +120,14 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    roles=(("x", LEN), ("y", LEN), ("phi", ROT))),
     ComponentClass("Spherical", "joint", _JOINT_COMMON + _SPATIAL, "a ball joint (three rotations)",
                    roles=(("phi", ROT), ("theta", ROT), ("psi", ROT))),
-    ComponentClass("Free", "joint", (_f("parent", "point", "world"), _f("child", "point")) + _SPATIAL,
+    ComponentClass("Free", "joint", (_f("parent", "point", "world"), _JOINT_COMMON[1]) + _SPATIAL,
                    "six degrees of freedom (three for a point mass)",
                    roles=(("x", LEN), ("y", LEN), ("z", LEN), ("phi", ROT), ("theta", ROT), ("psi", ROT))),
     ComponentClass("Fixed", "joint", _JOINT_COMMON, "a rigid connection (no freedom)"),
+    ComponentClass("RigidLink", "joint", (_f("a", "body", doc="the body (or joint frame, or world) the link starts on"),
+                                          _f("b", "point", doc="the body or point it carries"),
+                                          _f("r", "vec3", dim=U.LENGTH, doc="where b sits, in a's axes")),
+                   "a massless rigid link: b is held at r from a's origin, with a's axes"),
     # ------------------------------------------------------------------ forces
     ComponentClass("Gravity", "force", (_f("g", "vec3", (0.0, -9.81, 0.0), U.ACCEL, "gravitational acceleration"),),
                    "uniform gravity on every body"),
@@ -140,6 +147,12 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    "a torque applied to a body"),
     ComponentClass("GeneralizedForce", "force", (_f("coordinate", "coordinate"), _f("Q", "scalar")),
                    "a generalized force on one coordinate"),
+    ComponentClass("Friction", "force", (
+        _f("coordinate", "coordinate", doc="the joint variable or coordinate the friction acts on"),
+        _f("F", "scalar", doc="Coulomb friction force or torque while sliding (mu N; may depend on the state)"),
+        _f("v_eps", "scalar", 1e-3, doc="regularization speed (coordinate units per second): "
+                                         "Q = -F tanh(der(q)/v_eps)")),
+        "regularized Coulomb friction on one coordinate (joint friction, a block sliding on a guide)"),
     ComponentClass("Gravitation", "force", (_f("bodies", "bodies"), _f("G", "scalar", 6.6743e-11, U.GRAV_CONST)),
                    "mutual Newtonian gravitation between bodies (at their mass centres)"),
     ComponentClass("Potential", "force", (_f("V", "scalar", dim=U.ENERGY),),
@@ -155,6 +168,8 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
         _f("surface_radius", "scalar", 0.0, U.LENGTH),
         _f("inside", "bool", 0.0, doc="sphere: the point stays inside"),
         _f("e", "scalar", 1.0, U.ONE, "coefficient of restitution"),
+        _f("mu", "scalar", 0.0, U.ONE, "coefficient of sliding friction while the contact persists"),
+        _f("v_eps", "scalar", 1e-3, U.VELOCITY, "regularization speed of the sliding friction"),
         _f("gap", "scalar", None, U.LENGTH, "the gap as an expression of coordinates and time (>= 0 allowed); "
                                             "instead of point and surface, e.g. in equation-layer models")),
         "a unilateral frictionless contact with restitution"),

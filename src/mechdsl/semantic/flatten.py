@@ -22,8 +22,12 @@ from . import instances as Inst
 from . import mods as Mods
 from . import values as V
 from .evaluate import BUILTIN_NAMES, EvalError, Evaluator, fail
+from .constraint_names import constraint_name
+from .friction import friction_force
 from .mods import Mod
 from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
+from .instance_arrays import InstanceArrays
+from .vector_starts import VECTOR_STARTS, VectorStarts
 
 SCALAR_TYPES = {"Real", "Integer", "Boolean"}
 PARAM_ATTRS = {"unit", "min", "max", "displayUnit"}
@@ -48,6 +52,7 @@ class Entry:
     outputs: list[ir.Output] = field(default_factory=list)
     elements: list["CompInst"] = field(default_factory=list)
     cache: dict = field(default_factory=dict)   # evaluated array-level modifier values
+    element_mods: dict = field(default_factory=dict)   # "q[2]" -> Mod: an override of one element (API, --set)
 
 
 _BUDGET = {"coordinate": "coordinates", "output": "outputs", "component": "components"}  # kind -> limit
@@ -74,7 +79,9 @@ class _Failed(Exception):
     """An entry already reported an error; dependants stay quiet."""
 
 
-class Flattener(Evaluator):
+class Flattener(InstanceArrays, VectorStarts, Evaluator):
+    Failed = _Failed           # for the mixins (instance_arrays.py, vector_starts.py)
+
     def __init__(self, program, model: ast.ModelDef, outer: dict[str, Mod] | None = None):
         self.program = program
         self.model = model
@@ -89,8 +96,10 @@ class Flattener(Evaluator):
         self.constraints: list[ir.Constraint] = []
         self.terms: list[ir.Term] = []
         self.gen_forces: list[ir.GeneralizedForce] = []
+        self.joint_frames: set[str] = set()     # joints without a child whose massless frame is used
         self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
         self.instances: dict[str, ast.Declaration] = {}   # model instances, by (prefixed) name
+        self.instance_arrays: dict[str, int] = {}         # arrays of model instances: name -> size
         self._collect(model, outer or {}, [])
         self._check_modified_names(outer or {}, model.name)
 
@@ -137,10 +146,9 @@ class Flattener(Evaluator):
         problem = None
         if d.prefix is not None:
             problem = ("E215", f"'{d.prefix}' cannot be applied to a model instance", d.span, f"remove '{d.prefix}'")
-        elif d.dims:
-            problem = ("E203", f"arrays of model instances ('{d.type_name} {d.name}[...]') are not supported",
-                       d.dims[0].span, "declare the instances one by one, or use arrays of components "
-                                       "(bodies, joints, forces) with a `for` loop")
+        elif len(d.dims) > 1:
+            problem = ("E301", "arrays of model instances have one dimension", d.dims[1].span,
+                       f"write {d.type_name} {d.name}[n](...)")
         elif d.value is not None:
             problem = ("E214", f"a model instance takes modifiers, not a value", d.value.span,
                        f"write {d.type_name} {d.name}(parameter = ...)")
@@ -148,6 +156,9 @@ class Flattener(Evaluator):
             problem = ("E202", f"'{d.name}' is declared twice", d.name_span, "rename one of them")
         if problem:
             self.diags.error(*problem)
+            return
+        if d.dims:
+            self._instance_array(d, outer, chain)
             return
         self.instances[d.name] = d
         mod = Mods.merge(Mod(sub=Mods.from_ast(d.modification, self.diags), span=d.span, name_span=d.name_span),
@@ -159,6 +170,9 @@ class Flattener(Evaluator):
     def _check_modified_names(self, mods: dict[str, Mod], model_name: str, prefix: str = "") -> None:
         """A modification (scene, extends, API override) must name a declaration of the model."""
         for k, m in mods.items():
+            base = k.split("[", 1)[0]
+            if "[" in k and base in self.entries and self.entries[base].kind == "coordinate":
+                continue                    # an element's start (q[2].start): checked where q is built
             if k not in self.entries and k not in self.instances:
                 local = k[len(prefix):] if k.startswith(prefix) else k
                 own = self._own(prefix[:-1]) if prefix else list(self.entries)
@@ -209,7 +223,8 @@ class Flattener(Evaluator):
                                  f"write {d.type_name} {d.name}(field = ...)")
                 return
             kind = "component"
-        self.entries[d.name] = Entry(d, kind, mod, len(self.entries), cls)
+        self.entries[d.name] = Entry(d, kind, mod, len(self.entries), cls,
+                                     element_mods={k: v for k, v in outer.items() if k.startswith(d.name + "[")})
 
     # ================================================================== lookup
     def known_names(self) -> list[str]:
@@ -251,7 +266,9 @@ class Flattener(Evaluator):
         raise AssertionError
 
     def eval_ref(self, r: ast.Ref) -> Val:
-        """`s.x.y` where `s` is a model instance: the longest declared name `s.x` first, then fields."""
+        """`s.x.y` where `s` is a model instance: the longest declared name `s.x` first, then fields;
+        `links[i].x` where `links` is an array of instances: element i's `x`."""
+        r = self._instance_element(r)
         if len(r.parts) > 1 and r.parts[0].name in self.instances and not r.parts[0].subscripts:
             names = [p.name for p in r.parts]
             for k in range(len(r.parts), 1, -1):
@@ -473,19 +490,30 @@ class Flattener(Evaluator):
         fixed = self._attr_values(e.mod, "fixed", dims, None, 1.0, default=1.0)
         sfixed = self._attr_values(e.mod, "speed_fixed", dims, None, 1.0, default=1.0)
         items = []
-        for k, (idx, _) in enumerate(_enumerate(None, dims) if dims else [((), None)]):
-            name = d.name + _suffix(idx)
+        names = [d.name + _suffix(idx) for idx, _ in (_enumerate(None, dims) if dims else [((), None)])]
+        for key, em in e.element_mods.items():
+            if key not in names:
+                fail("E204", f"coordinate '{d.name}' has no element '{key}' to modify", em.name_span or d.name_span,
+                     f"elements: {names[0]} ... {names[-1]}" if names else "it has no elements")
+            self._check_attrs(em, {"start", "speed", "fixed", "speed_fixed"})
+            k = names.index(key)
+            for attr, lst, adim, f in (("start", starts, dim, factor),
+                                       ("speed", speeds, V.dim_div(dim, U.TIME) if dim else None, factor),
+                                       ("fixed", fixed, None, 1.0), ("speed_fixed", sfixed, None, 1.0)):
+                lst[k] = (self._attr_values(em, attr, (), adim, f, default=None) or [lst[k]])[0]
+        for k, name in enumerate(names):
             e.coords.append(ir.Coordinate(name, starts[k], speeds[k], bool(_constval(fixed[k])),
                                           bool(_constval(sfixed[k])), unit, d.doc or "", None, d.name_span))
             items.append(Scalar(ir.Coord(name), dim))
         assert len(items) == n
         return _reshape(items, dims)
 
-    def _attr_values(self, mod: Mod, attr: str, dims, dim, factor, default: float = 0.0) -> list[ir.Expr]:
+    def _attr_values(self, mod: Mod, attr: str, dims, dim, factor, default: float | None = 0.0) -> list[ir.Expr]:
+        """One expression per element of `attr` (start, speed, ...); [] when absent and no default."""
         n = math.prod(dims) if dims else 1
         m = mod.sub.get(attr)
         if m is None or m.value is None:
-            return [X.const(default)] * n
+            return [] if default is None else [X.const(default)] * n
         v = self.eval(m.value)
         if isinstance(v, Scalar) and dims:
             vals = [v] * n
@@ -539,7 +567,8 @@ class Flattener(Evaluator):
         d = e.decl
         if len(dims) > 1:
             fail("E301", "arrays of components have one dimension", d.span, f"write {d.type_name} {d.name}[n](...)")
-        allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | (
+        cartesian = {"x", "y", "z"} if e.cls.name == "PointMass" and ("r" in e.mod.sub or "v" in e.mod.sub) else set()
+        allowed = {f.name for f in e.cls.fields} | {r for r, _ in e.cls.roles} | set(VECTOR_STARTS.get(e.cls.name, ())) | cartesian | (
             {r for r, _ in K.QUATERNION_ROLES} if e.cls.name in ("Spherical", "Free") else set())
         for k, m in e.mod.sub.items():
             if k not in allowed:
@@ -584,6 +613,7 @@ class Flattener(Evaluator):
                 finally:
                     inst.busy.discard((fname, "busy"))
                 val = _pick(inst.entry.cache[key], inst, FIELD_RANK[f.kind], m.each)
+                val = self._frame_of_joint(val, f, m.value.span)
                 self._check_field(inst, f, val, m.value.span)
             elif f.default is K.REQUIRED:
                 hint = None
@@ -603,6 +633,22 @@ class Flattener(Evaluator):
                 val = K.python_to_val(f.default)
         inst.fields[fname] = val
         return val
+
+    def _frame_of_joint(self, val: Val, f: K.Field | None, span: Span) -> Val:
+        """A joint named where a body or point is expected (`parent = turn`) means the joint's
+        own massless frame, when the joint has no child of its own (issue 17)."""
+        if not (isinstance(val, CompRef) and val.kind == "joint") or (f is not None and f.kind not in ("point", "body")):
+            return val
+        inst = self.insts.get(val.name)
+        if inst is None or inst.cls.field("child") is None:
+            return val
+        child = self.field_value(inst, "child")
+        if child is not None:
+            fail("E209", f"joint '{val.name}' has the child '{child.name}' (a joint is not a point)", span,  # type: ignore[union-attr]
+                 f"name its child ({child.name}) or a point on it; a joint without a child is a massless frame"  # type: ignore[union-attr]
+                 " that others can use")
+        self.joint_frames.add(val.name)
+        return CompRef("body", val.name, "JointFrame")
 
     def _check_field(self, inst: CompInst, f: K.Field, val: Val, span: Span) -> None:
         try:
@@ -658,19 +704,27 @@ class Flattener(Evaluator):
                  "attributes (.x, .r, .R, .phi, ...) belong to components")
         if value.kind == "world":
             zero = V.const(0.0)
-            table = {"r": Arr((zero,) * 3), "v": Arr((zero,) * 3), "x": zero, "y": zero, "z": zero,
-                     "w": Arr((zero,) * 3), "R": Arr(tuple(Arr(tuple(V.const(float(i == j)) for j in range(3)))
+            table = {"r": Arr((zero,) * 3), "v": Arr((zero,) * 3), "a": Arr((zero,) * 3), "x": zero, "y": zero,
+                     "z": zero, "w": Arr((zero,) * 3), "w_body": Arr((zero,) * 3), "alpha": Arr((zero,) * 3), "R": Arr(tuple(Arr(tuple(V.const(float(i == j)) for j in range(3)))
                                                         for i in range(3)))}
             if name in table:
                 return table[name]
-            fail("E219", f"world has no attribute '{name}'", span, "world has r, v, x, y, z, R, w")
+            fail("E219", f"world has no attribute '{name}'", span, "world has r, v, a, x, y, z, R, w, w_body, alpha")
+        if value.kind == "joint" and name in ("r", "v", "a", "x", "y", "z", "R", "w", "w_body", "alpha"):
+            jinst = self.insts.get(value.name)     # a child-less joint's frame; a joint variable (f.x) wins
+            if (jinst is not None and jinst.cls.field("child") is not None and self.field_value(jinst, "child") is None
+                    and name not in [jv.role for jv in self.joint_vars(jinst)]):
+                value = self._frame_of_joint(value, None, span)
         if value.kind in ("point", "body"):
+            inst = self.insts.get(value.name)
+            if inst is not None and name in inst.cls.points:   # rod.a is Rod's end point a, not an acceleration
+                return CompRef("point", f"{inst.name}.{name}", "Point")
             kin = _kinematic_attr(value, name)
             if kin is not None:
                 return kin
         inst = self.insts.get(value.name)
         if inst is None:  # a named point of a body (rod.a) or a derived point
-            fail("E219", f"'{value.name}' has no attribute '{name}'", span, "points have r, v, x, y, z")
+            fail("E219", f"'{value.name}' has no attribute '{name}'", span, "points have r, v, a, x, y, z")
         cls = inst.cls
         if name in cls.points:
             return CompRef("point", f"{inst.name}.{name}", "Point")
@@ -688,7 +742,7 @@ class Flattener(Evaluator):
         roles = [jv.role for jv in self.joint_vars(inst)] if cls.category == "joint" else []
         opts = list(cls.points) + [f.name for f in cls.fields] + roles
         if cls.category in ("body", "point", "frame"):
-            opts += ["r", "v", "x", "y", "z"] + (["R", "w"] if cls.category != "point" else [])
+            opts += ["r", "v", "a", "x", "y", "z"] + (["R", "w", "w_body", "alpha"] if cls.category != "point" else [])
         fail("E219", f"{cls.name} '{inst.name}' has no attribute '{name}'", span,
              did_you_mean(name, opts) or ("attributes: " + ", ".join(dict.fromkeys(opts)) if opts else None))
         raise AssertionError
@@ -731,35 +785,41 @@ class Flattener(Evaluator):
                     coord = v.expr.name if isinstance(v.expr, ir.Coord) else None
                     out.append(ir.JointVar(role, v.expr, coord))
                     continue
-                sub = m.sub if m is not None else {}
-                self._check_attrs(Mod(sub=sub), COORD_ATTRS)
-                name = f"{inst.name}.{role}"
-                default_start = 1.0 if role == "q0" else 0.0
-                vals = {}
-                for attr, default in (("start", default_start), ("speed", 0.0), ("fixed", 1.0), ("speed_fixed", 1.0)):
-                    sm = sub.get(attr)
-                    if sm is None or sm.value is None:
-                        vals[attr] = X.const(default)
-                        continue
-                    key = ("role", role, attr)
-                    if key not in inst.entry.cache:
-                        inst.entry.cache[key] = self.eval(sm.value)
-                    v = _pick(inst.entry.cache[key], inst, 0, sm.each)
-                    if not isinstance(v, Scalar):
-                        fail("E301", f"{attr} of '{name}' must be a scalar", sm.value.span, f"e.g. {role}({attr} = 0)")
-                    if X.depends_on_state(v.expr) or X.depends_on_time(v.expr):
-                        fail("E306", f"the {attr} value may only depend on parameters", sm.value.span,
-                             "start values are numbers or expressions in parameters")
-                    vals[attr] = v.expr
-                unit = "rad" if dim == U.ONE else "m"
-                c = ir.Coordinate(name, vals["start"], vals["speed"], bool(_constval(vals["fixed"])),
-                                  bool(_constval(vals["speed_fixed"])), unit, "", inst.name, inst.entry.decl.name_span)
+                c = self._own_coordinate(inst, role, "rad" if dim == U.ONE else "m", inst.name,
+                                         {"start": X.const(1.0 if role == "q0" else 0.0)})
                 inst.coords.append(c)
-                out.append(ir.JointVar(role, ir.Coord(name), name))
+                out.append(ir.JointVar(role, ir.Coord(c.name), c.name))
+            self._vector_starts(inst, out, param)
             inst.jointvars = out
             return out
         finally:
             inst.busy.discard(("jointvars", "busy"))
+
+    def _own_coordinate(self, inst: CompInst, role: str, unit: str, owner: str, defaults: dict) -> ir.Coordinate:
+        """The coordinate `<inst>.<role>` a component owns, with the attributes of its modifier
+        `role(start = .., speed = .., fixed = .., speed_fixed = ..)` over `defaults`."""
+        m = inst.entry.mod.sub.get(role)
+        sub = m.sub if m is not None else {}
+        self._check_attrs(Mod(sub=sub), COORD_ATTRS)
+        name = f"{inst.name}.{role}"
+        vals = {"start": X.const(0.0), "speed": X.const(0.0), "fixed": X.const(1.0), "speed_fixed": X.const(1.0)}
+        vals.update(defaults)
+        for attr in vals:
+            sm = sub.get(attr)
+            if sm is None or sm.value is None:
+                continue
+            key = ("role", role, attr)
+            if key not in inst.entry.cache:
+                inst.entry.cache[key] = self.eval(sm.value)
+            v = _pick(inst.entry.cache[key], inst, 0, sm.each)
+            if not isinstance(v, Scalar):
+                fail("E301", f"{attr} of '{name}' must be a scalar", sm.value.span, f"e.g. {role}({attr} = 0)")
+            if X.depends_on_state(v.expr) or X.depends_on_time(v.expr):
+                fail("E306", f"the {attr} value may only depend on parameters", sm.value.span,
+                     "start values are numbers or expressions in parameters")
+            vals[attr] = v.expr
+        return ir.Coordinate(name, vals["start"], vals["speed"], bool(_constval(vals["fixed"])),
+                             bool(_constval(vals["speed_fixed"])), unit, "", owner, inst.entry.decl.name_span)
 
     def _body_class_of(self, ref: CompRef) -> str:
         base = ref.name
@@ -841,8 +901,8 @@ class Flattener(Evaluator):
             if eq.kind == "potential" and X.has_speed(v.expr):
                 fail("E308", "the potential energy must not depend on speeds", eq.expr.span,
                      "velocity-dependent forces go into force(q) = ... or the dissipation function")
-            if any(isinstance(n, (ir.EnergyRef, ir.ReactionRef)) for n in X.walk(v.expr)):
-                fail("E308", f"the {eq.kind} energy cannot refer to energies or reactions", eq.expr.span,
+            if any(isinstance(n, ir.EnergyRef) for n in X.walk(v.expr)) or X.needs_dynamics(v.expr):
+                fail("E308", f"the {eq.kind} energy cannot refer to energies, reactions or accelerations", eq.expr.span,
                      "write the expression itself; kinetic_energy() etc. are for outputs")
             self.terms.append(ir.Term(eq.kind, v.expr, f"{eq.kind}@{eq.span.line}", eq.span))
             return
@@ -873,9 +933,11 @@ class Flattener(Evaluator):
                 if not any(isinstance(n, (ir.Coord, ir.PointPos, ir.BodyRot)) for n in X.walk(s.expr)):
                     fail("E309", "this equation involves no coordinate", eq.span,
                          "an equation is a constraint on coordinates; to define a quantity use `Real x = ...;`")
-                nm = f"c{len(self.constraints) + 1}"
+                alias = f"c{len(self.constraints) + 1}"
+                nm = constraint_name(eq.doc, self.loop_vars.values(), k if len(items) > 1 else None,
+                                     self.constraints) or alias
                 self.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
-                                                      eq.span))
+                                                      eq.span, alias=alias))
             return
         raise AssertionError(type(eq))
 
@@ -893,7 +955,7 @@ class Flattener(Evaluator):
             if fname in inst.connections or (inst.entry.mod.sub.get(fname) and inst.entry.mod.sub[fname].value is not None):
                 fail("E211", f"'{fname}' of '{inst.name}' is set twice", ref.span,
                      "set it either with a modifier or with one connect(...)")
-            v = self.eval(ref)
+            v = self._frame_of_joint(self.eval(ref), inst.cls.field(fname), ref.span)
             self._check_field(inst, inst.cls.field(fname), v, ref.span)
             inst.connections[fname] = v
 
@@ -938,6 +1000,15 @@ class Flattener(Evaluator):
                         getattr(built, k).extend(getattr(b, k))
             # joints own coordinates too: the exact count, located at the declaration that passes it
             self.charge("coordinates", 0, e.decl.span, total=len(coords))
+        for j in built.joints:
+            jinst = self.insts.get(j.name)
+            if (j.child == j.name and j.name not in self.joint_frames and jinst is not None
+                    and not self.connect_failed):
+                cn = jinst.cls.connect_fields
+                self.diags.error("E210", f"{jinst.cls.name} '{j.name}' needs 'child'", jinst.entry.decl.name_span,
+                                 f"set it with child = ..., or connect({cn[0]}, {jinst.entry.decl.name}, {cn[1]}) in the "
+                                 f"equation section; a joint without a child is a massless frame only when another "
+                                 f"joint or point uses it (parent = {j.name})")
         self.diags.raise_if_errors()
         forces = built.forces + self.gen_forces
         model = ir.Model(
@@ -964,6 +1035,10 @@ class Flattener(Evaluator):
                 if any(n.startswith("I_") and inst.entry.mod.sub.get(n) for n in f):
                     fail("E211", f"give either I or I_11 ... I_32 for '{name}', not both", span, "remove one of them")
             out = K.build_body(cls, name, f, span)
+            if cls.name == "PointMass":
+                j = self._cartesian_point_mass(inst, span)
+                if j is not None:
+                    out.joints.append(j)
         elif cls.category == "point":
             body = f["body"]
             out.points.append(ir.Point(name, self.body_of_point(body.name), K.as_vec3(f["r"], "r"), span))
@@ -987,7 +1062,7 @@ class Flattener(Evaluator):
                                        name, (z, z, X.const(1.0)), (), None, K.as_vec3(f["r"], "r"), R, (), False,
                                        span))
         elif cls.category == "joint":
-            out.joints.append(self._build_joint(inst, f, span))
+            out.joints.append(self._build_joint(inst, f, span, out))
         elif cls.category == "force":
             out = self._build_force(inst, f, span)
         elif cls.category == "contact":
@@ -1023,9 +1098,21 @@ class Flattener(Evaluator):
                  "add point = ... (and surface, normal, ...) or gap = ... to its modifiers")
         return f["surface"].value
 
-    def _build_joint(self, inst: CompInst, f, span) -> ir.Joint:
+    def _build_joint(self, inst: CompInst, f, span, out: K.Built) -> ir.Joint:
         cls, name = inst.cls, inst.name
+        if cls.name == "RigidLink":
+            a, b = f["a"], f["b"]
+            end = f"{name}.end"
+            out.points.append(ir.Point(end, self.body_of_point(a.name), K.as_vec3(f["r"], "r"), span))
+            z = X.const(0.0)
+            return ir.Joint(name, "fixed", end, _point_name(b), self.body_of_point(a.name), self.body_of_point(b.name),
+                            (z, z, X.const(1.0)), (), None, None, None, (), False, span)
         parent, child = f["parent"], f["child"]
+        if child is None:                   # the joint's own massless frame
+            z = X.const(0.0)
+            out.bodies.append(ir.Body(name, "frame", span=span))
+            out.points.append(ir.Point(name, name, (z, z, z), span))
+            child = CompRef("body", name, "JointFrame")
         pb, cb = self.body_of_point(parent.name), self.body_of_point(child.name)
         kind = cls.name.lower()
         axis = K.normalized(K.as_vec3(f["axis"], "axis"), "axis") if cls.field("axis") else (
@@ -1070,6 +1157,8 @@ class Flattener(Evaluator):
             out.forces.append(ir.AppliedTorque(name, f["body"].name, K.as_vec3(f["tau"], "tau"), f["frame"].name, span))
         elif cls.name == "GeneralizedForce":
             out.forces.append(ir.GeneralizedForce(name, f["coordinate"].expr.name, e(f["Q"], "Q"), span))
+        elif cls.name == "Friction":
+            out.forces.append(friction_force(self, name, f, span))
         elif cls.name == "Gravitation":
             names = tuple(b.name for b in f["bodies"].items)
             if len(set(names)) != len(names):
@@ -1104,13 +1193,18 @@ def _kinematic_attr(ref: CompRef, name: str) -> Val | None:
         return Arr(tuple(Scalar(ir.PointPos(p, i), U.LENGTH) for i in range(3)))
     if name == "v":
         return Arr(tuple(Scalar(ir.PointVel(p, i), U.VELOCITY) for i in range(3)))
+    if name == "a":
+        return Arr(tuple(Scalar(ir.PointAcc(p, i), U.ACCEL) for i in range(3)))
     if name in ("x", "y", "z"):
         return Scalar(ir.PointPos(p, "xyz".index(name)), U.LENGTH)
     if ref.kind == "body" and ref.type_name not in ("Point",):
         if name == "R":
             return Arr(tuple(Arr(tuple(Scalar(ir.BodyRot(p, i, j), U.ONE) for j in range(3))) for i in range(3)))
-        if name == "w":
-            return Arr(tuple(Scalar(ir.BodyOmega(p, i), U.dim(s=-1)) for i in range(3)))
+        if name in ("w", "w_body"):
+            frame = "world" if name == "w" else "body"
+            return Arr(tuple(Scalar(ir.BodyOmega(p, i, frame), U.dim(s=-1)) for i in range(3)))
+        if name == "alpha":
+            return Arr(tuple(Scalar(ir.BodyAlpha(p, i), U.dim(s=-2)) for i in range(3)))
     return None
 
 

@@ -137,6 +137,12 @@ def dim_text(d) -> str:
 # ----------------------------------------------------------------------------- dimensions
 
 
+def zdim(s: Scalar):
+    """The dimension of ``s`` for sums and products: an exact zero (literal 0, the zeros of
+    zeros()/diagonal()/skew(), a product with one of them) takes any unit."""
+    return ANY if s.const == 0.0 else s.dim
+
+
 def dim_join(a, b, what: str, approx: bool = False):
     """Dimension of a sum/comparison; error when both known and different."""
     if a is ANY or a is None:
@@ -241,14 +247,14 @@ def _check_num(v: Val, op: str) -> None:
 def add(a: Val, b: Val) -> Val:
     _check_num(a, "+"), _check_num(b, "+")
     return elementwise(a, b, lambda x, y: Scalar(X.add(x.expr, y.expr),
-                                                 dim_join(x.dim, y.dim, "a sum", x.approx or y.approx),
+                                                 dim_join(zdim(x), zdim(y), "a sum", x.approx or y.approx),
                                                  x.integer and y.integer, approx=x.approx or y.approx), "a sum")
 
 
 def sub(a: Val, b: Val) -> Val:
     _check_num(a, "-"), _check_num(b, "-")
     return elementwise(a, b, lambda x, y: Scalar(X.sub(x.expr, y.expr),
-                                                 dim_join(x.dim, y.dim, "a difference", x.approx or y.approx),
+                                                 dim_join(zdim(x), zdim(y), "a difference", x.approx or y.approx),
                                                  x.integer and y.integer, approx=x.approx or y.approx), "a difference")
 
 
@@ -258,8 +264,8 @@ def neg(a: Val) -> Val:
 
 
 def _smul(x: Scalar, y: Scalar) -> Scalar:
-    return Scalar(X.mul(x.expr, y.expr), dim_mul(x.dim, y.dim), x.integer and y.integer,
-                  approx=x.approx or y.approx)
+    d = ANY if x.const == 0.0 or y.const == 0.0 else dim_mul(x.dim, y.dim)
+    return Scalar(X.mul(x.expr, y.expr), d, x.integer and y.integer, approx=x.approx or y.approx)
 
 
 def mul(a: Val, b: Val) -> Val:
@@ -344,7 +350,7 @@ def dot(a: Val, b: Val) -> Scalar:
     for x, y in zip(a.items, b.items):
         term = _smul(x, y)
         out = term if out is None else Scalar(X.add(out.expr, term.expr),
-                                              dim_join(out.dim, term.dim, "a dot product", out.approx or term.approx),
+                                              dim_join(zdim(out), zdim(term), "a dot product", out.approx or term.approx),
                                               approx=out.approx or term.approx)
     return out if out is not None else const(0)
 
@@ -357,7 +363,7 @@ def cross(a: Val, b: Val) -> Arr:
 
     def c(i, j):
         p, q = _smul(x[i], y[j]), _smul(x[j], y[i])
-        return Scalar(X.sub(p.expr, q.expr), dim_join(p.dim, q.dim, "a cross product", p.approx or q.approx),
+        return Scalar(X.sub(p.expr, q.expr), dim_join(zdim(p), zdim(q), "a cross product", p.approx or q.approx),
                       approx=p.approx or q.approx)
 
     return Arr((c(1, 2), c(2, 0), c(0, 1)))
@@ -381,7 +387,7 @@ def norm(a: Val) -> Scalar:
 def compare(op: str, a: Val, b: Val) -> Scalar:
     a = _scalar(a, f"'{op}'")
     b = _scalar(b, f"'{op}'")
-    dim_join(a.dim, b.dim, "a comparison", a.approx or b.approx)
+    dim_join(zdim(a), zdim(b), "a comparison", a.approx or b.approx)
     name = {"<": "lt", "<=": "le", ">": "gt", ">=": "ge", "==": "eq", "<>": "ne"}[op]
     if a.const is not None and b.const is not None:
         r = {"lt": a.const < b.const, "le": a.const <= b.const, "gt": a.const > b.const,
@@ -408,7 +414,7 @@ def select(cond: Scalar, a: Val, b: Val) -> Val:
     if cond.const is not None:
         return a if cond.const else b
     return elementwise(a, b, lambda x, y: Scalar(ir.Op("if", (cond.expr, x.expr, y.expr)),
-                                                 dim_join(x.dim, y.dim, "the branches of an if-expression",
+                                                 dim_join(zdim(x), zdim(y), "the branches of an if-expression",
                                                           x.approx or y.approx), approx=x.approx or y.approx),
                        "the branches of an if-expression")
 
@@ -443,7 +449,7 @@ def apply_func(name: str, args: list[Val]) -> Val:
             raise ValError("E304", f"{name}() takes 2 arguments, got {len(args)}", f"write {name}(a, b)")
 
         def g(x: Scalar, y: Scalar) -> Scalar:
-            d = dim_join(x.dim, y.dim, f"{name}()", x.approx or y.approx)
+            d = dim_join(zdim(x), zdim(y), f"{name}()", x.approx or y.approx)
             if name == "atan2":
                 d = U.ONE
             if x.const is not None and y.const is not None:

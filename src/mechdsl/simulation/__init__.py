@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import time
 
+from ..diagnostics import MechError
 from ..result import Result
 from .problem import Problem, dump, formulate
 from .settings import SimulationSettings, from_kwargs, resolve
@@ -44,10 +45,17 @@ def solve(problem: Problem, progress=None) -> Result:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         r = backend.run(problem, callback)
+    except MechError:
+        _blame_signals(problem)
+        raise
     finally:
         if bar is not None:
             bar.close()
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    if problem.drive is not None and problem.kind != "ode":
+        _record_inputs(r, problem.drive)
+    if problem.drive is not None:
+        _signal_failure(r, problem.drive)
     A.check_finite(r)
     A.normalize_stats(r, cpu, wall)
     A.accuracy_report(r, problem, fixed_step=problem.backend == "fixed-step")
@@ -62,8 +70,20 @@ def solve(problem: Problem, progress=None) -> Result:
     ran = backend.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,
-                   "compiled": bool(meta.get("compiled", (meta.get("options") or {}).get("compiled", False))),
+                   "compiled": _ran_compiled(meta),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
+    from ..eom import parameter_vector
+    from ..friction import friction_notes
+
+    eom = problem.eom
+    notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
+    if notes:
+        meta["friction"] = notes          # regularized laws and their regularization (issue 17)
+    renamed = [c for c in (eom.model.constraints if getattr(eom, "model", None) is not None else ())
+               if c.alias and c.alias != c.name]
+    if renamed:                           # constraints named after their description: old names still read
+        meta["aliases"] = {**{f"lambda[{c.alias}]": f"lambda[{c.name}]" for c in renamed},
+                           **{f"residual({c.alias})": f"residual({c.name})" for c in renamed}}
     if "versions" not in meta:
         from ..simulate import versions
 
@@ -71,6 +91,44 @@ def solve(problem: Problem, progress=None) -> Result:
     if s.estimate_error:
         _estimate_error(r, problem)
     return r
+
+
+def _record_inputs(r: Result, drive) -> None:
+    """The inputs on the recorded times, as signals named after them (the ODE back end records
+    its own), and the bound warnings of signals known only during the run."""
+    import numpy as np
+
+    from ..simulate import record_inputs
+
+    X = np.c_[r.q, r.qd] if len(r.t) else np.zeros((0, 2 * len(r.coordinates)))
+    r.metadata.setdefault("inputs", drive.describe())
+    record_inputs(drive, drive.values(np.asarray(r.t, float), X), r.signals, r.metadata)
+
+
+def _blame_signals(problem: Problem) -> None:
+    """A back end that could not evaluate the equations before its run (the fixed-step back end
+    probes them): when a Python input signal failed there, that is the error to report."""
+    errors = problem.drive.signal_errors() if problem.drive is not None else []
+    if errors:
+        from ..diagnostics import UsageError
+
+        raise UsageError(f"{'; '.join(errors)} (the {problem.backend} back end evaluates the equations, "
+                         "input signals included, at sample states before it starts)") from None
+
+
+def _signal_failure(r: Result, drive) -> None:
+    """A Python input signal that failed during the run is the cause of the run's failure."""
+    errors = drive.signal_errors()
+    if not errors:
+        return
+    import dataclasses
+
+    if r.failure is not None:
+        r.failure = dataclasses.replace(r.failure, cause="input signal failed",
+                                        detail=f"{'; '.join(errors)} (the back end then reported: "
+                                               f"{r.failure.cause}: {r.failure.detail})")
+    else:
+        r.metadata.setdefault("warnings", []).extend(errors)
 
 
 def _estimate_error(r: Result, problem: Problem) -> None:
@@ -94,10 +152,21 @@ def _estimate_error(r: Result, problem: Problem) -> None:
         how = f"rtol = {tighter.rtol:g}, atol = {tighter.atol:g}"
     if problem.backend == "fixed-step" and s.points is None:
         tighter = tighter.replace(points=len(r.t)) if len(r.t) >= 2 else tighter
+    if problem.drive is not None and problem.kind != "ode":
+        tighter = tighter.replace(inputs=None)        # problem.eom has the inputs built in
     tight = solve(formulate(problem.eom, tighter.validated()))
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
+
+
+def _ran_compiled(meta) -> bool:
+    """Whether compiled code ran: the back end's flag (a bool; the ODE back end's
+    ``metadata.compiled`` is the decision's text, its flag is ``options.compiled``)."""
+    flag = meta.get("compiled")
+    if not isinstance(flag, bool):
+        flag = (meta.get("options") or {}).get("compiled", False)
+    return bool(flag)
 
 
 __all__ = ["SimulationSettings", "Problem", "formulate", "solve", "simulate", "resolve", "from_kwargs", "dump"]

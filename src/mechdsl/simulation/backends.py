@@ -30,7 +30,7 @@ class Backend(abc.ABC):
 
 class OdeBackend(Backend):
     name = "ode"
-    ignores = ("rest_speed", "impact_order")
+    ignores = ("rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
         from ..simulate import simulate_ode
@@ -46,9 +46,31 @@ class OdeBackend(Backend):
         return {"formulation": "ode", "integrator": plugin, "method": method}
 
 
+def python_signals(problem) -> tuple[str, ...]:
+    """Inputs driven by Python callables: call nodes in the equations, which C cannot hold."""
+    drive = problem.drive
+    return tuple(sg.name for sg in drive.signals if sg.kind == "callable") if drive is not None else ()
+
+
+def _compiled(problem) -> tuple[bool, str | None]:
+    """compiled as asked, unless Python signals are in the equations (then a note why not)."""
+    s = problem.settings
+    names = python_signals(problem) if problem.kind != "ode" else ()
+    if s.compiled and names:
+        return False, (f"compiled = true not applied: the input signal(s) {', '.join(names)} are Python "
+                       "functions, which compiled code cannot call; the run used the virtual machine")
+    return bool(s.compiled), None
+
+
+def _noted(r: Result, note: str | None) -> Result:
+    if note:
+        r.metadata.setdefault("notes", []).append(note)
+    return r
+
+
 class DaeBackend(Backend):
     name = "dae"
-    ignores = ("rest_speed", "impact_order")
+    ignores = ("rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
         from ..dae import simulate_dae
@@ -58,10 +80,11 @@ class DaeBackend(Backend):
         for key in ("dt", "integrator_options"):
             if getattr(s, key):
                 kw[key] = getattr(s, key)
-        return simulate_dae(problem.eom, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol, method=s.method,
-                            points=s.points, outputs=s.outputs, x0=s.x0, p=s.p, progress=progress,
-                            formulation=s.formulation, reactions=s.reactions, compiled=s.compiled,
-                            max_steps=s.max_steps, **kw)
+        compiled, note = _compiled(problem)
+        return _noted(simulate_dae(problem.eom, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol,
+                                   method=s.method, points=s.points, outputs=s.outputs, x0=s.x0, p=s.p,
+                                   progress=progress, formulation=s.formulation, reactions=s.reactions,
+                                   compiled=compiled, max_steps=s.max_steps, **kw), note)
 
     def describe(self, r):
         f = r.metadata.get("formulation")
@@ -90,7 +113,7 @@ class EventsBackend(Backend):
         return simulate_with_contacts(problem.eom, None, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol,
                                       method=s.method, points=s.points, outputs=s.outputs, x0=s.x0, p=s.p,
                                       progress=progress, rest_speed=s.rest_speed, impact_order=s.impact_order,
-                                      **kw)
+                                      output_events=s.output_events, **kw)
 
     def describe(self, r):
         from ..impacts.stepper import SCIPY_METHODS
@@ -101,7 +124,7 @@ class EventsBackend(Backend):
 
 class FixedStepBackend(Backend):
     name = "fixed-step"
-    ignores = ("max_steps", "integrator_options", "rest_speed", "impact_order")
+    ignores = ("max_steps", "integrator_options", "rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
         from ..symplectic import simulate_symplectic

@@ -12,8 +12,10 @@ and inputs nothing drives keep their declared default.  When every signal is con
 back ends receive u as a constant vector (the integrators' parameter is [u; p]); otherwise
 the ODE back end integrates the closed loop ``ode(t, x, U(t, x), p)``, an MX Function built
 once here (Python callables enter through a ``casadi.Callback`` with finite-difference
-derivatives), so every integrator plug-in runs it unchanged.  The values are recorded as
-signals named after the inputs.
+derivatives), so every integrator plug-in runs it unchanged, and the back ends that read the
+equations themselves (DAE, contacts, fixed step) get ``close_eom``: the equations with u
+replaced by the SX expression U(t, x) (Python signals as call nodes).  The values are
+recorded as signals named after the inputs.
 
 Bounds: a constant or a table outside the declared ``min``/``max`` is an error (known
 before the run); a callable's values are only known during the run, so leaving the bounds
@@ -95,14 +97,28 @@ class Drive:
     names: tuple[str, ...]
     signals: list[Signal] = field(default_factory=list)
     bounds: tuple = ()        # (min, max) per input, None where not declared
+    span: tuple = (-np.inf, np.inf)     # the run's times: signals are never called outside
 
     @property
     def constant(self) -> bool:
         return all(s.kind in ("default", "constant") for s in self.signals)
 
-    def vector(self) -> np.ndarray:
-        """u of a constant drive (the defaults where a signal is not constant)."""
-        return np.array([s.value if s.value is not None else 0.0 for s in self.signals], float)
+    def vector(self, t: float | None = None) -> np.ndarray:
+        """u of a constant drive; with ``t``, also the value at t of every zero-order-hold table
+        (held until its next sample); 0 for the other signals (closed into ``ode``)."""
+        return np.array([_held(s, t) if _zoh(s) and t is not None else s.value if s.value is not None else 0.0
+                         for s in self.signals], float)
+
+    def breakpoints(self, t0: float, t1: float) -> np.ndarray:
+        """The tables' sample times strictly inside (t0, t1): where a zero-order hold jumps and a
+        linear table has a kink.  The ODE back end restarts its integrator there (an integrator
+        stepping across a jump loses accuracy, and at tight tolerances fails)."""
+        tol = 1e-12 * max(1.0, abs(t0), abs(t1))
+        ts = [s.table.times for s in self.signals if s.kind == "table"]
+        if not ts:
+            return np.zeros(0)
+        allt = np.unique(np.concatenate(ts))
+        return allt[(allt > t0 + tol) & (allt < t1 - tol)]
 
     def describe(self) -> dict:
         out = {}
@@ -116,10 +132,12 @@ class Drive:
         return out
 
     def closed(self, funcs):
-        """{"ode", "ode_jacobian"} of the closed loop ode(t, x, U(t, x), p), signature (t, x, u, p)
-        (u unused: the call sites stay the same), or ``funcs`` itself for a constant drive."""
-        if self.constant:
-            return funcs
+        """{"ode", "ode_jacobian"} of the closed loop ode(t, x, U(t, x), p), signature (t, x, u, p),
+        where u carries only the zero-order-hold tables' current values (``vector(t)``: the back
+        end integrates piece by piece between ``breakpoints``, so a step never sees a jump), or
+        ``funcs`` itself when every signal is a constant or a zero-order hold."""
+        if all(s.kind in ("default", "constant") or _zoh(s) for s in self.signals):
+            return funcs             # zero-order holds come in through u, piece by piece (vector(t))
         import casadi as ca
 
         from ..codegen import TXUP, jacobian_of
@@ -129,15 +147,43 @@ class Drive:
         x = ca.MX.sym("x", ode.size1_in(1))
         u = ca.MX.sym("u", ode.size1_in(2))
         p = ca.MX.sym("p", ode.size1_in(3))
-        U = self.expression(t, x)
+        U = self.expression(t, x, held=u)
         closed = ca.Function("ode", [t, x, u, p], [ode(t, x, U, p)], TXUP, ["xdot"])
         return _Closed({"ode": closed, "ode_jacobian": jacobian_of(closed)}, funcs)
 
-    def expression(self, t, x):
-        """U(t, x) as an MX column (one entry per input)."""
+    def expression(self, t, x, held=None):
+        """U(t, x) as a column of the type of ``t`` (MX or SX: in SX, Python signals and MX
+        Functions enter as call nodes), one entry per input; ``held``: a column whose entries
+        stand for the zero-order-hold tables (instead of their expression in t)."""
         import casadi as ca
 
-        return ca.vertcat(*[_mx(s, t, x) for s in self.signals]) if self.signals else ca.MX(0, 1)
+        sym = ca.SX if isinstance(t, ca.SX) else ca.MX
+        if not self.signals:
+            return sym(0, 1)
+        return ca.vertcat(*[held[j] if held is not None and _zoh(s) else _expr(s, t, x, sym, self.span)
+                            for j, s in enumerate(self.signals)])
+
+    def close_eom(self, eom):
+        """The equations with every input replaced by its signal U(t, x) (SX): for the back ends
+        that read the equations themselves (DAE, contacts, fixed step), which then see the
+        inputs as functions of time and state, as the ODE back end's closed loop does."""
+        import casadi as ca
+
+        u = eom.u
+        U = self.expression(eom.t, ca.vertcat(eom.q, eom.qd))
+
+        def sub(e):
+            if e is None or isinstance(e, (int, float, np.ndarray)):
+                return e
+            v = ca.SX(e)
+            return ca.substitute(v, u, U) if ca.depends_on(v, u) else e
+
+        def subs(d):
+            return {k: (tuple(sub(a) for a in v) if isinstance(v, tuple) else sub(v)) for k, v in (d or {}).items()}
+
+        changes = {k: sub(getattr(eom, k)) for k in ("T", "V", "D", "Q", "M", "bias", "qdd", "g")}
+        return eom.replace(**changes, outputs=subs(eom.outputs), reactions=subs(eom.reactions),
+                           invariants=subs(eom.invariants), u=None, inputs=(), input_defaults=())
 
     def values(self, t: np.ndarray, X: np.ndarray) -> np.ndarray:
         """The inputs on the sample times: rows = times, columns = inputs."""
@@ -150,6 +196,10 @@ class Drive:
         xx = ca.MX.sym("x", X.shape[1])
         f = ca.Function("U", [tt, xx], [self.expression(tt, xx)])
         return np.array(f.map(N)(t.reshape(1, -1), X.T), float).reshape(len(self.signals), N).T
+
+    def signal_errors(self) -> list[str]:
+        """What went wrong in Python signals during the run (each gave NaN from then on)."""
+        return [s.fn.error for s in self.signals if s.kind == "callable" and getattr(s.fn, "error", None)]
 
     def check_bounds(self, U: np.ndarray) -> list[str]:
         """Warnings for recorded values outside the declared bounds (signals known only during a run)."""
@@ -176,11 +226,22 @@ class _Closed(dict):
         return self.base[key]
 
 
-def _mx(s: Signal, t, x):
+def _zoh(s: Signal) -> bool:
+    return s.kind == "table" and s.table.hold == "zoh"
+
+
+def _held(s: Signal, t: float) -> float:
+    """A zero-order-hold table's value on [t, next sample): value k on [t_k, t_k+1)."""
+    tb = s.table
+    k = int(np.searchsorted(tb.times, t + 1e-12 * max(1.0, abs(t)), side="right")) - 1
+    return float(tb.values[min(max(k, 0), tb.values.size - 1)])
+
+
+def _expr(s: Signal, t, x, sym, span):
     import casadi as ca
 
     if s.kind in ("default", "constant"):
-        return ca.MX(s.value)
+        return sym(s.value)
     if s.kind == "table":
         tb = s.table
         ts = ca.SX.sym("t")
@@ -192,7 +253,10 @@ def _mx(s: Signal, t, x):
             expr = ca.pw_const(ts, ca.DM(tb.times[1:]), ca.DM(tb.values))
         return ca.Function(_fname("table", s.name), [ts], [expr])(t)
     f = s.fn
-    return f(t, x) if s.feedback else f(t)
+    # the user's function only at the run's times: integrators may look past the end, and the
+    # fixed-step back end's structure probes (mechdsl.analysis.core) use times of their own
+    tc = ca.fmin(ca.fmax(t, span[0]), span[1]) if np.isfinite(span).all() else t
+    return f(tc, x) if s.feedback else f(tc)
 
 
 def _fname(prefix: str, name: str) -> str:
@@ -223,7 +287,7 @@ def build_drive(eom, spec, t0: float, t1: float, x0=None) -> Drive:
             signals.append(Signal(name, "default", value=default))
             continue
         signals.append(_signal(name, spec[name], t0, t1, x0, nx))
-    drive = Drive(names, signals, bounds)
+    drive = Drive(names, signals, bounds, (float(t0), float(t1)))
     for s, (lo, hi) in zip(signals, bounds):
         vals = (np.array([s.value]) if s.kind in ("default", "constant") else
                 s.table.values if s.kind == "table" else None)
@@ -307,12 +371,17 @@ def _numeric(v) -> bool:
 
 
 def _callback(name, fn, feedback, nx):
-    """A casadi.Callback around a Python signal (finite differences for derivatives)."""
+    """A casadi.Callback around a Python signal (finite differences for derivatives).
+
+    A call that fails or returns anything but one number gives NaN (never a Python exception
+    through CasADi, whose traceback would be printed): the back end stops the run there as
+    for a non-finite right-hand side, and ``error`` keeps the first problem for the report."""
     import casadi as ca
 
     class PySignal(ca.Callback):
         def __init__(self):
             ca.Callback.__init__(self)
+            self.error = None
             self.construct(_fname("input", name), {"enable_fd": True})
 
         def get_n_in(self):
@@ -326,10 +395,18 @@ def _callback(name, fn, feedback, nx):
 
         def eval(self, args):
             t = float(args[0])
-            v = fn(t, np.array(args[1], float).ravel()) if feedback else fn(t)
-            arr = np.asarray(v, dtype=float).ravel()
+            try:
+                v = fn(t, np.array(args[1], float).ravel()) if feedback else fn(t)
+                arr = np.asarray(v, dtype=float).ravel()
+            except Exception as e:  # noqa: BLE001 - the user's code: reported with the run's failure
+                return self._fail(t, f"calling the signal failed: {type(e).__name__}: {e}")
             if arr.size != 1:
-                raise ValueError(f"input '{name}' returned {arr.size} values at t = {t:g}")
+                return self._fail(t, f"the signal returned {arr.size} values, not one number")
             return [ca.DM(float(arr[0]))]
+
+        def _fail(self, t, what):
+            if self.error is None:
+                self.error = f"input '{name}' at t = {t:.6g}: {what}"
+            return [ca.DM(float("nan"))]
 
     return PySignal()

@@ -5,13 +5,13 @@
 or a fixed-step canonical integration) and which back end solves it; ``dump(problem)``
 prints it deterministically (``mech compile --emit problem``).  ``inputs`` names the model's
 control inputs and ``drive`` (drive.py) their signals: the ODE back end integrates the
-closed loop; the other back ends take constant inputs only, folded into the parameters.
+closed loop; the other back ends get the equations with constant inputs folded into the
+parameters, or with u replaced by the signals' expression U(t, x) (``Drive.close_eom``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..diagnostics import UsageError
 from .settings import SimulationSettings
 
 KINDS = {"ode": "ODE in minimal coordinates: M(q) q'' = bias(q, q', t, p)",
@@ -69,12 +69,8 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
         from .inputs import start_vector
 
         drive = build_drive(eom, settings.inputs, settings.t_start, settings.t_end, start_vector(eom, settings.x0, pv))
-        if kind != "ode":
-            if not drive.constant:
-                raise UsageError(f"time-varying inputs ({', '.join(s.name for s in drive.signals if s.kind not in ('default', 'constant'))}) "
-                                 f"are supported for ODE problems only; this run is a {kind} problem ({KINDS[kind]}); "
-                                 "drive the inputs with constants here")
-            run_eom = fold_inputs(eom, drive.vector())      # constant inputs: trailing parameters
+        if kind != "ode":      # constant inputs: trailing parameters; signals: u = U(t, x) in the equations
+            run_eom = fold_inputs(eom, drive.vector()) if drive.constant else drive.close_eom(eom)
     elif settings.inputs:
         from .drive import build_drive
 
@@ -137,6 +133,8 @@ def dump(problem: Problem) -> str:
     lines += [f"    {topic}: {text}" for topic, text in problem.plan]
     lines.append("  settings:")
     for k, v in s.as_dict().items():
+        if k == "compiled" and v is None:
+            v = "auto"      # the ODE back end compiles when it pays
         if v is None or v == {} or k == "extra":
             continue
         lines.append(f"    {k} = {v!r}")

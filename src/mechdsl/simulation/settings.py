@@ -31,7 +31,7 @@ MAX_TIME = 1e15             # |t| beyond this: the time grid loses sub-second re
 SCENE_KEYS = {"stop_time": "t_end", "start_time": "t_start", "rtol": "rtol", "atol": "atol",
               "method": "method", "points": "points", "outputs": "outputs", "formulation": "formulation",
               "dt": "dt", "reactions": "reactions", "compiled": "compiled", "rest_speed": "rest_speed",
-              "impact_order": "impact_order"}
+              "impact_order": "impact_order", "output_events": "output_events"}
 
 
 @dataclass(frozen=True)
@@ -51,11 +51,12 @@ class SimulationSettings:
     inputs: dict | None = None         # {input name: number | table | u(t) | u(t, x) | casadi.Function} (drive.py)
     dt: float | None = None            # fixed-step methods
     reactions: bool = False
-    compiled: bool = False
+    compiled: bool | None = None       # None: automatic (the ODE back end compiles when it pays)
     max_steps: int | None = None
     integrator_options: dict | None = None
     rest_speed: float | None = None    # contacts
     impact_order: str | None = None    # contacts
+    output_events: bool = False        # contacts: also record the state before and after each event
     budget: int = DEFAULT_BUDGET
     estimate_error: bool = False
     extra: dict = field(default_factory=dict)   # back-end specific options (checked by the back end)
@@ -219,13 +220,14 @@ def validate(s: SimulationSettings) -> SimulationSettings:
             raise UsageError(f"outputs must be a list of names (got {outputs!r})")
         outputs = tuple(outputs)
     max_steps = None if s.max_steps is None else _count("max_steps", s.max_steps, 1)
-    for name in ("reactions", "compiled", "estimate_error"):
-        if not isinstance(getattr(s, name), (bool, int)):
+    for name in ("reactions", "compiled", "estimate_error", "output_events"):
+        if not isinstance(getattr(s, name), (bool, int)) and not (name == "compiled" and s.compiled is None):
             raise UsageError(f"{name} must be true or false (got {getattr(s, name)!r})")
     return dataclasses.replace(s, t_start=t0, t_end=t1, rtol=rtol, atol=atol, points=points, dt=dt,
                                method=method, formulation=formulation,
                                outputs=outputs, max_steps=max_steps, reactions=bool(s.reactions),
-                               compiled=bool(s.compiled), budget=budget, estimate_error=bool(s.estimate_error))
+                               compiled=None if s.compiled is None else bool(s.compiled), budget=budget,
+                               estimate_error=bool(s.estimate_error), output_events=bool(s.output_events))
 
 
 def unknown_setting(name: str) -> UsageError:

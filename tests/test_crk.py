@@ -1,0 +1,285 @@
+"""The compiled stepping loop (mechdsl.simulation.crk): dopri5 and dop853 in C.
+
+Checked against independent references: scipy's RK45/DOP853 stepping in Python (the same
+algorithm, so the same steps), closed-form motions, CasADi's own integrators, and the
+output grid (the dense output must not change the steps)."""
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mechdsl import eom as E
+from mechdsl import integrators as I
+from mechdsl.codegen import find_compiler
+from mechdsl.simulate import simulate
+from mechdsl.simulation import crk
+from sim_models import blowup, chain, pendulum
+
+PAIRS = {"dopri5": "scipy-rk45", "dop853": "scipy-dop853"}
+
+
+def oscillator(w=3.0):
+    """x'' = -w^2 x from x = 1, x' = 0: x = cos(w t)."""
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 1)
+    return E.from_lagrangian("Osc", ["x"], ["k"], [w * w], q, qd, t, p, 0.5 * qd[0] ** 2, 0.5 * p[0] * q[0] ** 2,
+                             q0=[1.0], qd0=[0.0])
+
+
+def _compiled(r):
+    if find_compiler() is None:     # no compiler: the run says so and steps in Python
+        assert any("compiled stepping loop unavailable" in w for w in r.metadata["warnings"])
+        return False
+    assert r.metadata["options"]["compiled"] is True, r.metadata["warnings"]
+    return True
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_compiled_loop_takes_the_steps_of_scipys_same_method(method):
+    e = chain(2)
+    r = simulate(e, 1.5, method=method, rtol=1e-8, atol=1e-8, points=31)
+    ref = simulate(e, 1.5, method=PAIRS[method], rtol=1e-8, atol=1e-8, points=31)
+    assert r.success and ref.success
+    _compiled(r)
+    assert r.stats["steps"] == ref.stats["steps"]
+    assert r.stats["rhs_evals"] == ref.stats["rhs_evals"]
+    assert r.stats["rejected_steps"] >= 0 and r.stats["jac_evals"] == 0
+    # compiled and virtual machine right-hand sides differ by round-off only
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-10)
+    assert r.metadata["method"] == method and "compiled stepping loop" in r.metadata["integrator"]
+
+
+@pytest.mark.parametrize("method,rtol,bound", [("dopri5", 1e-9, 2e-7), ("dop853", 1e-11, 1e-9)])
+def test_harmonic_oscillator_against_the_closed_form_on_every_output_point(method, rtol, bound):
+    w = 3.0
+    r = simulate(oscillator(w), 10.0, method=method, rtol=rtol, atol=rtol, points=777)
+    assert r.success
+    _compiled(r)
+    err = max(np.abs(r.q[:, 0] - np.cos(w * r.t)).max(), np.abs(r.qd[:, 0] + w * np.sin(w * r.t)).max() / w)
+    assert err < bound, err
+    assert err > 0     # not a copy of the closed form
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_output_grid_density_does_not_change_the_solution(method):
+    e = pendulum(theta0=2.5)
+    coarse = simulate(e, 4.0, method=method, rtol=1e-10, atol=1e-10, points=5)
+    fine = simulate(e, 4.0, method=method, rtol=1e-10, atol=1e-10, points=4001)
+    assert coarse.stats["steps"] == fine.stats["steps"]
+    assert coarse.stats["rejected_steps"] == fine.stats["rejected_steps"]
+    assert coarse.q[-1, 0] == pytest.approx(fine.q[-1, 0], abs=1e-14)
+    # the fine grid's points at the coarse times come from the dense output, not from a step end
+    idx = [round(k * 1000) for k in range(5)]
+    np.testing.assert_allclose(fine.q[idx, 0], coarse.q[:, 0], rtol=0, atol=1e-8)
+
+
+def test_agrees_with_casadis_own_integrator():
+    e = chain(3)
+    r = simulate(e, 1.0, method="dop853", rtol=1e-11, atol=1e-11, points=11)
+    ref = simulate(e, 1.0, method="cvodes-adams", rtol=1e-11, atol=1e-11, points=11)
+    assert r.success and ref.success
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_failure_says_when_and_keeps_the_solution_up_to_it(method):
+    r = simulate(blowup(), 2.0, method=method, rtol=1e-10, atol=1e-10, points=201)
+    assert not r.success
+    assert r.failure.time == pytest.approx(math.sqrt(2), abs=0.02)
+    assert r.t[-1] < math.sqrt(2)
+    exact = 1 / (1 - r.t / math.sqrt(2))
+    np.testing.assert_allclose(r.q[:, 0], exact, rtol=1e-5)
+
+
+def test_step_limit_is_a_failure_with_its_cause():
+    r = simulate(chain(2), 5.0, method="dop853", rtol=1e-10, atol=1e-10, points=3, max_steps=5)
+    assert not r.success
+    assert r.failure.cause == "too many steps"
+    assert 0 < r.failure.time < 2.5
+
+
+def test_without_a_compiler_the_same_method_runs_in_python(monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    monkeypatch.setattr(crk, "_LIBS", {})
+    e = oscillator(2.0)
+    r = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
+    assert r.success
+    assert r.metadata["options"]["compiled"] is False
+    assert any("no C compiler" in w for w in r.metadata["warnings"])
+    monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.delenv("CC")
+    c = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
+    _compiled(c)
+    assert c.stats["steps"] == r.stats["steps"]
+    np.testing.assert_allclose(c.q, r.q, rtol=0, atol=1e-12)
+
+
+def test_integrator_options_are_refused_as_a_usage_error():
+    from mechdsl.diagnostics import UsageError
+
+    with pytest.raises(UsageError, match="dop853"):
+        simulate(chain(2), 1.0, method="dop853", integrator_options={"foo": 1})
+
+
+def test_registry_names_and_no_jacobian():
+    from mechdsl.simulation.registry import check_method, methods
+
+    for m in PAIRS:
+        assert m in I.NO_JACOBIAN and m in I.METHODS
+        assert "ode" in check_method(m).backends and "ode" in methods()[m].backends
+    assert "events" in methods()["dop853"].backends      # the contact back end's name is kept
+
+
+# --------------------------------------------------------------------------- method auto compiles when it pays
+
+
+def test_auto_compiles_a_long_run_and_says_why():
+    e = pendulum(theta0=2.5)
+    r = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301)
+    if find_compiler() is None:
+        assert r.metadata["method"] == "erk" and "no C compiler" in r.metadata["compiled"]
+        return
+    assert r.metadata["method"] == "dop853"
+    assert r.metadata["compiled"].startswith("auto (estimated") and "pays back" in r.metadata["compiled"]
+    assert "compiled stepping loop" in r.metadata["method_reason"]
+    assert r.metadata["options"]["compiled"] is True
+    est = r.metadata["auto"]["compile"]
+    assert est["estimated_vm_time"] > est["estimated_compiled_time"] > 0
+    # opting out keeps the virtual machine's erk; both within the tolerance of each other
+    off = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301, compiled=False)
+    assert off.metadata["method"] == "erk" and off.metadata["compiled"] == "off (requested)"
+    assert off.metadata["options"]["compiled"] is False
+    np.testing.assert_allclose(r.q[:, 0], off.q[:, 0], rtol=0, atol=1e-4)
+
+
+def test_auto_does_not_compile_a_short_run_of_a_small_model():
+    r = simulate(pendulum(), 2.0, rtol=1e-8, atol=1e-8)
+    assert r.metadata["method"] == "erk"
+    assert r.metadata["compiled"].startswith("no: auto (")
+    assert r.metadata["options"]["compiled"] is False
+
+
+def test_auto_without_a_compiler_stays_in_the_virtual_machine(monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    r = simulate(pendulum(theta0=2.5), 300.0, rtol=1e-8, atol=1e-8, points=11)
+    assert r.success and r.metadata["method"] == "erk"
+    assert r.metadata["compiled"] == "no: auto (no C compiler)"
+
+
+def test_rhs_cost_counts_instructions_and_the_linear_solve():
+    from mechdsl.codegen import casadi_functions
+
+    sx = casadi_functions(pendulum(), names=("ode",))["ode"]
+    assert sx.is_a("SXFunction") and crk.rhs_cost(sx) == sx.n_instructions()
+    mx = casadi_functions(chain(3), names=("ode",))["ode"]      # M qdd = bias solved numerically (QR)
+    assert not mx.is_a("SXFunction")
+    assert crk.rhs_cost(mx) > 3 ** 3 + mx.n_instructions()
+
+
+def test_cli_no_compile_opts_out(tmp_path, monkeypatch, capsys):
+    import json
+
+    from mechdsl.cli import main
+
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)
+
+    model = Path(__file__).resolve().parents[1] / "models" / "pendulum.mech"
+    out = tmp_path / "p.csv"
+    assert main(["simulate", str(model), "--t-end", "150", "--points", "11", "--no-compile", "-o", str(out),
+                 "--no-progress"]) == 0
+    meta = json.loads((tmp_path / "p.json").read_text())["metadata"]
+    assert meta["compiled"] == "off (requested)" and meta["method"] != "dop853"
+    assert main(["simulate", str(model), "--compiled", "--no-compile"]) == 2
+
+
+def test_cvodes_adams_compiled_holds_no_dense_jacobian(tmp_path, monkeypatch):
+    """Functional iteration never evaluates the Jacobian: the library holds the forward
+    derivative only (it used to compile the dense Jacobian: 774 kB of C at N = 12)."""
+    import ctypes
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    e = chain(3)
+    r = simulate(e, 2.0, method="cvodes-adams", compiled=True, rtol=1e-10, atol=1e-10, points=11)
+    vm = simulate(e, 2.0, method="cvodes-adams", compiled=False, rtol=1e-10, atol=1e-10, points=11)
+    assert r.success
+    if find_compiler() is None:
+        assert any("compiled code unavailable" in w for w in r.metadata["warnings"])
+        return
+    assert r.metadata["options"]["compiled"] is True
+    libs = list(tmp_path.glob("*.so"))
+    assert len(libs) == 1
+    lib = ctypes.CDLL(str(libs[0]))
+    assert hasattr(lib, "fwd1_ode") and not hasattr(lib, "jac_ode")
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[vm.q, vm.qd], rtol=0, atol=1e-8)
+
+
+def test_run_record_says_whether_compiled_code_ran():
+    small = simulate(pendulum(), 1.0)
+    assert small.metadata["compiled"].startswith("no: auto") and small.metadata["run"]["compiled"] is False
+    r = simulate(pendulum(), 1.0, method="dopri5")
+    assert r.metadata["run"]["compiled"] is _compiled(r)
+    assert r.metadata["run"]["integrator"] == "crk:dopri5"
+
+
+def test_jacobian_eigenvalues_of_the_second_order_form_equal_the_full_decomposition():
+    from mechdsl.simulate import jacobian_eigenvalues
+
+    rng = np.random.default_rng(7)
+    for n in (1, 3, 8):
+        A = rng.normal(size=(n, n))
+        J = np.block([[np.zeros((n, n)), np.eye(n)], [A, np.zeros((n, n))]])
+        fast, full = jacobian_eigenvalues(J), np.linalg.eigvals(J)
+        assert len(fast) == 2 * n
+        for lam in full:      # every eigenvalue of J is found (and vice versa)
+            assert np.abs(fast - lam).min() < 1e-9 * max(1.0, abs(lam))
+        for lam in fast:
+            assert np.abs(full - lam).min() < 1e-9 * max(1.0, abs(lam))
+    damped = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.eye(2), -0.5 * np.eye(2)]])
+    np.testing.assert_allclose(np.sort_complex(jacobian_eigenvalues(damped)), np.sort_complex(np.linalg.eigvals(damped)))
+
+
+@pytest.mark.slow
+def test_twelve_link_chain_compiled_loop_equals_scipy_dop853_on_the_virtual_machine():
+    import re
+    from pathlib import Path
+
+    import mechdsl
+
+    text = (Path(__file__).resolve().parents[1] / "models" / "nlink_pendulum.mech").read_text()
+    m = mechdsl.loads(re.sub(r"parameter Integer N = \d+", "parameter Integer N = 12", text))
+    r = m.simulate(t_end=5, rtol=1e-8, method="dop853")
+    ref = m.simulate(t_end=5, rtol=1e-8, method="scipy-dop853")
+    assert r.success and ref.success
+    _compiled(r)
+    assert r.stats["steps"] == ref.stats["steps"]
+    np.testing.assert_allclose(np.c_[r.q, r.qd], np.c_[ref.q, ref.qd], rtol=0, atol=1e-9)
+
+
+def test_structurally_zero_accelerations_free_particle():
+    """xdot = (qd, 0): the output of ode is sparse; the loop reads it densified.  x = x0 + v t."""
+    q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
+    e = E.from_lagrangian("Free", ["x"], [], [], q, qd, t, p, 0.5 * qd[0] ** 2, 0 * q[0], q0=[1.0], qd0=[0.25])
+    r = simulate(e, 4.0, method="dopri5", rtol=1e-10, atol=1e-10, points=9)
+    assert r.success
+    _compiled(r)
+    np.testing.assert_allclose(r.q[:, 0], 1.0 + 0.25 * r.t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(r.qd[:, 0], 0.25, rtol=0, atol=1e-12)
+
+
+def test_concurrent_runs_share_one_library_and_give_the_same_numbers():
+    from concurrent.futures import ThreadPoolExecutor
+
+    e = chain(2)
+    one = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
+    starts = [{"theta1": 0.5 + 0.1 * k} for k in range(4)]
+    alone = [simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21, x0=s).q for s in starts]
+    with ThreadPoolExecutor(4) as ex:
+        together = list(ex.map(lambda s: simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21,
+                                                   x0=s).q, starts))
+    for a, b in zip(alone, together):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
+    assert not np.allclose(alone[0], one.q)      # the starts differ: the runs are not copies

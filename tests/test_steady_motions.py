@@ -1,0 +1,139 @@
+"""Issue 17: steady motions (relative equilibria of the Routh-reduced system) against closed forms:
+the heavy top's slow and fast precession, the conical pendulum, circular orbits in a central field."""
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import mechdsl
+from mechdsl.analysis.steady import steady_motions
+
+from conftest import MODELS
+
+TOP = dict(m=1.0, l=0.5, g=9.81, I1=0.12, I3=0.2)
+
+
+def test_heavy_top_slow_and_fast_precession():
+    """m g l = phi' (I3 w3 - A phi' cos th), A = I1 + m l^2: two roots for a given nutation and spin."""
+    model = mechdsl.load(MODELS / "heavy_top.mech", model="HeavyTop")
+    th, w3 = 0.6, 20.0
+    A, I3, mgl = TOP["I1"] + TOP["m"] * TOP["l"]**2, TOP["I3"], TOP["m"] * TOP["g"] * TOP["l"]
+    found = steady_motions(model.eom, {"tip.theta": th, "p_tip.psi": I3 * w3},
+                           ignorable=["tip.phi", "tip.psi"], max_guesses=30)
+    c = math.cos(th)
+    disc = math.sqrt((I3 * w3)**2 - 4 * A * c * mgl)
+    slow, fast = (I3 * w3 - disc) / (2 * A * c), (I3 * w3 + disc) / (2 * A * c)
+    assert [s.speeds["der(tip.phi)"] for s in found] == pytest.approx([slow, fast], rel=1e-9)
+    for s in found:
+        assert s.values["tip.theta"] == pytest.approx(th, abs=1e-12)
+        phid = s.speeds["der(tip.phi)"]
+        assert s.speeds["der(tip.psi)"] + phid * c == pytest.approx(w3, rel=1e-12)      # the pinned spin
+        # Routh's reduced potential, independently in sympy: V_R'' at the momenta of the motion
+        T, pphi, ppsi = sp.symbols("theta p_phi p_psi")
+        VR = mgl * sp.cos(T) + (pphi - ppsi * sp.cos(T))**2 / (2 * A * sp.sin(T)**2) + ppsi**2 / (2 * I3)
+        d2 = float(sp.diff(VR, T, 2).subs({T: th, pphi: s.momenta["p_tip.phi"], ppsi: s.momenta["p_tip.psi"]}))
+        assert s.hessian_eigenvalues == pytest.approx([d2], rel=1e-8)
+        assert float(sp.diff(VR, T).subs({T: th, pphi: s.momenta["p_tip.phi"], ppsi: s.momenta["p_tip.psi"]})) \
+            == pytest.approx(0, abs=1e-9)
+        assert s.stable is True
+        # the reduced linear system oscillates at sqrt(V_R''/A) (nutation about the steady motion)
+        assert np.max(np.abs(s.linear_eigenvalues.imag)) == pytest.approx(math.sqrt(d2 / A), rel=1e-8)
+
+
+CONICAL = """
+model Conical "a spherical pendulum in its polar angles"
+  parameter Real m = 0.8;
+  parameter Real L = 1.3;
+  parameter Real g = 9.81;
+  coordinate Real th(start = 0.5, unit = "rad");
+  coordinate Real ph(start = 0, speed = 2, unit = "rad");
+equation
+  kinetic = 1/2*m*L^2*(der(th)^2 + sin(th)^2*der(ph)^2);
+  potential = -m*g*L*cos(th);
+end Conical;
+"""
+
+
+@pytest.mark.parametrize("th", [0.3, 0.9, 1.3])
+def test_conical_pendulum(th):
+    """phi'^2 = g / (L cos th), both senses; nutation about it at w^2 = (g/L)(1 + 3 cos^2 th)/cos th."""
+    m, L, g = 0.8, 1.3, 9.81
+    found = steady_motions(mechdsl.loads(CONICAL).eom, {"th": th})
+    rate = math.sqrt(g / (L * math.cos(th)))
+    assert [s.speeds["der(ph)"] for s in found] == pytest.approx([-rate, rate], rel=1e-9)
+    for s in found:
+        assert s.stable is True
+        assert s.momenta["p_ph"] == pytest.approx(m * L**2 * math.sin(th)**2 * s.speeds["der(ph)"], rel=1e-12)
+        w2 = g / L * (1 + 3 * math.cos(th)**2) / math.cos(th)
+        assert np.max(np.abs(s.linear_eigenvalues.imag)) == pytest.approx(math.sqrt(w2), rel=1e-8)
+
+
+def _central(potential):
+    return mechdsl.loads(f"""
+model Central "a particle in a central field, polar coordinates"
+  parameter Real m = 1.5;
+  parameter Real k = 2;
+  coordinate Real r(start = 1);
+  coordinate Real ph(start = 0, speed = 1, unit = "rad");
+equation
+  kinetic = 1/2*m*(der(r)^2 + r^2*der(ph)^2);
+  potential = {potential};
+end Central;
+""")
+
+
+def test_circular_orbit_kepler_is_stable_with_the_orbital_frequency():
+    """V = -k/r: r* = h^2/(m k) for the angular momentum h; radial frequency = orbital frequency."""
+    m, k, h = 1.5, 2.0, 1.7
+    (s,) = steady_motions(_central("-k/r").eom, {"p_ph": h}, max_guesses=30)
+    r = h**2 / (m * k)
+    assert s.values["r"] == pytest.approx(r, rel=1e-10)
+    assert s.speeds["der(ph)"] == pytest.approx(h / (m * r**2), rel=1e-10)
+    assert s.stable is True
+    assert s.hessian_eigenvalues == pytest.approx([k / r**3], rel=1e-8)        # V_R'' = -2k/r^3 + 3h^2/(m r^4)
+    assert np.max(np.abs(s.linear_eigenvalues.imag)) == pytest.approx(h / (m * r**2), rel=1e-8)
+
+
+def test_circular_orbit_in_an_inverse_cube_field_is_unstable():
+    """V = -k/(2 r^2) ... falls as fast as the centrifugal term: take V = -k/r^3, unstable for any h."""
+    m, k, h = 1.5, 2.0, 1.7
+    (s,) = steady_motions(_central("-k/r^3").eom, {"p_ph": h}, guesses={"r": 2.0}, max_guesses=20)
+    r = 3 * k * m / h**2                  # V'(r) = 3k/r^4 = h^2/(m r^3)
+    assert s.values["r"] == pytest.approx(r, rel=1e-10)
+    assert s.stable is False and "positive real part" in s.reason
+    assert s.hessian_eigenvalues[0] == pytest.approx(-12 * k / r**5 + 3 * h**2 / (m * r**4), rel=1e-8)
+
+
+def test_pins_are_checked():
+    model = mechdsl.loads(CONICAL)
+    with pytest.raises(mechdsl.UsageError, match="need 1 pin"):
+        steady_motions(model.eom, {})
+    with pytest.raises(mechdsl.UsageError, match="ignorable"):
+        steady_motions(model.eom, {"ph": 1.0})
+    with pytest.raises(mechdsl.UsageError, match="cannot pin"):
+        steady_motions(model.eom, {"der(th)": 1.0})
+
+
+def test_no_ignorable_coordinate_is_a_model_error():
+    model = mechdsl.load(MODELS / "pendulum.mech")
+    with pytest.raises(mechdsl.MechError) as info:
+        steady_motions(model.eom, {})
+    assert info.value.diagnostics[0].code == "E912"
+
+
+def test_cli_steady(capsys, tmp_path):
+    from mechdsl.cli import main
+
+    top = str(MODELS / "heavy_top.mech")
+    out = tmp_path / "steady.json"
+    assert main(["equilibrium", top, "--model", "HeavyTop", "--steady", "tip.theta=0.6,p_tip.psi=4",
+                 "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "2 steady motions" in text and "1.36942" in text and "11.7293" in text and "stable" in text
+    import json
+
+    data = json.loads(out.read_text())
+    assert data["count"] == 2 and data["steady_motions"][0]["speeds"]["der(tip.phi)"] == pytest.approx(1.3694173, 1e-6)
+    assert main(["equilibrium", top, "--model", "HeavyTop", "--steady", "tip.phi=1,p_tip.psi=4"]) == 2
+    assert "ignorable" in capsys.readouterr().err
