@@ -416,3 +416,29 @@ def test_a_loop_smaller_than_the_constraint_tolerance(tmp_path, capsys):
     _located(err, "E755", path, 29)
     found = preflight(mechdsl.loads(text, model="NFourBar").eom, {"l": 1e-6})
     assert found == []
+
+
+@pytest.mark.parametrize("model,old,new,code,line", [
+    ("particle_on_sphere.mech", 'R(unit = "m") = 1 ', 'R(unit = "m") = 1.8e308 ', "E303", 17),
+    ("pendulum_wall.mech", "tolerance = 1e-10;", "tolerance = 1e-300;", "E604", 37),
+], ids=["sphere-radius-beyond-double", "wall-tolerance-1e-300"])
+def test_issue_18_examples_refused_where_written(tmp_path, capsys, model, old, new, code, line):
+    """Issue 18: particle_on_sphere with 1.8e308 wrote inf with exit 0; a contact scene with
+    tolerance = 1e-300 exited 3 without a CSV.  Both are model errors at the value now."""
+    path = _edited(tmp_path, model, old, new)
+    for cmd in (["check", str(path)], ["simulate", str(path), "--t-end", "0.05", "--no-progress",
+                                        "-o", str(tmp_path / "o.csv")]):
+        rc, err = _cli(cmd, capsys)
+        assert rc == 1
+        _located(err, code, path, line)
+
+
+def test_falling_rod_from_1e32_m_finishes_with_finite_results(tmp_path, capsys):
+    """Issue 18: falling_rod.mech with a number 1e32 (the start height) spun in the event search;
+    it now runs 0.05 s and writes finite numbers (exit 0)."""
+    path = _edited(tmp_path, "falling_rod.mech", 'h(unit = "m") = 1 ', 'h(unit = "m") = 1e32 ')
+    out = tmp_path / "o.csv"
+    rc, err = _cli(["simulate", str(path), "--t-end", "0.05", "--points", "5", "--no-progress", "-o", str(out)], capsys)
+    assert rc == 0, err
+    rows = [line.split(",") for line in out.read_text().splitlines()[1:]]
+    assert len(rows) == 5 and all(np.isfinite(float(x)) for row in rows for x in row)
