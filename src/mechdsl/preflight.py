@@ -120,7 +120,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         except MechError as e:
             return e.diagnostics
         q, qd = init.q, init.qd
-        found = _loop_resolution(eom, q, t, pv, drift_bound) or _loop_too_small(eom, q, t, pv, drift_bound)
+        found = _loop_scale(eom, q, t, pv, drift_bound)
         if found:
             return found
     else:
@@ -335,39 +335,15 @@ def _coincident_ends(eom, q, t, pv) -> list[Diagnostic]:
     return out
 
 
-def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
-    """E749: loop closures compare positions; when double precision resolves the positions of
-    the loop's points only to more than the drift bound, no projection can hold them."""
-    model = eom.model
-    if model is None or eom.point_position is None:
-        return []
-    import casadi as ca
+def _loop_scale(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
+    """The size of the loops against the constraint drift the run holds (drift_bound).
 
-    cut = [j for j in model.joints if j.closes_loop]
-    if not cut:
-        return []
-    fn = eom.cached("preflight_loop_points", lambda: ca.Function(
-        "loop_points", [eom.q, eom.t, eom.p],
-        [ca.vertcat(*[eom.point_position(n) for j in cut for n in (j.parent, j.child)])]))
-    xyz = np.abs(_value(fn, q, t, pv))
-    if not xyz.size or not np.all(np.isfinite(xyz)):
-        return []
-    k = int(np.argmax(xyz)) // 6
-    res = float(np.max(xyz)) * np.finfo(float).eps
-    if res <= drift_bound:
-        return []
-    j = cut[k]
-    return [Diagnostic("E749", f"the loop closed by joint '{j.name}' lies {np.max(xyz):.3g} from the origin: "
-                               f"double precision resolves its positions only to {res:.2g}, more than the "
-                               f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
-                       "choose units (or an origin) that keep the positions moderate, or raise atol")]
-
-
-def _loop_too_small(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
-    """E755: a closed loop smaller than LOOP_SIZE_FACTOR times the constraint drift the run holds
-    (max(10 atol, 1e-10)): its geometry is lost in the tolerance.  nfourbar with rods of 1e-12 m
-    ran away (speeds of 1e12 rad/s after 2e-6 s) and ground for minutes in CVODES before this.
-    The loop's size: the largest distance between the joint points of the model (at the start)."""
+    E749: loop closures compare positions; when double precision resolves the positions of
+    the loop's points only to more than the drift bound, no projection can hold them.
+    E755: a mechanism smaller than LOOP_SIZE_FACTOR times the drift bound (max(10 atol, 1e-10)):
+    its geometry is lost in the tolerance.  nfourbar with rods of 1e-12 m ran away (speeds of
+    1e12 rad/s after 2e-6 s) and ground for minutes in CVODES before this.  Its size: the
+    largest distance between the joint points of the model (at the start)."""
     model = eom.model
     if model is None or eom.point_position is None:
         return []
@@ -376,17 +352,28 @@ def _loop_too_small(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
         return []
     import casadi as ca
 
-    names = list(dict.fromkeys(n for j in model.joints for n in (j.parent, j.child)))
+    names = list(dict.fromkeys([n for j in cut for n in (j.parent, j.child)]
+                               + [n for j in model.joints for n in (j.parent, j.child)]))
     try:
         fn = eom.cached("preflight_joint_points", lambda: ca.Function(
             "joint_points", [eom.q, eom.t, eom.p], [ca.horzcat(*[ca.vec(eom.point_position(n)) for n in names])]))
     except Exception:  # noqa: BLE001 - a point without a position: nothing to judge here
         return []
-    xyz = np.asarray(fn(q, t, pv), float).reshape(3, -1)
-    if xyz.shape[1] < 2 or not np.all(np.isfinite(xyz)):
+    xyz = np.asarray(fn(q, t, pv), float).reshape(3, -1, order="F")
+    if not xyz.size or not np.all(np.isfinite(xyz)):
         return []
-    size = float(np.max(np.linalg.norm(xyz - xyz.mean(axis=1, keepdims=True), axis=0))) * 2
-    if size <= 0 or size >= LOOP_SIZE_FACTOR * drift_bound:
+    far = np.max(np.abs(xyz), axis=0)                   # per point
+    loop_far = [max(far[names.index(j.parent)], far[names.index(j.child)]) for j in cut]
+    k = int(np.argmax(loop_far))
+    res = float(loop_far[k]) * np.finfo(float).eps
+    if res > drift_bound:
+        j = cut[k]
+        return [Diagnostic("E749", f"the loop closed by joint '{j.name}' lies {loop_far[k]:.3g} from the origin: "
+                                   f"double precision resolves its positions only to {res:.2g}, more than the "
+                                   f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
+                           "choose units (or an origin) that keep the positions moderate, or raise atol")]
+    size = 2 * float(np.max(np.linalg.norm(xyz - xyz.mean(axis=1, keepdims=True), axis=0)))
+    if xyz.shape[1] < 2 or size <= 0 or size >= LOOP_SIZE_FACTOR * drift_bound:
         return []
     j = cut[0]
     return [Diagnostic("E755", f"the mechanism closed by joint '{j.name}' measures only {size:.3g} across: the "
