@@ -70,3 +70,13 @@ def test_check_prints_the_plan_of_every_scene(tmp_path, capsys):
     assert "    reactions: computed" in swing and "    reactions: not computed" in angles
     assert "    formulation: dae, formulation projection" in angles
     assert "    invariants: energy" in angles
+
+
+def test_check_plans_a_scene_without_stop_time(tmp_path, capsys):
+    """A scene without stop_time (and a late start) still gets its plan: the end does not matter."""
+    path = tmp_path / "late.mech"
+    path.write_text((MODELS / "pendulum.mech").read_text().split("scene ")[0]
+                    + "scene Late\n  model " + mechdsl.load(MODELS / "pendulum.mech").model.name
+                    + ";\n  start_time = 5;\nend Late;\n")
+    assert main(["check", str(path), "--scene", "Late"]) == 0
+    assert "    formulation: ode in minimal coordinates" in capsys.readouterr().out
