@@ -191,7 +191,8 @@ def structure(eom, p=None) -> Structure:
     cache = eom.__dict__.setdefault("_analysis_cache", {})
     key = ("structure", pv.tobytes(), id(parts(eom)))
     if key not in cache:
-        cache[key] = _structure(eom, pv)
+        with np.errstate(all="ignore"):     # probes with huge values overflow: judged by finiteness, not printed
+            cache[key] = _structure(eom, pv)
     return cache[key]
 
 
@@ -241,7 +242,10 @@ def _structure(eom, pv) -> Structure:
     fM = pt.fn("M_bias")
     rest = [np.max(np.abs(fM(pr.q[i], np.zeros(n), pr.t[i], pv)[1].full()), initial=0.0) for i, _ in rows]
     rest = [r for r in rest if np.isfinite(r)]
-    force_scale = float(np.median(rest)) if rest else 0.0
+    with np.errstate(over="ignore"):        # the mean of two values near 1e308 overflows
+        force_scale = float(np.median(rest)) if rest else 0.0
+    if not np.isfinite(force_scale):
+        force_scale = float(np.max(rest))
 
     stiff = [float(np.max(np.abs(o[9]), initial=0.0)) for _, o in rows]
     periodic = tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale) for k in range(n))
@@ -316,8 +320,13 @@ def _quadratic_T(pt: Parts, pv, pr: Probe, L_scale: float) -> bool:
 
 
 def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
-    """Orthonormal basis (columns) of the null space of J, in a deterministic orientation."""
+    """Orthonormal basis (columns) of the null space of J, in a deterministic orientation.
+    A J with inf or nan entries (values that overflowed) has no basis to claim: none is
+    returned (LAPACK's SVD does not return on nan input; heavy_top with g = 1e308 hung
+    `mech check` in the symmetry search)."""
     n = J.shape[1]
+    if not np.all(np.isfinite(J)):
+        return np.zeros((n, 0))
     if J.size == 0 or not np.any(J):
         return np.eye(n)
     # thin SVD when J is tall (probes stack many rows): the full U would cost O(rows^2)
