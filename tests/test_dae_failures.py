@@ -161,3 +161,30 @@ def test_a_constrained_run_that_needs_too_many_steps_fails_at_its_start():
     assert rate(r16) / rate(r) == pytest.approx(10.0, rel=0.01)
     ok = simulate_dae(m.eom, 0.05, points=5, rtol=1e-8)      # the shipped values: far under the budget
     assert ok.success
+
+
+def test_a_ctrl_c_taken_by_casadi_in_the_jacobian_is_not_swallowed(monkeypatch):
+    """The Jacobian guard (a failed evaluation -> no estimate) must not eat a Ctrl-C that CasADi
+    turned into a RuntimeError (as stepper.call_integrator gives it back): a Ctrl-C during the
+    method choice would otherwise be lost and the run go on to the end."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.dae.system import ConstrainedSystem
+
+    m = mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
+    pv = np.asarray(m.eom.param_values, float)
+    system = ConstrainedSystem.build(m.eom, pv, list(range(m.eom.m)))
+
+    def interrupted(*a):
+        raise RuntimeError("Error in Function::call for 'ode_jac': KeyboardInterrupt")
+
+    monkeypatch.setattr(system, "_jac", lambda: interrupted)
+    q = np.zeros(m.eom.n)
+    with pytest.raises(KeyboardInterrupt):
+        system.eigenvalues(q, q, 0.0)
+
+    def failed(*a):
+        raise RuntimeError(".../casadi/core/function_internal.hpp:1766: Evaluation failed")
+
+    monkeypatch.setattr(system, "_jac", lambda: failed)
+    assert system.eigenvalues(q, q, 0.0).size == 0 and system.spectral_radius(q, q, 0.0) == 0.0

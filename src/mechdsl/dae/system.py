@@ -375,7 +375,9 @@ class ConstrainedSystem:
         "Evaluation failed" from the method choice, exit 3), or it is not finite."""
         try:
             J = np.array(self._jac()(q, qd, t, self.p), float)
-        except RuntimeError:
+        except RuntimeError as e:
+            if "KeyboardInterrupt" in str(e):       # CasADi took a Ctrl-C: give it back (stepper.call_integrator)
+                raise KeyboardInterrupt from None
             return None
         return J if J.size and np.all(np.isfinite(J)) else None
 
