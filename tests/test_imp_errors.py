@@ -205,3 +205,23 @@ def test_the_work_estimate_is_a_lower_bound(method, rtol):
     rho = np.sqrt(9.81 * np.cos(1.0))          # |eigenvalue| of the linearization at theta = -1, at rest
     est = rho * T / (2 * np.pi) * steps_per_period(resolve_method(method)[0], rtol)
     assert est <= r.stats["steps"] <= 4 * est + 5
+
+
+def test_accumulating_events_fail_instead_of_running_for_minutes(monkeypatch):
+    """Fuzz mutant (issue 18): falling_rod.mech with g = 1e12.  The rod lands at 1.4e6 m/s and
+    every rebound stays faster than rest_speed = 1e-3 m/s (gravity alone gives that speed in
+    1e-15 s), so the ends chatter without end: 1000 events advanced time by 1e-8 s at 12 ms
+    an event, and the budget of 100,000 events meant 20 minutes.  500 events within 1e-6 of
+    the run's span now end the run, naming rest_speed (here 100 events, to keep the test short;
+    the default 500 stops this run after 541 events, 2 s CPU)."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.impacts import run
+
+    monkeypatch.setattr(run, "ZENO_EVENTS", 100)
+    m = mechdsl.load(MODELS / "falling_rod.mech", model="FallingRod").with_params(g=1e12)
+    r = simulate_with_contacts(m.eom, None, 0.05, points=5)
+    assert not r.success and r.failure.cause == "events accumulate (Zeno behaviour)"
+    assert "the last 100 events" in r.failure.detail and "raise rest_speed" in r.failure.detail
+    assert len(r.events) <= 200
+    assert 0 < r.failure.time < 1e-5            # the chatter starts within microseconds of the fall

@@ -17,6 +17,7 @@ from this step's interpolant; the integrator restarts at the event.
 """
 from __future__ import annotations
 
+import collections
 import math
 
 import numpy as np
@@ -24,6 +25,9 @@ import numpy as np
 from .impact_map import ImpactError, solve_impact
 from .rootfind import bracket_root
 from .stepper import IMPLICIT, make_solver, steps_per_period
+
+ZENO_EVENTS = 500           # this many events ...
+ZENO_SPAN = 1e-6            # ... within this fraction of the run's span: the events accumulate (Zeno)
 
 
 class RunFailure(Exception):
@@ -54,6 +58,7 @@ class Run:
         self.stats = {"steps": 0, "rejected_steps": 0, "restarts": 0, "projections": 0, "events": 0,
                       "root_evaluations": 0}
         self._burst = (math.nan, 0)
+        self._recent = collections.deque(maxlen=ZENO_EVENTS)     # times of the latest events
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -196,6 +201,13 @@ class Run:
         if cnt > 200 * (self.s.k + len(self.s.fixations) + 1):
             raise RunFailure(t, "events do not settle at one instant",
                              f"{cnt} events at t = {t:.12g}; contacts may be contradictory")
+        self._recent.append(t)
+        span = t - self._recent[0]
+        if len(self._recent) == ZENO_EVENTS and span < ZENO_SPAN * (self.grid[-1] - self.grid[0]):
+            raise RunFailure(t, "events accumulate (Zeno behaviour)",
+                             f"the last {ZENO_EVENTS} events fell within {span:.3g} s, and time hardly advances "
+                             f"(each rebound stays faster than rest_speed = {self.o.rest_speed:g} m/s, so the "
+                             "contact never comes to rest); raise rest_speed for the scale of this model's speeds")
 
     def _record(self, ev: dict) -> None:
         self.events.append(ev)
