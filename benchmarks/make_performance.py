@@ -189,6 +189,18 @@ CHAIN_TEXT = ("`benchmarks/chain_kernel.py` (issue 16): the N-rod chain's `ode` 
               "and always evaluates the unrolled form in the virtual machine.")
 
 
+def contacts_table(quick):
+    """benchmarks/impacts_compiled.py: contact stepping compiled against Python and free flight."""
+    return script_table("impacts_compiled.py", "20", ["--repeats", "3" if quick else "5"])
+
+
+CONTACTS_TEXT = ("`benchmarks/impacts_compiled.py` (issue 16): models with contacts step their free flights "
+                 "(all contacts open) in the compiled dop853 loop, which also locates the events; the impact "
+                 "law, persistent contacts and fixations stay in Python (docs/internals/impacts.md). Wall "
+                 "times of whole `simulate_with_contacts` calls, warm. Goal: the ball's 20 bounces within 2x "
+                 "of its free flight at equal step counts.")
+
+
 def simulation_scaling(quick):
     """CPU time of simulating the N-link chain for 5 s at rtol = atol = 1e-8 (erk and
     cvodes-adams, virtual machine), min of 3 after a warm-up."""
@@ -368,9 +380,21 @@ def page(ctx) -> str:
               "Simulating the chain for 5 s at rtol = atol = 1e-8 (virtual machine, CPU time, min of 3 "
               "after a warm-up):", "", ctx["simscale"], "", NLINK_RUN_TEXT, "", ctx["nlinkrun"], "",
               "### Chains as loops over per-link kernels", "", CHAIN_TEXT, "", ctx["chain"], ""]
+    if ctx.get("contacts"):
+        parts += ["## Contacts in the compiled loop", "", CONTACTS_TEXT, "", ctx["contacts"], ""]
+    if ctx.get("coldstart"):
+        parts += ["## Cold start", "", COLDSTART_TEXT, "", ctx["coldstart"], ""]
     if ctx.get("control"):
         parts += ["## Optimal control: cart-pole swing-up", "", CONTROL_TEXT, "", "```", *ctx["control"], "```", ""]
     return "\n".join(parts).rstrip() + "\n"
+
+
+COLDSTART_TEXT = ("What a fresh `mech` process costs (issues 12 and 16). A run reads its model from the model "
+                  "cache (mechdsl.modelcache, docs/simulate.md) after the first: no parsing, analysis or "
+                  "derivation, and neither lark nor the front end nor the mechanics are imported. Imports are "
+                  "the sum of the top-level cumulative times of `python -X importtime`, numpy's in the same "
+                  "process; goals: imports < 2x numpy, `--version` and `check` well under 0.5 s, the 12-link "
+                  "chain under 0.4 s warm and 1 s cold on an idle machine.")
 
 
 CONTROL_TEXT = ("benchmarks/control_swingup.py: the swing-up of docs/control.md solved by IPOPT (exact "
@@ -424,6 +448,11 @@ def main(argv=None) -> int:
     log("== simulation cost against N")
     ctx["simscale"] = simulation_scaling(a.quick)
     ctx["nlinkrun"] = nlink_run_table(a.quick)
+    ctx["contacts"] = contacts_table(a.quick)
+    log("== cold start")
+    from coldstart import section as coldstart_section
+
+    ctx["coldstart"] = coldstart_section(3 if a.quick else 5)
     from control_swingup import rows as control_rows
 
     ctx["control"] = list(control_rows([30, 60] if a.quick else [30, 60, 120], 1 if a.quick else 3))

@@ -1,5 +1,7 @@
 import os
+import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -11,6 +13,15 @@ REFERENCES = ROOT / "tests" / "references"   # verbatim copies of ../shared/refe
 # deep recursion guard for pathological inputs is part of the CLI; tests call the library directly
 sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# the tests never read or write the user's caches (model cache, compiled libraries): one
+# temporary cache folder for the session (tests that need their own set MECHDSL_CACHE themselves)
+_SESSION_CACHE = tempfile.mkdtemp(prefix="mechdsl-test-cache-")
+os.environ["MECHDSL_CACHE"] = _SESSION_CACHE
+
+
+def pytest_unconfigure(config):
+    shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
 
 
 @pytest.fixture

@@ -211,9 +211,9 @@ def four_bar_eom(lengths=(1.0, 1.0, 1.0, 1.0), masses=(1.0, 1.0, 1.0), gravity=9
                         constraint_names=["jC.force[0]", "jC.force[1]"],
                         outputs={"xB": B[0], "yB": B[1], "xC": C3[0], "yC": C3[1], "energy": T + V})
     if fixed_q is not None:
-        e.fixed_q = tuple(fixed_q)
+        e = e.replace(fixed_q=tuple(fixed_q))
     if fixed_qd is not None:
-        e.fixed_qd = tuple(fixed_qd)
+        e = e.replace(fixed_qd=tuple(fixed_qd))
     return e
 
 
@@ -264,7 +264,7 @@ def slider_crank_eom(r=0.3, l=1.0, masses=(1.0, 2.0, 0.5), gravity=9.81, torque=
     e = from_lagrangian("SliderCrank", coords, params, [*masses, gravity, torque], q, qd, t, p, T, V, Q=Q, g=g,
                         q0=q0, qd0=qd0, constraint_names=["jB.force[0]", "jB.force[1]"],
                         outputs={"xA": A[0], "yA": A[1]})
-    e.fixed_qd = (True, False, False)
+    e = e.replace(fixed_qd=(True, False, False))
     return e
 
 
@@ -318,7 +318,7 @@ def bricard_eom(gravity=9.81, speed=1.0):
                         q0=[0.0] * 5, qd0=[speed, 0, 0, 0, 0],
                         constraint_names=["j6.x", "j6.y", "j6.z", "j6.axis_y", "j6.axis_z"],
                         outputs={"energy": T + V})
-    e.fixed_qd = (True, False, False, False, False)
+    e = e.replace(fixed_qd=(True, False, False, False, False))
     return e
 
 
@@ -338,7 +338,7 @@ def rheonomic_pendulum_eom(gravity=9.81, amp=0.2, freq=2.0, theta0=0.8):
     x0, y0 = np.sin(theta0), -np.cos(theta0)
     e = from_lagrangian("RheonomicPendulum", coords, params, [gravity, amp, freq], q, qd, t, p, T, V, g=g,
                         q0=[x0, y0], qd0=[0.0, 0.0], constraint_names=["rod"], outputs={"x": q[0], "y": q[1]})
-    e.fixed_qd = (False, False)
+    e = e.replace(fixed_qd=(False, False))
     return e
 
 

@@ -227,7 +227,7 @@ def test_subprocess_missing_file(tmp_path):
 # ----------------------------------------------------------------------------- coverage and documentation
 
 
-FRONT_END = [SRC / "parser.py", SRC / "diagnostics.py", SRC / "api.py", SRC / "cli.py", SRC / "units.py",
+FRONT_END = [SRC / "parser.py", SRC / "source.py", SRC / "diagnostics.py", SRC / "api.py", SRC / "cli.py", SRC / "units.py",
              SRC / "commands" / "check.py", SRC / "commands" / "compile.py", *sorted((SRC / "semantic").glob("*.py"))]
 
 

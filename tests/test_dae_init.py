@@ -15,8 +15,7 @@ def test_consistent_start_changes_nothing():
 
 def test_free_position_and_speed_are_solved_and_reported():
     e = pendulum_eom(x0=(0.6, -0.5), v0=(0.3, 0.0))
-    e.fixed_q = (True, False)       # x held, y free
-    e.fixed_qd = (True, False)
+    e = e.replace(fixed_q=(True, False), fixed_qd=(True, False))       # x held, y free
     rep = initialize(e)
     assert rep.q[0] == 0.6 and rep.q[1] == pytest.approx(-0.8, abs=1e-14)
     # velocity tangent to the circle: x vx + y vy = 0 -> vy = -x vx / y
@@ -29,7 +28,7 @@ def test_free_position_and_speed_are_solved_and_reported():
 
 def test_initialization_is_in_result_metadata():
     e = pendulum_eom(x0=(0.6, -0.5), v0=(0.0, 0.0))
-    e.fixed_q = (True, False)
+    e = e.replace(fixed_q=(True, False))
     r = simulate_dae(e, 0.1, points=3)
     ch = r.metadata["initialization"]["changes"]
     assert [c["name"] for c in ch] == ["y"] and ch[0]["after"] == pytest.approx(-0.8)
@@ -46,7 +45,7 @@ def test_all_fixed_and_inconsistent_is_a_diagnostic_naming_the_constraint():
 
 def test_unreachable_start_names_the_constraint():
     e = pendulum_eom(x0=(2.0, 0.0))          # x = 2 beyond the rod length, y free
-    e.fixed_q = (True, False)
+    e = e.replace(fixed_q=(True, False))
     with pytest.raises(MechError) as info:
         initialize(e)
     assert info.value.first.code == "E821" and "'rod'" in info.value.first.message

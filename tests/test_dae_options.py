@@ -79,7 +79,7 @@ def test_parameters_override():
     ({"bogus": 1}, "unknown option"),
     ({"points": 1}, "at least 2"),
     ({"rtol": -1}, "positive"),
-    ({"p": {"nope": 1}}, "unknown parameter"),
+    ({"p": {"nope": 1}}, "not a parameter"),
 ])
 def test_usage_errors(kw, match):
     with pytest.raises(UsageError, match=match):

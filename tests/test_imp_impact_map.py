@@ -119,3 +119,24 @@ def test_contradictory_bilateral_rows_are_reported():
     B = np.array([[1.0, 0.0], [1.0, 0.0]])
     with pytest.raises(ImpactError):
         solve_impact(M, np.zeros(2), np.zeros((0, 2)), [], [], B, np.array([1.0, 2.0]))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_single_contact_shortcut_equals_the_general_solve(seed):
+    """A lone contact without bilateral rows takes the closed-form shortcut; the same row given
+    twice (dependent rows) goes through the general least-distance solve: same velocities, the
+    same total impulse; a separating contact gets no impulse."""
+    rng = np.random.default_rng(100 + seed)
+    n = 4
+    M, G, v = spd(rng, n), rng.normal(size=(1, n)), rng.normal(size=n)
+    gt = rng.normal(size=1)
+    e = rng.uniform(0, 1)
+    one = solve_impact(M, v, G, gt, [e])
+    two = solve_impact(M, v, np.vstack([G, G]), np.r_[gt, gt], [e, e])
+    assert one.qd == pytest.approx(two.qd, abs=1e-12)
+    assert one.impulses[0] == pytest.approx(two.impulses.sum(), abs=1e-12)
+    u = (G @ v + gt)[0]
+    if u >= 0:
+        assert one.impulses[0] == pytest.approx(0.0, abs=1e-15) and one.qd == pytest.approx(v, abs=1e-15)
+    else:
+        assert one.speeds_after[0] == pytest.approx(-e * u, rel=1e-10)

@@ -138,8 +138,7 @@ def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
     import casadi as ca
 
     c = pendulum()
-    c.g = ca.SX(c.q[0] ** 2 - 1)  # any constraint routes to the DAE helper
-    c.constraint_names = ("g1",)
+    c = c.replace(g=ca.SX(c.q[0] ** 2 - 1), constraint_names=("g1",))  # any constraint routes to the DAE helper
     monkeypatch.setattr("mechdsl.preflight.check_start", lambda *a, **k: None)   # (q0 is not on g = 0)
     dcalls = []
     monkeypatch.setattr(dae, "simulate_dae", fake("bdf", dcalls))

@@ -90,14 +90,14 @@ def test_singularity_monitor_closest_approach_and_warning():
     import casadi as ca
 
     e = pendulum(theta0=0.3)
-    e.singularity_monitors = {"theta=0": ca.sin(e.q[0])}   # "singular" where sin(theta) = 0
+    e = e.replace(singularity_monitors={"theta=0": ca.sin(e.q[0])})   # "singular" where sin(theta) = 0
     r = simulate(e, 1.0, points=201)
     rep = r.metadata["singularity"]["theta=0"]
     i = int(np.argmin(np.abs(np.sin(r["theta"]))))
     assert rep["closest"] == pytest.approx(abs(np.sin(r["theta"][i]))) and rep["time"] == r.t[i]
     assert any("singular configuration of theta=0" in w for w in r.metadata["warnings"])
     far = pendulum(theta0=0.3)
-    far.singularity_monitors = {"theta=pi/2": ca.cos(far.q[0])}
+    far = far.replace(singularity_monitors={"theta=pi/2": ca.cos(far.q[0])})
     r2 = simulate(far, 1.0, points=51)
     assert r2.metadata["singularity"]["theta=pi/2"]["closest"] > 0.9
     assert not r2.metadata["warnings"]

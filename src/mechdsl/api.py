@@ -17,27 +17,31 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import ast, ir
-from . import display as _display
+from . import ir
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
-from .parser import parse, parse_file
-from .semantic import Program, analyze
-from .semantic.mods import Mod
+
+# the front end (lark, ast, semantic) is imported on use: a model served from the model cache
+# (mechdsl.modelcache) never needs it
+if TYPE_CHECKING:
+    from .semantic import Program
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
 _EOM_LOCK = threading.Lock()
 
 
-def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True) -> Program:
+def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True):
+    from .parser import parse
+    from .semantic import analyze
+
     if is_text:
         text = path_or_text
     else:
-        from .parser import read_source
+        from .source import read_source
 
         filename, text = read_source(path_or_text)
     program = analyze(parse(text, filename), units=units)
@@ -45,15 +49,32 @@ def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True
     return program
 
 
-def load(path, model: str | None = None, scene: str | None = None, units: bool = True) -> "Model":
-    """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis."""
-    return Model._from_program(_program(str(path), False, str(path), units), model, scene)
+def load(path, model: str | None = None, scene: str | None = None, units: bool = True,
+         cache: bool = True) -> "Model":
+    """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis.
+    cache=False: neither read nor write the model cache (mechdsl.modelcache)."""
+    from .source import read_source
+
+    filename, text = read_source(str(path))
+    return _load_text(text, filename, model, scene, units, cache)
 
 
 def loads(text: str, model: str | None = None, scene: str | None = None, filename: str = "<string>",
-          units: bool = True) -> "Model":
-    """Load a model from .mech source text."""
-    return Model._from_program(_program(text, True, filename, units), model, scene)
+          units: bool = True, cache: bool = True) -> "Model":
+    """Load a model from .mech source text (cache: as for ``load``)."""
+    return _load_text(text, filename, model, scene, units, cache)
+
+
+def _load_text(text: str, filename: str, model, scene, units: bool, cache: bool) -> "Model":
+    info = _Cache((text, filename, bool(units)), (model, scene), ()) if cache else None
+    hit = info.lookup() if info is not None else None
+    if hit is not None:
+        return hit
+    m = Model._from_program(_program(text, True, filename, units), model, scene)
+    if info is not None:
+        info.claim(m)
+        m._cache = info
+    return m
 
 
 def load_model_ir(path, model: str | None = None, scene: str | None = None) -> ir.Model:
@@ -82,14 +103,31 @@ def select_target(program: Program, model: str | None, scene: str | None) -> tup
 class Model:
     """A resolved model, optionally with a scene's settings, ready to derive and simulate."""
 
-    def __init__(self, program: Program, model: ir.Model, scene: ir.Scene | None = None,
-                 overrides: dict[str, Mod] | None = None, target: tuple[str, str] | None = None):
-        self.program = program
+    def __init__(self, program, model: ir.Model, scene: ir.Scene | None = None,
+                 overrides: dict | None = None, target: tuple[str, str] | None = None):
+        self._program = program           # semantic.Program; None: parsed again on use (a cached Model)
         self.model = model
         self.scene = scene
-        self._overrides = overrides or {}
+        self._ov = overrides or {}        # None: built from self._cache.items on use
         self._target = target or (("scene", scene.name) if scene else ("model", model.name))
         self._eom = None
+        self._warnings = None             # the front end's warnings for this model (None: the program's)
+        self._cache: _Cache | None = None     # where the derived form is remembered (None: nowhere)
+
+    @property
+    def program(self):
+        """The analysed file (mechdsl.semantic.Program); a Model read from the model cache
+        parses its source again only when this is asked for."""
+        if self._program is None:
+            text, filename, units = self._cache.source
+            self._program = _program(text, True, filename, units)
+        return self._program
+
+    @property
+    def _overrides(self) -> dict:
+        if self._ov is None:
+            self._ov = _overrides_of(self._cache.items, self.model) if self._cache is not None else {}
+        return self._ov
 
     @classmethod
     def _from_program(cls, program: Program, model: str | None, scene: str | None,
@@ -97,8 +135,11 @@ class Model:
         kind, name = select_target(program, model, scene)
         if kind == "scene":
             sc = program.scene(name, overrides)
-            return cls(program, sc.model, sc, overrides, (kind, name))
-        return cls(program, program.model(name, overrides), None, overrides, (kind, name))
+            m = cls(program, sc.model, sc, overrides, (kind, name))
+        else:
+            m = cls(program, program.model(name, overrides), None, overrides, (kind, name))
+        m._warnings = list(getattr(program, "last_warnings", []))
+        return m
 
     # ------------------------------------------------------------------ description
     @property
@@ -151,24 +192,36 @@ class Model:
 
     @property
     def warnings(self) -> list[Diagnostic]:
+        if self._warnings is not None:
+            return list(self._warnings)
         return list(getattr(self.program, "last_warnings", []))
 
-    _repr_html_ = _display.model_html            # notebook displays (mechdsl.display)
-    _repr_markdown_ = _display.model_markdown
+    def _repr_html_(self):                      # notebook displays (mechdsl.display)
+        from .display import model_html
+
+        return model_html(self)
+
+    def _repr_markdown_(self):
+        from .display import model_markdown
+
+        return model_markdown(self)
 
     # ------------------------------------------------------------------ pickling
     def __reduce__(self):
         """Pickled by its source text, target, overrides, parameter values and scene settings
         (sweeps on worker processes and Dask); the equations are derived again on the other
         side, once per process (``_restore`` caches by the pickled state)."""
-        text = getattr(self.program, "source_text", None)
+        if self._program is None:
+            text, filename, units = self._cache.source
+        else:
+            text = getattr(self.program, "source_text", None)
+            filename, units = self.program.file.filename, bool(self.program.units)
         if text is None:
             raise TypeError("this Model was not loaded from source text (mechdsl.load/loads) and cannot be pickled")
         # values of the independent parameters; bound ones are evaluated again from their bindings
         values = tuple((p.name, float(p.value)) for p in self.model.real_parameters if p.binding is None)
         settings = tuple(self.scene.settings) if self.scene is not None else None
-        state = (text, self.program.file.filename, bool(self.program.units), self._target,
-                 self._overrides, values, settings)
+        state = (text, filename, units, self._target, self._overrides, values, settings)
         return (_restore, (state,))
 
     def __repr__(self) -> str:
@@ -187,21 +240,30 @@ class Model:
         by_name = {p.name: p for p in self.model.parameters}
         coords = set(self.coordinates)
         real: dict[str, float] = {}
-        structural: dict[str, Mod] = {}
+        structural: list[tuple[str, Any]] = []
         for k, v in values.items():
             if k in by_name and not by_name[k].integer:
                 real[k] = _number(k, v)
             elif k in by_name or "." in k or k in coords:
-                _add_override(structural, k, v, by_name, coords)
+                structural.append((k, v))
             else:
                 hint = did_you_mean(k, list(by_name) + [f"{c}.start" for c in coords])
                 raise UsageError(f"'{k}' is not a parameter of {self.name}" + (f"; {hint}" if hint else ""))
         m: Model = self
         if structural:
-            ov = _merge_overrides(self._overrides, structural)
             kind, name = self._target
-            m = Model._from_program(self.program, name if kind == "model" else None,
-                                    name if kind == "scene" else None, ov)
+            info = self._cache.more(tuple((k, _key_value(v)) for k, v in structural)) if self._cache is not None else None
+            m = info.lookup() if info is not None else None      # stored only if the items were valid
+            if m is None:
+                tree: dict = {}
+                for k, v in structural:
+                    _add_override(tree, k, v, by_name, coords)
+                ov = _merge_overrides(self._overrides, tree)
+                m = Model._from_program(self.program, name if kind == "model" else None,
+                                        name if kind == "scene" else None, ov)
+                if info is not None:
+                    info.claim(m)
+                    m._cache = info
         if real:
             m = m._with_real(real)
         return m
@@ -225,7 +287,13 @@ class Model:
         if problems:
             raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None
-        new = Model(self.program, model, scene, self._overrides, self._target)
+        return self._sibling(model, scene)
+
+    def _sibling(self, model, scene) -> "Model":
+        """A Model of the same structure (other values or settings): same program, overrides,
+        cache place (it stores the equations under its origin's key) and warnings."""
+        new = Model(self._program, model, scene, self._ov, self._target)
+        new._ov, new._cache, new._warnings = self._ov, self._cache, self._warnings   # _ov may be lazy (None)
         return new
 
     def with_settings(self, **settings) -> "Model":
@@ -234,12 +302,14 @@ class Model:
         merged = dict(base.settings)
         merged.update({k: v for k, v in settings.items() if v is not None})
         scene = dataclasses.replace(base, settings=tuple(merged.items()))
-        return Model(self.program, self.model, scene, self._overrides, self._target)
+        return self._sibling(self.model, scene)
 
     # ------------------------------------------------------------------ derived forms
     @property
     def eom(self):
-        """The equations of motion (mechdsl.eom.EOM), derived once per model structure."""
+        """The equations of motion (mechdsl.eom.EOM), derived once per model structure.  Frozen:
+        ``eom.replace(field=...)`` makes a changed copy; what is derived from it is kept in
+        ``Model.workspace``."""
         if self._eom is None:
             key = _structure_key(self.model)
             base = _EOM_CACHE.get(key)
@@ -247,6 +317,9 @@ class Model:
                 from .mechanics import derive
 
                 base = derive(self.model)
+                from .modelcache import record_callables
+
+                base = record_callables(base)     # point positions a run asks for are stored with it
                 with _EOM_LOCK:             # models simulated in several threads
                     if len(_EOM_CACHE) >= _EOM_CACHE_MAX:
                         _EOM_CACHE.pop(next(iter(_EOM_CACHE)), None)
@@ -254,6 +327,18 @@ class Model:
             self._eom = base.replace(param_values=self.parameter_values, model=self.model,   # keeps lazy fields lazy
                                      input_defaults=tuple(float(p.value) for p in self.model.inputs))
         return self._eom
+
+    @property
+    def workspace(self):
+        """What is derived from the equations and kept (Functions, the recorder's, searches):
+        ``mechdsl.workspace.Workspace`` of this model's EOM, alive as long as the model."""
+        return self.eom.workspace
+
+    def _remember(self) -> None:
+        """Store the derived equations (and what a run or an analysis built on them) in the
+        model cache: once after the work, so a first run packs them once."""
+        if self._cache is not None and self._eom is not None:
+            self._cache.remember(self._eom)
 
     def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
         """CasADi Functions (mechdsl.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
@@ -368,8 +453,11 @@ class Model:
         (t_start, formulation, outputs, dt, reactions, compiled, budget, estimate_error, ...)."""
         from .simulation import simulate
 
-        r = simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
-                                             **kw), progress=progress)
+        try:
+            r = simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
+                                                 **kw), progress=progress)
+        finally:
+            self._remember()                         # with what the run derived on the way (lazy M, bias)
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
         return r
 
@@ -397,12 +485,18 @@ class Model:
     def equilibria(self, guesses=None, **kw):
         from .analysis.equilibrium import equilibria
 
-        return equilibria(self.eom, guesses, **kw)
+        try:
+            return equilibria(self.eom, guesses, **kw)
+        finally:
+            self._remember()
 
     def linearize(self, at="equilibrium", **kw):
         from .analysis.linearize import linearize
 
-        return linearize(self.eom, at, **kw)
+        try:
+            return linearize(self.eom, at, **kw)
+        finally:
+            self._remember()
 
     def steady_motions(self, pins: dict, **kw):
         """Steady motions (relative equilibria of the Routh-reduced system): see
@@ -414,7 +508,10 @@ class Model:
     def first_integrals(self):
         from .analysis.integrals import first_integrals
 
-        return first_integrals(self.eom)
+        try:
+            return first_integrals(self.eom)
+        finally:
+            self._remember()
 
     def draw(self, t: float | None = None, q=None, **kw):
         """The mechanism as a matplotlib Figure: at coordinates q, else at time t of a run from the
@@ -533,7 +630,9 @@ def _number(name: str, v) -> float:
     return x
 
 
-def _literal(v) -> ast.Expr:
+def _literal(v):
+    from . import ast
+
     if isinstance(v, bool):
         return ast.Bool(value=v)
     x = _number("value", v)
@@ -542,7 +641,9 @@ def _literal(v) -> ast.Expr:
     return ast.Number(value=abs(x)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-x))
 
 
-def _add_override(tree: dict[str, Mod], key: str, value, by_name, coords) -> None:
+def _add_override(tree: dict, key: str, value, by_name, coords) -> None:
+    from .semantic.mods import Mod
+
     parts = key.split(".")
     if parts[-1] not in ("start", "speed", "fixed") and key not in by_name:
         if key in coords:
@@ -557,7 +658,100 @@ def _add_override(tree: dict[str, Mod], key: str, value, by_name, coords) -> Non
         node_dict = node.sub
 
 
-def _merge_overrides(a: dict[str, Mod], b: dict[str, Mod]) -> dict[str, Mod]:
+def _key_value(v):
+    """A structural value as the cache key sees it: N=4 and N=4.0 are one model."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return v
+    return float(v)
+
+
+def _overrides_of(items, model: ir.Model) -> dict:
+    """The override tree of structural ``with_params`` items (a cached Model keeps only these)."""
+    by_name = {p.name: p for p in model.parameters}
+    coords = set(model.coordinate_names)
+    tree: dict = {}
+    for k, v in items:
+        _add_override(tree, k, v, by_name, coords)
+    return tree
+
+
+class _Cache:
+    """Where a Model's resolved IR and derived equations are remembered on disk
+    (mechdsl.modelcache): its source, the target asked for and the structural overrides.
+    Models of the same structure (other parameter values or settings) share it; the entry
+    always holds the IR of the Model the key names (``owner``)."""
+
+    def __init__(self, source: tuple[str, str, bool], request: tuple, items: tuple):
+        self.source = source
+        self.request = request
+        self.items = items
+        self.owner = None           # (ir.Model, ir.Scene, target, warnings) of the Model named by the key
+        self.stored = None          # modelcache.content of the stored entry (None: no equations stored)
+        self._key = None
+
+    @property
+    def key(self) -> str:
+        if self._key is None:
+            from . import modelcache
+
+            text, filename, units = self.source
+            self._key = modelcache.key(text, filename, units, self.request, self.items)
+        return self._key
+
+    def more(self, items: tuple) -> "_Cache":
+        return _Cache(self.source, self.request, self.items + items)
+
+    def lookup(self) -> "Model | None":
+        """The Model stored under this key, with its equations, or None (not stored, unusable)."""
+        from . import modelcache
+        from .report import remember_source
+
+        entry = modelcache.read(self.key)
+        if entry is None:
+            return None
+        try:
+            base = modelcache.unpack_eom(entry.eom, entry.model) if entry.eom is not None else None
+        except Exception:       # a stream this CasADi cannot read: derived again
+            return None
+        m = Model(None, entry.model, entry.scene, None, tuple(entry.target))
+        m._ov, m._cache, m._warnings = None, self, list(entry.warnings)     # overrides built from items on use
+        self.owner = (entry.model, entry.scene, tuple(entry.target), list(entry.warnings))
+        if base is not None:
+            self.stored = modelcache.content(base)
+            key = _structure_key(entry.model)
+            with _EOM_LOCK:
+                _EOM_CACHE.setdefault(key, base)
+        text, filename, _ = self.source
+        remember_source(filename, text)      # later diagnostics show their source line
+        return m
+
+    def claim(self, m: "Model") -> None:
+        """``m`` is the Model this key names: store its IR now (a later run with other
+        structural settings finds its parameters without parsing), the equations when derived."""
+        from . import modelcache
+
+        if self.owner is None:
+            self.owner = (m.model, m.scene, m._target, m.warnings)
+            modelcache.write(self.key, modelcache.Entry(*self.owner))
+
+    def remember(self, eom) -> None:
+        """Store the owner's IR with ``eom`` unless the entry already holds at least as much."""
+        from . import modelcache
+
+        if self.owner is None:
+            return
+        now = modelcache.content(eom)
+        if self.stored is not None and now[0] >= self.stored[0] and now[1] <= self.stored[1] \
+                and now[2] <= self.stored[2]:
+            return                      # the entry holds at least as much
+        data = modelcache.pack_eom(eom)
+        if data is not None:
+            model, scene, target, warnings = self.owner
+            modelcache.write(self.key, modelcache.Entry(model, scene, target, list(warnings), data))
+        self.stored = now               # (nothing storable: not tried again)
+
+
+def _merge_overrides(a: dict, b: dict) -> dict:
     from .semantic.mods import merge_dicts
 
     return merge_dicts(a, b)

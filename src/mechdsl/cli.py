@@ -20,7 +20,33 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 from .diagnostics import InternalError, MechError, UsageError
 
 
+class _Formatter(argparse.HelpFormatter):
+    """argparse's formatter with the terminal width found as shutil finds it, without importing
+    shutil (and zlib, bz2, lzma): argparse builds a formatter for every option it registers."""
+
+    def __init__(self, prog, **kw):
+        kw.setdefault("width", _columns() - 2)
+        super().__init__(prog, **kw)
+
+
+def _columns() -> int:
+    try:
+        columns = int(os.environ.get("COLUMNS", "0"))
+    except ValueError:
+        columns = 0
+    if columns <= 0:
+        try:
+            columns = os.get_terminal_size(sys.__stdout__.fileno()).columns
+        except (AttributeError, ValueError, OSError):
+            columns = 0
+    return columns if columns > 0 else 80
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *a, **kw):
+        kw.setdefault("formatter_class", _Formatter)
+        super().__init__(*a, **kw)
+
     def error(self, message):  # usage errors: exit 2, no traceback
         self.print_usage(sys.stderr)
         print(f"mech: error: {message}", file=sys.stderr)
@@ -67,6 +93,11 @@ def main(argv: list[str] | None = None) -> int:
         from .commands import COMMANDS
 
         words = sys.argv[1:] if argv is None else list(argv)
+        if words == ["--version"]:           # without building every command's parser (imports)
+            from . import __version__
+
+            print(f"mechdsl {__version__}")
+            return 0
         ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
         args = ap.parse_args(argv)
         if not getattr(args, "_run", None):

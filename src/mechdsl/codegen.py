@@ -40,9 +40,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
-import shutil
-import subprocess
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -326,7 +323,12 @@ class FunctionSet(Mapping):
         if self.want_compiled and not self._compiled_done:
             self._compile_all()
         if name not in self._cache:
-            if name == "ode_jacobian":
+            # read from the model cache (Functions with parameters built in are not stored)
+            stored = None if self.fixed else self.eom.workspace.stored_functions(self.eom)
+            hit = stored.get((name, self.outputs, self.sx)) if stored else None
+            if hit is not None:
+                self._cache[name] = hit
+            elif name == "ode_jacobian":
                 self._cache[name] = jacobian_of(self["ode"])
             else:
                 self._cache[name] = self._make(name)
@@ -521,6 +523,8 @@ def cache_dir() -> Path:
 
 
 def find_compiler() -> str | None:
+    import shutil
+
     for cand in (os.environ.get("CC"), "gcc", "cc", "clang"):
         if cand:
             path = shutil.which(cand)
@@ -575,6 +579,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
     built in a temporary folder and renamed into place (safe under concurrency).
     """
+    import subprocess          # (subprocess and tempfile: 10 ms to import; only a compile needs them)
+    import tempfile
+
     ca = _ca()
     cc = find_compiler()
     if cc is None:
@@ -676,6 +683,8 @@ def _file_sha256(path: Path) -> str:
 
 
 def _record_digest(built: Path, lib: Path) -> None:
+    import tempfile
+
     """Write the hash of the library `built` next to its cache place `lib` (``<name>.sha256``), atomically."""
     side = _digest_path(lib)
     fd, tmp = tempfile.mkstemp(prefix=f".{side.name}.", suffix=".tmp", dir=str(lib.parent))

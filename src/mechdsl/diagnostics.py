@@ -13,7 +13,6 @@ Rendered form (``render``)::
 """
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -112,6 +111,8 @@ def _order(d: Diagnostic):
 
 
 def did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
+    import difflib      # (4 ms to import: only when a name is wrong)
+
     close = difflib.get_close_matches(name, sorted(set(candidates)), n=1, cutoff=0.6)
     return f"did you mean '{close[0]}'?" if close else None
 

@@ -11,6 +11,10 @@ add -G^T lambda to the right-hand side, G = dg/dq.
 
 ``qdd`` is the explicit forward dynamics when a recursive O(N) route produced it (tree of
 components); otherwise None and ``M``/``bias`` are solved numerically.
+
+The object is frozen (setting an attribute raises ``dataclasses.FrozenInstanceError``):
+what phases derive from it and keep (Functions, searches, caches) lives in its workspace
+(``mechdsl.workspace.of(eom)``; ``api.Model.workspace``), never on the EOM.
 """
 from __future__ import annotations
 
@@ -22,7 +26,7 @@ import numpy as np
 from . import ir
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)      # eq=False: hashed and compared by identity (workspace key)
 class EOM:
     name: str
     coords: tuple[str, ...]
@@ -87,23 +91,27 @@ class EOM:
     def replace(self, **changes) -> "EOM":
         """A shallow copy with some fields changed.  Unlike dataclasses.replace it does not
         touch the other fields, so fields that derive computes on first access (M and bias
-        on the 'aba' route, whose O(N^2) CRBA a simulation does not need) stay lazy."""
+        on the 'aba' route, whose O(N^2) CRBA a simulation does not need) stay lazy.  The
+        copy gets a fresh workspace that shares the content-keyed values (workspace.inherit)."""
         import copy
 
-        new = copy.copy(self)
-        new.__dict__.pop("_fn_cache", None)      # Functions of the old fields
-        for k, v in changes.items():
+        from . import workspace
+
+        for k in changes:
             if k not in self.__dataclass_fields__:
                 raise TypeError(f"EOM has no field {k!r}")
-            setattr(new, k, v)
+        new = copy.copy(self)
+        for k, v in changes.items():
+            object.__setattr__(new, k, v)        # the copy is not yet shared with anyone
+        workspace.inherit(new, self)
         return new
 
-    def cached(self, key, build):
-        """A value built once per EOM (Functions of its fields); ``replace`` starts afresh."""
-        cache = self.__dict__.setdefault("_fn_cache", {})
-        if key not in cache:
-            cache[key] = build()
-        return cache[key]
+    @property
+    def workspace(self):
+        """The derived values kept for this EOM (mechdsl.workspace)."""
+        from . import workspace
+
+        return workspace.of(self)
 
     @property
     def m(self) -> int:
@@ -118,7 +126,7 @@ class EOM:
         import casadi as ca
 
         pv = self.param_values if p is None else np.asarray(p, float)
-        f = self.cached("start", lambda: ca.Function("start", [self.p], [self.q0, self.qd0]))
+        f = self.workspace.start_function(self)
         a, b = f(pv)
         return np.array(a, float).ravel(), np.array(b, float).ravel()
 
@@ -145,7 +153,7 @@ def multiplier_scales(eom: "EOM"):
         G = ca.jacobian(eom.g, eom.q)
         rows = [ca.norm_2(G[i, :]) if e else ca.SX(1) for i, e in enumerate(explicit_constraints(eom))]
         return ca.vertcat(*rows) if rows else ca.SX(0, 1)
-    return eom.cached("multiplier_scales", build)
+    return eom.workspace.memo("multiplier_scales", build)
 
 
 def reported_multipliers(eom: "EOM", q, p, lam, t: float = 0.0) -> np.ndarray:
@@ -154,7 +162,7 @@ def reported_multipliers(eom: "EOM", q, p, lam, t: float = 0.0) -> np.ndarray:
 
     if eom.m == 0:
         return np.zeros(0)
-    f = eom.cached("multiplier_scales_fn",
+    f = eom.workspace.memo("multiplier_scales_fn",
                    lambda: ca.Function("scales", [eom.q, eom.t, eom.p], [multiplier_scales(eom)]))
     s = np.array(f(np.asarray(q, float), t, np.asarray(p, float)), float).ravel()
     return s * np.asarray(lam, float).ravel()
@@ -169,7 +177,7 @@ def fold_inputs(eom: "EOM", u=None) -> "EOM":
         return eom
     import casadi as ca
 
-    base = eom.cached("folded", lambda: eom.replace(p=ca.vertcat(eom.p, eom.u), params=eom.params + eom.inputs,
+    base = eom.workspace.folded("base", lambda: eom.replace(p=ca.vertcat(eom.p, eom.u), params=eom.params + eom.inputs,
                                                     u=None, inputs=(), input_defaults=()))
     uv = np.asarray(eom.input_defaults if u is None else u, float).ravel()
     return base.replace(param_values=np.r_[np.asarray(eom.param_values, float).ravel(), uv])

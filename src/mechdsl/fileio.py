@@ -14,7 +14,6 @@ never created silently.
 from __future__ import annotations
 
 import os
-import secrets
 from pathlib import Path
 
 from .diagnostics import UsageError
@@ -91,7 +90,7 @@ def _has_marker(p: Path) -> bool:
 def _new_temp(final: Path, suffix: str = ".tmp") -> tuple[int, Path]:
     """A fresh temporary file beside ``final``: mode 0666 & ~umask, or final's mode if it exists."""
     for _ in range(100):
-        tmp = final.parent / f".{final.name}.{secrets.token_hex(4)}{suffix}"
+        tmp = final.parent / f".{final.name}.{os.urandom(4).hex()}{suffix}"   # (secrets costs 15 ms to import)
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:

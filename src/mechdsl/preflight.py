@@ -108,10 +108,10 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
     if found:
         return found
     if eom.m:
-        from .dae.driver import _start
         from .dae.init import initialize
+        from .simulation.inputs import fixed_start
 
-        q, qd, fq, fqd = _start(eom, x0, pv)
+        q, qd, fq, fqd = fixed_start(eom, x0, pv)
         g_problem = _constraint_problem(eom, q, t, pv)
         if g_problem:
             return g_problem
@@ -124,7 +124,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         if found:
             return found
     else:
-        from .simulate import start_vector
+        from .simulation.inputs import start_vector
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]
@@ -176,7 +176,7 @@ def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
         return gaps, ca.Function("start_gaps", [eom.q, eom.t, eom.p],
                                  [ca.vertcat(*[ca.SX(g.gap) for g in gaps])] if gaps else [ca.SX(0, 1)])
 
-    gaps, fn = eom.cached("preflight_gaps", build)
+    gaps, fn = eom.workspace.memo("preflight_gaps", build)
     if not gaps:
         return []
     for g, v in zip(gaps, _value(fn, q, t, pv)):
@@ -203,7 +203,7 @@ def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         return names, sizes, ca.Function("start_outputs", [eom.q, eom.qd, eom.t, u, eom.p],
                                          [ca.vertcat(*exprs)] if exprs else [ca.SX(0, 1)])
 
-    names, sizes, fn = eom.cached("preflight_outputs", build)
+    names, sizes, fn = eom.workspace.memo("preflight_outputs", build)
     if not names:
         return []
     vals = _value(fn, q, qd, t, _u(eom), pv)
@@ -355,7 +355,7 @@ def _loop_scale(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
     names = list(dict.fromkeys([n for j in cut for n in (j.parent, j.child)]
                                + [n for j in model.joints for n in (j.parent, j.child)]))
     try:
-        fn = eom.cached("preflight_joint_points", lambda: ca.Function(
+        fn = eom.workspace.memo("preflight_joint_points", lambda: ca.Function(
             "joint_points", [eom.q, eom.t, eom.p], [ca.horzcat(*[ca.vec(eom.point_position(n)) for n in names])]))
     except Exception:  # noqa: BLE001 - a point without a position: nothing to judge here
         return []

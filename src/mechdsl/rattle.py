@@ -83,14 +83,14 @@ def consistent_start(eom, x0, q0, qd0, t0, pv):
     consistent initialization (overridden values count as fixed) and its choice of
     independent constraints."""
     from .dae import dof_report, initialize
-    from .dae.driver import _start
+    from .simulation.inputs import fixed_start
 
     if q0 is not None or qd0 is not None:
         a, b = eom.start(pv)
         a = a if q0 is None else np.asarray(q0, float).ravel()
         b = b if qd0 is None else np.asarray(qd0, float).ravel()
         x0 = np.concatenate([a, b])
-    qs, qds, fq, fqd = _start(eom, x0, pv)
+    qs, qds, fq, fqd = fixed_start(eom, x0, pv)
     init = initialize(eom, qs, qds, t0, pv, fixed_q=fq, fixed_qd=fqd)
     dof = dof_report(eom, init.q, t0, pv)
     return init.q, init.qd, init, tuple(dof.independent), dof
@@ -100,31 +100,12 @@ def constrained_signals(eom, active, t, q, qd, pv, outputs) -> tuple[dict, dict]
     """Signals of a constrained run as the DAE simulator records them (outputs, energies,
     residuals, drift, multipliers from the consistent state when an output needs them);
     returns (signals, drift statistics)."""
-    import casadi as ca
-
-    from .dae.record import evaluate_signals, select_signals, standard_signals
+    from .dae.record import constrained_signals as record_signals, multipliers, select_signals
     from .dae.system import ConstrainedSystem
 
     chosen, need_lam = select_signals(eom, outputs, False)
-    LAM = None
-    if need_lam:
-        system = ConstrainedSystem.build(eom, pv, active)
-        LAM = np.zeros((len(t), eom.m))
-        for i in range(len(t)):
-            _, lam = system.accel(q[i], qd[i], t[i])
-            LAM[i, list(active)] = lam
-    plain = {k: v for k, v in chosen.items() if k in eom.outputs}
-    sig = evaluate_signals(eom, plain, t, q, qd, LAM, pv)
-    sig.update(evaluate_signals(eom, standard_signals(eom), t, q, qd, LAM, pv))
-    G = ca.jacobian(eom.g, eom.q)
-    f = ca.Function("drift", [eom.q, eom.qd, eom.t, eom.p],
-                    [ca.norm_inf(eom.g), ca.norm_inf(ca.mtimes(G, eom.qd) + ca.jacobian(eom.g, eom.t))])
-    N = len(t)
-    if N:
-        D, VD = f.map(N)(q.T, qd.T, np.asarray(t).reshape(1, -1), np.repeat(np.asarray(pv).reshape(-1, 1), N, 1))
-        sig["constraint_drift"] = np.array(D, float).ravel()
-        sig["velocity_drift"] = np.array(VD, float).ravel()
-    sig.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, q, qd, LAM, pv))
+    LAM = multipliers(ConstrainedSystem.build(eom, pv, active), t, q, qd) if need_lam else None
+    sig = record_signals(eom, chosen, t, q, qd, LAM, pv)
     stats = {"max_constraint_drift": float(np.max(sig.get("constraint_drift", [0.0]), initial=0.0)),
              "max_velocity_drift": float(np.max(sig.get("velocity_drift", [0.0]), initial=0.0))}
     return sig, stats

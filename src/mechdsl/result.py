@@ -11,14 +11,12 @@ integrator, method, tolerances, compiled), ``r.success``/``r.message``/``r.failu
 """
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from . import display as _display
 from .fileio import write_atomic_group
 
 
@@ -46,8 +44,15 @@ class Result:
     events: list[dict[str, Any]] = field(default_factory=list)
     failure: Failure | None = None
 
-    _repr_html_ = _display.result_html            # notebook displays (mechdsl.display)
-    _repr_markdown_ = _display.result_markdown
+    def _repr_html_(self):                      # notebook displays (mechdsl.display)
+        from .display import result_html
+
+        return result_html(self)
+
+    def _repr_markdown_(self):
+        from .display import result_markdown
+
+        return result_markdown(self)
 
     # -- access -----------------------------------------------------------------------
     @property
@@ -147,6 +152,8 @@ class Result:
         }
 
     def to_json_text(self, **extra) -> str:
+        import json
+
         return json.dumps(_jsonable({**self.summary(), **extra}), indent=2, sort_keys=True) + "\n"
 
     # -- seeing it (mechdsl.display) ------------------------------------------------------

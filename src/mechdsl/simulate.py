@@ -9,23 +9,22 @@ why.  See docs/simulate.md (users) and docs/internals/numerics.md (design).
 from __future__ import annotations
 
 import math
-import platform
 import time
 from typing import Any
 
 import numpy as np
 
 from . import integrators as I
-from .codegen import FastFunction, casadi_functions, singularity_monitors
+from .codegen import FastFunction, casadi_functions
 from .diagnostics import UsageError, did_you_mean
 from .result import Failure, Result
 from .eom import parameter_vector
 from .simulation.inputs import start_vector  # noqa: F401  (re-exported: one builder)
+from .simulation.record import ENERGY_NAMES
 
 DEFAULT_POINTS = 501
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
-ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
 NO_U = np.zeros(0)                   # the input vector u of a model without inputs
 KNOWN_OPTS = ("singularity_threshold", "functions")   # back-end options of the ODE runs (besides the settings)
 
@@ -74,14 +73,14 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         drive = build_drive(eom, s.inputs, t0, t1, xs)
     uv = drive.vector(t0)
     vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
-    post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
+    post = casadi_functions(eom, names=("mass_matrix",))     # the failure diagnosis reads M
     grid = np.linspace(t0, t1, npts)
     meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
                             "warnings": [], "notes": []}
     if eom.inputs:
         meta["inputs"] = drive.describe()
     if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
-        return _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive)
+        return _no_state_result(eom, grid, pv, out_names, meta, wall0, drive)
     auto_compiled = None
     if method == "auto":
         method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
@@ -142,7 +141,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     X[0] = xs
     t = grid[:n_ok].copy()
     U = drive.values(t, X)
-    signals = compute_signals(eom, post, t, X, pv, out_names, U=U)
+    signals = compute_signals(eom, t, X, pv, out_names, U=U)
     record_inputs(drive, U, signals, meta)
     _singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or SINGULARITY_THRESHOLD))
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
@@ -204,10 +203,10 @@ def record_inputs(drive, U, signals, meta) -> None:
     meta.setdefault("warnings", []).extend(drive.check_bounds(U))
 
 
-def _no_state_result(eom, post, grid, pv, out_names, meta, wall0, drive) -> Result:
+def _no_state_result(eom, grid, pv, out_names, meta, wall0, drive) -> Result:
     X = np.zeros((len(grid), 0))
     U = drive.values(grid, X)
-    signals = compute_signals(eom, post, grid, X, pv, out_names, U=U)
+    signals = compute_signals(eom, grid, X, pv, out_names, U=U)
     record_inputs(drive, U, signals, meta)
     meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
                 versions=versions(), options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
@@ -522,56 +521,23 @@ def _short(error: str) -> str:
 # --------------------------------------------------------------------------- signals
 
 
-def compute_signals(eom, post, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
-    """Outputs, energies (and constraint residuals / singularity monitors when present)
-    on the sample times: one vectorized (mapped) call per Function.  U: the inputs on the
-    sample times (rows = times; None: the inputs' defaults)."""
-    import casadi as ca
+def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
+    """What an unconstrained run records (simulation/record.py: outputs, energies, residuals,
+    invariants, first integrals, singularity monitors) on the sample times.  U: the inputs on
+    the sample times (rows = times; None: the inputs' defaults)."""
+    from .simulation import record as R
 
-    N = len(t)
-    sig: dict[str, np.ndarray] = {}
+    t = np.asarray(t, float).reshape(-1)
+    N, n = len(t), eom.n
     if N == 0:
-        return sig
-    T = t.reshape(1, N)
-    XT = X.T
-    P = np.asarray(pv, float).reshape(-1, 1)
+        return {}
+    X = np.asarray(X, float).reshape(N, 2 * n)
     UT = (np.tile(np.asarray(eom.input_defaults, float).reshape(-1, 1), (1, N)) if U is None
           else np.asarray(U, float).reshape(N, -1).T)
-
-    def mapped(f):
-        res = f.map(N)(T, XT, UT, P)
-        return [np.array(r, float) for r in (res if isinstance(res, (list, tuple)) else [res])]
-
-    if out_names:
-        f = post["outputs"]
-        for name, val in zip(f.name_out(), mapped(f)):
-            val = np.asarray(val, float)
-            rows = val.shape[0] if val.ndim == 2 else 1
-            if rows == 1:
-                sig[name] = val.reshape(-1)
-            else:
-                for i in range(rows):
-                    sig[f"{name}[{i + 1}]"] = val[i].reshape(-1)
-    e = mapped(post["energy"])
-    for name, val in zip(ENERGY_NAMES, e):
-        sig[name] = np.asarray(val, float).reshape(-1)
-    if eom.g is not None:
-        g, gd = mapped(casadi_functions(eom, names=("constraints",))["constraints"])
-        for i, cn in enumerate(eom.constraint_names):
-            sig[f"residual({cn})"] = g[i].reshape(-1)
-    if getattr(eom, "invariants", None):
-        f = casadi_functions(eom, names=("invariants",))["invariants"]
-        for name, val in zip(f.name_out(), mapped(f)):
-            sig[name] = np.asarray(val, float).reshape(-1)
-    steady = UT[:, 0] if UT.size and np.all(UT == UT[:, :1]) else (UT[:, 0] if N and not UT.size else None)
-    for name, val in _first_integrals(eom, t, X, pv, steady).items():
-        sig.setdefault(name, val)
-    if singularity_monitors(eom):
-        f = post["singularity"]
-        for name, val in zip(f.name_out(), mapped(f)):
-            sig[f"singularity({name})"] = np.asarray(val, float).reshape(-1)
-    del ca
-    return sig
+    steady = UT[:, 0] if UT.size and np.all(UT == UT[:, :1]) else (UT[:, 0] if not UT.size else None)
+    f, folded = _integral_search(eom, pv, steady)
+    cols = R.model_columns(eom, out_names, f, folded)
+    return R.record(eom, cols, t, X[:, :n], X[:, n:], pv, UT.T, using=(f,))
 
 
 def _singularity_report(eom, signals, t, meta, threshold):
@@ -595,26 +561,30 @@ def _singularity_report(eom, signals, t, meta, threshold):
 MAX_INTEGRAL_SEARCH = 20   # coordinates: beyond this the search costs more than a typical run
 
 
-def _first_integrals(eom, t, X, pv, u=None) -> dict[str, np.ndarray]:
-    """Values of the model's first integrals (cyclic momenta, Jacobi integral) on the samples,
-    so their drift measures the integrator.  The search is cached on the EOM.  u: the inputs'
-    constant values (None: time-varying, then no integrals are searched)."""
-    import casadi as ca
-
-    if eom.inputs:      # constant inputs: the integrals of the model with them as parameters
+def _integral_search(eom, pv, u=None):
+    """(the first integrals' Function (t, x, p) or None, whether it is of the folded model):
+    cyclic momenta and the Jacobi integral, recorded so their drift measures the integrator.
+    The search is kept in the workspace (and on disk).  u: the inputs' constant values (None:
+    time-varying, then no integrals are searched); with inputs the search runs on the model
+    with them as trailing parameters."""
+    if eom.inputs:
         if u is None:
-            return {}
+            return None, False
         from .eom import fold_inputs
 
-        key = ("folded", tuple(float(v) for v in u))
-        return _first_integrals(eom.cached(key, lambda: fold_inputs(eom, u)), t, X, np.r_[pv, u])
+        key = tuple(float(v) for v in u)
+        folded = eom.workspace.folded(key, lambda: fold_inputs(eom, u))
+        return _integral_search(folded, np.r_[pv, u])[0], True
     searchable = eom.n <= MAX_INTEGRAL_SEARCH and eom.model is not None and not eom.model.contacts
-    f = eom.cached("first_integrals", lambda: _integral_function(eom, pv) if searchable else None)
-    if f is None or len(t) == 0:
-        return {}
-    res = f.map(len(t))(t.reshape(1, -1), X.T, np.asarray(pv, float).reshape(-1, 1))
-    res = res if isinstance(res, (list, tuple)) else [res]
-    return {name: np.array(v, float).reshape(-1) for name, v in zip(f.name_out(), res)}
+
+    def search():
+        # shared by the EOM's replace copies with the same equations (other Models of the same
+        # structure): one Function object, so the recorder's Function is shared too
+        return eom.workspace.by_content(eom, ("q", "qd", "t", "p", "T", "V", "D", "Q", "g"),
+                                        ("first_integrals", np.asarray(pv, float).tobytes()),
+                                        lambda: _integral_function(eom, pv))
+
+    return eom.workspace.first_integrals(search if searchable else lambda: None), False
 
 
 INTEGRAL_CACHE_VERSION = "2"          # 2: rotation symmetries (angular momenta, issue 17)
@@ -668,11 +638,9 @@ def _integral_function(eom, pv):
 
 
 def _integral_drift(signals, eom) -> dict:
-    fs = [eom.cached("first_integrals", lambda: None)]
+    fs = [eom.workspace.first_integrals()]
     if eom.inputs:      # the integrals were searched on the model with constant inputs folded in
-        cache = eom.__dict__.get("_fn_cache", {})
-        fs = [v.cached("first_integrals", lambda: None) for k, v in cache.items()
-              if isinstance(k, tuple) and k and k[0] == "folded"]
+        fs = [v.workspace.first_integrals() for v in eom.workspace.folded_variants()]
     out = {}
     for name in [n for f in fs if f is not None for n in f.name_out()]:
         v = signals.get(name)
@@ -682,13 +650,10 @@ def _integral_drift(signals, eom) -> dict:
 
 
 def _energy_drift(signals) -> dict:
-    E = signals.get("energy")
-    if E is None or len(E) == 0 or not np.isfinite(E).all():
-        return {}
-    dE = float(np.abs(E - E[0]).max())
-    scale = max(abs(float(E[0])), float(np.abs(signals["kinetic_energy"]).max()),
-                float(np.abs(signals["potential_energy"]).max()), 1e-300)
-    return {"energy_drift": dE, "energy_drift_relative": dE / scale}
+    """accuracy.energy_drift without the keys it cannot fill (a back end's own statistics)."""
+    from .simulation.accuracy import energy_drift
+
+    return {k: v for k, v in energy_drift(signals).items() if v is not None}
 
 
 def is_conservative(eom) -> bool:
@@ -718,10 +683,34 @@ def _dedup(text: str) -> list[str]:
 
 
 def versions() -> dict[str, str]:
+    import platform
+
     import casadi
-    import scipy
 
     from . import __version__
 
     return {"mechdsl": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "python": platform.python_version()}
+            "scipy": _scipy_version(), "python": platform.python_version()}
+
+
+def _scipy_version() -> str:
+    """scipy.__version__ without importing scipy (8 ms) when the run did not: its version.py
+    is a file of plain assignments, read on its own."""
+    import sys
+
+    mod = sys.modules.get("scipy")
+    if mod is None:
+        import importlib.util
+        import os
+
+        try:
+            spec = importlib.util.find_spec("scipy")
+            where = os.path.join(os.path.dirname(spec.origin), "version.py")
+            vspec = importlib.util.spec_from_file_location("_mechdsl_scipy_version", where)
+            vmod = importlib.util.module_from_spec(vspec)
+            vspec.loader.exec_module(vmod)
+            return str(vmod.version)
+        except Exception:     # another layout: ask scipy itself
+            pass
+        import scipy as mod
+    return str(mod.__version__)

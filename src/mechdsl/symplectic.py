@@ -252,15 +252,13 @@ def _output_names(eom, outputs) -> tuple[str, ...]:
 
 
 def _signals(eom, ham, q, qd, pm, t, pv, out_names, active=None) -> dict[str, np.ndarray]:
-    """The simulator's signals (outputs, energies, singularity monitors: mechdsl.simulate's
-    compute_signals, so both kinds of Result look alike; constrained models as the DAE
-    simulator records them, with the drift), then H, the canonical momenta p_<coordinate>
-    and the first integrals."""
-    import casadi as ca
-
+    """The simulator's signals (simulate.compute_signals: outputs, energies, monitors, ...; a
+    constrained model as the DAE simulator records them, with the drift), then this back
+    end's own columns: H, the canonical momenta p_<coordinate> and the first integrals of
+    ``integral_signals`` not recorded yet (one recorder call, simulation/record.py)."""
     from .analysis.integrals import integral_signals
-    from .codegen import casadi_functions
     from .simulate import compute_signals
+    from .simulation import record as R
 
     if len(t) == 0:
         return {}
@@ -269,29 +267,19 @@ def _signals(eom, ham, q, qd, pm, t, pv, out_names, active=None) -> dict[str, np
 
         sig, _ = constrained_signals(eom, active, t, q, qd, pv, out_names)
     else:
-        post = casadi_functions(eom, names=("energy", "outputs", "singularity"), outputs=out_names)
-        sig = compute_signals(eom, post, t, np.hstack([q, qd]), pv, out_names)
+        sig = compute_signals(eom, t, np.hstack([q, qd]), pv, out_names)
     sig["H"] = _map(ham.function("H"), [q.T, pm.T, t[None, :], pv])[0]
     for i, c in enumerate(eom.coords):
         sig[f"p_{c}"] = pm[:, i].copy()
-    extra = {k: v for k, v in integral_signals(eom, pv).items() if k not in sig or k == "energy"}
-    extra.pop("energy", None)          # the same T + V as the simulator's "energy"
-    if extra:
-        f = ca.Function("fi", [eom.q, eom.qd, eom.t, eom.p], [ca.vertcat(*[ca.SX(v) for v in extra.values()])])
-        vals = _map(f, [q.T, qd.T, t[None, :], pv])
-        for i, k in enumerate(extra):
-            sig[k] = vals[i]
+    extra = {k: v for k, v in integral_signals(eom, pv).items() if k not in sig and k != "energy"}
+    sig.update(R.record(eom, extra, t, q, qd, pv, keep=False))     # fresh expressions each call
     return sig
 
 
 def _energy_drift(signals) -> dict:
-    E = signals.get("energy")
-    if E is None or len(E) == 0 or not np.isfinite(E).all():
-        return {}
-    dE = float(np.abs(E - E[0]).max())
-    scale = max(abs(float(E[0])), float(np.abs(signals.get("kinetic_energy", E)).max()),
-                float(np.abs(signals.get("potential_energy", E)).max()), 1e-300)
-    out = {"energy_drift": dE, "energy_drift_relative": dE / scale}
+    from .simulate import _energy_drift as energy_drift
+
+    out = energy_drift(signals)
     if "H" in signals and np.isfinite(signals["H"]).all():
         out["hamiltonian_drift"] = float(np.abs(signals["H"] - signals["H"][0]).max())
     return out

@@ -45,7 +45,7 @@ def quaternion_blocks(eom) -> list[tuple[str, list[int]]]:
                 out.append((name[: -len(".quaternion_norm")], dep))
         return out
 
-    return eom.cached("quaternion_blocks", build)
+    return eom.workspace.memo("quaternion_blocks", build)
 
 
 def normalize_blocks(q: np.ndarray, blocks, fallback: np.ndarray | None = None) -> np.ndarray | None:
@@ -119,7 +119,7 @@ def chart(eom, qstar: np.ndarray):
     """The EOM in the chart about ``qstar`` (module docstring); its coordinates are
     ``chart_names``, z = 0 at qstar.  Cached per reference point."""
     qstar = np.asarray(qstar, float)
-    return eom.cached(("chart", qstar.tobytes()), lambda: _chart(eom, qstar))
+    return eom.workspace.memo(("chart", qstar.tobytes()), lambda: _chart(eom, qstar))
 
 
 def _chart(eom, qstar):
@@ -184,7 +184,7 @@ def locked_joints(eom, q, t, pv) -> list[str]:
     for name, expr in eom.singularity_monitors.items():
         if not name.endswith(".gimbal"):
             continue
-        f = eom.cached(("monitor", name), lambda e=expr: ca.Function("m", [eom.q, eom.t, eom.p], [ca.SX(e)]))
+        f = eom.workspace.memo(("monitor", name), lambda e=expr: ca.Function("m", [eom.q, eom.t, eom.p], [ca.SX(e)]))
         v = float(f(q, t, pv))
         if np.isfinite(v) and abs(v) < LOCK_TOL:
             out.append(name[: -len(".gimbal")])
@@ -202,7 +202,7 @@ def quaternion_model(eom, joints: list[str]):
     """The EOM of the same model with the Euler-angle joints ``joints`` in quaternions, and a
     function mapping coordinate vectors of ``eom`` to coordinate vectors of the new one
     (derived once per EOM and set of joints)."""
-    return eom.cached(("quaternion_model", tuple(joints)), lambda: _quaternion_model(eom, list(joints)))
+    return eom.workspace.memo(("quaternion_model", tuple(joints)), lambda: _quaternion_model(eom, list(joints)))
 
 
 def _quaternion_model(eom, joints: list[str]):
@@ -358,7 +358,7 @@ def euler_blocks(eom) -> list[tuple[list[int], bool, str]]:
             out.append(([eom.coords.index(c) for c in idx], a == c, j.name))
         return out
 
-    return eom.cached("euler_blocks", build)
+    return eom.workspace.memo("euler_blocks", build)
 
 
 def euler_twin(q: np.ndarray, block) -> np.ndarray:

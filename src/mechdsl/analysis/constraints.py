@@ -55,12 +55,8 @@ class Fns:
 
 
 def fns(eom) -> Fns:
-    cache = eom.__dict__.setdefault("_analysis_cache", {})
-    key = ("constraint_fns", id(eom.g), id(eom.q))
-    f = cache.get(key)
-    if f is None:
-        f = cache[key] = Fns(eom)
-    return f
+    # shared with the EOM.replace copies of the same constraints
+    return eom.workspace.by_content(eom, ("g", "q", "t", "p"), "constraint_fns", lambda: Fns(eom))
 
 
 @dataclass

@@ -336,10 +336,12 @@ def _classify(eom, pt, pv, t, x, r_idx, s_idx, ign, q0, resid) -> SteadyMotion:
 def _reduced(eom, pt, r_idx, s_idx):
     """CasADi Functions of (q, t, p, beta): [Hessian of V_R in r, its gradient] and the reduced
     linear system matrix A (state (r, r'), momenta of s held at beta)."""
-    key = ("steady_reduced", tuple(r_idx), tuple(s_idx))
-    cache = eom.__dict__.setdefault("_analysis_cache", {})
-    if key in cache:
-        return cache[key]
+    # shared with EOM.replace copies: keyed by the Parts (content-keyed themselves), held by the entry
+    key = ("steady_reduced", id(pt), tuple(r_idx), tuple(s_idx))
+    return eom.workspace.shared(key, lambda: (pt,) + _build_reduced(eom, pt, r_idx, s_idx))[1:]
+
+
+def _build_reduced(eom, pt, r_idx, s_idx):
     import casadi as ca
 
     n, nr, ns = eom.n, len(r_idx), len(s_idx)
@@ -367,8 +369,7 @@ def _reduced(eom, pt, r_idx, s_idx):
     A = ca.jacobian(rhs, state) if nr else ca.SX(0, 0)
     fa = ca.Function("Ared", [q, t, p, beta, rd], [A])
     fa0 = lambda q_, t_, p_, b_: fa(q_, t_, p_, b_, np.zeros(nr))  # noqa: E731
-    cache[key] = (fv, fa0)
-    return cache[key]
+    return fv, fa0
 
 
 def _fmt(v) -> str:

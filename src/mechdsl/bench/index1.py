@@ -15,8 +15,6 @@ supervision, not caching.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from ..diagnostics import UsageError
 
 FORMULATION = "index1-ode"
@@ -67,16 +65,15 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
             funcs = {k: native[k] for k in funcs}
             compiled_note, native_code = None, True
     free = eom.replace(g=None)
-    free.cached("first_integrals", lambda: None)   # the free system's symmetries are not the model's
+    free.workspace.first_integrals(lambda: None)   # the free system's symmetries are not the model's
     r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
     r.metadata["compiled"] = native_code
     if compiled_note:
         r.metadata.setdefault("notes", []).append(compiled_note)
-    if len(r.t):
-        g = ca.Function("g", [eom.t, eom.q, eom.p], [eom.g])
-        G = np.array(g.map(len(r.t))(r.t.reshape(1, -1), r.q.T, pv.reshape(-1, 1)), float)
-        for i, name in enumerate(eom.constraint_names):
-            r.signals[f"residual({name})"] = G[i].reshape(-1)
+    if len(r.t):                     # the constrained model's residuals, as every constrained run records them
+        from ..simulation import record as R
+
+        r.signals.update(R.record(eom, R.residuals(eom), r.t, r.q, r.qd, pv))
     r.metadata["formulation"] = FORMULATION
     r.metadata["baumgarte"] = [alpha, beta]
     r.metadata["active_constraints"] = [eom.constraint_names[i] for i in system.active]

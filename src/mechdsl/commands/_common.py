@@ -42,6 +42,11 @@ def add_target_args(p, *, what: str = "use") -> None:
     g.add_argument("--scene", metavar="S", help=f"scene to {what} (its model, overrides and settings)")
 
 
+def add_cache_arg(p) -> None:
+    p.add_argument("--no-cache", action="store_true",
+                   help="neither read nor write the model cache (parse, analyse and derive anew; docs/simulate.md)")
+
+
 def add_set_arg(p) -> None:
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE[,...]",
                    help="change a parameter (m=2) or a start value (theta.start=pi/4, theta.speed=0); "
@@ -151,7 +156,7 @@ def load_model(args, *, starts_in_model: bool = True):
     from ..api import load
 
     m = load(args.file, model=getattr(args, "model", None), scene=getattr(args, "scene", None),
-             units=not getattr(args, "no_units", False))
+             units=not getattr(args, "no_units", False), cache=not getattr(args, "no_cache", False))
     # where a later phase's diagnostic without a position of its own is shown (cli._locate)
     args._where = (m.scene or m.model).span
     params, starts = split_starts(assignments(getattr(args, "set", None)))

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from ._common import add_force_arg, add_set_arg, add_target_args, load_model, number, target_line
+from ._common import add_cache_arg, add_force_arg, add_set_arg, add_target_args, load_model, number, target_line
 
 HELP = "simulate a model and write an animation of the mechanism (.gif, .html or .mp4)"
 
@@ -14,6 +14,7 @@ def add_parser(sub):
     p = sub.add_parser("animate", help=HELP, description=HELP + ". Bodies are drawn from their shapes; plane "
                        "mechanisms are drawn in their plane, spatial ones projected (see docs/animate.md).")
     add_target_args(p, what="animate")
+    add_cache_arg(p)
     p.add_argument("-o", "--output", metavar="OUT", required=True,
                    help="animation file: .gif, .html (play/pause and a scrubber) or .mp4 (needs ffmpeg)")
     p.add_argument("--fps", type=_num("--fps"), default=30.0, metavar="F", help="frames per second (default 30)")

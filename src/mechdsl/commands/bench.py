@@ -11,11 +11,12 @@ HELP = "speed against accuracy: run methods over a tolerance sweep, measure erro
 def add_parser(sub):
     from ..bench.plan import RUN_BUDGET, SWEEP_BUDGET
     from ..bench.runner import DEFAULT_BUDGET
-    from ._common import add_set_arg, add_target_args
+    from ._common import add_cache_arg, add_set_arg, add_target_args
     from .simulate import _number_arg
 
     p = sub.add_parser("bench", help=HELP, description=HELP)
     add_target_args(p, what="benchmark")
+    add_cache_arg(p)
     p.add_argument("--methods", action="append", default=[], metavar="LIST",
                    help="comma-separated method specifications: erk, cvodes-bdf, scipy-dop853, stormer-verlet, "
                         "rk[dt=0.01]; for constrained models FORMULATION+METHOD, e.g. projection+cvodes-bdf "

@@ -1,7 +1,7 @@
 """``mech equations FILE``: Lagrange's equations of a model, as people write them."""
 from __future__ import annotations
 
-from ._common import add_set_arg, add_target_args, load_model, target_line
+from ._common import add_cache_arg, add_set_arg, add_target_args, load_model, target_line
 
 
 def add_parser(sub):
@@ -9,6 +9,7 @@ def add_parser(sub):
                        description="Print T, V, D, Q and one Lagrange equation per coordinate, simplified "
                                    "(sympy). Large models are described by their structure instead.")
     add_target_args(p, what="print")
+    add_cache_arg(p)
     add_set_arg(p)
     p.add_argument("--latex", action="store_true", help="print LaTeX (an align environment)")
     p.add_argument("--hamiltonian", action="store_true", help="print Hamilton's equations instead")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import json
 
-from ._common import add_force_arg, add_guess_arg, add_set_arg, add_target_args, assignments, load_model, target_line
+from ._common import (add_cache_arg, add_force_arg, add_guess_arg, add_set_arg, add_target_args,
+                      assignments, load_model, target_line)
 
 
 def add_parser(sub):
@@ -14,6 +15,7 @@ def add_parser(sub):
                                    "(Lagrange-Dirichlet), unstable, or undetermined, with the eigenvalues "
                                    "that decide.")
     add_target_args(p, what="analyse")
+    add_cache_arg(p)
     add_guess_arg(p, "a starting guess, e.g. theta=pi/2 or x=1,phi=0.5 (coordinates not named keep "
                      "their start values); repeat --guess for several guesses")
     add_set_arg(p)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import re
 
-from ._common import add_force_arg, add_guess_arg, add_set_arg, add_target_args, assignments, load_model, target_line
+from ._common import (add_cache_arg, add_force_arg, add_guess_arg, add_set_arg, add_target_args,
+                      assignments, load_model, target_line)
 
 
 def add_parser(sub):
@@ -12,6 +13,7 @@ def add_parser(sub):
                        description="Linearize the equations of motion: M dq'' + C dq' + K dq = B du; print "
                                    "M, C, K, the first-order A (and B for inputs) and the modes.")
     add_target_args(p, what="analyse")
+    add_cache_arg(p)
     p.add_argument("--at", default="equilibrium",
                    help="'equilibrium' (nearest to the start values; steer with --guess), 't=T' (the state "
                         "reached at time T from the start values), 'start', or NAME=VALUE,... (a state; "

@@ -4,7 +4,7 @@ from __future__ import annotations
 import sys
 
 from ..diagnostics import UsageError
-from ._common import add_set_arg, add_target_args, load_model, number, target_line
+from ._common import add_cache_arg, add_set_arg, add_target_args, load_model, number, target_line
 
 HELP = "simulate a model and write its results (CSV + JSON sidecar) and a plot"
 
@@ -12,6 +12,7 @@ HELP = "simulate a model and write its results (CSV + JSON sidecar) and a plot"
 def add_parser(sub):
     p = sub.add_parser("simulate", help=HELP, description=HELP)
     add_target_args(p, what="simulate")
+    add_cache_arg(p)
     p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time, else 10)")
     p.add_argument("--t-start", type=_number_arg, metavar="T0", help="start time [s] (default 0)")
     p.add_argument("--points", type=int, metavar="N", help="output points including both ends (default 501)")
@@ -130,7 +131,6 @@ def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
     during the run) is written to a fresh folder under the temporary directory instead, and
     said so, so a long run is never lost.  Returns (written paths, problems)."""
     import os
-    import tempfile
     from pathlib import Path
 
     written: list[str] = []
@@ -143,6 +143,8 @@ def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
             return write(path, force)
         except OSError as e:
             if rescue is None:
+                import tempfile      # (tempfile and shutil: 3-20 ms to import; only on a failed write)
+
                 rescue = tempfile.mkdtemp(prefix="mechdsl-results-")
             alt = os.path.join(rescue, Path(path).name)
             lost.append(f"could not write {path} ({e.strerror or e}); wrote {alt} instead")

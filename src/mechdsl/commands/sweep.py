@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 
 from ..diagnostics import UsageError
-from ._common import add_force_arg, add_set_arg, add_target_args, load_model
+from ._common import add_cache_arg, add_force_arg, add_set_arg, add_target_args, load_model
 
 HELP = "run a model over a grid or a random sample of parameters and start values"
 METRICS = "flip:EXPR (first time |EXPR| > pi), final:VAR, max:VAR (max |VAR|), or a status column " \
@@ -22,6 +22,7 @@ def add_parser(sub):
 
     p = sub.add_parser("sweep", help=HELP, description=HELP)
     add_target_args(p, what="sweep")
+    add_cache_arg(p)
     add_set_arg(p)
     p.add_argument("--grid", action="append", default=[], metavar="NAME=A:B:N",
                    help="sweep NAME over N values from A to B (or NAME=v1,v2,...); several --grid make a "

@@ -111,7 +111,7 @@ def dof_report(eom: EOM, q=None, t: float = 0.0, p=None, tol: float = RANK_TOL) 
     q = np.asarray(q, float)
     if m == 0:
         return DofReport(coordinates=n, constraints=0, rank=0, dof=n, redundant=0, t=t)
-    f = eom.cached("dof_GM", lambda: ca.Function("GM", [eom.q, eom.t, eom.p], [ca.jacobian(eom.g, eom.q), eom.M]))
+    f = eom.workspace.memo("dof_GM", lambda: ca.Function("GM", [eom.q, eom.t, eom.p], [ca.jacobian(eom.g, eom.q), eom.M]))
     Gv, Mv = f(q, t, pv)
     G = np.array(Gv, float).reshape(m, n)
     M = np.array(Mv, float).reshape(n, n)

@@ -30,12 +30,14 @@ import time as _time
 
 import numpy as np
 
-from ..diagnostics import UsageError, did_you_mean
+from ..diagnostics import UsageError
+from ..eom import parameter_vector
 from ..result import Failure, Result
+from ..simulation.inputs import fixed_start
 from .dof import dof_report, short_list, singular_ratio, singular_ratios
 from .init import initialize
 from .options import DaeOptions, parse_options
-from .record import evaluate_signals, select_signals, standard_signals
+from .record import constrained_signals, multipliers, select_signals
 from .stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
 from .system import ConstrainedSystem
 
@@ -48,52 +50,6 @@ BUDGET_MARGIN = 8.0        # a call may take this many times the steps per unit 
 MAX_CALLS = 100_000        # integrator calls per run: a bound on every loop of the driver
 CHUNK = 64                 # most output intervals per integrator call (one integrator is built
                            # per segment length and kept with the system, so reruns reuse it)
-
-
-def _param_vector(eom, p) -> np.ndarray:
-    if p is None:
-        return np.array(eom.param_values, float)
-    if isinstance(p, dict):
-        pv = np.array(eom.param_values, float)
-        for k, v in p.items():
-            if k not in eom.params:
-                raise UsageError(f"unknown parameter {k!r}")
-            pv[eom.params.index(k)] = float(v)
-        return pv
-    pv = np.asarray(p, float).ravel()
-    if pv.size != len(eom.params):
-        raise UsageError(f"parameter vector has {pv.size} entries, the model has {len(eom.params)}")
-    return pv
-
-
-def _start(eom, x0, pv):
-    """Start values with the overrides x0 ([q; qd] or {name | "der(name)": value}) applied;
-    an overridden value counts as fixed for the consistent initialization."""
-    q0, qd0 = eom.start(pv)
-    n = eom.n
-    fq = list(eom.fixed_q) if len(eom.fixed_q) == n else [True] * n
-    fqd = list(eom.fixed_qd) if len(eom.fixed_qd) == n else [True] * n
-    if x0 is None:
-        return q0, qd0, tuple(fq), tuple(fqd)
-    if isinstance(x0, dict):
-        for k, v in x0.items():
-            name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
-            if name not in eom.coords:
-                hint = did_you_mean(name, eom.coords)
-                raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
-            i = eom.coords.index(name)
-            if speed:
-                qd0[i], fqd[i] = float(v), True
-            else:
-                q0[i], fq[i] = float(v), True
-    else:
-        x = np.asarray(x0, float).ravel()
-        if x.size != 2 * n:
-            raise UsageError(f"x0 has {x.size} entries; expected {2 * n} (coordinates then their speeds)")
-        q0, qd0 = x[:n].copy(), x[n:].copy()
-    if not (np.all(np.isfinite(q0)) and np.all(np.isfinite(qd0))):
-        raise UsageError("start values are not finite")
-    return q0, qd0, tuple(fq), tuple(fqd)
 
 
 FIRST_PERIODS = 50         # the first segment of an ODE formulation spans at most this many periods
@@ -171,7 +127,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     if eom.g is None or eom.m == 0:
         raise UsageError("simulate_dae needs a model with constraints; use mechdsl.simulate for ODEs")
     wall0 = _time.perf_counter()
-    pv = _param_vector(eom, opts.p)
+    pv = parameter_vector(eom, opts.p)
     t0 = float(opts.t_start)
     t_end = float(t_end)
     if not t_end > t0:
@@ -185,7 +141,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     span = t_end - t0
     chosen, need_lam = select_signals(eom, opts.outputs, opts.reactions)
 
-    q0, qd0, fixed_q, fixed_qd = _start(eom, opts.x0, pv)
+    q0, qd0, fixed_q, fixed_qd = fixed_start(eom, opts.x0, pv)
     init = initialize(eom, q0, qd0, t0, pv, fixed_q=fixed_q, fixed_qd=fixed_qd)
     dof = dof_report(eom, init.q, t0, pv)
     notes: list[str] = []
@@ -379,18 +335,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     t = np.array(T)
     Q = np.array(Qs).reshape(len(T), eom.n)
     QD = np.array(QDs).reshape(len(T), eom.n)
-    LAM = None
-    if need_lam:
-        LAM = np.zeros((len(T), eom.m))
-        for i in range(len(T)):
-            _, lam = system.accel(Q[i], QD[i], t[i])
-            LAM[i, list(system.active)] = lam
-    plain = {k: v for k, v in chosen.items() if k in eom.outputs}
-    signals = evaluate_signals(eom, plain, t, Q, QD, LAM, pv)
-    signals.update(evaluate_signals(eom, standard_signals(eom), t, Q, QD, LAM, pv))
-    signals["constraint_drift"] = np.array(D)
-    signals["velocity_drift"] = np.array(VD)
-    signals.update(evaluate_signals(eom, {k: v for k, v in chosen.items() if k not in plain}, t, Q, QD, LAM, pv))
+    LAM = multipliers(system, t, Q, QD) if need_lam else None
+    signals = constrained_signals(eom, chosen, t, Q, QD, LAM, pv, drift=(D, VD))
 
     energy = energy_check(eom, signals, opts, failure is None)
     bound = opts.bound
@@ -507,7 +453,7 @@ def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
         except Exception:  # noqa: BLE001 -- a non-SX model: make no claim
             return None
 
-    cons = eom.cached("dae_conservative", conservative)
+    cons = eom.workspace.memo("dae_conservative", conservative)
     out["conservative"] = cons
     if cons and "energy_drift_relative" in out:
         limit = min(ENERGY_CAP, max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol))

@@ -69,7 +69,7 @@ class InitReport:
 
 
 def _functions(eom: EOM):
-    return eom.cached("init_functions", lambda: _build_functions(eom))
+    return eom.workspace.memo("init_functions", lambda: _build_functions(eom))
 
 
 def _build_functions(eom: EOM):

@@ -24,17 +24,10 @@ import re
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
+from ..simulation.record import lam_symbol  # noqa: F401  (the one multiplier symbol)
 
 REACTION_NAME = re.compile(r"(.+)\.(force|torque)\[(\d)\]")
 
-
-def lam_symbol(eom):
-    """The EOM's multiplier symbol (created and stored on the EOM when it has none)."""
-    import casadi as ca
-
-    if getattr(eom, "lam", None) is None:
-        eom.lam = ca.SX.sym("lam", eom.m)
-    return eom.lam
 
 
 def depends_on(expr, sym) -> bool:
@@ -107,45 +100,42 @@ def select_signals(eom, outputs, reactions: bool) -> tuple[dict, bool]:
     return chosen, need
 
 
-def evaluate_signals(eom, chosen: dict, t, Q, QD, LAM, p) -> dict[str, np.ndarray]:
-    """Values of the chosen signals at the recorded states; a vector-valued output `v` becomes
-    the signals v[1], v[2], ... (1-based, as the ODE simulator names them)."""
+def constrained_signals(eom, chosen: dict, t, Q, QD, LAM, p, drift=None) -> dict[str, np.ndarray]:
+    """What a constrained run records, in this order: the chosen model outputs, energies and
+    residuals, the drift (``drift`` = (D, VD) measured by the integrator, or None: evaluated
+    at the recorded states), then the multipliers and reactions chosen.  One recorder call
+    (simulation/record.py); LAM (N, m) the multipliers (None: not computed)."""
+    from ..simulation import record as R
+
+    plain = {k: v for k, v in chosen.items() if k in eom.outputs}
+    rest = {k: v for k, v in chosen.items() if k not in plain}
+    cols = R.merged(plain, R.energies(eom), R.residuals(eom), {} if drift is not None else R.drift(eom), rest)
+    sig = R.record(eom, cols, t, Q, QD, p, LAM=LAM)
+    if drift is None:
+        return sig
+    out = {k: sig[k] for k in sig if k not in _names(eom, rest)}
+    out["constraint_drift"] = np.asarray(drift[0], float)
+    out["velocity_drift"] = np.asarray(drift[1], float)
+    out.update({k: sig[k] for k in sig if k not in out})
+    return out
+
+
+def multipliers(system, t, Q, QD) -> np.ndarray:
+    """The multipliers (N, m) at the recorded states, from the augmented system at
+    acceleration level (0 for a constraint outside the active set)."""
+    LAM = np.zeros((len(t), system.eom.m))
+    for i in range(len(t)):
+        _, lam = system.accel(Q[i], QD[i], t[i])
+        LAM[i, list(system.active)] = lam
+    return LAM
+
+
+def _names(eom, cols: dict) -> set:
+    """The signal names of these columns (vector columns expand to name[i])."""
     import casadi as ca
 
-    if not chosen:
-        return {}
-    def build():
-        lam = lam_symbol(eom)
-        names, exprs = [], []
-        for k, v in chosen.items():
-            v = ca.SX(v)
-            if v.numel() == 1:
-                names.append(k)
-            else:
-                names += [f"{k}[{i + 1}]" for i in range(v.numel())]
-            exprs.append(ca.vec(v))
-        return names, ca.Function("signals", [eom.q, eom.qd, eom.t, eom.p, lam], [ca.vertcat(*exprs)])
-
-    # the signals of a name are the same expressions on every run of this EOM
-    names, F = eom.cached(("signals", tuple(chosen)), build)
-    N = len(t)
-    if N == 0:
-        return {k: np.zeros(0) for k in names}
-    P = np.repeat(np.asarray(p, float).reshape(-1, 1), N, axis=1)
-    L = LAM.T if LAM is not None and LAM.size else np.zeros((eom.m, N))
-    vals = np.array(F.map(N)(Q.T, QD.T, np.asarray(t).reshape(1, -1), P, L), float).reshape(len(names), N)
-    return {k: vals[i] for i, k in enumerate(names)}
-
-
-def standard_signals(eom) -> dict[str, object]:
-    """Energies and constraint residuals, recorded in every run."""
-    return dict(eom.cached("standard_signals", lambda: _standard_signals(eom)))
-
-
-def _standard_signals(eom) -> dict[str, object]:
-    import casadi as ca
-
-    out = {"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V}
-    for i, name in enumerate(eom.constraint_names):
-        out[f"residual({name})"] = ca.SX(eom.g)[i]
+    out = set()
+    for k, v in cols.items():
+        k_n = int(ca.SX(v).numel())
+        out |= {k} if k_n == 1 else {f"{k}[{i + 1}]" for i in range(k_n)}
     return out

@@ -102,7 +102,7 @@ def _kkt_route(eom: EOM, pv: np.ndarray, m: int) -> str:
     ca = _sx()
     try:
         q0 = eom.start(pv)[0] if eom.q0 is not None else np.zeros(n)
-        fM = eom.cached("M", lambda: ca.Function("M", [eom.q, eom.t, eom.p], [eom.M]))
+        fM = eom.workspace.memo("M", lambda: ca.Function("M", [eom.q, eom.t, eom.p], [eom.M]))
         M = np.array(fM(q0, 0.0, pv), float)
         d = 1.0 / np.sqrt(np.abs(np.diag(M)) + 1e-300)
         ev = np.linalg.eigvalsh(d[:, None] * M * d[None, :])
@@ -136,6 +136,8 @@ def equilibrated_kkt_solve(M, G, rhs_q, rhs_c):
     return d * x[:n], s * x[n:]
 
 
+SYSTEM_FIELDS = ("q", "qd", "t", "p", "M", "bias", "g")     # what ConstrainedSystem._build reads
+
 @dataclass
 class ConstrainedSystem:
     """Symbolic and compiled pieces of an EOM with constraints, for numeric parameters p."""
@@ -159,13 +161,12 @@ class ConstrainedSystem:
             raise ValueError("ConstrainedSystem needs an EOM with constraints (eom.g)")
         pv = eom.param_values if p is None else np.asarray(p, float)
         active = tuple(range(eom.m)) if active is None else tuple(active)
-        cache = eom.__dict__.setdefault("_constrained_systems", {})
-        route = eom.cached(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
+        route = eom.workspace.memo(("kkt_route", len(active), pv.tobytes(), SX_KKT_MAX, SCHUR_MAX_N),
                            lambda: _kkt_route(eom, pv, len(active)))
-        key = (active, route)     # the active set and the linear-algebra route
-        if key not in cache:
-            cache[key] = ConstrainedSystem._build(eom, pv, active, route)
-        base = cache[key]
+        # the active set and the linear-algebra route; shared with EOM.replace copies of the
+        # same equations (not with Drive.close_eom's, whose M, bias and g read the signals)
+        base = eom.workspace.by_content(eom, SYSTEM_FIELDS, ("constrained_system", active, route),
+                                        lambda: ConstrainedSystem._build(eom, pv, active, route))
         return ConstrainedSystem(eom=eom, p=pv, active=active, sym=base.sym, fn=base.fn, route=base.route,
                                  fast=base.fast)
 

@@ -56,6 +56,10 @@ def solve_impact(M, qd, G, gt, e, B=None, bt=None) -> ImpactSolution:
     bt = np.zeros(B.shape[0]) if bt is None else np.asarray(bt, float).reshape(-1)
     u_minus = G @ v + gt
     h = -e * np.minimum(u_minus, 0.0)                 # required u+ (>=)
+    if G.shape[0] == 1 and not B.shape[0]:
+        single = _single(M, v, G[0], gt, h, u_minus)
+        if single is not None:
+            return single
     L = np.linalg.cholesky(M)
     Gt = sla.solve_triangular(L, G.T, lower=True).T   # G L^-T
     Bt = sla.solve_triangular(L, B.T, lower=True).T
@@ -80,6 +84,24 @@ def solve_impact(M, qd, G, gt, e, B=None, bt=None) -> ImpactSolution:
         mu = np.linalg.lstsq(B.T, M @ (v_plus - v) - G.T @ lam, rcond=None)[0]
     return ImpactSolution(qd=v_plus, impulses=lam, bilateral=mu, speeds_before=u_minus,
                           speeds_after=G @ v_plus + gt)
+
+
+def _single(M, v, g, gt, h, u_minus):
+    """One contact, no bilateral rows: the least-distance problem in closed form,
+    Lambda = max(0, h - u) / W with W = g M^-1 g^T, q'+ = q'- + M^-1 g^T Lambda (what the
+    LDP gives for one row; the impact events of a lone contact, the common case, skip the
+    factorizations and the NNLS).  None when W is not positive (the general path decides)."""
+    try:
+        x = np.linalg.solve(M, g)
+    except np.linalg.LinAlgError:
+        return None
+    W = float(g @ x)
+    if not (W > 0.0 and np.isfinite(W)):
+        return None
+    lam = np.array([max(0.0, float(h[0] - u_minus[0])) / W])
+    v_plus = v + x * lam[0]
+    return ImpactSolution(qd=v_plus, impulses=lam, bilateral=np.zeros(0), speeds_before=u_minus,
+                          speeds_after=np.array([g @ v_plus]) + gt)
 
 
 def ldp(E, f) -> tuple[np.ndarray, np.ndarray]:

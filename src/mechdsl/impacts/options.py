@@ -17,8 +17,8 @@ class ContactOptions:
     event_offset: float | None = None   # m: events fire at gap = -event_offset (default atol)
     impact_order: str = "simultaneous"
     max_events: int = 100000
-    max_steps: int = 200_000        # steps in one run (the stepping is in Python, ~0.1-0.5 ms a step): a
-                                    # collapsed step size, or a run estimated to need more, fails instead
+    max_steps: int = 200_000        # steps in one run (Python steps cost ~0.1-0.5 ms, compiled free flight
+                                    # ~1 us): a collapsed step size, or a run estimated to need more, fails
     max_step: float | None = None
     proj_tol: float | None = None   # drift of active constraints that triggers a projection (default 100 atol)
     samples: int = 4                # sub-intervals per step on which event functions are sampled

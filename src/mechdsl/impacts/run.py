@@ -24,6 +24,7 @@ import numpy as np
 
 from .impact_map import ImpactError, solve_impact
 from .rootfind import bracket_root
+from .compiled import COMPILED_CLASSES, EVENT, OK
 from .stepper import IMPLICIT, make_solver, steps_per_period
 
 ZENO_EVENTS = 500           # this many events ...
@@ -37,7 +38,8 @@ class RunFailure(Exception):
 
 
 class Run:
-    def __init__(self, system, opts, grid: np.ndarray, method_cls: str, progress=None, output_events: bool = False):
+    def __init__(self, system, opts, grid: np.ndarray, method_cls: str, progress=None, output_events: bool = False,
+                 flight=None):
         self.s, self.o = system, opts
         self.grid = np.asarray(grid, float)
         self.method_cls = method_cls
@@ -59,6 +61,10 @@ class Run:
                       "root_evaluations": 0}
         self._burst = (math.nan, 0)
         self._recent = collections.deque(maxlen=ZENO_EVENTS)     # times of the latest events
+        # the compiled loop for free flight (impacts/compiled.py), or None: all in Python
+        self.flight = flight if method_cls in COMPILED_CLASSES and opts.max_step is None else None
+        if self.flight is not None:
+            self.stats.update(compiled_segments=0, python_segments=0)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -396,6 +402,59 @@ class Run:
         qd[free_v] -= np.linalg.lstsq(A[rows][:, free_v], r, rcond=None)[0]
         return q, qd
 
+    def _at_event(self, t: float, y_ev: np.ndarray) -> np.ndarray:
+        """Handle the events at t (state y_ev just before): the state after them."""
+        n = self.n
+        count, pre = len(self.events), self._sample(t, y_ev)
+        q, qd = self.handle(t, y_ev[:n], y_ev[n:])
+        y = np.concatenate([q, qd])
+        self._event_rows(t, y_ev, pre, y, count)
+        return y
+
+    def _fixations_due(self, t: float, y: np.ndarray, pending, fixed: set) -> np.ndarray:
+        """Apply the pending fixations whose time is t (the end of a segment): the state after them."""
+        n = self.n
+        for tf, j in pending:
+            if tf <= t:
+                count, y_pre, pre = len(self.events), y, self._sample(t, y)
+                q, qd = self.fixate(t, y[:n], y[n:], j)
+                y = np.concatenate([q, qd])
+                self._event_rows(t, y_pre, pre, y, count)
+                fixed.add(j)
+        return y
+
+    def _flight_segment(self, t: float, y: np.ndarray, t_stop: float, t_end: float):
+        """Free flight from t to t_stop (or the first event) in the compiled loop: (time, state,
+        stopped at an event) with the output rows before it stored, or None when the C loop
+        failed or an event sits at t itself (the caller then steps this segment in Python)."""
+        s, o, g = self.s, self.o, self.grid
+        if not np.all(np.isfinite(y)) or not t_stop > t:
+            return None
+        while self.gi < len(g) and g[self.gi] <= t:      # points at an event time: the state after it
+            self._store(self.gi, g[self.gi], y)
+            self.gi += 1
+        pts = g[self.gi:]
+        pts = pts[pts < t_stop]
+        tick = None if self.progress is None else (lambda tt: self.progress(tt, t_end))
+        status, t_r, y_r, X, st = self.flight.segment(
+            COMPILED_CLASSES[self.method_cls], np.concatenate([[t], pts, [t_stop]]), y, s.p, o.rtol, o.atol,
+            o.max_steps - self.stats["steps"], s.k, o.offset, o.samples, tick)
+        if status not in (OK, EVENT):
+            return None
+        rows = min(len(X) - 1, len(pts))
+        self.out_y[self.gi:self.gi + rows] = X[1:1 + rows]
+        self.gi += rows
+        self.stats["steps"] += st["steps"]
+        self.stats["rejected_steps"] += st["rejected"]
+        self.stats["root_evaluations"] += st["root"]
+        self.stats["restarts"] += 1
+        self.stats["compiled_segments"] += 1
+        s.n_rhs += st["rhs"]
+        self.t_now = t_r
+        if tick is not None:
+            tick(t_r)
+        return (t_r, y_r.copy(), True) if status == EVENT else (t_stop, y_r.copy(), False)
+
     def _check_work(self, t0: float, t_end: float, y: np.ndarray) -> None:
         """A run that would need more steps than the budget fails at once, with the time scale
         named, instead of stepping for minutes in Python (a rod of 1e-12 m swings at 2e6 rad/s).
@@ -442,6 +501,14 @@ class Run:
             pending = [(tf, j) for tf, j in fix_times if j not in fixed]
             t_stop = min([t_end] + [tf for tf, _ in pending])
             pending_times = {tf for tf, _ in pending}
+            if self.flight is not None and not self.active:
+                seg = self._flight_segment(t, y, t_stop, t_end)
+                if seg is not None:
+                    t, y, event = seg
+                    y = self._at_event(t, y) if event else self._fixations_due(t, y, pending, fixed)
+                    continue
+            if self.flight is not None:
+                self.stats["python_segments"] += 1
             rows = list(self.active)
             jac = s.jacobian(rows) if self.method_cls in ("Radau", "BDF", "LSODA") else None
             if not np.all(np.isfinite(y)):
@@ -470,10 +537,7 @@ class Run:
                     t_ev, y_ev, _ = ev
                     self.emit(sol, t_ev, inclusive=False)
                     t = t_ev
-                    count, pre = len(self.events), self._sample(t, y_ev)
-                    q, qd = self.handle(t, y_ev[:n], y_ev[n:])
-                    y = np.concatenate([q, qd])
-                    self._event_rows(t, y_ev, pre, y, count)
+                    y = self._at_event(t, y_ev)
                     restart = True
                     break
                 # a grid point at a fixation time shows the state after it (as at impacts)
@@ -490,13 +554,7 @@ class Run:
             if restart:
                 continue
             t = t_stop
-            for tf, j in pending:
-                if tf <= t_stop:
-                    count, y_pre, pre = len(self.events), y, self._sample(t, y)
-                    q, qd = self.fixate(t, y[:n], y[n:], j)
-                    y = np.concatenate([q, qd])
-                    self._event_rows(t, y_pre, pre, y, count)
-                    fixed.add(j)
+            y = self._fixations_due(t, y, pending, fixed)
         # grid points at the final time (after an event there)
         while self.gi < len(self.grid) and self.grid[self.gi] <= t + 1e-12 * max(1.0, abs(t)):
             self._store(self.gi, self.grid[self.gi], y)

@@ -9,18 +9,19 @@ from .. import result as R
 from ..diagnostics import Diagnostic, MechError, UsageError
 from .gaps import contact_gaps
 from .options import ContactOptions
+from .compiled import COMPILED_CLASSES, flight
 from .run import Run, RunFailure
 from .stepper import resolve_method
 from .system import ContactSystem
 from ..eom import parameter_vector  # noqa: F401  (re-exported)
 from ..simulation.inputs import start_vector
+from ..simulation.record import ENERGY_NAMES
 
 # options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
 # the simulator can pass its options through unchanged
 _PASSED_THROUGH = ("formulation", "dt", "reactions", "compiled", "max_steps", "integrator_options",
                    "singularity_threshold", "functions")
 DEFAULT_POINTS = 501
-ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
 
 
 def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_start: float = 0.0,
@@ -79,8 +80,17 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                        g.span or _no_span(),
                                        "change the start values so that every gap is >= 0"))
     grid = np.linspace(t_start, t_end, npts)
+    fl, compiled_note = None, "off (requested)"
+    if passed.get("compiled") is False:
+        pass
+    elif method_cls not in COMPILED_CLASSES or max_step is not None:
+        compiled_note = "no: the compiled loop steps dop853 and rk45 without max_step"
+    else:
+        fl, compiled_note = flight(system, tag=eom.name)
+        compiled_note = ("free flight (all contacts open) in the compiled loop; impacts, closed contacts and "
+                         "fixations in Python" if fl is not None else f"no: {compiled_note}")
     run = Run(system, opts, grid, method_cls, progress=progress if callable(progress) else None,
-              output_events=bool(output_events))
+              output_events=bool(output_events), flight=fl)
     wall = _time.perf_counter()
     failure = None
     try:
@@ -99,7 +109,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     n = eom.n
     res = R.Result(t=T.copy(), q=Y[:, :n].copy(), qd=Y[:, n:].copy(), coordinates=tuple(eom.coords),
                    events=run.events, failure=failure)
-    res.signals = _signals(eom, system, T, Y, force, lam, out_names)
+    res.signals = _signals(eom, system, T, Y, force, lam, out_names, model_gaps=contacts is None)
     if output_events:
         res.signals["event"] = side
     res.stats = dict(run.stats, rhs_evals=system.n_rhs, points=m, wall_time=wall, events=len(run.events),
@@ -107,9 +117,10 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     conservative = _conservative(eom) and not system.friction
     if conservative and m:
         res.stats.update(_drift_between_events(res, run.events, side))
-    reason = "one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+    reason = ("one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
+              + ("; free flights in the compiled loop" if fl is not None else ""))
     res.metadata = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords), "warnings": [],
-                    "method": method_cls.lower(), "method_reason": reason, "conservative": conservative,
+                    "method": method_cls.lower(), "method_reason": reason, "compiled": compiled_note, "conservative": conservative,
                     "simulator": "mechdsl.impacts",
                     "options": {"t_start": t_start, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol,
                                 "points": npts, "method": method or "auto", "outputs": list(out_names),
@@ -194,35 +205,19 @@ def _no_span():
     return Span()
 
 
-def _signals(eom, system, t, Y, force, lam, out_names) -> dict[str, np.ndarray]:
-    """Outputs, energies, invariants and each contact's gap and normal force at the grid points."""
+def _signals(eom, system, t, Y, force, lam, out_names, model_gaps=True) -> dict[str, np.ndarray]:
+    """Outputs, energies, invariants and each contact's gap (the recorder), then each
+    contact's normal force (from the run).  model_gaps: the gaps are the model's own (the
+    same expressions on every run, so the recorder's Function is reused)."""
     import casadi as ca
 
-    n, N = eom.n, len(t)
-    contact_sig = {f"{g.name}.gap": ca.SX(g.gap) for g in system.gaps}
-    forced = {f"{g.name}.force": i for i, g in enumerate(system.gaps)}
-    exprs = {name: eom.outputs[name] for name in out_names}
-    exprs.update({"kinetic_energy": eom.T, "potential_energy": eom.V, "energy": eom.T + eom.V})
-    exprs.update(dict(getattr(eom, "invariants", None) or {}))
-    exprs.update(contact_sig)
-    lam_sym = getattr(eom, "lam", None)
-    ins = [eom.t, eom.q, eom.qd, eom.p] + ([lam_sym] if lam_sym is not None else [])
-    out: dict[str, np.ndarray] = {}
-    cols = [ca.reshape(ca.SX(e), -1, 1) for e in exprs.values()]
-    if cols:
-        f = ca.Function("signals", ins, [ca.vertcat(*cols)])
-        args = [t.reshape(1, -1), Y[:, :n].T, Y[:, n:].T, np.repeat(system.p.reshape(-1, 1), N, 1)]
-        if lam_sym is not None:
-            args.append(lam.T if lam.shape[1] == int(lam_sym.numel()) else np.zeros((int(lam_sym.numel()), N)))
-        vals = np.array(f.map(N)(*args), float) if N else np.zeros((sum(int(c.numel()) for c in cols), 0))
-        row = 0
-        for name, c in zip(exprs, cols):
-            k = int(c.numel())
-            if k == 1:
-                out[name] = vals[row]
-            else:
-                out.update({f"{name}[{i + 1}]": vals[row + i] for i in range(k)})
-            row += k
-    for name, i in forced.items():
-        out[name] = force[:, i].copy()
+    from ..simulation import record as R
+
+    n = eom.n
+    cols = R.merged(R.outputs(eom, out_names), R.energies(eom), R.invariants(eom),
+                    {f"{g.name}.gap": ca.SX(g.gap) for g in system.gaps})
+    out = R.record(eom, cols, t, Y[:, :n], Y[:, n:2 * n], system.p, LAM=lam,
+                   using=() if model_gaps else tuple(g.gap for g in system.gaps))
+    for i, g in enumerate(system.gaps):
+        out[f"{g.name}.force"] = force[:, i].copy()
     return out

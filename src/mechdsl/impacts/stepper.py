@@ -41,7 +41,7 @@ def resolve_method(method: str | None) -> tuple[str, str]:
         note = ""
         if name != "auto" and not name.startswith("scipy-"):
             note = (f"method '{method}' is stepped as '{target}' for event location "
-                    "(models with contacts run on scipy's one-step solvers)")
+                    "(models with contacts run scipy's one-step methods; dop853 and rk45 compiled between events)")
         return SCIPY_METHODS[target], note
     if name in SYMPLECTIC:
         raise UsageError(f"the symplectic method '{method}' cannot step over impacts; "

@@ -445,19 +445,17 @@ class _Lazy:
 class LazyEOM(eom_mod.EOM):
     """An EOM whose expensive fields (M and bias on the 'aba' route, where the simulator
     needs only qdd; Q; the looped form qdd_loop) are built on first access.  Behaves as a
-    plain EOM otherwise."""
+    plain EOM otherwise; the field keeps its _Lazy holder (which keeps the value), so the
+    object stays frozen."""
 
     def __getattribute__(self, name):
         if name in ("M", "bias", "Q", "qdd_loop"):
-            d = object.__getattribute__(self, "__dict__")
-            v = d.get(name)
+            v = object.__getattribute__(self, "__dict__").get(name)
             if isinstance(v, _Lazy):
                 r = v.get()
                 if name in ("M", "bias") and isinstance(r, tuple):
-                    d["M"], d["bias"] = r
-                else:
-                    d[name] = r
-                return d[name]
+                    return r[0] if name == "M" else r[1]
+                return r
         return object.__getattribute__(self, name)
 
 

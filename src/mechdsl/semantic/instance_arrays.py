@@ -7,6 +7,7 @@ import dataclasses
 
 from .. import ast
 from .. import limits
+from .entries import Failed
 from .evaluate import EvalError, fail
 from .mods import Mod
 from .values import Arr
@@ -23,7 +24,7 @@ class InstanceArrays:
         except EvalError as ex:
             self.diags.items.append(ex.diag)
             return
-        except self.Failed:
+        except Failed:
             return
         if n > limits.get("components"):
             self.diags.error("E316", f"{n} instances of {d.type_name} exceed the limit of {limits.get('components')} "
@@ -77,7 +78,7 @@ class InstanceArrays:
     def _is_array_of(self, ref: ast.Ref, n: int) -> bool:
         try:
             v = self.eval(ref)
-        except (EvalError, self.Failed):
+        except (EvalError, Failed):
             return False
         return isinstance(v, Arr) and len(v.items) == n
 

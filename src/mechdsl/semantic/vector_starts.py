@@ -34,7 +34,7 @@ from .values import Arr, CompRef, Str
 
 if TYPE_CHECKING:
     from ..diagnostics import Span
-    from .flatten import CompInst
+    from .entries import CompInst
 
 VECTOR_STARTS = {"Spherical": ("omega",), "Free": ("r", "v", "omega"), "PointMass": ("r", "v")}   # the modifiers
 

@@ -70,7 +70,7 @@ def solve(problem: Problem, progress=None) -> Result:
     ran = backend.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,
-                   "compiled": _ran_compiled(meta),
+                   "compiled": _ran_compiled(meta, r.stats),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
     from ..eom import parameter_vector
     from ..friction import friction_notes
@@ -160,9 +160,12 @@ def _estimate_error(r: Result, problem: Problem) -> None:
                                     "reference_failed": None if tight.success else str(tight.failure)}
 
 
-def _ran_compiled(meta) -> bool:
+def _ran_compiled(meta, stats=None) -> bool:
     """Whether compiled code ran: the back end's flag (a bool; the ODE back end's
-    ``metadata.compiled`` is the decision's text, its flag is ``options.compiled``)."""
+    ``metadata.compiled`` is the decision's text, its flag is ``options.compiled``); a contact
+    run counts its free-flight segments in the compiled loop."""
+    if (stats or {}).get("compiled_segments"):
+        return True
     flag = meta.get("compiled")
     if not isinstance(flag, bool):
         flag = (meta.get("options") or {}).get("compiled", False)

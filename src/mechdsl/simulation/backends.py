@@ -95,7 +95,7 @@ class DaeBackend(Backend):
 
 class EventsBackend(Backend):
     name = "events"
-    ignores = ("dt", "max_steps", "integrator_options", "formulation", "reactions", "compiled")
+    ignores = ("dt", "max_steps", "integrator_options", "formulation", "reactions")
 
     def run(self, problem, progress):
         from ..impacts import simulate_with_contacts
@@ -107,9 +107,10 @@ class EventsBackend(Backend):
                 kw[key] = getattr(s, key)
         if s.formulation not in ("auto",):
             kw["formulation"] = s.formulation
-        for key in ("reactions", "compiled"):
-            if getattr(s, key):
-                kw[key] = True
+        if s.reactions:
+            kw["reactions"] = True
+        if s.compiled is not None:      # False: all in Python; otherwise free flight compiled when it can be
+            kw["compiled"] = bool(s.compiled)
         return simulate_with_contacts(problem.eom, None, s.t_end, t_start=s.t_start, rtol=s.rtol, atol=s.atol,
                                       method=s.method, points=s.points, outputs=s.outputs, x0=s.x0, p=s.p,
                                       progress=progress, rest_speed=s.rest_speed, impact_order=s.impact_order,
@@ -119,7 +120,12 @@ class EventsBackend(Backend):
         from ..impacts.stepper import SCIPY_METHODS
 
         m = r.metadata.get("method")
-        return {"formulation": "events", "integrator": f"scipy:{SCIPY_METHODS.get(m, m)}", "method": m}
+        python = f"scipy:{SCIPY_METHODS.get(m, m)}"
+        stats = r.stats or {}
+        compiled, in_python = stats.get("compiled_segments", 0), stats.get("python_segments", 0)
+        # name what ran: free flight in the compiled loop, the rest (or all) in scipy's stepper
+        parts = ([f"crk:{m}"] if compiled else []) + ([python] if in_python or not compiled else [])
+        return {"formulation": "events", "integrator": "+".join(parts), "method": m}
 
 
 class FixedStepBackend(Backend):

@@ -30,7 +30,8 @@ extern void ode_incref(void);
 extern void ode_decref(void);
 
 enum { CRK_OK = 0, CRK_MAX_STEPS = 1, CRK_HMIN = 2, CRK_TOO_SMALL = 3, CRK_NONFINITE = 4,
-       CRK_CANCELLED = 5, CRK_NOMEM = 6, CRK_RHS_ERROR = 7, CRK_BAD_METHOD = 8 };
+       CRK_CANCELLED = 5, CRK_NOMEM = 6, CRK_RHS_ERROR = 7, CRK_BAD_METHOD = 8,
+       CRK_EVENT = 9, CRK_EVENT_AT_START = 10 };
 
 static const double P5_A[6 * 5] = {
     0.0, 0.0, 0.0,
@@ -261,9 +262,168 @@ static double error_norm(int method, const double *K, double h, const double *sc
   return fabs(h) * s5 / sqrt((s5 + 0.01 * s3) * (double)n);
 }
 
-int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+/* the continuous extension of the step [t_old, t_old + h] at tt (scipy's dense output) */
+typedef struct { int method; const double *K, *F, *yold; double h, t_old; cint n; } Dense;
+
+static void dense_eval(const Dense *d, double tt, double *out) {
+  const cint n = d->n;
+  const double *K = d->K, *F = d->F, *yold = d->yold;
+  double x = (tt - d->t_old) / d->h;
+  for (cint i = 0; i < n; i++) {
+    if (d->method == 0) {   /* y_old + h * sum_m (K^T P)_im x^(m+1) */
+      double acc = 0.0, xp = 1.0;
+      for (int m = 0; m < 4; m++) {
+        double q = 0.0;
+        for (int j = 0; j < 7; j++) q += K[(cint)j * n + i] * P5_P[j * 4 + m];
+        xp *= x;
+        acc += q * xp;
+      }
+      out[i] = yold[i] + d->h * acc;
+    } else {                /* scipy's Dop853DenseOutput: alternate factors x and 1 - x */
+      double acc = 0.0;
+      for (int m = 6; m >= 0; m--) {
+        acc += F[m * n + i];
+        acc *= ((6 - m) % 2 == 0) ? x : 1.0 - x;
+      }
+      out[i] = acc + yold[i];
+    }
+  }
+}
+
+/* ---------------------------------------------------------------- event location (contacts)
+
+   Models with contacts (mechdsl.impacts.compiled): the CasADi-generated gap function
+   `gap(t, x, p) -> g` (k gaps of the open contacts, compiled in the same library, passed in
+   by address) is watched on every accepted step: the event function E(t) = min_i g_i + offset
+   is sampled at `samples` equal sub-intervals of the step on the continuous extension; the
+   first sample with E <= 0 is shrunk by the Illinois iteration of impacts/rootfind.py (forced
+   bisection when two steps do not halve the bracket) to the resolution of doubles, then the
+   root of the triggering gaps themselves (without the offset) is located the same way from
+   the positive side.  The loop stops there (status CRK_EVENT), with the output rows before the
+   event written and the state at the event in xfail; Python applies the impact law and calls
+   again.  E <= 0 at the start is CRK_EVENT_AT_START (Python handles that step itself). */
+typedef int (*casadi_fn)(const double **arg, double **res, cint *iw, double *w, int mem);
+typedef int (*casadi_work_fn)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+
+typedef struct {
+  casadi_fn gap; casadi_work_fn work;
+  cint k; double offset; int samples;
+  const double **arg; double **res; cint *iw; double *w;
+  double *g, *x;        /* k gaps; a state on the interpolant */
+  const double *p; double targ;
+  cint nev;             /* gap evaluations in root finding */
+  double t_event;
+} Events;
+
+static int gaps_at(Events *e, double t, const double *x) {
+  e->targ = t;
+  e->arg[0] = &e->targ; e->arg[1] = x; e->arg[2] = e->p;
+  e->res[0] = e->g;
+  return e->gap(e->arg, e->res, e->iw, e->w, 0);
+}
+
+/* min_i g_i + offset, or min over the flagged gaps (raw, no offset) when `only` is given */
+static double event_value(Events *e, const int *only) {
+  double v = INFINITY;
+  for (cint i = 0; i < e->k; i++) {
+    if (only && !only[i]) continue;
+    double gi = only ? e->g[i] : e->g[i] + e->offset;
+    if (gi != gi) return gi;   /* a NaN gap: find_event reports an error */
+    if (gi < v) v = gi;
+  }
+  return v;
+}
+
+static double event_at(Events *e, const Dense *d, double tt, const int *only, int *err) {
+  dense_eval(d, tt, e->x);
+  if (gaps_at(e, tt, e->x)) *err = 1;
+  return event_value(e, only);
+}
+
+/* impacts/rootfind.py's bracket_root: f(a) > 0 >= f(b) shrunk to b - a <= xtol */
+static void bracket_root(Events *e, const Dense *d, const int *only, double *pa, double *pb, double fa,
+                         double fb, double xtol, int *err) {
+  double a = *pa, b = *pb, wa = fa, wb = fb, w1 = INFINITY, w2 = INFINITY, w3 = b - a;
+  int side = 0, nev = 0;
+  while (b - a > xtol && nev < 200) {
+    double c;
+    if (b - a > 0.5 * w1) c = 0.5 * (a + b);
+    else {
+      c = wb != wa ? (a * wb - b * wa) / (wb - wa) : 0.5 * (a + b);
+      if (!isfinite(c)) c = 0.5 * (a + b);
+      double margin = 1e-3 * (b - a);
+      c = fmin(fmax(c, a + margin), b - margin);
+    }
+    if (!(a < c && c < b)) break;
+    double fc = event_at(e, d, c, only, err);
+    nev++;
+    if (fc > 0) { a = c; wa = fc; if (side == 1) wb *= 0.5; side = 1; }
+    else { b = c; wb = fc; if (side == -1) wa *= 0.5; side = -1; }
+    w1 = w2; w2 = w3; w3 = b - a;
+  }
+  e->nev += nev;
+  *pa = a; *pb = b;
+}
+
+/* The earliest event in the step (t_old, t_old + h]: 1 and its time in e->t_event, the state
+   in e->x; 0 if none.  ea: E at the step start (> 0).  flags: k ints of scratch. */
+static int find_event(Events *e, const Dense *d, double ea, int *flags, int *err) {
+  double ta = d->t_old, tb = d->t_old + d->h, lo = ta, flo = ea, hi = ta, fhi = ea;
+  int hit = 0;
+  for (int j = 1; j <= e->samples; j++) {
+    hi = j == e->samples ? tb : ta + (tb - ta) * j / e->samples;
+    fhi = event_at(e, d, hi, NULL, err);
+    if (!(fhi == fhi)) { *err = 1; return 0; }   /* a NaN gap: the caller fails (Python takes over) */
+    if (fhi <= 0) { hit = 1; break; }
+    lo = hi; flo = fhi;
+  }
+  if (!hit) return 0;
+  double xtol = 4e-16 * fmax(fabs(ta), fabs(tb)) + 1e-15 * (tb - ta);
+  double a = lo, b = hi, s0 = lo;
+  bracket_root(e, d, NULL, &a, &b, flo, fhi, xtol, err);
+  /* the triggering gaps at b, then the root of those gaps themselves (no offset) */
+  event_at(e, d, b, NULL, err);
+  cint worst = 0, any = 0;
+  for (cint i = 0; i < e->k; i++) {
+    flags[i] = e->g[i] + e->offset <= 0;
+    any |= flags[i];
+    if (e->g[i] < e->g[worst]) worst = i;
+  }
+  if (!any) flags[worst] = 1;
+  double rb = event_value(e, flags);
+  double rlo = event_at(e, d, s0, flags, err);
+  e->nev += 2;
+  if (rlo > 0 && rb <= 0) bracket_root(e, d, flags, &s0, &b, rlo, rb, xtol, err), a = s0;
+  e->t_event = a;
+  dense_eval(d, a, e->x);
+  return 1;
+}
+
+/* DOP853: the three extra stages and the interpolant's coefficients F of the accepted step */
+static int dense_coefficients(Rhs *r, const Tableau *tab, double *K, double *F, const double *y,
+                              const double *yold, const double *f, double *tmp, double h, double t_old, cint n) {
+  for (int s = tab->stages + 1; s < tab->extended; s++) {
+    combine(yold, K, tab->A + (cint)s * tab->lda, s, h, n, tmp);
+    if (rhs(r, t_old + tab->C[s] * h, tmp, K + (cint)s * n)) return 1;
+  }
+  for (cint i = 0; i < n; i++) {
+    double dy = y[i] - yold[i];
+    F[i] = dy;
+    F[n + i] = h * K[i] - dy;
+    F[2 * n + i] = 2 * dy - h * (f[i] + K[i]);
+    for (int m = 0; m < 4; m++) {
+      double d = 0.0;
+      for (int j = 0; j < 16; j++) d += P8_D[m * 16 + j] * K[(cint)j * n + i];
+      F[(3 + m) * n + i] = h * d;
+    }
+  }
+  return 0;
+}
+
+static int crk_core(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail) {
+            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev) {
+  int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
   else if (method == 1) { Tableau t = {12, 16, P8_A, 16, P8_B, P8_C, 7}; tab = t; }
@@ -300,6 +460,14 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
   memcpy(X, x0, (size_t)n * sizeof(double));
   ctl[0] = 1;
   if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
+  double e_start = INFINITY;      /* the event function at the current step's start */
+  if (ev) {
+    flags = (int *)calloc((size_t)(ev->k > 0 ? ev->k : 1), sizeof(int));
+    if (!flags) { status = CRK_NOMEM; goto done; }
+    if (gaps_at(ev, t, y)) { status = CRK_RHS_ERROR; goto done; }
+    e_start = event_value(ev, NULL);
+    if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
+  }
   /* initial step: scipy.integrate._ivp.common.select_initial_step */
   double h_abs;
   {
@@ -364,53 +532,38 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
     int finite = 1;
     for (cint i = 0; i < n; i++) if (!isfinite(y[i])) { finite = 0; break; }
     if (!finite) { status = CRK_NONFINITE; goto done; }
-    if (k < ngrid && grid[k] <= t) {
-      if (method == 1) {   /* the three extra stages and the interpolant's coefficients F */
-        for (int s = S + 1; s < tab.extended; s++) {
-          combine(yold, K, tab.A + (cint)s * tab.lda, s, h, n, tmp);
-          if (rhs(&r, t_old + tab.C[s] * h, tmp, K + (cint)s * n)) { status = CRK_RHS_ERROR; goto done; }
-        }
-        for (cint i = 0; i < n; i++) {
-          double dy = y[i] - yold[i];
-          F[i] = dy;
-          F[n + i] = h * K[i] - dy;
-          F[2 * n + i] = 2 * dy - h * (f[i] + K[i]);
-          for (int m = 0; m < 4; m++) {
-            double d = 0.0;
-            for (int j = 0; j < 16; j++) d += P8_D[m * 16 + j] * K[(cint)j * n + i];
-            F[(3 + m) * n + i] = h * d;
-          }
-        }
+    Dense dn = {method, K, F, yold, h, t_old, n};
+    double t_out = t;           /* rows up to here (inclusive) come from this step */
+    int dense_ready = 0, event = 0;
+    if (ev && ev->k > 0) {
+      if (method == 1) {
+        if (dense_coefficients(&r, &tab, K, F, y, yold, f, tmp, h, t_old, n)) { status = CRK_RHS_ERROR; goto done; }
+        dense_ready = 1;
       }
-      while (k < ngrid && grid[k] <= t) {
+      int err = 0;
+      event = find_event(ev, &dn, e_start, flags, &err);
+      if (err) { status = CRK_RHS_ERROR; goto done; }
+      if (event) t_out = nextafter(ev->t_event, -INFINITY);
+      else e_start = event_value(ev, NULL);    /* the last sample: E at the step end */
+    }
+    if (k < ngrid && grid[k] <= t_out) {
+      if (method == 1 && !dense_ready) {   /* the three extra stages and the interpolant's coefficients F */
+        if (dense_coefficients(&r, &tab, K, F, y, yold, f, tmp, h, t_old, n)) { status = CRK_RHS_ERROR; goto done; }
+      }
+      while (k < ngrid && grid[k] <= t_out) {
         double *row = X + k * n;
         if (grid[k] == t) memcpy(row, y, (size_t)n * sizeof(double));
-        else {
-          double x = (grid[k] - t_old) / h;
-          for (cint i = 0; i < n; i++) {
-            if (method == 0) {   /* y_old + h * sum_m (K^T P)_im x^(m+1) */
-              double acc = 0.0, xp = 1.0;
-              for (int m = 0; m < 4; m++) {
-                double q = 0.0;
-                for (int j = 0; j < 7; j++) q += K[(cint)j * n + i] * P5_P[j * 4 + m];
-                xp *= x;
-                acc += q * xp;
-              }
-              row[i] = yold[i] + h * acc;
-            } else {             /* scipy's Dop853DenseOutput: alternate factors x and 1 - x */
-              double acc = 0.0;
-              for (int m = 6; m >= 0; m--) {
-                acc += F[m * n + i];
-                acc *= ((6 - m) % 2 == 0) ? x : 1.0 - x;
-              }
-              row[i] = acc + yold[i];
-            }
-          }
-        }
+        else dense_eval(&dn, grid[k], row);
         k++;
         ctl[0] = k;
       }
-      steps_here = 0;
+      if (!ev) steps_here = 0;     /* with events max_steps bounds the whole call */
+    }
+    if (event) {
+      memcpy(y, ev->x, (size_t)n * sizeof(double));
+      t = ev->t_event;
+      status = CRK_EVENT;
+      break;
     }
     if (steps_here >= max_steps) { status = CRK_MAX_STEPS; break; }
   }
@@ -419,6 +572,41 @@ done:
   memcpy(xfail, y, (size_t)n * sizeof(double));
   ode_release(r.mem);
   ode_decref();
-  free(r.arg); free(r.res); free(r.iw); free(r.w); free(mem);
+  free(r.arg); free(r.res); free(r.iw); free(r.w); free(mem); free(flags);
+  return status;
+}
+
+int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+            const double *p, double rtol, double atol, double hmin, cint max_steps,
+            double *X, double *stats, volatile cint *ctl, double *xfail) {
+  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL);
+}
+
+/* crk_run watching the gaps `gap` (k outputs, CasADi signature, work sizes from `work`):
+   stops at the first event (CRK_EVENT, the time in stats[3], the state in xfail); stats[4]
+   counts the gap evaluations of root finding; max_steps bounds the whole call. */
+int crk_run_events(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                   const double *p, double rtol, double atol, double hmin, cint max_steps,
+                   double *X, double *stats, volatile cint *ctl, double *xfail,
+                   void *gap, void *gap_work, cint k, double offset, int samples, const double *gp) {
+  Events e;
+  memset(&e, 0, sizeof e);
+  e.gap = (casadi_fn)gap; e.work = (casadi_work_fn)gap_work;
+  e.k = k; e.offset = offset; e.samples = samples < 1 ? 1 : samples; e.p = gp;
+  cint sz_arg = 0, sz_res = 0, sz_iw = 0, sz_w = 0;
+  e.work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  if (sz_arg < 3) sz_arg = 3;
+  if (sz_res < 1) sz_res = 1;
+  e.arg = (const double **)calloc((size_t)sz_arg, sizeof(double *));
+  e.res = (double **)calloc((size_t)sz_res, sizeof(double *));
+  e.iw = (cint *)calloc((size_t)(sz_iw > 0 ? sz_iw : 1), sizeof(cint));
+  e.w = (double *)calloc((size_t)(sz_w > 0 ? sz_w : 1), sizeof(double));
+  e.g = (double *)calloc((size_t)(k > 0 ? k : 1), sizeof(double));
+  e.x = (double *)calloc((size_t)(nx > 0 ? nx : 1), sizeof(double));
+  int status = CRK_NOMEM;
+  if (e.arg && e.res && e.iw && e.w && e.g && e.x)
+    status = crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e);
+  stats[4] = (double)e.nev;
+  free(e.arg); free(e.res); free(e.iw); free(e.w); free(e.g); free(e.x);
   return status;
 }

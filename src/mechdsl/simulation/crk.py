@@ -54,9 +54,26 @@ def dense_ode(ode):
     return ca.Function("ode", args, [ca.densify(ode(*args))], [ode.name_in(i) for i in range(4)], ["xdot"])
 
 
+RUN_ARGTYPES = [ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_double,
+                ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P, _DP]
+
+
 def library(ode, tag: str = "model"):
     """(ctypes function crk_run or None, note) for the model Function ``ode``; cached per Function."""
-    key = id(ode)
+
+    def load(lib):
+        fn = lib.crk_run
+        fn.restype = ctypes.c_int
+        fn.argtypes = RUN_ARGTYPES
+        fn._keep = lib
+        return fn
+
+    return cached_library(id(ode), ode, (), tag, load, "the compiled stepping loop")
+
+
+def cached_library(key, ode, extra, tag, load, what):
+    """(load(ctypes library) or None, note): the C of ``ode`` (dense output), of the Functions
+    ``extra`` and of crk.c in one cached shared library; cached in memory under ``key``."""
     with _LOCK:
         hit = _LIBS.get(key)
     if hit is not None and hit[0] is ode:
@@ -64,31 +81,48 @@ def library(ode, tag: str = "model"):
     from ..codegen import compile_functions
 
     try:
-        f = dense_ode(ode)
-        loaded, note, path = compile_functions([f], tag=tag, jacobian=False, extra_units=(SOURCE.read_text(),))
+        loaded, note, path = compile_functions([dense_ode(ode), *extra], tag=tag, jacobian=False,
+                                               extra_units=(SOURCE.read_text(),))
     except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
         loaded, note, path = None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})", None
-    fn = None
+    obj = None
     if loaded is not None:
         try:
-            lib = ctypes.CDLL(path)
-            fn = lib.crk_run
-            fn.restype = ctypes.c_int
-            fn.argtypes = [ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP,
-                           ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong,
-                           _DP, _DP, _I64P, _DP]
-            fn._keep = lib
+            obj = load(ctypes.CDLL(path))
         except (OSError, AttributeError) as e:
-            fn, note = None, f"cannot load the compiled stepping loop {path}: {e}"
+            obj, note = None, f"cannot load {what} {path}: {e}"
     with _LOCK:
         if len(_LIBS) >= 16:
             _LIBS.pop(next(iter(_LIBS)))
-        _LIBS[key] = (ode, fn, note)
-    return fn, note
+        _LIBS[key] = (ode, obj, note)
+    return obj, note
 
 
 def _ptr(a):
     return a.ctypes.data_as(_DP)
+
+
+def call_in_thread(call, ctl, tick):
+    """``call()`` (a ctypes call of the loop, which releases the GIL) in a worker thread; the main
+    thread calls ``tick(rows written)`` every 0.1 s from the progress word ctl[0] and, on Ctrl-C,
+    sets ctl[1] (the loop stops at its next step) and lets the interrupt through.  The status, or
+    7 when the call raised.  ``call`` keeps the buffers it passes alive while the worker runs."""
+    box = {}
+
+    def work():
+        box["status"] = call()
+
+    th = threading.Thread(target=work, name="mechdsl-crk", daemon=True)
+    th.start()
+    try:
+        while th.is_alive():
+            th.join(0.1)
+            if ctl[0]:
+                tick(int(ctl[0]))
+    except BaseException:
+        ctl[1] = 1          # ask the loop to stop at its next step, then let the interrupt through
+        raise
+    return box.get("status", 7)
 
 
 def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress) -> I.Run:
@@ -102,28 +136,15 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
     stats = np.zeros(4)
     ctl = np.zeros(2, dtype=np.int64)
     xfail = np.zeros(nx)
-    box = {}
-    keep = (grid, X, x0c, pc, uc, stats, ctl, xfail, fn)   # alive while the worker runs
 
-    def work():
-        assert keep
-        box["status"] = fn(CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
-                           float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats),
-                           ctl.ctypes.data_as(_I64P), _ptr(xfail))
+    def call():
+        return fn(CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
+                  float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats),
+                  ctl.ctypes.data_as(_I64P), _ptr(xfail))
 
-    th = threading.Thread(target=work, name="mechdsl-crk", daemon=True)
-    th.start()
-    try:
-        while th.is_alive():
-            th.join(0.1)
-            if ctl[0]:
-                progress.update(float(grid[int(ctl[0]) - 1]))
-    except BaseException:
-        ctl[1] = 1          # ask the loop to stop at its next step, then let the interrupt through
-        raise
+    status = call_in_thread(call, ctl, lambda rows: progress.update(float(grid[rows - 1])))
     reached = int(ctl[0])
     progress.update(float(grid[max(reached, 1) - 1]))
-    status = box.get("status", 7)
     raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status)}
     run = I.Run(X=X, reached=reached, stats=raw)
     if status != 0 or reached < len(grid):

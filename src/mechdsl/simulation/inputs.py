@@ -3,6 +3,8 @@
 ``state_key`` reads a start-value key (``"theta"`` or ``"der(theta)"``) in one place;
 ``start_vector`` applies overrides (a full [q; qd] vector or {key: value}) to the model's
 start values; ``parameter_vector`` (mechdsl.eom) does the same for parameters.
+``fixed_start`` adds what a constrained run's consistent initialization needs: which
+start values are fixed (the model's ``fixed`` attributes, and every overridden value).
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ import numpy as np
 from ..diagnostics import UsageError, did_you_mean
 from ..eom import parameter_vector
 
-__all__ = ["state_key", "start_vector", "parameter_vector"]
+__all__ = ["state_key", "start_vector", "fixed_start", "parameter_vector"]
 
 
 def state_key(eom, key: str) -> int:
@@ -43,3 +45,18 @@ def start_vector(eom, x0, pv) -> np.ndarray:
         bad = [names[i] for i in np.flatnonzero(~np.isfinite(out))]
         raise UsageError(f"start values are not finite: {', '.join(bad)}")
     return out
+
+
+def fixed_start(eom, x0, pv) -> tuple[np.ndarray, np.ndarray, tuple[bool, ...], tuple[bool, ...]]:
+    """(q0, qd0, fixed_q, fixed_qd): ``start_vector`` split, with the fixed flags of the
+    model's start values; a value overridden by name counts as fixed (a full vector keeps
+    the model's flags)."""
+    n = eom.n
+    x = start_vector(eom, x0, pv)
+    fq = list(eom.fixed_q) if len(eom.fixed_q) == n else [True] * n
+    fqd = list(eom.fixed_qd) if len(eom.fixed_qd) == n else [True] * n
+    if isinstance(x0, dict):
+        for k in x0:
+            i = state_key(eom, str(k))
+            (fqd if i >= n else fq)[i % n] = True
+    return x[:n].copy(), x[n:].copy(), tuple(fq), tuple(fqd)

@@ -168,7 +168,6 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     from .. import integrators as I
     from ..result import Result
     from ..simulate import compute_signals, _check_outputs
-    from ..codegen import casadi_functions
     from ..simulation import formulate
     from ..simulation import accuracy as A
 
@@ -188,7 +187,6 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     nx, nt = X0.shape[0], len(job.grid)
     traj = xf.reshape(nx, k, nt).transpose(1, 2, 0)        # (run, time, state)
     out_names = _check_outputs(eom0, s0.outputs)
-    post = casadi_functions(eom0, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
     problem = formulate(eom0, s0)          # invariants depend on the structure only (none swept here)
     left = []
     n = nx // 2
@@ -199,7 +197,7 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
             continue
         eom, s = prepared[i]
         X[0] = s.x0
-        sig = compute_signals(eom, post, job.grid, X, s.p, out_names)
+        sig = compute_signals(eom, job.grid, X, s.p, out_names)
         r = Result(t=job.grid.copy(), q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=sig,
                    stats={}, metadata={"warnings": []})
         A.check_finite(r)

@@ -1,0 +1,92 @@
+"""Free flight with contacts in the compiled stepping loop (``simulation/crk.c``).
+
+A segment of a contact run in which no row is active (no closed contact, no fixation, no
+model constraint: every contact open, only its gap watched) is one C call: the loop of
+``mechdsl.simulation.crk`` steps the model's ``ode`` (dopri5 = scipy's RK45, dop853 = DOP853,
+the same steps as the Python path), evaluates the CasADi-generated gaps of all contacts on
+the continuous extension of every accepted step, locates the first event (the same sampling
+and Illinois iteration as ``Run.find_event``) and returns with the output rows before it and
+the state at it.  Python applies the impact law (``Run.handle``) and calls again.
+
+Everything else stays in Python (``Run``): segments with active rows (closed contacts,
+fixations, model constraints: the constrained accelerations, releases on the multipliers,
+projections), the implicit methods (radau, bdf, lsoda), ``max_step``, models with inputs,
+an event at a segment's very start, and any segment the C loop fails on (it is then
+stepped again in Python, which words the failure as before).  Without a C compiler the
+whole run is Python.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..simulation import crk
+
+# scipy class (impacts.stepper) -> method of the compiled loop
+COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
+OK, EVENT = 0, 9
+_VP = ctypes.c_void_p
+
+
+class CompiledFlight:
+    """The compiled loop with gap events for one ContactSystem."""
+
+    def __init__(self, fn, gap_addr: int, work_addr: int, lib):
+        self.fn, self.gap, self.work, self._lib = fn, gap_addr, work_addr, lib
+
+    def segment(self, method: str, grid, y0, p, rtol, atol, max_steps, k, offset, samples, tick=None):
+        """One C call from grid[0] to grid[-1]: (status, time reached, state there, rows written,
+        stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; others: failed."""
+        grid = np.ascontiguousarray(grid, float)
+        nx = y0.size
+        X = np.full((len(grid), nx), np.nan)
+        x0c = np.ascontiguousarray(y0, float)
+        pc = np.ascontiguousarray(np.ravel(p), float)
+        uc = np.zeros(0)
+        stats = np.zeros(5)
+        ctl = np.zeros(2, dtype=np.int64)
+        xend = np.zeros(nx)
+        _P = crk._ptr
+
+        def call():
+            return self.fn(crk.CRK_METHODS[method][0], nx, _P(grid), len(grid), _P(x0c), _P(uc), _P(pc),
+                           float(rtol), float(atol), 0.0, int(max_steps), _P(X), _P(stats),
+                           ctl.ctypes.data_as(crk._I64P), _P(xend), self.gap, self.work, int(k), float(offset),
+                           int(samples), _P(pc))
+
+        status = call() if tick is None else crk.call_in_thread(call, ctl, lambda r: tick(float(grid[r - 1])))
+        st = {"steps": int(stats[0]), "rhs": int(stats[1]), "rejected": int(stats[2]), "root": int(stats[4])}
+        return int(status), float(stats[3]), xend, X[:int(ctl[0])], st
+
+
+def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
+    """(CompiledFlight or None, note) for a ContactSystem; the library is cached per model."""
+    import casadi as ca
+
+    from ..codegen import casadi_functions, find_compiler
+
+    if find_compiler() is None:
+        return None, "no C compiler"
+    eom = system.eom
+    try:
+        ode = casadi_functions(eom, names=("ode",))["ode"]
+    except Exception as e:  # noqa: BLE001 - no ode Function for this model: stay in Python
+        return None, f"no right-hand side Function ({e})"
+    n = system.n
+    if ode.numel_in(1) != 2 * n or ode.numel_in(2) != 0 or ode.numel_in(3) != system.p.size:
+        return None, "the model has inputs or fixed parameters: contact stepping stays in Python"
+    x = ca.vertcat(eom.q, eom.qd)
+    gapv = ca.vertcat(*[ca.SX(g.gap) for g in system.gaps]) if system.gaps else ca.SX.zeros(0, 1)
+    gapf = ca.Function("contact_gap", [eom.t, x, eom.p], [gapv], ["t", "x", "p"], ["gap"])
+
+    def load(lib):
+        fn = lib.crk_run_events
+        fn.restype = ctypes.c_int
+        fn.argtypes = crk.RUN_ARGTYPES + [_VP, _VP, ctypes.c_longlong, ctypes.c_double, ctypes.c_int, crk._DP]
+        return CompiledFlight(fn, ctypes.cast(lib.contact_gap, _VP).value,
+                              ctypes.cast(lib.contact_gap_work, _VP).value, lib)
+
+    fl, note = crk.cached_library((id(ode), gapf.serialize()), ode, (gapf,), tag, load,
+                                  "the compiled contact loop")
+    return fl, note or ""

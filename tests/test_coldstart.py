@@ -1,0 +1,61 @@
+"""Cold start (issues 12 and 16): what a fresh ``mech`` process imports.  Times are measured in
+benchmarks/coldstart.py, never here; these tests check the imports that must not happen."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+from conftest import MODELS
+
+
+def imported(*args, env=None):
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "mechdsl", *args], capture_output=True,
+                       text=True, env=env)
+    names = {line.rsplit("|", 1)[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time")}
+    return r, names
+
+
+def test_version_imports_no_command_and_no_numpy():
+    r, names = imported("--version")
+    assert r.returncode == 0 and r.stdout.strip().startswith("mechdsl ")
+    assert "mechdsl.cli" in names                      # the check sees the imports
+    assert not {"numpy", "casadi", "lark", "mechdsl.commands.simulate", "mechdsl.commands.bench"} & names
+
+
+def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
+    """A warm run: scipy's version is read from its version.py; fileio names temporary files
+    without secrets; codegen imports subprocess and tempfile only to compile."""
+    env = {**os.environ, "MECHDSL_CACHE": str(tmp_path)}
+    args = ("simulate", str(MODELS / "pendulum.mech"), "--t-end", "0.1", "--points", "3", "--no-progress",
+            "-o", str(tmp_path / "r.csv"), "--force")
+    imported(*args, env=env)                    # the first run fills the model cache
+    r, names = imported(*args, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "mechdsl.simulate" in names
+    # (shutil: method auto looks for a C compiler with shutil.which, simulation/crk.py)
+    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma"}
+    assert unwanted & names == set()
+
+
+def test_scipy_version_without_importing_scipy(monkeypatch):
+    import scipy
+
+    from mechdsl.simulate import _scipy_version
+
+    monkeypatch.delitem(sys.modules, "scipy")
+    assert _scipy_version() == scipy.__version__
+    assert "scipy" not in sys.modules
+
+
+def test_median_is_numpys_without_importing_numpy_ma():
+    """analysis.core.median replaces np.median (which imports numpy.ma: 11 ms of `mech check`);
+    it must give numpy's value bit for bit, NaN and both parities included."""
+    from mechdsl.analysis.core import median
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 4, 7, 10):
+        x = list(rng.normal(size=n) * 10.0 ** rng.integers(-5, 5, size=n))
+        assert median(x) == float(np.median(x))
+    assert np.isnan(median([1.0, float("nan"), 2.0]))
+    assert np.isnan(median([]))
