@@ -16,6 +16,15 @@ def imported(*args, env=None):
     return r, names
 
 
+def imported_by_numpy_and_casadi():
+    """What ``import numpy, casadi`` alone brings in with the installed versions (older numpy
+    imports numpy.ma and secrets itself): not mechdsl's to avoid."""
+    r = subprocess.run([sys.executable, "-c", "import sys, numpy, casadi; print(chr(10).join(sys.modules))"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return set(r.stdout.split())
+
+
 def test_version_imports_no_command_and_no_numpy():
     r, names = imported("--version")
     assert r.returncode == 0 and r.stdout.strip().startswith("mechdsl ")
@@ -33,9 +42,48 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "mechdsl.simulate" in names
-    # (shutil: method auto looks for a C compiler with shutil.which, simulation/crk.py)
-    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma"}
-    assert unwanted & names == set()
+    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma", "shutil"}
+    assert unwanted & names - imported_by_numpy_and_casadi() == set()
+
+
+def test_a_warm_compiled_run_starts_no_process(tmp_path):
+    """Issue 12's command, compiled stepping loop loaded from the cache: the compiler's version
+    is remembered (codegen.compiler_version) and its path found without shutil, so the run
+    imports neither subprocess nor tempfile nor shutil (with lzma and bz2)."""
+    env = {**os.environ, "MECHDSL_CACHE": str(tmp_path)}
+    args = ("simulate", str(MODELS / "double_pendulum.mech"), "--no-progress", "-o", str(tmp_path / "r.csv"),
+            "--force")
+    imported(*args, env=env)                    # fills the model cache and compiles
+    r, names = imported(*args, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "loaded compiled model from cache" in r.stdout + r.stderr
+    assert {"subprocess", "tempfile", "shutil", "lzma", "bz2"} & names - imported_by_numpy_and_casadi() == set()
+    assert "mechdsl.ir" in names and "mechdsl.parser" not in names
+
+
+def test_a_warm_run_creates_no_dataclass(tmp_path):
+    """Issue 12: the classes a warm run needs (ir's for the cached model, the EOM, settings,
+    problem, result...) are made by mechdsl.records.record, not by @dataclass (an exec per
+    generated method: ~13 ms for ir alone).  The run is spied on from within: every class
+    dataclasses processes is listed."""
+    env = {**os.environ, "MECHDSL_CACHE": str(tmp_path)}
+    args = ["simulate", str(MODELS / "pendulum.mech"), "--t-end", "0.1", "--points", "3", "--no-progress",
+            "-o", str(tmp_path / "r.csv"), "--force"]
+    spy = ("import dataclasses, runpy, sys, atexit\n"
+           "made = []\n"
+           "real = dataclasses._process_class\n"
+           "def spy(cls, *a, **k):\n"
+           "    made.append(cls.__module__ + '.' + cls.__qualname__)\n"
+           "    return real(cls, *a, **k)\n"
+           "dataclasses._process_class = spy\n"
+           "atexit.register(lambda: print('DATACLASSES', made, file=sys.stderr))\n"
+           f"sys.argv = ['mech', *{args!r}]\n"
+           "runpy.run_module('mechdsl', run_name='__main__')\n")
+    subprocess.run([sys.executable, "-m", "mechdsl", *args], capture_output=True, env=env)   # fills the cache
+    r = subprocess.run([sys.executable, "-c", spy], capture_output=True, text=True, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    made = [line for line in r.stderr.splitlines() if line.startswith("DATACLASSES")]
+    assert made == ["DATACLASSES []"], made
 
 
 def test_scipy_version_without_importing_scipy(monkeypatch):

@@ -175,6 +175,9 @@ def test_integrator_function_matches_a_simulated_interval():
         m.integrator(-0.1)
     with pytest.raises(UsageError, match="no CasADi integrator plug-in"):
         m.integrator(0.1, method="scipy-rk45")
+    for steps in (0, 2.5):      # was CasADi's RuntimeError (an assertion in RungeKutta::init)
+        with pytest.raises(UsageError, match="steps must be a whole number of at least 1"):
+            m.integrator(0.1, method="rk", steps=steps)
     bead = mechdsl.load(str(ROOT / "models" / "pendulum_cartesian.mech"))
     with pytest.raises(UsageError, match="constraints or contacts"):
         bead.integrator(0.1)

@@ -283,3 +283,36 @@ def test_concurrent_runs_share_one_library_and_give_the_same_numbers():
     for a, b in zip(alone, together):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
     assert not np.allclose(alone[0], one.q)      # the starts differ: the runs are not copies
+
+
+@pytest.mark.parametrize("method", list(PAIRS))
+def test_compiled_false_runs_the_named_loop_method_in_python(method, monkeypatch):
+    """`--method dop853 --no-compile` (compiled=False) never compiles: it used to build the
+    loop anyway while the metadata said "off (requested)". It runs scipy's same method, and
+    says so; the numbers are that method's (x = cos(w t))."""
+    def no_build(*a, **k):
+        raise AssertionError("compiled=False built the compiled loop")
+
+    monkeypatch.setattr(crk, "library", no_build)
+    e = oscillator(3.0)
+    r = simulate(e, 2.0, method=method, compiled=False, rtol=1e-10, atol=1e-12, points=21)
+    assert r.success and r.metadata["method"] == PAIRS[method]
+    assert r.metadata["options"]["compiled"] is False and r.metadata["compiled"] == "off (requested)"
+    assert "compiled = false" in r.metadata["method_reason"]
+    np.testing.assert_allclose(r.q[:, 0], np.cos(3.0 * r.t), rtol=0, atol=1e-7)
+
+
+def test_auto_whose_loop_cannot_be_built_says_erk_runs(monkeypatch, tmp_path):
+    """auto decides to compile, the build fails (a cache path that is a file): the run is erk
+    and its reason says so (it kept the reason of the compiled loop it did not run)."""
+    if find_compiler() is None:
+        pytest.skip("needs a C compiler: without one auto never decides to compile")
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    monkeypatch.setenv("MECHDSL_CACHE", str(blocked))
+    monkeypatch.setattr(crk, "_LIBS", {})
+    r = simulate(pendulum(theta0=2.5), 300.0, rtol=1e-8, atol=1e-8, points=11)
+    assert r.success and r.metadata["method"] == "erk"
+    assert r.metadata["compiled"] == "no: auto (the compiled loop could not be built)"
+    assert "could not be built" in r.metadata["method_reason"]
+    assert any("compiled stepping loop unavailable" in w for w in r.metadata["warnings"])

@@ -214,6 +214,22 @@ def test_cli_input_constant_and_csv(tmp_path):
                  "--no-progress"]) == 2
 
 
+@pytest.mark.parametrize("rows, hold, message", [
+    ("1,1\n0,2\n", "", "--input F: {csv}: a table's times must be strictly increasing"),
+    ("0,nan\n1,2\n", "", "--input F: {csv}: a table's times and values must be finite numbers"),
+    ("0,1\n5,2\n", ":cubic", "--input F: unknown hold ':cubic' after {csv} (use :zoh or :linear)"),
+], ids=["unsorted", "nan", "unknown-hold"])
+def test_cli_bad_input_tables_name_the_input_and_the_file(tmp_path, capsys, rows, hold, message):
+    """A bad table file or a misspelt hold says which --input and which file (usage error, 2)."""
+    from mechdsl.cli import main
+
+    src, csv_in = tmp_path / "model.mech", tmp_path / "f.csv"
+    src.write_text(SLIDER)
+    csv_in.write_text(rows)
+    assert main(["simulate", str(src), "--t-end", "1", "--input", f"F={csv_in}{hold}", "--no-progress"]) == 2
+    assert message.format(csv=csv_in) in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("body, code", [
     ("parameter Real a = 1;\n  input Real F = a;", "E230"),
     ("input Real F = 0;\n  parameter Real a = 2*F;", "E231"),

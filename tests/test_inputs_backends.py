@@ -255,3 +255,24 @@ def test_a_signal_failing_where_the_fixed_step_back_end_probes_is_named(slider):
     evaluated at any probe state', naming no input)."""
     with pytest.raises(UsageError, match="input 'F' at t = .*ZeroDivisionError.*fixed-step back end"):
         slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": lambda t: 1.0 if t < 0.2 else 1 / 0}, points=3)
+
+
+def test_fixed_step_across_zero_order_hold_jumps_says_its_order_is_lost(slider):
+    """rk4 with a zero-order-hold table: the stage at a step's end sees the next sample, so each
+    jump can add an error of first order in dt to the speed (closed form: x'' = F/m with F held
+    piecewise constant, v(1) = sum F_k * 0.1 / m).  The run says so in its warnings; without
+    jumps it does not."""
+    m_ = 2.0
+    times = np.linspace(0.0, 1.0, 11)
+    F = np.where(np.arange(11) % 2 == 0, 1.0, -1.0)
+    tab = mechdsl.table(times, F, hold="zoh")
+    v_exact = F[:10].sum() * 0.1 / m_
+    r = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": tab}, points=11)
+    # rk4 is exact for a force constant over each step; the jumps alone make this error
+    assert abs(r.qd[-1, 0] - v_exact) > 1e-4
+    assert any("zero-order hold of F" in w for w in r.metadata["warnings"])
+    adaptive = slider.simulate(1.0, inputs={"F": tab}, points=11, rtol=1e-10, atol=1e-12)
+    assert adaptive.qd[-1, 0] == pytest.approx(v_exact, abs=1e-9)
+    assert not any("zero-order hold" in w for w in adaptive.metadata["warnings"])
+    flat = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": mechdsl.table([0.0, 1.0], [1.0, 1.0])}, points=11)
+    assert not any("zero-order hold" in w for w in flat.metadata["warnings"])

@@ -71,11 +71,19 @@ def test_body_angular_velocity_and_euler_equations():
         assert I @ _vec(out, "al") + np.cross(w, I @ w) == pytest.approx(np.zeros(3), abs=1e-9)
 
 
-def test_acceleration_in_a_force_is_refused():
-    bad = ROD.replace("PHI", "th").replace("end P;", "  Force f(point = rod.b, F = 0.1*rod.b.a);\nend P;")
+@pytest.mark.parametrize("extra, at", [
+    ("  Force f(point = rod.b, F = 0.1*rod.b.a);\nend P;", "Force f"),
+    ("  parameter Real J(unit = \"kg.m2\") = 1;\n  Torque tq(body = rod, tau = {0, 0, J*rod.alpha[3]});\nend P;",
+     "Torque tq"),
+    ("  parameter Real mL(unit = \"kg.m2\") = 1;\nequation\n  force(th) = mL*rod.b.a[2];\nend P;", "force(th)"),
+], ids=["force", "torque", "generalized-force"])
+def test_acceleration_in_a_force_is_refused(extra, at):
+    """...at the force or term that uses it (the diagnostic had no place: `<input>: error`)."""
+    bad = ROD.replace("PHI", "th").replace("end P;", extra)
     with pytest.raises(MechError) as err:
         mechdsl.loads(bad).eom
     assert "E725" in str(err.value) and "outputs only" in str(err.value)
+    assert at in bad.splitlines()[err.value.first.span.line - 1]
 
 
 

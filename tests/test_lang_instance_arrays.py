@@ -11,7 +11,7 @@ import pytest
 
 import mechdsl
 from mechdsl.cli import main
-from mechdsl.diagnostics import MechError
+from mechdsl.diagnostics import MechError, UsageError
 from reach_util import accelerations, evaluator
 
 SHIPPED = Path(__file__).parents[1] / "models" / "nlink_pendulum.mech"
@@ -56,6 +56,51 @@ def test_chain_of_instances_equals_the_shipped_chain(n):
             assert x == pytest.approx(y, rel=1e-12, abs=1e-12)
 
 
+NESTED = """
+model Sub
+  parameter Real m(unit = "kg") = 1;
+  coordinate Real q(start = 0, unit = "rad");
+  Rod rod(m = m, L = 1, axis = {0, -1, 0});
+  Revolute j(axis = {0, 0, 1}, phi = q);
+end Sub;
+
+model Pair "two links, an array inside a part"
+  Sub subs[2];
+equation
+  connect(subs[1].rod.b, subs[2].j, subs[2].rod.a);
+end Pair;
+
+model Chain4 "a chain of 4 as 2 pairs: elements of an array inside an element"
+  Gravity gravity(g = {0, -9.81, 0});
+  Pair pairs[2];
+  output Real tip_x(unit = "m") = pairs[2].subs[2].rod.b.x;
+equation
+  connect(world, pairs[1].subs[1].j, pairs[1].subs[1].rod.a);
+  connect(pairs[1].subs[2].rod.b, pairs[2].subs[1].j, pairs[2].subs[1].rod.a);
+end Chain4;
+"""
+
+
+def test_an_element_of_an_array_inside_an_element():
+    """`pairs[2].subs[1].j` names element 1 of the array `subs` of element 2 of `pairs` (was
+    E201 "has no declaration 'subs'"); the chain of 2 x 2 has the shipped chain's equations."""
+    mine = mechdsl.loads(NESTED, model="Chain4")
+    ref = mechdsl.load(SHIPPED).with_params(N=4)
+    assert mine.coordinates == ("pairs[1].subs[1].q", "pairs[1].subs[2].q", "pairs[2].subs[1].q", "pairs[2].subs[2].q")
+    a, b = accelerations(mine.eom), accelerations(ref.eom)
+    ta = evaluator(mine.eom, mine.eom.outputs["tip_x"])
+    tb = evaluator(ref.eom, ref.eom.outputs["tip_x"])
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        q, qd = rng.uniform(-np.pi, np.pi, 4), rng.uniform(-2, 2, 4)
+        assert a(q, qd) == pytest.approx(b(q, qd), rel=1e-10, abs=1e-10)
+        assert ta(q, qd)[0] == pytest.approx(tb(q, qd)[0], rel=1e-12, abs=1e-12)
+    assert mine.with_params(**{"pairs[2].subs[1].m": 3.0}).parameters["pairs[2].subs[1].m"] == 3.0
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(NESTED.replace("pairs[2].subs[2].rod.b.x", "pairs[2].subs[3].rod.b.x"), model="Chain4")
+    assert "index 3 is out of range for 'pairs[2].subs' (1..2)" in str(err.value)
+
+
 def test_split_and_each_modifiers_and_element_overrides():
     text = CHAIN.replace("each m = 1, each L = 1", "m = {1, 2, 3}, each L = 0.5")
     m = mechdsl.loads(text, model="Chain")
@@ -87,11 +132,45 @@ def test_indexed_start_override_of_a_coordinate_array(tmp_path):
     (("links[N](", "links[N, 2]("), "E301"),
     (("connect(world, links[1].j", "connect(world, links[4].j"), "E303"),
     (("links[N].rod.b.x", "links.rod.b.x"), "E303"),
+    (("parameter Integer N = 3;", "parameter Integer N = -1;"), "E307"),   # was accepted: no instances
 ])
 def test_instance_array_errors(change, code):
     with pytest.raises(MechError) as err:
         mechdsl.loads(CHAIN.replace(*change), model="Chain")
     assert code in str(err.value)
+
+
+@pytest.mark.parametrize("mods, n, what", [
+    ("m = {1, 2, 3}, each L = 1", 4, "'m' of the array 'links' has 3 entries for 4 elements"),
+    ("m = {1, 2, 3}, each L = 1", 5, "'m' of the array 'links' has 3 entries for 5 elements"),
+    ("each m = 1, each L = 1, q(start = {1, 0})", 3, "'start' of the array 'links' has 2 entries for 3 elements"),
+], ids=["m-4", "m-5", "start-3"])
+def test_a_literal_array_of_the_wrong_length_is_one_clear_error(mods, n, what):
+    """A literal array modifier whose length is not the instance array's size (say after
+    `--set N=...`) is not split: one E301 that says so, not one shape error per element."""
+    text = CHAIN.replace("each m = 1, each L = 1, q(start = {if i == 1 then pi/2 else 0 for i in 1:N})", mods)
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(text.replace("parameter Integer N = 3", f"parameter Integer N = {n}"), model="Chain")
+    assert [d.code for d in err.value.diagnostics] == ["E301"]
+    assert err.value.first.message == what and "each" in err.value.first.help
+
+
+def test_a_structural_parameter_that_is_not_a_number_is_named():
+    with pytest.raises(UsageError, match="value of 'N' must be a number, got 'a'"):    # said 'value'
+        mechdsl.loads(CHAIN, model="Chain").with_params(N="a")
+
+
+@pytest.mark.parametrize("mod, message", [
+    ("links[7](m = 3)", "'links' of model 'Chain' is an array of 3 model instances; links[7] is not one"),
+    ("links(m = 3)", "'links' of model 'Chain' is an array of 3 model instances"),
+])
+def test_a_scene_modifying_the_array_or_a_missing_element_says_so(mod, message):
+    """(was "no declaration 'links[7]'" with the hint "did you mean 'links[3].q'")"""
+    text = CHAIN + f"\nscene S\n  model Chain({mod});\nend S;\n"
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(text, scene="S")
+    assert err.value.first.code == "E204" and err.value.first.message == message
+    assert "links[i](...) with i in 1..3" in err.value.first.help
 
 
 def test_scenes_modify_elements_by_index():

@@ -125,6 +125,9 @@ end F;
      "  Prismatic s(parent = h, child = bob);\nend B;\n", "E209"),
     ("model B\n  PointMass bob(m = 1, r(start = {1, 2}), v(start = {0, 0, 1}));\nend B;\n", "E301"),
     ("model B\n  PointMass bob(m = 1, r = {1, 2});\nend B;\n", "E220"),
+    # an attribute a RigidLink does not have (it has no child field: was an internal AssertionError)
+    (PEND.replace("bob.y;", "rod.x;"), "E219"),
+    (PEND.replace("bob.y;", "rod.phi;"), "E219"),
 ])
 def test_massless_and_cartesian_errors(text, code):
     with pytest.raises(MechError) as err:

@@ -133,3 +133,19 @@ def test_vector_start_errors():
         with pytest.raises(MechError) as err:
             mechdsl.loads(text)
         assert code in str(err.value), (code, str(err.value))
+
+
+@pytest.mark.parametrize("change, code, message", [
+    (('frame = "body"', "frame = 3"), "E217", "the frame of omega must be a string, got a scalar"),
+    (("{0.7, w2, 1.9}", '{0.7, w2, "a"}'), "E301", "the start of 'omega' of 's' must be numbers, got a string"),
+])
+def test_vector_start_errors_of_the_wrong_kind_say_what_and_where(change, code, message):
+    """A non-string frame and a string inside the start vector: the message says what is wrong
+    and points at the value (not at the joint, not "'' is not a valid frame")."""
+    text = model_text("Spherical", "zyx", "body").replace(*change)
+    with pytest.raises(MechError) as err:
+        mechdsl.loads(text)
+    d = err.value.first
+    assert (d.code, d.message) == (code, message)
+    line = text.splitlines()[d.span.line - 1]
+    assert change[1] in line and line.index(change[1]) <= d.span.col - 1 < line.index(change[1]) + len(change[1])

@@ -1,6 +1,7 @@
 """CasADi Functions built from an EOM: names, numbers, laziness, compiled code, fast calls."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -124,6 +125,8 @@ def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
         return
     assert cf["ode"].class_name() == "External" and cf.compiled
     assert "compiled" in cf.notes[0] and cf.library.startswith(str(tmp_path))
+    flags = re.search(r"\(([^)]*)\) into", cf.notes[0]).group(1).split(", ")
+    assert len(flags) == len(set(flags)), cf.notes[0]     # each set of flags once ("-O2, -O2" before)
     p = e.param_values
     for _ in range(10):
         x = RNG.uniform(-3, 3, 4)
@@ -173,9 +176,12 @@ def test_missing_compiler_falls_back_with_a_note(monkeypatch, tmp_path):
     f = casadi_functions(e, compiled=True)
     assert f["ode"].class_name() != "External"
     assert not f.compiled and "no C compiler" in f.notes[0]
+    assert "$CC = '/nonexistent/cc' is not a program" in f.notes[0]     # not "looked for $CC, gcc, ..."
     r = simulate(e, 1.0, compiled=True, points=3)
     assert r.success and r.metadata["options"]["compiled"] is False
     assert any("compiled code unavailable" in w for w in r.metadata["warnings"])
+    # said once, as the warning: not repeated as a note (the command line printed both)
+    assert not any("no C compiler" in n for n in r.metadata["notes"])
 
 
 def test_bound_fast_function_equals_plain_calls():
@@ -217,8 +223,32 @@ def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
     libs = {lib for _, _, lib in results}
     assert len(libs) == 1 and all(loaded is not None for loaded, _, _ in results)
     lib = Path(next(iter(libs)))
-    assert sorted(p.name for p in tmp_path.iterdir()) == [lib.with_suffix(".sha256").name, lib.name]  # no debris
+    # no debris (compilers: the compiler's version, kept for later runs)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [lib.with_suffix(".sha256").name, lib.name, "compilers"]
     x = np.array([0.3, -0.2])
     for loaded, _, _ in results:
         np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, [], e.param_values)),
                                       np.array(casadi_functions(e)["ode"](0.0, x, [], e.param_values)))
+
+
+def test_compiler_version_is_asked_once_per_compiler(tmp_path, monkeypatch):
+    """A warm run starts no `cc --version` process: the answer is kept by the compiler's path,
+    size and time; a changed compiler is asked again."""
+    import os
+    import subprocess
+
+    from mechdsl.codegen import compiler_version
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    cc = tmp_path / "fakecc"
+    cc.write_text("#!/bin/sh\necho fake cc 1.0\n")
+    cc.chmod(0o755)
+    calls = []
+    real = subprocess.run
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: calls.append(a) or real(*a, **k))
+    assert compiler_version(str(cc)) == "fake cc 1.0" and len(calls) == 1
+    assert compiler_version(str(cc)) == "fake cc 1.0" and len(calls) == 1       # kept
+    cc.write_text("#!/bin/sh\necho fake cc 2.0 newer\n")
+    os.utime(cc, ns=(1, 10**18))
+    assert compiler_version(str(cc)) == "fake cc 2.0 newer" and len(calls) == 2
+    assert compiler_version(str(tmp_path / "missing")) == str(tmp_path / "missing")

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import ir
+from .records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
@@ -399,6 +400,8 @@ class Model:
         if m not in I.METHODS or I.METHODS[m][0] != "casadi":
             casadi_methods = [k for k, v in I.METHODS.items() if v[0] == "casadi"]
             raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
+        if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
+            raise UsageError(f"steps must be a whole number of at least 1 (got {steps!r})")
         if m in I.FIXED_STEP and steps is None:
             pv = self.parameter_values
             steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
@@ -573,7 +576,7 @@ def _restore(state) -> "Model":
 
 
 
-@dataclasses.dataclass(frozen=True)
+@record
 class InputInfo:
     """One control input: its name, unit, declared bounds (None: none) and default value."""
     name: str
@@ -630,12 +633,12 @@ def _number(name: str, v) -> float:
     return x
 
 
-def _literal(v):
+def _literal(v, name: str = "value"):
     from . import ast
 
     if isinstance(v, bool):
         return ast.Bool(value=v)
-    x = _number("value", v)
+    x = _number(name, v)
     if float(x).is_integer() and isinstance(v, int):
         return ast.Number(value=int(v)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-int(v)))
     return ast.Number(value=abs(x)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-x))
@@ -654,7 +657,7 @@ def _add_override(tree: dict, key: str, value, by_name, coords) -> None:
     for i, part in enumerate(parts):
         node = node_dict.setdefault(part, Mod())
         if i == len(parts) - 1:
-            node.value = _literal(value)
+            node.value = _literal(value, key)
         node_dict = node.sub
 
 

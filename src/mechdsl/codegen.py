@@ -522,17 +522,63 @@ def cache_dir() -> Path:
     return Path(base) / "mechdsl"
 
 
-def find_compiler() -> str | None:
-    import shutil
+def _which(name: str) -> str | None:
+    """shutil.which on POSIX (importing shutil costs a warm run 2 ms: it imports lzma and bz2)."""
+    if os.name != "posix":
+        import shutil
 
+        return shutil.which(name)
+    folders = [""] if os.sep in name else os.get_exec_path()
+    for d in folders:
+        path = os.path.join(d, name)
+        if os.path.isfile(path) and os.access(path, os.X_OK):
+            return path
+    return None
+
+
+def find_compiler() -> str | None:
     for cand in (os.environ.get("CC"), "gcc", "cc", "clang"):
         if cand:
-            path = shutil.which(cand)
+            path = _which(cand)
             if path:
                 return path
             if os.environ.get("CC") == cand:
                 return None  # an explicit CC that does not exist: do not guess another
     return None
+
+
+def compiler_version(cc: str) -> str:
+    """The first line of ``cc --version`` (``cc`` when it says nothing), part of a compiled
+    library's key.  Kept in ``<cache_dir()>/compilers`` by the compiler's real path, size and
+    modification time, so a warm run starts no process (nor imports subprocess) to ask again."""
+    try:
+        st = os.stat(cc)
+        tag = f"{os.path.realpath(cc)}\t{st.st_size}\t{st.st_mtime_ns}\t"
+    except OSError:
+        tag = None
+    memo = cache_dir() / "compilers"
+    if tag is not None:
+        try:
+            for line in memo.read_text(encoding="utf-8").splitlines():
+                if line.startswith(tag):
+                    return line[len(tag):] or cc
+        except (OSError, UnicodeDecodeError):
+            pass
+    import subprocess
+
+    try:
+        version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
+        version = version.splitlines()[0] if version else cc
+    except (OSError, subprocess.SubprocessError):
+        return cc
+    if tag is not None and "\n" not in version:
+        try:
+            memo.parent.mkdir(parents=True, exist_ok=True)
+            with open(memo, "a", encoding="utf-8") as f:      # one short line: appends do not interleave
+                f.write(tag + version + "\n")
+        except OSError:
+            pass
+    return version
 
 
 JAC_MAX_CODE = 1_000_000   # above this, compile the forward derivative of ode instead of its Jacobian
@@ -579,13 +625,13 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     library is cached under ``cache_dir()`` by the SHA-256 of the code and the flags; it is
     built in a temporary folder and renamed into place (safe under concurrency).
     """
-    import subprocess          # (subprocess and tempfile: 10 ms to import; only a compile needs them)
-    import tempfile
-
     ca = _ca()
     cc = find_compiler()
     if cc is None:
-        return None, ("no C compiler found (looked for $CC, gcc, cc, clang); "
+        env_cc = os.environ.get("CC")
+        looked = (f"$CC = {env_cc!r} is not a program on PATH (CC names one program, without flags)" if env_cc
+                  else "looked for $CC, gcc, cc, clang")
+        return None, (f"no C compiler found ({looked}); "
                       "using the CasADi virtual machine instead of compiled code"), None
     units = []
     main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
@@ -616,11 +662,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         units.append(code)
     units += list(extra_units)
     flags = [cflags_for(len(code)) for code in units]
-    try:
-        version = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
-        version = version.splitlines()[0] if version else cc
-    except (OSError, subprocess.SubprocessError):
-        version = cc
+    version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
     digest = hashlib.sha256(key.encode()).hexdigest()[:24]
     d = cache_dir()
@@ -630,6 +672,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     if lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
     else:
+        import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
+        import tempfile        # loads the cached library)
+
         try:
             d.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
@@ -662,7 +707,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         except OSError as e:
             return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
-                f"({', '.join(' '.join(f) for f in flags)}) into {lib}"
+                f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
         if problem:
             note = f"the cached library {lib} {problem}: rebuilt; " + note

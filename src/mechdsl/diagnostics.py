@@ -13,11 +13,13 @@ Rendered form (``render``)::
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Iterable, Sequence
 
+from .records import record
 
-@dataclass(frozen=True, order=True)
+
+@record(order=True)
 class Span:
     """A half-open region of a source file (1-based lines and columns)."""
 
@@ -35,7 +37,7 @@ class Span:
         return f"{self.file}:{self.line}:{self.col}"
 
 
-@dataclass(frozen=True)
+@record
 class Diagnostic:
     code: str
     message: str

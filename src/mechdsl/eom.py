@@ -18,15 +18,16 @@ what phases derive from it and keep (Functions, searches, caches) lives in its w
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Callable
 
 import numpy as np
 
 from . import ir
+from .records import record
 
 
-@dataclass(frozen=True, eq=False)      # eq=False: hashed and compared by identity (workspace key)
+@record(eq=False)      # eq=False: hashed and compared by identity (workspace key)
 class EOM:
     name: str
     coords: tuple[str, ...]

@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Callable, Iterator
 
 from . import ir
+from .records import record
 from .ir import (BodyAlpha, BodyOmega, BodyRot, Const, Coord, EnergyRef, Expr, Op, Param, PointAcc,
                  PointPos, PointVel, ReactionRef, Speed, Time, TimeDer)
 
@@ -365,7 +366,7 @@ def _casadi_ops(op, a, ca):
     return getattr(ca, op)(a[0])
 
 
-@dataclass
+@record(frozen=False)
 class CasadiEnv:
     """Symbols for translating IR expressions to CasADi SX.
 

@@ -25,10 +25,12 @@ import math
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any, Callable
 
 import numpy as np
+
+from .records import record
 
 # method name -> (backend, plugin or scipy class name, options, description)
 METHODS: dict[str, tuple[str, str, dict, str]] = {
@@ -64,7 +66,7 @@ FIXED_STEP = ("rk", "collocation")
 FIXED_ORDER = {"rk": 4, "collocation": 5}
 
 
-@dataclass
+@record(frozen=False)
 class Run:
     X: np.ndarray                         # (n_t, nx); NaN after a failure
     reached: int                          # number of grid points with a valid state

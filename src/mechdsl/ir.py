@@ -5,7 +5,8 @@ no modifiers left.  Every name is a flat string (``link[2].b``, ``q[3]``, ``j1.p
 Vector and matrix quantities are tuples of scalar expressions (a vector is a 3-tuple, a
 matrix a 3-tuple of 3-tuples), so every :class:`Expr` is a scalar.
 
-Expressions are small frozen dataclasses.  Leaves refer to the model's parameters
+Expressions are small frozen dataclasses (made by :func:`mechdsl.records.record`, which builds
+them cheaply).  Leaves refer to the model's parameters
 (:class:`Param`), generalized coordinates (:class:`Coord`), their speeds (:class:`Speed`,
 i.e. ``der(q)``) and :class:`Time`.  Kinematic queries (:class:`PointPos`, ...) and
 energies (:class:`EnergyRef`) are leaves that ``derive`` replaces by the expressions it
@@ -36,47 +37,48 @@ Conventions (documented in docs/language.md):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Union
 
 from .diagnostics import Span
+from .records import record
 
 # --------------------------------------------------------------------------- expressions
 
 
-@dataclass(frozen=True)
+@record
 class Expr:
     pass
 
 
-@dataclass(frozen=True)
+@record
 class Const(Expr):
     value: float
 
 
-@dataclass(frozen=True)
+@record
 class Param(Expr):
     name: str
 
 
-@dataclass(frozen=True)
+@record
 class Coord(Expr):
     name: str
 
 
-@dataclass(frozen=True)
+@record
 class Speed(Expr):
     """der(coordinate)."""
 
     name: str
 
 
-@dataclass(frozen=True)
+@record
 class Time(Expr):
     pass
 
 
-@dataclass(frozen=True)
+@record
 class Op(Expr):
     """An operation on scalar arguments.
 
@@ -89,14 +91,14 @@ class Op(Expr):
     args: tuple[Expr, ...]
 
 
-@dataclass(frozen=True)
+@record
 class TimeDer(Expr):
     """der(expr) of an expression in coordinates and time (not speeds): total derivative."""
 
     expr: Expr
 
 
-@dataclass(frozen=True)
+@record
 class PointPos(Expr):
     """Component i (0, 1, 2) of a point's position in world coordinates."""
 
@@ -104,7 +106,7 @@ class PointPos(Expr):
     i: int
 
 
-@dataclass(frozen=True)
+@record
 class PointVel(Expr):
     """Component i of a point's absolute velocity in world coordinates."""
 
@@ -112,7 +114,7 @@ class PointVel(Expr):
     i: int
 
 
-@dataclass(frozen=True)
+@record
 class BodyRot(Expr):
     """Entry (i, j) of a body's rotation matrix (body axes -> world axes)."""
 
@@ -121,7 +123,7 @@ class BodyRot(Expr):
     j: int
 
 
-@dataclass(frozen=True)
+@record
 class BodyOmega(Expr):
     """Component i of a body's angular velocity in world coordinates (frame "world", the
     attribute ``b.w``) or in body coordinates (frame "body", ``b.w_body``)."""
@@ -131,7 +133,7 @@ class BodyOmega(Expr):
     frame: str = "world"
 
 
-@dataclass(frozen=True)
+@record
 class PointAcc(Expr):
     """Component i of a point's absolute acceleration in world coordinates (``p.a``): it needs
     the forward dynamics, so it may appear in outputs only."""
@@ -140,7 +142,7 @@ class PointAcc(Expr):
     i: int
 
 
-@dataclass(frozen=True)
+@record
 class BodyAlpha(Expr):
     """Component i of a body's angular acceleration in world coordinates (``b.alpha``; outputs
     only, like PointAcc)."""
@@ -149,14 +151,14 @@ class BodyAlpha(Expr):
     i: int
 
 
-@dataclass(frozen=True)
+@record
 class EnergyRef(Expr):
     """kind: 'kinetic' | 'potential' | 'dissipation' | 'energy' (T + V)."""
 
     kind: str
 
 
-@dataclass(frozen=True)
+@record
 class ReactionRef(Expr):
     """Reaction of a joint on its child, in the child joint frame.
 
@@ -177,7 +179,7 @@ ONE = Const(1.0)
 # --------------------------------------------------------------------------- declarations
 
 
-@dataclass(frozen=True)
+@record
 class Parameter:
     name: str
     value: float                     # numeric default (after evaluating the binding)
@@ -191,7 +193,7 @@ class Parameter:
     max: float | None = None
 
 
-@dataclass(frozen=True)
+@record
 class Coordinate:
     name: str
     start: Expr = ZERO               # in Params only
@@ -204,7 +206,7 @@ class Coordinate:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class Body:
     name: str
     kind: str                        # 'point' | 'rigid' | 'frame' (massless) | 'world'
@@ -217,7 +219,7 @@ class Body:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class Point:
     """A point fixed on a body (or on 'world'), position r in body coordinates."""
 
@@ -227,7 +229,7 @@ class Point:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class JointVar:
     """One joint variable.
 
@@ -248,7 +250,7 @@ class JointVar:
         return self.coordinate is None and not depends_on_state(self.motion)
 
 
-@dataclass(frozen=True)
+@record
 class Joint:
     """kind: revolute prismatic cylindrical spherical planar free fixed frame.
 
@@ -284,14 +286,14 @@ class Joint:
 # --------------------------------------------------------------------------- forces and terms
 
 
-@dataclass(frozen=True)
+@record
 class Gravity:
     name: str
     g: Vec3
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class SpringDamper:
     """A linear spring and/or damper between points a and b (force along the line).
 
@@ -309,7 +311,7 @@ class SpringDamper:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class AppliedForce:
     """Force F applied at a point; F given in world axes or in the axes of body `frame`."""
 
@@ -320,7 +322,7 @@ class AppliedForce:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class AppliedTorque:
     name: str
     body: str
@@ -329,7 +331,7 @@ class AppliedTorque:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class GeneralizedForce:
     name: str
     coordinate: str
@@ -339,7 +341,7 @@ class GeneralizedForce:
     regularization: Expr | None = None   # Friction: v_eps (an expression in parameters)
 
 
-@dataclass(frozen=True)
+@record
 class Gravitation:
     """Mutual Newtonian gravitation between every pair of `bodies` (at their mass centres)."""
 
@@ -349,7 +351,7 @@ class Gravitation:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class Term:
     """An equation-layer term.  kind: 'kinetic' | 'potential' | 'dissipation'.
 
@@ -365,7 +367,7 @@ class Term:
 Force = Union[Gravity, SpringDamper, AppliedForce, AppliedTorque, GeneralizedForce, Gravitation]
 
 
-@dataclass(frozen=True)
+@record
 class Constraint:
     """An explicit holonomic constraint residual(q, t) = 0 (residual = lhs - rhs).
 
@@ -379,7 +381,7 @@ class Constraint:
     alias: str = ""
 
 
-@dataclass(frozen=True)
+@record
 class Loop:
     """A kinematic loop closed by the cut joint `joint` (bodies along the loop, in order)."""
 
@@ -389,7 +391,7 @@ class Loop:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class Output:
     name: str
     expr: Expr
@@ -398,7 +400,7 @@ class Output:
     span: Span = field(default_factory=Span)
 
 
-@dataclass(frozen=True)
+@record
 class Contact:
     """A unilateral contact (issue 6).  Fields are kept generic until impacts land."""
 
@@ -411,7 +413,7 @@ class Contact:
         return dict(self.fields).get(key, default)
 
 
-@dataclass(frozen=True)
+@record
 class Model:
     name: str
     doc: str = ""
@@ -478,7 +480,7 @@ def _find(items, name):
     raise KeyError(name)
 
 
-@dataclass(frozen=True)
+@record
 class Scene:
     """A named experiment: the model (with overrides already applied) and settings.
 

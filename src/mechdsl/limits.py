@@ -16,11 +16,12 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import math
-from dataclasses import dataclass
 from typing import Iterator, Mapping
 
+from .records import record
 
-@dataclass(frozen=True)
+
+@record
 class Limit:
     name: str
     default: int

@@ -28,8 +28,10 @@ import hashlib
 import os
 import pickle
 import sys
-from dataclasses import dataclass, field, fields
+from dataclasses import field, fields
 from pathlib import Path
+
+from .records import record
 
 FORMAT = "mechdsl-model-cache 4"
 MAX_ENTRIES = 1000          # more: the entries written longest ago are removed
@@ -37,7 +39,7 @@ _CALLABLES = ("point_position", "point_velocity", "body_rotation")
 _PER_MODEL = ("model", "param_values", "input_defaults")     # set again from the Model on load
 
 
-@dataclass
+@record(frozen=False)
 class Entry:
     """What a cache file holds."""
     model: object                       # ir.Model

@@ -12,15 +12,16 @@ integrator, method, tolerances, compiled), ``r.success``/``r.message``/``r.failu
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 import numpy as np
 
 from .fileio import write_atomic_group
+from .records import record
 
 
-@dataclass
+@record(frozen=False)
 class Failure:
     """Why and where a run stopped early."""
 
@@ -32,7 +33,7 @@ class Failure:
         return f"simulation failed at t = {self.time:.6g}: {self.cause}" + (f" ({self.detail})" if self.detail else "")
 
 
-@dataclass
+@record(frozen=False)
 class Result:
     t: np.ndarray
     q: np.ndarray

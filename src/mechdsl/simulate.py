@@ -89,6 +89,11 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
             method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
+    if method in I.COMPILED_LOOP and compiled is False:     # compiled = false wins: never compile
+        from .simulation.crk import scipy_name
+
+        method, reason = scipy_name(method), (f"{method} requested with compiled = false: its loop would compile; "
+                                              f"{scipy_name(method)} is the same method stepped in Python")
     if "compiled" not in meta:
         meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
     meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
@@ -100,7 +105,9 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
         if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
             method, loop_compiled = "erk", None
-            meta.update(method=method, integrator=I.METHODS[method][3])
+            meta.update(method=method, integrator=I.METHODS[method][3],
+                        method_reason=reason.split(";")[0] + "; the compiled stepping loop it would pick could "
+                                                             "not be built (see the warning): erk in the virtual machine")
             meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
@@ -110,13 +117,15 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         funcs = drive.closed(funcs)
     else:
         funcs = vm
-    meta["notes"] += list(getattr(funcs, "notes", []))
+    unavailable = compiled and loop_compiled is None and not getattr(funcs, "compiled", False)
+    if unavailable:     # said once, as a warning (not also as a note)
+        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
+    else:
+        meta["notes"] += list(getattr(funcs, "notes", []))
     if s.formulation not in ("auto", "ode"):
         meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
     if s.reactions:
         meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
-    if compiled and loop_compiled is None and not getattr(funcs, "compiled", False):
-        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")

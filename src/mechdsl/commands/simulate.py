@@ -1,6 +1,7 @@
 """``mech simulate FILE``: integrate a model (or a scene) and write CSV, JSON and a plot."""
 from __future__ import annotations
 
+import os
 import sys
 
 from ..diagnostics import UsageError
@@ -122,6 +123,9 @@ def parse_inputs(items) -> dict | None:
             for h in ("linear", "zoh"):
                 if value.endswith(":" + h):
                     path, hold = value[: -len(h) - 1], h
+            head, colon, tail = value.rpartition(":")
+            if colon and hold == "zoh" and tail.isalpha() and not os.path.exists(value) and os.path.exists(head):
+                raise UsageError(f"--input {name}: unknown hold ':{tail}' after {head} (use :zoh or :linear)")
             out[name] = read_table(path, hold, what=f"--input {name}")
     return out
 

@@ -6,6 +6,7 @@ by the Lagrange route).  Equation-layer terms and generalized forces act in q-sp
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -84,73 +85,84 @@ def build_loads(model: ir.Model, kin: Kinematics, env) -> Loads:
         if b.kind in ("point", "rigid"):
             masses[b.name] = env.translate(b.mass)
 
-    for f in model.forces:
-        if isinstance(f, ir.Gravity):
-            g = vec(f.g)
-            for b in model.bodies:
-                if b.name not in masses:
-                    continue
-                i, c = kin.com_link(b)
-                m = masses[b.name]
-                L.point_forces.append((i, c, m * g))
-                V = V - m * ca.dot(g, kin.link_pos(i, c))
-        elif isinstance(f, ir.SpringDamper):
-            ia, ra = tree.point_in_link(f.a)
-            ib, rb = tree.point_in_link(f.b)
-            d = kin.link_pos(ib, rb) - kin.link_pos(ia, ra)
-            dd = kin.link_vel(ib, rb) - kin.link_vel(ia, ra)
-            k, c, l0 = (env.translate(x) for x in (f.k, f.c, f.l0))
-            l0_zero = isinstance(f.l0, ir.Const) and f.l0.value == 0
-            l = ca.norm_2(d)
-            F = ca.SX.zeros(3, 1)
-            if f.kind in ("spring", "spring-damper") and not _is_zero(ca.SX(k)):
-                F = F - (k * d if l0_zero else k * (l - l0) * d / l)
-                V = V + 0.5 * k * ((ca.dot(d, d) if l0_zero else (l - l0) ** 2))
-            if f.kind in ("damper", "spring-damper") and not _is_zero(ca.SX(c)):
-                ldot = ca.dot(d, dd) / l
-                F = F - c * ldot * d / l
-                D = D + 0.5 * c * ldot ** 2
-            L.point_forces.append((ib, rb, F))
-            L.point_forces.append((ia, ra, -F))
-        elif isinstance(f, ir.Gravitation):
-            G = env.translate(f.G)
-            bodies = [model.body(b) for b in f.bodies]
-            cs = [kin.com_link(b) for b in bodies]
-            pos = [kin.link_pos(i, c) for i, c in cs]
-            for a in range(len(bodies)):
-                for b in range(a + 1, len(bodies)):
-                    ma, mb = masses.get(bodies[a].name, 0), masses.get(bodies[b].name, 0)
-                    d = pos[b] - pos[a]
-                    r = ca.norm_2(d)
-                    F = -G * ma * mb * d / r ** 3          # on b
-                    L.point_forces.append((cs[b][0], cs[b][1], F))
-                    L.point_forces.append((cs[a][0], cs[a][1], -F))
-                    V = V - G * ma * mb / r
-        elif isinstance(f, ir.AppliedForce):
-            i, r = tree.point_in_link(f.point)
-            F = vec(f.F)
-            if f.frame != "world":
-                F = ca.mtimes(kin.body_rot(f.frame), F)
-            L.point_forces.append((i, r, F))
-            L.applied.append(("force", i, r, F))
-        elif isinstance(f, ir.AppliedTorque):
-            i = tree.body_link[f.body]
-            tau = vec(f.tau)
-            if f.frame != "world":
-                tau = ca.mtimes(kin.body_rot(f.frame), tau)
-            L.torques.append((i, tau))
-            L.applied.append(("torque", i, None, tau))
-        elif isinstance(f, ir.GeneralizedForce):
-            try:
-                k = env.coords.index(f.coordinate)
-            except ValueError:
-                raise MechError(Diagnostic("E720", f"generalized force '{f.name}' on unknown coordinate "
-                                                   f"'{f.coordinate}'", f.span)) from None
-            L.Q_gen[k] = L.Q_gen[k] + env.translate(f.Q)
-        else:
-            raise MechError(Diagnostic("E721", f"unsupported force '{getattr(f, 'name', f)}'"))
+    f = None
+    try:
+        for f in model.forces:
+            if isinstance(f, ir.Gravity):
+                g = vec(f.g)
+                for b in model.bodies:
+                    if b.name not in masses:
+                        continue
+                    i, c = kin.com_link(b)
+                    m = masses[b.name]
+                    L.point_forces.append((i, c, m * g))
+                    V = V - m * ca.dot(g, kin.link_pos(i, c))
+            elif isinstance(f, ir.SpringDamper):
+                ia, ra = tree.point_in_link(f.a)
+                ib, rb = tree.point_in_link(f.b)
+                d = kin.link_pos(ib, rb) - kin.link_pos(ia, ra)
+                dd = kin.link_vel(ib, rb) - kin.link_vel(ia, ra)
+                k, c, l0 = (env.translate(x) for x in (f.k, f.c, f.l0))
+                l0_zero = isinstance(f.l0, ir.Const) and f.l0.value == 0
+                l = ca.norm_2(d)
+                F = ca.SX.zeros(3, 1)
+                if f.kind in ("spring", "spring-damper") and not _is_zero(ca.SX(k)):
+                    F = F - (k * d if l0_zero else k * (l - l0) * d / l)
+                    V = V + 0.5 * k * ((ca.dot(d, d) if l0_zero else (l - l0) ** 2))
+                if f.kind in ("damper", "spring-damper") and not _is_zero(ca.SX(c)):
+                    ldot = ca.dot(d, dd) / l
+                    F = F - c * ldot * d / l
+                    D = D + 0.5 * c * ldot ** 2
+                L.point_forces.append((ib, rb, F))
+                L.point_forces.append((ia, ra, -F))
+            elif isinstance(f, ir.Gravitation):
+                G = env.translate(f.G)
+                bodies = [model.body(b) for b in f.bodies]
+                cs = [kin.com_link(b) for b in bodies]
+                pos = [kin.link_pos(i, c) for i, c in cs]
+                for a in range(len(bodies)):
+                    for b in range(a + 1, len(bodies)):
+                        ma, mb = masses.get(bodies[a].name, 0), masses.get(bodies[b].name, 0)
+                        d = pos[b] - pos[a]
+                        r = ca.norm_2(d)
+                        F = -G * ma * mb * d / r ** 3          # on b
+                        L.point_forces.append((cs[b][0], cs[b][1], F))
+                        L.point_forces.append((cs[a][0], cs[a][1], -F))
+                        V = V - G * ma * mb / r
+            elif isinstance(f, ir.AppliedForce):
+                i, r = tree.point_in_link(f.point)
+                F = vec(f.F)
+                if f.frame != "world":
+                    F = ca.mtimes(kin.body_rot(f.frame), F)
+                L.point_forces.append((i, r, F))
+                L.applied.append(("force", i, r, F))
+            elif isinstance(f, ir.AppliedTorque):
+                i = tree.body_link[f.body]
+                tau = vec(f.tau)
+                if f.frame != "world":
+                    tau = ca.mtimes(kin.body_rot(f.frame), tau)
+                L.torques.append((i, tau))
+                L.applied.append(("torque", i, None, tau))
+            elif isinstance(f, ir.GeneralizedForce):
+                try:
+                    k = env.coords.index(f.coordinate)
+                except ValueError:
+                    raise MechError(Diagnostic("E720", f"generalized force '{f.name}' on unknown coordinate "
+                                                       f"'{f.coordinate}'", f.span)) from None
+                L.Q_gen[k] = L.Q_gen[k] + env.translate(f.Q)
+            else:
+                raise MechError(Diagnostic("E721", f"unsupported force '{getattr(f, 'name', f)}'"))
+    except MechError as e:      # a query without a place of its own (E725): at the force
+        raise located(e, getattr(f, "span", None)) from None
     L.V, L.D = V, D
     return L
+
+
+def located(err: MechError, span) -> MechError:
+    """``err`` with ``span`` given to its diagnostics that have no place (line 0)."""
+    if span is None or not span.line:
+        return err
+    return MechError([d if d.span.line else dataclasses.replace(d, span=span) for d in err.diagnostics])
 
 
 def add_terms(L: Loads, model: ir.Model, env) -> None:

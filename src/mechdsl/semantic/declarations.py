@@ -90,6 +90,12 @@ class Declarations:
             if k not in self.entries and k not in self.instances:
                 local = k[len(prefix):] if k.startswith(prefix) else k
                 own = self._own(prefix[:-1]) if prefix else list(self.entries)
+                n = self.instance_arrays.get(base)
+                if n is not None:       # the array itself, or an element it does not have
+                    self.diags.error("E204", f"'{base[len(prefix):]}' of model '{model_name}' is an array of {n} "
+                                             f"model instances" + ("" if "[" not in k else f"; {local} is not one"),
+                                     m.name_span, f"modify one element, {base[len(prefix):]}[i](...) with i in 1..{n}")
+                    continue
                 self.diags.error("E204", f"model '{model_name}' has no declaration '{local}' to modify", m.name_span,
                                  did_you_mean(local, own) or "modify its parameters and start values")
 

@@ -58,6 +58,7 @@ class Flattener(Declarations, InstanceArrays, ScalarDeclarations, ComponentEleme
         self.connect_failed = False     # a connect(...) was reported: missing parent/child stay quiet
         self.instances: dict[str, ast.Declaration] = {}   # model instances, by (prefixed) name
         self.instance_arrays: dict[str, int] = {}         # arrays of model instances: name -> size
+        self.unsplit_arrays: dict = {}    # span of an array modifier not split over an instance array -> (name, n, reported)
         self._collect(model, outer or {}, [])
         self._check_modified_names(outer or {}, model.name)
 

@@ -26,6 +26,9 @@ class InstanceArrays:
             return
         except Failed:
             return
+        if n < 0:
+            self.diags.error("E307", f"array size {n} is negative", d.dims[0].span, "array sizes are 0 or more")
+            return
         if n > limits.get("components"):
             self.diags.error("E316", f"{n} instances of {d.type_name} exceed the limit of {limits.get('components')} "
                                      "components", d.dims[0].span, limits.hint("components"))
@@ -33,7 +36,7 @@ class InstanceArrays:
         self.instance_arrays[d.name] = n
         mods = self._split_arrays(d.modification, n, d.name, outer)
         for k in range(1, n + 1):
-            dk = dataclasses.replace(d, name=f"{d.name}[{k}]", dims=(), modification=self._element_mods(mods, k, n))
+            dk = dataclasses.replace(d, name=f"{d.name}[{k}]", dims=(), modification=self._element_mods(mods, k, n, d.name))
             self._instance(dk, outer, chain)
 
     def _split_arrays(self, mods, n: int, path: str, outer):
@@ -56,8 +59,10 @@ class InstanceArrays:
             out.append(dataclasses.replace(m, value=value, modification=sub))
         return tuple(out)
 
-    def _element_mods(self, mods, k: int, n: int):
-        """Element k's modifiers: `each` ones as they are, arrays of n entries split."""
+    def _element_mods(self, mods, k: int, n: int, array: str):
+        """Element k's modifiers: `each` ones as they are, arrays of n entries split (a literal
+        array of another length is given whole to every element, and remembered for the error
+        if it does not fit: unsplit_array_mismatch)."""
         if not mods:
             return mods
         out = []
@@ -66,14 +71,32 @@ class InstanceArrays:
             if value is not None and not m.each:
                 if isinstance(value, ast.Array) and len(value.items) == n:
                     value = value.items[k - 1]
+                elif isinstance(value, ast.Array):
+                    self.unsplit_arrays.setdefault(value.span, [array, n, False])
                 elif isinstance(value, ast.Ref) and not value.parts[-1].subscripts and self._is_array_of(value, n):
                     last = value.parts[-1]
                     index = ast.Number(value=k, span=value.span)
                     value = dataclasses.replace(value, parts=value.parts[:-1] + (
                         dataclasses.replace(last, subscripts=(index,)),))
-            sub = self._element_mods(m.modification, k, n) if not m.each else m.modification
+            sub = self._element_mods(m.modification, k, n, array) if not m.each else m.modification
             out.append(dataclasses.replace(m, value=value, modification=sub, each=False))
         return tuple(out)
+
+    def unsplit_array_mismatch(self, span, name: str, want: tuple, got: tuple) -> None:
+        """A parameter of an instance array's element whose value is a literal array that was
+        not split (its length is not the array's size) and does not fit: one error for all the
+        elements, saying why (E301), instead of one shape error per element."""
+        seen = self.unsplit_arrays.get(span)
+        if seen is None:
+            return
+        array, n, reported = seen
+        if reported:
+            raise Failed()
+        seen[2] = True
+        attr = name.rsplit(".", 1)[-1]
+        fail("E301", f"'{attr}' of the array '{array}' has {got[0] if got else 1} entries for {n} elements",
+             span, f"give {n} entries, one per element (a comprehension {{... for i in 1:N}} over the array's size "
+                   f"follows it), or `each {attr} = ...` for the same value in every element")
 
     def _is_array_of(self, ref: ast.Ref, n: int) -> bool:
         try:
@@ -83,21 +106,31 @@ class InstanceArrays:
         return isinstance(v, Arr) and len(v.items) == n
 
     def _instance_element(self, r: ast.Ref) -> ast.Ref:
-        first = r.parts[0]
-        n = self.instance_arrays.get(first.name)
-        if n is None or not first.subscripts:
-            if n is not None and len(r.parts) > 1:
-                fail("E303", f"'{first.name}' is an array of {n} model instances: pick one, e.g. {first.name}[1]",
-                     first.span, f"write {first.name}[i].{r.parts[1].name}")
-            return r
-        if len(first.subscripts) != 1:
-            fail("E303", f"'{first.name}' has one dimension", first.span, f"write {first.name}[i]")
-        k = self.int_value(first.subscripts[0], "an index")
-        if not 1 <= k <= n:
-            fail("E303", f"index {k} is out of range for '{first.name}' (1..{n})", first.subscripts[0].span,
-                 "indices start at 1")
-        if len(r.parts) == 1:
-            fail("E201", f"'{first.name}[{k}]' is a model instance, not a value", first.span,
-                 f"refer to one of its declarations, e.g. {first.name}[{k}].{next(iter(self._own(f'{first.name}[{k}]')), 'x')}")
-        return dataclasses.replace(r, parts=(dataclasses.replace(first, name=f"{first.name}[{k}]", subscripts=()),)
-                                   + r.parts[1:])
+        """`links[i].x` -> `links[3].x`, also inside parts (`links[2].subs[1].x`): each indexed
+        part that names an array of instances becomes that element's name."""
+        parts, prefix = list(r.parts), ""
+        for j, part in enumerate(parts):
+            path = prefix + part.name
+            n = self.instance_arrays.get(path)
+            if n is None:
+                if part.subscripts or j > 0 and prefix[:-1] not in self.instances:
+                    break           # an indexed value, or no longer inside instances
+                prefix = path + "."
+                continue
+            if not part.subscripts:
+                if j + 1 < len(parts):
+                    fail("E303", f"'{path}' is an array of {n} model instances: pick one, e.g. {path}[1]",
+                         part.span, f"write {path}[i].{parts[j + 1].name}")
+                break
+            if len(part.subscripts) != 1:
+                fail("E303", f"'{path}' has one dimension", part.span, f"write {path}[i]")
+            k = self.int_value(part.subscripts[0], "an index")
+            if not 1 <= k <= n:
+                fail("E303", f"index {k} is out of range for '{path}' (1..{n})", part.subscripts[0].span,
+                     "indices start at 1")
+            if j + 1 == len(parts):
+                fail("E201", f"'{path}[{k}]' is a model instance, not a value", part.span,
+                     f"refer to one of its declarations, e.g. {path}[{k}].{next(iter(self._own(f'{path}[{k}]')), 'x')}")
+            parts[j] = dataclasses.replace(part, name=f"{part.name}[{k}]", subscripts=())
+            prefix = f"{path}[{k}]."
+        return dataclasses.replace(r, parts=tuple(parts))

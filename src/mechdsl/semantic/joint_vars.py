@@ -28,7 +28,7 @@ class JointVariables:
             param = "euler"
             if cls.field("parametrization") is not None:
                 param = self.field_value(inst, "parametrization").value  # type: ignore[union-attr]
-            child = self.field_value(inst, "child")
+            child = self.field_value(inst, "child") if cls.field("child") is not None else None   # RigidLink: b
             point_mass_child = isinstance(child, CompRef) and self._body_class_of(child) == "PointMass"
             roles = K.joint_roles(cls, param, point_mass_child)
             out: list[ir.JointVar] = []

@@ -64,6 +64,7 @@ class ScalarDeclarations:
         want = dims
         got = V.shape_of(val)
         if got != want:
+            self.unsplit_array_mismatch(e.mod.value.span, d.name, want, got)
             fail("E301", f"parameter '{d.name}' is declared with shape {_shape_text(want)} but its value is "
                          f"{V.describe_shape(val)}", e.mod.value.span,
                  "use fill(value, n) for arrays" if want and not got else
@@ -184,6 +185,7 @@ class ScalarDeclarations:
             vals = [v] * n
         else:
             if V.shape_of(v) != dims:
+                self.unsplit_array_mismatch(m.value.span, attr, dims, V.shape_of(v))
                 fail("E301", f"'{attr}' has shape {_shape_text(V.shape_of(v))}, expected {_shape_text(dims)}",
                      m.value.span, "give one value for all elements, or one per element")
             vals = V.flatten(v) if dims else [v]

@@ -30,7 +30,7 @@ from . import values as V
 from .components import rodrigues
 from .evaluate import fail
 from .mods import Mod
-from .values import Arr, CompRef, Str
+from .values import Arr, CompRef, Scalar, Str
 
 if TYPE_CHECKING:
     from ..diagnostics import Span
@@ -146,9 +146,11 @@ class VectorStarts:
                 frame = "body"
                 if "frame" in m.sub:
                     fv = self.eval(m.sub["frame"].value)
-                    frame = fv.value if isinstance(fv, Str) else ""
+                    frame = fv.value if isinstance(fv, Str) else None
                     if frame not in ("body", "world"):
-                        fail("E217", f"'{frame}' is not a valid frame of omega", m.sub["frame"].value.span,
+                        fail("E217", (f"'{frame}' is not a valid frame of omega" if frame is not None else
+                                      f"the frame of omega must be a string, got {V.describe_shape(fv)}"),
+                             m.sub["frame"].value.span,
                              'frame = "body" (child body axes) or "world"')
                 if frame == "world" and self._point_name_of(inst, "parent") != "world":
                     fail("E221", f"omega(frame = \"world\") of '{inst.name}' needs a joint whose parent is the world",
@@ -186,6 +188,10 @@ class VectorStarts:
         if not isinstance(sv, Arr) or len(V.shape_of(sv)) != 1 or V.shape_of(sv)[0] not in sizes:
             fail("E301", f"the start of '{key}' of '{inst.name}' must be a vector of "
                          f"{' or '.join(map(str, sizes))}, got {V.describe_shape(sv)}",
+                 m.sub["start"].value.span, f"write {key}(start = {{x, y, z}})")
+        bad = next((it for it in sv.items if not isinstance(it, Scalar)), None)
+        if bad is not None:
+            fail("E301", f"the start of '{key}' of '{inst.name}' must be numbers, got {V.describe_shape(bad)}",
                  m.sub["start"].value.span, f"write {key}(start = {{x, y, z}})")
         for s in V.flatten(sv):
             self.check_dim(s, want, f"the start of '{key}' of '{inst.name}'", m.sub["start"].value.span)

@@ -61,6 +61,14 @@ def solve(problem: Problem, progress=None) -> Result:
     A.accuracy_report(r, problem, fixed_step=problem.backend == "fixed-step")
     meta = r.metadata
     meta.setdefault("warnings", [])
+    if problem.backend == "fixed-step" and problem.drive is not None:
+        jumps = [sig.name for sig in problem.drive.signals if _zoh(sig)
+                 and problem.drive.breakpoints(s.t_start, s.t_end).size]
+        if jumps:
+            meta["warnings"].append(
+                f"the fixed-step method steps across the zero-order hold of {', '.join(jumps)}: a stage at a "
+                "step's end that lands on a sample sees the next value, so a jump can add an error of first "
+                "order in dt (the method's own order is lost there); an adaptive method restarts at every jump")
     meta.setdefault("notes", [])
     meta.setdefault("conservative", "energy" in problem.invariants)
     unused = ignored_settings(backend, s)
@@ -158,6 +166,12 @@ def _estimate_error(r: Result, problem: Problem) -> None:
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
+
+
+def _zoh(signal) -> bool:
+    from .drive import _zoh as zoh
+
+    return zoh(signal)
 
 
 def _ran_compiled(meta, stats=None) -> bool:

@@ -234,7 +234,7 @@ class CrkPlugin(I.IntegratorPlugin):
             from ..codegen import FastFunction
 
             rhs = FastFunction(ode).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
-            run = I.run_scipy(_scipy_name(method), rhs, None, grid, x0, rtol, atol, max_steps, progress, {},
+            run = I.run_scipy(scipy_name(method), rhs, None, grid, x0, rtol, atol, max_steps, progress, {},
                               hmin=hmin)
             run.stats = {"n_steps": run.stats.get("steps"), "n_rhs": run.stats.get("rhs_evals"),
                          "n_reject": None, "fallback": "scipy"}
@@ -246,7 +246,8 @@ class CrkPlugin(I.IntegratorPlugin):
                 "rejected_steps": raw.get("n_reject")}
 
 
-def _scipy_name(method: str) -> str:
+def scipy_name(method: str) -> str:
+    """The scipy method (in mechdsl's names) that a compiled loop's method runs as in Python."""
     return "scipy-" + CRK_METHODS[method][1].lower()
 
 

@@ -24,16 +24,17 @@ there is a warning in the Result's metadata.
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
+from ..records import record
 
 HOLDS = ("zoh", "linear")
 
 
-@dataclass(frozen=True)
+@record
 class Table:
     """Samples of one input: ``hold`` = "zoh" (zero-order hold, the default) or "linear"."""
     times: np.ndarray
@@ -79,10 +80,13 @@ def read_table(path, hold: str = "zoh", what: str = "input table") -> Table:
     if not data:
         raise UsageError(f"{what}: {path} has no (time, value) rows")
     arr = np.array(data, float)
-    return table(arr[:, 0], arr[:, 1], hold)
+    try:
+        return table(arr[:, 0], arr[:, 1], hold)
+    except UsageError as e:
+        raise UsageError(f"{what}: {path}: {e}") from None
 
 
-@dataclass
+@record(frozen=False)
 class Signal:
     name: str
     kind: str                 # default | constant | table | callable | function
@@ -92,7 +96,7 @@ class Signal:
     feedback: bool = False    # depends on the state
 
 
-@dataclass
+@record(frozen=False)
 class Drive:
     names: tuple[str, ...]
     signals: list[Signal] = field(default_factory=list)

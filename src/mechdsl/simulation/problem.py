@@ -10,7 +10,9 @@ parameters, or with u replaced by the signals' expression U(t, x) (``Drive.close
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
+
+from ..records import record
 
 from .settings import SimulationSettings
 
@@ -20,7 +22,7 @@ KINDS = {"ode": "ODE in minimal coordinates: M(q) q'' = bias(q, q', t, p)",
          "canonical": "fixed-step integration in canonical variables (q, p)"}
 
 
-@dataclass(frozen=True)
+@record
 class Problem:
     kind: str                              # one of KINDS
     backend: str                           # name in backends.BACKENDS

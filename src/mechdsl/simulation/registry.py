@@ -6,14 +6,13 @@ is refused the same way for every model, with one did-you-mean list.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from ..diagnostics import UsageError, did_you_mean
+from ..records import record
 
 ODE, DAE, EVENTS, FIXED = "ode", "dae", "events", "fixed-step"
 
 
-@dataclass(frozen=True)
+@record
 class MethodInfo:
     name: str
     backends: tuple[str, ...]     # back ends that accept the name

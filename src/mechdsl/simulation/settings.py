@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 from typing import Any
 
 from ..diagnostics import UsageError, did_you_mean
+from ..records import record
 
 DEFAULT_POINTS = 501
 DEFAULT_RTOL = 1e-8
@@ -34,7 +35,7 @@ SCENE_KEYS = {"stop_time": "t_end", "start_time": "t_start", "rtol": "rtol", "at
               "impact_order": "impact_order", "output_events": "output_events"}
 
 
-@dataclass(frozen=True)
+@record
 class SimulationSettings:
     """Everything a run needs besides the model; ``validated()`` returns the checked copy."""
 
