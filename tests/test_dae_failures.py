@@ -129,3 +129,68 @@ def test_the_driver_loop_is_bounded(monkeypatch):
     assert "more than 5 integrator calls" in r.failure.detail
     assert 0.0 < r.failure.time <= 5 * 0.1 + 1e-12 and r.t[-1] == r.failure.time
     assert r.stats["segments"] == 5
+
+
+def test_a_jacobian_that_cannot_be_evaluated_is_a_failure_not_a_crash():
+    """Fuzz mutant (issue 18): andrews.mech with m3 = -1e12.  The method choice evaluated the
+    index-1 ODE's Jacobian, whose linear solve fails on the singular KKT matrix: CasADi's
+    "Evaluation failed" escaped as a RuntimeError (exit 3).  The start check now refuses the
+    negative mass (E747); past it (as a state met during a run would be), the estimate falls
+    back and the run fails with the time and the cause."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.dae import simulate_dae
+
+    m = mechdsl.load(MODELS / "andrews.mech", model="Andrews")
+    r = simulate_dae(m.eom, 0.01, points=3, p={"m3": -1e12})
+    assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_constrained_run_that_needs_too_many_steps_fails_at_its_start():
+    """four_bar.mech with g = 1e14: the swing's rate sqrt(g/l) ~ 3.5e6 1/s makes 0.05 s about
+    2.8e4 periods; BDF at rtol 1e-8 takes at least 2 rtol^(-1/5) = 80 steps a period, 2.2e6
+    steps in all, over the budget of 1e7 / (n + m) = 2e6.  The run fails at t = 0 naming the
+    time scale (E824) instead of grinding through CVODES' step budgets."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.dae import simulate_dae
+
+    m = mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
+    r = simulate_dae(m.eom, 0.05, points=5, p={"g": 1e14}, rtol=1e-8)
+    assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-12)
+    assert r.failure.cause == "too many steps needed" and "[E824]" in r.failure.detail
+    # the rate it names is the gravity swing's: it grows like sqrt(g) (x 10 for g x 100)
+    def rate(res):
+        return float(res.failure.detail.split("(rate ")[1].split(" ")[0])
+
+    r16 = simulate_dae(m.eom, 0.05, points=5, p={"g": 1e16}, rtol=1e-8)
+    assert rate(r16) / rate(r) == pytest.approx(10.0, rel=0.01)
+    ok = simulate_dae(m.eom, 0.05, points=5, rtol=1e-8)      # the shipped values: far under the budget
+    assert ok.success
+
+
+def test_a_ctrl_c_taken_by_casadi_in_the_jacobian_is_not_swallowed(monkeypatch):
+    """The Jacobian guard (a failed evaluation -> no estimate) must not eat a Ctrl-C that CasADi
+    turned into a RuntimeError (as stepper.call_integrator gives it back): a Ctrl-C during the
+    method choice would otherwise be lost and the run go on to the end."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.dae.system import ConstrainedSystem
+
+    m = mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
+    pv = np.asarray(m.eom.param_values, float)
+    system = ConstrainedSystem.build(m.eom, pv, list(range(m.eom.m)))
+
+    def interrupted(*a):
+        raise RuntimeError("Error in Function::call for 'ode_jac': KeyboardInterrupt")
+
+    monkeypatch.setattr(system, "_jac", lambda: interrupted)
+    q = np.zeros(m.eom.n)
+    with pytest.raises(KeyboardInterrupt):
+        system.eigenvalues(q, q, 0.0)
+
+    def failed(*a):
+        raise RuntimeError(".../casadi/core/function_internal.hpp:1766: Evaluation failed")
+
+    monkeypatch.setattr(system, "_jac", lambda: failed)
+    assert system.eigenvalues(q, q, 0.0).size == 0 and system.spectral_radius(q, q, 0.0) == 0.0

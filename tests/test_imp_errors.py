@@ -172,3 +172,56 @@ def test_a_run_that_needs_too_many_steps_fails_at_once(tmp_path):
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 1, p.stdout + p.stderr
     assert "FAILED at t = 0: too many steps needed" in p.stdout and "time scale of 4.3" in p.stdout
+
+
+def test_the_work_estimate_counts_the_tolerance():
+    """Issue 18: pendulum_wall with a rod of 1e-12 m (the hinge's point at {0, 1e-12, 0}) and
+    --t-end 0.05 passed the flat estimate (10 steps a period: 1.8e5 < 2e5) and failed only after
+    stepping 200,000 times (45 s CPU, 86 s wall) at t = 0.0155.  At rtol 1e-10 dop853 takes about
+    23 steps a period (measured 22.6 on a pendulum swinging 1 rad), so the run is refused at t = 0."""
+    import mechdsl
+    from conftest import MODELS
+
+    src = (MODELS / "pendulum_wall.mech").read_text()
+    m = mechdsl.loads(src.replace("r = {0, L, 0}", "r = {0, 1e-12, 0}"), model="PendulumWall")
+    r = simulate_with_contacts(m.eom, None, 0.05, points=5, rtol=1e-10, atol=1e-10)
+    assert not r.success and r.failure.time == 0.0 and r.failure.cause == "too many steps needed"
+    assert "at rtol 1e-10" in r.failure.detail
+
+
+@pytest.mark.parametrize("method,rtol", [("dop853", 1e-10), ("dop853", 1e-4), ("rk45", 1e-8), ("radau", 1e-6)])
+def test_the_work_estimate_is_a_lower_bound(method, rtol):
+    """The estimate may refuse only runs that could not finish: on the shipped pendulum_wall (no
+    impact in the first 0.6 s: free swinging) the steps a solver really takes are at least the
+    estimate rho T / (2 pi) * steps_per_period(method, rtol), and within a factor 4 of it."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.impacts.stepper import resolve_method, steps_per_period
+
+    m = mechdsl.load(MODELS / "pendulum_wall.mech", model="PendulumWall")
+    T = 0.6
+    r = simulate_with_contacts(m.eom, None, T, points=3, rtol=rtol, atol=rtol, method=method)
+    assert r.success and not [e for e in r.events if e.kind == "impact"]
+    rho = np.sqrt(9.81 * np.cos(1.0))          # |eigenvalue| of the linearization at theta = -1, at rest
+    est = rho * T / (2 * np.pi) * steps_per_period(resolve_method(method)[0], rtol)
+    assert est <= r.stats["steps"] <= 4 * est + 5
+
+
+def test_accumulating_events_fail_instead_of_running_for_minutes(monkeypatch):
+    """Fuzz mutant (issue 18): falling_rod.mech with g = 1e12.  The rod lands at 1.4e6 m/s and
+    every rebound stays faster than rest_speed = 1e-3 m/s (gravity alone gives that speed in
+    1e-15 s), so the ends chatter without end: 1000 events advanced time by 1e-8 s at 12 ms
+    an event, and the budget of 100,000 events meant 20 minutes.  500 events within 1e-6 of
+    the run's span now end the run, naming rest_speed (here 100 events, to keep the test short;
+    the default 500 stops this run after 541 events, 2 s CPU)."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.impacts import run
+
+    monkeypatch.setattr(run, "ZENO_EVENTS", 100)
+    m = mechdsl.load(MODELS / "falling_rod.mech", model="FallingRod").with_params(g=1e12)
+    r = simulate_with_contacts(m.eom, None, 0.05, points=5)
+    assert not r.success and r.failure.cause == "events accumulate (Zeno behaviour)"
+    assert "the last 100 events" in r.failure.detail and "raise rest_speed" in r.failure.detail
+    assert len(r.events) <= 200
+    assert 0 < r.failure.time < 1e-5            # the chatter starts within microseconds of the fall

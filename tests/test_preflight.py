@@ -356,3 +356,89 @@ def test_gaps_not_finite_at_the_start(tmp_path, capsys, model, setting, code, li
                     "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
     assert rc == 1
     _located(err, code, MODELS / model, line)
+
+
+@pytest.mark.parametrize("old,new,line,what", [
+    ('m1(unit = "kg") = 0.04325', 'm1(unit = "kg") = -1', 15, "negative mass"),
+    ('i3(unit = "kg.m2") = 5.255e-06', 'i3(unit = "kg.m2") = -1e-3', 31, "negative moment of inertia"),
+], ids=["mass", "inertia"])
+def test_negative_mass_in_the_equation_layer_of_andrews(tmp_path, capsys, old, new, line, what):
+    """andrews.mech with m1 = -1 ran to the end (exit 0): the reduced mass matrix stays positive
+    definite, so E743 cannot see it.  The parameter is a mass by its unit and because T grows
+    linearly with it; `check`, `simulate` and `--set` refuse it at the parameter (E747)."""
+    path = _edited(tmp_path, "andrews.mech", old, new)
+    rc, err = _cli(["check", str(path)], capsys)
+    assert rc == 1 and what in err
+    _located(err, "E747", path, line)
+    rc, err = _cli(["simulate", str(MODELS / "andrews.mech"), "--set", new.split("(")[0] + "=" + new.split("= ")[-1],
+                    "--t-end", "0.001", "--no-progress", "-o", str(tmp_path / "o.csv")], capsys)
+    assert rc == 1 and "error[E747]" in err and not (tmp_path / "o.csv").exists()
+
+
+EQUATION_LAYER = """model Rotor
+  parameter Real A(unit = "kg.m2") = 2;
+  parameter Real B(unit = "kg.m2") = 3;
+  parameter Real C(unit = "kg.m2") = -0.5;
+  parameter Real dm(unit = "kg", min = -0.5) = -0.25;
+  parameter Real m(unit = "kg") = 1;
+  coordinate Real a(start = 0);
+  coordinate Real b(start = 0);
+  coordinate Real x(start = 0);
+equation
+  kinetic = 1/2*(A*der(a)^2 + B*der(b)^2) + C*der(a)*der(b) + 1/2*(m + dm)*der(x)^2;
+  potential = a^2 + b^2 + x^2;
+end Rotor;
+"""
+
+
+def test_negative_mass_check_spares_products_of_inertia_and_declared_ranges():
+    """C is a product of inertia (dT/dC = a'b' is indefinite) and dm declares its range: neither
+    is a negative mass.  Made negative, the moment A is (dT/dA = a'^2/2 >= 0)."""
+    model = mechdsl.loads(EQUATION_LAYER)
+    assert preflight(model.eom) == []
+    found = preflight(model.eom, {"A": -1.0})
+    assert [d.code for d in found] == ["E747"] and "'A'" in found[0].message
+    assert found[0].span.line == 2
+
+
+def test_a_loop_smaller_than_the_constraint_tolerance(tmp_path, capsys):
+    """Fuzz mutant (issue 18): nfourbar.mech with rods of 1e-12 m and 1e-12 kg.  The constraints
+    are held to max(10 atol, 1e-10) = 1e-9 m, a thousand times the mechanism: the run ran away
+    (speeds of 1e12 rad/s after 2e-6 s) and did not return in 300 s.  Refused at the start (E755)
+    at the joint that closes the first loop; a mechanism of 1e-6 m (1000 x the bound) passes."""
+    text = (MODELS / "nfourbar.mech").read_text()
+    for old in ('m(unit = "kg") = 1 ', 'l(unit = "m") = 1 '):
+        assert old in text
+    tiny = text.replace('m(unit = "kg") = 1 ', 'm(unit = "kg") = 1e-12 ').replace('l(unit = "m") = 1 ', 'l(unit = "m") = 1e-12 ')
+    path = _write(tmp_path, tiny, "nfourbar.mech")
+    rc, err = _cli(["check", str(path)], capsys)
+    assert rc == 1 and "measures only 2.27e-12 across" in err
+    _located(err, "E755", path, 29)
+    found = preflight(mechdsl.loads(text, model="NFourBar").eom, {"l": 1e-6})
+    assert found == []
+
+
+@pytest.mark.parametrize("model,old,new,code,line", [
+    ("particle_on_sphere.mech", 'R(unit = "m") = 1 ', 'R(unit = "m") = 1.8e308 ', "E303", 17),
+    ("pendulum_wall.mech", "tolerance = 1e-10;", "tolerance = 1e-300;", "E604", 37),
+], ids=["sphere-radius-beyond-double", "wall-tolerance-1e-300"])
+def test_issue_18_examples_refused_where_written(tmp_path, capsys, model, old, new, code, line):
+    """Issue 18: particle_on_sphere with 1.8e308 wrote inf with exit 0; a contact scene with
+    tolerance = 1e-300 exited 3 without a CSV.  Both are model errors at the value now."""
+    path = _edited(tmp_path, model, old, new)
+    for cmd in (["check", str(path)], ["simulate", str(path), "--t-end", "0.05", "--no-progress",
+                                        "-o", str(tmp_path / "o.csv")]):
+        rc, err = _cli(cmd, capsys)
+        assert rc == 1
+        _located(err, code, path, line)
+
+
+def test_falling_rod_from_1e32_m_finishes_with_finite_results(tmp_path, capsys):
+    """Issue 18: falling_rod.mech with a number 1e32 (the start height) spun in the event search;
+    it now runs 0.05 s and writes finite numbers (exit 0)."""
+    path = _edited(tmp_path, "falling_rod.mech", 'h(unit = "m") = 1 ', 'h(unit = "m") = 1e32 ')
+    out = tmp_path / "o.csv"
+    rc, err = _cli(["simulate", str(path), "--t-end", "0.05", "--points", "5", "--no-progress", "-o", str(out)], capsys)
+    assert rc == 0, err
+    rows = [line.split(",") for line in out.read_text().splitlines()[1:]]
+    assert len(rows) == 5 and all(np.isfinite(float(x)) for row in rows for x in row)

@@ -10,11 +10,14 @@ In order (the first group that finds something ends the check):
 
   E740  a parameter value that is not finite, or subnormal (below 2.2e-308)  (at the parameter)
   E508-E512  the component values (semantic/physical.py)  (at the component)
+  E747  a negative parameter that is a mass or an inertia: its unit is kg or kg.m2 and the
+        kinetic energy is linear in it with a positive semidefinite coefficient (at the parameter)
   E741  a start value that is not finite                  (at the coordinate's joint)
   E748  a start angle too large for double precision (|q| eps > 1e-6 rad, e.g. tan(pi/2))
   E826  a constraint residual or gradient that is not finite at the start (dae/init.py)
   E821/E822  consistent initialization (dae/init.py)      (constrained models)
   E749  a loop whose positions double precision cannot resolve to the drift bound (lengths 1e16)
+  E755  a mechanism with closed loops smaller than 100 times the drift bound (lengths 1e-12)
   E742  the mass matrix is not finite at the start
   E743  the mass matrix is singular (or not positive definite) at the start, on the motions
         the constraints allow: a coordinate moves no inertia (a point mass on a Spherical
@@ -40,6 +43,8 @@ from .diagnostics import Diagnostic, MechError, Span
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
 COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
+PROBES = 3                 # seeded positions besides the start at which E747 judges dT/dp
+LOOP_SIZE_FACTOR = 100     # a closed loop must measure this many times the constraint drift bound (E755)
 DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
@@ -81,6 +86,9 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
         found = value_problems(model, env)
         if found:
             return found
+    found = _negative_masses(eom, pv)
+    if found:
+        return found
     if eom.n == 0:
         return []
     if not isinstance(drift_bound, (int, float)) or not drift_bound > 0:
@@ -112,7 +120,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         except MechError as e:
             return e.diagnostics
         q, qd = init.q, init.qd
-        found = _loop_resolution(eom, q, t, pv, drift_bound)
+        found = _loop_scale(eom, q, t, pv, drift_bound)
         if found:
             return found
     else:
@@ -327,32 +335,52 @@ def _coincident_ends(eom, q, t, pv) -> list[Diagnostic]:
     return out
 
 
-def _loop_resolution(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
-    """E749: loop closures compare positions; when double precision resolves the positions of
-    the loop's points only to more than the drift bound, no projection can hold them."""
+def _loop_scale(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
+    """The size of the loops against the constraint drift the run holds (drift_bound).
+
+    E749: loop closures compare positions; when double precision resolves the positions of
+    the loop's points only to more than the drift bound, no projection can hold them.
+    E755: a mechanism smaller than LOOP_SIZE_FACTOR times the drift bound (max(10 atol, 1e-10)):
+    its geometry is lost in the tolerance.  nfourbar with rods of 1e-12 m ran away (speeds of
+    1e12 rad/s after 2e-6 s) and ground for minutes in CVODES before this.  Its size: the
+    largest distance between the joint points of the model (at the start)."""
     model = eom.model
     if model is None or eom.point_position is None:
         return []
-    import casadi as ca
-
     cut = [j for j in model.joints if j.closes_loop]
     if not cut:
         return []
-    fn = eom.workspace.memo("preflight_loop_points", lambda: ca.Function(
-        "loop_points", [eom.q, eom.t, eom.p],
-        [ca.vertcat(*[eom.point_position(n) for j in cut for n in (j.parent, j.child)])]))
-    xyz = np.abs(_value(fn, q, t, pv))
+    import casadi as ca
+
+    names = list(dict.fromkeys([n for j in cut for n in (j.parent, j.child)]
+                               + [n for j in model.joints for n in (j.parent, j.child)]))
+    try:
+        fn = eom.workspace.memo("preflight_joint_points", lambda: ca.Function(
+            "joint_points", [eom.q, eom.t, eom.p], [ca.horzcat(*[ca.vec(eom.point_position(n)) for n in names])]))
+    except Exception:  # noqa: BLE001 - a point without a position: nothing to judge here
+        return []
+    xyz = np.asarray(fn(q, t, pv), float).reshape(3, -1, order="F")
     if not xyz.size or not np.all(np.isfinite(xyz)):
         return []
-    k = int(np.argmax(xyz)) // 6
-    res = float(np.max(xyz)) * np.finfo(float).eps
-    if res <= drift_bound:
+    far = np.max(np.abs(xyz), axis=0)                   # per point
+    loop_far = [max(far[names.index(j.parent)], far[names.index(j.child)]) for j in cut]
+    k = int(np.argmax(loop_far))
+    res = float(loop_far[k]) * np.finfo(float).eps
+    if res > drift_bound:
+        j = cut[k]
+        return [Diagnostic("E749", f"the loop closed by joint '{j.name}' lies {loop_far[k]:.3g} from the origin: "
+                                   f"double precision resolves its positions only to {res:.2g}, more than the "
+                                   f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
+                           "choose units (or an origin) that keep the positions moderate, or raise atol")]
+    size = 2 * float(np.max(np.linalg.norm(xyz - xyz.mean(axis=1, keepdims=True), axis=0)))
+    if xyz.shape[1] < 2 or size <= 0 or size >= LOOP_SIZE_FACTOR * drift_bound:
         return []
-    j = cut[k]
-    return [Diagnostic("E749", f"the loop closed by joint '{j.name}' lies {np.max(xyz):.3g} from the origin: "
-                               f"double precision resolves its positions only to {res:.2g}, more than the "
-                               f"constraint drift the simulation holds ({drift_bound:.2g})", j.span,
-                       "choose units (or an origin) that keep the positions moderate, or raise atol")]
+    j = cut[0]
+    return [Diagnostic("E755", f"the mechanism closed by joint '{j.name}' measures only {size:.3g} across: the "
+                               f"simulation holds its constraints to {drift_bound:.2g} (max(10 atol, 1e-10)), "
+                               f"more than 1/{LOOP_SIZE_FACTOR:g} of its size, so its geometry is lost in the tolerance",
+                       j.span, "choose units that make the lengths moderate (um or mm instead of m), "
+                               "or check the lengths for a mistake")]
 
 
 def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
@@ -436,6 +464,67 @@ def _start_problem(eom, i: int, value: float) -> Diagnostic:
     return Diagnostic("E741", f"the start value of {what} is not finite ({value:g})", _coord_span(eom, name),
                       "check its start/speed formula for a function outside its domain (asin of more than 1, "
                       "sqrt of a negative number) or a division by zero, with the parameter values in force")
+
+
+def _negative_masses(eom, pv) -> list[Diagnostic]:
+    """E747: a negative parameter that the kinetic energy uses as a mass or an inertia.
+
+    Component models state their masses (E508/E509 judge them); in the equation layer
+    (`kinetic = 1/2*(m1*ra^2 + ...)*der(beta)^2 + ...`) a negative mass need not make the
+    reduced mass matrix indefinite (andrews.mech with m1 = -1 runs on), so it is identified
+    here: a parameter with the unit of a mass (kg) or of a moment of inertia (kg.m2), a
+    negative value and no declared `min`, on which the kinetic energy T depends linearly with
+    a coefficient dT/dp that is a positive semidefinite quadratic form of the speeds (at the
+    start and at PROBES seeded positions around it).  A product of inertia (dT/dp indefinite)
+    and a mass difference with a declared range pass.  Cost: nothing unless such a parameter
+    is negative."""
+    model = eom.model
+    if model is None or eom.n == 0 or eom.T is None:
+        return []
+    from . import units as U
+
+    declared = {par.name: par for par in model.real_parameters}
+    suspects = []
+    for i, name in enumerate(eom.params):
+        par = declared.get(name)
+        if par is None or pv[i] >= 0 or par.min is not None or not par.unit:
+            continue
+        try:
+            dim = U.parse_unit(par.unit)[1]
+        except ValueError:
+            continue
+        if dim in (U.MASS, U.INERTIA):
+            suspects.append((i, par, "mass" if dim == U.MASS else "moment of inertia"))
+    if not suspects:
+        return []
+    import casadi as ca
+
+    T = ca.SX(eom.T)
+    q0, _ = eom.start(pv)
+    rng = np.random.default_rng(20260)
+    probes = [np.asarray(q0, float)] + [np.asarray(q0, float) + rng.normal(size=eom.n) for _ in range(PROBES)]
+    out = []
+    for i, par, what in suspects:
+        dT = ca.jacobian(T, eom.p[i])
+        if ca.depends_on(dT, eom.p[i]) or dT.is_zero():
+            continue
+        H = ca.Function("dT_dp", [eom.q, eom.t, eom.p], [ca.hessian(dT, eom.qd)[0]])
+        try:
+            eigs = [np.linalg.eigvalsh(np.asarray(H(q, 0.0, pv), float)) for q in probes if np.all(np.isfinite(q))]
+        except (RuntimeError, np.linalg.LinAlgError):
+            continue
+        if not eigs or not all(np.all(np.isfinite(e)) for e in eigs):
+            continue
+        scale = max(float(np.max(np.abs(e))) for e in eigs)
+        if scale > 0 and all(float(np.min(e)) >= -1e-12 * scale for e in eigs):
+            out.append(Diagnostic("E747", f"parameter '{par.name}' = {pv[i]:g} is a negative {what}: the kinetic "
+                                          f"energy grows with it (unit {par.unit}), so it gives the motion negative "
+                                          "inertia and the equations of motion no physical meaning",
+                                  par.span,
+                                  f"masses and moments of inertia are >= 0; if '{par.name}' is not one (a difference "
+                                  f"of masses), declare its range: parameter Real {par.name}(unit = \"{par.unit}\", "
+                                  f"min = {pv[i]:g})"))
+    return out
 
 
 def _param_span(model, name: str) -> Span:

@@ -182,7 +182,11 @@ def structure(eom, p=None) -> Structure:
 
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     pv = param_vector(eom, p)
-    return eom.workspace.shared(("structure", pv.tobytes(), id(parts(eom))), lambda: _structure(eom, pv))
+    def build():
+        with np.errstate(all="ignore"):     # probes with huge values overflow: judged by finiteness, not printed
+            return _structure(eom, pv)
+
+    return eom.workspace.shared(("structure", pv.tobytes(), id(parts(eom))), build)
 
 
 def _structure(eom, pv) -> Structure:
@@ -306,8 +310,13 @@ def _quadratic_T(pt: Parts, pv, pr: Probe, L_scale: float) -> bool:
 
 
 def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
-    """Orthonormal basis (columns) of the null space of J, in a deterministic orientation."""
+    """Orthonormal basis (columns) of the null space of J, in a deterministic orientation.
+    A J with inf or nan entries (values that overflowed) has no basis to claim: none is
+    returned (LAPACK's SVD does not return on nan input; heavy_top with g = 1e308 hung
+    `mech check` in the symmetry search)."""
     n = J.shape[1]
+    if not np.all(np.isfinite(J)):
+        return np.zeros((n, 0))
     if J.size == 0 or not np.any(J):
         return np.eye(n)
     # thin SVD when J is tall (probes stack many rows): the full U would cost O(rows^2)

@@ -49,6 +49,10 @@ def rotation_symmetries(eom, pt, pv) -> list[np.ndarray]:
             continue
         q, v = pr.q[k], pr.qd[k]
         Lq, Lv, Q = Lq.ravel(), Lv.ravel(), Q.ravel()
+        with np.errstate(all="ignore"):     # huge values: products that overflow end the search below
+            finite = np.all(np.isfinite(Lq[J] * q[I] - Lq[I] * q[J] + Lv[J] * v[I] - Lv[I] * v[J]))
+        if not finite:
+            return []
         # A_ji = a, A_ij = -a: (A q)_j = a q_i, (A q)_i = -a q_j
         blocks[0].append(Lq[J] * q[I] - Lq[I] * q[J] + Lv[J] * v[I] - Lv[I] * v[J])
         sizes[0] = max(sizes[0], float(np.max(np.abs(Lq) * np.max(np.abs(q)) + np.abs(Lv) * np.max(np.abs(v)))))

@@ -53,10 +53,12 @@ def run(args) -> int:
                 for w in m.warnings:
                     print(format_diagnostics([w]), file=sys.stderr)
                 if kind == "scene":
-                    if m.scene_settings.get("stop_time") is not None:
-                        m.settings()       # the run's own validation: a scene value over a budget is E604
+                    # the run's own validation (a scene value over a budget is E604) and its plan
+                    given = m.scene_settings.get("stop_time") is not None     # else any end: the plan does not depend on it
+                    problem = m.problem(**({} if given else {"t_end": float(m.scene_settings.get("start_time") or 0.0) + 1.0}))
                     settings = ", ".join(f"{k} = {_fmt(v)}" for k, v in m.scene.settings)
                     lines.append(f"  scene {name} -> {m.name}" + (f" ({settings})" if settings else ""))
+                    lines += [f"    {topic}: {text}" for topic, text in problem.plan]
                 else:
                     lines.append("  " + m.summary(derive=True))
                     lines += _extra_lines(m)

@@ -64,7 +64,8 @@ def first_chunk(system, stepper, grid) -> int:
     q, qd, t = stepper.q, stepper.qd, stepper.t
     try:
         qdd, _ = system.accel(q, qd, t)
-        rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
+        with np.errstate(all="ignore"):     # q = 0: an infinite rate (no warning on stderr), the default
+            rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
     except Exception:  # noqa: BLE001 -- no estimate: the default
         return CHUNK
     if not np.isfinite(rate) or rate <= 0:
@@ -152,7 +153,8 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     if opts.formulation == "partitioning" and dof.dof == 0:
         notes.append("no degrees of freedom: partitioning has nothing to integrate; using projection")
         opts.formulation = "projection"
-    method_reason = resolve_method(opts, system, init.q, init.qd, t0, span)
+    method_reason, ev = resolve_method(opts, system, init.q, init.qd, t0, span)
+    too_much = work_failure(opts, system, ev, t0, span)
     stepper = make_stepper(system, opts, t0, init.q, init.qd, span)
     stepper.reset(t0, init.q, init.qd)
     setup_wall = _time.perf_counter() - wall0
@@ -160,8 +162,7 @@ def simulate_dae(eom, t_end, **kw) -> Result:
 
     T, Qs, QDs, D, VD = [], [], [], [], []
     events: list[dict] = []
-    failure = None
-    failure_code = None
+    failure, failure_code = (too_much, CODE_INTEGRATOR) if too_much is not None else (None, None)
     rank = system.m
 
     def ratio_at(q, t):
@@ -487,19 +488,20 @@ def common_stats(st: dict, energy: dict) -> dict:
 STIFF = 1e4   # an overdamped mode decaying this many times within the run makes 'auto' pick BDF
 
 
-def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
-    """Replace method 'auto' by a concrete one; return why."""
+def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> tuple[str, np.ndarray | None]:
+    """Replace method 'auto' by a concrete one; return why, and the eigenvalues of the
+    ODE's Jacobian at the start when the choice computed them (None otherwise)."""
     if opts.formulation == "ggl":
         opts.method = "idas"
-        return "IDAS is the solver of the GGL formulation"
+        return "IDAS is the solver of the GGL formulation", None
     if opts.method == "cvodes":
         opts.method = "bdf"
     if opts.method != "auto":
-        return "requested"
+        return "requested", None
     if opts.formulation == "partitioning":
         opts.method = "bdf"
         return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
-                "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there")
+                "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there"), None
     if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
         from .augmented import ode_eigenvalues
 
@@ -511,11 +513,42 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> str:
     if rate * span > STIFF:
         opts.method = "bdf"
         return (f"auto: stiff (an overdamped mode decays at {rate:.3g}/s, {rate * span:.3g} times the run "
-                "length); BDF")
+                "length); BDF"), ev
     opts.method = "erk"
     return (f"auto: not stiff (fastest overdamped rate {rate:.3g}/s over a {span:g} s run); the explicit "
             "Runge-Kutta 5(4) needs no Jacobian and was 2-10x faster than Adams on the shipped constrained "
-            "models (docs/performance.md)")
+            "models (docs/performance.md)"), ev
+
+
+WORK_BUDGET = 1e7     # coordinate-steps (steps x (n + m)) a constrained run may be estimated to need
+# steps a period of an oscillation take at rtol: c rtol^(-1/order), lower bounds as in impacts/stepper.py
+PERIOD_STEPS = {"erk": (5, 1.0), "bdf": (5, 2.0), "adams": (12, 5.0)}
+
+
+def work_failure(opts: DaeOptions, system, ev, t0: float, span: float) -> Failure | None:
+    """A run that must take more integrator steps than WORK_BUDGET / (n + m) fails at its start,
+    naming the time scale, instead of grinding (nfourbar's A02 scene with rods of 1e-12 m and
+    1e-12 kg did not return in 300 s for 0.0001 s: CVODES BDF on 41 coordinates and 200
+    constraints, each step with a Jacobian).  The estimate uses the eigenvalues the method choice
+    computed (method auto; none otherwise): the fastest oscillation (largest imaginary part;
+    for the explicit erk also the largest modulus, its stability limit) makes rho span / (2 pi)
+    periods of at least c rtol^(-1/order) steps each (PERIOD_STEPS, measured lower bounds)."""
+    if ev is None or not len(ev):
+        return None
+    order, c = PERIOD_STEPS.get(opts.method, (5, 1.0))
+    rho = float(np.max(np.abs(ev if opts.method == "erk" else ev.imag), initial=0.0))
+    per_period = max(1.0, c * opts.rtol ** (-1.0 / order))
+    need = rho * span / (2 * np.pi) * per_period
+    size = system.n + system.m
+    budget = WORK_BUDGET / max(1, size)
+    if need <= budget:
+        return None
+    return Failure(t0, "too many steps needed",
+                   f"[{CODE_INTEGRATOR}] the model's fastest motion at the start has a time scale of {1 / rho:.3g} s "
+                   f"(rate {rho:.3g} 1/s): following it for {span:g} s takes about {need:.3g} steps ({per_period:.3g} "
+                   f"a period with {opts.method} at rtol {opts.rtol:g}), over the budget of {budget:.3g} steps for "
+                   f"{system.n} coordinates and {system.m} constraints ({WORK_BUDGET:g} / (n + m)); check the "
+                   "sizes and stiffnesses (a tiny length or a huge spring), or shorten the run")
 
 
 def _method_name(opts: DaeOptions) -> str:

@@ -370,18 +370,28 @@ class ConstrainedSystem:
             self.fn["ode_jac"] = _ode_jacobian(self.fn["accel"], self.route, s["q"], s["qd"], s["t"], s["p"])
         return self.fn["ode_jac"]
 
+    def _jac_at(self, q, qd, t) -> np.ndarray | None:
+        """The index-1 ODE's Jacobian at a state, None where it cannot be evaluated: its linear
+        solve fails on a singular KKT matrix (andrews.mech with m3 = -1e12 raised CasADi's
+        "Evaluation failed" from the method choice, exit 3), or it is not finite."""
+        try:
+            J = np.array(self._jac()(q, qd, t, self.p), float)
+        except RuntimeError as e:
+            if "KeyboardInterrupt" in str(e):       # CasADi took a Ctrl-C: give it back (stepper.call_integrator)
+                raise KeyboardInterrupt from None
+            return None
+        return J if J.size and np.all(np.isfinite(J)) else None
+
     def eigenvalues(self, q, qd, t) -> np.ndarray:
-        J = np.array(self._jac()(q, qd, t, self.p), float)
-        if not np.all(np.isfinite(J)) or not J.size:
-            return np.zeros(0)
-        return np.linalg.eigvals(J)
+        """Eigenvalues of the Jacobian (none where it cannot be evaluated: the callers' estimates
+        then fall back to their defaults, and the run itself meets the problem and says so)."""
+        J = self._jac_at(q, qd, t)
+        return np.zeros(0) if J is None else np.linalg.eigvals(J)
 
     def spectral_radius(self, q, qd, t) -> float:
         """Largest |eigenvalue| of the unstabilized index-1 ODE's Jacobian (a rate, 1/s)."""
-        J = np.array(self._jac()(q, qd, t, self.p), float)
-        if not np.all(np.isfinite(J)):
-            return 0.0
-        return float(np.max(np.abs(np.linalg.eigvals(J)))) if J.size else 0.0
+        J = self._jac_at(q, qd, t)
+        return 0.0 if J is None else float(np.max(np.abs(np.linalg.eigvals(J))))
 
 
 def _ode_jacobian(accel, route, q, qd, t, pp):

@@ -29,7 +29,7 @@ class ContactOptions:
             raise UsageError(f"impact order must be one of {', '.join(IMPACT_ORDERS)}, got '{self.impact_order}'")
         for name in ("rtol", "atol", "rest_speed"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and v > 0):
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and 0 < v < float("inf")):
                 raise UsageError(f"{name} must be a positive number, got {v!r}")
         if self.samples < 1:
             raise UsageError("samples must be at least 1")

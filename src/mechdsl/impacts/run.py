@@ -17,6 +17,7 @@ from this step's interpolant; the integrator restarts at the event.
 """
 from __future__ import annotations
 
+import collections
 import math
 
 import numpy as np
@@ -24,10 +25,10 @@ import numpy as np
 from .impact_map import ImpactError, solve_impact
 from .rootfind import bracket_root
 from .compiled import COMPILED_CLASSES, EVENT, OK
-from .stepper import make_solver
+from .stepper import IMPLICIT, make_solver, steps_per_period
 
-
-STEPS_PER_PERIOD = 10      # the fewest steps a one-step method takes to follow one oscillation
+ZENO_EVENTS = 500           # this many events ...
+ZENO_SPAN = 1e-6            # ... within this fraction of the run's span: the events accumulate (Zeno)
 
 
 class RunFailure(Exception):
@@ -59,6 +60,7 @@ class Run:
         self.stats = {"steps": 0, "rejected_steps": 0, "restarts": 0, "projections": 0, "events": 0,
                       "root_evaluations": 0}
         self._burst = (math.nan, 0)
+        self._recent = collections.deque(maxlen=ZENO_EVENTS)     # times of the latest events
         # the compiled loop for free flight (impacts/compiled.py), or None: all in Python
         self.flight = flight if method_cls in COMPILED_CLASSES and opts.max_step is None else None
         if self.flight is not None:
@@ -205,6 +207,13 @@ class Run:
         if cnt > 200 * (self.s.k + len(self.s.fixations) + 1):
             raise RunFailure(t, "events do not settle at one instant",
                              f"{cnt} events at t = {t:.12g}; contacts may be contradictory")
+        self._recent.append(t)
+        span = t - self._recent[0]
+        if len(self._recent) == ZENO_EVENTS and span < ZENO_SPAN * (self.grid[-1] - self.grid[0]):
+            raise RunFailure(t, "events accumulate (Zeno behaviour)",
+                             f"the last {ZENO_EVENTS} events fell within {span:.3g} s, and time hardly advances "
+                             f"(each rebound stays faster than rest_speed = {self.o.rest_speed:g} m/s, so the "
+                             "contact never comes to rest); raise rest_speed for the scale of this model's speeds")
 
     def _record(self, ev: dict) -> None:
         self.events.append(ev)
@@ -448,24 +457,29 @@ class Run:
 
     def _check_work(self, t0: float, t_end: float, y: np.ndarray) -> None:
         """A run that would need more steps than the budget fails at once, with the time scale
-        named, instead of stepping for hours in Python (a rod of 1e-12 m swings at 3e6 rad/s).
-        The estimate: the fastest motion at the start (spectral radius rho of the free-flight
-        Jacobian) makes rho (t_end - t0) / (2 pi) periods, and a one-step method needs at
-        least STEPS_PER_PERIOD steps a period to follow one."""
+        named, instead of stepping for minutes in Python (a rod of 1e-12 m swings at 2e6 rad/s).
+        The estimate: the fastest motion at the start (the largest eigenvalue modulus rho of the
+        free-flight Jacobian; for the implicit solvers the largest imaginary part, since they
+        step over decaying stiff modes) makes rho (t_end - t0) / (2 pi) periods, and the solver
+        takes at least stepper.steps_per_period(method, rtol) steps a period (measured; 23 for
+        dop853 at rtol 1e-10): a lower bound of the work, so a run it refuses could not finish."""
         jac = self.s.jacobian([])
         if jac is None:
             return
         J = np.asarray(jac(t0, y), float)
         if not np.all(np.isfinite(J)):
             return
-        rho = float(np.max(np.abs(np.linalg.eigvals(J)), initial=0.0))
-        need = rho * (t_end - t0) / (2 * np.pi) * STEPS_PER_PERIOD
+        lam = np.linalg.eigvals(J)
+        rho = float(np.max(np.abs(lam.imag if self.method_cls in IMPLICIT else lam), initial=0.0))
+        per_period = steps_per_period(self.method_cls, self.o.rtol)
+        need = rho * (t_end - t0) / (2 * np.pi) * per_period
         if need > self.o.max_steps:
             raise RunFailure(t0, "too many steps needed",
                              f"the model's fastest motion at the start has a time scale of {1 / rho:.3g} s "
                              f"(spectral radius {rho:.3g} 1/s): following it to t = {t_end:g} takes about "
-                             f"{need:.3g} steps, over the budget of {self.o.max_steps} steps (max_steps); check "
-                             "the sizes and stiffnesses (a tiny length or a huge spring), or shorten the run")
+                             f"{need:.3g} steps ({per_period:.3g} a period at rtol {self.o.rtol:g}), over the "
+                             f"budget of {self.o.max_steps} steps (max_steps); check the sizes and stiffnesses "
+                             "(a tiny length or a huge spring), or shorten the run")
 
     # ------------------------------------------------------------------ the loop
     def run(self, t0: float, t_end: float, q: np.ndarray, qd: np.ndarray):

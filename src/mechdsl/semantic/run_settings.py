@@ -38,6 +38,8 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
         if method not in CONSTRAINED:
             bad("method", f"= \"{method}\" ignores the constraints of {model.name}",
                 'use method = "rattle" (constrained Stormer-Verlet) or an adaptive method (docs/constraints.md)')
+    if model.contacts:
+        _contact_rules(out, spans, diags)
     for name in ("tolerance", "rtol", "atol"):
         v = out.get(name)
         if isinstance(v, float) and not 0 < v < 1:
@@ -50,3 +52,20 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
     if isinstance(out.get("points"), int) and out["points"] < 2:
         bad("points", f"must be at least 2 (the start and the end; got {out['points']})", "e.g. points = 501;")
     diags.raise_if_errors()
+
+
+def _contact_rules(out: dict[str, object], spans: dict, diags: DiagnosticBag) -> None:
+    """The contact back end's own rules (impacts/stepper.py, impacts/options.py) for a model with
+    contacts: its method names (no `rk4`, no symplectic method), rest_speed and impact_order."""
+    from ..diagnostics import UsageError
+    from ..impacts.options import ContactOptions
+    from ..impacts.stepper import resolve_method
+
+    rules = (("method", resolve_method), ("rest_speed", lambda v: ContactOptions(rest_speed=v)),
+             ("impact_order", lambda v: ContactOptions(impact_order=v)))
+    for name, rule in rules:
+        if out.get(name) is not None and name in spans:
+            try:
+                rule(out[name].lower() if isinstance(out[name], str) else out[name])
+            except UsageError as e:
+                diags.error("E604", f"{e} (this model has contacts)", spans[name], "see docs/contacts.md")

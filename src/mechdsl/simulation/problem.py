@@ -37,6 +37,8 @@ class Problem:
     constraints: tuple[str, ...] = ()
     contacts: tuple[str, ...] = ()         # events
     outputs: tuple[str, ...] = ()
+    reactions: tuple[str, ...] = ()        # reaction/multiplier signals computed (empty: none are built)
+    plan: tuple[tuple[str, str], ...] = ()  # (topic, what is computed and why): plan.py
     eom: object = field(default=None, repr=False, compare=False)
     drive: object = field(default=None, repr=False, compare=False)    # drive.Drive
 
@@ -76,11 +78,15 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
 
         build_drive(eom, settings.inputs, settings.t_start, settings.t_end)     # reports the unknown name
     outputs = settings.outputs if settings.outputs is not None else tuple(getattr(eom, "outputs", {}) or ())
+    from .plan import plan, reaction_signals
+
+    invariants = invariant_names(eom)
     return Problem(kind=kind, backend=backend, model=eom.name, states=states, parameters=params,
                    settings=settings, formulation=settings.formulation if kind == "dae" else None,
-                   invariants=invariant_names(eom),
+                   invariants=invariants,
                    constraints=tuple(eom.constraint_names) if constrained else (), contacts=contacts,
-                   outputs=tuple(outputs), eom=run_eom, drive=drive,
+                   outputs=tuple(outputs), reactions=reaction_signals(eom, settings, kind),
+                   plan=plan(eom, settings, kind, contacts, tuple(outputs), invariants), eom=run_eom, drive=drive,
                    inputs=tuple(eom.inputs),
                    input_signals=tuple(drive.describe().items()) if drive is not None else ())
 
@@ -124,6 +130,9 @@ def dump(problem: Problem) -> str:
     lines.append("  constraints: " + (", ".join(problem.constraints) or "none"))
     lines.append("  contacts: " + (", ".join(problem.contacts) or "none"))
     lines.append("  outputs: " + (", ".join(problem.outputs) or "none"))
+    lines.append("  reactions: " + (", ".join(problem.reactions) or "none"))
+    lines.append("  computed, and why:")
+    lines += [f"    {topic}: {text}" for topic, text in problem.plan]
     lines.append("  settings:")
     for k, v in s.as_dict().items():
         if k == "compiled" and v is None:
