@@ -442,3 +442,20 @@ def test_falling_rod_from_1e32_m_finishes_with_finite_results(tmp_path, capsys):
     assert rc == 0, err
     rows = [line.split(",") for line in out.read_text().splitlines()[1:]]
     assert len(rows) == 5 and all(np.isfinite(float(x)) for row in rows for x in row)
+
+
+def test_a_subnormal_stop_time_is_a_run_not_an_internal_error(tmp_path, capsys):
+    """Fuzzer class 'exit 3': a scene stop_time of 1e-320 overflowed the auto-compile work
+    estimate (span * time scale) into an OverflowError.  The run now goes on without an
+    estimate: exit 0, finite results, the span as asked."""
+    src = (MODELS / "double_pendulum.mech").read_text()
+    src = re.sub(r"stop_time = [0-9.e+-]+", "stop_time = 1e-320", src, count=1)
+    path = tmp_path / "tiny.mech"
+    path.write_text(src)
+    out = tmp_path / "tiny.csv"
+    rc = main(["simulate", str(path), "-o", str(out), "--no-progress", "--points", "3"])
+    text = capsys.readouterr()
+    assert rc == 0, text.err
+    data = np.loadtxt(out, delimiter=",", skiprows=1, ndmin=2)
+    assert np.isfinite(data).all() and data.shape[0] == 3
+    assert 0.0 < data[-1, 0] <= 1.0e-319                  # the time column reaches the stop time

@@ -208,6 +208,8 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     omega, _ = time_scale(funcs, x0, pv, t0, t1, u, rho=rho)
     span = t1 - t0
     evals = 2.6 * math.sqrt(max(eom.n, 1)) * span * omega * rtol ** -0.2
+    if not math.isfinite(evals):        # a subnormal span or an overflowing time scale
+        return None, f"no estimate of the run's work (span {span:.3g} s, time scale {omega:.3g} rad/s)", {}
     vm = evals * (VM_CALL + VM_OP * ops)
     comp = C_EVALS * evals * (C_CALL + C_OP * ops)
     gcc = GCC_FIXED + GCC_OP * ops
