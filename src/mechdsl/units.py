@@ -9,14 +9,15 @@ Values given in non-SI units are converted to SI (the factor is returned with th
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 from fractions import Fraction
 from functools import lru_cache
+
+from .records import record
 
 _BASES = ("m", "kg", "s", "A", "K", "mol", "cd")
 
 
-@dataclass(frozen=True)
+@record
 class Dim:
     e: tuple[Fraction, ...] = (Fraction(0),) * 7
 
