@@ -7,13 +7,11 @@ import math
 import numpy as np
 import pytest
 
-pytest.importorskip("mechdsl.mechanics", reason="needs the mechanics stage (mechdsl.mechanics.derive)")
+import mechdsl
+from mechdsl.cli import main
+from mechdsl.symplectic import simulate_symplectic
 
-import mechdsl  # noqa: E402
-from mechdsl.cli import main  # noqa: E402
-from mechdsl.symplectic import simulate_symplectic  # noqa: E402
-
-from conftest import MODELS  # noqa: E402
+from conftest import MODELS
 
 POINT_MASS_DP = """
 model DPComponents "two equal point masses on equal massless rods"
