@@ -65,5 +65,8 @@ def check(out: str) -> int:
 
 
 if __name__ == "__main__":
+    if len(sys.argv) != 3 or sys.argv[1] not in ("mech", "dop853", "check"):
+        print(__doc__, file=sys.stderr)
+        sys.exit(2)
     mode, path = sys.argv[1], sys.argv[2]
     sys.exit({"mech": run_mech, "dop853": run_dop853, "check": check}[mode](path))
