@@ -32,19 +32,34 @@ _VP = ctypes.c_void_p
 class CompiledFlight:
     """The compiled loop with gap events for one ContactSystem."""
 
-    def __init__(self, fn, gap_addr: int, work_addr: int, lib):
+    def __init__(self, fn, gap_addr: int, work_addr: int, lib, impact=None):
         self.fn, self.gap, self.work, self._lib = fn, gap_addr, work_addr, lib
+        self.impact = impact      # (function, work) addresses of contact_impact, or None
 
-    def segment(self, method: str, grid, y0, p, rtol, atol, max_steps, k, offset, samples, tick=None):
+    def segment(self, method: str, grid, y0, p, rtol, atol, max_steps, k, offset, samples, tick=None,
+                impacts=None):
         """One C call from grid[0] to grid[-1]: (status, time reached, state there, rows written,
-        stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; others: failed."""
+        stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; others: failed.
+        ``impacts`` (restitution (k,), rest_speed, v_eps, touch, capacity) lets the loop apply
+        the simple impacts itself (``impact_in_c`` in crk.c); their records are in
+        stats["impacts"], an (m, 5 + 2 nx) array of rows (time, contact, impulse, speed before,
+        speed after, state before, state after)."""
         grid = np.ascontiguousarray(grid, float)
         nx = y0.size
         X = np.full((len(grid), nx), np.nan)
         x0c = np.ascontiguousarray(y0, float)
         pc = np.ascontiguousarray(np.ravel(p), float)
         uc = np.zeros(0)
-        stats = np.zeros(5)
+        stats = np.zeros(6)
+        use = impacts is not None and self.impact is not None and impacts[4] > 0
+        if use:
+            rest = np.ascontiguousarray(impacts[0], float)
+            limits = np.array(impacts[1:4], float)
+            buf = np.zeros((int(impacts[4]), 5 + 2 * nx))
+            imp, imp_work, cap = self.impact[0], self.impact[1], int(impacts[4])
+        else:
+            rest, limits, buf = np.zeros(1), np.zeros(3), np.zeros((1, 5 + 2 * nx))
+            imp, imp_work, cap = None, None, 0
         ctl = np.zeros(2, dtype=np.int64)
         xend = np.zeros(nx)
         _P = crk._ptr
@@ -53,10 +68,11 @@ class CompiledFlight:
             return self.fn(crk.CRK_METHODS[method][0], nx, _P(grid), len(grid), _P(x0c), _P(uc), _P(pc),
                            float(rtol), float(atol), 0.0, int(max_steps), _P(X), _P(stats),
                            ctl.ctypes.data_as(crk._I64P), _P(xend), self.gap, self.work, int(k), float(offset),
-                           int(samples), _P(pc))
+                           int(samples), _P(pc), imp, imp_work, _P(rest), _P(limits), _P(buf), cap)
 
         status = call() if tick is None else crk.call_in_thread(call, ctl, lambda r: tick(float(grid[r - 1])))
-        st = {"steps": int(stats[0]), "rhs": int(stats[1]), "rejected": int(stats[2]), "root": int(stats[4])}
+        st = {"steps": int(stats[0]), "rhs": int(stats[1]), "rejected": int(stats[2]), "root": int(stats[4]),
+              "impacts": buf[:int(stats[5])]}
         return int(status), float(stats[3]), xend, X[:int(ctl[0])], st
 
 
@@ -79,14 +95,41 @@ def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     x = ca.vertcat(eom.q, eom.qd)
     gapv = ca.vertcat(*[ca.SX(g.gap) for g in system.gaps]) if system.gaps else ca.SX.zeros(0, 1)
     gapf = ca.Function("contact_gap", [eom.t, x, eom.p], [gapv], ["t", "x", "p"], ["gap"])
+    impf = impact_function(system, x)
+    extra = (gapf,) if impf is None else (gapf, impf)
 
     def load(lib):
         fn = lib.crk_run_events
         fn.restype = ctypes.c_int
-        fn.argtypes = crk.RUN_ARGTYPES + [_VP, _VP, ctypes.c_longlong, ctypes.c_double, ctypes.c_int, crk._DP]
+        fn.argtypes = crk.RUN_ARGTYPES + [_VP, _VP, ctypes.c_longlong, ctypes.c_double, ctypes.c_int, crk._DP,
+                                          _VP, _VP, crk._DP, crk._DP, crk._DP, ctypes.c_longlong]
+        imp = None if impf is None else (ctypes.cast(lib.contact_impact, _VP).value,
+                                         ctypes.cast(lib.contact_impact_work, _VP).value)
         return CompiledFlight(fn, ctypes.cast(lib.contact_gap, _VP).value,
-                              ctypes.cast(lib.contact_gap_work, _VP).value, lib)
+                              ctypes.cast(lib.contact_gap_work, _VP).value, lib, imp)
 
-    fl, note = crk.cached_library((id(ode), gapf.serialize()), ode, (gapf,), tag, load,
-                                  "the compiled contact loop")
+    key = (id(ode), gapf.serialize(), None if impf is None else impf.serialize())
+    fl, note = crk.cached_library(key, ode, extra, tag, load, "the compiled contact loop")
     return fl, note or ""
+
+
+MAX_IMPACT_DOF = 12     # the symbolic M^-1 A^T of contact_impact grows as n^3
+
+
+def impact_function(system, x):
+    """``contact_impact(t, x, p) -> (g, u, D, W)`` for the impacts applied in C, or None when the
+    model is not the simple case (model constraints, fixations, more than MAX_IMPACT_DOF
+    coordinates): gaps g, normal speeds u = A q' + g_t, D = M^-1 A^T (n x k) and
+    W_i = a_i M^-1 a_i^T, A = dg/dq."""
+    import casadi as ca
+
+    eom = system.eom
+    if system.m or system.fixations or not system.gaps or system.n > MAX_IMPACT_DOF:
+        return None
+    g = ca.vertcat(*[ca.SX(gi.gap) for gi in system.gaps])
+    A = ca.jacobian(g, eom.q)
+    u = ca.mtimes(A, eom.qd) + ca.jacobian(g, eom.t)
+    D = ca.solve(ca.SX(eom.M), A.T)
+    W = ca.vertcat(*[ca.mtimes(A[i, :], D[:, i]) for i in range(system.k)])
+    return ca.Function("contact_impact", [eom.t, x, eom.p], [ca.densify(g), ca.densify(u), ca.densify(D), ca.densify(W)],
+                       ["t", "x", "p"], ["g", "u", "D", "W"])

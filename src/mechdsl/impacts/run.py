@@ -22,12 +22,13 @@ import math
 
 import numpy as np
 
-from .impact_map import ImpactError, solve_impact
+from .impact_map import ImpactError, ImpactSolution, solve_impact
 from .rootfind import bracket_root
 from .compiled import COMPILED_CLASSES, EVENT, OK
 from .stepper import IMPLICIT, make_solver, steps_per_period
 
 ZENO_EVENTS = 500           # this many events ...
+IMPACTS_PER_CALL = 1024     # impact records one compiled call may hold
 ZENO_SPAN = 1e-6            # ... within this fraction of the run's span: the events accumulate (Zeno)
 
 
@@ -44,6 +45,7 @@ class Run:
         self.grid = np.asarray(grid, float)
         self.method_cls = method_cls
         self.progress = progress
+        self._progress_t = -math.inf
         self.t_now = math.nan              # time reached (for failure reports)
         n, k = system.n, system.k
         self.closed = [False] * k
@@ -435,10 +437,10 @@ class Run:
             self.gi += 1
         pts = g[self.gi:]
         pts = pts[pts < t_stop]
-        tick = None if self.progress is None else (lambda tt: self.progress(tt, t_end))
+        tick = None if self.progress is None else (lambda tt: self._tick(tt, t_end))
         status, t_r, y_r, X, st = self.flight.segment(
             COMPILED_CLASSES[self.method_cls], np.concatenate([[t], pts, [t_stop]]), y, s.p, o.rtol, o.atol,
-            o.max_steps - self.stats["steps"], s.k, o.offset, o.samples, tick)
+            o.max_steps - self.stats["steps"], s.k, o.offset, o.samples, tick, self._impacts_in_c())
         if status not in (OK, EVENT):
             return None
         rows = min(len(X) - 1, len(pts))
@@ -450,10 +452,46 @@ class Run:
         self.stats["restarts"] += 1
         self.stats["compiled_segments"] += 1
         s.n_rhs += st["rhs"]
+        self._decode_impacts(st["impacts"], tick)
         self.t_now = t_r
         if tick is not None:
             tick(t_r)
         return (t_r, y_r.copy(), True) if status == EVENT else (t_stop, y_r.copy(), False)
+
+    def _impacts_in_c(self):
+        """What the compiled loop needs to apply the simple impacts itself (restitution,
+        rest_speed, v_eps, touch, record capacity), or None: with output events off the
+        records stay within max_events (the last one allowed comes back to Python, which fails
+        the run exactly as before)."""
+        o = self.o
+        cap = min(IMPACTS_PER_CALL, o.max_events - len(self.events))
+        return (self.s.e, o.rest_speed, o.v_eps, o.touch, cap) if cap > 0 else None
+
+    def _tick(self, t: float, t_end: float) -> None:
+        """Progress from the compiled loop: never backwards (the worker thread reports the rows
+        written, the decoded impacts come after)."""
+        if t >= self._progress_t:
+            self._progress_t = t
+            self.progress(t, t_end)
+
+    def _decode_impacts(self, recs: np.ndarray, tick=None) -> None:
+        """The impacts the compiled loop applied (crk.c impact_in_c), recorded as Run.handle
+        records them: rows (time, contact, impulse, speed before, speed after, state at the
+        event, state after the impact and the projection)."""
+        n = self.n
+        for r in recs:
+            t, i, y_ev, y = float(r[0]), int(r[1]), r[5:5 + 2 * n], r[5 + 2 * n:]
+            count, pre = len(self.events), self._sample(t, y_ev)
+            sol = ImpactSolution(qd=y[n:].copy(), impulses=r[2:3].copy(), bilateral=np.zeros(0),
+                                 speeds_before=r[3:4].copy(), speeds_after=r[4:5].copy())
+            self._record_impact(t, y_ev[:n], y_ev[n:], sol, [i])
+            self._event_rows(t, y_ev, pre, y, count)
+            self.stats["projections"] += 1
+            self.stats["restarts"] += 1
+            self.stats["compiled_segments"] += 1
+            self.stats["compiled_impacts"] = self.stats.get("compiled_impacts", 0) + 1
+            if tick is not None:
+                tick(t)
 
     def _check_work(self, t0: float, t_end: float, y: np.ndarray) -> None:
         """A run that would need more steps than the budget fails at once, with the time scale

@@ -313,7 +313,16 @@ typedef struct {
   const double *p; double targ;
   cint nev;             /* gap evaluations in root finding */
   double t_event;
+  /* impacts applied in C (impacts/compiled.py; NULL imp: every event returns to Python) */
+  casadi_fn imp;
+  const double **iarg; double **ires; cint *iiw; double *iw_;
+  const double *e;      /* k coefficients of restitution */
+  double rest_speed, v_eps, touch;
+  double *ig, *iu, *iD, *iW, *xa;       /* impact outputs (k, k, n x k, k); the state after */
+  double *buf; cint cap, count;          /* event records, CRK_EVENT_ROW(nx) doubles each */
 } Events;
+
+#define CRK_EVENT_ROW(nx) (5 + 2 * (nx))
 
 static int gaps_at(Events *e, double t, const double *x) {
   e->targ = t;
@@ -399,6 +408,64 @@ static int find_event(Events *e, const Dense *d, double ea, int *flags, int *err
   return 1;
 }
 
+/* the impact outputs at (t, x): gaps g, normal speeds u, D = M^-1 A^T (n x k, column-major),
+   W_i = a_i M^-1 a_i^T (a_i = dg_i/dq) */
+static int impact_eval(Events *e, double t, const double *x) {
+  e->targ = t;
+  e->iarg[0] = &e->targ; e->iarg[1] = x; e->iarg[2] = e->p;
+  e->ires[0] = e->ig; e->ires[1] = e->iu; e->ires[2] = e->iD; e->ires[3] = e->iW;
+  return e->imp(e->iarg, e->ires, e->iiw, e->iw_, 0);
+}
+
+/* Run.handle for the simple case, in C: one touching contact i (gap <= touch, every other gap
+   above it), approaching (u_i < -v_eps), rebounding faster than rest_speed (e_i |u_i| >=
+   rest_speed), no other row: the closed-form impact of impact_map._single (Lambda = (h - u) / W,
+   q'+ = q'- + D_i Lambda) and the one-sided position projection of ContactSystem.project (Newton
+   steps q -= D_j g_j / W_j while a gap is below -offset/2, to |g_j| <= 1e-3 offset).  On
+   success 1, the state after in e->xa and the record appended to e->buf; 0 (nothing changed)
+   whenever anything else could happen: Python then handles the event as before. */
+static int impact_in_c(Events *e, double t, const double *x, cint n, cint nx) {
+  if (!e->imp || e->count >= e->cap) return 0;
+  if (impact_eval(e, t, x)) return 0;
+  cint i = -1;
+  for (cint j = 0; j < e->k; j++) {
+    if (!(e->ig[j] == e->ig[j])) return 0;
+    if (e->ig[j] <= e->touch) { if (i >= 0) return 0; i = j; }
+  }
+  if (i < 0) return 0;
+  double u = e->iu[i], W = e->iW[i];
+  if (!(u < -e->v_eps) || !(W > 0.0 && isfinite(W))) return 0;
+  if (!(e->e[i] * -u >= e->rest_speed)) return 0;
+  double h = -e->e[i] * u;
+  double lam = fmax(0.0, h - u) / W;
+  double *xa = e->xa;
+  memcpy(xa, x, (size_t)nx * sizeof(double));
+  for (cint j = 0; j < n; j++) xa[n + j] = x[n + j] + e->iD[i * n + j] * lam;
+  double u_after = u + W * lam;
+  if (!(u_after > e->v_eps)) return 0;
+  double *rec = e->buf + e->count * CRK_EVENT_ROW(nx);
+  rec[0] = t; rec[1] = (double)i; rec[2] = lam; rec[3] = u;
+  memcpy(rec + 5, x, (size_t)nx * sizeof(double));
+  double tol = 1e-3 * e->offset, below = -0.5 * e->offset;
+  for (int it = 0; it < 8; it++) {
+    if (impact_eval(e, t, xa)) return 0;
+    cint use = -1, many = 0;
+    for (cint j = 0; j < e->k; j++)
+      if (e->ig[j] < below) { many |= use >= 0; use = j; }
+    if (use < 0 || fabs(e->ig[use]) <= tol) break;
+    if (many || !(e->iW[use] > 0.0)) return 0;
+    double step = e->ig[use] / e->iW[use];
+    for (cint j = 0; j < n; j++) xa[j] -= e->iD[use * n + j] * step;
+  }
+  rec[4] = u_after;
+  for (cint j = 0; j < nx; j++) if (!isfinite(xa[j])) return 0;
+  /* the run must restart above the event threshold */
+  if (gaps_at(e, t, xa) || !(event_value(e, NULL) > 0)) return 0;
+  memcpy(rec + 5 + nx, xa, (size_t)nx * sizeof(double));
+  e->count++;
+  return 1;
+}
+
 /* DOP853: the three extra stages and the interpolant's coefficients F of the accepted step */
 static int dense_coefficients(Rhs *r, const Tableau *tab, double *K, double *F, const double *y,
                               const double *yold, const double *f, double *tmp, double h, double t_old, cint n) {
@@ -417,6 +484,24 @@ static int dense_coefficients(Rhs *r, const Tableau *tab, double *K, double *F, 
       F[(3 + m) * n + i] = h * d;
     }
   }
+  return 0;
+}
+
+/* the initial step: scipy.integrate._ivp.common.select_initial_step (1: the rhs failed) */
+static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const double *y, const double *f,
+                        double *scale, double *tmp, double *ynew, double rtol, double atol, cint n, double *out) {
+  double interval = fabs(tb - t), d0, d1, d2, h0, h1;
+  for (cint i = 0; i < n; i++) scale[i] = atol + fabs(y[i]) * rtol;
+  d0 = rms(y, scale, n); d1 = rms(f, scale, n);
+  h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+  if (h0 > interval) h0 = interval;
+  for (cint i = 0; i < n; i++) tmp[i] = y[i] + h0 * f[i];
+  if (rhs(r, t + h0, tmp, ynew)) return 1;
+  for (cint i = 0; i < n; i++) ynew[i] -= f[i];
+  d2 = rms(ynew, scale, n) / h0;
+  if (d1 <= 1e-15 && d2 <= 1e-15) h1 = fmax(1e-6, h0 * 1e-3);
+  else h1 = pow(0.01 / fmax(d1, d2), 1.0 / (tab->err_order + 1.0));
+  *out = fmin(fmin(100 * h0, h1), interval);
   return 0;
 }
 
@@ -468,22 +553,8 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
     e_start = event_value(ev, NULL);
     if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
   }
-  /* initial step: scipy.integrate._ivp.common.select_initial_step */
   double h_abs;
-  {
-    double interval = fabs(tb - t), d0, d1, d2, h0, h1;
-    for (cint i = 0; i < n; i++) scale[i] = atol + fabs(y[i]) * rtol;
-    d0 = rms(y, scale, n); d1 = rms(f, scale, n);
-    h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    if (h0 > interval) h0 = interval;
-    for (cint i = 0; i < n; i++) tmp[i] = y[i] + h0 * f[i];
-    if (rhs(&r, t + h0, tmp, ynew)) { status = CRK_RHS_ERROR; goto done; }
-    for (cint i = 0; i < n; i++) ynew[i] -= f[i];
-    d2 = rms(ynew, scale, n) / h0;
-    if (d1 <= 1e-15 && d2 <= 1e-15) h1 = fmax(1e-6, h0 * 1e-3);
-    else h1 = pow(0.01 / fmax(d1, d2), 1.0 / (tab.err_order + 1.0));
-    h_abs = fmin(fmin(100 * h0, h1), interval);
-  }
+  if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
   while (k < ngrid) {
     if (ctl[1]) { status = CRK_CANCELLED; break; }
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
@@ -562,8 +633,20 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
     if (event) {
       memcpy(y, ev->x, (size_t)n * sizeof(double));
       t = ev->t_event;
-      status = CRK_EVENT;
-      break;
+      if (!impact_in_c(ev, t, y, n / 2, n)) { status = CRK_EVENT; break; }
+      /* handled in C: a new segment from the event, as Python would start it */
+      memcpy(y, ev->xa, (size_t)n * sizeof(double));
+      while (k < ngrid - 1 && grid[k] <= t) {        /* points at the event time: the state after it */
+        memcpy(X + k * n, y, (size_t)n * sizeof(double));
+        k++;
+        ctl[0] = k;
+      }
+      if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
+      e_start = event_value(ev, NULL);      /* impact_in_c left the gaps at y in ev->g */
+      if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) {
+        status = CRK_RHS_ERROR; goto done;
+      }
+      continue;
     }
     if (steps_here >= max_steps) { status = CRK_MAX_STEPS; break; }
   }
@@ -588,7 +671,8 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
 int crk_run_events(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
                    const double *p, double rtol, double atol, double hmin, cint max_steps,
                    double *X, double *stats, volatile cint *ctl, double *xfail,
-                   void *gap, void *gap_work, cint k, double offset, int samples, const double *gp) {
+                   void *gap, void *gap_work, cint k, double offset, int samples, const double *gp,
+                   void *imp, void *imp_work, const double *rest, const double *limits, double *buf, cint cap) {
   Events e;
   memset(&e, 0, sizeof e);
   e.gap = (casadi_fn)gap; e.work = (casadi_work_fn)gap_work;
@@ -603,10 +687,27 @@ int crk_run_events(int method, cint nx, const double *grid, cint ngrid, const do
   e.w = (double *)calloc((size_t)(sz_w > 0 ? sz_w : 1), sizeof(double));
   e.g = (double *)calloc((size_t)(k > 0 ? k : 1), sizeof(double));
   e.x = (double *)calloc((size_t)(nx > 0 ? nx : 1), sizeof(double));
+  int ok = e.arg && e.res && e.iw && e.w && e.g && e.x;
+  if (imp && ok) {       /* impacts in C: limits = rest_speed, v_eps, touch */
+    e.imp = (casadi_fn)imp; e.e = rest; e.rest_speed = limits[0]; e.v_eps = limits[1]; e.touch = limits[2];
+    e.buf = buf; e.cap = cap;
+    cint ia = 0, ir = 0, iiw = 0, iw = 0, nq = nx / 2;
+    ((casadi_work_fn)imp_work)(&ia, &ir, &iiw, &iw);
+    e.iarg = (const double **)calloc((size_t)(ia < 3 ? 3 : ia), sizeof(double *));
+    e.ires = (double **)calloc((size_t)(ir < 4 ? 4 : ir), sizeof(double *));
+    e.iiw = (cint *)calloc((size_t)(iiw > 0 ? iiw : 1), sizeof(cint));
+    e.iw_ = (double *)calloc((size_t)(iw > 0 ? iw : 1), sizeof(double));
+    e.ig = (double *)calloc((size_t)(3 * k + nq * k + 1), sizeof(double));
+    e.xa = (double *)calloc((size_t)(nx + 1), sizeof(double));
+    ok = e.iarg && e.ires && e.iiw && e.iw_ && e.ig && e.xa;
+    if (ok) { e.iu = e.ig + k; e.iW = e.iu + k; e.iD = e.iW + k; }
+  }
   int status = CRK_NOMEM;
-  if (e.arg && e.res && e.iw && e.w && e.g && e.x)
+  if (ok)
     status = crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e);
   stats[4] = (double)e.nev;
+  stats[5] = (double)e.count;
   free(e.arg); free(e.res); free(e.iw); free(e.w); free(e.g); free(e.x);
+  free(e.iarg); free(e.ires); free(e.iiw); free(e.iw_); free(e.ig); free(e.xa);
   return status;
 }
