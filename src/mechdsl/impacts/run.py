@@ -66,7 +66,7 @@ class Run:
         # the compiled loop for free flight (impacts/compiled.py), or None: all in Python
         self.flight = flight if method_cls in COMPILED_CLASSES and opts.max_step is None else None
         if self.flight is not None:
-            self.stats.update(compiled_segments=0, python_segments=0)
+            self.stats.update(compiled_segments=0, python_segments=0, compiled_calls=0, compiled_impacts=0)
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -451,6 +451,7 @@ class Run:
         self.stats["root_evaluations"] += st["root"]
         self.stats["restarts"] += 1
         self.stats["compiled_segments"] += 1
+        self.stats["compiled_calls"] += 1
         s.n_rhs += st["rhs"]
         self._decode_impacts(st["impacts"], tick)
         self.t_now = t_r
@@ -489,7 +490,7 @@ class Run:
             self.stats["projections"] += 1
             self.stats["restarts"] += 1
             self.stats["compiled_segments"] += 1
-            self.stats["compiled_impacts"] = self.stats.get("compiled_impacts", 0) + 1
+            self.stats["compiled_impacts"] += 1
             if tick is not None:
                 tick(t)
 
