@@ -68,8 +68,11 @@ def ball_table(bounces: int, repeats: int) -> list[str]:
             ("free flight without contacts, ODE simulator dop853",
              lambda: simulate(eom, t_end, method="dop853", **kw))]
     res = {}
+    c_time = {}
     for name, call in runs:
         t, r = best(call, repeats)
+        if "compiled loop" in name:
+            c_time[name] = (segment_time(call, repeats), int(r.stats["steps"]))
         steps = int(r.stats["steps"])
         nimp = sum(1 for e in (r.events or []) if e["kind"] == "impact")
         res[name] = (t, steps)
@@ -88,8 +91,39 @@ def ball_table(bounces: int, repeats: int) -> list[str]:
             f"cost, which flatters this ratio; whole calls: {tc / tf:.1f}x the ODE simulator's free flight, "
             f"{tc / tn:.1f}x the same contact run whose contact is never reached; "
             f"(contact run - never reached) / impacts = {(tc - tn) / max(rows[0][1], 1) * 1e3:.2f} ms an impact "
-            "(Python's impact law, mode and projection)."]
+            "(Python's decoding of the impact records, its impact law when it handles one, the run's setup)."]
+    (cc, sc), (cn, sn) = c_time[runs[0][0]], c_time[runs[2][0]]
+    out += ["", "The compiled calls alone (time inside `CompiledFlight.segment`, best of the same runs): "
+            f"contact run {cc * 1e6:.0f} us for {sc} steps and {rows[0][1]} impacts ({cc / sc * 1e6:.2f} us a step), "
+            f"free flight with the contact never reached {cn * 1e6:.0f} us for {sn} steps "
+            f"({cn / sn * 1e6:.2f} us a step): per step {cc / sc / (cn / sn):.2f}x."]
     return out
+
+
+def segment_time(call, repeats):
+    """The least total time a run spends in compiled contact calls (CompiledFlight.segment)."""
+    from mechdsl.impacts import compiled
+
+    orig = compiled.CompiledFlight.segment
+    spent = [0.0]
+
+    def timed(self, *a, **kw):
+        t0 = time.perf_counter()
+        try:
+            return orig(self, *a, **kw)
+        finally:
+            spent[0] += time.perf_counter() - t0
+
+    compiled.CompiledFlight.segment = timed
+    try:
+        best_t = np.inf
+        for _ in range(repeats):
+            spent[0] = 0.0
+            call()
+            best_t = min(best_t, spent[0])
+    finally:
+        compiled.CompiledFlight.segment = orig
+    return best_t
 
 
 def scenes_table(repeats: int) -> list[str]:
