@@ -6,7 +6,10 @@ model constraint: every contact open, only its gap watched) is one C call: the l
 the same steps as the Python path), evaluates the CasADi-generated gaps of all contacts on
 the continuous extension of every accepted step, locates the first event (the same sampling
 and Illinois iteration as ``Run.find_event``) and returns with the output rows before it and
-the state at it.  Python applies the impact law (``Run.handle``) and calls again.
+the state at it.  Python applies the impact law (``Run.handle``) and calls again.  The simple
+impacts (one touching contact, restitution rebounding faster than rest_speed, no constraint
+rows, no fixations) are applied in the loop itself with ``contact_impact`` (``impact_function``)
+and recorded in a buffer that ``Run._decode_impacts`` reads: the ball bounces in one C call.
 
 Everything else stays in Python (``Run``): segments with active rows (closed contacts,
 fixations, model constraints: the constrained accelerations, releases on the multipliers,

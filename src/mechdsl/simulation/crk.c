@@ -667,7 +667,12 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
 
 /* crk_run watching the gaps `gap` (k outputs, CasADi signature, work sizes from `work`):
    stops at the first event (CRK_EVENT, the time in stats[3], the state in xfail); stats[4]
-   counts the gap evaluations of root finding; max_steps bounds the whole call. */
+   counts the gap evaluations of root finding; max_steps bounds the whole call.  With `imp`
+   (the CasADi `contact_impact(t, x, p) -> g, u, D, W`, work sizes from `imp_work`),
+   restitution coefficients `rest` (k), limits = {rest_speed, v_eps, touch} and a record buffer
+   `buf` of `cap` rows of CRK_EVENT_ROW(nx) doubles, the simple impacts are applied in the loop
+   (impact_in_c) and stepping goes on; stats[5] counts the records.  imp NULL: every event
+   returns. */
 int crk_run_events(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
                    const double *p, double rtol, double atol, double hmin, cint max_steps,
                    double *X, double *stats, volatile cint *ctl, double *xfail,
