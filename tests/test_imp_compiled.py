@@ -108,8 +108,9 @@ def test_no_compile_reaches_the_contact_stepper(tmp_path):
 
 @needs_cc
 def test_progress_is_reported_from_the_compiled_segments():
-    """With a progress callback each compiled segment runs in a worker thread and reports the
-    time it reached: non-decreasing, ending at t_end; the numbers equal a run without one."""
+    """With a progress callback each compiled call (free flights and the impacts applied in C)
+    runs in a worker thread and reports the time it reached: non-decreasing, ending at t_end;
+    the numbers equal a run without one."""
     eom, floor = ball(1.0, 0.8, G)
     seen = []
     r = simulate_with_contacts(eom, [floor], 3.0, points=5, progress=lambda t, t_end: seen.append((t, t_end)))
