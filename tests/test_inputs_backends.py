@@ -269,9 +269,11 @@ def test_fixed_step_holds_a_zero_order_hold_over_each_step(slider, method):
     tab = mechdsl.table(times, F, hold="zoh")
     v_exact = F[:10].sum() * 0.1 / m_
     x_exact = sum(F[k] / m_ * (0.1 * 0.1 / 2 + 0.1 * (0.9 - 0.1 * k)) for k in range(10))
-    r = slider.simulate(1.0, method=method, dt=0.01, inputs={"F": tab}, points=11)
+    r = slider.simulate(1.0, method=method, dt=0.01, inputs={"F": tab}, points=11, estimate_error=True)
     assert r.success, r.failure
     assert r.qd[-1, 0] == pytest.approx(v_exact, abs=1e-12)
+    # the error estimate's run (dt/4) holds the values over its steps too (it read them at t before)
+    assert max(r.metadata["error_estimate"]["max_abs_difference"].values()) < 1e-12
     assert r.q[-1, 0] == pytest.approx(x_exact, abs=1e-12)
     np.testing.assert_allclose(r["F"], F, rtol=1e-15)          # recorded: value k from t_k on
     assert not any("zero-order hold" in w for w in r.metadata["warnings"])

@@ -135,6 +135,8 @@ def _signal_failure(r: Result, drive) -> None:
 
 def _estimate_error(r: Result, problem: Problem) -> None:
     """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter)."""
+    import dataclasses
+
     from . import accuracy as A
     from .settings import MIN_RTOL
 
@@ -156,7 +158,10 @@ def _estimate_error(r: Result, problem: Problem) -> None:
         tighter = tighter.replace(points=len(r.t)) if len(r.t) >= 2 else tighter
     if problem.drive is not None and problem.kind != "ode":
         tighter = tighter.replace(inputs=None)        # problem.eom has the inputs built in
-    tight = solve(formulate(problem.eom, tighter.validated()))
+    tight_problem = formulate(problem.eom, tighter.validated())
+    if problem.step_eom is not None:                  # the holds kept over each step there too
+        tight_problem = dataclasses.replace(tight_problem, step_eom=problem.step_eom)
+    tight = solve(tight_problem)
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
