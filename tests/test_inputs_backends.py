@@ -257,22 +257,94 @@ def test_a_signal_failing_where_the_fixed_step_back_end_probes_is_named(slider):
         slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": lambda t: 1.0 if t < 0.2 else 1 / 0}, points=3)
 
 
-def test_fixed_step_across_zero_order_hold_jumps_says_its_order_is_lost(slider):
-    """rk4 with a zero-order-hold table: the stage at a step's end sees the next sample, so each
-    jump can add an error of first order in dt to the speed (closed form: x'' = F/m with F held
-    piecewise constant, v(1) = sum F_k * 0.1 / m).  The run says so in its warnings; without
-    jumps it does not."""
+@pytest.mark.parametrize("method", ["rk4", "stormer-verlet", "implicit-midpoint", "gauss-legendre"])
+def test_fixed_step_holds_a_zero_order_hold_over_each_step(slider, method):
+    """A zero-order-hold table is held over each step (read at its midpoint), and the steps land
+    on the samples: every method is exact for x'' = F/m with F constant over a step (closed
+    form v(1) = sum F_k * 0.1 / m, x(1) likewise), and no warning (before: a stage at a step's
+    end saw the next sample, an error of first order in dt, and a warning said so)."""
     m_ = 2.0
     times = np.linspace(0.0, 1.0, 11)
     F = np.where(np.arange(11) % 2 == 0, 1.0, -1.0)
     tab = mechdsl.table(times, F, hold="zoh")
     v_exact = F[:10].sum() * 0.1 / m_
-    r = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": tab}, points=11)
-    # rk4 is exact for a force constant over each step; the jumps alone make this error
+    x_exact = sum(F[k] / m_ * (0.1 * 0.1 / 2 + 0.1 * (0.9 - 0.1 * k)) for k in range(10))
+    r = slider.simulate(1.0, method=method, dt=0.01, inputs={"F": tab}, points=11, estimate_error=True)
+    assert r.success, r.failure
+    assert r.qd[-1, 0] == pytest.approx(v_exact, abs=1e-12)
+    # the error estimate's run (dt/4) holds the values over its steps too (it read them at t before)
+    assert max(r.metadata["error_estimate"]["max_abs_difference"].values()) < 1e-12
+    assert r.q[-1, 0] == pytest.approx(x_exact, abs=1e-12)
+    np.testing.assert_allclose(r["F"], F, rtol=1e-15)          # recorded: value k from t_k on
+    assert not any("zero-order hold" in w for w in r.metadata["warnings"])
+
+
+def test_fixed_step_with_samples_inside_steps_says_its_order_is_lost(slider):
+    """dt = 0.03 does not divide the samples' spacing 0.1: steps cross samples, read the value at
+    their midpoint, and the run says so; the adaptive method restarts at every jump."""
+    m_ = 2.0
+    times = np.linspace(0.0, 1.0, 11)
+    F = np.random.default_rng(3).uniform(-4, 4, 11)
+    tab = mechdsl.table(times, F, hold="zoh")
+    v_exact = F[:10].sum() * 0.1 / m_
+    r = slider.simulate(1.0, method="rk4", dt=0.03, inputs={"F": tab}, points=11)
     assert abs(r.qd[-1, 0] - v_exact) > 1e-4
-    assert any("zero-order hold of F" in w for w in r.metadata["warnings"])
+    assert any("zero-order hold of F" in w and "inside a step" in w for w in r.metadata["warnings"])
     adaptive = slider.simulate(1.0, inputs={"F": tab}, points=11, rtol=1e-10, atol=1e-12)
     assert adaptive.qd[-1, 0] == pytest.approx(v_exact, abs=1e-9)
     assert not any("zero-order hold" in w for w in adaptive.metadata["warnings"])
-    flat = slider.simulate(1.0, method="rk4", dt=0.01, inputs={"F": mechdsl.table([0.0, 1.0], [1.0, 1.0])}, points=11)
+    flat = slider.simulate(1.0, method="rk4", dt=0.03, inputs={"F": mechdsl.table([0.0, 1.0], [1.0, 1.0])}, points=11)
     assert not any("zero-order hold" in w for w in flat.metadata["warnings"])
+
+
+DUFFING = """
+model Duffing
+  parameter Real m(unit = "kg") = 2;
+  parameter Real k(unit = "N/m") = 3;
+  parameter Real c(unit = "N.s/m") = 0.4;
+  input Real F(unit = "N") "push";
+  coordinate Real x(start = 0.3, speed = -0.2, unit = "m");
+equation
+  kinetic = 0.5*m*der(x)^2;
+  potential = 0.25*k*x^4;
+  force(x) = F - c*der(x);
+end Duffing;
+"""
+
+
+def test_rk4_replays_an_rk4_discretized_control_to_round_off():
+    """The docs/control.md replay: an optimizer's RK4 recursion (M steps of h/M per interval,
+    the control held over each interval) written here on the state (x, v), against the fixed-step
+    rk4 run with dt = h/M driven by the same zero-order-hold table.  The mass is constant, so
+    RK4 in the canonical (x, p = m v) is the same map and the gap is round-off (before: the stage
+    at a step's end read the next interval's control, a gap of order dt)."""
+    model = mechdsl.loads(DUFFING, model="Duffing")
+    m_, k_, c_ = 2.0, 3.0, 0.4
+    T, N, M = 2.0, 20, 3
+    h = T / N
+    u = np.random.default_rng(11).uniform(-5, 5, N)
+
+    def f(s, F):
+        x, v = s
+        return np.array([v, (F - c_ * v - k_ * x ** 3) / m_])
+
+    s, ref = np.array([0.3, -0.2]), [np.array([0.3, -0.2])]
+    for j in range(N):
+        for _ in range(M):
+            d = h / M
+            k1 = f(s, u[j])
+            k2 = f(s + d / 2 * k1, u[j])
+            k3 = f(s + d / 2 * k2, u[j])
+            k4 = f(s + d * k3, u[j])
+            s = s + d / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        ref.append(s)
+    ref = np.array(ref)
+    tab = mechdsl.table(np.linspace(0, T, N + 1), np.r_[u, u[-1]], hold="zoh")
+    r = model.simulate(T, method="rk4", dt=h / M, inputs={"F": tab}, points=N + 1)
+    assert r.success, r.failure
+    np.testing.assert_allclose(r.t, np.linspace(0, T, N + 1), atol=1e-12)
+    np.testing.assert_allclose(np.c_[r.q, r.qd], ref, atol=1e-12)
+    assert not any("zero-order hold" in w for w in r.metadata["warnings"])
+    # the ODE back end (restarts at every sample) agrees to the RK4 error only: the check is not vacuous
+    ode = model.simulate(T, inputs={"F": tab}, points=N + 1, rtol=1e-11, atol=1e-13)
+    assert 1e-9 < np.abs(np.c_[ode.q, ode.qd] - ref).max() < 1e-4

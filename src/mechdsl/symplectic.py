@@ -46,14 +46,17 @@ _IGNORED = ("rtol", "atol", "tolerance", "max_step", "first_step", "formulation"
 def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: float | None = None, *,
                         t0: float = 0.0, p=None, q0=None, qd0=None, points: int | None = None,
                         newton_tol: float = 1e-12, max_newton: int = 30, outputs=None, t_start=None,
-                        x0=None, progress=None, **opts) -> Result:
+                        x0=None, progress=None, step_eom=None, **opts) -> Result:
     """Integrate ``eom`` from t0 to t_end with a fixed step (at most ``dt``).
 
     p: parameter overrides (dict or vector); q0/qd0: start values (default: the model's), or
     x0: the full state [q; qd] or a dict {coordinate: value, "der(coordinate)": value}
     (as mechdsl.simulate); progress: a callable(t, t_end) called after every chunk of steps;
     points: number of recorded points (default: every step, at most 20001); outputs: names of
-    the model outputs to record (default: all); t_start: alias of t0.  Tolerance
+    the model outputs to record (default: all); t_start: alias of t0; step_eom: the equations
+    to step when zero-order-hold inputs drive the model (``Drive.close_eom(eom, hold_time=True)``:
+    the holds read at a trailing parameter, which every step sets to its midpoint t_n + h/2, so
+    that all its stages see the value held on [t_n, t_n + h); ``eom`` records).  Tolerance
     options of the adaptive solvers (rtol, atol) do not apply and are noted in the metadata.
     Returns a Result whose signals hold the energy T + V, the Hamiltonian H, the canonical
     momenta p_<coordinate>, the first integrals and the model outputs at every recorded point.
@@ -126,9 +129,16 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
         method = "rattle"
         step = rattle_step(ham, eom, active, newton_tol, max_newton)
         state0, evals_per_step, evals_init = np.concatenate([qs, pm0, [t0], np.zeros(len(active))]), None, 0
+    elif step_eom is not None:        # zero-order holds read at the step's midpoint (a trailing parameter)
+        hs = hamiltonian(step_eom, np.r_[pv, t0])
+        explicit_sv = method == "stormer-verlet" and hs.separable
+        step, state0, evals_per_step, evals_init = _step_function(hs, method, explicit_sv, n, newton_tol,
+                                                                  max_newton, qs, pm0, t0, np.r_[pv, t0],
+                                                                  hold=True)
     else:
         step, state0, evals_per_step, evals_init = _step_function(ham, method, explicit_sv, n, newton_tol,
                                                                   max_newton, qs, pm0, t0, pv)
+    pstep = pv if step_eom is None or constrained else np.r_[pv, t0]
     stride = _stride(nsteps, points)
     rec_idx = [0]
     rec_states = [state0.copy()]
@@ -144,7 +154,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
             F = step.mapaccum("steps", k)
             cache[k] = F
         try:
-            X, R = F(x, h, pv)
+            X, R = F(x, h, pstep)
         except RuntimeError as e:  # pragma: no cover - CasADi evaluation error
             failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
             break
@@ -288,32 +298,51 @@ def _energy_drift(signals) -> dict:
 # --------------------------------------------------------------------------- step functions
 
 
-def _step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv):
-    """(Function (state, h, p) -> (state_next, residual), initial state, evals a step, initial evals)."""
+def _step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv, hold=False):
+    """(Function (state, h, p) -> (state_next, residual), initial state, evals a step, initial evals).
+
+    hold: the last parameter is the zero-order holds' time, set to the step's midpoint t_n + h/2
+    for every stage of the step (the value passed in is ignored)."""
     import casadi as ca
 
     q, pm, t, p = ham.q, ham.pm, ham.t, ham.p
-    rhs = ca.Function("f", [q, pm, t, p], [ham.qd_of_p, ham.pdot])
+    rhs0 = ca.Function("f", [q, pm, t, p], [ham.qd_of_p, ham.pdot])
+    held = {}                           # id(parameter symbol) -> its value in the step
+
+    def rhs(qq, pp, tt, pps):
+        return rhs0(qq, pp, tt, held.get(id(pps), pps))
+
+    def holding(pps, tt, hh):
+        """The parameters of a step from tt of size hh: the hold time at its midpoint."""
+        if hold:
+            held[id(pps)] = ca.vertcat(pps[:-1], tt + 0.5 * hh)
+        return pps
+
     h = ca.SX.sym("h") if method in ("rk4",) or explicit_sv else ca.MX.sym("h")
 
     if explicit_sv:
-        force = ca.Function("force", [q, t, p], [ca.substitute(ham.pdot, pm, ca.SX.zeros(n))])
+        force0 = ca.Function("force", [q, t, p], [ca.substitute(ham.pdot, pm, ca.SX.zeros(n))])
         vel = ca.Function("vel", [pm, p], [ca.substitute(ham.qd_of_p, q, ca.SX.zeros(n))])
+
+        def force(qq, tt, pps):
+            return force0(qq, tt, held.get(id(pps), pps))
         X = ca.SX.sym("X", 2 * n + 1 + n)
         qn, pn, tn, Fn = X[:n], X[n:2 * n], X[2 * n], X[2 * n + 1:]
-        ps = ca.SX.sym("p", p.numel())
+        ps = holding(ca.SX.sym("p", p.numel()), tn, h)
+        if hold:                        # the force carried from the last step read the last step's hold
+            Fn = force(qn, tn, ps)
         ph = pn + 0.5 * h * Fn
         q1 = qn + h * vel(ph, ps)
         F1 = force(q1, tn + h, ps)
         p1 = ph + 0.5 * h * F1
         step = ca.Function("sv", [X, h, ps], [ca.vertcat(q1, p1, tn + h, F1), ca.SX(0)])
-        F0 = np.array(force(q0, t0, pv), float).ravel()
-        return step, np.concatenate([q0, pm0, [t0], F0]), 1, 1
+        F0 = np.array(force0(q0, t0, pv), float).ravel()
+        return step, np.concatenate([q0, pm0, [t0], F0]), 2 if hold else 1, 1
 
     if method == "rk4":
         X = ca.SX.sym("X", 2 * n + 1)
-        ps = ca.SX.sym("p", p.numel())
         qn, pn, tn = X[:n], X[n:2 * n], X[2 * n]
+        ps = holding(ca.SX.sym("p", p.numel()), tn, h)
 
         def f(qq, pp, tt):
             a, b = rhs(qq, pp, tt, ps)
@@ -330,13 +359,13 @@ def _step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv
 
     opts = {"abstol": tol, "abstolStep": tol, "max_iter": max_newton, "error_on_fail": False}
     X = ca.MX.sym("X", 2 * n + 1)
-    ps = ca.MX.sym("p", p.numel())
     qn, pn, tn = X[:n], X[n:2 * n], X[2 * n]
     # residual functions in SX (Jacobians by AD), called from the MX step
     zq = ca.SX.sym("zq", n)
     zp = ca.SX.sym("zp", n)
     Sq, Sp, St, Sh = ca.SX.sym("Sq", n), ca.SX.sym("Sp", n), ca.SX.sym("St"), ca.SX.sym("Sh")
-    Sps = ca.SX.sym("Sps", p.numel())
+    ps = holding(ca.MX.sym("p", p.numel()), tn, h)
+    Sps = holding(ca.SX.sym("Sps", p.numel()), St, Sh)
 
     def frhs(qq, pp, tt):
         return rhs(qq, pp, tt, Sps)

@@ -145,7 +145,7 @@ class FixedStepBackend(Backend):
                 ignored[key] = True
         return simulate_symplectic(problem.eom, s.t_end, method=s.method, dt=s.dt, t_start=s.t_start, p=s.p,
                                    x0=s.x0, points=s.points, outputs=s.outputs, progress=progress,
-                                   **ignored, **kw)
+                                   step_eom=problem.step_eom, **ignored, **kw)
 
     def describe(self, r):
         m = r.metadata.get("method")

@@ -86,6 +86,9 @@ def read_table(path, hold: str = "zoh", what: str = "input table") -> Table:
         raise UsageError(f"{what}: {path}: {e}") from None
 
 
+HOLD_TIME = "<hold time>"     # the trailing parameter of close_eom(eom, hold_time=True)
+
+
 @record(frozen=False)
 class Signal:
     name: str
@@ -155,26 +158,39 @@ class Drive:
         closed = ca.Function("ode", [t, x, u, p], [ode(t, x, U, p)], TXUP, ["xdot"])
         return _Closed({"ode": closed, "ode_jacobian": jacobian_of(closed)}, funcs)
 
-    def expression(self, t, x, held=None):
+    def expression(self, t, x, held=None, hold_time=None):
         """U(t, x) as a column of the type of ``t`` (MX or SX: in SX, Python signals and MX
         Functions enter as call nodes), one entry per input; ``held``: a column whose entries
-        stand for the zero-order-hold tables (instead of their expression in t)."""
+        stand for the zero-order-hold tables (instead of their expression in t); ``hold_time``:
+        the time at which the zero-order-hold tables are read (default ``t``)."""
         import casadi as ca
 
         sym = ca.SX if isinstance(t, ca.SX) else ca.MX
         if not self.signals:
             return sym(0, 1)
-        return ca.vertcat(*[held[j] if held is not None and _zoh(s) else _expr(s, t, x, sym, self.span)
+        th = t if hold_time is None else hold_time
+        return ca.vertcat(*[held[j] if held is not None and _zoh(s) else
+                            _expr(s, th if _zoh(s) else t, x, sym, self.span)
                             for j, s in enumerate(self.signals)])
 
-    def close_eom(self, eom):
+    @property
+    def holds(self) -> bool:
+        """Whether a zero-order-hold table drives an input."""
+        return any(_zoh(s) for s in self.signals)
+
+    def close_eom(self, eom, hold_time: bool = False):
         """The equations with every input replaced by its signal U(t, x) (SX): for the back ends
         that read the equations themselves (DAE, contacts, fixed step), which then see the
-        inputs as functions of time and state, as the ODE back end's closed loop does."""
+        inputs as functions of time and state, as the ODE back end's closed loop does.
+
+        ``hold_time``: the zero-order-hold tables read at a time of their own, a trailing
+        parameter named ``HOLD_TIME`` (p' = [p; t_hold]), which the fixed-step back end sets to
+        each step's midpoint, so that every stage of a step sees the value held over the step."""
         import casadi as ca
 
         u = eom.u
-        U = self.expression(eom.t, ca.vertcat(eom.q, eom.qd))
+        th = ca.SX.sym("t_hold") if hold_time else None
+        U = self.expression(eom.t, ca.vertcat(eom.q, eom.qd), hold_time=th)
 
         def sub(e):
             if e is None or isinstance(e, (int, float, np.ndarray)):
@@ -186,6 +202,9 @@ class Drive:
             return {k: (tuple(sub(a) for a in v) if isinstance(v, tuple) else sub(v)) for k, v in (d or {}).items()}
 
         changes = {k: sub(getattr(eom, k)) for k in ("T", "V", "D", "Q", "M", "bias", "qdd", "g")}
+        if th is not None:
+            changes.update(p=ca.vertcat(eom.p, th), params=tuple(eom.params) + (HOLD_TIME,),
+                           param_values=np.r_[np.asarray(eom.param_values, float).ravel(), 0.0])
         return eom.replace(**changes, outputs=subs(eom.outputs), reactions=subs(eom.reactions),
                            invariants=subs(eom.invariants), u=None, inputs=(), input_defaults=())
 
@@ -198,7 +217,9 @@ class Drive:
 
         tt = ca.MX.sym("t")
         xx = ca.MX.sym("x", X.shape[1])
-        f = ca.Function("U", [tt, xx], [self.expression(tt, xx)])
+        # a zero-order hold read as _held does: a time a round-off short of a sample (a fixed
+        # step's t0 + k h) already shows the sample's value
+        f = ca.Function("U", [tt, xx], [self.expression(tt, xx, hold_time=tt + 1e-12 * ca.fmax(1, ca.fabs(tt)))])
         return np.array(f.map(N)(t.reshape(1, -1), X.T), float).reshape(len(self.signals), N).T
 
     def signal_errors(self) -> list[str]:

@@ -41,6 +41,9 @@ class Problem:
     plan: tuple[tuple[str, str], ...] = ()  # (topic, what is computed and why): plan.py
     eom: object = field(default=None, repr=False, compare=False)
     drive: object = field(default=None, repr=False, compare=False)    # drive.Drive
+    # fixed step with zero-order holds: the equations with the holds read at a trailing
+    # parameter, the hold time, which each step sets to its midpoint (Drive.close_eom)
+    step_eom: object = field(default=None, repr=False, compare=False)
 
 
 def formulate(eom, settings: SimulationSettings) -> Problem:
@@ -64,7 +67,7 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
 
     pv = parameter_vector(eom, settings.p)
     params = tuple((n, float(v)) for n, v in zip(eom.params, pv))
-    drive, run_eom = None, eom
+    drive, run_eom, step_eom = None, eom, None
     if eom.inputs:
         from ..eom import fold_inputs
         from .drive import build_drive
@@ -73,6 +76,8 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
         drive = build_drive(eom, settings.inputs, settings.t_start, settings.t_end, start_vector(eom, settings.x0, pv))
         if kind != "ode":      # constant inputs: trailing parameters; signals: u = U(t, x) in the equations
             run_eom = fold_inputs(eom, drive.vector()) if drive.constant else drive.close_eom(eom)
+            if backend == "fixed-step" and drive.holds and not constrained:
+                step_eom = drive.close_eom(eom, hold_time=True)
     elif settings.inputs:
         from .drive import build_drive
 
@@ -86,7 +91,7 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
                    invariants=invariants,
                    constraints=tuple(eom.constraint_names) if constrained else (), contacts=contacts,
                    outputs=tuple(outputs), reactions=reaction_signals(eom, settings, kind),
-                   plan=plan(eom, settings, kind, contacts, tuple(outputs), invariants), eom=run_eom, drive=drive,
+                   plan=plan(eom, settings, kind, contacts, tuple(outputs), invariants), eom=run_eom, drive=drive, step_eom=step_eom,
                    inputs=tuple(eom.inputs),
                    input_signals=tuple(drive.describe().items()) if drive is not None else ())
 
