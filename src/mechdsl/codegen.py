@@ -764,6 +764,19 @@ def _cache_problem(lib: Path) -> str | None:
 # --------------------------------------------------------------------------- fast calls
 
 
+def dense_function(f):
+    """``f`` itself when its inputs and outputs are dense, else a thin wrapper Function that
+    takes and returns dense arrays (what FastFunction's buffers need)."""
+    if all(f.sparsity_out(i).is_dense() for i in range(f.n_out())) and \
+            all(f.sparsity_in(i).is_dense() for i in range(f.n_in())):
+        return f
+    ca = _ca()
+    ins = [ca.MX.sym(f.name_in(i), f.size1_in(i), f.size2_in(i)) for i in range(f.n_in())]
+    outs = f.call([ca.project(a, f.sparsity_in(i)) if not f.sparsity_in(i).is_dense() else a
+                   for i, a in enumerate(ins)])
+    return ca.Function(f.name() + "_dense", ins, [ca.densify(o) for o in outs], f.name_in(), f.name_out())
+
+
 class FastFunction:
     """Call a casadi.Function through ``Function.buffer()`` with preallocated numpy arrays.
 
@@ -774,13 +787,7 @@ class FastFunction:
     """
 
     def __init__(self, f, copy: bool = True):
-        ca = _ca()
-        if any(not f.sparsity_out(i).is_dense() for i in range(f.n_out())) or \
-                any(not f.sparsity_in(i).is_dense() for i in range(f.n_in())):
-            ins = [ca.MX.sym(f.name_in(i), f.size1_in(i), f.size2_in(i)) for i in range(f.n_in())]
-            outs = f.call([ca.project(a, f.sparsity_in(i)) if not f.sparsity_in(i).is_dense() else a
-                           for i, a in enumerate(ins)])
-            f = ca.Function(f.name() + "_dense", ins, [ca.densify(o) for o in outs], f.name_in(), f.name_out())
+        f = dense_function(f)
         self.function = f
         self.copy = copy
         self._buf, self._eval = f.buffer()

@@ -62,8 +62,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                           impact_order=impact_order, gap_tol=gap_tol, event_offset=event_offset,
                           max_events=int(max_events), max_step=max_step, samples=int(samples))
     method_cls, note = resolve_method(method)
-    gaps, fixes = contact_gaps(eom, contacts)
-    fixes = fixes + list(fixations)
+    gaps, fixes, functions = _contact_setup(eom, contacts, fixations)
     pv = parameter_vector(eom, p)
     xs = start_vector(eom, x0, pv)
     qs, qds = xs[:eom.n], xs[eom.n:]
@@ -72,7 +71,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
     if qd0 is not None:
         qds = np.asarray(qd0, float).ravel()
     out_names = output_names(eom, gaps, outputs)
-    system = ContactSystem(eom, gaps, fixes, pv)
+    system = ContactSystem(eom, gaps, fixes, pv, functions=functions)
     gap0 = system.gap(t_start, qs)
     for g, v in zip(gaps, gap0):
         if v < -opts.touch:
@@ -204,6 +203,28 @@ def _no_span():
 
     return Span()
 
+
+
+def _contact_setup(eom, contacts, fixations):
+    """(gaps, fixations, contact Functions) of the model's contacts: derived once per EOM
+    object and set of contacts (kept in its workspace; a repeated run, a sweep or a benchmark
+    does not rebuild them), fresh when the contacts are not hashable."""
+    from .system import contact_functions
+
+    def build():
+        gaps, fixes = contact_gaps(eom, contacts)
+        fixes = fixes + list(fixations)
+        return gaps, fixes, contact_functions(eom, gaps, fixes)
+
+    key = ("contact_setup", None if contacts is None else tuple(contacts), tuple(fixations))
+    try:
+        hash(key)
+    except TypeError:
+        return build()
+    from ..workspace import of
+
+    gaps, fixes, functions = of(eom).memo(key, build)
+    return list(gaps), list(fixes), functions
 
 def _signals(eom, system, t, Y, force, lam, out_names, model_gaps=True) -> dict[str, np.ndarray]:
     """Outputs, energies, invariants and each contact's gap (the recorder), then each

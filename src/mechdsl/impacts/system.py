@@ -22,39 +22,62 @@ from .fastfn import FastFunction
 RANK_TOL = 1e-10
 
 
-class ContactSystem:
-    def __init__(self, eom, gaps, fixations, p: np.ndarray):
-        import casadi as ca
+def contact_functions(eom, gaps, fixations) -> dict:
+    """The CasADi Functions of a contact system (stateless, dense outputs): built once per
+    model and set of contacts (``impacts.simulate`` keeps them in the EOM's workspace); each
+    run wraps them in its own FastFunction buffers."""
+    import casadi as ca
 
+    from ..codegen import dense_function
+    from .gaps import point_position
+
+    q, qd, t, P = eom.q, eom.qd, eom.t, eom.p
+    rows = []
+    if eom.m:
+        rows.append(ca.reshape(eom.g, -1, 1))
+    rows += [ca.SX(g.gap) for g in gaps]
+    rows += [ca.reshape(point_position(eom, f.point), 3, 1) for f in fixations]
+    c = ca.vertcat(*rows) if rows else ca.SX.zeros(0, 1)
+    A = ca.jacobian(c, q)
+    ct = ca.jacobian(c, t)
+    cdot = ca.mtimes(A, qd) + ct
+    gamma = ca.mtimes(ca.jacobian(cdot, q), qd) + ca.jacobian(cdot, t)
+    args, names = [t, q, qd, P], ["t", "q", "qd", "p"]
+    gapv = ca.vertcat(*[ca.SX(g.gap) for g in gaps]) if gaps else ca.SX.zeros(0, 1)
+    out = {"n_rows": int(c.numel()),
+           "dyn": ca.Function("dyn", args, [eom.M, eom.bias], names, ["M", "bias"]),
+           "qdd": ca.Function("qdd", args, [eom.qdd], names, ["qdd"]) if eom.qdd is not None else None,
+           "cons": ca.Function("cons", args, [c, A, ct, gamma], names, ["c", "A", "ct", "gamma"]),
+           "pos": ca.Function("pos", [t, q, P], [c, A, ct], ["t", "q", "p"], ["c", "A", "ct"]),
+           "gap": ca.Function("gap", [t, q, P], [gapv], ["t", "q", "p"], ["gap"]),
+           "energy": ca.Function("energy", args, [eom.T, eom.V], names, ["T", "V"]),
+           "e": ca.Function("e", [P], [ca.vertcat(*[ca.SX(g.e) for g in gaps]) if gaps else ca.SX.zeros(0, 1)]),
+           "friction": None}
+    friction = [i for i, g in enumerate(gaps) if g.friction is not None]
+    if friction:
+        cols = [ca.SX(gaps[i].friction) for i in friction]
+        out["friction"] = ca.Function("friction", args, [ca.horzcat(*cols)], names, ["W"])
+    for k in ("dyn", "qdd", "cons", "pos", "energy", "friction"):
+        if out[k] is not None:
+            out[k] = dense_function(out[k])
+    return out
+
+
+class ContactSystem:
+    def __init__(self, eom, gaps, fixations, p: np.ndarray, functions: dict | None = None):
         self.eom, self.gaps, self.fixations = eom, list(gaps), list(fixations)
         self.p = np.asarray(p, float)
         self.n, self.m, self.k = eom.n, eom.m, len(self.gaps)
-        q, qd, t, P = eom.q, eom.qd, eom.t, eom.p
-        rows = []
-        if self.m:
-            rows.append(ca.reshape(eom.g, -1, 1))
-        rows += [ca.SX(g.gap) for g in self.gaps]
-        from .gaps import point_position
-
-        rows += [ca.reshape(point_position(eom, f.point), 3, 1) for f in self.fixations]
-        c = ca.vertcat(*rows) if rows else ca.SX.zeros(0, 1)
-        self.n_rows = int(c.numel())
-        A = ca.jacobian(c, q)
-        ct = ca.jacobian(c, t)
-        cdot = ca.mtimes(A, qd) + ct
-        gamma = ca.mtimes(ca.jacobian(cdot, q), qd) + ca.jacobian(cdot, t)
-        args, names = [t, q, qd, P], ["t", "q", "qd", "p"]
-        self.f_dyn = FastFunction(ca.Function("dyn", args, [eom.M, eom.bias], names, ["M", "bias"]))
-        self.f_qdd = (FastFunction(ca.Function("qdd", args, [eom.qdd], names, ["qdd"]))
-                      if eom.qdd is not None else None)
-        self.f_cons = FastFunction(ca.Function("cons", args, [c, A, ct, gamma], names, ["c", "A", "ct", "gamma"]))
-        self.f_pos = FastFunction(ca.Function("pos", [t, q, P], [c, A, ct], ["t", "q", "p"], ["c", "A", "ct"]))
-        gapv = ca.vertcat(*[ca.SX(g.gap) for g in self.gaps]) if self.gaps else ca.SX.zeros(0, 1)
-        self._f_gap = ca.Function("gap", [t, q, P], [gapv], ["t", "q", "p"], ["gap"])
+        fs = functions if functions is not None else contact_functions(eom, self.gaps, self.fixations)
+        self.n_rows = fs["n_rows"]
+        self.f_dyn = FastFunction(fs["dyn"])
+        self.f_qdd = FastFunction(fs["qdd"]) if fs["qdd"] is not None else None
+        self.f_cons = FastFunction(fs["cons"])
+        self.f_pos = FastFunction(fs["pos"])
+        self._f_gap = fs["gap"]
         self.f_gap = FastFunction(self._f_gap)
-        self.f_energy = FastFunction(ca.Function("energy", args, [eom.T, eom.V], names, ["T", "V"]))
-        ef = ca.Function("e", [P], [ca.vertcat(*[ca.SX(g.e) for g in self.gaps]) if self.gaps else ca.SX.zeros(0, 1)])
-        self.e = np.array(ef(self.p), float).ravel()
+        self.f_energy = FastFunction(fs["energy"])
+        self.e = np.array(fs["e"](self.p), float).ravel()
         if np.any(self.e < 0) or np.any(self.e > 1):
             from ..diagnostics import Diagnostic, MechError
 
@@ -62,10 +85,7 @@ class ContactSystem:
             raise MechError(Diagnostic("E862", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
         # sliding friction of persistent contacts: column i = generalized force per unit normal force
         self.friction = [i for i, g in enumerate(self.gaps) if g.friction is not None]
-        self.f_fric = None
-        if self.friction:
-            cols = [ca.SX(self.gaps[i].friction) for i in self.friction]
-            self.f_fric = FastFunction(ca.Function("friction", args, [ca.horzcat(*cols)], names, ["W"]))
+        self.f_fric = FastFunction(fs["friction"]) if fs["friction"] is not None else None
         self.anchor = np.zeros(self.n_rows)
         self._gap_maps: dict[int, object] = {}
         self._f_jac = None
