@@ -153,3 +153,20 @@ def test_run_record_names_the_compiled_loop_when_it_ran():
     assert on.metadata["run"]["integrator"] == "crk:dop853" and on.metadata["run"]["compiled"] is True
     assert off.stats.get("compiled_segments", 0) == 0
     assert off.metadata["run"]["integrator"] == "scipy:DOP853" and off.metadata["run"]["compiled"] is False
+
+
+def test_a_repeated_contact_run_reuses_the_contact_functions(monkeypatch):
+    """The contact system's CasADi Functions are derived once per model and set of contacts
+    (kept in the EOM's workspace): a second run builds none and gives the same numbers."""
+    import mechdsl.impacts.system as S
+
+    calls = []
+    real = S.contact_functions
+    monkeypatch.setattr(S, "contact_functions", lambda *a: calls.append(1) or real(*a))
+    eom, floor = ball(1.0, 0.8, G)
+    first = simulate_with_contacts(eom, [floor], 1.0, points=5)
+    again = simulate_with_contacts(eom, [floor], 1.0, points=5)
+    other, floor2 = ball(1.0, 0.5, G)
+    simulate_with_contacts(other, [floor2], 1.0, points=5)            # another model builds its own
+    assert len(calls) == 2
+    np.testing.assert_allclose(again.q, first.q, rtol=0, atol=1e-14)
