@@ -20,6 +20,17 @@ _SESSION_CACHE = tempfile.mkdtemp(prefix="mechdsl-test-cache-")
 os.environ["MECHDSL_CACHE"] = _SESSION_CACHE
 
 
+def _has_compiler() -> bool:
+    from mechdsl.codegen import find_compiler
+
+    return find_compiler() is not None
+
+
+# compiled code needs a C compiler (CI's machines have gcc; a test of the fallback without one
+# checks the message instead of skipping)
+needs_cc = pytest.mark.skipif(not _has_compiler(), reason="no C compiler: compiled code cannot be built")
+
+
 def pytest_unconfigure(config):
     shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
 

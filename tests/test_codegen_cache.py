@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from mechdsl.codegen import find_compiler
+from conftest import needs_cc
 
-pytestmark = pytest.mark.skipif(find_compiler() is None, reason="needs a C compiler")
+pytestmark = needs_cc
 
 # build (or load) the compiled energy of a pendulum and evaluate it at one state.  The "other"
 # model is a pendulum whose potential has the opposite sign: a valid library with the same

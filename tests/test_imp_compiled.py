@@ -4,13 +4,11 @@ import numpy as np
 import pytest
 
 import mechdsl
-from conftest import MODELS
+from conftest import needs_cc, MODELS
 from imp_models import ball, ball_closed_form, pendulum, pendulum_wall_impacts, wall
-from mechdsl.codegen import find_compiler
 from mechdsl.impacts import simulate_with_contacts
 
 G = 9.81
-needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler: the compiled loop cannot be built")
 
 
 def impacts(r):

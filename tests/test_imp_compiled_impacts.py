@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 
 from imp_models import ball, ball_closed_form, pendulum, wall
-from mechdsl.codegen import find_compiler
 from mechdsl.impacts import simulate_with_contacts
+from conftest import needs_cc
 
 G = 9.81
-needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler: the compiled loop cannot be built")
 
 
 def both(eom, contacts, t_end, **kw):

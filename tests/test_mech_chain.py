@@ -13,8 +13,9 @@ import pytest
 from mech_models import P, Z, coord_var, const, neg, nlink, rod_body, v3
 from mechdsl import eom as eom_mod
 from mechdsl import ir
-from mechdsl.codegen import build_ode, casadi_functions, find_compiler, jacobian_of, looped_ode
+from mechdsl.codegen import build_ode, casadi_functions, jacobian_of, looped_ode
 from mechdsl.mechanics import derive
+from conftest import needs_cc
 
 
 def rod_tree(links, *, name="tree", spring_to=None, damping=None, inputs=()):
@@ -187,7 +188,7 @@ def test_looped_only_where_it_pays():
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
+@needs_cc
 def test_compiled_chain_uses_the_loops(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
     e = derive(nlink(80))

@@ -10,6 +10,7 @@ import pytest
 from mechdsl.codegen import FastFunction, casadi_functions, compile_functions, find_compiler
 from mechdsl.diagnostics import MechError
 from mechdsl.simulate import simulate
+from conftest import needs_cc
 from sim_models import chain, pendulum
 
 RNG = np.random.default_rng(12345)
@@ -152,7 +153,7 @@ def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
     assert lib == lib2 and note2.startswith("loaded compiled model from cache")
 
 
-@pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
+@needs_cc
 def test_cvodes_adams_compiles_no_jacobian(tmp_path, monkeypatch):
     """Functional iteration sets the Jacobian up but never evaluates it: the library holds the
     forward derivative (issue 16: 774 kB of Jacobian C and 51 s of gcc for the 12-link chain)."""

@@ -15,7 +15,8 @@ import mechdsl
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 from mechdsl.simulate import simulate
-from sim_models import chain, pendulum
+from conftest import needs_cc
+from sim_models import pendulum
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
@@ -367,8 +368,7 @@ def test_settings_refuse_bad_values_for_every_model():
             m.simulate(0.1, **kw)
 
 
-@pytest.mark.skipif(__import__("mechdsl.codegen", fromlist=["x"]).find_compiler() is None,
-                    reason="needs a C compiler")
+@needs_cc
 def test_cli_honours_scene_compiled(tmp_path, capsys):
     text = (MODELS / "double_pendulum.mech").read_text()
     path = tmp_path / "dp.mech"

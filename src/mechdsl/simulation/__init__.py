@@ -175,7 +175,7 @@ def _hold_warning(r: Result, problem: Problem) -> None:
 
     s, drive = problem.settings, problem.drive
     breaks = drive.breakpoints(s.t_start, s.t_end)
-    jumps = [sig.name for sig in drive.signals if _zoh(sig)] if breaks.size else []
+    jumps = drive.held_names if breaks.size else []
     if not jumps:
         return
     if problem.step_eom is None:
@@ -193,12 +193,6 @@ def _hold_warning(r: Result, problem: Problem) -> None:
             f"t = {off[0]:.6g}; step {h:.6g}): the step across a sample reads the value held at its midpoint, an "
             "error of first order in dt there; choose dt so that the samples lie on the step grid "
             "(t_start + k dt), or use an adaptive method, which restarts at every jump")
-
-
-def _zoh(signal) -> bool:
-    from .drive import _zoh as zoh
-
-    return zoh(signal)
 
 
 def _ran_compiled(meta, stats=None) -> bool:

@@ -176,7 +176,12 @@ class Drive:
     @property
     def holds(self) -> bool:
         """Whether a zero-order-hold table drives an input."""
-        return any(_zoh(s) for s in self.signals)
+        return bool(self.held_names)
+
+    @property
+    def held_names(self) -> list[str]:
+        """The inputs driven by a zero-order-hold table."""
+        return [s.name for s in self.signals if _zoh(s)]
 
     def close_eom(self, eom, hold_time: bool = False):
         """The equations with every input replaced by its signal U(t, x) (SX): for the back ends
