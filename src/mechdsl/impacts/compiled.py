@@ -30,7 +30,6 @@ from ..simulation import crk
 COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
 OK, EVENT = 0, 9
 _VP = ctypes.c_void_p
-_RECENT: dict = {}      # (ode, gaps) identities -> (CompiledFlight or None, note): flight() of a repeated run
 
 
 class CompiledFlight:
@@ -82,8 +81,6 @@ class CompiledFlight:
 
 def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     """(CompiledFlight or None, note) for a ContactSystem; the library is cached per model."""
-    import casadi as ca
-
     from ..codegen import casadi_functions, find_compiler
 
     if find_compiler() is None:
@@ -96,13 +93,19 @@ def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     n = system.n
     if ode.numel_in(1) != 2 * n or ode.numel_in(2) != 0 or ode.numel_in(3) != system.p.size:
         return None, "the model has inputs or fixed parameters: contact stepping stays in Python"
-    # the same model and contact objects as a recent run: its library (building and serializing
-    # the gap and impact Functions for the cache key costs ~1 ms a run)
-    key = (id(ode), tuple(id(g) for g in system.gaps), system.m, bool(system.fixations))
-    objs = (ode, *system.gaps)
-    hit = _RECENT.get(key)
-    if hit is not None and all(a is b for a, b in zip(hit[0], objs)) and len(hit[0]) == len(objs):
-        return hit[1]
+    # kept in the EOM's workspace per right-hand side and contact objects (the contacts' own
+    # objects are kept per model by impacts.simulate): building and serializing the gap and
+    # impact Functions for the library's cache key costs ~1 ms a run
+    from ..workspace import of
+
+    return of(eom).by_content(eom, (), ("compiled_flight", system.m, bool(system.fixations)),
+                              lambda: _build_flight(system, ode, tag), extra=(ode, *system.gaps))
+
+
+def _build_flight(system, ode, tag: str) -> tuple[CompiledFlight | None, str]:
+    import casadi as ca
+
+    eom = system.eom
     x = ca.vertcat(eom.q, eom.qd)
     gapv = ca.vertcat(*[ca.SX(g.gap) for g in system.gaps]) if system.gaps else ca.SX.zeros(0, 1)
     gapf = ca.Function("contact_gap", [eom.t, x, eom.p], [gapv], ["t", "x", "p"], ["gap"])
@@ -121,9 +124,6 @@ def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
 
     fl, note = crk.cached_library((id(ode), gapf.serialize(), None if impf is None else impf.serialize()),
                                   ode, extra, tag, load, "the compiled contact loop")
-    if len(_RECENT) >= 16:
-        _RECENT.pop(next(iter(_RECENT)))
-    _RECENT[key] = (objs, (fl, note or ""))
     return fl, note or ""
 
 
