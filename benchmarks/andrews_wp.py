@@ -30,7 +30,7 @@ sys.path[:0] = [str(HERE.parent / "src"), str(HERE.parent / "tests")]
 
 from dae_models import andrews_data, andrews_eom  # noqa: E402
 from mechdsl.dae import FORMULATIONS, simulate_dae  # noqa: E402
-from mechdsl.fileio import atomic_target, commit  # noqa: E402
+from mechdsl.output.fileio import atomic_target, commit  # noqa: E402
 
 REF = np.array(andrews_data()["reference_t0.03"][:7])
 

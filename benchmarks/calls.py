@@ -24,7 +24,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(__file__))
 from _models import chain  # noqa: E402
 
-from mechdsl.codegen import FastFunction, casadi_functions  # noqa: E402
+from mechdsl.eom.codegen import FastFunction, casadi_functions  # noqa: E402
 
 
 def per_call(fn, min_time=0.2):

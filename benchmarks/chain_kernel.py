@@ -37,7 +37,7 @@ import casadi as ca  # noqa: E402
 
 import mechdsl  # noqa: E402
 from mechdsl.bench.report import markdown_table  # noqa: E402
-from mechdsl.codegen import FastFunction, build_ode, compile_functions  # noqa: E402
+from mechdsl.eom.codegen import FastFunction, build_ode, compile_functions  # noqa: E402
 from nlink import fmt, mech_text  # noqa: E402
 
 

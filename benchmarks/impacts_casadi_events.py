@@ -57,7 +57,7 @@ def casadi_run(solver, grid):
 def impacts_run(grid):
     import casadi as ca
 
-    from mechdsl import ir
+    from mechdsl.model import ir
     from mechdsl.eom import from_lagrangian
     from mechdsl.impacts import simulate_with_contacts
 

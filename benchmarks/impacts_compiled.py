@@ -54,7 +54,7 @@ def ball_table(bounces: int, repeats: int) -> list[str]:
     far = ball(H0, E, G)[1]
     import dataclasses
 
-    from mechdsl import ir
+    from mechdsl.model import ir
 
     far = dataclasses.replace(far, fields=tuple((k, ir.Const(-1000.0)) if k == "offset" else (k, v)
                                                 for k, v in far.fields))

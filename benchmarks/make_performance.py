@@ -390,7 +390,7 @@ def page(ctx) -> str:
 
 
 COLDSTART_TEXT = ("What a fresh `mech` process costs (issues 12 and 16). A run reads its model from the model "
-                  "cache (mechdsl.modelcache, docs/simulate.md) after the first: no parsing, analysis or "
+                  "cache (mechdsl.eom.modelcache, docs/simulate.md) after the first: no parsing, analysis or "
                   "derivation, and neither lark nor the front end nor the mechanics are imported. Imports are "
                   "the sum of the top-level cumulative times of `python -X importtime`; numpy's is measured in "
                   "the same process (it then lacks the standard modules mechdsl imported first) and alone, "

@@ -64,7 +64,7 @@ def pin_rhs(N):
 
 
 def own_rhs(m):
-    from mechdsl.codegen import FastFunction, casadi_functions
+    from mechdsl.eom.codegen import FastFunction, casadi_functions
 
     fast = FastFunction(casadi_functions(m.eom, names=("ode",))["ode"]).bind(u=np.zeros(0), p=m.parameter_vector())
     return lambda t, x: fast(t, x)

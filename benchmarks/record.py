@@ -33,7 +33,7 @@ CASES = {"double_pendulum": ("double_pendulum.mech", {}), "chain30": ("nlink_pen
 def recorder(eom, out_names):
     """A callable (t, X, pv) -> signals, for this source tree's compute_signals."""
     if "post" in inspect.signature(S.compute_signals).parameters:      # before simulation/record.py
-        from mechdsl.codegen import casadi_functions
+        from mechdsl.eom.codegen import casadi_functions
 
         post = casadi_functions(eom, names=("energy", "outputs", "singularity", "mass_matrix"), outputs=out_names)
         return lambda t, X, pv: S.compute_signals(eom, post, t, X, pv, out_names)

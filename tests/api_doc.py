@@ -18,10 +18,10 @@ DOCS = ROOT / "docs" / "api.md"
 # (import path, what it is) of the classes the top-level functions hand out
 CLASSES = [
     ("mechdsl.api.Model", "what `mechdsl.load` / `mechdsl.loads` return"),
-    ("mechdsl.result.Result", "what `Model.simulate` returns"),
-    ("mechdsl.result.Failure", "`Result.failure` of a run that stopped early"),
+    ("mechdsl.output.result.Result", "what `Model.simulate` returns"),
+    ("mechdsl.output.result.Failure", "`Result.failure` of a run that stopped early"),
     ("mechdsl.animate.Animation", "what `Result.animate` returns"),
-    ("mechdsl.display.Equations", "what `Model.equations` returns"),
+    ("mechdsl.output.display.Equations", "what `Model.equations` returns"),
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
     ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),

@@ -21,7 +21,7 @@ os.environ["MECHDSL_CACHE"] = _SESSION_CACHE
 
 
 def _has_compiler() -> bool:
-    from mechdsl.codegen import find_compiler
+    from mechdsl.eom.codegen import find_compiler
 
     return find_compiler() is not None
 

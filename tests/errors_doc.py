@@ -321,11 +321,11 @@ def corpus_text(name: str) -> bytes:
 
 def run(entry: Entry) -> tuple[str, str]:
     """(text shown as the example, output of the command), produced in a temporary folder."""
-    from mechdsl import limits
-    from mechdsl import parser as P
+    from mechdsl.frontend import limits
+    from mechdsl.frontend import parser as P
     from mechdsl.cli import main
     from mechdsl.diagnostics import MechError
-    from mechdsl.report import format_diagnostics
+    from mechdsl.diagnostics import format_diagnostics
 
     data = corpus_text(entry.corpus) if entry.corpus else (entry.source or "").encode("utf-8")
     old = os.getcwd()

@@ -8,7 +8,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from mechdsl import ir
+from mechdsl.model import ir
 from mechdsl.eom import from_lagrangian
 
 C = ir.Const

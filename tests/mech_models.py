@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import math
 
-from mechdsl import ir
-from mechdsl.exprs import const, div, mul, neg
+from mechdsl.model import ir
+from mechdsl.model.exprs import const, div, mul, neg
 
 Z, O = ir.ZERO, ir.ONE
 P = ir.Param

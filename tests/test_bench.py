@@ -14,8 +14,16 @@ import pytest
 from scipy.special import ellipj
 
 import mechdsl
-from mechdsl.bench import (Setup, parse_tolerances, parse_variants, read_csv, run_bench,
-                           to_csv_text, write_chart, write_tables)
+from mechdsl.bench import (
+    Setup,
+    parse_tolerances,
+    parse_variants,
+    read_csv,
+    run_bench,
+    to_csv_text,
+    write_chart,
+    write_tables,
+)
 from mechdsl.bench import measure
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError

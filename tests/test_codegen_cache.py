@@ -33,7 +33,7 @@ import casadi as ca
 sys.path.insert(0, {tests!r})
 from sim_models import _syms, pendulum
 from mechdsl import eom as E
-from mechdsl.codegen import _build, compile_functions
+from mechdsl.eom.codegen import _build, compile_functions
 if {other!r}:
     q, qd, t, p = _syms(1, 3)
     e = E.from_lagrangian("Other", ["theta"], ["m", "L", "g"], [1.0, 1.0, 9.81], q, qd, t, p,

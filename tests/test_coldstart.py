@@ -42,7 +42,7 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "mechdsl.simulate" in names
-    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.display", "numpy.ma", "shutil"}
+    unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.output.display", "numpy.ma", "shutil"}
     assert unwanted & names - imported_by_numpy_and_casadi() == set()
 
 
@@ -58,12 +58,12 @@ def test_a_warm_compiled_run_starts_no_process(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert "loaded compiled model from cache" in r.stdout + r.stderr
     assert {"subprocess", "tempfile", "shutil", "lzma", "bz2"} & names - imported_by_numpy_and_casadi() == set()
-    assert "mechdsl.ir" in names and "mechdsl.parser" not in names
+    assert "mechdsl.model.ir" in names and "mechdsl.frontend.parser" not in names
 
 
 def test_a_warm_run_creates_no_dataclass(tmp_path):
     """Issue 12: the classes a warm run needs (ir's for the cached model, the EOM, settings,
-    problem, result...) are made by mechdsl.records.record, not by @dataclass (an exec per
+    problem, result...) are made by mechdsl.model.records.record, not by @dataclass (an exec per
     generated method: ~13 ms for ir alone).  The run is spied on from within: every class
     dataclasses processes is listed."""
     env = {**os.environ, "MECHDSL_CACHE": str(tmp_path)}

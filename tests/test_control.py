@@ -87,7 +87,7 @@ def test_fixed_parameters_give_the_same_functions_with_fewer_instructions():
 def test_terms_that_cancel_are_dropped_only_when_safe():
     """codegen.drop_cancelled: an output entry that does not depend on an input (zero derivative
     at random states) loses the terms that cancel; piecewise expressions are left alone."""
-    from mechdsl.codegen import drop_cancelled
+    from mechdsl.eom.codegen import drop_cancelled
 
     t, x, u, p = ca.SX.sym("t"), ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("p", 0)
     rest = ca.sin(x[0]) * x[1] * ca.cos(x[0]) - x[1] * ca.cos(x[0]) * ca.sin(x[0])   # zero, not folded
@@ -241,7 +241,7 @@ def test_lqr_gain_satisfies_the_riccati_equation():
 def test_compiled_functions_support_exact_hessian(tmp_path, monkeypatch):
     """Model.casadi(compiled=True): IPOPT with the exact Hessian of the Lagrangian works and
     takes the same iterations as the virtual machine (before: 'Derivatives cannot be calculated')."""
-    from mechdsl.codegen import find_compiler
+    from mechdsl.eom.codegen import find_compiler
 
     if find_compiler() is None:
         pytest.skip("no C compiler")

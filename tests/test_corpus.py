@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from mechdsl import limits
-from mechdsl import parser as P
+from mechdsl.frontend import limits
+from mechdsl.frontend import parser as P
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError
 
@@ -227,7 +227,8 @@ def test_subprocess_missing_file(tmp_path):
 # ----------------------------------------------------------------------------- coverage and documentation
 
 
-FRONT_END = [SRC / "parser.py", SRC / "source.py", SRC / "diagnostics.py", SRC / "api.py", SRC / "cli.py", SRC / "units.py",
+FRONT_END = [SRC / "frontend" / "parser.py", SRC / "frontend" / "source.py", SRC / "diagnostics.py", SRC / "api.py",
+             SRC / "cli.py", SRC / "model" / "units.py",
              SRC / "commands" / "check.py", SRC / "commands" / "compile.py", *sorted((SRC / "semantic").glob("*.py"))]
 
 
@@ -269,7 +270,7 @@ def test_generalized_force_field_can_be_written(capsys):
     src = ("model A\n  coordinate Real q(start = 0);\n  GeneralizedForce push(coordinate = q, Q = 1);\n"
            "equation\n  kinetic = der(q)^2/2;\nend A;\n")
     tree = P.parse(src, "gf.mech")
-    from mechdsl.printer import to_source
+    from mechdsl.frontend.printer import to_source
 
     assert P.parse(to_source(tree), "again") == tree
     import mechdsl

@@ -13,7 +13,7 @@ import pytest
 
 from mechdsl import eom as E
 from mechdsl import integrators as I
-from mechdsl.codegen import find_compiler
+from mechdsl.eom.codegen import find_compiler
 from mechdsl.simulate import simulate
 from mechdsl.simulation import crk
 from sim_models import blowup, chain, pendulum
@@ -169,7 +169,7 @@ def test_auto_without_a_compiler_stays_in_the_virtual_machine(monkeypatch):
 
 
 def test_rhs_cost_counts_instructions_and_the_linear_solve():
-    from mechdsl.codegen import casadi_functions
+    from mechdsl.eom.codegen import casadi_functions
 
     sx = casadi_functions(pendulum(), names=("ode",))["ode"]
     assert sx.is_a("SXFunction") and crk.rhs_cost(sx) == sx.n_instructions()

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 import mechdsl
-from mechdsl.codegen import find_compiler
+from mechdsl.eom.codegen import find_compiler
 
 from conftest import ROOT
 

@@ -1,5 +1,5 @@
-"""Notebook displays, sympy equations, tables with units and plots that read (mechdsl.display,
-mechdsl.plot)."""
+"""Notebook displays, sympy equations, tables with units and plots that read (mechdsl.output.display,
+mechdsl.output.plot)."""
 from __future__ import annotations
 
 import math
@@ -12,7 +12,7 @@ from sympy.core.function import AppliedUndef
 
 import mechdsl
 from mechdsl.diagnostics import UsageError
-from mechdsl.result import Result
+from mechdsl.output.result import Result
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -153,7 +153,7 @@ def test_plot_puts_angles_and_lengths_on_separate_labelled_axes_with_legends_out
 
 
 def test_colours_do_not_repeat_past_ten_curves():
-    from mechdsl.plot import colours
+    from mechdsl.output.plot import colours
 
     n = 40
     t = np.linspace(0, 1, 5)
@@ -181,7 +181,7 @@ def test_plot_command_still_writes_a_file(tmp_path):
 
 
 def test_progress_bar_outside_a_notebook_is_the_text_one():
-    from mechdsl.display import in_notebook, notebook_bar
+    from mechdsl.output.display import in_notebook, notebook_bar
 
     assert not in_notebook() and notebook_bar(total=1) is None
 

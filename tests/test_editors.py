@@ -13,7 +13,7 @@ from conftest import MODELS, ROOT, model_files
 sys.path.insert(0, str(ROOT / "editors"))
 import make_textmate  # noqa: E402
 
-from mechdsl import lexer as L  # noqa: E402
+from mechdsl.frontend import lexer as L  # noqa: E402
 
 
 def test_word_lists_match_the_language():

@@ -18,9 +18,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mechdsl.diagnostics import Diagnostic, MechError, Span
-from mechdsl.dump import dump_ast, dump_model
-from mechdsl.parser import KEYWORDS, decode_source, parse
-from mechdsl.printer import to_source
+from mechdsl.frontend.dump import dump_ast, dump_model
+from mechdsl.frontend.parser import KEYWORDS, decode_source, parse
+from mechdsl.frontend.printer import to_source
 from mechdsl.semantic import analyze
 
 from conftest import ROOT, model_files

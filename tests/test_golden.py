@@ -145,7 +145,7 @@ def test_eom_dump_values_match_the_closed_form_pendulum():
     the dump, with parameters that are not 1 (so a swapped m and L would show).  The states are
     printed to 10 digits, hence the tolerance."""
     import mechdsl
-    from mechdsl.dump_eom import dump_eom
+    from mechdsl.eom.dump_eom import dump_eom
 
     m, L, g = 2.5, 0.7, 9.81
     text = dump_eom(mechdsl.load(MODELS / "pendulum.mech", model="Pendulum").with_params(m=m, L=L).eom)
@@ -178,7 +178,7 @@ def test_eom_dump_stops_counting_operations_past_its_budget(monkeypatch):
     """Counting each large expression's operations is quadratic in a big model; past the
     budget the dump says 'large expression' for it and every later one."""
     import mechdsl
-    from mechdsl import dump_eom as d
+    from mechdsl.eom import dump_eom as d
 
     eom = mechdsl.load(MODELS / "nlink_pendulum.mech").eom
     monkeypatch.setattr(d, "OPS_BUDGET", 200)

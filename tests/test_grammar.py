@@ -1,7 +1,7 @@
 """The grammar is LALR(1) without conflicts or terminal collisions (lark strict mode)."""
 import lark
 
-from mechdsl.parser import grammar_path
+from mechdsl.frontend.parser import grammar_path
 
 
 def test_grammar_is_strict_lalr():

@@ -101,7 +101,7 @@ def test_elastic_ball_keeps_energy():
 def test_rising_floor_rheonomic_gap():
     """A floor rising at constant speed w (gap = y - w t, an equation-layer gap in time):
     the impact law acts on the relative normal speed, v+ - w = -e (v- - w)."""
-    from mechdsl import ir
+    from mechdsl.model import ir
 
     w = 0.5
     eom, _ = ball(H0, E, G)

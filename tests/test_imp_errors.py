@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from imp_models import ball
-from mechdsl import ir
+from mechdsl.model import ir
 from mechdsl.diagnostics import MechError, UsageError
 from mechdsl.impacts import events_table, print_events, simulate_with_contacts
 
@@ -137,7 +137,7 @@ def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
                             "--t-end", "0.1", "-o", str(out), "--force"], capture_output=True, text=True, timeout=60)
         assert p.returncode == 1, p.stdout + p.stderr
         if model == "falling_rod.mech":
-            # the weight m g h is inf at the start: the start check (mechdsl.preflight) refuses
+            # the weight m g h is inf at the start: the start check (mechdsl.eom.preflight) refuses
             # the values before the first step with a coded, located error, as `mech check` does
             assert "error[E746]" in p.stderr and "falling_rod.mech:16:1" in p.stderr
         else:

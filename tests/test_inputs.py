@@ -289,7 +289,7 @@ end Arr;
 def test_public_ode_is_sx_for_a_model_solved_numerically():
     """models/andrews.mech was an MX Function (numeric QR solve of M qdd = bias), which broke SX
     glue; Model.casadi() now gives SX (unrolled LDL^T), equal to the numeric solve."""
-    from mechdsl.codegen import casadi_functions
+    from mechdsl.eom.codegen import casadi_functions
 
     m = mechdsl.load(str(ROOT / "models" / "andrews.mech"))
     ode = m.casadi()["ode"]

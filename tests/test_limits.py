@@ -1,4 +1,4 @@
-"""The front end's size and work budgets (mechdsl/limits.py, docs/language.md "Limits").
+"""The front end's size and work budgets (mechdsl/frontend/limits.py, docs/language.md "Limits").
 
 Each example below was found by a fuzzer on a shipped model and used to crash (SystemError,
 a CasADi or C++ exception) or hang; now `mech check` stops it with a located E-code, exit 1.
@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from mechdsl import limits
+from mechdsl.frontend import limits
 from mechdsl.cli import main
 
 from conftest import ROOT
@@ -138,7 +138,7 @@ def test_every_limit_is_documented():
 def test_shipped_models_are_far_inside_the_budgets():
     # the defaults must never bite a real model: every shipped model passes with a quarter of them
     tight = {k: max(1, v // 4) for k, v in limits.DEFAULTS.items() if k not in ("nesting", "depth")}
-    from mechdsl.parser import parse_file
+    from mechdsl.frontend.parser import parse_file
     from mechdsl.semantic import analyze
 
     with limits.override(tight):

@@ -12,8 +12,8 @@ import pytest
 
 from mech_models import P, Z, coord_var, const, neg, nlink, rod_body, v3
 from mechdsl import eom as eom_mod
-from mechdsl import ir
-from mechdsl.codegen import build_ode, casadi_functions, jacobian_of, looped_ode
+from mechdsl.model import ir
+from mechdsl.eom.codegen import build_ode, casadi_functions, jacobian_of, looped_ode
 from mechdsl.mechanics import derive
 from conftest import needs_cc
 

@@ -6,9 +6,9 @@ import dataclasses
 import pytest
 
 from mech_models import coord_var, joint_chain, point, v3
-from mechdsl import ir
+from mechdsl.model import ir
 from mechdsl.diagnostics import MechError
-from mechdsl.exprs import const
+from mechdsl.model.exprs import const
 from mechdsl.mechanics import derive
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from mech_models import coord_var, fn, point, rod_body, rot_z_expr, v3
-from mechdsl import ir
-from mechdsl.exprs import const, mul, neg
+from mechdsl.model import ir
+from mechdsl.model.exprs import const, mul, neg
 from mechdsl.mechanics import derive
 
 Z, O = ir.ZERO, ir.ONE

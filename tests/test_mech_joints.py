@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mech_models import joint_chain, rot_z_expr, t_expr, v3, fn
-from mechdsl import ir
-from mechdsl.exprs import const, mul
+from mechdsl.model import ir
+from mechdsl.model.exprs import const, mul
 from mechdsl.mechanics import derive
 
 

@@ -11,9 +11,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mech_models import coord_var, joint_chain, mat, point, t_expr, v3, IA
-from mechdsl import ir
+from mechdsl.model import ir
 from mechdsl.diagnostics import MechError
-from mechdsl.exprs import const
+from mechdsl.model.exprs import const
 from mechdsl.mechanics import derive
 
 

@@ -8,8 +8,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from mech_models import coord_var, mat, point, v3
-from mechdsl import ir
-from mechdsl.exprs import const
+from mechdsl.model import ir
+from mechdsl.model.exprs import const
 from mechdsl.mechanics import derive
 
 I_BODY = np.array([[1.0, 0.1, -0.05], [0.1, 2.0, 0.2], [-0.05, 0.2, 3.0]])

@@ -1,4 +1,4 @@
-"""The model cache (mechdsl.modelcache): a second run neither parses nor derives, gives the
+"""The model cache (mechdsl.eom.modelcache): a second run neither parses nor derives, gives the
 same numbers bit for bit, and a changed, corrupt or foreign cache file is rebuilt."""
 import os
 import subprocess
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import mechdsl.api as api
-import mechdsl.codegen as codegen
+import mechdsl.eom.codegen as codegen
 import mechdsl.mechanics
-import mechdsl.parser
-from mechdsl import modelcache
+import mechdsl.frontend.parser
+from mechdsl.eom import modelcache
 from mechdsl.cli import main
 
 from conftest import MODELS
@@ -48,7 +48,7 @@ def forbid_front_end_and_derivation(monkeypatch):
         raise AssertionError("parsed or derived on a cache hit")
 
     monkeypatch.setattr(mechdsl.mechanics, "derive", boom)
-    monkeypatch.setattr(mechdsl.parser, "parse", boom)
+    monkeypatch.setattr(mechdsl.frontend.parser, "parse", boom)
 
 
 def forbid_building_functions(monkeypatch):
@@ -208,7 +208,7 @@ def test_fields_not_cached_are_derived_again_in_the_cached_symbols(cache, monkey
 
 
 def test_key_depends_on_text_target_items_and_limits():
-    from mechdsl import limits
+    from mechdsl.frontend import limits
 
     base = modelcache.key("text", "f.mech", True, (None, None), ())
     assert base == modelcache.key("text", "f.mech", True, (None, None), ())
@@ -230,7 +230,7 @@ def test_a_warm_process_imports_neither_lark_nor_the_front_end_nor_the_mechanics
     assert [r.returncode for r in runs] == [0, 0], runs[1].stderr[-2000:]
     loaded = [{line.rsplit("|", 1)[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time")}
               for r in runs]
-    heavy = {"lark", "mechdsl.parser", "mechdsl.semantic", "mechdsl.mechanics", "mechdsl.ast"}
+    heavy = {"lark", "mechdsl.frontend.parser", "mechdsl.semantic", "mechdsl.mechanics", "mechdsl.frontend.ast"}
     assert heavy <= loaded[0]                 # the cold run needs them: the check can fail
     assert not heavy & loaded[1]
 
@@ -281,11 +281,11 @@ def test_an_edited_mechdsl_is_a_new_key(tmp_path, monkeypatch):
     """Developers change mechdsl under one version number: the key includes the sources'
     sizes and modification times, so equations derived by older code are not served."""
     pkg = tmp_path / "src" / "mechdsl"
-    pkg.mkdir(parents=True)
-    (pkg / "modelcache.py").write_text("# stand-in\n")
+    (pkg / "eom").mkdir(parents=True)
+    (pkg / "eom" / "modelcache.py").write_text("# stand-in\n")
     derive = pkg / "derive.py"
     derive.write_text("x = 1\n")
-    monkeypatch.setattr(modelcache, "__file__", str(pkg / "modelcache.py"))
+    monkeypatch.setattr(modelcache, "__file__", str(pkg / "eom" / "modelcache.py"))
     monkeypatch.setattr(modelcache, "_FINGERPRINT", [])
     before = modelcache.code_fingerprint()
     assert modelcache.code_fingerprint() == before              # stable within a process

@@ -1,4 +1,4 @@
-"""The start check (mechdsl.preflight, E740-E748, E754) and the degenerate component values
+"""The start check (mechdsl.eom.preflight, E740-E748, E754) and the degenerate component values
 (semantic/physical.py, E510-E512): what `mech check` accepts, `mech simulate` can start.
 
 Each case is a model that passed `check` (exit 0) before and failed or hung in `simulate`, or a
@@ -13,7 +13,7 @@ import pytest
 import mechdsl
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError
-from mechdsl.preflight import _mass_problems, preflight
+from mechdsl.eom.preflight import _mass_problems, preflight
 
 from conftest import MODELS
 

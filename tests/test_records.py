@@ -1,4 +1,4 @@
-"""mechdsl.records.record: the same class as @dataclass(frozen=True), made cheaply (issue 12).
+"""mechdsl.model.records.record: the same class as @dataclass(frozen=True), made cheaply (issue 12).
 Each behaviour is compared with a real frozen dataclass of the same fields."""
 import dataclasses
 import math
@@ -6,9 +6,9 @@ import pickle
 
 import pytest
 
-from mechdsl import ir
+from mechdsl.model import ir
 from mechdsl.diagnostics import Span
-from mechdsl.records import record
+from mechdsl.model.records import record
 
 
 def pair(body, **options):

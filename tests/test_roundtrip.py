@@ -1,8 +1,8 @@
 """parse -> print -> parse gives the same AST, for every shipped model and tricky snippets."""
 import pytest
 
-from mechdsl.parser import parse
-from mechdsl.printer import to_source
+from mechdsl.frontend.parser import parse
+from mechdsl.frontend.printer import to_source
 
 from conftest import model_files
 

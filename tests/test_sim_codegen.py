@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mechdsl.codegen import FastFunction, casadi_functions, compile_functions, find_compiler
+from mechdsl.eom.codegen import FastFunction, casadi_functions, compile_functions, find_compiler
 from mechdsl.diagnostics import MechError
 from mechdsl.simulate import simulate
 from conftest import needs_cc
@@ -146,7 +146,7 @@ def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
     assert b_c.stats["jac_evals"] > 0
     np.testing.assert_allclose(b_c.q, b_vm.q, rtol=0, atol=1e-7)
     # second build: the same code is found in the cache
-    from mechdsl.codegen import _build
+    from mechdsl.eom.codegen import _build
 
     _, note, lib = compile_functions([_build(e, "energy", None)])
     _, note2, lib2 = compile_functions([_build(e, "energy", None)])
@@ -204,7 +204,7 @@ def test_bound_fast_function_equals_plain_calls():
 def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
     import threading
 
-    from mechdsl.codegen import _build
+    from mechdsl.eom.codegen import _build
 
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
     if find_compiler() is None:
@@ -238,7 +238,7 @@ def test_compiler_version_is_asked_once_per_compiler(tmp_path, monkeypatch):
     import os
     import subprocess
 
-    from mechdsl.codegen import compiler_version
+    from mechdsl.eom.codegen import compiler_version
 
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
     cc = tmp_path / "fakecc"

@@ -81,7 +81,7 @@ def test_non_finite_right_hand_side_at_the_start():
     q, qd, t, p = ca.SX.sym("q", 1), ca.SX.sym("qd", 1), ca.SX.sym("t"), ca.SX.sym("p", 0)
     # V = -sqrt(q): the force sqrt'(q) is infinite at q = 0, where the run starts
     e = E.from_lagrangian("Root", ["q"], [], [], q, qd, t, p, 0.5 * qd[0] ** 2, -ca.sqrt(q[0]))
-    # at the start the start check refuses it (mechdsl.preflight): a coded error, no run
+    # at the start the start check refuses it (mechdsl.eom.preflight): a coded error, no run
     with pytest.raises(MechError) as ex:
         simulate(e, 1.0, points=11)
     assert ex.value.first.code == "E744" and "q" in ex.value.first.message

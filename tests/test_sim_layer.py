@@ -148,7 +148,7 @@ def _slow_pendulum_run(**kw):
 
     import casadi as ca
 
-    from mechdsl.codegen import casadi_functions
+    from mechdsl.eom.codegen import casadi_functions
 
     class Slow(ca.Callback):
         def __init__(self, f):
@@ -257,7 +257,7 @@ def test_non_finite_results_fail_with_time_and_coordinate(monkeypatch):
     """A back end that returns inf/nan without noticing: the run fails at the first such
     time, names the coordinate and keeps the results before it."""
     import mechdsl.symplectic as symp
-    from mechdsl.result import Result
+    from mechdsl.output.result import Result
 
     def broken(eom, t_end, **kw):
         t = np.linspace(0.0, t_end, 6)
@@ -348,7 +348,7 @@ def test_mech_simulate_imports_only_what_it_needs(tmp_path):
 
     code = ("import sys\nfrom mechdsl.cli import main\n"
             f"main(['simulate', {str(MODELS / 'double_pendulum.mech')!r}, '--t-end', '0.1', '--no-progress'])\n"
-            "print(sorted(m for m in ('mechdsl.bench', 'mechdsl.impacts', 'mechdsl.dae', 'mechdsl.plot', "
+            "print(sorted(m for m in ('mechdsl.bench', 'mechdsl.impacts', 'mechdsl.dae', 'mechdsl.output.plot', "
             "'matplotlib', 'scipy.optimize') if m in sys.modules))\n")
     env = {**__import__("os").environ, "MECHDSL_CACHE": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)

@@ -73,7 +73,7 @@ def test_loads_text_model_and_failure_report():
 
 
 def test_parameter_variants_share_functions_and_give_their_own_numbers():
-    from mechdsl.codegen import casadi_functions
+    from mechdsl.eom.codegen import casadi_functions
 
     m = mechdsl.load(MODELS / "pendulum.mech", model="PendulumLagrange")
     m2 = m.with_params(L=2.0)

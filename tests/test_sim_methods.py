@@ -119,7 +119,7 @@ def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
     constrained models the DAE driver (each called with the settings of the run)."""
     import mechdsl.dae as dae
     import mechdsl.symplectic as symp
-    from mechdsl.result import Result
+    from mechdsl.output.result import Result
 
     def fake(tag, calls):
         def run(eom, t_end, **kw):
@@ -139,7 +139,7 @@ def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
 
     c = pendulum()
     c = c.replace(g=ca.SX(c.q[0] ** 2 - 1), constraint_names=("g1",))  # any constraint routes to the DAE helper
-    monkeypatch.setattr("mechdsl.preflight.check_start", lambda *a, **k: None)   # (q0 is not on g = 0)
+    monkeypatch.setattr("mechdsl.eom.preflight.check_start", lambda *a, **k: None)   # (q0 is not on g = 0)
     dcalls = []
     monkeypatch.setattr(dae, "simulate_dae", fake("bdf", dcalls))
     r = simulate(c, 2.0, rtol=1e-7)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mechdsl.plot import plot_result
+from mechdsl.output.plot import plot_result
 from mechdsl.simulate import simulate
 from sim_models import chain, pendulum
 

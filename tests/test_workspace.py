@@ -1,4 +1,4 @@
-"""The frozen EOM, its workspace (mechdsl/workspace.py) and the one recorder (simulation/record.py)."""
+"""The frozen EOM, its workspace (mechdsl/eom/workspace.py) and the one recorder (simulation/record.py)."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import mechdsl
-from mechdsl import workspace
+from mechdsl.eom import workspace
 from mechdsl.eom import EOM
 from mechdsl.simulation import record as R
 
@@ -183,7 +183,8 @@ def test_an_eom_read_from_the_model_cache_is_frozen_and_keeps_its_functions_in_t
     """modelcache.unpack_eom used to set the fields it did not hold, the Recorders and the
     stored Functions on the EOM after building it; now they are constructor values and
     workspace entries, and a warm run gives the cold run's numbers bit for bit."""
-    from mechdsl import api, codegen, modelcache
+    from mechdsl import api
+    from mechdsl.eom import codegen, modelcache
 
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(api, "_EOM_CACHE", {})

@@ -21,7 +21,7 @@ DT = 0.01
 
 
 def run(size: str = "small") -> Case:
-    from mechdsl.codegen import casadi_functions
+    from mechdsl.eom.codegen import casadi_functions
     from mechdsl.simulate import parameter_vector, simulate, start_vector
 
     check_size(size)

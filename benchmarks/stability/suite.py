@@ -61,7 +61,7 @@ def load(path: str, **kw):
 
 
 def save(fig, out_dir, stem) -> list[Path]:
-    """PNG and SVG, written atomically (mechdsl.fileio)."""
+    """PNG and SVG, written atomically (mechdsl.output.fileio)."""
     import matplotlib.pyplot as plt
 
     from mechdsl.bench.chart import save as save_one

@@ -21,12 +21,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import ir
-from .records import record
+from .model import ir
+from .model.records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
-# (mechdsl.modelcache) never needs it
+# (mechdsl.eom.modelcache) never needs it
 if TYPE_CHECKING:
     from .semantic import Program
 
@@ -36,13 +36,13 @@ _EOM_LOCK = threading.Lock()
 
 
 def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True):
-    from .parser import parse
+    from .frontend.parser import parse
     from .semantic import analyze
 
     if is_text:
         text = path_or_text
     else:
-        from .source import read_source
+        from .frontend.source import read_source
 
         filename, text = read_source(path_or_text)
     program = analyze(parse(text, filename), units=units)
@@ -53,8 +53,8 @@ def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True
 def load(path, model: str | None = None, scene: str | None = None, units: bool = True,
          cache: bool = True) -> "Model":
     """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis.
-    cache=False: neither read nor write the model cache (mechdsl.modelcache)."""
-    from .source import read_source
+    cache=False: neither read nor write the model cache (mechdsl.eom.modelcache)."""
+    from .frontend.source import read_source
 
     filename, text = read_source(str(path))
     return _load_text(text, filename, model, scene, units, cache)
@@ -197,13 +197,13 @@ class Model:
             return list(self._warnings)
         return list(getattr(self.program, "last_warnings", []))
 
-    def _repr_html_(self):                      # notebook displays (mechdsl.display)
-        from .display import model_html
+    def _repr_html_(self):                      # notebook displays (mechdsl.output.display)
+        from .output.display import model_html
 
         return model_html(self)
 
     def _repr_markdown_(self):
-        from .display import model_markdown
+        from .output.display import model_markdown
 
         return model_markdown(self)
 
@@ -270,7 +270,7 @@ class Model:
         return m
 
     def _with_real(self, values: dict[str, float]) -> "Model":
-        from .exprs import evaluate
+        from .model.exprs import evaluate
 
         env: dict[str, float] = {}
         params = []
@@ -318,7 +318,7 @@ class Model:
                 from .mechanics import derive
 
                 base = derive(self.model)
-                from .modelcache import record_callables
+                from .eom.modelcache import record_callables
 
                 base = record_callables(base)     # point positions a run asks for are stored with it
                 with _EOM_LOCK:             # models simulated in several threads
@@ -332,7 +332,7 @@ class Model:
     @property
     def workspace(self):
         """What is derived from the equations and kept (Functions, the recorder's, searches):
-        ``mechdsl.workspace.Workspace`` of this model's EOM, alive as long as the model."""
+        ``mechdsl.eom.workspace.Workspace`` of this model's EOM, alive as long as the model."""
         return self.eom.workspace
 
     def _remember(self) -> None:
@@ -342,7 +342,7 @@ class Model:
             self._cache.remember(self._eom)
 
     def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
-        """CasADi Functions (mechdsl.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
+        """CasADi Functions (mechdsl.eom.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
         "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds
         the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``.
 
@@ -354,7 +354,7 @@ class Model:
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
         recomputed value, so it cannot go stale.  p then holds the other parameters, in
         order, named by ``.parameter_names`` of the returned mapping."""
-        from .codegen import casadi_functions
+        from .eom.codegen import casadi_functions
 
         fixed = self._fixed_entries(fixed_parameters)
         # compiled: with first and second derivatives in the library, so that Jacobians and exact
@@ -380,7 +380,7 @@ class Model:
         from .simulation.inputs import start_vector
         from .simulate import choose_method, default_inputs, fixed_step_count, min_step
         from . import integrators as I
-        from .codegen import casadi_functions
+        from .eom.codegen import casadi_functions
         import casadi as ca
 
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
@@ -449,7 +449,7 @@ class Model:
 
     def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
                  method: str | None = None, points: int | None = None, progress=None, **kw):
-        """Integrate from the start values to t_end; returns a mechdsl.result.Result.
+        """Integrate from the start values to t_end; returns a mechdsl.output.result.Result.
 
         Settings resolve once, argument > scene > default (mechdsl.simulation.settings):
         t_end, rtol, atol, method, points and every other field of SimulationSettings
@@ -461,7 +461,7 @@ class Model:
                                                  **kw), progress=progress)
         finally:
             self._remember()                         # with what the run derived on the way (lazy M, bias)
-        r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.display
+        r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.output.display
         return r
 
     def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
@@ -519,20 +519,20 @@ class Model:
     def draw(self, t: float | None = None, q=None, **kw):
         """The mechanism as a matplotlib Figure: at coordinates q, else at time t of a run from the
         start values, else at the start (docs/animate.md)."""
-        from .display import draw_model
+        from .output.display import draw_model
 
         return draw_model(self, t, q, **kw)
 
     def equations(self, form: str = "lagrange"):
         """The equations of motion as sympy equations: form "lagrange" (M q'' = bias, one per
         coordinate) or "hamilton" (q' = dH/dp, p' = -dH/dq).  Displays typeset in notebooks."""
-        from .display import equations
+        from .output.display import equations
 
         return equations(self, form)
 
     def summary(self, derive: bool = False) -> str:
         """Counts and formulation; derive=True asks the mechanics which route it takes."""
-        from .formulation import describe
+        from .model.formulation import describe
 
         route = None
         if derive:
@@ -589,7 +589,7 @@ class InputInfo:
 
 def _dependents_of(eom, fixed: set[int]) -> set[int]:
     """Entries of p computed (by bindings) only from the free parameters among ``fixed``."""
-    from .codegen import casadi_functions, free_parameters
+    from .eom.codegen import casadi_functions, free_parameters
 
     free = free_parameters(eom)
     f = casadi_functions(eom, names=("parameters",))["parameters"]
@@ -634,7 +634,7 @@ def _number(name: str, v) -> float:
 
 
 def _literal(v, name: str = "value"):
-    from . import ast
+    from .frontend import ast
 
     if isinstance(v, bool):
         return ast.Bool(value=v)
@@ -680,7 +680,7 @@ def _overrides_of(items, model: ir.Model) -> dict:
 
 class _Cache:
     """Where a Model's resolved IR and derived equations are remembered on disk
-    (mechdsl.modelcache): its source, the target asked for and the structural overrides.
+    (mechdsl.eom.modelcache): its source, the target asked for and the structural overrides.
     Models of the same structure (other parameter values or settings) share it; the entry
     always holds the IR of the Model the key names (``owner``)."""
 
@@ -695,7 +695,7 @@ class _Cache:
     @property
     def key(self) -> str:
         if self._key is None:
-            from . import modelcache
+            from .eom import modelcache
 
             text, filename, units = self.source
             self._key = modelcache.key(text, filename, units, self.request, self.items)
@@ -706,8 +706,8 @@ class _Cache:
 
     def lookup(self) -> "Model | None":
         """The Model stored under this key, with its equations, or None (not stored, unusable)."""
-        from . import modelcache
-        from .report import remember_source
+        from .eom import modelcache
+        from .diagnostics import remember_source
 
         entry = modelcache.read(self.key)
         if entry is None:
@@ -731,7 +731,7 @@ class _Cache:
     def claim(self, m: "Model") -> None:
         """``m`` is the Model this key names: store its IR now (a later run with other
         structural settings finds its parameters without parsing), the equations when derived."""
-        from . import modelcache
+        from .eom import modelcache
 
         if self.owner is None:
             self.owner = (m.model, m.scene, m._target, m.warnings)
@@ -739,7 +739,7 @@ class _Cache:
 
     def remember(self, eom) -> None:
         """Store the owner's IR with ``eom`` unless the entry already holds at least as much."""
-        from . import modelcache
+        from .eom import modelcache
 
         if self.owner is None:
             return

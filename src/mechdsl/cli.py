@@ -78,7 +78,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
 
 
 def _limit(text: str) -> tuple[str, int]:
-    from .limits import parse_setting
+    from .frontend.limits import parse_setting
 
     try:
         return parse_setting(text)
@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         if not getattr(args, "_run", None):
             ap.print_help(sys.stderr)
             return 2
-        from .limits import override
+        from .frontend.limits import override
 
         with override(dict(getattr(args, "limit", None) or [])):
             return int(args._run(args) or 0)
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mech: error: {e}", file=sys.stderr)
         return 2
     except MechError as e:
-        from .report import print_diagnostics
+        from .diagnostics import print_diagnostics
 
         # diagnostics of later phases that carry no source position are located at the model
         # (or scene) the command worked on, else at the file

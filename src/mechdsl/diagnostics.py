@@ -13,10 +13,12 @@ Rendered form (``render``)::
 """
 from __future__ import annotations
 
+import sys
+
 from dataclasses import field
 from typing import Iterable, Sequence
 
-from .records import record
+from .model.records import record
 
 
 @record(order=True)
@@ -65,7 +67,7 @@ class MechError(Exception):
     def __str__(self) -> str:
         """The same located text the command line prints: ``file:line:col: error[CODE]: ...``, the
         source line, a caret and the hint, one block per diagnostic."""
-        from .report import format_diagnostics
+        from .diagnostics import format_diagnostics
 
         return format_diagnostics(self.diagnostics)
 
@@ -144,3 +146,31 @@ def render(d: Diagnostic, source: str | None = None) -> str:
     if d.help:
         out.append(f"  help: {d.help}")
     return "\n".join(out)
+
+
+# --- printing diagnostics with their source lines (sources are cached by file name)
+_SOURCES: dict[str, str] = {}
+
+
+def remember_source(filename: str, text: str) -> None:
+    _SOURCES[filename] = text
+
+
+def forget_source(filename: str) -> None:
+    _SOURCES.pop(filename, None)
+
+
+def source_of(filename: str) -> str | None:
+    return _SOURCES.get(filename)
+
+
+def format_diagnostics(diags: Iterable[Diagnostic]) -> str:
+    return "\n".join(render(d, source_of(d.span.file)) for d in diags)
+
+
+def print_diagnostics(diags: Iterable[Diagnostic], file=None) -> None:
+    diags = list(diags)
+    print(format_diagnostics(diags), file=file or sys.stderr)
+    n_err = sum(d.severity == "error" for d in diags)
+    if n_err > 1:
+        print(f"{n_err} errors", file=file or sys.stderr)

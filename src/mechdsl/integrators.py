@@ -30,7 +30,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .records import record
+from .model.records import record
 
 # method name -> (backend, plugin or scipy class name, options, description)
 METHODS: dict[str, tuple[str, str, dict, str]] = {
@@ -93,7 +93,7 @@ class Progress:
                 from tqdm import tqdm
             except ImportError:  # pragma: no cover - tqdm is a core dependency
                 return
-            from .display import notebook_bar
+            from .output.display import notebook_bar
 
             self.bar = notebook_bar(total=round(t1 - t0, 12), desc=label, unit="s", leave=False)   # in Jupyter
             if self.bar is None:
@@ -471,7 +471,7 @@ class CasadiPlugin(IntegratorPlugin):
 class ScipyPlugin(IntegratorPlugin):
     def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
                 u=None):
-        from .codegen import FastFunction
+        from .eom.codegen import FastFunction
 
         uv = np.zeros(0) if u is None else np.ravel(u)
         rhs = FastFunction(funcs["ode"]).bind(u=uv, p=p)

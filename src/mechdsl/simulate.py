@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 
 from . import integrators as I
-from .codegen import FastFunction, casadi_functions
+from .eom.codegen import FastFunction, casadi_functions
 from .diagnostics import UsageError, did_you_mean
-from .result import Failure, Result
+from .output.result import Failure, Result
 from .eom import parameter_vector
 from .simulation.inputs import start_vector  # noqa: F401  (re-exported: one builder)
 from .simulation.record import ENERGY_NAMES
@@ -607,7 +607,7 @@ def _integral_function(eom, pv):
 
     import casadi as ca
 
-    from .codegen import cache_dir
+    from .eom.codegen import cache_dir
 
     path = None
     try:
@@ -637,7 +637,7 @@ def _integral_function(eom, pv):
         f = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()), ["t", "x", "p"], list(sig))
     if path is not None:
         try:
-            from .fileio import write_atomic
+            from .output.fileio import write_atomic
 
             path.parent.mkdir(parents=True, exist_ok=True)
             write_atomic(path, "none" if f is None else f.serialize(), overwrite=True)

@@ -30,7 +30,7 @@ import time as _time
 import numpy as np
 
 from .diagnostics import UsageError
-from .result import Failure, Result
+from .output.result import Failure, Result
 
 from .simulation.registry import FIXED_METHODS
 

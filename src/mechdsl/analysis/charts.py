@@ -206,7 +206,7 @@ def quaternion_model(eom, joints: list[str]):
 
 
 def _quaternion_model(eom, joints: list[str]):
-    from .. import ir
+    from ..model import ir
     from ..mechanics import derive
 
     model = eom.model
@@ -268,8 +268,8 @@ def _quaternion_model(eom, joints: list[str]):
 
 
 def _coords_used_outside_joints(model) -> set[str]:
-    from .. import ir
-    from ..exprs import walk
+    from ..model import ir
+    from ..model.exprs import walk
 
     used: set[str] = set()
 

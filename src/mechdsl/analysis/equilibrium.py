@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import display as _display
+from ..output import display as _display
 from ..eom import reported_multipliers
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from . import charts
@@ -100,7 +100,7 @@ class Equilibrium:
     def values(self) -> dict[str, float]:
         return {c: float(v) for c, v in zip(self.coords, self.q)}
 
-    _repr_html_ = _display.equilibrium_html          # notebook displays (mechdsl.display)
+    _repr_html_ = _display.equilibrium_html          # notebook displays (mechdsl.output.display)
     _repr_markdown_ = _display.equilibrium_markdown
 
     @property

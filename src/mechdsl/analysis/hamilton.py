@@ -333,7 +333,7 @@ def _lname(c):
 
 def _lagrangian_for(model):
     """(SymbolicLagrangian, eom or None) for an ir.Model, an EOM or an api Model."""
-    from .. import ir
+    from ..model import ir
     from .symbolic import equation_layer_only, from_model, lagrangian_of
 
     if hasattr(model, "T") and hasattr(model, "qd"):          # an EOM

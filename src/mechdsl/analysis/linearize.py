@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import display as _display
+from ..output import display as _display
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from .constraints import constrained, setup
 from .core import dense, param_vector, parts, structure, wrap_angle
@@ -56,7 +56,7 @@ class Linearization:
     multiplier_scales: np.ndarray | None = None
     stiffness: np.ndarray | None = None
 
-    _repr_html_ = _display.linearization_html        # notebook displays (mechdsl.display)
+    _repr_html_ = _display.linearization_html        # notebook displays (mechdsl.output.display)
     _repr_markdown_ = _display.linearization_markdown
 
     @property

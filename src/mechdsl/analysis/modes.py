@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..fileio import write_atomic
+from ..output.fileio import write_atomic
 
 
 @dataclass
@@ -121,7 +121,7 @@ class Modes:
         if title:
             fig.suptitle(title, fontsize=10)
         fig.tight_layout()
-        from ..plot import save_figure
+        from ..output.plot import save_figure
 
         return save_figure(fig, path, overwrite=overwrite)
 

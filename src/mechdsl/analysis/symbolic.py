@@ -191,7 +191,7 @@ def from_eom(eom) -> SymbolicLagrangian:
 
 def equation_layer_only(model) -> bool:
     """True when the model is written with T, V, D, Q only (no bodies, joints or other forces)."""
-    from .. import ir
+    from ..model import ir
 
     return (not model.bodies and not model.joints and not model.constraints
             and all(isinstance(f, ir.GeneralizedForce) for f in model.forces))
@@ -201,8 +201,8 @@ def from_model(model) -> SymbolicLagrangian:
     """T, V, D, Q of an equation-layer ir.Model through exprs.to_sympy (independent of CasADi)."""
     import sympy as sp
 
-    from .. import ir
-    from ..exprs import to_sympy
+    from ..model import ir
+    from ..model.exprs import to_sympy
 
     if not equation_layer_only(model):
         raise Untranslatable("the ir route covers equation-layer models (T, V, D, Q) only")

@@ -13,7 +13,7 @@ class BarStage(Blitted):
 
     def __init__(self, names, units, t, Q, *, title="", size=(480, 400), dpi=80):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from ..plot import colours, new_figure
+        from ..output.plot import colours, new_figure
 
         self.t = np.asarray(t, float)
         self.Q = np.asarray(Q, float).reshape(len(self.t), -1)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import ir
+from ..model import ir
 from ..diagnostics import UsageError, did_you_mean
 
 RIM = 24                      # samples on a disk's rim

@@ -90,7 +90,7 @@ class Stage(Blitted):
 
     def __init__(self, geometry, t, X, *, view="auto", events=(), title="", size=(480, 400), dpi=80):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from ..plot import colours, new_figure
+        from ..output.plot import colours, new_figure
 
         check_view(view)
         self.view = detect_view(X, geometry.anchors) if view == "auto" else view

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import UsageError
-from ..fileio import atomic_target, check_writable, commit
+from ..output.fileio import atomic_target, check_writable, commit
 
 OWN_MARK = '"generator": "mechdsl"'      # what fileio.is_own_output looks for: a rerun may replace the file
 FORMATS = {".gif": "animated GIF", ".html": "a web page with play/pause and a scrubber",

@@ -13,7 +13,7 @@ import math
 from pathlib import Path
 
 from ..diagnostics import UsageError
-from ..fileio import atomic_target, check_writable, commit, output_folder
+from ..output.fileio import atomic_target, check_writable, commit, output_folder
 from . import measure
 
 FLOOR = 1e-17        # zero errors are drawn here (log axes)

@@ -58,7 +58,7 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     compiled_note, native_code = None, False
     if kw.pop("compiled", False):
         # the same native code as the DAE layer's compiled runs, so that a chart compares methods
-        from ..codegen import compile_functions
+        from ..eom.codegen import compile_functions
 
         native, compiled_note, _lib = compile_functions(list(funcs.values()), tag="index1", jacobian=False)
         if native and all(native.get(k) is not None for k in funcs):

@@ -7,7 +7,7 @@ import json
 import math
 from pathlib import Path
 
-from ..fileio import check_writable, output_folder, write_atomic
+from ..output.fileio import check_writable, output_folder, write_atomic
 from . import measure
 from .reference import fmt_accuracy, is_floor
 

@@ -157,7 +157,7 @@ def classify_setup(setup: Setup) -> str:
         return "dae"
     if eom.n == 0:
         return "ode"
-    from ..codegen import casadi_functions
+    from ..eom.codegen import casadi_functions
     from ..simulate import choose_method, parameter_vector, start_vector
 
     pv = parameter_vector(eom, setup.p)
@@ -172,7 +172,7 @@ def symplectic_dt(setup: Setup, method: str, tol: float, points: int) -> float:
     its fixed-step methods, h omega = 0.5 tol^(1/order) (docs/simulate.md), with the
     method's order; then shortened so that a whole number of steps falls in every output
     interval (the recorded times are then the output grid)."""
-    from ..codegen import casadi_functions
+    from ..eom.codegen import casadi_functions
     from ..simulate import fixed_step_count, parameter_vector, start_vector
 
     order = SYMPLECTIC_ORDER[method]

@@ -3,7 +3,15 @@ from __future__ import annotations
 
 import sys
 
-from ._common import add_cache_arg, add_force_arg, add_set_arg, add_target_args, load_model, number, target_line
+from ._common import (
+    add_cache_arg,
+    add_force_arg,
+    add_set_arg,
+    add_target_args,
+    load_model,
+    number,
+    target_line,
+)
 
 HELP = "simulate a model and write an animation of the mechanism (.gif, .html or .mp4)"
 

@@ -67,9 +67,17 @@ def default_methods(kind: str) -> list[str]:
 
 def run(args) -> int:
 
-    from ..bench import Setup, format_table, parse_tolerances, parse_variants, run_bench, write_chart, write_tables
+    from ..bench import (
+        Setup,
+        format_table,
+        parse_tolerances,
+        parse_variants,
+        run_bench,
+        write_chart,
+        write_tables,
+    )
     from ..bench.runner import classify_setup
-    from ..fileio import check_writable, output_folder
+    from ..output.fileio import check_writable, output_folder
     from ._common import load_model, target_line
 
     if args.repeats is not None and args.repeats < 1:

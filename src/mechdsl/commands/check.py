@@ -1,11 +1,11 @@
-"""``mech check FILE...``: parse, analyze, derive and check the start state (mechdsl.preflight);
+"""``mech check FILE...``: parse, analyze, derive and check the start state (mechdsl.eom.preflight);
 print each model's formulation, or the diagnostics."""
 from __future__ import annotations
 
 import sys
 
 from ..diagnostics import MechError
-from ..report import format_diagnostics
+from ..diagnostics import format_diagnostics
 
 
 def add_parser(sub):
@@ -22,8 +22,8 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..api import Model
-    from ..parser import parse_file
-    from ..preflight import check_start
+    from ..frontend.parser import parse_file
+    from ..eom.preflight import check_start
     from ..semantic import analyze
 
     status = 0
@@ -72,7 +72,7 @@ def run(args) -> int:
 
 
 def _extra_lines(m) -> list[str]:
-    from ..friction import friction_notes
+    from ..model.friction import friction_notes
     from ..simulate import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
 
     """Lines other phases contribute (loops, first integrals, ...), each guarded: check never fails on them."""

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 
-from ..fileio import check_writable, write_atomic
+from ..output.fileio import check_writable, write_atomic
 from ._common import add_force_arg, target_line
 
 EMITS = ("ast", "source", "model", "eom", "problem")
@@ -27,9 +27,9 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..api import Model
-    from ..dump import dump_ast, dump_model
-    from ..parser import parse_file
-    from ..printer import to_source
+    from ..frontend.dump import dump_ast, dump_model
+    from ..frontend.parser import parse_file
+    from ..frontend.printer import to_source
     from ..semantic import analyze
 
     if args.output:
@@ -53,7 +53,7 @@ def run(args) -> int:
                 t_end = 10.0
             text = dump(m.problem(t_end=t_end))
         else:
-            from ..dump_eom import dump_eom
+            from ..eom.dump_eom import dump_eom
 
             text = dump_eom(m.eom)
     if args.output:

@@ -4,8 +4,16 @@ from __future__ import annotations
 
 import json
 
-from ._common import (add_cache_arg, add_force_arg, add_guess_arg, add_set_arg, add_target_args,
-                      assignments, load_model, target_line)
+from ._common import (
+    add_cache_arg,
+    add_force_arg,
+    add_guess_arg,
+    add_set_arg,
+    add_target_args,
+    assignments,
+    load_model,
+    target_line,
+)
 
 
 def add_parser(sub):
@@ -32,7 +40,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..analysis.equilibrium import equilibria
-    from ..fileio import check_writable, write_atomic
+    from ..output.fileio import check_writable, write_atomic
 
     if args.output:
         check_writable(args.output, args.force)
@@ -53,7 +61,7 @@ def run(args) -> int:
 
 def _steady(args, m, guesses) -> int:
     from ..analysis.steady import steady_motions
-    from ..fileio import write_atomic
+    from ..output.fileio import write_atomic
 
     pins = assignments(args.steady, "--steady")
     found = steady_motions(m.eom, pins, guesses=guesses or None, t=args.time)

@@ -4,8 +4,16 @@ from __future__ import annotations
 
 import re
 
-from ._common import (add_cache_arg, add_force_arg, add_guess_arg, add_set_arg, add_target_args,
-                      assignments, load_model, target_line)
+from ._common import (
+    add_cache_arg,
+    add_force_arg,
+    add_guess_arg,
+    add_set_arg,
+    add_target_args,
+    assignments,
+    load_model,
+    target_line,
+)
 
 
 def add_parser(sub):
@@ -35,7 +43,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..analysis.linearize import linearize
-    from ..fileio import check_figure, check_writable, write_atomic
+    from ..output.fileio import check_figure, check_writable, write_atomic
 
     for out in (args.output, args.csv):
         if out:

@@ -46,8 +46,8 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from ..fileio import check_figure, check_writable
-    from ..result import sidecar_path
+    from ..output.fileio import check_figure, check_writable
+    from ..output.result import sidecar_path
 
     for path in (args.output, args.output and sidecar_path(args.output)):   # before any work is done
         if path:
@@ -157,7 +157,7 @@ def write_outputs(r, csv_path, plot_path, force) -> tuple[list[str], list[str]]:
     if csv_path:
         written += attempt(lambda p, f: r.to_csv(p, overwrite=f), csv_path)
     if plot_path:
-        from ..plot import plot_result
+        from ..output.plot import plot_result
 
         written.append(str(attempt(lambda p, f: plot_result(r, p, overwrite=f), plot_path)))
     return written, lost

@@ -53,7 +53,7 @@ def add_parser(sub):
 def run(args) -> int:
     import numpy as np
 
-    from ..fileio import check_figure, check_writable
+    from ..output.fileio import check_figure, check_writable
     from ..sample import normal, uniform
     from ..sweep.spec import parse_range
 
@@ -101,7 +101,7 @@ def run(args) -> int:
                      rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
     written = [nc] if nc else []
     if args.output and args.output.endswith(".csv"):
-        from ..fileio import write_atomic
+        from ..output.fileio import write_atomic
         from ..sweep import to_frame
 
         write_atomic(args.output, to_frame(ds).to_csv(index=False), overwrite=True)

@@ -26,8 +26,18 @@ import math
 
 import numpy as np
 
-from .stepper import (GridIntegrators, NonFiniteError, Stepper, StepError, call_integrator, chunk_span,
-                      integrator_options, ode_plugin, scaled_dae, state_names)
+from .stepper import (
+    GridIntegrators,
+    NonFiniteError,
+    Stepper,
+    StepError,
+    call_integrator,
+    chunk_span,
+    integrator_options,
+    ode_plugin,
+    scaled_dae,
+    state_names,
+)
 
 RATE_FACTOR = 10.0
 

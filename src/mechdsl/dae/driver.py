@@ -32,7 +32,7 @@ import numpy as np
 
 from ..diagnostics import UsageError
 from ..eom import parameter_vector
-from ..result import Failure, Result
+from ..output.result import Failure, Result
 from ..simulation.inputs import fixed_start
 from .dof import dof_report, short_list, singular_ratio, singular_ratios
 from .init import initialize

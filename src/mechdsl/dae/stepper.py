@@ -249,10 +249,10 @@ class GridIntegrators:
 
     def _compile(self) -> None:
         """The ODE right-hand side as C, compiled and loaded (cached by the code's hash, like
-        mechdsl.codegen for the tree models); the virtual machine when that is not possible."""
+        mechdsl.eom.codegen for the tree models); the virtual machine when that is not possible."""
         import casadi as ca
 
-        from ..codegen import compile_functions
+        from ..eom.codegen import compile_functions
         from ..integrators import dae_function
 
         d = self.dae

@@ -280,7 +280,7 @@ class ConstrainedSystem:
         """Evaluate fn[name] through Function.buffer (the driver calls these at every check)."""
         f = self.fast.get(name)
         if f is None:
-            from ..codegen import FastFunction
+            from ..eom.codegen import FastFunction
 
             f = self.fast[name] = FastFunction(self.fn[name])
         out = f(*args)
@@ -306,7 +306,7 @@ class ConstrainedSystem:
         key = f"{name}_map_{K}"
         f = self.fast.get(key)
         if f is None:
-            from ..codegen import FastFunction
+            from ..eom.codegen import FastFunction
 
             f = self.fast[key] = FastFunction(self.fn[name].map(K))
         return f

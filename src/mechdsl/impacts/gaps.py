@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .. import exprs as X
-from .. import ir
+from ..model import exprs as X
+from ..model import ir
 from ..diagnostics import Diagnostic, MechError
 
 SURFACES = ("plane", "sphere", "point", "gap")

@@ -5,7 +5,7 @@ import time as _time
 
 import numpy as np
 
-from .. import result as R
+from ..output import result as R
 from ..diagnostics import Diagnostic, MechError, UsageError
 from .gaps import contact_gaps
 from .options import ContactOptions
@@ -221,7 +221,7 @@ def _contact_setup(eom, contacts, fixations):
         hash(key)
     except TypeError:
         return build()
-    from ..workspace import of
+    from ..eom.workspace import of
 
     gaps, fixes, functions = of(eom).memo(key, build)
     return list(gaps), list(fixes), functions

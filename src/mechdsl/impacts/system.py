@@ -28,7 +28,7 @@ def contact_functions(eom, gaps, fixations) -> dict:
     run wraps them in its own FastFunction buffers."""
     import casadi as ca
 
-    from ..codegen import dense_function
+    from ..eom.codegen import dense_function
     from .gaps import point_position
 
     q, qd, t, P = eom.q, eom.qd, eom.t, eom.p

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .. import ir
+from ..model import ir
 from . import joints as J
 from .rotations import rot, quat_matrix, unit_axis_index
 from .spatial import vee

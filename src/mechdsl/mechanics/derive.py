@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from .. import eom as eom_mod
-from .. import exprs, ir
+from ..model import exprs, ir
 from ..diagnostics import Diagnostic, MechError, UsageError
 from . import chain, dynamics
 from . import templates as tpl

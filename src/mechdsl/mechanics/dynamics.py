@@ -42,7 +42,7 @@ def _p1(tree: Tree, kin: Kinematics, fext: dict):
 
 
 def _no_mass_hint(tree: Tree, joint) -> str:
-    from ..preflight import point_rotation_hint
+    from ..eom.preflight import point_rotation_hint
 
     hint = point_rotation_hint(tree.model, joint)
     return hint or "a joint variable needs inertia beyond it (or prescribe its motion)"

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 
-from .. import ir
+from ..model import ir
 from ..diagnostics import Diagnostic, MechError
 from .kinematics import Kinematics
 from . import templates as tpl

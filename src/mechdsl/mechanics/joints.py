@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .. import ir
+from ..model import ir
 from ..diagnostics import Diagnostic, MechError
 from .rotations import euler_sequence
 

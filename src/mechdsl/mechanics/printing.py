@@ -11,7 +11,7 @@ seconds: what is printed depends on the model only, not on the machine or its lo
 """
 from __future__ import annotations
 
-from .. import ir
+from ..model import ir
 
 MAX_COORDS = 6
 MAX_OPS = 3000            # operations (sympy count_ops) of one expression

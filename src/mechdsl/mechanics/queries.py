@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from .. import exprs, ir
+from ..model import exprs, ir
 from ..diagnostics import Diagnostic, MechError
 from .kinematics import Kinematics
 

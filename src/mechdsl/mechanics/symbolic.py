@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from .. import exprs, ir
+from ..model import exprs, ir
 from ..diagnostics import Diagnostic, MechError
 from . import joints as J
 

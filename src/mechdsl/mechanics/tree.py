@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 
-from .. import exprs, ir
+from ..model import exprs, ir
 from ..diagnostics import Diagnostic, MechError
 from . import joints as J
 from . import templates as tpl

@@ -1,4 +1,4 @@
-"""Phase 2, ``analyze``: AST -> resolved models (:mod:`mechdsl.ir`) and scenes.
+"""Phase 2, ``analyze``: AST -> resolved models (:mod:`mechdsl.model.ir`) and scenes.
 
 ``analyze(file)`` checks the file as a whole and returns a :class:`Program`; models and
 scenes are flattened on request (``program.model(name)``, ``program.scene(name)``), so a
@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import math
 
-from .. import ast
-from .. import ir
-from .. import limits
+from ..frontend import ast
+from ..model import ir
+from ..frontend import limits
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
-from ..printer import expr as print_expr
+from ..frontend.printer import expr as print_expr
 from . import mods as Mods
 from .cycles import containment_cycles
 from .flatten import Flattener
@@ -150,7 +150,7 @@ class Program:
 
 
 def _setting_value(it: ast.Setting, kind: str, values: dict[str, float], model: ir.Model):
-    from .. import exprs as X
+    from ..model import exprs as X
 
     v = it.value
 

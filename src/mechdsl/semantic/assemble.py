@@ -4,8 +4,8 @@ points, joints, forces and contacts (`build_component`) and the `ir.Model` of th
 Functions of the :class:`~mechdsl.semantic.flatten.Flattener` `fl`: they read its state."""
 from __future__ import annotations
 
-from .. import exprs as X
-from .. import ir
+from ..model import exprs as X
+from ..model import ir
 from . import components as K
 from .entries import CompInst, Failed
 from .evaluate import EvalError, fail

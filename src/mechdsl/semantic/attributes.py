@@ -3,8 +3,8 @@
 (j1.phi) and fields. A mixin of :class:`~mechdsl.semantic.flatten.Flattener`."""
 from __future__ import annotations
 
-from .. import ir
-from .. import units as U
+from ..model import ir
+from ..model import units as U
 from ..diagnostics import Span, did_you_mean
 from . import components as K
 from . import values as V

@@ -9,9 +9,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .. import exprs as X
-from .. import ir
-from .. import units as U
+from ..model import exprs as X
+from ..model import ir
+from ..model import units as U
 from .values import ANY, Arr, CompRef, Scalar, Str, ValError, Val, describe_shape, shape_of
 
 REQUIRED = object()

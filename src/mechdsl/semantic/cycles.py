@@ -5,7 +5,7 @@ an A) although both models are parts, which it otherwise checks only inside thei
 """
 from __future__ import annotations
 
-from .. import ast
+from ..frontend import ast
 from ..diagnostics import Diagnostic
 
 

@@ -5,7 +5,7 @@ declaration, E206 unknown base, E207 cycles, E214/E215/E216). A mixin of
 :class:`~mechdsl.semantic.flatten.Flattener`."""
 from __future__ import annotations
 
-from .. import ast
+from ..frontend import ast
 from ..diagnostics import did_you_mean
 from . import components as K
 from . import instances as Inst

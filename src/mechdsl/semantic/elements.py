@@ -4,7 +4,7 @@ frame of a child-less joint named as a point or body (issue 17), and the body a 
 A mixin of :class:`~mechdsl.semantic.flatten.Flattener`."""
 from __future__ import annotations
 
-from .. import ir
+from ..model import ir
 from ..diagnostics import Span, did_you_mean
 from . import components as K
 from . import values as V

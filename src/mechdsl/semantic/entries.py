@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .. import ast
-from .. import ir
+from ..frontend import ast
+from ..model import ir
 from . import components as K
 from .mods import Mod
 from .values import Arr, Val

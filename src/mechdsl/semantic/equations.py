@@ -4,12 +4,12 @@ complete components before anything reads their fields), then energies (terms), 
 :class:`~mechdsl.semantic.flatten.Flattener` `fl`, whose lists they fill."""
 from __future__ import annotations
 
-from .. import ast
-from .. import ir
-from .. import exprs as X
-from .. import units as U
+from ..frontend import ast
+from ..model import ir
+from ..model import exprs as X
+from ..model import units as U
 from ..diagnostics import Span
-from ..printer import expr as print_expr
+from ..frontend.printer import expr as print_expr
 from . import values as V
 from .constraint_names import constraint_name
 from .entries import Failed

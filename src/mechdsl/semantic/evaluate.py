@@ -8,11 +8,11 @@ from __future__ import annotations
 import abc
 import math
 
-from .. import ast
-from .. import exprs as X
-from .. import ir
-from .. import limits
-from .. import units as U
+from ..frontend import ast
+from ..model import exprs as X
+from ..model import ir
+from ..frontend import limits
+from ..model import units as U
 from ..diagnostics import MechError, Diagnostic, Span
 from . import values as V
 from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError

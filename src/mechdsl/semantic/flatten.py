@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import math
 
-from .. import ast
-from .. import ir
-from .. import limits
-from .. import units as U
+from ..frontend import ast
+from ..model import ir
+from ..frontend import limits
+from ..model import units as U
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, Span, did_you_mean
 from . import values as V
 from .assemble import build_model

@@ -1,9 +1,9 @@
 """The `Friction` component lowered to a generalized force (issue 17)."""
 from __future__ import annotations
 
-from .. import exprs as X
-from .. import ir
-from .. import units as U
+from ..model import exprs as X
+from ..model import ir
+from ..model import units as U
 from . import components as K
 from .evaluate import fail
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from .. import ast
-from .. import limits
+from ..frontend import ast
+from ..frontend import limits
 from .entries import Failed
 from .evaluate import EvalError, fail
 from .mods import Mod

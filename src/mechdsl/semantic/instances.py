@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from .. import ast
+from ..frontend import ast
 
 
 def declared_names(program, m: ast.ModelDef, seen: frozenset[str] = frozenset()) -> set[str]:

@@ -4,9 +4,9 @@ attributes from the role's modifier), then the vector starts rewrite those coord
 :class:`~mechdsl.semantic.flatten.Flattener`."""
 from __future__ import annotations
 
-from .. import exprs as X
-from .. import ir
-from .. import units as U
+from ..model import exprs as X
+from ..model import ir
+from ..model import units as U
 from . import components as K
 from . import values as V
 from .entries import COORD_ATTRS, CompInst, constval, pick

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .. import ast
+from ..frontend import ast
 from ..diagnostics import DiagnosticBag, Span
 
 

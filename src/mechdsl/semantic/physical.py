@@ -3,7 +3,7 @@
 ``value_problems(model, env)`` is the entry: the mass properties (E508, E509) and the
 degenerate values (E510-E512) below, judged on the numbers of the parameter values given
 (default: the model's).  It runs when the model is analyzed, when `with_params` / `--set`
-change a parameter, and in the start check (``mechdsl.preflight``) of every simulation.
+change a parameter, and in the start check (``mechdsl.eom.preflight``) of every simulation.
 
 A negative mass or an inertia tensor no rigid body can have (not symmetric, a negative
 principal moment, principal moments that break the triangle inequality I_a + I_b >= I_c)
@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-from .. import exprs as X
-from .. import ir
+from ..model import exprs as X
+from ..model import ir
 from ..diagnostics import Diagnostic
 
 REL_TOL = 1e-9

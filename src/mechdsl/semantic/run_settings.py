@@ -7,8 +7,8 @@ and `simulate` reports it as a located model error (exit 1), not as a usage erro
 """
 from __future__ import annotations
 
-from .. import ast
-from .. import ir
+from ..frontend import ast
+from ..model import ir
 from ..diagnostics import DiagnosticBag
 
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import math
 
-from .. import ast
-from .. import exprs as X
-from .. import ir
-from .. import limits
-from .. import units as U
+from ..frontend import ast
+from ..model import exprs as X
+from ..model import ir
+from ..frontend import limits
+from ..model import units as U
 from ..diagnostics import did_you_mean
 from . import values as V
 from .entries import COORD_ATTRS, Entry, constval

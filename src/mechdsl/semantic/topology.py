@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from .. import exprs as X
-from .. import ir
+from ..model import exprs as X
+from ..model import ir
 from ..diagnostics import DiagnosticBag
 
 

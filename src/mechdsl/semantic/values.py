@@ -1,7 +1,7 @@
 """Values of the analyzer: scalars (an IR expression with its dimension), arrays, strings and
 references to components.  Arithmetic here checks shapes (E3xx) and units (E4xx).
 
-Dimension markers: a :class:`~mechdsl.units.Dim`, ``None`` (unknown: a quantity declared
+Dimension markers: a :class:`~mechdsl.model.units.Dim`, ``None`` (unknown: a quantity declared
 without a unit) or ``ANY`` (a literal number: dimensionless factor in products, wildcard in
 sums).  Unknown dimensions never cause an error; two known, different ones do.
 """
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import contextvars
 from fractions import Fraction
 
-from .. import exprs as X
-from .. import ir
-from .. import units as U
+from ..model import exprs as X
+from ..model import ir
+from ..model import units as U
 
 
 class _Any:

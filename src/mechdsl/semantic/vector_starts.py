@@ -22,9 +22,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import exprs as X
-from .. import ir
-from .. import units as U
+from ..model import exprs as X
+from ..model import ir
+from ..model import units as U
 from . import components as K
 from . import values as V
 from .components import rodrigues

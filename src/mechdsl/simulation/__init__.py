@@ -15,15 +15,15 @@ from __future__ import annotations
 import time
 
 from ..diagnostics import MechError
-from ..result import Result
+from ..output.result import Result
 from .problem import Problem, dump, formulate
 from .settings import SimulationSettings, from_kwargs, resolve
 
 
 def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
-    """Formulate and solve one run, after the start check (mechdsl.preflight: what
+    """Formulate and solve one run, after the start check (mechdsl.eom.preflight: what
     `mech check` accepts can start here; `p`, `x0` and `--set` values are judged too)."""
-    from ..preflight import check_start
+    from ..eom.preflight import check_start
 
     drift = settings.extra.get("drift_bound") or max(10 * settings.atol, 1e-10)   # the DAE's default
     check_start(eom, p=settings.p, x0=settings.x0, t=settings.t_start, drift_bound=drift)
@@ -75,7 +75,7 @@ def solve(problem: Problem, progress=None) -> Result:
                    "compiled": _ran_compiled(meta, r.stats),
                    "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p", "extra")}}
     from ..eom import parameter_vector
-    from ..friction import friction_notes
+    from ..model.friction import friction_notes
 
     eom = problem.eom
     notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ..result import Failure, Result
+from ..output.result import Failure, Result
 
 SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
           "energy_drift", "energy_drift_relative", "invariant_drift", "constraint_drift")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import abc
 
-from ..result import Result
+from ..output.result import Result
 
 
 class Backend(abc.ABC):

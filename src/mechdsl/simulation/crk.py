@@ -4,7 +4,7 @@ Methods ``dopri5`` (Dormand-Prince 5(4)) and ``dop853`` (Dormand-Prince 8(5,3)),
 the step-size control, initial step, error norm and dense output of scipy's RK45 and DOP853
 (``crk.c`` in this package, a small hand-written driver).  The driver and the CasADi C of
 the model's right-hand side ``ode`` are compiled into one shared library with the cached
-compile machinery of ``mechdsl.codegen`` (cache key: the code, flags, compiler and CasADi
+compile machinery of ``mechdsl.eom.codegen`` (cache key: the code, flags, compiler and CasADi
 versions), loaded with ctypes and called once per run in a worker thread (ctypes releases
 the GIL; the main thread shows progress from the rows written and can cancel).  No
 Jacobian is generated.
@@ -78,7 +78,7 @@ def cached_library(key, ode, extra, tag, load, what):
         hit = _LIBS.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1], hit[2]
-    from ..codegen import compile_functions
+    from ..eom.codegen import compile_functions
 
     try:
         loaded, note, path = compile_functions([dense_ode(ode), *extra], tag=tag, jacobian=False,
@@ -197,7 +197,7 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     """(method or None, reason, numbers): compile the dop853 loop (dopri5 at rtol >= 1e-5) when
     the time it saves per run, estimated from the model's size and the run's length, repays the
     estimated compile time within PAYBACK_RUNS runs."""
-    from ..codegen import find_compiler
+    from ..eom.codegen import find_compiler
     from ..simulate import time_scale
 
     if find_compiler() is None:
@@ -233,7 +233,7 @@ class CrkPlugin(I.IntegratorPlugin):
         ode = funcs["ode"]
         fn, _ = library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"))
         if fn is None:
-            from ..codegen import FastFunction
+            from ..eom.codegen import FastFunction
 
             rhs = FastFunction(ode).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
             run = I.run_scipy(scipy_name(method), rhs, None, grid, x0, rtol, atol, max_steps, progress, {},

@@ -29,7 +29,7 @@ from dataclasses import field
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from ..records import record
+from ..model.records import record
 
 HOLDS = ("zoh", "linear")
 
@@ -147,7 +147,7 @@ class Drive:
             return funcs             # zero-order holds come in through u, piece by piece (vector(t))
         import casadi as ca
 
-        from ..codegen import TXUP, jacobian_of
+        from ..eom.codegen import TXUP, jacobian_of
 
         ode = funcs["ode"]
         t = ca.MX.sym("t")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import field
 
-from ..records import record
+from ..model.records import record
 
 from .settings import SimulationSettings
 

@@ -129,7 +129,7 @@ def invariants(eom) -> dict:
 
 
 def monitors(eom) -> dict:
-    from ..codegen import singularity_monitors
+    from ..eom.codegen import singularity_monitors
 
     return {f"singularity({k})": v for k, v in singularity_monitors(eom).items()}
 

@@ -7,7 +7,7 @@ is refused the same way for every model, with one did-you-mean list.
 from __future__ import annotations
 
 from ..diagnostics import UsageError, did_you_mean
-from ..records import record
+from ..model.records import record
 
 ODE, DAE, EVENTS, FIXED = "ode", "dae", "events", "fixed-step"
 

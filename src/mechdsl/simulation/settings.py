@@ -18,7 +18,7 @@ from dataclasses import field
 from typing import Any
 
 from ..diagnostics import UsageError, did_you_mean
-from ..records import record
+from ..model.records import record
 
 DEFAULT_POINTS = 501
 DEFAULT_RTOL = 1e-8

@@ -201,7 +201,7 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
 
 def _resolve_auto(job, d, settings):
     """method=auto, once for the sweep: the choice of a single run at the first run's start."""
-    from ..codegen import casadi_functions
+    from ..eom.codegen import casadi_functions
     from ..simulate import choose_method
     from .runs import _prepare
 
@@ -246,7 +246,7 @@ def _bar(progress, n):
 
 
 def _check_out(out: str, overwrite: bool) -> None:
-    from ..fileio import check_writable
+    from ..output.fileio import check_writable
 
     if not str(out).endswith(".nc"):
         raise UsageError(f"sweep out= must be a .nc file (got {out!r}); write CSV from the Dataset with to_frame")

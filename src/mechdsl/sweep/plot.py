@@ -54,7 +54,7 @@ def heat_map(ds, values: np.ndarray, label: str, path, overwrite: bool = True):
     """A heat map of ``values`` over the sweep's two grid axes (a line over one axis)."""
     from matplotlib.figure import Figure
 
-    from ..plot import save_figure
+    from ..output.plot import save_figure
 
     axes = [a for a in str(ds.attrs.get("grid_axes", "")).split(",") if a]
     if len(axes) not in (1, 2):

@@ -137,7 +137,7 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
     """The one place the sweep touches the model's CasADi Functions: the integrator of a
     single run (same Function, same options as ``simulate_ode``) mapped over k runs."""
     from .. import integrators as I
-    from ..codegen import casadi_functions
+    from ..eom.codegen import casadi_functions
     from ..simulate import DEFAULT_POINTS, MAX_STEPS_TOTAL, min_step
 
     npts = s.points or DEFAULT_POINTS
@@ -166,7 +166,7 @@ def scheme_parameter(pv) -> np.ndarray:
 def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
     from .. import integrators as I
-    from ..result import Result
+    from ..output.result import Result
     from ..simulate import compute_signals, _check_outputs
     from ..simulation import formulate
     from ..simulation import accuracy as A

@@ -27,7 +27,7 @@ class Store:
         else:
             import h5netcdf
 
-            from ..fileio import atomic_target
+            from ..output.fileio import atomic_target
 
             self.part, self.final = atomic_target(path, overwrite)     # renamed when complete
             self._f = h5netcdf.File(self.part, "w")

@@ -9,7 +9,7 @@ it imports neither lark nor the front end nor the mechanics (issue 12's cold sta
     write(key, entry)                              atomic (temporary name, then rename)
     pack_eom(eom) / unpack_eom(data, model)        CasADi SX through one StringSerializer
 
-The file is ``<cache_dir()>/models/<key>.pkl`` (``cache_dir`` of mechdsl.codegen:
+The file is ``<cache_dir()>/models/<key>.pkl`` (``cache_dir`` of mechdsl.eom.codegen:
 MECHDSL_CACHE, else XDG_CACHE_HOME/mechdsl, else ~/.cache/mechdsl): a header line with the
 format and the SHA-256 of the payload, then the payload (a pickle of plain data: the
 ir.Model, the ir.Scene, the front end's warnings and the packed equations).  The hash is
@@ -31,7 +31,7 @@ import sys
 from dataclasses import field, fields
 from pathlib import Path
 
-from .records import record
+from ..model.records import record
 
 FORMAT = "mechdsl-model-cache 4"
 MAX_ENTRIES = 1000          # more: the entries written longest ago are removed
@@ -60,7 +60,8 @@ def key(text: str, filename: str, units: bool, target: tuple, items: tuple) -> s
     (``items``: (name, value) pairs in the order given), the limits in force and the versions."""
     import casadi
 
-    from . import __version__, limits
+    from .. import __version__
+    from ..frontend import limits
 
     parts = (FORMAT, __version__, code_fingerprint(), casadi.__version__, sys.version, filename, bool(units),
              tuple(target), tuple(items), tuple(sorted(limits.current().items())))
@@ -78,7 +79,7 @@ def code_fingerprint() -> str:
     source files and grammar (an edited mechdsl under the same version number, as while
     developing, must not be served equations derived by the old code).  Once per process."""
     if not _FINGERPRINT:
-        here = Path(__file__).resolve().parent
+        here = Path(__file__).resolve().parents[1]     # the mechdsl package
         h = hashlib.sha256()
         files = [here.parents[1] / "grammar" / "mech.lark", here / "_grammar" / "mech.lark"]
         for folder, dirs, names in os.walk(here):
@@ -119,7 +120,7 @@ def read(k: str) -> Entry | None:
 
 def write(k: str, entry: Entry) -> bool:
     """Store ``entry`` atomically; False (and nothing left behind) if the cache is not writable."""
-    from .fileio import _new_temp
+    from ..output.fileio import _new_temp
 
     try:
         payload = pickle.dumps(entry, protocol=pickle.HIGHEST_PROTOCOL)
@@ -240,7 +241,7 @@ def content(eom) -> tuple[frozenset, frozenset, frozenset]:
 
 
 def _functions(eom) -> dict:
-    """The virtual-machine Functions mechdsl.codegen built for ``eom``'s structure, by
+    """The virtual-machine Functions mechdsl.eom.codegen built for ``eom``'s structure, by
     (name, outputs, sx); those read from the cache included."""
     from . import codegen
 
@@ -326,7 +327,7 @@ def unpack_eom(data: dict, model):
     return eom
 
 
-from .eom import EOM  # noqa: E402  (after the helpers: eom imports ir, which the cache needs anyway)
+from . import EOM  # noqa: E402  (after the helpers: eom imports ir, which the cache needs anyway)
 
 _FIELD_NAMES = frozenset(f.name for f in fields(EOM))
 _PENDABLE = frozenset(("M", "bias", "Q", "qdd", "g", "q0", "qd0", "lam", "u", *_CALLABLES))
@@ -361,7 +362,7 @@ class _Again:
 
     def _derived(self):
         if self.full is None:
-            from .mechanics import derive
+            from ..mechanics import derive
 
             self.full = derive(self.model)
         return self.full

@@ -7,8 +7,24 @@ from typing import Callable, Iterator
 
 from . import ir
 from .records import record
-from .ir import (BodyAlpha, BodyOmega, BodyRot, Const, Coord, EnergyRef, Expr, Op, Param, PointAcc,
-                 PointPos, PointVel, ReactionRef, Speed, Time, TimeDer)
+from .ir import (
+    BodyAlpha,
+    BodyOmega,
+    BodyRot,
+    Const,
+    Coord,
+    EnergyRef,
+    Expr,
+    Op,
+    Param,
+    PointAcc,
+    PointPos,
+    PointVel,
+    ReactionRef,
+    Speed,
+    Time,
+    TimeDer,
+)
 
 UNARY_FUNCS = ("sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "exp",
                "log", "log10", "sqrt", "abs", "sign", "floor", "ceil")

@@ -2,7 +2,7 @@
 
 ``@dataclass(frozen=True)`` compiles six methods per class (``exec`` of generated source) and
 builds a docstring with ``inspect.signature``: about 0.4 ms a class, 13 ms for the 33 classes of
-:mod:`mechdsl.ir`, which every run needs (the model cache unpickles an ``ir.Model``).  ``record``
+:mod:`mechdsl.model.ir`, which every run needs (the model cache unpickles an ``ir.Model``).  ``record``
 makes the same class: frozen, ``__eq__`` and ``__hash__`` on the tuple of the fields,
 ``__repr__``, ``__match_args__`` and real ``dataclasses.Field`` objects in
 ``__dataclass_fields__``, so ``dataclasses.fields``, ``replace``, ``asdict`` and

@@ -5,12 +5,12 @@ no modifiers left.  Every name is a flat string (``link[2].b``, ``q[3]``, ``j1.p
 Vector and matrix quantities are tuples of scalar expressions (a vector is a 3-tuple, a
 matrix a 3-tuple of 3-tuples), so every :class:`Expr` is a scalar.
 
-Expressions are small frozen dataclasses (made by :func:`mechdsl.records.record`, which builds
+Expressions are small frozen dataclasses (made by :func:`mechdsl.model.records.record`, which builds
 them cheaply).  Leaves refer to the model's parameters
 (:class:`Param`), generalized coordinates (:class:`Coord`), their speeds (:class:`Speed`,
 i.e. ``der(q)``) and :class:`Time`.  Kinematic queries (:class:`PointPos`, ...) and
 energies (:class:`EnergyRef`) are leaves that ``derive`` replaces by the expressions it
-computes.  Translators to CasADi and sympy live in :mod:`mechdsl.exprs`.
+computes.  Translators to CasADi and sympy live in :mod:`mechdsl.model.exprs`.
 
 Conventions (documented in docs/language.md):
 - world frame: x right, y up, z out of the plane; gravity is whatever Gravity says.
@@ -40,7 +40,7 @@ from __future__ import annotations
 from dataclasses import field
 from typing import Union
 
-from .diagnostics import Span
+from ..diagnostics import Span
 from .records import record
 
 # --------------------------------------------------------------------------- expressions

@@ -16,7 +16,7 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput
 
 from . import ast
 from . import limits
-from .diagnostics import Diagnostic, InternalError, MechError, Span
+from ..diagnostics import Diagnostic, InternalError, MechError, Span
 
 
 KEYWORDS = {
@@ -37,7 +37,7 @@ TOKEN_TEXT = {
 
 
 def grammar_path() -> Path:
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]         # the mechdsl package
     for cand in (here / "_grammar" / "mech.lark", here.parents[1] / "grammar" / "mech.lark"):
         if cand.is_file():
             return cand
@@ -70,7 +70,7 @@ def parse_file(path: str | os.PathLike) -> ast.File:
 
 
 def parse(text: str, filename: str = "<input>") -> ast.File:
-    from .report import remember_source
+    from ..diagnostics import remember_source
 
     remember_source(filename, text)
     if not text.strip() or _only_comments(text):

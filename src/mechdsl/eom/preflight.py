@@ -38,7 +38,7 @@ import math
 
 import numpy as np
 
-from .diagnostics import Diagnostic, MechError, Span
+from ..diagnostics import Diagnostic, MechError, Span
 
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
@@ -62,7 +62,7 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
     """The problems of ``eom`` at its start state with parameters ``p`` (vector or overrides)
     and start overrides ``x0`` (as ``simulate`` takes them); empty when it can start.
     drift_bound: the constraint drift the DAE simulation will hold (E749)."""
-    from .eom import parameter_vector
+    from . import parameter_vector
 
     pv = parameter_vector(eom, p)
     model = eom.model
@@ -79,7 +79,7 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
     own = None if model is None else np.array([q.value for q in model.real_parameters], float)
     if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
         # the model's own values were judged when it was analyzed (or by with_params)
-        from .semantic.physical import parameter_env, value_problems
+        from ..semantic.physical import parameter_env, value_problems
 
         env = parameter_env(model)
         env.update(zip(eom.params, map(float, pv)))
@@ -108,8 +108,8 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
     if found:
         return found
     if eom.m:
-        from .dae.init import initialize
-        from .simulation.inputs import fixed_start
+        from ..dae.init import initialize
+        from ..simulation.inputs import fixed_start
 
         q, qd, fq, fqd = fixed_start(eom, x0, pv)
         g_problem = _constraint_problem(eom, q, t, pv)
@@ -124,7 +124,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         if found:
             return found
     else:
-        from .simulation.inputs import start_vector
+        from ..simulation.inputs import start_vector
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]
@@ -169,7 +169,7 @@ def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
         return []
     import casadi as ca
 
-    from .impacts.gaps import contact_gaps
+    from ..impacts.gaps import contact_gaps
 
     def build():
         gaps = contact_gaps(eom)[0]
@@ -310,7 +310,7 @@ def _force_problems(eom, q, t, pv, rhs) -> list[Diagnostic]:
 
 
 def _coincident_ends(eom, q, t, pv) -> list[Diagnostic]:
-    from . import ir
+    from ..model import ir
 
     model = eom.model
     if model is None or eom.point_position is None:
@@ -385,7 +385,7 @@ def _loop_scale(eom, q, t, pv, drift_bound) -> list[Diagnostic]:
 
 def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
     """E826 (dae/init.py): a constraint residual or gradient that is inf/nan at the start."""
-    from .dae.init import check_defined
+    from ..dae.init import check_defined
 
     if not np.all(np.isfinite(q)):
         return []
@@ -397,7 +397,7 @@ def _constraint_problem(eom, q, t, pv) -> list[Diagnostic]:
 
 
 def _constraint_fns(eom):
-    from .dae.init import _functions
+    from ..dae.init import _functions
 
     return _functions(eom)
 
@@ -481,7 +481,7 @@ def _negative_masses(eom, pv) -> list[Diagnostic]:
     model = eom.model
     if model is None or eom.n == 0 or eom.T is None:
         return []
-    from . import units as U
+    from ..model import units as U
 
     declared = {par.name: par for par in model.real_parameters}
     suspects = []

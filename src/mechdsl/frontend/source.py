@@ -1,6 +1,6 @@
 """Reading a .mech file: size limit, regular files only, UTF-8, no NUL bytes (E001-E006).
 
-Kept apart from the parser so that a run served from the model cache (mechdsl.modelcache)
+Kept apart from the parser so that a run served from the model cache (mechdsl.eom.modelcache)
 reads its source without importing lark and the front end.
 """
 from __future__ import annotations
@@ -10,7 +10,7 @@ import stat
 from pathlib import Path
 
 from . import limits
-from .diagnostics import Diagnostic, MechError, Span
+from ..diagnostics import Diagnostic, MechError, Span
 
 
 def read_source(path: str | os.PathLike) -> tuple[str, str]:
@@ -54,7 +54,7 @@ def _file_kind(mode: int) -> str:
 
 
 def decode_source(data: bytes, name: str = "<input>") -> str:
-    from .report import forget_source
+    from ..diagnostics import forget_source
 
     forget_source(name)  # an older text of the same name must not be shown under these errors
     if len(data) > limits.get("file_bytes"):

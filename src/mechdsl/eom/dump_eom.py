@@ -31,8 +31,8 @@ from __future__ import annotations
 
 import random
 
-from . import ir
-from .exprs import fmt_num, to_text
+from ..model import ir
+from ..model.exprs import fmt_num, to_text
 
 MAX_CHARS = 240          # longest expression text printed; larger ones are summarized
 SEED = 20261124          # the seeded states
@@ -46,7 +46,7 @@ NOISE = 1e-12            # relative size below which a value prints as 0 (see _n
 def dump_eom(eom) -> str:
     import casadi as ca
 
-    from .eom import fold_inputs
+    from . import fold_inputs
 
     eom = fold_inputs(eom)          # inputs print as trailing parameters at their defaults
 

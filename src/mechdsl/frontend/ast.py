@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Iterator, Union
 
-from .diagnostics import Span
+from ..diagnostics import Span
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -92,7 +92,7 @@ def result_figure(result, *signals, energy: bool = True, drift: bool = False, mo
     (``energy=False`` leaves them out); with ``drift=True`` the energy drift E(t) - E(0) as its
     own panel.  Legends sit outside the data, right of each axis; colours never repeat within
     a figure.  A failed run is drawn up to its last point with the failure marked."""
-    from .diagnostics import UsageError
+    from ..diagnostics import UsageError
 
     units = signal_units(result, model)
     names = list(signals) if signals else list(result.coordinates)

@@ -7,7 +7,7 @@ and can be raised by people who really mean it:
 
     mech check model.mech --limit coordinates=5000 --limit file_bytes=50000000
 
-or, from Python, ``with mechdsl.limits.override(coordinates=5000): ...``.  The current values
+or, from Python, ``with mechdsl.frontend.limits.override(coordinates=5000): ...``.  The current values
 live in a context variable (no process-wide state: threads and nested overrides are
 independent); the phases read them with :func:`get` where they count.
 """
@@ -18,7 +18,7 @@ import contextvars
 import math
 from typing import Iterator, Mapping
 
-from .records import record
+from ..model.records import record
 
 
 @record
@@ -92,7 +92,7 @@ def parse_setting(text: str) -> tuple[str, int]:
 
 def hint(name: str) -> str:
     """The second half of a help line: how to raise the budget `name`."""
-    return f"the limit is {get(name):,}; raise it with `--limit {name}=N` (or mechdsl.limits.override) if you mean it"
+    return f"the limit is {get(name):,}; raise it with `--limit {name}=N` (or mechdsl.frontend.limits.override) if you mean it"
 
 
 __all__ = ["LIMITS", "DEFAULTS", "Limit", "get", "current", "override", "parse_setting", "hint"]

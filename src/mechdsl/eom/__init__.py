@@ -14,7 +14,7 @@ components); otherwise None and ``M``/``bias`` are solved numerically.
 
 The object is frozen (setting an attribute raises ``dataclasses.FrozenInstanceError``):
 what phases derive from it and keep (Functions, searches, caches) lives in its workspace
-(``mechdsl.workspace.of(eom)``; ``api.Model.workspace``), never on the EOM.
+(``mechdsl.eom.workspace.of(eom)``; ``api.Model.workspace``), never on the EOM.
 """
 from __future__ import annotations
 
@@ -23,8 +23,8 @@ from typing import Callable
 
 import numpy as np
 
-from . import ir
-from .records import record
+from ..model import ir
+from ..model.records import record
 
 
 @record(eq=False)      # eq=False: hashed and compared by identity (workspace key)
@@ -109,7 +109,7 @@ class EOM:
 
     @property
     def workspace(self):
-        """The derived values kept for this EOM (mechdsl.workspace)."""
+        """The derived values kept for this EOM (mechdsl.eom.workspace)."""
         from . import workspace
 
         return workspace.of(self)
@@ -187,7 +187,7 @@ def fold_inputs(eom: "EOM", u=None) -> "EOM":
 def parameter_vector(eom: "EOM", p=None) -> np.ndarray:
     """The numeric parameter vector: the model's values, or overrides (a dict by name, or a
     full vector).  Shared by every phase that takes ``p=``."""
-    from .diagnostics import UsageError, did_you_mean
+    from ..diagnostics import UsageError, did_you_mean
 
     base = np.array(eom.param_values, float).ravel().copy()
     if p is None:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .fileio import write_atomic_group
-from .records import record
+from ..model.records import record
 
 
 @record(frozen=False)
@@ -45,7 +45,7 @@ class Result:
     events: list[dict[str, Any]] = field(default_factory=list)
     failure: Failure | None = None
 
-    def _repr_html_(self):                      # notebook displays (mechdsl.display)
+    def _repr_html_(self):                      # notebook displays (mechdsl.output.display)
         from .display import result_html
 
         return result_html(self)
@@ -157,9 +157,9 @@ class Result:
 
         return json.dumps(_jsonable({**self.summary(), **extra}), indent=2, sort_keys=True) + "\n"
 
-    # -- seeing it (mechdsl.display) ------------------------------------------------------
+    # -- seeing it (mechdsl.output.display) ------------------------------------------------------
     def plot(self, *signals, **kw):
-        """A matplotlib Figure: coordinates (one axis per unit), energies, drift (mechdsl.plot)."""
+        """A matplotlib Figure: coordinates (one axis per unit), energies, drift (mechdsl.output.plot)."""
         from .plot import result_figure
 
         return result_figure(self, *signals, **kw)

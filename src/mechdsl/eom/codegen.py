@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .diagnostics import Diagnostic, MechError
+from ..diagnostics import Diagnostic, MechError
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
             "start", "parameters", "singularity", "invariants")
@@ -241,8 +241,8 @@ def _bindings(eom) -> dict:
 def build_parameters(eom):
     """(free) -> p: dependent parameters recomputed from their bindings (SX)."""
     ca = _ca()
-    from . import exprs as X
-    from . import ir
+    from ..model import exprs as X
+    from ..model import ir
 
     bound = _bindings(eom)
     free = free_parameters(eom)

@@ -81,7 +81,7 @@ def notebook_bar(**kw):
 
 
 def _model_parts(m):
-    from .exprs import evaluate
+    from ..model.exprs import evaluate
 
     model = m.model
     env = {p.name: p.value for p in model.parameters}
@@ -237,12 +237,12 @@ def equations(m, form: str = "lagrange") -> Equations:
     Hamilton's (``Eq(q', dH/dp)``, ``Eq(p', -dH/dq + Q - dD/dq')``) as sympy equations."""
     import sympy as sp
 
-    from .diagnostics import UsageError
+    from ..diagnostics import UsageError
 
     if form not in ("lagrange", "hamilton"):
         raise UsageError(f"form must be 'lagrange' or 'hamilton', not {form!r}")
     if form == "lagrange":
-        from .mechanics.printing import _TooLarge, lagrange_equations
+        from ..mechanics.printing import _TooLarge, lagrange_equations
 
         try:
             _, T, V, D, Q, eqs = lagrange_equations(m.model)
@@ -250,7 +250,7 @@ def equations(m, form: str = "lagrange") -> Equations:
             raise UsageError(f"the equations of {m.name} are too large to show symbolically: {e}") from None
         extra = {"T": T, "V": V} | ({"D": D} if D != 0 else {})
         return Equations([sp.Eq(a + b, Qi) for a, b, Qi in eqs], form, extra)
-    from .analysis.hamilton import _lagrangian_for, symbolic_hamilton
+    from ..analysis.hamilton import _lagrangian_for, symbolic_hamilton
 
     lg, _ = _lagrangian_for(m)
     h = symbolic_hamilton(lg)
@@ -267,7 +267,7 @@ def equations(m, form: str = "lagrange") -> Equations:
 
 
 def draw_model(m, t=None, q=None, **kw):
-    from .animate import draw
+    from ..animate import draw
 
     if q is None and t:
         r = m.simulate(float(t), points=2)
@@ -276,8 +276,8 @@ def draw_model(m, t=None, q=None, **kw):
 
 
 def animate_result(r, model=None, **kw):
-    from .animate import animate
-    from .diagnostics import UsageError
+    from ..animate import animate
+    from ..diagnostics import UsageError
 
     model = model if model is not None else getattr(r, "source_model", None)
     if model is None:
@@ -301,7 +301,7 @@ def to_pandas(r):
     try:
         import pandas as pd
     except ImportError:
-        from .diagnostics import UsageError
+        from ..diagnostics import UsageError
 
         raise UsageError("to_pandas needs pandas: pip install 'mechdsl[table]'") from None
     names, units = _columns(r)
@@ -317,7 +317,7 @@ def to_xarray(r):
     try:
         import xarray as xr
     except ImportError:
-        from .diagnostics import UsageError
+        from ..diagnostics import UsageError
 
         raise UsageError("to_xarray needs xarray: pip install 'mechdsl[table]'") from None
     names, units = _columns(r)

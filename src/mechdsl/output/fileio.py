@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .diagnostics import UsageError
+from ..diagnostics import UsageError
 
 PROTECTED_SUFFIXES = {".mech", ".py", ".md", ".toml", ".lark"}
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")

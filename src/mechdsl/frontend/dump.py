@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from . import ast, ir
-from .exprs import fmt_num, to_text
+from . import ast
+from ..model import ir
+from ..model.exprs import fmt_num, to_text
 from .printer import expr as print_expr
 
 
@@ -59,7 +60,7 @@ def _m(m) -> str:
 
 
 def dump_model(model: ir.Model) -> str:
-    from .semantic.topology import counts
+    from ..semantic.topology import counts
 
     L: list[str] = [f"model {model.name}" + (f'  "{model.doc}"' if model.doc else "")]
     c = counts(model)

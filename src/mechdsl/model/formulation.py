@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from . import exprs as X
 from . import ir
-from .semantic.topology import counts
+from ..semantic.topology import counts
 
 DEFAULT_DAE_FORMULATION = "projection"  # mechdsl.dae: index-1 ODE + projection onto both manifolds
 
