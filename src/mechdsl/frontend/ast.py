@@ -142,6 +142,7 @@ class Modifier(Node):
     each: bool = False
     modification: tuple["Modifier", ...] | None = None
     value: Expr | None = None
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,12 +157,14 @@ class Declaration(Node):
     value: Expr | None = None
     doc: str | None = None
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
+    type_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Extends(Node):
     name: str
     modification: tuple[Modifier, ...] | None = None
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 # ----------------------------------------------------------------------------- equations
@@ -223,12 +226,14 @@ class ModelDef(Node):
 class SceneModel(Node):
     name: str
     modification: tuple[Modifier, ...] | None = None
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Setting(Node):
     name: str
     value: Expr
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)

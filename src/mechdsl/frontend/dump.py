@@ -23,7 +23,7 @@ def _ast_lines(node, depth: int, out: list[str], spans: bool, label: str) -> Non
     name = type(node).__name__
     scalars, children = [], []
     for f in dataclasses.fields(node):
-        if f.name in ("span", "name_span", "filename"):
+        if f.name.endswith("span") or f.name == "filename":   # positions: shown as @line:col
             continue
         v = getattr(node, f.name)
         if isinstance(v, ast.Node):

@@ -442,11 +442,11 @@ class _Builder(Transformer_NonRecursive):
 
     def scene_model(self, meta, items):
         name, mod = items
-        return ast.SceneModel(name=str(name), modification=mod, span=self.S(meta))
+        return ast.SceneModel(name=str(name), modification=mod, name_span=_tok_span(self.f, name), span=self.S(meta))
 
     def setting(self, meta, items):
         name, value = items
-        return ast.Setting(name=str(name), value=value, span=self.S(meta))
+        return ast.Setting(name=str(name), value=value, name_span=_tok_span(self.f, name), span=self.S(meta))
 
     # -- declarations
     def doc(self, meta, items):
@@ -459,11 +459,12 @@ class _Builder(Transformer_NonRecursive):
         prefix, type_tok, name_tok, dims, mod, value, doc = items
         return ast.Declaration(prefix=prefix, type_name=str(type_tok), name=str(name_tok),
                                dims=tuple(dims or ()), modification=mod, value=value, doc=doc,
-                               name_span=_tok_span(self.f, name_tok), span=self.S(meta))
+                               name_span=_tok_span(self.f, name_tok), type_span=_tok_span(self.f, type_tok),
+                               span=self.S(meta))
 
     def extends_clause(self, meta, items):
         name, mod = items
-        return ast.Extends(name=str(name), modification=mod, span=self.S(meta))
+        return ast.Extends(name=str(name), modification=mod, name_span=_tok_span(self.f, name), span=self.S(meta))
 
     def dims(self, meta, items):
         return tuple(items)
@@ -474,8 +475,8 @@ class _Builder(Transformer_NonRecursive):
     def modification(self, meta, items):
         return tuple(x for x in items if x is not None)
 
-    def dotted_name(self, meta, items):
-        return ".".join(items)
+    def dotted_name(self, meta, items):   # (name, span): the span goes to Modifier.name_span
+        return ".".join(items), self.S(meta)
 
     def name_part(self, meta, items):
         name, index = items
@@ -489,11 +490,12 @@ class _Builder(Transformer_NonRecursive):
         return f"{name}[{int(text)}]"
 
     def coordinate_field(self, meta, items):
-        return "coordinate"
+        return "coordinate", self.S(meta)
 
     def argument(self, meta, items):
-        each, name, mod, value = items
-        return ast.Modifier(name=name, each=each is not None, modification=mod, value=value, span=self.S(meta))
+        each, (name, name_span), mod, value = items
+        return ast.Modifier(name=name, each=each is not None, modification=mod, value=value, name_span=name_span,
+                            span=self.S(meta))
 
     # -- equations
     def simple_equation(self, meta, items):
