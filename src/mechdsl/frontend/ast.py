@@ -129,6 +129,7 @@ class Comprehension(Expr):
     expr: Expr
     var: str
     range: Range
+    var_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 # ----------------------------------------------------------------------------- declarations
@@ -206,6 +207,7 @@ class ForEquation(Node):
     var: str
     range: Range
     body: tuple["EquationItem", ...] = ()
+    var_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 EquationItem = Union[SimpleEquation, EnergyEquation, ForceEquation, Connect, ForEquation]

@@ -519,7 +519,8 @@ class _Builder(Transformer_NonRecursive):
 
     def for_equation(self, meta, items):
         var, rng, *body = items
-        return ast.ForEquation(var=str(var), range=rng, body=tuple(body), span=self.S(meta))
+        return ast.ForEquation(var=str(var), range=rng, body=tuple(body), var_span=_tok_span(self.f, var),
+                               span=self.S(meta))
 
     def range(self, meta, items):
         a, b, c = items
@@ -579,7 +580,7 @@ class _Builder(Transformer_NonRecursive):
 
     def comprehension(self, meta, items):
         expr, var, rng = items
-        return ast.Comprehension(expr=expr, var=str(var), range=rng, span=self.S(meta))
+        return ast.Comprehension(expr=expr, var=str(var), range=rng, var_span=_tok_span(self.f, var), span=self.S(meta))
 
     def component_ref(self, meta, items):
         return ast.Ref(parts=tuple(items), span=self.S(meta))
