@@ -70,14 +70,47 @@ def parse_file(path: str | os.PathLike) -> ast.File:
 
 
 def parse(text: str, filename: str = "<input>") -> ast.File:
+    tree, diagnostics = parse_partial(text, filename)
+    if diagnostics:
+        raise MechError(diagnostics)
+    return tree
+
+
+def parse_partial(text: str, filename: str = "<input>") -> tuple[ast.File | None, list[Diagnostic]]:
+    """``parse`` for an editor's half-typed file: the diagnostics ``parse`` raises (the same list)
+    and, when there are syntax errors, the AST of the text with the broken statements blanked as
+    the error recovery blanks them (spans unchanged), or None when nothing could be recovered (a
+    model not closed yet, an unterminated string, ...)."""
     from ..diagnostics import remember_source
 
     remember_source(filename, text)
     if not text.strip() or _only_comments(text):
-        raise MechError(Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
-                                   "a file holds one or more `model Name ... end Name;` (and scenes)"))
-    _check_nesting(text, filename)
-    tree = _parse_recovering(text, filename)
+        return None, [Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
+                                 "a file holds one or more `model Name ... end Name;` (and scenes)")]
+    try:
+        _check_nesting(text, filename)
+    except MechError as e:
+        return None, e.diagnostics
+    tree, diagnostics = _parse_recovering(text, filename)
+    if diagnostics:                      # the recovered rest, for an editor (never raised)
+        try:
+            result, _ = _build(tree, filename) if tree is not None else (None, [])
+            if result is not None:
+                _check_depth(result)
+        except (MechError, InternalError):
+            result = None
+        return result, diagnostics
+    result, problems = _build(tree, filename)
+    if problems:
+        return result, problems
+    try:
+        _check_depth(result)
+    except MechError as e:
+        return None, e.diagnostics
+    return result, []
+
+
+def _build(tree, filename: str) -> tuple[ast.File, list[Diagnostic]]:
     builder = _Builder(filename)
     try:
         result = builder.transform(tree)
@@ -85,10 +118,7 @@ def parse(text: str, filename: str = "<input>") -> ast.File:
         if isinstance(e.orig_exc, MechError):
             raise e.orig_exc from None
         raise InternalError(f"AST construction failed: {e.orig_exc!r}") from e.orig_exc
-    if builder.problems:
-        raise MechError(builder.problems)
-    _check_depth(result)
-    return result
+    return result, builder.problems
 
 
 # ----------------------------------------------------------------------------- error recovery
@@ -97,8 +127,10 @@ _STRUCTURE = re.compile(r"\b(model|scene|end|equation|loop)\b")
 _HEADER = re.compile(r"\b(?:(?:model|scene)\s+[A-Za-z_]\w*|equation|loop)\b")  # on code, docs blanked
 
 
-def _parse_recovering(text: str, filename: str):
+def _parse_recovering(text: str, filename: str) -> tuple[object | None, list[Diagnostic]]:
     """Parse; on a syntax error blank the broken statement and parse again to find more errors.
+    Returns the lark tree of the text with every broken statement blanked (None when the search
+    stopped before the rest parsed) and the syntax diagnostics (none: the tree is the text's).
 
     Recovery is deliberately conservative so that no follow-on error is ever invented: the blanked
     region runs from the end of the previous statement (a ';' or a header such as `model A`,
@@ -131,10 +163,8 @@ def _parse_recovering(text: str, filename: str):
             m = re.compile(r"\S").search(code, b)
             skip_to = m.start() if m else -1
             continue
-        if diagnostics:
-            raise MechError(diagnostics)
-        return tree
-    raise MechError(diagnostics)
+        return tree, diagnostics
+    return None, diagnostics
 
 
 def _error_offset(e: UnexpectedInput) -> int | None:
