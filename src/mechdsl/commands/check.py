@@ -23,39 +23,27 @@ def add_parser(sub):
 def run(args) -> int:
     from ..api import Model
     from ..frontend.parser import parse_file
-    from ..eom.preflight import check_start
     from ..semantic import analyze
 
     status = 0
     for path in args.files:
         try:
             program = analyze(parse_file(path), units=not args.no_units)
-            targets = []
             if args.scene:
                 targets = [("scene", args.scene)]
             elif args.model:
                 targets = [("model", args.model)]
             else:
-                # a model used as a part of others is checked inside them (alone it may be
-                # incomplete, like a Modelica partial model: a link without its joint)
-                parts = program.part_users()
-                targets = [("model", n) for n in program.model_names() if n not in parts]
-                targets += [("scene", n) for n in program.scene_names()]
+                targets = check_targets(program)
             lines = []
             if not (args.scene or args.model):
-                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
+                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in program.part_users().items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
-                settings = m.scene_settings
-                atol = settings.get("atol", 1e-10)
-                check_start(m.eom, t=float(settings.get("start_time", 0.0)),
-                            drift_bound=settings.get("drift_bound") or max(10 * float(atol), 1e-10))
+                problem = check_start_state(m)
                 for w in m.warnings:
                     print(format_diagnostics([w]), file=sys.stderr)
                 if kind == "scene":
-                    # the run's own validation (a scene value over a budget is E604) and its plan
-                    given = m.scene_settings.get("stop_time") is not None     # else any end: the plan does not depend on it
-                    problem = m.problem(**({} if given else {"t_end": float(m.scene_settings.get("start_time") or 0.0) + 1.0}))
                     settings = ", ".join(f"{k} = {_fmt(v)}" for k, v in m.scene.settings)
                     lines.append(f"  scene {name} -> {m.name}" + (f" ({settings})" if settings else ""))
                     lines += [f"    {topic}: {text}" for topic, text in problem.plan]
@@ -69,6 +57,30 @@ def run(args) -> int:
             print(format_diagnostics(e.diagnostics), file=sys.stderr)
             status = 1
     return status
+
+
+def check_targets(program) -> list[tuple[str, str]]:
+    """What ``mech check FILE`` checks: ("model", name) for every model that is not a part of
+    another (a part may be incomplete alone, like a Modelica partial model: a link without its
+    joint; it is checked inside the models that use it), then ("scene", name) for every scene."""
+    parts = program.part_users()
+    return [("model", n) for n in program.model_names() if n not in parts] + [("scene", n) for n in program.scene_names()]
+
+
+def check_start_state(m):
+    """The start-state checks of ``mech check`` (mechdsl.eom.preflight) on a loaded model; for a
+    scene also the run's own validation (a scene value over a budget is E604).  Raises MechError;
+    returns the scene's Problem (its plan), else None."""
+    from ..eom.preflight import check_start
+
+    settings = m.scene_settings
+    atol = settings.get("atol", 1e-10)
+    check_start(m.eom, t=float(settings.get("start_time", 0.0)),
+                drift_bound=settings.get("drift_bound") or max(10 * float(atol), 1e-10))
+    if m.scene is None:
+        return None
+    given = settings.get("stop_time") is not None     # else any end: the plan does not depend on it
+    return m.problem(**({} if given else {"t_end": float(settings.get("start_time") or 0.0) + 1.0}))
 
 
 def _extra_lines(m) -> list[str]:
