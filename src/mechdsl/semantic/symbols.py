@@ -63,6 +63,7 @@ class Occurrence:
     symbol: Symbol | None = None
     owner: str | None = None
     container: str | None = None
+    path: str = ""          # the dotted name up to this one (``rod1.b``; ``s.m`` in ``Sub s(m = 2)``)
 
 
 # a "type" while resolving a dotted name: ("model", M) | ("class", C) | ("world",) | ("point",) | ("scalar", kind)
@@ -184,9 +185,9 @@ class _Walker:
     def __init__(self, index: SymbolIndex):
         self.ix = index
 
-    def add(self, span: Span, name: str, role: str, symbol=None, owner=None, container=None) -> None:
+    def add(self, span: Span, name: str, role: str, symbol=None, owner=None, container=None, path=None) -> None:
         if span.line > 0:
-            self.ix.occurrences.append(Occurrence(span, name, role, symbol, owner, container))
+            self.ix.occurrences.append(Occurrence(span, name, role, symbol, owner, container, path or name))
 
     def run(self) -> None:
         ix = self.ix
@@ -207,7 +208,7 @@ class _Walker:
             if isinstance(el, ast.Extends):
                 self.type_name(el.name, el.name_span, m.name)
                 base = ("model", el.name) if el.name in ix.models else None
-                self.mods(el.modification, base, env, m.name)
+                self.mods(el.modification, base, env, m.name, "")
                 continue
             sym = ix.own(m.name).get(el.name)
             if sym is not None and sym.node is el:
@@ -218,7 +219,7 @@ class _Walker:
                 self.expr(d, env, m.name)
             kind = declaration_kind(el, ix.models)
             target = ix.type_of(Symbol(el.name, kind, el.span, el.name_span, m.name, el.type_name))
-            self.mods(el.modification, target, env, m.name)
+            self.mods(el.modification, target, env, m.name, el.name + ".")
             if el.value is not None:
                 self.expr(el.value, env, m.name)
         self.equations(m.equations, env, m.name)
@@ -230,7 +231,7 @@ class _Walker:
         for it in s.items:
             if isinstance(it, ast.SceneModel):
                 self.type_name(it.name, it.name_span, s.name)
-                self.mods(it.modification, ("model", it.name) if it.name in ix.models else None, env, s.name)
+                self.mods(it.modification, ("model", it.name) if it.name in ix.models else None, env, s.name, "")
             else:
                 self.add(it.name_span, it.name, "setting", owner="setting", container=s.name)
                 self.expr(it.value, env, s.name)
@@ -247,18 +248,18 @@ class _Walker:
             self.add(span, name, "type", container=container)
 
     # ------------------------------------------------------------------ modifications
-    def mods(self, mods, owner: _Type | None, env, container: str) -> None:
-        todo = [(mods, owner)]
+    def mods(self, mods, owner: _Type | None, env, container: str, prefix: str) -> None:
+        todo = [(mods, owner, prefix)]
         while todo:
-            mods, owner = todo.pop()
+            mods, owner, prefix = todo.pop()
             for m in mods or ():
-                nxt = self.modifier_name(m, owner, container)
+                nxt = self.modifier_name(m, owner, container, prefix)
                 if m.modification:
-                    todo.append((m.modification, nxt))
+                    todo.append((m.modification, nxt, prefix + m.name + "."))
                 if m.value is not None:
                     self.expr(m.value, env, container)
 
-    def modifier_name(self, m: ast.Modifier, owner: _Type | None, container: str) -> _Type | None:
+    def modifier_name(self, m: ast.Modifier, owner: _Type | None, container: str, prefix: str) -> _Type | None:
         """Record the parts of a (dotted) modifier name; the type its sub-modification modifies."""
         parts = m.name.split(".")
         span = m.name_span
@@ -271,11 +272,11 @@ class _Walker:
                 col += len(p) + 1
         cur = owner
         for i, p in enumerate(parts):
-            cur = self.member(p.split("[")[0], spans[i], cur, container)
+            cur = self.member(p.split("[")[0], spans[i], cur, container, prefix + ".".join(parts[:i + 1]))
         return cur
 
     # ------------------------------------------------------------------ members
-    def member(self, name: str, span: Span | None, owner: _Type | None, container: str) -> _Type | None:
+    def member(self, name: str, span: Span | None, owner: _Type | None, container: str, path: str) -> _Type | None:
         """Record `name` as a member of `owner`; the type a further dot leads into."""
         ix = self.ix
         sp = span or Span()
@@ -283,21 +284,21 @@ class _Walker:
             return None
         if owner[0] == "model":
             sym = ix.scope(owner[1]).get(name)
-            self.add(sp, name, "member", sym, container=container)
+            self.add(sp, name, "member", sym, container=container, path=path)
             return ix.type_of(sym)
         if owner[0] == "class":
             cls = K.CLASSES[owner[1]]
-            self.add(sp, name, "member", owner=f"class:{cls.name}", container=container)
+            self.add(sp, name, "member", owner=f"class:{cls.name}", container=container, path=path)
             if name in cls.points:
                 return ("point",)
             if cls.category == "joint" and name in {r for r, _ in cls.roles + K.QUATERNION_ROLES}:
                 return ("scalar", "joint variable")
             return None
         if owner[0] in ("world", "point"):
-            self.add(sp, name, "member", owner=owner[0], container=container)
+            self.add(sp, name, "member", owner=owner[0], container=container, path=path)
             return None
         if owner[0] == "scalar":
-            self.add(sp, name, "member", owner=f"scalar:{owner[1]}", container=container)
+            self.add(sp, name, "member", owner=f"scalar:{owner[1]}", container=container, path=path)
         return None
 
     # ------------------------------------------------------------------ equations and expressions
@@ -365,8 +366,10 @@ class _Walker:
         else:
             self.add(_name_span(first), first.name, "reference", container=container)
             cur = None
+        path = first.name
         for p in r.parts[1:]:
-            cur = self.member(p.name, _name_span(p), cur, container)
+            path += "." + p.name
+            cur = self.member(p.name, _name_span(p), cur, container, path)
 
 
 def _name_span(p: ast.RefPart) -> Span:
