@@ -25,6 +25,7 @@ from .parser import _code_only, parse
 
 _TOKEN = re.compile(r'"(?:[^"\\\n]|\\.)*"|//[^\r\n]*|/\*.*?\*/', re.S)
 _STRING = re.compile(r'"(?:[^"\\\n]|\\.)*"')
+_BLANK_LINE = re.compile(r"\n[ \t\r\f]*\n")
 WIDTH = 100     # a statement the author wrapped stays wrapped when its printed line is longer
 
 
@@ -114,14 +115,14 @@ class _Formatter:
                 self.lines[-1] += between.replace("\r", "") + first
                 self.lines += rest
             else:
-                if between.count("\n") >= 2:
+                if _BLANK_LINE.search(between):
                     self.want_blank = True
                 first, *rest = body.split("\n")
                 self.newline(indent + first)
                 self.lines += rest
             self.on_line = True
             p = c1
-        if self.text[p:b].count("\n") >= 2:
+        if _BLANK_LINE.search(self.text, p, b):
             self.want_blank = True
 
     def statement(self, a: int, b: int, printed: list[str]) -> None:
@@ -146,9 +147,9 @@ class _Formatter:
         pos = 0
         for k, u in enumerate(tree.items):
             a, b = self.span(u)
-            self.gap(pos, a, "")
             if k:
-                self.want_blank = True
+                self.want_blank = True          # units are paragraphs of their own
+            self.gap(pos, a, "")
             head_end = self.header_end(u)
             self.statement(a, head_end, [P.header(u)])
             pos = head_end

@@ -36,6 +36,8 @@ def hover_text(analysis, occ) -> str | None:
     if owner == "function":
         sig, doc = C.FUNCTIONS[occ.name]
         return f"```mech\n{sig}\n```\nbuilt-in function: {doc}"
+    if owner == "signal":
+        return f"**{occ.name}** (recorded signal): {C.FUNCTIONS[occ.name][1]}"
     if owner == "builtin":
         return f"**{occ.name}** (built-in)\n\n{C.BUILTIN_VALUES.get(occ.name, '')}"
     if owner == "scalar-type":

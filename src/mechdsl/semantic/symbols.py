@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 from ..diagnostics import Span
 from ..frontend import ast
+from . import ENERGY_SIGNALS
 from . import components as K
 from .declarations import SCALAR_TYPES
 from .evaluate import ALL_FUNCS, BUILTIN_NAMES
@@ -55,7 +56,7 @@ class Occurrence:
     owner: for names that have no declaration in the file, whose they are: ``class:Rod`` (a
     built-in class's member, or the class itself for a type), ``world``, ``point``,
     ``scalar:coordinate`` / ``scalar:parameter`` (a declaration's attribute), ``setting``,
-    ``function``, ``builtin``."""
+    ``function``, ``builtin``, ``signal`` (a scene's ``outputs = {energy}``)."""
 
     span: Span
     name: str
@@ -280,7 +281,8 @@ class _Walker:
         """Record `name` as a member of `owner`; the type a further dot leads into."""
         ix = self.ix
         sp = span or Span()
-        if owner is None:
+        if owner is None:              # after an unknown name, or a field holding a reference
+            self.add(sp, name, "member", container=container, path=path)
             return None
         if owner[0] == "model":
             sym = ix.scope(owner[1]).get(name)
@@ -363,6 +365,9 @@ class _Walker:
         elif first.name in BUILTIN_NAMES:
             self.add(_name_span(first), first.name, "builtin", owner="builtin", container=container)
             cur = ("world",) if first.name == "world" else None
+        elif first.name in ENERGY_SIGNALS and container in self.ix.scenes:      # outputs = {energy}
+            self.add(_name_span(first), first.name, "builtin", owner="signal", container=container)
+            cur = None
         else:
             self.add(_name_span(first), first.name, "reference", container=container)
             cur = None
