@@ -104,32 +104,37 @@ def _expression_items(index, ctx: Context) -> list[T.CompletionItem]:
 
 
 def _resolve(index, model: str | None, names: list[str]):
-    """The type a dotted chain of names leads into (see SymbolIndex.type_of)."""
+    """The type a dotted chain of names leads into (see SymbolIndex.type_of) and the declaration
+    of its last name (None when it has none)."""
     if not names:
-        return None
+        return None, None
+    sym = None
     if names[0] == "world":
         cur = ("world",)
     else:
-        cur = index.type_of(index.scope(model).get(names[0])) if model else None
+        sym = index.scope(model).get(names[0]) if model else None
+        cur = index.type_of(sym)
     for name in names[1:]:
         if cur is None:
-            return None
+            return None, None
         if cur[0] == "model":
-            cur = index.type_of(index.scope(cur[1]).get(name))
+            sym = index.scope(cur[1]).get(name)
+            cur = index.type_of(sym)
         elif cur[0] == "class":
-            cls = K.CLASSES[cur[1]]
+            cls, sym = K.CLASSES[cur[1]], None
             cur = ("point",) if name in cls.points else None
         else:
-            return None
-    return cur
+            return None, None
+    return cur, sym
 
 
 def _chain_members(index, ctx: Context) -> list[C.Member]:
-    cur = _resolve(index, _scope_model(ctx), ctx.chain)
+    cur, sym = _resolve(index, _scope_model(ctx), ctx.chain)
     if cur is None:
         return []
     if cur[0] == "class":
-        return C.class_members(cur[1])
+        mods = {m.name for m in (getattr(sym.node, "modification", None) or ())} if sym is not None else set()
+        return C.class_members(cur[1], joint_frame="child" not in mods)
     if cur[0] == "world":
         return C.world_members()
     if cur[0] == "point":
@@ -138,7 +143,7 @@ def _chain_members(index, ctx: Context) -> list[C.Member]:
 
 
 def _chain_symbols(index, ctx: Context) -> list:
-    cur = _resolve(index, _scope_model(ctx), ctx.chain)
+    cur, _ = _resolve(index, _scope_model(ctx), ctx.chain)
     if cur is not None and cur[0] == "model":
         return list(index.scope(cur[1]).values())
     return []

@@ -104,10 +104,11 @@ def role_members(cls: K.ComponentClass) -> list[Member]:
                    "rad" if d == U.ONE else unit_text(d)) for r, d in roles]
 
 
-def class_members(name: str) -> list[Member]:
+def class_members(name: str, joint_frame: bool = True) -> list[Member]:
     """Every name that may follow ``c.`` for a component ``c`` of the built-in class ``name``:
     its named points, joint variables, fields and kinematic attributes (a named point wins over an
-    attribute of the same name: ``rod.a`` is an end point)."""
+    attribute of the same name: ``rod.a`` is an end point).  A joint has the attributes of its
+    own frame only when it has no child (``joint_frame``)."""
     cls = K.CLASSES.get(name)
     if cls is None:
         return []
@@ -120,7 +121,7 @@ def class_members(name: str) -> list[Member]:
         out += _kinematic(FRAME_ATTRIBUTES)
     elif cls.category == "point":
         out += _kinematic(POINT_ATTRIBUTES)
-    elif cls.category == "joint" and cls.field("child") is not None:
+    elif cls.category == "joint" and cls.field("child") is not None and joint_frame:
         out += [Member(m.name, m.kind, m.doc + " of the joint's frame (a joint without a child)", m.unit)
                 for m in _kinematic(FRAME_ATTRIBUTES)]
     seen: dict[str, Member] = {}
