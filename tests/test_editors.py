@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -126,3 +129,48 @@ def test_textmate_engine_sees_comments_and_strings():
     assert s[text.index("c\nc")] == "comment.block.mech"
     assert s[text.index("Revolute")] == "support.class.component.mech"
     assert s[text.index("// end")] == "comment.line.double-slash.mech"
+
+
+# ----------------------------------------------------------------------------- the VS Code extension
+
+VSCODE = ROOT / "editors" / "vscode"
+
+
+def test_vscode_extension_contributes_files_that_exist():
+    pkg = json.loads((VSCODE / "package.json").read_text())
+    contrib = pkg["contributes"]
+    (lang,) = contrib["languages"]
+    assert lang["id"] == "mech" and lang["extensions"] == [".mech"]
+    conf = json.loads((VSCODE / lang["configuration"]).read_text())
+    assert conf["comments"] == {"lineComment": "//", "blockComment": ["/*", "*/"]}
+    assert ["(", ")"] in conf["brackets"] and ["{", "}"] in conf["brackets"]
+    for pattern in conf["indentationRules"].values():
+        re.compile(pattern)
+    (gram,) = contrib["grammars"]
+    assert gram["language"] == "mech"
+    grammar = json.loads((VSCODE / gram["path"]).read_text())
+    assert grammar["scopeName"] == gram["scopeName"] == "source.mech"
+    assert (VSCODE / pkg["main"]).is_file()
+    assert "vscode-languageclient" in pkg["dependencies"]
+    assert set(contrib["configuration"]["properties"]) >= {"mech.server.path", "mech.server.args",
+                                                            "mech.diagnostics.debounceMs"}
+
+
+def test_vscode_extension_ships_the_committed_grammar():
+    assert (VSCODE / "syntaxes" / "mech.tmLanguage.json").read_bytes() == \
+        (ROOT / "editors" / "mech.tmLanguage.json").read_bytes(), "stale copy: run python editors/make_textmate.py"
+    assert [p.relative_to(ROOT / "editors") for p in make_textmate.TARGETS] == \
+        [Path("mech.tmLanguage.json"), Path("vscode/syntaxes/mech.tmLanguage.json")]
+
+
+def test_vscode_client_starts_mech_lsp_with_the_settings():
+    js = (VSCODE / "extension.js").read_text()
+    assert 'require("vscode-languageclient/node")' in js
+    assert 'config.get("server.path", "mech")' in js and 'config.get("server.args", ["lsp"])' in js
+    assert "debounceMs" in js and 'language: "mech"' in js
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="node is not installed: the client's syntax is not checked")
+def test_vscode_client_is_valid_javascript():
+    p = subprocess.run(["node", "--check", str(VSCODE / "extension.js")], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
