@@ -92,7 +92,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--server", action="store_true", help="also the round trip over stdio")
     args = ap.parse_args()
-    paths = args.models or sorted((ROOT / "models").glob("*.mech"), key=lambda p: -p.stat().st_size)
+    paths = [p.resolve() for p in args.models] or sorted((ROOT / "models").glob("*.mech"), key=lambda p: -p.stat().st_size)
     print(f"CPU seconds, minimum of {args.repeats}; stage 1 = parse + analyse + load (published at once), "
           "stage 2 = equations of motion + start-state checks")
     print(f"{'model':28s} {'bytes':>6s} {'coords':>6s} {'stage 1':>8s} {'stage 2':>8s} {'stage 2':>8s} {'total':>8s}")

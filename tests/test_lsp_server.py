@@ -153,3 +153,16 @@ def test_mech_lsp_without_pygls_says_how_to_install_it(tmp_path):
     p = subprocess.run([sys.executable, "-m", "mechdsl", "lsp"], capture_output=True, text=True,
                        env={**os.environ, **env}, timeout=60, stdin=subprocess.DEVNULL)
     assert p.returncode == 2 and "pip install 'mechdsl[lsp]'" in p.stderr
+
+
+def test_pygls_is_imported_only_when_mech_lsp_runs():
+    import subprocess
+    import sys
+
+    for args in (["--help"], ["check", str(PATH)]):
+        r = subprocess.run([sys.executable, "-X", "importtime", "-m", "mechdsl", *args], capture_output=True,
+                           text=True, timeout=120)
+        names = {line.rsplit("|", 1)[-1].strip() for line in r.stderr.splitlines() if line.startswith("import time")}
+        assert "mechdsl.cli" in names
+        assert not {n for n in names if n.split(".")[0] in ("pygls", "lsprotocol", "cattrs")}, args
+        assert "mechdsl.lsp" not in names
