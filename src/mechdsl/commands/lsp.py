@@ -18,9 +18,9 @@ def add_parser(sub):
 
 def run(args) -> int:
     try:
-        import pygls  # noqa: F401
+        import pygls.lsp.server  # noqa: F401  (pygls 2.0 and newer)
     except ImportError:
-        raise UsageError("mech lsp needs pygls: pip install 'mechdsl[lsp]'") from None
+        raise UsageError("mech lsp needs pygls 2.0 or newer: pip install 'mechdsl[lsp]'") from None
     from ..lsp.server import serve
 
     # the protocol owns stdout: anything else written there (a print, a C library's message)
