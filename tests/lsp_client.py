@@ -153,12 +153,26 @@ class LspClient:
             raise AssertionError("the server did not end after exit") from None
 
 
-def pos(text: str, needle: str, nth: int = 0, delta: int = 0) -> dict:
-    """The LSP position (UTF-16) of the nth occurrence of needle in text, plus delta characters."""
+def offset(text: str, needle: str, nth: int = 0, delta: int = 0) -> int:
+    """The offset of the nth occurrence of needle in text, plus delta characters."""
     i = -1
     for _ in range(nth + 1):
         i = text.index(needle, i + 1)
-    i += delta
-    line = text.count("\n", 0, i)
+    return i + delta
+
+
+def where(text: str, needle: str, nth: int = 0, delta: int = 0) -> tuple[int, int]:
+    """mechdsl's 1-based (line, column) of offset(...)."""
+    i = offset(text, needle, nth, delta)
+    return text.count("\n", 0, i) + 1, i - (text.rfind("\n", 0, i) + 1) + 1
+
+
+def lsp_position(text: str, i: int) -> dict:
+    """The LSP position (UTF-16 code units) of offset i."""
     col_text = text[text.rfind("\n", 0, i) + 1:i]
-    return {"line": line, "character": len(col_text.encode("utf-16-le")) // 2}
+    return {"line": text.count("\n", 0, i), "character": len(col_text.encode("utf-16-le", "surrogatepass")) // 2}
+
+
+def pos(text: str, needle: str, nth: int = 0, delta: int = 0) -> dict:
+    """The LSP position of offset(...)."""
+    return lsp_position(text, offset(text, needle, nth, delta))

@@ -15,6 +15,7 @@ from mechdsl.lsp.context import context_at
 from mechdsl.lsp.hover import hover_text
 from mechdsl.lsp.positions import Lines
 
+from lsp_client import where
 from test_corpus import CORPUS, EXPECT
 
 HEADER = re.compile(r"^(?P<file>.*):(?P<line>\d+):(?P<col>\d+): (?P<sev>error|warning)\[(?P<code>[EW]\d{3})\]: (?P<msg>.*)$")
@@ -107,13 +108,7 @@ PENDULUMS = (MODELS / "double_pendulum.mech").read_text()
 
 def _hover(text: str, needle: str, delta: int = 0, nth: int = 0) -> str | None:
     a = analyse(text, "x.mech")
-    i = -1
-    for _ in range(nth + 1):
-        i = text.index(needle, i + 1)
-    i += delta
-    line = text.count("\n", 0, i) + 1
-    col = i - (text.rfind("\n", 0, i) + 1) + 1
-    occ = a.index.at(line, col)
+    occ = a.index.at(*where(text, needle, nth, delta))
     return hover_text(a, occ) if occ else None
 
 

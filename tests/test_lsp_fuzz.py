@@ -9,17 +9,11 @@ from __future__ import annotations
 import pytest
 
 from conftest import MODELS, model_files
-from lsp_client import LspClient
+from lsp_client import LspClient, lsp_position
 from test_corpus import CORPUS
 
 URI = "file:///fuzz/half_typed.mech"
 OPTIONS = {"tabSize": 2, "insertSpaces": True}
-
-
-def _position(text: str, i: int) -> dict:
-    line = text.count("\n", 0, i)
-    col = text[text.rfind("\n", 0, i) + 1:i]
-    return {"line": line, "character": len(col.encode("utf-16-le", "surrogatepass")) // 2}
 
 
 def truncations(path, stride: int) -> list[str]:
@@ -42,7 +36,7 @@ def sweep(texts: list[str]) -> int:
             c.change(URI, text, v)
             doc = {"textDocument": {"uri": URI}}
             for i in sorted({len(text), len(text) // 2, len(text) // 3, max(0, len(text) - 7)}):
-                at = {**doc, "position": _position(text, i)}
+                at = {**doc, "position": lsp_position(text, i)}
                 for method in ("textDocument/hover", "textDocument/definition", "textDocument/completion"):
                     answer = c.request(method, at)
                     assert "error" not in answer, (method, text[-200:], answer)

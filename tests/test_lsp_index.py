@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from conftest import model_files
+from lsp_client import where
 from mechdsl import loads
 from mechdsl.diagnostics import MechError
 from mechdsl.frontend.parser import parse, parse_file
@@ -83,13 +84,7 @@ end S;
 
 
 def _occ(ix, text, needle, nth=0, delta=0):
-    i = -1
-    for _ in range(nth + 1):
-        i = text.index(needle, i + 1)
-    i += delta
-    line = text.count("\n", 0, i) + 1
-    col = i - (text.rfind("\n", 0, i) + 1) + 1
-    return ix.at(line, col)
+    return ix.at(*where(text, needle, nth, delta))
 
 
 def test_scopes_extends_instances_and_members():
