@@ -4,6 +4,8 @@ publishDiagnostics, hover, definition, completion, documentSymbol, formatting, d
 texts, shutdown and exit."""
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from conftest import MODELS
@@ -126,8 +128,8 @@ def test_formatting_replaces_the_document_with_the_printers_text(server):
     assert edits[0]["range"] == {"start": {"line": 0, "character": 0}, "end": {"line": 3, "character": 0}}
 
 
-def test_rapid_edits_are_analysed_once():
-    c = LspClient({"debounceMs": 2000})
+def test_rapid_edits_are_analysed_once_and_start_checks_can_be_left_out():
+    c = LspClient({"debounceMs": 2000, "startChecks": False})
     try:
         c.open(URI, TEXT, 1)
         for v in (2, 3, 4):
@@ -137,6 +139,12 @@ def test_rapid_edits_are_analysed_once():
         versions = [m["params"]["version"] for m in c.notifications
                     if m.get("method") == "textDocument/publishDiagnostics"]
         assert set(versions) == {4}
+        # without the second stage, a start-state problem (E748, see above) is not reported
+        c.change(URI, TEXT.replace("start = pi/2", "start = 1e17"), 5)
+        assert c.diagnostics(URI, 5)["diagnostics"] == []
+        time.sleep(3)
+        assert [m["params"]["diagnostics"] for m in c.notifications
+                if m.get("method") == "textDocument/publishDiagnostics" and m["params"]["version"] == 5] == [[]]
         assert c.internal_errors() == []
     finally:
         assert c.close() == 0

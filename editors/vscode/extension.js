@@ -18,7 +18,10 @@ function activate(context) {
       { scheme: "file", language: "mech" },
       { scheme: "untitled", language: "mech" },
     ],
-    initializationOptions: { debounceMs: config.get("diagnostics.debounceMs", 300) },
+    initializationOptions: {
+      debounceMs: config.get("diagnostics.debounceMs", 300),
+      startChecks: config.get("diagnostics.startChecks", true),
+    },
   };
   client = new LanguageClient("mech", "mechdsl language server", serverOptions, clientOptions);
   client.start().catch((err) => {

@@ -7,7 +7,8 @@ feed or U+2028 is a line break that the client does not count).
 Diagnostics: an edit (re)starts a timer (``debounceMs``, default 300 ms, an initialization
 option); when it fires, analysis.analyse runs in a worker thread and its diagnostics are
 published; then analysis.start_problems (the equations of motion and the start-state checks) runs
-in a second worker and, if the text is still the same, publishes them with the first stage's.
+in a second worker and, if the text is still the same, publishes them with the first stage's
+(unless the initialization option ``startChecks`` is false).
 Each worker runs only the newest job of a document (an older one not started yet is dropped),
 so a slow derivation never delays the next edit's syntax and name errors.  Both are daemon
 threads: nothing keeps the process alive after ``exit``.
@@ -92,6 +93,7 @@ class MechLanguageServer:
     def __init__(self, debounce: float = DEBOUNCE):
         self.ls = LanguageServer("mechdsl", __version__, text_document_sync_kind=T.TextDocumentSyncKind.Full)
         self.debounce = debounce
+        self.start_checks = True                # stage 2 (initialization option startChecks)
         self.docs: dict[str, Document] = {}
         self.limits = limits.current()          # `mech lsp --limit ...` holds in the workers too
         self.loop: asyncio.AbstractEventLoop | None = None
@@ -160,7 +162,7 @@ class MechLanguageServer:
             return
         doc.analysis = a
         self.publish(doc, a.diagnostics)
-        if not a.loaded:
+        if not a.loaded or not self.start_checks:
             return
         lim = self.limits
 
@@ -225,6 +227,8 @@ class MechLanguageServer:
             opts = params.initialization_options
             if isinstance(opts, dict) and isinstance(opts.get("debounceMs"), (int, float)):
                 self.debounce = max(0.0, float(opts["debounceMs"]) / 1000.0)
+            if isinstance(opts, dict) and isinstance(opts.get("startChecks"), bool):
+                self.start_checks = opts["startChecks"]
 
         @ls.feature(T.TEXT_DOCUMENT_DID_OPEN)
         def did_open(params: T.DidOpenTextDocumentParams):
