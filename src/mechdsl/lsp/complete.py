@@ -65,7 +65,7 @@ def _kw(word: str) -> T.CompletionItem:
 
 def _member(m: C.Member) -> T.CompletionItem:
     unit = f" [{m.unit}]" if m.unit and m.unit != "1" else ""
-    default = f"; default {m.default}" if m.default else ""
+    default = "; required" if m.required else f"; default {m.default}" if m.default else ""
     return _item(m.name, m.kind, f"{m.kind}{unit}", m.doc + default)
 
 

@@ -8,6 +8,7 @@ import math
 
 from ..frontend import ast
 from ..frontend import printer as P
+from ..model.exprs import evaluate, fmt_num
 from ..semantic import catalog as C
 from ..semantic import components as K
 
@@ -52,8 +53,7 @@ def class_text(name: str) -> str | None:
     lines = [f"**{cls.name}** (built-in {cls.category} class): {cls.doc}", "",
              "| field | unit | default | meaning |", "|---|---|---|---|"]
     for m in C.field_members(cls):
-        lines.append(f"| `{m.name}` | {m.unit} | {m.default or '(required)' if 'required' in m.doc else m.default} "
-                     f"| {m.doc.replace('; required', '')} |")
+        lines.append(f"| `{m.name}` | {m.unit} | {'(required)' if m.required else m.default} | {m.doc} |")
     if cls.points:
         lines += ["", "named points: " + ", ".join(f"`{p}`" for p in cls.points)]
     if cls.roles:
@@ -63,7 +63,7 @@ def class_text(name: str) -> str | None:
 
 def _member(m: C.Member, where: str) -> str:
     unit = f" [{m.unit}]" if m.unit and m.unit != "1" else ""
-    default = f"; default {m.default}" if m.default else ""
+    default = "; required" if m.required else f"; default {m.default}" if m.default else ""
     return f"**{m.name}**{unit} ({m.kind} {where})\n\n{m.doc}{default}"
 
 
@@ -133,8 +133,6 @@ def _model_for(analysis, occ):
 def value_lines(analysis, sym, occ) -> list[str]:
     """The values of the declaration at ``occ.path`` in its model: a parameter's value, a
     coordinate's start value and speed, a joint's coordinates, an output's unit."""
-    from ..model.exprs import evaluate, fmt_num
-
     m = _model_for(analysis, occ)
     if m is None:
         return []
@@ -160,8 +158,6 @@ def value_lines(analysis, sym, occ) -> list[str]:
 
 
 def _num(v: float) -> str:
-    from ..model.exprs import fmt_num
-
     return fmt_num(v) if math.isfinite(v) else str(v)
 
 

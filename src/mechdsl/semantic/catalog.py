@@ -26,6 +26,7 @@ class Member:
     doc: str = ""
     unit: str = ""      # a unit for people ("kg", "m/s"); "" when none or unknown
     default: str = ""   # the default value as text ("" when required or none)
+    required: bool = False
 
 
 def unit_text(d: U.Dim | None) -> str:
@@ -88,9 +89,7 @@ def field_members(cls: K.ComponentClass) -> list[Member]:
         doc = f.doc or f.kind
         if f.choices:
             doc += " (" + " or ".join(f'"{c}"' for c in f.choices) + ")"
-        if f.default is K.REQUIRED:
-            doc += "; required"
-        out.append(Member(f.name, "field", doc, unit_text(f.dim), _default_text(f)))
+        out.append(Member(f.name, "field", doc, unit_text(f.dim), _default_text(f), f.default is K.REQUIRED))
     return out
 
 
