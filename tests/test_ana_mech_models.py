@@ -9,7 +9,7 @@ import pytest
 
 import mechdsl
 from mechdsl.cli import main
-from mechdsl.symplectic import simulate_symplectic
+from mechdsl.simulation.backends.fixed_step import simulate_symplectic
 
 from conftest import MODELS
 

@@ -1,4 +1,4 @@
-"""The compiled stepping loop (mechdsl.simulation.crk): dopri5 and dop853 in C.
+"""The compiled stepping loop (mechdsl.simulation.backends.crk): dopri5 and dop853 in C.
 
 Checked against independent references: scipy's RK45/DOP853 stepping in Python (the same
 algorithm, so the same steps), closed-form motions, CasADi's own integrators, and the
@@ -15,7 +15,7 @@ from mechdsl import eom as E
 from mechdsl import integrators as I
 from mechdsl.eom.codegen import find_compiler
 from mechdsl.simulate import simulate
-from mechdsl.simulation import crk
+from mechdsl.simulation.backends import crk
 from sim_models import blowup, chain, pendulum
 
 PAIRS = {"dopri5": "scipy-rk45", "dop853": "scipy-dop853"}
@@ -226,7 +226,7 @@ def test_run_record_says_whether_compiled_code_ran():
 
 
 def test_jacobian_eigenvalues_of_the_second_order_form_equal_the_full_decomposition():
-    from mechdsl.simulate import jacobian_eigenvalues
+    from mechdsl.simulation.choose import jacobian_eigenvalues
 
     rng = np.random.default_rng(7)
     for n in (1, 3, 8):

@@ -256,7 +256,7 @@ def test_budget_can_be_raised():
 def test_non_finite_results_fail_with_time_and_coordinate(monkeypatch):
     """A back end that returns inf/nan without noticing: the run fails at the first such
     time, names the coordinate and keeps the results before it."""
-    import mechdsl.symplectic as symp
+    import mechdsl.simulation.backends.fixed_step as symp
     from mechdsl.output.result import Result
 
     def broken(eom, t_end, **kw):

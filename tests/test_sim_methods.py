@@ -117,8 +117,8 @@ def test_progress_callback_sees_time_advance():
 def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
     """The problem's kind picks the back end: fixed-step methods the canonical integrator,
     constrained models the DAE driver (each called with the settings of the run)."""
-    import mechdsl.dae as dae
-    import mechdsl.symplectic as symp
+    import mechdsl.simulation.backends.dae as dae
+    import mechdsl.simulation.backends.fixed_step as symp
     from mechdsl.output.result import Result
 
     def fake(tag, calls):

@@ -34,7 +34,7 @@ def _stride(periods: int, per_period: int) -> int:
 
 def run(size: str = "small") -> Case:
     from mechdsl.simulate import simulate
-    from mechdsl.symplectic import simulate_symplectic
+    from mechdsl.simulation.backends.fixed_step import simulate_symplectic
 
     check_size(size)
     periods = 1000 if size == "small" else 100_000

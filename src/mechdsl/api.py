@@ -378,7 +378,7 @@ class Model:
         steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
         ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
         from .simulation.inputs import start_vector
-        from .simulate import choose_method, default_inputs, fixed_step_count, min_step
+        from .simulation.choose import choose_method, default_inputs, fixed_step_count, min_step
         from . import integrators as I
         from .eom.codegen import casadi_functions
         import casadi as ca

@@ -18,7 +18,6 @@ through ``codegen.FastFunction`` (buffer calls).
 """
 from __future__ import annotations
 
-import abc
 import contextlib
 import io
 import math
@@ -435,58 +434,3 @@ def run_scipy(method: str, rhs: Callable, jac: Callable | None, grid: np.ndarray
         error = f"solver stopped at t = {solver.t} ({solver.status})"
         fail_time = solver.t
     return Run(X=X, reached=k, stats=stats, error=error, fail_time=fail_time, fail_state=fail_state)
-
-
-# --------------------------------------------------------------------------- plug-ins
-
-
-class IntegratorPlugin(abc.ABC):
-    """A family of ODE integrators behind one hook: ``advance`` integrates x' = ode(t, x, p)
-    over the output grid and returns a :class:`Run`; ``counts`` maps its raw statistics to
-    the schema's names; ``zoom``: a failure can be located by re-integrating on finer grids."""
-
-    zoom = False
-
-    @abc.abstractmethod
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress,
-                hmin, u=None) -> Run:
-        """Integrate over the output grid; the Run keeps what was reached and the error."""
-
-    def counts(self, method: str, raw: dict) -> dict:
-        return dict(raw)
-
-
-class CasadiPlugin(IntegratorPlugin):
-    zoom = True
-
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
-                u=None):
-        opts = casadi_options(method, rtol, atol, max_steps, fixed_steps, extra, hmin=hmin)
-        return run_casadi(method, funcs["ode"], grid, x0, p, opts, progress, u=u)
-
-    def counts(self, method, raw):
-        return casadi_counts(method, raw)
-
-
-class ScipyPlugin(IntegratorPlugin):
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
-                u=None):
-        from .eom.codegen import FastFunction
-
-        uv = np.zeros(0) if u is None else np.ravel(u)
-        rhs = FastFunction(funcs["ode"]).bind(u=uv, p=p)
-        jac = None if method in NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(u=uv, p=p)
-        return run_scipy(method, rhs, jac, grid, x0, rtol, atol, max_steps, progress, extra, hmin=hmin)
-
-
-PLUGINS: dict[str, IntegratorPlugin] = {"casadi": CasadiPlugin(), "scipy": ScipyPlugin()}
-
-
-def plugin(method: str) -> IntegratorPlugin:
-    """The plug-in that runs ``method`` (a name of METHODS)."""
-    kind = METHODS[method][0]
-    if kind == "crk" and kind not in PLUGINS:     # imported on first use (ctypes, the C source)
-        from .simulation.crk import PLUGIN
-
-        PLUGINS[kind] = PLUGIN
-    return PLUGINS[kind]

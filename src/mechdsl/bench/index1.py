@@ -26,7 +26,9 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     constraint the KKT matrix is singular)."""
     import casadi as ca
 
-    from ..simulate import parameter_vector, simulate, start_vector
+    from ..eom import parameter_vector
+    from ..simulate import simulate
+    from ..simulation.inputs import start_vector
 
     if eom.g is None:
         raise UsageError(f"formulation {FORMULATION!r} needs a model with constraints")

@@ -73,7 +73,7 @@ def run(args) -> int:
 
 def _extra_lines(m) -> list[str]:
     from ..model.friction import friction_notes
-    from ..simulate import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
+    from ..simulation.monitors import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
 
     """Lines other phases contribute (loops, first integrals, ...), each guarded: check never fails on them."""
     out = []

@@ -11,11 +11,21 @@ Public API:
     dae_index(dae, x0, z0, p0, t0) -> int               (index of a semi-explicit DAE)
     FORMULATIONS, DEFAULT_FORMULATION
 """
+from ..output.result import RunInterrupted
 from .dof import DofReport, dof_report
-from .driver import RunInterrupted, simulate_dae
 from .index import dae_index, guarded_idas
 from .init import InitReport, check_report, initialize
 from .options import DEFAULT_FORMULATION, FORMULATIONS
+
+
+def __getattr__(name):
+    # the public entry of a constrained run is the simulation layer's (this package holds the
+    # mechanics of constrained systems; the run itself lives in mechdsl.simulation)
+    if name == "simulate_dae":
+        from ..simulation.entries import simulate_dae
+
+        return simulate_dae
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = ["simulate_dae", "RunInterrupted", "dof_report", "DofReport", "initialize", "InitReport", "check_report",
            "dae_index", "guarded_idas", "FORMULATIONS", "DEFAULT_FORMULATION"]

@@ -11,8 +11,17 @@ stepper (scipy one-step solvers), table (events summary).  Design: docs/internal
 """
 from .gaps import ContactGap, Fixation, contact_gaps, gap_from_ir, gap_jacobian
 from .impact_map import ImpactError, ImpactSolution, solve_impact
-from .simulate import simulate_with_contacts
 from .table import events_table, print_events
+
+
+def __getattr__(name):
+    # the public entry of a contact run is the simulation layer's (this package holds the
+    # contact mechanics; the run itself lives in mechdsl.simulation)
+    if name == "simulate_with_contacts":
+        from ..simulation.entries import simulate_with_contacts
+
+        return simulate_with_contacts
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __all__ = ["simulate_with_contacts", "ContactGap", "Fixation", "contact_gaps", "gap_from_ir", "gap_jacobian",
            "solve_impact",

@@ -33,7 +33,7 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
                 diags.error("E604", str(e), spans[name], "see docs/simulate.md for the names")
     method = str(out.get("method", "")).lower()
     if method in R.FIXED_METHODS and (model.loops or model.constraints):
-        from ..symplectic import CONSTRAINED
+        from ..simulation.backends.fixed_step import CONSTRAINED
 
         if method not in CONSTRAINED:
             bad("method", f"= \"{method}\" ignores the constraints of {model.name}",

@@ -87,7 +87,7 @@ def solve(problem: Problem, progress=None) -> Result:
         meta["aliases"] = {**{f"lambda[{c.alias}]": f"lambda[{c.name}]" for c in renamed},
                            **{f"residual({c.alias})": f"residual({c.name})" for c in renamed}}
     if "versions" not in meta:
-        from ..simulate import versions
+        from ..output.result import versions
 
         meta["versions"] = versions()
     if s.estimate_error:
@@ -100,7 +100,7 @@ def _record_inputs(r: Result, drive) -> None:
     its own), and the bound warnings of signals known only during the run."""
     import numpy as np
 
-    from ..simulate import record_inputs
+    from .backends.ode import record_inputs
 
     X = np.c_[r.q, r.qd] if len(r.t) else np.zeros((0, 2 * len(r.coordinates)))
     r.metadata.setdefault("inputs", drive.describe())

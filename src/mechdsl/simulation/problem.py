@@ -98,7 +98,7 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
 
 def invariant_names(eom) -> tuple[str, ...]:
     """The energy when the model conserves it, and the model's declared invariants."""
-    from ..simulate import is_conservative
+    from .monitors import is_conservative
 
     names = []
     if conserves_energy(eom, is_conservative):

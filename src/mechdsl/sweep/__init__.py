@@ -55,7 +55,7 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
         raise UsageError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
     if out is not None:
         _check_out(out, overwrite)
-    from ..simulate import DEFAULT_POINTS
+    from ..simulation.backends.ode import DEFAULT_POINTS
 
     settings = model.settings(t_end=t_end, **options)
     if settings.points is None:
@@ -202,7 +202,7 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
 def _resolve_auto(job, d, settings):
     """method=auto, once for the sweep: the choice of a single run at the first run's start."""
     from ..eom.codegen import casadi_functions
-    from ..simulate import choose_method
+    from ..simulation.choose import choose_method
     from .runs import _prepare
 
     row = {k: float(v[0]) for k, v in d.values.items()}

@@ -138,7 +138,8 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
     single run (same Function, same options as ``simulate_ode``) mapped over k runs."""
     from .. import integrators as I
     from ..eom.codegen import casadi_functions
-    from ..simulate import DEFAULT_POINTS, MAX_STEPS_TOTAL, min_step
+    from ..simulation.backends.ode import DEFAULT_POINTS, MAX_STEPS_TOTAL
+    from ..simulation.choose import min_step
 
     npts = s.points or DEFAULT_POINTS
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))      # as simulate_ode
@@ -158,7 +159,7 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
 def scheme_parameter(pv) -> np.ndarray:
     """The integrator's parameter input [u; p] (integrators.dae_function); u is empty: the
     vectorized path serves models without inputs only."""
-    from ..simulate import NO_U
+    from ..simulation.choose import NO_U
 
     return np.r_[NO_U, np.asarray(pv, float).ravel()]
 
@@ -167,7 +168,8 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
     from .. import integrators as I
     from ..output.result import Result
-    from ..simulate import compute_signals, _check_outputs
+    from ..simulation.backends.ode import _check_outputs
+    from ..simulation.monitors import compute_signals
     from ..simulation import formulate
     from ..simulation import accuracy as A
 

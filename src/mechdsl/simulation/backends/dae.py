@@ -30,16 +30,17 @@ import time as _time
 
 import numpy as np
 
-from ..diagnostics import UsageError
-from ..eom import parameter_vector
-from ..output.result import Failure, Result
-from ..simulation.inputs import fixed_start
-from .dof import dof_report, short_list, singular_ratio, singular_ratios
-from .init import initialize
-from .options import DaeOptions, parse_options
-from .record import constrained_signals, multipliers, select_signals
-from .stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
-from .system import ConstrainedSystem
+from ...diagnostics import UsageError
+from ...eom import parameter_vector
+from ...output.result import Failure, Result, RunInterrupted
+from ..inputs import fixed_start
+from ...dae.dof import dof_report, short_list, singular_ratio, singular_ratios
+from ...dae.init import initialize
+from ...dae.options import DaeOptions, parse_options
+from ..record_dae import constrained_signals, multipliers, select_signals
+from ..monitors import energy_drift_stats, is_conservative
+from ...dae.stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
+from ...dae.system import ConstrainedSystem
 
 DEFAULT_POINTS = 501
 SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
@@ -92,23 +93,23 @@ def with_outputs(times, outs, t_now: float, tiny: float):
 def make_stepper(system, opts: DaeOptions, t0, q0, qd0, span):
     f = opts.formulation
     if f == "baumgarte":
-        from .baumgarte import BaumgarteStepper
+        from ...dae.baumgarte import BaumgarteStepper
 
         return BaumgarteStepper(system, opts, span)
     if f == "projection":
-        from .projection import ProjectionStepper
+        from ...dae.projection import ProjectionStepper
 
         return ProjectionStepper(system, opts, span)
     if f == "ggl":
-        from .ggl import GGLStepper
+        from ...dae.ggl import GGLStepper
 
         return GGLStepper(system, opts, t0, q0, qd0)
     if f == "partitioning":
-        from .partitioning import PartitioningStepper
+        from ...dae.partitioning import PartitioningStepper
 
         return PartitioningStepper(system, opts)
     if f == "augmented":
-        from .augmented import AugmentedStepper
+        from ...dae.augmented import AugmentedStepper
 
         return AugmentedStepper(system, opts, span, t0, q0)
     raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (parse_options checks)
@@ -374,12 +375,6 @@ def simulate_dae(eom, t_end, **kw) -> Result:
     metadata["warnings"] = []
     if failure_code:
         metadata["failure_code"] = failure_code
-    try:
-        from ..simulate import versions
-
-        metadata["versions"] = versions()
-    except ImportError:  # pragma: no cover
-        pass
     if not drift_ok:
         msg = (f"constraint drift exceeded the bound {bound:.1e}: max ||g|| = {max_d:.2e}, "
                f"max ||G q' + g_t|| = {max_v:.2e} (formulation {opts.formulation}); "
@@ -398,16 +393,6 @@ def simulate_dae(eom, t_end, **kw) -> Result:
         metadata["interrupted"] = True
         raise RunInterrupted(result)
     return result
-
-
-class RunInterrupted(KeyboardInterrupt):
-    """Ctrl-C during a constrained run: a KeyboardInterrupt that carries the partial Result
-    (``.result``: failure "interrupted", metadata["interrupted"] = True), so a caller may
-    write what was computed before it stops."""
-
-    def __init__(self, result: Result):
-        super().__init__("interrupted")
-        self.result = result
 
 
 CODE_INTEGRATOR = "E824"    # the integrator gave up (step budget, step size collapse, Newton)
@@ -441,11 +426,9 @@ def energy_check(eom, signals, opts: DaeOptions, complete: bool) -> dict:
     """Energy drift of the recorded states; for a conservative model (no damping, no other
     generalized forces, no explicit time in T, V or the constraints) a drift far above the
     tolerance means a wrong answer (e.g. a jump to another assembly branch), so it warns."""
-    from ..simulate import _energy_drift, is_conservative
-
     import casadi as ca
 
-    out = dict(_energy_drift(signals))
+    out = dict(energy_drift_stats(signals))
 
     def conservative():
         try:
@@ -503,7 +486,7 @@ def resolve_method(opts: DaeOptions, system, q, qd, t0, span) -> tuple[str, np.n
         return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
                 "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there"), None
     if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
-        from .augmented import ode_eigenvalues
+        from ...dae.augmented import ode_eigenvalues
 
         ev = ode_eigenvalues(system, q, qd, t0)
     else:

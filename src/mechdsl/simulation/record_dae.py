@@ -24,7 +24,7 @@ import re
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from ..simulation.record import lam_symbol  # noqa: F401  (the one multiplier symbol)
+from .record import lam_symbol  # noqa: F401  (the one multiplier symbol)
 
 REACTION_NAME = re.compile(r"(.+)\.(force|torque)\[(\d)\]")
 
@@ -105,7 +105,7 @@ def constrained_signals(eom, chosen: dict, t, Q, QD, LAM, p, drift=None) -> dict
     residuals, the drift (``drift`` = (D, VD) measured by the integrator, or None: evaluated
     at the recorded states), then the multipliers and reactions chosen.  One recorder call
     (simulation/record.py); LAM (N, m) the multipliers (None: not computed)."""
-    from ..simulation import record as R
+    from . import record as R
 
     plain = {k: v for k, v in chosen.items() if k in eom.outputs}
     rest = {k: v for k, v in chosen.items() if k not in plain}

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import abc
 
-from ..output.result import Result
+from ...output.result import Result
 
 
 class Backend(abc.ABC):
@@ -33,12 +33,12 @@ class OdeBackend(Backend):
     ignores = ("rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
-        from ..simulate import simulate_ode
+        from .ode import simulate_ode
 
         return simulate_ode(problem.eom, problem.settings, progress, drive=problem.drive)
 
     def describe(self, r):
-        from .. import integrators as I
+        from ... import integrators as I
 
         method = r.metadata.get("method")
         row = I.METHODS.get(method)
@@ -73,7 +73,7 @@ class DaeBackend(Backend):
     ignores = ("rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
-        from ..dae import simulate_dae
+        from .dae import simulate_dae
 
         s = problem.settings
         kw = dict(s.extra)
@@ -98,7 +98,7 @@ class EventsBackend(Backend):
     ignores = ("dt", "max_steps", "integrator_options", "formulation", "reactions")
 
     def run(self, problem, progress):
-        from ..impacts import simulate_with_contacts
+        from .events import simulate_with_contacts
 
         s = problem.settings
         kw = dict(s.extra)
@@ -117,7 +117,7 @@ class EventsBackend(Backend):
                                       output_events=s.output_events, **kw)
 
     def describe(self, r):
-        from ..impacts.stepper import SCIPY_METHODS
+        from ...impacts.stepper import SCIPY_METHODS
 
         m = r.metadata.get("method")
         python = f"scipy:{SCIPY_METHODS.get(m, m)}"
@@ -133,7 +133,7 @@ class FixedStepBackend(Backend):
     ignores = ("max_steps", "integrator_options", "rest_speed", "impact_order", "output_events")
 
     def run(self, problem, progress):
-        from ..symplectic import simulate_symplectic
+        from .fixed_step import simulate_symplectic
 
         s = problem.settings
         kw = dict(s.extra)

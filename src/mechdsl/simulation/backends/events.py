@@ -5,17 +5,18 @@ import time as _time
 
 import numpy as np
 
-from ..output import result as R
-from ..diagnostics import Diagnostic, MechError, UsageError
-from .gaps import contact_gaps
-from .options import ContactOptions
-from .compiled import COMPILED_CLASSES, flight
-from .run import Run, RunFailure
-from .stepper import resolve_method
-from .system import ContactSystem
-from ..eom import parameter_vector  # noqa: F401  (re-exported)
-from ..simulation.inputs import start_vector
-from ..simulation.record import ENERGY_NAMES
+from ...output import result as R
+from ...diagnostics import Diagnostic, MechError, UsageError
+from ...impacts.gaps import contact_gaps
+from ...impacts.options import ContactOptions
+from .event_flight import COMPILED_CLASSES, flight
+from .event_loop import Run, RunFailure
+from ...impacts.stepper import resolve_method
+from ...impacts.system import ContactSystem
+from ...eom import parameter_vector  # noqa: F401  (re-exported)
+from ..inputs import start_vector
+from .. import record as Rec
+from ..record import ENERGY_NAMES
 
 # options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
 # the simulator can pass its options through unchanged
@@ -130,12 +131,6 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                 "start": {**dict(zip(eom.coords, map(float, qs))),
                                           **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}},
                     "contacts": [g.name for g in gaps], "fixations": [f.label for f in fixes]}
-    try:
-        from ..simulate import versions
-
-        res.metadata["versions"] = versions()
-    except ImportError:  # pragma: no cover - the ODE simulator is part of mechdsl
-        pass
     return res
 
 
@@ -199,7 +194,7 @@ def output_names(eom, gaps, outputs) -> list[str]:
 
 
 def _no_span():
-    from ..diagnostics import Span
+    from ...diagnostics import Span
 
     return Span()
 
@@ -209,7 +204,7 @@ def _contact_setup(eom, contacts, fixations):
     """(gaps, fixations, contact Functions) of the model's contacts: derived once per EOM
     object and set of contacts (kept in its workspace; a repeated run, a sweep or a benchmark
     does not rebuild them), fresh when the contacts are not hashable."""
-    from .system import contact_functions
+    from ...impacts.system import contact_functions
 
     def build():
         gaps, fixes = contact_gaps(eom, contacts)
@@ -221,7 +216,7 @@ def _contact_setup(eom, contacts, fixations):
         hash(key)
     except TypeError:
         return build()
-    from ..eom.workspace import of
+    from ...eom.workspace import of
 
     gaps, fixes, functions = of(eom).memo(key, build)
     return list(gaps), list(fixes), functions
@@ -232,12 +227,10 @@ def _signals(eom, system, t, Y, force, lam, out_names, model_gaps=True) -> dict[
     same expressions on every run, so the recorder's Function is reused)."""
     import casadi as ca
 
-    from ..simulation import record as R
-
     n = eom.n
-    cols = R.merged(R.outputs(eom, out_names), R.energies(eom), R.invariants(eom),
+    cols = Rec.merged(Rec.outputs(eom, out_names), Rec.energies(eom), Rec.invariants(eom),
                     {f"{g.name}.gap": ca.SX(g.gap) for g in system.gaps})
-    out = R.record(eom, cols, t, Y[:, :n], Y[:, n:2 * n], system.p, LAM=lam,
+    out = Rec.record(eom, cols, t, Y[:, :n], Y[:, n:2 * n], system.p, LAM=lam,
                    using=() if model_gaps else tuple(g.gap for g in system.gaps))
     for i, g in enumerate(system.gaps):
         out[f"{g.name}.force"] = force[:, i].copy()

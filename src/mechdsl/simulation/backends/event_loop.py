@@ -22,10 +22,10 @@ import math
 
 import numpy as np
 
-from .impact_map import ImpactError, ImpactSolution, solve_impact
-from .rootfind import bracket_root
-from .compiled import COMPILED_CLASSES, EVENT, OK
-from .stepper import IMPLICIT, make_solver, steps_per_period
+from ...impacts.impact_map import ImpactError, ImpactSolution, solve_impact
+from ...impacts.rootfind import bracket_root
+from .event_flight import COMPILED_CLASSES, EVENT, OK
+from ...impacts.stepper import IMPLICIT, make_solver, steps_per_period
 
 ZENO_EVENTS = 500           # this many events ...
 IMPACTS_PER_CALL = 1024     # impact records one compiled call may hold
