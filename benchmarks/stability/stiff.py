@@ -24,7 +24,7 @@ def run(size: str = "small") -> Case:
     from mechdsl.eom.codegen import casadi_functions
     from mechdsl.eom import parameter_vector
     from mechdsl.simulate import simulate
-    from mechdsl.simulation.inputs import start_vector
+    from mechdsl.eom.start import start_vector
 
     check_size(size)
     T = 2.0 if size == "small" else 10.0

@@ -28,7 +28,7 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
 
     from ..eom import parameter_vector
     from ..simulate import simulate
-    from ..simulation.inputs import start_vector
+    from ..eom.start import start_vector
 
     if eom.g is None:
         raise UsageError(f"formulation {FORMULATION!r} needs a model with constraints")
@@ -91,12 +91,12 @@ def _rates(b):
 
 
 def _ode_methods():
-    from ..integrators import METHODS
+    from ..simulation.registry import ode_methods
 
-    return tuple(METHODS)
+    return ode_methods()
 
 
 def _no_jacobian():
-    from ..integrators import NO_JACOBIAN
+    from ..simulation.registry import METHODS
 
-    return NO_JACOBIAN
+    return tuple(m.name for m in METHODS.values() if not m.needs_jacobian)

@@ -160,7 +160,7 @@ def classify_setup(setup: Setup) -> str:
     from ..eom.codegen import casadi_functions
     from ..eom import parameter_vector
     from ..simulation.choose import choose_method
-    from ..simulation.inputs import start_vector
+    from ..eom.start import start_vector
 
     pv = parameter_vector(eom, setup.p)
     xs = start_vector(eom, setup.x0, pv)
@@ -177,7 +177,7 @@ def symplectic_dt(setup: Setup, method: str, tol: float, points: int) -> float:
     from ..eom.codegen import casadi_functions
     from ..eom import parameter_vector
     from ..simulation.choose import fixed_step_count
-    from ..simulation.inputs import start_vector
+    from ..eom.start import start_vector
 
     order = SYMPLECTIC_ORDER[method]
     eom = setup.eom

@@ -46,16 +46,16 @@ def run(args) -> int:
                 lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
-                settings = m.scene_settings
-                atol = settings.get("atol", 1e-10)
-                check_start(m.eom, t=float(settings.get("start_time", 0.0)),
-                            drift_bound=settings.get("drift_bound") or max(10 * float(atol), 1e-10))
+                # the run's own settings (argument > scene > default): its start time and drift bound
+                given = m.scene_settings.get("stop_time") is not None     # else any end: the plan does not depend on it
+                end = {} if given else {"t_end": float(m.scene_settings.get("start_time") or 0.0) + 1.0}
+                run = m.settings(**end)
+                check_start(m.eom, t=run.t_start, drift_bound=run.dae.bound(run.atol))
                 for w in m.warnings:
                     print(format_diagnostics([w]), file=sys.stderr)
                 if kind == "scene":
                     # the run's own validation (a scene value over a budget is E604) and its plan
-                    given = m.scene_settings.get("stop_time") is not None     # else any end: the plan does not depend on it
-                    problem = m.problem(**({} if given else {"t_end": float(m.scene_settings.get("start_time") or 0.0) + 1.0}))
+                    problem = m.problem(**end)
                     settings = ", ".join(f"{k} = {_fmt(v)}" for k, v in m.scene.settings)
                     lines.append(f"  scene {name} -> {m.name}" + (f" ({settings})" if settings else ""))
                     lines += [f"    {topic}: {text}" for topic, text in problem.plan]
@@ -82,7 +82,7 @@ def _extra_lines(m) -> list[str]:
     out += ["    " + s for s in friction_notes(m.model, m.parameters)]
     if m.model.loops or m.model.constraints:
         try:
-            from ..dae import check_report
+            from ..dae.init import check_report
 
             out += ["    " + s for s in check_report(m.eom)]
         except MechError:

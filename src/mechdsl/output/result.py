@@ -19,6 +19,7 @@ import numpy as np
 
 from .fileio import write_atomic_group
 from ..model.records import record
+from ..model.names import split_state
 
 
 @record(frozen=False)
@@ -89,9 +90,9 @@ class Result:
         for cand in _aliases(name):
             if cand in self.coordinates:
                 return "q", self.coordinates.index(cand)
-            m = re.fullmatch(r"der\((.+)\)", cand)
-            if m:
-                for inner in _aliases(m.group(1)):
+            inner_name, speed = split_state(cand)
+            if speed:
+                for inner in _aliases(inner_name):
                     if inner in self.coordinates:
                         return "qd", self.coordinates.index(inner)
             if cand in self.signals:

@@ -12,9 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import integrators as I
 from ..diagnostics import UsageError
 from ..eom.codegen import FastFunction
+from .registry import spec
+
 
 NO_U = np.zeros(0)                   # the input vector u of a model without inputs
 
@@ -86,7 +87,7 @@ def fixed_step_count(method, funcs, x0, pv, t0, t1, rtol, dt, budget=10_000_000,
             raise UsageError(f"dt must be positive (got {dt})")
         return max(1, math.ceil(span / dt - 1e-9)), f"dt = {dt:g} given"
     omega, rho = time_scale(funcs, x0, pv, t0, t1, u)
-    h = 0.5 * rtol ** (1.0 / I.FIXED_ORDER[method]) / omega
+    h = 0.5 * rtol ** (1.0 / spec(method).order) / omega
     steps = min(max(1, math.ceil(span / h)), int(budget))
     return steps, ("(capped at the budget) " if steps == int(budget) else "") + (f"h = {span / steps:.3g} from rtol = {rtol:g} and the time scale 1/{omega:.3g} s at the start "
                    f"(Jacobian spectral radius {rho:.3g}/s, sqrt(|qdd|), |qd|)")

@@ -11,6 +11,7 @@ from .. import integrators as I
 from ..eom.codegen import FastFunction
 from ..output.result import Failure
 from .choose import NO_U, min_step
+from .registry import spec
 
 
 def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=NO_U) -> Failure:
@@ -21,19 +22,21 @@ def diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps,
     t_fail = run.fail_time
     x_fail = run.fail_state
     unstable = False
-    if x_fail is None and k + 1 < len(grid) and I.plugin(method).zoom:
+    if x_fail is None and k + 1 < len(grid) and spec(method).family == "casadi":   # the plug-in can zoom
         # zoom in: re-integrate the failing interval on finer grids (3 levels of 50 subintervals);
         # a fixed-step method is checked with the adaptive erk instead
-        zoom = "erk" if method in I.FIXED_STEP else method
+        zoom = "erk" if spec(method).fixed_step else method
+        zs = spec(zoom)
         a, b, xa = t_last, float(grid[k + 1]), x_last
         hmin = min_step(float(grid[0]), float(grid[-1]))
         try:
-            opts = I.casadi_options(zoom, rtol, atol, max_steps, None, extra if zoom == method else {}, hmin=hmin)
+            opts = I.casadi_options(zs.plugin, zs.options, rtol, atol, max_steps, None, extra if zoom == method else {},
+                                    hmin=hmin)
             for level in range(3):
                 if b - a <= 100 * hmin:
                     break
                 fine = np.linspace(a, b, 51)
-                sub = I.run_casadi(zoom, funcs["ode"], fine, xa, pv, opts, I.Progress(False, 0, 1), u=u)
+                sub = I.run_casadi(zs.plugin, funcs["ode"], fine, xa, pv, opts, I.Progress(False, 0, 1), u=u)
                 if sub.error is None:
                     unstable = level == 0 and zoom != method
                     break

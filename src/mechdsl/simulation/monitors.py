@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import analysis     # its face: the first-integral search is imported when a run first searches
+from ..eom import fold_inputs
+from ..eom.codegen import cache_dir
+from ..output.fileio import write_atomic
 from . import record as R
 from .accuracy import energy_drift
-
-SINGULARITY_THRESHOLD = 0.05         # warn when a monitor comes closer than this to zero
 
 
 def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
@@ -62,7 +64,6 @@ def _integral_search(eom, pv, u=None):
     if eom.inputs:
         if u is None:
             return None, False
-        from ..eom import fold_inputs
 
         key = tuple(float(v) for v in u)
         folded = eom.workspace.folded(key, lambda: fold_inputs(eom, u))
@@ -90,7 +91,6 @@ def _integral_function(eom, pv):
 
     import casadi as ca
 
-    from ..eom.codegen import cache_dir
 
     path = None
     try:
@@ -109,9 +109,7 @@ def _integral_function(eom, pv):
     except Exception:  # noqa: BLE001 - no cache: search
         path = None
     try:
-        from ..analysis.integrals import integral_signals
-
-        sig = integral_signals(eom, pv)
+        sig = analysis.integral_signals(eom, pv)
     except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
         sig = {}
     f = None
@@ -120,8 +118,6 @@ def _integral_function(eom, pv):
         f = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()), ["t", "x", "p"], list(sig))
     if path is not None:
         try:
-            from ..output.fileio import write_atomic
-
             path.parent.mkdir(parents=True, exist_ok=True)
             write_atomic(path, "none" if f is None else f.serialize(), overwrite=True)
         except Exception:  # noqa: BLE001 - a cache that cannot be written is only slower

@@ -28,6 +28,7 @@ from ... import integrators as I
 from ...eom.codegen import compile_functions, find_compiler
 from ..choose import time_scale
 
+
 # method -> (id in crk.c, scipy class of the same algorithm)
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
 SOURCE = Path(__file__).with_name("crk.c")

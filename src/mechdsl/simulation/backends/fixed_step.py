@@ -1,4 +1,4 @@
-"""Fixed-step integration in canonical variables (q, p): symplectic methods.
+"""The fixed-step back end: integration in canonical variables (q, p), symplectic methods and RATTLE.
 
     q' = dH/dp = qd(q, p, t) = M^-1 (p - b),   p' = -dH/dq + Q_nc = dL/dq|_(q, qd(q, p)) + Q - dD/dqd
 
@@ -13,7 +13,7 @@
 - ``rk4``: the classical explicit Runge-Kutta method (4 evaluations a step), not symplectic,
   for comparisons;
 - ``rattle``: for constrained models (g(q, t) = 0), the constrained Stormer-Verlet method
-  (mechdsl.rattle), symplectic on the constraint manifold, order 2; ``stormer-verlet`` means
+  (``schemes.rattle_step``), symplectic on the constraint manifold, order 2; ``stormer-verlet`` means
   RATTLE there.  The other methods ignore constraints and refuse constrained models.  Without
   constraints ``rattle`` is ``stormer-verlet``.
 
@@ -29,101 +29,87 @@ import time as _time
 
 import numpy as np
 
+from ...analysis.hamilton import hamiltonian
 from ...analysis.integrals import integral_signals
 from ...dae.dof import dof_report
 from ...dae.init import initialize
 from ...dae.system import ConstrainedSystem
-from ...diagnostics import UsageError
+from ...diagnostics import UsageError, did_you_mean
+from ...eom import parameter_vector
 from ...output.result import Failure, Result
 from .. import record as R
-from ..inputs import fixed_start
+from ...eom.start import fixed_start, start_vector
 from ..monitors import compute_signals, energy_drift_stats
-from ..record_dae import constrained_signals as record_signals, multipliers, select_signals
-from ..registry import FIXED_METHODS
+from ..record_dae import constrained_signals as record_signals
+from ..record_dae import multipliers, select_signals
+from ..registry import spec
+from . import Backend
 from .schemes import rattle_step, step_function
 
-METHODS = tuple(FIXED_METHODS)     # the names live in the one method registry
-SYMPLECTIC = ("stormer-verlet", "implicit-midpoint", "gauss-legendre", "rattle")
-CONSTRAINED = ("stormer-verlet", "rattle")     # methods for models with constraints (RATTLE)
+
 CHUNK = 2000                  # steps a mapaccum call
 MAX_POINTS = 20001            # recorded points unless ``points`` asks otherwise
-# options of the adaptive solvers that do not apply to a fixed step (noted in the metadata)
-_IGNORED = ("rtol", "atol", "tolerance", "max_step", "first_step", "formulation", "compiled", "reactions")
 
 
-def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: float | None = None, *,
-                        t0: float = 0.0, p=None, q0=None, qd0=None, points: int | None = None,
-                        newton_tol: float = 1e-12, max_newton: int = 30, outputs=None, t_start=None,
-                        x0=None, progress=None, step_eom=None, **opts) -> Result:
-    """Integrate ``eom`` from t0 to t_end with a fixed step (at most ``dt``).
+class FixedStepBackend(Backend):
+    name = "fixed-step"
+    noun = "a fixed-step"
+    groups = ("fixed_step",)
+    ignores = ("rtol", "atol", "max_steps", "integrator_options", "compiled")
+    fixed_step = True
 
-    p: parameter overrides (dict or vector); q0/qd0: start values (default: the model's), or
-    x0: the full state [q; qd] or a dict {coordinate: value, "der(coordinate)": value}
-    (as mechdsl.simulate); progress: a callable(t, t_end) called after every chunk of steps;
-    points: number of recorded points (default: every step, at most 20001); outputs: names of
-    the model outputs to record (default: all); t_start: alias of t0; step_eom: the equations
-    to step when zero-order-hold inputs drive the model (``Drive.close_eom(eom, hold_time=True)``:
-    the holds read at a trailing parameter, which every step sets to its midpoint t_n + h/2, so
-    that all its stages see the value held on [t_n, t_n + h); ``eom`` records).  Tolerance
-    options of the adaptive solvers (rtol, atol) do not apply and are noted in the metadata.
-    Returns a Result whose signals hold the energy T + V, the Hamiltonian H, the canonical
-    momenta p_<coordinate>, the first integrals and the model outputs at every recorded point.
+    def run(self, problem, progress):
+        return fixed_step_run(problem.eom, problem.settings, progress, step_eom=problem.step_eom)
+
+    def describe(self, r):
+        m = r.metadata.get("method")
+        return {"formulation": "canonical", "integrator": f"mechdsl:{m}", "method": m}
+
+
+def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
+    """Integrate ``eom`` from t_start to t_end with a fixed step (at most ``dt``).
+
+    Reads the validated settings: the common fields and the ``fixed_step`` group (dt: default
+    (t_end - t_start) / 1000; newton_tol, max_newton of the implicit stages).  points: number
+    of recorded points (default: every step, at most 20001).  step_eom: the equations to step
+    when zero-order-hold inputs drive the model (``Drive.close_eom(eom, hold_time=True)``: the
+    holds read at a trailing parameter, which every step sets to its midpoint t_n + h/2, so that
+    all its stages see the value held on [t_n, t_n + h); ``eom`` records).  Returns a Result
+    whose signals hold the energy T + V, the Hamiltonian H, the canonical momenta
+    p_<coordinate>, the first integrals and the model outputs at every recorded point.
     """
-    import casadi as ca
-
-    from ...eom import parameter_vector
-    from ...analysis.hamilton import hamiltonian
-
-    method = str(method).lower().replace("_", "-")
-    if method not in METHODS:
-        raise UsageError(f"unknown symplectic method {method!r}; choose one of {', '.join(METHODS)}")
+    fs = s.fixed_step
+    method, dt, points, outputs, x0 = s.method, fs.dt, s.points, s.outputs, s.x0
+    newton_tol, max_newton = fs.newton_tol, fs.max_newton
     constrained = eom.g is not None and eom.m > 0
-    if constrained and method not in CONSTRAINED:
+    if constrained and not spec(method).constrained:
         raise UsageError(f"the method '{method}' ignores the constraints of {eom.name}; for a constrained "
                          "model use method = \"rattle\" (constrained Stormer-Verlet, symplectic) or an "
                          "adaptive DAE formulation (method = \"auto\", docs/constraints.md)")
     if method == "rattle" and not constrained:
         method = "stormer-verlet"          # RATTLE without constraints is Stormer-Verlet
-    unknown = sorted(k for k in opts if k not in _IGNORED)
-    if unknown:
-        raise UsageError(f"unknown option(s) for the fixed-step integrators: {', '.join(unknown)}")
-    t0 = float(t_start) if t_start is not None else float(t0)
-    t_end = float(t_end)
-    if not (math.isfinite(t_end) and t_end > t0):
-        raise UsageError(f"stop time {t_end} must be after the start time {t0}")
+    t0, t_end = s.t_start, s.t_end
     notes = []
     if dt is None:
         dt = (t_end - t0) / 1000.0
         notes.append("no step size given: dt = (stop time - start time)/1000")
-    dt = float(dt)
-    if not (math.isfinite(dt) and dt > 0):
-        raise UsageError(f"step size dt = {dt} must be positive")
-    if opts:
-        notes.append("fixed-step method: ignored " + ", ".join(sorted(opts)))
     wall0 = _time.perf_counter()
 
-    pv = parameter_vector(eom, p)
+    pv = parameter_vector(eom, s.p)
     ham = hamiltonian(eom, pv)
     n = eom.n
     out_names = _output_names(eom, outputs) if not constrained else outputs
     extra_meta = {}
     if constrained:
-        qs, qds, init, active, dof = consistent_start(eom, x0, q0, qd0, t0, pv)
+        qs, qds, init, active, dof = consistent_start(eom, x0, t0, pv)
         extra_meta = {"initialization": init.as_dict(), "dof": dof.as_dict(),
                       "constraints": list(eom.constraint_names),
                       "active_constraints": [eom.constraint_names[i] for i in active]}
     elif x0 is not None:
-        from ..inputs import start_vector
-
         xs = start_vector(eom, x0, pv)
         qs, qds = xs[:n], xs[n:]
     else:
         qs, qds = eom.start(pv)
-    if not constrained:
-        qs = qs if q0 is None else np.asarray(q0, float).ravel()
-        qds = qds if qd0 is None else np.asarray(qd0, float).ravel()
-    if qs.size != n or qds.size != n:
-        raise UsageError(f"start values need {n} entries each")
     pm0 = np.array(ham.function("momenta")(qs, qds, t0, pv), float).ravel()
 
     nsteps = max(1, int(math.ceil((t_end - t0) / dt - 1e-9)))
@@ -219,7 +205,7 @@ def simulate_symplectic(eom, t_end: float, method: str = "stormer-verlet", dt: f
                       "max_velocity_drift": float(np.max(signals["velocity_drift"], initial=0.0))})
     meta = {"model": eom.name, "route": getattr(eom, "route", ""), "coordinates": list(eom.coords),
             "method": method, "method_reason": "requested", "why": why, "dt": h,
-            "symplectic": method in SYMPLECTIC, "separable": ham.separable, "canonical_variables": True,
+            "symplectic": spec(method).symplectic, "separable": ham.separable, "canonical_variables": True,
             "notes": notes + list(ham.notes), "warnings": [],
             "options": {"t_start": t0, "t_end": t_end, "dt": h, "method": method, "points": int(len(t)),
                         "outputs": list(out_names or ()), "newton_tolerance": newton_tol,
@@ -258,8 +244,6 @@ def _output_names(eom, outputs) -> tuple[str, ...]:
             if o not in names:
                 names.append(o)
         elif o not in known:
-            from ...diagnostics import did_you_mean
-
             hint = did_you_mean(o, list(eom.outputs or ()) + sorted(known))
             raise UsageError(f"'{o}' is not an output of {eom.name}" + (f"; {hint}" if hint else ""))
     return tuple(names)
@@ -291,15 +275,10 @@ def _energy_drift(signals) -> dict:
     return out
 
 
-def consistent_start(eom, x0, q0, qd0, t0, pv):
+def consistent_start(eom, x0, t0, pv):
     """(q, qd, InitReport, active constraint indices, DofReport) at the start: the DAE's
     consistent initialization (overridden values count as fixed) and its choice of
     independent constraints."""
-    if q0 is not None or qd0 is not None:
-        a, b = eom.start(pv)
-        a = a if q0 is None else np.asarray(q0, float).ravel()
-        b = b if qd0 is None else np.asarray(qd0, float).ravel()
-        x0 = np.concatenate([a, b])
     qs, qds, fq, fqd = fixed_start(eom, x0, pv)
     init = initialize(eom, qs, qds, t0, pv, fixed_q=fq, fixed_qd=fqd)
     dof = dof_report(eom, init.q, t0, pv)

@@ -22,13 +22,33 @@ from ...output.result import Result
 from .. import monitors as Mon
 from ..choose import NO_U, choose_method, fixed_step_count, min_step
 from ..diagnose import diagnose
-from ..inputs import start_vector
+from ..drive import build_drive
+from ...eom.start import start_vector
 from ..record import ENERGY_NAMES
+from ..registry import ODE_FAMILIES, ode_methods, spec
+from ..settings import DEFAULT_POINTS
+from . import Backend
 from . import plugins as P
+from .crk import auto_choice, library, scipy_name
 
-DEFAULT_POINTS = 501
+
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
-KNOWN_OPTS = ("singularity_threshold", "functions")   # back-end options of the ODE runs (besides the settings)
+
+
+class OdeBackend(Backend):
+    name = "ode"
+    noun = "an ODE"
+    groups = ("ode", "fixed_step")
+    accepts = {"formulation": ("ode",)}     # the unconstrained problem's own name: no note
+
+    def run(self, problem, progress):
+        return simulate_ode(problem.eom, problem.settings, progress, drive=problem.drive)
+
+    def describe(self, r):
+        method = r.metadata.get("method")
+        m = spec(method) if method in ode_methods() else None
+        plugin = "none" if m is None else f"{m.family}:{m.plugin}"
+        return {"formulation": "ode", "integrator": plugin, "method": method}
 
 
 def simulate_ode(eom, s, progress=None, drive=None) -> Result:
@@ -36,23 +56,17 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     ``s`` validated by mechdsl.simulation.settings; ``drive``: the inputs' signals,
     mechdsl.simulation.drive, built by formulate)."""
     wall0 = time.perf_counter()
-    opts = dict(s.extra)
-    unknown = sorted(set(opts) - set(KNOWN_OPTS))
-    if unknown:
-        hint = did_you_mean(unknown[0], KNOWN_OPTS)
-        raise UsageError(f"unknown simulation option '{unknown[0]}'" + (f"; {hint}" if hint else ""))
+    functions = s.ode.functions
     method = s.method
-    if method != "auto" and method not in I.METHODS:
-        raise UsageError(f"method '{method}' does not apply to an ODE model (methods: {', '.join(['auto', *I.METHODS])}"
-                         ", or a fixed-step method)")
+    if method != "auto" and spec(method).family not in ODE_FAMILIES:
+        raise UsageError(f"method '{method}' does not apply to an ODE model (methods: "
+                         f"{', '.join(['auto', *ode_methods()])}, or a fixed-step method)")
     t0, t1, rtol, atol, npts = s.t_start, s.t_end, s.rtol, s.atol, s.points or DEFAULT_POINTS
     pv = parameter_vector(eom, s.p)
     xs = start_vector(eom, s.x0, pv)
     out_names = _check_outputs(eom, s.outputs)
     compiled = s.compiled
     if drive is None:
-        from ..drive import build_drive
-
         drive = build_drive(eom, s.inputs, t0, t1, xs)
     uv = drive.vector(t0)
     vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
@@ -68,34 +82,32 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     if method == "auto":
         method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
         meta["auto"] = info
-        if method == "erk" and compiled is None and opts.get("functions") is None:
+        if method == "erk" and compiled is None and functions is None:
             method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
     else:
         reason = "requested"
-    if method in I.COMPILED_LOOP and compiled is False:     # compiled = false wins: never compile
-        from .crk import scipy_name
-
+    if spec(method).compiled_loop and compiled is False:     # compiled = false wins: never compile
         method, reason = scipy_name(method), (f"{method} requested with compiled = false: its loop would compile; "
                                               f"{scipy_name(method)} is the same method stepped in Python")
     if "compiled" not in meta:
         meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
-    meta.update(method=method, method_reason=reason, integrator=I.METHODS[method][3])
+    meta.update(method=method, method_reason=reason, integrator=spec(method).description)
     loop_compiled = None
-    if opts.get("functions") is not None:
-        funcs = opts["functions"]
-    elif method in I.COMPILED_LOOP:     # the loop compiles the model's C together with its own
+    if functions is not None:
+        funcs = functions
+    elif spec(method).compiled_loop:     # the loop compiles the model's C together with its own
         funcs = vm
         loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
         if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
             method, loop_compiled = "erk", None
-            meta.update(method=method, integrator=I.METHODS[method][3],
+            meta.update(method=method, integrator=spec(method).description,
                         method_reason=reason.split(";")[0] + "; the compiled stepping loop it would pick could "
                                                              "not be built (see the warning): erk in the virtual machine")
             meta["compiled"] = "no: auto (the compiled loop could not be built)"
     elif compiled:
         funcs = casadi_functions(eom, compiled=True,
-                                 names=("ode",) if method in I.NO_JACOBIAN else ("ode", "ode_jacobian"),
-                                 jacobian="forward" if method in I.FORWARD_ONLY else "full")
+                                 names=("ode", "ode_jacobian") if spec(method).needs_jacobian else ("ode",),
+                                 jacobian="forward" if spec(method).forward_only else "full")
         funcs["ode"]  # compile now (notes below)
         funcs = drive.closed(funcs)
     else:
@@ -105,20 +117,16 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
     else:
         meta["notes"] += list(getattr(funcs, "notes", []))
-    if s.formulation not in ("auto", "ode"):
-        meta["notes"].append(f"formulation = {s.formulation!r} applies to constrained models only; ignored for this ODE")
-    if s.reactions:
-        meta["notes"].append("reactions = true applies to constrained models only; ignored for this ODE")
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
     extra = dict(s.integrator_options or {})
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     breaks = drive.breakpoints(t0, t1)
     try:
         if breaks.size:
-            run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom,
+            run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar, eom,
                                      t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
         else:
-            run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.dt, extra, bar, eom, t0, t1,
+            run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar, eom, t0, t1,
                               meta["notes"], 10 * s.budget, u=uv)
     finally:
         bar.close()
@@ -135,7 +143,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     U = drive.values(t, X)
     signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
     record_inputs(drive, U, signals, meta)
-    Mon.singularity_report(eom, signals, t, meta, float(opts.get("singularity_threshold") or Mon.SINGULARITY_THRESHOLD))
+    Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
     stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
              "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
     stats.update(Mon.energy_drift_stats(signals))
@@ -160,8 +168,6 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
 def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
     """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
     fallback to scipy's stepping in Python (or to ``fallback``) is a warning of the run."""
-    from .crk import library
-
     fn, note = library(funcs["ode"], tag=eom.name)
     if fn is None:
         instead = (f"{fallback} runs instead" if fallback else
@@ -176,8 +182,6 @@ def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
 def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
     """method = auto on a non-stiff model: erk in the virtual machine, or the compiled dop853
     loop when compiling pays (simulation.crk.auto_choice); ``meta['compiled']`` says why."""
-    from .crk import auto_choice
-
     pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv, rho=meta["auto"].get("spectral_radius"))
     meta["auto"]["compile"] = info
     if pick is None:
@@ -234,12 +238,13 @@ def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom
          u=NO_U):
     """One run of the integrator plug-in of ``method`` over the output grid."""
     fixed, steps = None, None
-    if method in I.FIXED_STEP:
+    if spec(method).fixed_step:
         steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
                                       xs, pv, t0, t1, rtol, dt, budget, u=u)
         fixed = {"target_steps": steps, "why": why}
     elif dt is not None:
-        meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(I.FIXED_STEP)})")
+        fixed = [m for m in ode_methods() if spec(m).fixed_step]
+        meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(fixed)})")
     try:
         run = P.plugin(method).advance(method, funcs, grid, xs, pv, rtol=rtol, atol=atol, max_steps=max_steps,
                                        fixed_steps=steps, extra=extra, progress=bar, hmin=min_step(t0, t1),
@@ -261,7 +266,7 @@ def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, b
         raise UsageError(f"the input tables have {breaks.size} samples inside the run; at most {MAX_PIECES} "
                          "(each is a restart of the integrator): resample the table")
     edges = np.r_[t0, breaks, t1]
-    if method in I.FIXED_STEP and dt is None:    # the step of the whole run, not of each piece's span
+    if spec(method).fixed_step and dt is None:    # the step of the whole run, not of each piece's span
         steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")), xs, pv, t0, t1,
                                       rtol, None, budget, u=drive.vector(t0))
         dt = (t1 - t0) / steps

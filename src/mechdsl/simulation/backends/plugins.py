@@ -18,15 +18,27 @@ import abc
 import numpy as np
 
 from ...eom.codegen import FastFunction
-from ...integrators import (METHODS, NO_JACOBIAN, Run, casadi_counts, casadi_options, run_casadi,
-                            run_scipy)
+from ...integrators import Run, casadi_counts, casadi_options, run_casadi, run_scipy
+from ..registry import spec
 from . import crk
 
 
 class IntegratorPlugin(abc.ABC):
-    """A family of ODE integrators behind one hook: ``advance`` integrates x' = ode(t, x, p)
+    """A family of ODE integrators behind one hook: ``advance`` integrates x' = ode(t, x, u, p)
     over the output grid and returns a :class:`Run`; ``counts`` maps its raw statistics to
-    the schema's names; ``zoom``: a failure can be located by re-integrating on finer grids."""
+    the schema's names; ``zoom``: a failure can be located by re-integrating on finer grids.
+
+    How to add an integrator (docs/internals/simulation.md has the whole list):
+
+    1. A ``MethodSpec`` in simulation/registry.py: name, family, plug-in name, options, order,
+       needs_jacobian, fixed_step, kinds (and ``dae`` / ``events`` when the DAE or contact back
+       end can run it under another name).
+    2. If no family fits, a subclass here: ``advance`` never raises for a numerical failure
+       (the Run keeps the rows reached, ``error`` and, when known, ``fail_time``/``fail_state``);
+       ``counts`` maps its raw statistics to steps, rhs_evals, jac_evals, rejected_steps.
+    3. Register the subclass in ``PLUGINS`` under the family name.
+    4. A test that runs the method on a model with a closed form (tests/test_sim_methods.py).
+    """
 
     zoom = False
 
@@ -44,11 +56,12 @@ class CasadiPlugin(IntegratorPlugin):
 
     def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
                 u=None):
-        opts = casadi_options(method, rtol, atol, max_steps, fixed_steps, extra, hmin=hmin)
-        return run_casadi(method, funcs["ode"], grid, x0, p, opts, progress, u=u)
+        m = spec(method)
+        opts = casadi_options(m.plugin, m.options, rtol, atol, max_steps, fixed_steps, extra, hmin=hmin)
+        return run_casadi(m.plugin, funcs["ode"], grid, x0, p, opts, progress, u=u)
 
     def counts(self, method, raw):
-        return casadi_counts(method, raw)
+        return casadi_counts(spec(method).plugin, raw)
 
 
 class ScipyPlugin(IntegratorPlugin):
@@ -56,8 +69,9 @@ class ScipyPlugin(IntegratorPlugin):
                 u=None):
         uv = np.zeros(0) if u is None else np.ravel(u)
         rhs = FastFunction(funcs["ode"]).bind(u=uv, p=p)
-        jac = None if method in NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(u=uv, p=p)
-        return run_scipy(method, rhs, jac, grid, x0, rtol, atol, max_steps, progress, extra, hmin=hmin)
+        m = spec(method)
+        jac = FastFunction(funcs["ode_jacobian"]).bind(u=uv, p=p) if m.needs_jacobian else None
+        return run_scipy(m.plugin, rhs, jac, grid, x0, rtol, atol, max_steps, progress, extra, hmin=hmin)
 
 
 class CrkPlugin(IntegratorPlugin):
@@ -71,8 +85,8 @@ class CrkPlugin(IntegratorPlugin):
         fn, _ = crk.library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"))
         if fn is None:
             rhs = FastFunction(ode).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
-            run = run_scipy(crk.scipy_name(method), rhs, None, grid, x0, rtol, atol, max_steps, progress, {},
-                              hmin=hmin)
+            run = run_scipy(spec(crk.scipy_name(method)).plugin, rhs, None, grid, x0, rtol, atol, max_steps,
+                            progress, {}, hmin=hmin)
             run.stats = {"n_steps": run.stats.get("steps"), "n_rhs": run.stats.get("rhs_evals"),
                          "n_reject": None, "fallback": "scipy"}
             return run
@@ -86,8 +100,6 @@ class CrkPlugin(IntegratorPlugin):
 PLUGINS: dict[str, IntegratorPlugin] = {"casadi": CasadiPlugin(), "scipy": ScipyPlugin(), "crk": CrkPlugin()}
 
 
-
 def plugin(method: str) -> IntegratorPlugin:
-    """The plug-in that runs ``method`` (a name of METHODS)."""
-    kind = METHODS[method][0]
-    return PLUGINS[kind]
+    """The plug-in that runs ``method`` (an ODE method of the registry)."""
+    return PLUGINS[spec(method).family]
