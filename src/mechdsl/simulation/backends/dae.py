@@ -30,15 +30,20 @@ import time as _time
 
 import numpy as np
 
+from ...dae.augmented import AugmentedStepper, ode_eigenvalues
+from ...dae.baumgarte import BaumgarteStepper
 from ...dae.dof import dof_report, short_list, singular_ratio, singular_ratios
+from ...dae.ggl import GGLStepper
 from ...dae.init import initialize
 from ...dae.options import FORMULATIONS, DaeRun, resolve_formulation
+from ...dae.partitioning import PartitioningStepper
+from ...dae.projection import ProjectionStepper
 from ...dae.stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
 from ...dae.system import ConstrainedSystem
 from ...diagnostics import UsageError
 from ...eom import parameter_vector
-from ...output.result import Failure, Result, RunInterrupted
 from ...eom.start import fixed_start
+from ...output.result import Failure, Result, RunInterrupted
 from ..monitors import energy_drift_stats, is_conservative
 from ..record_dae import constrained_signals, multipliers, select_signals
 from ..registry import dae_method
@@ -96,24 +101,14 @@ def with_outputs(times, outs, t_now: float, tiny: float):
 def make_stepper(system, opts: DaeRun, t0, q0, qd0, span):
     f = opts.formulation
     if f == "baumgarte":
-        from ...dae.baumgarte import BaumgarteStepper
-
         return BaumgarteStepper(system, opts, span)
     if f == "projection":
-        from ...dae.projection import ProjectionStepper
-
         return ProjectionStepper(system, opts, span)
     if f == "ggl":
-        from ...dae.ggl import GGLStepper
-
         return GGLStepper(system, opts, t0, q0, qd0)
     if f == "partitioning":
-        from ...dae.partitioning import PartitioningStepper
-
         return PartitioningStepper(system, opts)
     if f == "augmented":
-        from ...dae.augmented import AugmentedStepper
-
         return AugmentedStepper(system, opts, span, t0, q0)
     raise UsageError(f"unknown formulation {f!r}")  # pragma: no cover (SegmentRun checks)
 
@@ -540,7 +535,6 @@ def choose_dae_method(opts: DaeRun, system, q, qd, t0, span) -> tuple[str, np.nd
         return ("auto: the partitioned ODE solves for the dependent coordinates by Newton's method inside its "
                 "right-hand side; CVODES BDF takes the fewest right-hand-side evaluations there"), None
     if opts.formulation == "augmented":      # its own ODE (the KKT route's Jacobian can take seconds to build)
-        from ...dae.augmented import ode_eigenvalues
 
         ev = ode_eigenvalues(system, q, qd, t0)
     else:
