@@ -389,3 +389,12 @@ def median(xs) -> float:
         return float("nan")
     k = a.size // 2
     return float(a[k]) if a.size % 2 else float(np.mean(a[k - 1:k + 1]))
+
+
+def named_multipliers(names, scales, values) -> dict[str, float]:
+    """Multipliers by constraint name, each times its scale (|dg/dq| of an explicit constraint
+    equation: the reaction along -grad g, eom.multiplier_scales); empty without multipliers."""
+    if values is None:
+        return {}
+    scale = np.ones(len(values)) if scales is None else scales
+    return {c: float(s * v) for c, s, v in zip(names, scale, values)}

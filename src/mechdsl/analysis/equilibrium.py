@@ -41,7 +41,7 @@ from . import charts
 from .charts import chart, locked_joints, quaternion_blocks, quaternion_model
 from .charts import tangent_basis as zbasis
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
-from .core import dense, null_space, param_vector, parts, structure, wrap_angle
+from .core import dense, named_multipliers, null_space, param_vector, parts, structure, wrap_angle
 from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
 from .sampling import halton
@@ -95,10 +95,7 @@ class Equilibrium:
     @property
     def lambdas(self) -> dict[str, float]:
         """Multipliers by constraint name (empty for unconstrained models)."""
-        if self.multipliers is None:
-            return {}
-        scale = np.ones(len(self.multipliers)) if self.multiplier_scales is None else self.multiplier_scales
-        return {c: float(s * v) for c, s, v in zip(self.constraint_names, scale, self.multipliers)}
+        return named_multipliers(self.constraint_names, self.multiplier_scales, self.multipliers)
 
     @property
     def values(self) -> dict[str, float]:

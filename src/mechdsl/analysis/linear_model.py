@@ -12,7 +12,7 @@ import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from ..output import display as _display
-from .core import dense, parts
+from .core import dense, named_multipliers, parts
 from .lqr import lqr
 from .matrices import skew, sym
 from .modes import Modes, modes_of
@@ -67,10 +67,7 @@ class Linearization:
 
     @property
     def lambdas(self) -> dict[str, float]:
-        if self.multipliers is None:
-            return {}
-        scale = np.ones(len(self.multipliers)) if self.multiplier_scales is None else self.multiplier_scales
-        return {c: float(s * v) for c, s, v in zip(self.constraint_names, scale, self.multipliers)}
+        return named_multipliers(self.constraint_names, self.multiplier_scales, self.multipliers)
 
     @property
     def n(self) -> int:
