@@ -428,7 +428,7 @@ def main(argv=None) -> int:
     figs.mkdir(parents=True, exist_ok=True)
     data = Path(tempfile.mkdtemp(prefix="mechdsl-perf-data-"))
     w0, c0 = time.perf_counter(), time.process_time()
-    from mechdsl.simulate import versions
+    from mechdsl.output.result import versions
 
     v = versions()
     ctx = {"figs": figs, "data": data,

@@ -1,4 +1,4 @@
-"""The compiled stepping loop (mechdsl.simulation.crk): dopri5 and dop853 in C.
+"""The compiled stepping loop (mechdsl.simulation.backends.crk): dopri5 and dop853 in C.
 
 Checked against independent references: scipy's RK45/DOP853 stepping in Python (the same
 algorithm, so the same steps), closed-form motions, CasADi's own integrators, and the
@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 
 from mechdsl import eom as E
-from mechdsl import integrators as I
 from mechdsl.eom.codegen import find_compiler
 from mechdsl.simulate import simulate
-from mechdsl.simulation import crk
+from mechdsl.simulation.backends import crk
 from sim_models import blowup, chain, pendulum
 
 PAIRS = {"dopri5": "scipy-rk45", "dop853": "scipy-dop853"}
@@ -127,9 +126,9 @@ def test_registry_names_and_no_jacobian():
     from mechdsl.simulation.registry import check_method, methods
 
     for m in PAIRS:
-        assert m in I.NO_JACOBIAN and m in I.METHODS
-        assert "ode" in check_method(m).backends and "ode" in methods()[m].backends
-    assert "events" in methods()["dop853"].backends      # the contact back end's name is kept
+        assert not check_method(m).needs_jacobian and check_method(m).compiled_loop
+        assert "ode" in check_method(m).kinds and "ode" in methods()[m].kinds
+    assert "events" in methods()["dop853"].kinds      # the contact back end's name is kept
 
 
 # --------------------------------------------------------------------------- method auto compiles when it pays
@@ -226,7 +225,7 @@ def test_run_record_says_whether_compiled_code_ran():
 
 
 def test_jacobian_eigenvalues_of_the_second_order_form_equal_the_full_decomposition():
-    from mechdsl.simulate import jacobian_eigenvalues
+    from mechdsl.simulation.choose import jacobian_eigenvalues
 
     rng = np.random.default_rng(7)
     for n in (1, 3, 8):

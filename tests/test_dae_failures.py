@@ -121,7 +121,7 @@ def test_the_driver_loop_is_bounded(monkeypatch):
     """Every loop of the driver counts its integrator calls; at the bound the run fails (E824)
     with the results up to there (here the bound is lowered to 5 calls of 0.1 s)."""
     from dae_models import pendulum_eom
-    from mechdsl.dae import driver
+    from mechdsl.simulation.backends import dae as driver
 
     monkeypatch.setattr(driver, "MAX_CALLS", 5)
     r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), 2.0, points=3, max_interval=0.1)
@@ -141,8 +141,14 @@ def test_a_jacobian_that_cannot_be_evaluated_is_a_failure_not_a_crash():
     from conftest import MODELS
     from mechdsl.dae import simulate_dae
 
+    from mechdsl.diagnostics import MechError
+    from mechdsl.simulation import formulate, solve
+    from mechdsl.simulation.settings import from_kwargs
+
     m = mechdsl.load(MODELS / "andrews.mech", model="Andrews")
-    r = simulate_dae(m.eom, 0.01, points=3, p={"m3": -1e12})
+    with pytest.raises(MechError, match="E747"):        # every entry runs the start check (issue 22)
+        simulate_dae(m.eom, 0.01, points=3, p={"m3": -1e12})
+    r = solve(formulate(m.eom, from_kwargs(0.01, points=3, p={"m3": -1e12})))
     assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-12)
 
 

@@ -377,10 +377,11 @@ class Model:
         resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
         steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
         ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
-        from .simulation.inputs import start_vector
-        from .simulate import choose_method, default_inputs, fixed_step_count, min_step
+        from .eom.start import start_vector
+        from .simulation.choose import choose_method, default_inputs, fixed_step_count, min_step
         from . import integrators as I
         from .eom.codegen import casadi_functions
+        from .simulation.registry import METHODS
         import casadi as ca
 
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
@@ -397,17 +398,17 @@ class Model:
             pv = self.parameter_values
             m, _, _ = choose_method(self.eom, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
                                     start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol)
-        if m not in I.METHODS or I.METHODS[m][0] != "casadi":
-            casadi_methods = [k for k, v in I.METHODS.items() if v[0] == "casadi"]
+        if m not in METHODS or METHODS[m].family != "casadi":
+            casadi_methods = [k for k, v in METHODS.items() if v.family == "casadi"]
             raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
         if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
             raise UsageError(f"steps must be a whole number of at least 1 (got {steps!r})")
-        if m in I.FIXED_STEP and steps is None:
+        if METHODS[m].fixed_step and steps is None:
             pv = self.parameter_values
             steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
                                         start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol, None,
                                         u=default_inputs(self.eom, np.zeros(0)))
-        opts = I.casadi_options(m, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
+        opts = I.casadi_options(METHODS[m].plugin, METHODS[m].options, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
                                 hmin=min_step(0.0, s.t_end))
         ode = funcs["ode"]
         nu = ode.size1_in(2)
@@ -421,7 +422,7 @@ class Model:
             shifted = ca.Function("ode", [ts, xs, us, ps], [ode(ts + us[nu], xs, us[:nu], ps)],
                                   ["t", "x", "u", "p"], ["xdot"])
             args = ca.vertcat(u, t0, p)
-        integ = I.make_integrator("integrator", I.METHODS[m][1], I.dae_function(shifted), 0.0, s.t_end, opts)
+        integ = I.make_integrator("integrator", METHODS[m].plugin, I.dae_function(shifted), 0.0, s.t_end, opts)
         xf = integ(x0=x0, p=args)["xf"]
         return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..output.fileio import write_atomic
+from ..output.plot import save_figure
 
 
 @dataclass
@@ -98,7 +99,7 @@ class Modes:
 
     def plot(self, path, title: str = "", overwrite: bool = False):
         """Bar chart of each mode shape (one panel per mode), written atomically."""
-        from matplotlib.figure import Figure     # no pyplot: no global backend or figure registry
+        from matplotlib.figure import Figure  # no pyplot: no global backend or figure registry
 
         k = max(1, len(self))
         fig = Figure(figsize=(max(4.0, 0.9 * len(self.coords) + 2.5), 1.9 * k + 0.6))
@@ -121,7 +122,6 @@ class Modes:
         if title:
             fig.suptitle(title, fontsize=10)
         fig.tight_layout()
-        from ..output.plot import save_figure
 
         return save_figure(fig, path, overwrite=overwrite)
 

@@ -26,7 +26,9 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     constraint the KKT matrix is singular)."""
     import casadi as ca
 
-    from ..simulate import parameter_vector, simulate, start_vector
+    from ..eom import parameter_vector
+    from ..simulate import simulate
+    from ..eom.start import start_vector
 
     if eom.g is None:
         raise UsageError(f"formulation {FORMULATION!r} needs a model with constraints")
@@ -89,12 +91,12 @@ def _rates(b):
 
 
 def _ode_methods():
-    from ..integrators import METHODS
+    from ..simulation.registry import ode_methods
 
-    return tuple(METHODS)
+    return ode_methods()
 
 
 def _no_jacobian():
-    from ..integrators import NO_JACOBIAN
+    from ..simulation.registry import METHODS
 
-    return NO_JACOBIAN
+    return tuple(m.name for m in METHODS.values() if not m.needs_jacobian)

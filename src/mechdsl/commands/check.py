@@ -73,19 +73,17 @@ def check_start_state(m):
     returns the scene's Problem (its plan), else None."""
     from ..eom.preflight import check_start
 
-    settings = m.scene_settings
-    atol = settings.get("atol", 1e-10)
-    check_start(m.eom, t=float(settings.get("start_time", 0.0)),
-                drift_bound=settings.get("drift_bound") or max(10 * float(atol), 1e-10))
-    if m.scene is None:
-        return None
-    given = settings.get("stop_time") is not None     # else any end: the plan does not depend on it
-    return m.problem(**({} if given else {"t_end": float(settings.get("start_time") or 0.0) + 1.0}))
+    # the run's own settings (argument > scene > default): its start time and drift bound
+    given = m.scene_settings.get("stop_time") is not None     # else any end: the plan does not depend on it
+    end = {} if given else {"t_end": float(m.scene_settings.get("start_time") or 0.0) + 1.0}
+    run = m.settings(**end)
+    check_start(m.eom, t=run.t_start, drift_bound=run.dae.bound(run.atol))
+    return None if m.scene is None else m.problem(**end)
 
 
 def _extra_lines(m) -> list[str]:
     from ..model.friction import friction_notes
-    from ..simulate import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
+    from ..simulation.monitors import MAX_INTEGRAL_SEARCH  # the search grows like n^3: simulate's bound holds here too
 
     """Lines other phases contribute (loops, first integrals, ...), each guarded: check never fails on them."""
     out = []
@@ -94,7 +92,7 @@ def _extra_lines(m) -> list[str]:
     out += ["    " + s for s in friction_notes(m.model, m.parameters)]
     if m.model.loops or m.model.constraints:
         try:
-            from ..dae import check_report
+            from ..dae.init import check_report
 
             out += ["    " + s for s in check_report(m.eom)]
         except MechError:

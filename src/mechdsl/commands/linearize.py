@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+from ..model.names import split_state
 from ._common import (
     add_cache_arg,
     add_force_arg,
@@ -129,7 +130,7 @@ def format_symbolic(lin) -> str:
 
     s = lin.symbolic()
     out = [f"  symbolic (sympy, from T, V, D, Q via the {s.route} route), at "
-           + ", ".join(f"{k} = {text(v)}" for k, v in s.state.items() if not str(k).startswith("der(")
+           + ", ".join(f"{k} = {text(v)}" for k, v in s.state.items() if not split_state(str(k))[1]
                        and str(k) != "time")]
     for name, Mx in (("M", s.M), ("C", s.C), ("K", s.K)):
         out.append(f"    {name} = [" + "; ".join(", ".join(text(Mx[i, j]) for j in range(Mx.shape[1]))

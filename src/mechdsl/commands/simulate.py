@@ -79,7 +79,7 @@ def run(args) -> int:
     written, lost = write_outputs(r, args.output, args.plot, args.force)
     print(summary(r, written))
     if r.events:
-        from ..impacts import print_events
+        from ..impacts.table import print_events
 
         print_events(r)
     for line in lost:

@@ -28,12 +28,11 @@ of G_v overshot three times the re-partition level.
 """
 from __future__ import annotations
 
-from ..integrators import make_integrator
-
 import numpy as np
 
+from ..integrators import make_integrator
 from .dof import dependent_columns
-from .stepper import Stepper, StepError, build_timer, call_integrator, integrator_options, ode_plugin
+from .stepper import StepError, Stepper, build_timer, call_integrator, integrator_options, ode_plugin
 from .system import scale_jacobian
 
 

@@ -12,15 +12,15 @@ output times in between get an integrator per pattern of fractions.
 """
 from __future__ import annotations
 
-from ..integrators import make_integrator
-
 import abc
 import contextlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .options import DaeOptions
+from ..eom.codegen import compile_functions
+from ..integrators import captured_messages, dae_function, make_integrator
+from .options import DaeRun
 from .system import ConstrainedSystem
 
 
@@ -68,7 +68,7 @@ _ERK_KEYS = {"n_steps": "nsteps", "n_rhs": "nfevals", "n_reject": "netfails"}
 @dataclass
 class Stepper(abc.ABC):
     system: ConstrainedSystem
-    opts: DaeOptions
+    opts: DaeRun
     t: float = 0.0
     q: np.ndarray | None = None
     qd: np.ndarray | None = None
@@ -130,12 +130,12 @@ def scaled_dae(dae: dict, extra_p=None) -> dict:
     return out
 
 
-def ode_plugin(opts: DaeOptions) -> str:
+def ode_plugin(opts: DaeRun) -> str:
     """The CasADi plugin for the ODE formulations: CVODES (Adams/BDF) or the explicit RK 5(4)."""
     return "erk" if opts.method == "erk" else "cvodes"
 
 
-def integrator_options(opts: DaeOptions, plugin: str) -> dict:
+def integrator_options(opts: DaeRun, plugin: str) -> dict:
     if plugin == "erk":
         return {"abstol": opts.atol, "reltol": opts.rtol, "max_num_steps": opts.steps}
     o = {"abstol": opts.atol, "reltol": opts.rtol, "max_num_steps": opts.steps,
@@ -192,8 +192,6 @@ def call_integrator(F, **args):
     CasADi and SUNDIALS print to Python's stdout/stderr while they retry (e.g. a Newton
     solve inside a right-hand side that did not converge); that is captured here and only
     its last line is kept, as the detail of a failure."""
-    from ..integrators import captured_messages
-
     try:
         with captured_messages() as buf:    # this thread's output only (no global swap)
             out = F(**args)
@@ -252,8 +250,6 @@ class GridIntegrators:
         mechdsl.eom.codegen for the tree models); the virtual machine when that is not possible."""
         import casadi as ca
 
-        from ..eom.codegen import compile_functions
-        from ..integrators import dae_function
 
         d = self.dae
         if "z" in d and d["z"].numel():

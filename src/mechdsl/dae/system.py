@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..eom import EOM
+from ..eom.codegen import FastFunction
 
 
 def _sx():
@@ -280,8 +281,6 @@ class ConstrainedSystem:
         """Evaluate fn[name] through Function.buffer (the driver calls these at every check)."""
         f = self.fast.get(name)
         if f is None:
-            from ..eom.codegen import FastFunction
-
             f = self.fast[name] = FastFunction(self.fn[name])
         out = f(*args)
         return out if isinstance(out, tuple) else (out,)
@@ -306,8 +305,6 @@ class ConstrainedSystem:
         key = f"{name}_map_{K}"
         f = self.fast.get(key)
         if f is None:
-            from ..eom.codegen import FastFunction
-
             f = self.fast[key] = FastFunction(self.fn[name].map(K))
         return f
 

@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, Span
+from ..model.names import split_state
 
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
@@ -109,7 +110,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         return found
     if eom.m:
         from ..dae.init import initialize
-        from ..simulation.inputs import fixed_start
+        from .start import fixed_start
 
         q, qd, fq, fqd = fixed_start(eom, x0, pv)
         g_problem = _constraint_problem(eom, q, t, pv)
@@ -124,7 +125,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         if found:
             return found
     else:
-        from ..simulation.inputs import start_vector
+        from .start import start_vector
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]
@@ -436,7 +437,7 @@ def _overridden(eom, x0) -> set[int]:
         return set(range(2 * eom.n))
     out = set()
     for k in x0:
-        name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+        name, speed = split_state(k)
         if name in eom.coords:
             out.add(eom.coords.index(name) + (eom.n if speed else 0))
     return out

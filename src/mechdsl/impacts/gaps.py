@@ -17,9 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..diagnostics import Diagnostic, MechError
 from ..model import exprs as X
 from ..model import ir
-from ..diagnostics import Diagnostic, MechError
+
 
 SURFACES = ("plane", "sphere", "point", "gap")
 

@@ -17,7 +17,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from ..diagnostics import Diagnostic, MechError
+from ..eom.codegen import dense_function
 from .fastfn import FastFunction
+from .gaps import point_position
+
 
 RANK_TOL = 1e-10
 
@@ -28,8 +32,6 @@ def contact_functions(eom, gaps, fixations) -> dict:
     run wraps them in its own FastFunction buffers."""
     import casadi as ca
 
-    from ..eom.codegen import dense_function
-    from .gaps import point_position
 
     q, qd, t, P = eom.q, eom.qd, eom.t, eom.p
     rows = []
@@ -79,8 +81,6 @@ class ContactSystem:
         self.f_energy = FastFunction(fs["energy"])
         self.e = np.array(fs["e"](self.p), float).ravel()
         if np.any(self.e < 0) or np.any(self.e > 1):
-            from ..diagnostics import Diagnostic, MechError
-
             bad = [g.name for g, e in zip(self.gaps, self.e) if not 0 <= e <= 1]
             raise MechError(Diagnostic("E862", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
         # sliding friction of persistent contacts: column i = generalized force per unit normal force

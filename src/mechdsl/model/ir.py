@@ -38,7 +38,7 @@ Conventions (documented in docs/language.md):
 from __future__ import annotations
 
 from dataclasses import field
-from typing import Union
+from typing import Iterator, Union
 
 from ..diagnostics import Span
 from .records import record
@@ -176,6 +176,32 @@ Mat3 = tuple[Vec3, Vec3, Vec3]
 ZERO = Const(0.0)
 ONE = Const(1.0)
 
+# --------------------------------------------------------------------------- traversal
+
+
+def children(e: Expr) -> tuple[Expr, ...]:
+    if isinstance(e, Op):
+        return e.args
+    if isinstance(e, TimeDer):
+        return (e.expr,)
+    return ()
+
+
+def walk(e: Expr) -> Iterator[Expr]:
+    """Every node of e, pre-order (iterative: deep expressions are fine)."""
+    stack = [e]
+    while stack:
+        n = stack.pop()
+        yield n
+        stack.extend(reversed(children(n)))
+
+
+def depends_on_state(e: Expr) -> bool:
+    """True when e depends on coordinates, speeds or kinematic queries (not only t, p)."""
+    return any(isinstance(n, (Coord, Speed, PointPos, PointVel, BodyRot, BodyOmega, EnergyRef,
+                              ReactionRef, TimeDer, PointAcc, BodyAlpha)) for n in walk(e))
+
+
 # --------------------------------------------------------------------------- declarations
 
 
@@ -245,8 +271,6 @@ class JointVar:
 
     @property
     def prescribed(self) -> bool:
-        from .exprs import depends_on_state  # local import: exprs imports ir
-
         return self.coordinate is None and not depends_on_state(self.motion)
 
 

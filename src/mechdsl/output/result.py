@@ -19,6 +19,7 @@ import numpy as np
 
 from .fileio import write_atomic_group
 from ..model.records import record
+from ..model.names import split_state
 
 
 @record(frozen=False)
@@ -89,9 +90,9 @@ class Result:
         for cand in _aliases(name):
             if cand in self.coordinates:
                 return "q", self.coordinates.index(cand)
-            m = re.fullmatch(r"der\((.+)\)", cand)
-            if m:
-                for inner in _aliases(m.group(1)):
+            inner_name, speed = split_state(cand)
+            if speed:
+                for inner in _aliases(inner_name):
                     if inner in self.coordinates:
                         return "qd", self.coordinates.index(inner)
             if cand in self.signals:
@@ -222,3 +223,49 @@ def _jsonable(x):
     if isinstance(x, float) and not np.isfinite(x):
         return str(x)
     return x
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a constrained run: a KeyboardInterrupt that carries the partial Result
+    (``.result``: failure "interrupted", metadata["interrupted"] = True), so a caller may
+    write what was computed before it stops."""
+
+    def __init__(self, result: Result):
+        super().__init__("interrupted")
+        self.result = result
+
+
+def versions() -> dict[str, str]:
+    """The versions a result was computed with (``metadata["versions"]``, stamped once by the
+    simulation layer's template on every Result)."""
+    import platform
+
+    import casadi
+
+    from .. import __version__
+
+    return {"mechdsl": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
+            "scipy": _scipy_version(), "python": platform.python_version()}
+
+
+def _scipy_version() -> str:
+    """scipy.__version__ without importing scipy (8 ms) when the run did not: its version.py
+    is a file of plain assignments, read on its own."""
+    import sys
+
+    mod = sys.modules.get("scipy")
+    if mod is None:
+        import importlib.util
+        import os
+
+        try:
+            spec = importlib.util.find_spec("scipy")
+            where = os.path.join(os.path.dirname(spec.origin), "version.py")
+            vspec = importlib.util.spec_from_file_location("_mechdsl_scipy_version", where)
+            vmod = importlib.util.module_from_spec(vspec)
+            vspec.loader.exec_module(vmod)
+            return str(vmod.version)
+        except Exception:     # another layout: ask scipy itself
+            pass
+        import scipy as mod
+    return str(mod.__version__)

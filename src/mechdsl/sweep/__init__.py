@@ -23,6 +23,7 @@ import numpy as np
 
 from ..diagnostics import UsageError
 from .spec import Table, table  # noqa: F401  (public: mechdsl.sweep.table)
+from ..model.names import split_state
 
 __all__ = ["sweep", "table", "to_frame", "first_time"]
 
@@ -55,7 +56,7 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
         raise UsageError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
     if out is not None:
         _check_out(out, overwrite)
-    from ..simulate import DEFAULT_POINTS
+    from ..simulation.settings import DEFAULT_POINTS
 
     settings = model.settings(t_end=t_end, **options)
     if settings.points is None:
@@ -176,12 +177,13 @@ def _label(name: str, starts: dict) -> str:
     key = starts.get(name)
     if key is None:
         return name
-    return f"{key[4:-1]}.speed" if key.startswith("der(") else f"{key}.start"
+    coord, speed = split_state(key)
+    return f"{coord}.speed" if speed else f"{coord}.start"
 
 
 def _vectorizable(problem, names, method: str | None = None) -> str | None:
     """None when one mapped integrator can run the sweep, else why not."""
-    from .. import integrators as I
+    from ..simulation import registry as R
 
     if names.structural:
         return (f"{', '.join(names.structural)} is an Integer/Boolean parameter: it changes the model's "
@@ -192,9 +194,9 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
         return {"dae": "the model has constraints (a DAE)", "hybrid": "the model has contacts (events)",
                 "canonical": f"method {problem.settings.method} is a fixed-step canonical method"}[problem.kind]
     m = method or problem.settings.method
-    if m != "auto" and (m not in I.METHODS or I.METHODS[m][0] != "casadi"):
+    if m != "auto" and R.spec(m).family != "casadi":
         return f"method {m} is not a CasADi integrator"
-    if problem.settings.extra.get("functions") is not None:
+    if problem.settings.ode.functions is not None:
         return "the functions option replaces the model's Functions"
     return None
 
@@ -202,7 +204,7 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
 def _resolve_auto(job, d, settings):
     """method=auto, once for the sweep: the choice of a single run at the first run's start."""
     from ..eom.codegen import casadi_functions
-    from ..simulate import choose_method
+    from ..simulation.choose import choose_method
     from .runs import _prepare
 
     row = {k: float(v[0]) for k, v in d.values.items()}
@@ -210,7 +212,7 @@ def _resolve_auto(job, d, settings):
         eom, s = _prepare(job, row)
     except Exception:  # noqa: BLE001 - an invalid first run: decide at the model's own start
         eom, s = job.model.eom, settings.replace(p=job.model.parameter_values, x0=None)
-        from ..simulation.inputs import start_vector
+        from ..eom.start import start_vector
 
         s = s.replace(x0=start_vector(eom, None, s.p))
     funcs = casadi_functions(eom, names=("ode", "ode_jacobian"))

@@ -78,7 +78,7 @@ def run_chunk(job: Job, first: int, values: dict) -> Chunk:
 
 def _prepare(job: Job, row: dict):
     """The run's EOM and settings (the one place a run's p and x0 are built)."""
-    from ..simulation.inputs import start_vector
+    from ..eom.start import start_vector
 
     m = job.model
     if job.structural:
@@ -138,14 +138,18 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
     single run (same Function, same options as ``simulate_ode``) mapped over k runs."""
     from .. import integrators as I
     from ..eom.codegen import casadi_functions
-    from ..simulate import DEFAULT_POINTS, MAX_STEPS_TOTAL, min_step
+    from ..simulation.backends.ode import MAX_STEPS_TOTAL
+    from ..simulation.settings import DEFAULT_POINTS
+    from ..simulation.choose import min_step
+    from ..simulation.registry import spec
 
     npts = s.points or DEFAULT_POINTS
     max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))      # as simulate_ode
-    opts = I.casadi_options(s.method, s.rtol, s.atol, max_steps, None, dict(s.integrator_options or {}),
+    m = spec(s.method)
+    opts = I.casadi_options(m.plugin, m.options, s.rtol, s.atol, max_steps, None, dict(s.integrator_options or {}),
                             hmin=min_step(s.t_start, s.t_end))
     ode = casadi_functions(eom, compiled=s.compiled, names=("ode", "ode_jacobian"))["ode"]
-    integ = I._integrator(s.method, ode, grid, opts)
+    integ = I.cached_integrator(m.plugin, ode, grid, opts)
     key = (id(integ), k, threads)
     hit = _MAPS.get(key)
     if hit is None or hit[0] is not integ:
@@ -158,7 +162,7 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
 def scheme_parameter(pv) -> np.ndarray:
     """The integrator's parameter input [u; p] (integrators.dae_function); u is empty: the
     vectorized path serves models without inputs only."""
-    from ..simulate import NO_U
+    from ..simulation.choose import NO_U
 
     return np.r_[NO_U, np.asarray(pv, float).ravel()]
 
@@ -167,7 +171,8 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
     from .. import integrators as I
     from ..output.result import Result
-    from ..simulate import compute_signals, _check_outputs
+    from ..simulation.backends.ode import _check_outputs
+    from ..simulation.monitors import compute_signals
     from ..simulation import formulate
     from ..simulation import accuracy as A
 

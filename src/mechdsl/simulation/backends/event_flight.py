@@ -24,7 +24,10 @@ import ctypes
 
 import numpy as np
 
-from ..simulation import crk
+from ...eom.codegen import casadi_functions, find_compiler
+from ...eom.workspace import of
+from . import crk
+
 
 # scipy class (impacts.stepper) -> method of the compiled loop
 COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
@@ -81,8 +84,6 @@ class CompiledFlight:
 
 def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     """(CompiledFlight or None, note) for a ContactSystem; the library is cached per model."""
-    from ..eom.codegen import casadi_functions, find_compiler
-
     if find_compiler() is None:
         return None, "no C compiler"
     eom = system.eom
@@ -96,7 +97,6 @@ def flight(system, tag: str = "model") -> tuple[CompiledFlight | None, str]:
     # kept in the EOM's workspace per right-hand side and contact objects (the contacts' own
     # objects are kept per model by impacts.simulate): building and serializing the gap and
     # impact Functions for the library's cache key costs ~1 ms a run
-    from ..eom.workspace import of
 
     return of(eom).by_content(eom, (), ("compiled_flight", system.m, bool(system.fixations)),
                               lambda: _build_flight(system, ode, tag), extra=(ode, *system.gaps))

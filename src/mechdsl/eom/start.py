@@ -1,6 +1,7 @@
-"""The start vector and the parameter vector of a run, one builder each.
+"""The start vector of a run: the model's start values with overrides, one builder.
 
-``state_key`` reads a start-value key (``"theta"`` or ``"der(theta)"``) in one place;
+``state_key`` turns a start-value key (``"theta"`` or ``"der(theta)"``, read by
+``model.names.split_state``) into its index in [q; qd];
 ``start_vector`` applies overrides (a full [q; qd] vector or {key: value}) to the model's
 start values; ``parameter_vector`` (mechdsl.eom) does the same for parameters.
 ``fixed_start`` adds what a constrained run's consistent initialization needs: which
@@ -11,14 +12,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from ..eom import parameter_vector
+from ..model.names import split_state
 
-__all__ = ["state_key", "start_vector", "fixed_start", "parameter_vector"]
+__all__ = ["state_key", "start_vector", "fixed_start"]
 
 
 def state_key(eom, key: str) -> int:
     """Index in [q; qd] of a start-value key: a coordinate name or ``der(name)``."""
-    name, speed = (key[4:-1], True) if key.startswith("der(") and key.endswith(")") else (key, False)
+    name, speed = split_state(key)
     if name not in eom.coords:
         hint = did_you_mean(name, list(eom.coords))
         raise UsageError(f"'{name}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))

@@ -24,7 +24,10 @@ import re
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from ..simulation.record import lam_symbol  # noqa: F401  (the one multiplier symbol)
+from ..eom import multiplier_scales
+from . import record as R
+from .record import lam_symbol  # noqa: F401  (the one multiplier symbol)
+
 
 REACTION_NAME = re.compile(r"(.+)\.(force|torque)\[(\d)\]")
 
@@ -40,8 +43,6 @@ def depends_on(expr, sym) -> bool:
 
 def reaction_sources(eom) -> dict[str, object]:
     """name -> SX in (q, qd, t, p, lam) for every reaction/multiplier signal of the model."""
-    from ..eom import multiplier_scales
-
     lam = lam_symbol(eom)
     scale = multiplier_scales(eom)
     out = {}
@@ -105,8 +106,6 @@ def constrained_signals(eom, chosen: dict, t, Q, QD, LAM, p, drift=None) -> dict
     residuals, the drift (``drift`` = (D, VD) measured by the integrator, or None: evaluated
     at the recorded states), then the multipliers and reactions chosen.  One recorder call
     (simulation/record.py); LAM (N, m) the multipliers (None: not computed)."""
-    from ..simulation import record as R
-
     plain = {k: v for k, v in chosen.items() if k in eom.outputs}
     rest = {k: v for k, v in chosen.items() if k not in plain}
     cols = R.merged(plain, R.energies(eom), R.residuals(eom), {} if drift is not None else R.drift(eom), rest)

@@ -22,10 +22,11 @@ import math
 
 import numpy as np
 
-from .impact_map import ImpactError, ImpactSolution, solve_impact
-from .rootfind import bracket_root
-from .compiled import COMPILED_CLASSES, EVENT, OK
-from .stepper import IMPLICIT, make_solver, steps_per_period
+from ...impacts.impact_map import ImpactError, ImpactSolution, solve_impact
+from ...impacts.rootfind import bracket_root
+from ...impacts.stepper import IMPLICIT, make_solver, steps_per_period
+from .event_flight import COMPILED_CLASSES, EVENT, OK
+
 
 ZENO_EVENTS = 500           # this many events ...
 IMPACTS_PER_CALL = 1024     # impact records one compiled call may hold
@@ -440,7 +441,7 @@ class Run:
         tick = None if self.progress is None else (lambda tt: self._tick(tt, t_end))
         status, t_r, y_r, X, st = self.flight.segment(
             COMPILED_CLASSES[self.method_cls], np.concatenate([[t], pts, [t_stop]]), y, s.p, o.rtol, o.atol,
-            o.max_steps - self.stats["steps"], s.k, o.offset, o.samples, tick, self._impacts_in_c())
+            o.step_limit - self.stats["steps"], s.k, o.offset, o.samples, tick, self._impacts_in_c())
         if status not in (OK, EVENT):
             return None
         rows = min(len(X) - 1, len(pts))
@@ -512,12 +513,12 @@ class Run:
         rho = float(np.max(np.abs(lam.imag if self.method_cls in IMPLICIT else lam), initial=0.0))
         per_period = steps_per_period(self.method_cls, self.o.rtol)
         need = rho * (t_end - t0) / (2 * np.pi) * per_period
-        if need > self.o.max_steps:
+        if need > self.o.step_limit:
             raise RunFailure(t0, "too many steps needed",
                              f"the model's fastest motion at the start has a time scale of {1 / rho:.3g} s "
                              f"(spectral radius {rho:.3g} 1/s): following it to t = {t_end:g} takes about "
                              f"{need:.3g} steps ({per_period:.3g} a period at rtol {self.o.rtol:g}), over the "
-                             f"budget of {self.o.max_steps} steps (max_steps); check the sizes and stiffnesses "
+                             f"budget of {self.o.step_limit} steps (step_limit); check the sizes and stiffnesses "
                              "(a tiny length or a huge spring), or shorten the run")
 
     # ------------------------------------------------------------------ the loop
@@ -562,9 +563,9 @@ class Run:
                     where = ", ".join(f"{c} = {v:.6g}" for c, v in zip(s.eom.coords, solver.y[:n]))
                     raise RunFailure(solver.t, "integrator failed", f"{msg}; at {where}")
                 self.stats["steps"] += 1
-                if self.stats["steps"] > o.max_steps:
-                    raise RunFailure(solver.t, f"more than {o.max_steps} steps",
-                                     "the step size collapsed (a very stiff or singular model?); raise max_steps "
+                if self.stats["steps"] > o.step_limit:
+                    raise RunFailure(solver.t, f"more than {o.step_limit} steps",
+                                     "the step size collapsed (a very stiff or singular model?); raise step_limit "
                                      "if the run really needs them")
                 ta, tb = solver.t_old, solver.t
                 self.t_now = ta

@@ -1,86 +1,86 @@
-"""``simulate_with_contacts``: simulations of models with unilateral contacts and fixations."""
+"""The contact back end: models with unilateral contacts and fixations, as a hybrid system.
+
+``contact_run(eom, settings, progress) -> Result`` steps scipy's one-step solvers with event
+location (event_loop.py), free flight in the compiled loop when it can (event_flight.py),
+and applies the impact and contact laws of mechdsl.impacts.  Reads the validated settings:
+the common fields and the ``contacts`` group (rest_speed, impact_order, output_events,
+gap_tol, ..., and the contact objects of a hand-built model).
+"""
 from __future__ import annotations
 
 import time as _time
 
 import numpy as np
 
-from ..output import result as R
-from ..diagnostics import Diagnostic, MechError, UsageError
-from .gaps import contact_gaps
-from .options import ContactOptions
-from .compiled import COMPILED_CLASSES, flight
-from .run import Run, RunFailure
-from .stepper import resolve_method
-from .system import ContactSystem
-from ..eom import parameter_vector  # noqa: F401  (re-exported)
-from ..simulation.inputs import start_vector
-from ..simulation.record import ENERGY_NAMES
+from ...diagnostics import Diagnostic, MechError, Span, UsageError
+from ...eom import parameter_vector
+from ...eom.workspace import of
+from ...impacts.gaps import contact_gaps
+from ...impacts.options import ContactRun
+from ...impacts.system import ContactSystem, contact_functions
+from ...output import result as R
+from .. import record as Rec
+from ...eom.start import start_vector
+from ..monitors import is_conservative
+from ..record import ENERGY_NAMES
+from ..registry import events_method, spec
+from ..settings import DEFAULT_POINTS
+from . import Backend
+from .event_flight import COMPILED_CLASSES, flight
+from .event_loop import Run, RunFailure
 
-# options of the ODE simulator (mechdsl.simulate) that make no difference here: accepted so that
-# the simulator can pass its options through unchanged
-_PASSED_THROUGH = ("formulation", "dt", "reactions", "compiled", "max_steps", "integrator_options",
-                   "singularity_threshold", "functions")
-DEFAULT_POINTS = 501
+
+class EventsBackend(Backend):
+    name = "events"
+    noun = "a contact"
+    groups = ("contacts",)
+    ignores = ("max_steps", "integrator_options")
+
+    def run(self, problem, progress):
+        return contact_run(problem.eom, problem.settings, progress)
+
+    def describe(self, r):
+        m = r.metadata.get("method")
+        python = f"scipy:{spec(m).events if m in ('dop853', 'rk45', 'rk23', 'radau', 'bdf', 'lsoda') else m}"
+        stats = r.stats or {}
+        compiled, in_python = stats.get("compiled_segments", 0), stats.get("python_segments", 0)
+        # name what ran: free flight in the compiled loop, the rest (or all) in scipy's stepper
+        parts = ([f"crk:{m}"] if compiled else []) + ([python] if in_python or not compiled else [])
+        return {"formulation": "events", "integrator": "+".join(parts), "method": m}
 
 
-def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_start: float = 0.0,
-                           rtol: float = 1e-8, atol: float = 1e-10, method: str | None = "auto",
-                           points: int | None = None, outputs=None, x0=None, p=None, progress=None,
-                           q0=None, qd0=None, fixations=(), rest_speed: float | None = None,
-                           impact_order: str | None = None, gap_tol: float | None = None,
-                           event_offset: float | None = None, max_events: int = 100000,
-                           max_step: float | None = None, samples: int = 4, output_events: bool = False,
-                           **passed) -> R.Result:
+def contact_run(eom, s, progress=None) -> R.Result:
     """Simulate eom with unilateral contacts from t_start to t_end; output on a uniform grid.
 
-    contacts: ``ir.Contact`` / ``ContactGap`` / ``Fixation`` objects (default: the model's);
-    fixations: more :class:`Fixation` objects.  x0 ([q; qd] or {name: value, "der(name)": value})
-    and p (vector or {name: value}) as for ``mechdsl.simulate.simulate``; q0/qd0 override the
-    start values directly.  progress: a callable(t, t_end) called after every step.
-    rest_speed (m/s, default 1e-3), impact_order ("simultaneous" | "sequential"): see
-    docs/contacts.md.  The events (impacts, contacts closing and releasing, fixations) are
-    in ``result.events``, each with the state before and after it (``state_before``,
-    ``state_after``: {coordinate: value, "der(coordinate)": value}).  output_events: the
-    results also get a row just before and one just after every instant with events (same
-    time; the signal ``event`` is -1 before, +1 after, 0 on the grid).
+    The contacts are ``s.contacts.contacts`` (``ir.Contact`` / ``ContactGap`` / ``Fixation``
+    objects; default: the model's) and ``s.contacts.fixations``.  The events (impacts,
+    contacts closing and releasing, fixations) are in ``result.events``, each with the state
+    before and after it (``state_before``, ``state_after``: {coordinate: value,
+    "der(coordinate)": value}).  output_events: the results also get a row just before and
+    one just after every instant with events (same time; the signal ``event`` is -1 before,
+    +1 after, 0 on the grid).  See docs/contacts.md.
     """
-    for k in passed:
-        if k not in _PASSED_THROUGH:
-            raise UsageError(f"unknown option '{k}' for a simulation with contacts")
-    if t_end is None:
-        raise UsageError("give t_end")
-    t_end, t_start = float(t_end), float(t_start)
-    if not (np.isfinite(t_end) and np.isfinite(t_start) and t_end > t_start):
-        raise UsageError(f"t_end ({t_end}) must be after the start time ({t_start})")
-    npts = DEFAULT_POINTS if points is None else int(points)
-    if npts < 2:
-        raise UsageError("points must be at least 2")
-    rest_speed = 1e-3 if rest_speed is None else float(rest_speed)
-    impact_order = impact_order or "simultaneous"
-    opts = ContactOptions(rtol=float(rtol), atol=float(atol), rest_speed=float(rest_speed),
-                          impact_order=impact_order, gap_tol=gap_tol, event_offset=event_offset,
-                          max_events=int(max_events), max_step=max_step, samples=int(samples))
-    method_cls, note = resolve_method(method)
-    gaps, fixes, functions = _contact_setup(eom, contacts, fixations)
-    pv = parameter_vector(eom, p)
-    xs = start_vector(eom, x0, pv)
+    c = s.contacts
+    t_start, t_end = s.t_start, s.t_end
+    npts = s.points or DEFAULT_POINTS
+    opts = ContactRun(c, s.rtol, s.atol)
+    method_cls, note = events_method(s.method)
+    contacts, output_events, max_step = c.contacts, c.output_events, c.max_step
+    gaps, fixes, functions = _contact_setup(eom, contacts, c.fixations)
+    pv = parameter_vector(eom, s.p)
+    xs = start_vector(eom, s.x0, pv)
     qs, qds = xs[:eom.n], xs[eom.n:]
-    if q0 is not None:
-        qs = np.asarray(q0, float).ravel()
-    if qd0 is not None:
-        qds = np.asarray(qd0, float).ravel()
-    out_names = output_names(eom, gaps, outputs)
+    out_names = output_names(eom, gaps, s.outputs)
     system = ContactSystem(eom, gaps, fixes, pv, functions=functions)
     gap0 = system.gap(t_start, qs)
     for g, v in zip(gaps, gap0):
         if v < -opts.touch:
             raise MechError(Diagnostic("E861", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
-                                       g.span or _no_span(),
+                                       g.span or Span(),
                                        "change the start values so that every gap is >= 0"))
     grid = np.linspace(t_start, t_end, npts)
     fl, compiled_note = None, "off (requested)"
-    if passed.get("compiled") is False:
+    if s.compiled is False:
         pass
     elif method_cls not in COMPILED_CLASSES or max_step is not None:
         compiled_note = "no: the compiled loop steps dop853 and rk45 without max_step"
@@ -113,7 +113,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
         res.signals["event"] = side
     res.stats = dict(run.stats, rhs_evals=system.n_rhs, points=m, wall_time=wall, events=len(run.events),
                      impacts=sum(1 for e in run.events if e["kind"] == "impact"))
-    conservative = _conservative(eom) and not system.friction
+    conservative = is_conservative(eom) and not system.friction
     if conservative and m:
         res.stats.update(_drift_between_events(res, run.events, side))
     reason = ("one-step solver with event location (models with contacts)" + (f"; {note}" if note else "")
@@ -122,7 +122,7 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                     "method": method_cls.lower(), "method_reason": reason, "compiled": compiled_note, "conservative": conservative,
                     "simulator": "mechdsl.impacts",
                     "options": {"t_start": t_start, "t_end": t_end, "rtol": opts.rtol, "atol": opts.atol,
-                                "points": npts, "method": method or "auto", "outputs": list(out_names),
+                                "points": npts, "method": s.method, "outputs": list(out_names),
                                 "impact_order": opts.impact_order, "rest_speed": opts.rest_speed,
                                 "gap_tol": opts.touch, "event_offset": opts.offset,
                                 "output_events": bool(output_events),
@@ -130,12 +130,6 @@ def simulate_with_contacts(eom, contacts=None, t_end: float | None = None, *, t_
                                 "start": {**dict(zip(eom.coords, map(float, qs))),
                                           **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}},
                     "contacts": [g.name for g in gaps], "fixations": [f.label for f in fixes]}
-    try:
-        from ..simulate import versions
-
-        res.metadata["versions"] = versions()
-    except ImportError:  # pragma: no cover - the ODE simulator is part of mechdsl
-        pass
     return res
 
 
@@ -151,17 +145,6 @@ def _with_event_rows(T, Y, force, lam, rows):
     order = np.lexsort((seq, rank, t_all))
     stack = lambda a, k: np.vstack([a, np.array([r[k] for r in rows]).reshape(len(rows), -1)])[order]  # noqa: E731
     return t_all[order], stack(Y, 2), stack(force, 4), stack(lam, 3), side[order]
-
-
-def _conservative(eom) -> bool:
-    """No dissipation, no other generalized forces, no explicit time (impacts aside)."""
-    import casadi as ca
-
-    try:
-        return bool(ca.SX(eom.D).is_zero() and ca.SX(eom.Q).is_zero()
-                    and not ca.depends_on(ca.vertcat(ca.SX(eom.T), ca.SX(eom.V)), eom.t))
-    except Exception:  # noqa: BLE001 -- a non-SX energy: make no claim
-        return False
 
 
 def _drift_between_events(res, events, side=None) -> dict:
@@ -198,19 +181,10 @@ def output_names(eom, gaps, outputs) -> list[str]:
 
 
 
-def _no_span():
-    from ..diagnostics import Span
-
-    return Span()
-
-
-
 def _contact_setup(eom, contacts, fixations):
     """(gaps, fixations, contact Functions) of the model's contacts: derived once per EOM
     object and set of contacts (kept in its workspace; a repeated run, a sweep or a benchmark
     does not rebuild them), fresh when the contacts are not hashable."""
-    from .system import contact_functions
-
     def build():
         gaps, fixes = contact_gaps(eom, contacts)
         fixes = fixes + list(fixations)
@@ -221,8 +195,6 @@ def _contact_setup(eom, contacts, fixations):
         hash(key)
     except TypeError:
         return build()
-    from ..eom.workspace import of
-
     gaps, fixes, functions = of(eom).memo(key, build)
     return list(gaps), list(fixes), functions
 
@@ -232,12 +204,10 @@ def _signals(eom, system, t, Y, force, lam, out_names, model_gaps=True) -> dict[
     same expressions on every run, so the recorder's Function is reused)."""
     import casadi as ca
 
-    from ..simulation import record as R
-
     n = eom.n
-    cols = R.merged(R.outputs(eom, out_names), R.energies(eom), R.invariants(eom),
+    cols = Rec.merged(Rec.outputs(eom, out_names), Rec.energies(eom), Rec.invariants(eom),
                     {f"{g.name}.gap": ca.SX(g.gap) for g in system.gaps})
-    out = R.record(eom, cols, t, Y[:, :n], Y[:, n:2 * n], system.p, LAM=lam,
+    out = Rec.record(eom, cols, t, Y[:, :n], Y[:, n:2 * n], system.p, LAM=lam,
                    using=() if model_gaps else tuple(g.gap for g in system.gaps))
     for i, g in enumerate(system.gaps):
         out[f"{g.name}.force"] = force[:, i].copy()

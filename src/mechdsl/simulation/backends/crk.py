@@ -2,7 +2,7 @@
 
 Methods ``dopri5`` (Dormand-Prince 5(4)) and ``dop853`` (Dormand-Prince 8(5,3)), each with
 the step-size control, initial step, error norm and dense output of scipy's RK45 and DOP853
-(``crk.c`` in this package, a small hand-written driver).  The driver and the CasADi C of
+(``crk.c`` beside this file, a small hand-written driver).  The driver and the CasADi C of
 the model's right-hand side ``ode`` are compiled into one shared library with the cached
 compile machinery of ``mechdsl.eom.codegen`` (cache key: the code, flags, compiler and CasADi
 versions), loaded with ctypes and called once per run in a worker thread (ctypes releases
@@ -13,7 +13,7 @@ Without a C compiler, or when the model's code cannot be generated or compiled, 
 algorithm runs as scipy's RK45/DOP853 stepped in Python on the virtual machine (the same
 steps up to round-off), and the run's warnings say so.
 
-The outcome is a ``mechdsl.integrators.Run`` like every other integrator plug-in's.
+The outcome is a ``mechdsl.integrators.Run`` like every other integrator plug-in's (plugins.py).
 """
 from __future__ import annotations
 
@@ -24,7 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import integrators as I
+from ... import integrators as I
+from ...eom.codegen import compile_functions, find_compiler
+from ..choose import time_scale
+
 
 # method -> (id in crk.c, scipy class of the same algorithm)
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
@@ -78,8 +81,6 @@ def cached_library(key, ode, extra, tag, load, what):
         hit = _LIBS.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1], hit[2]
-    from ..eom.codegen import compile_functions
-
     try:
         loaded, note, path = compile_functions([dense_ode(ode), *extra], tag=tag, jacobian=False,
                                                extra_units=(SOURCE.read_text(),))
@@ -197,9 +198,6 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     """(method or None, reason, numbers): compile the dop853 loop (dopri5 at rtol >= 1e-5) when
     the time it saves per run, estimated from the model's size and the run's length, repays the
     estimated compile time within PAYBACK_RUNS runs."""
-    from ..eom.codegen import find_compiler
-    from ..simulate import time_scale
-
     if find_compiler() is None:
         return None, "no C compiler", {}
     ops = rhs_cost(funcs["ode"])
@@ -223,34 +221,7 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     return method, numbers + f": pays back within {PAYBACK_RUNS} runs", info
 
 
-class CrkPlugin(I.IntegratorPlugin):
-    """Integrator plug-in of the compiled stepping loop (falls back to scipy in Python)."""
-
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
-                u=None):
-        if extra:
-            raise RuntimeError(f"{method} takes no integrator options (got {', '.join(sorted(extra))})")
-        ode = funcs["ode"]
-        fn, _ = library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"))
-        if fn is None:
-            from ..eom.codegen import FastFunction
-
-            rhs = FastFunction(ode).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
-            run = I.run_scipy(scipy_name(method), rhs, None, grid, x0, rtol, atol, max_steps, progress, {},
-                              hmin=hmin)
-            run.stats = {"n_steps": run.stats.get("steps"), "n_rhs": run.stats.get("rhs_evals"),
-                         "n_reject": None, "fallback": "scipy"}
-            return run
-        return run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress)
-
-    def counts(self, method, raw):
-        return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
-                "rejected_steps": raw.get("n_reject")}
-
-
 def scipy_name(method: str) -> str:
     """The scipy method (in mechdsl's names) that a compiled loop's method runs as in Python."""
     return "scipy-" + CRK_METHODS[method][1].lower()
 
-
-PLUGIN = CrkPlugin()
