@@ -48,7 +48,7 @@ def test_mapped_evaluation_equals_one_call_per_sample():
     Q = np.tile(m.eom.start()[0], (4, 1)) + rng.normal(0, 0.1, (4, m.eom.n))
     X = geo.positions(t, Q)
     for k in range(4):
-        one = np.array(geo.function(t[k], Q[k], geo.p))
+        one = np.array(geo.function(t[k], Q[k], geo.p)[0])
         assert X[k] == pytest.approx(one, abs=1e-14)
 
 
@@ -143,7 +143,7 @@ def test_every_shipped_model_draws_moving_frames(path, tmp_path):
     q0 = m.eom.start()[0]
     Q = q0 + np.outer([0.0, 0.05, 0.1], np.ones_like(q0))
     fake = SimpleNamespace(t=np.array([0.0, 0.05, 0.1]), q=Q, events=[], failure=None)
-    anim = animate(fake, m, fps=20, size=(160, 120))
+    anim = animate(fake, m, fps=20, speed=1.0, size=(160, 120))
     assert len(anim) == 3
     anim.save(tmp_path / "a.gif")
     assert (tmp_path / "a.gif").stat().st_size > 500
@@ -154,7 +154,8 @@ def test_every_shipped_model_draws_moving_frames(path, tmp_path):
 @pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
 def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, capsys):
     out = tmp_path / f"{path.stem}.gif"
-    assert main(["animate", str(path), "-o", str(out), "--t-end", "0.1", "--fps", "20", "--size", "160x120"]) == 0
+    assert main(["animate", str(path), "-o", str(out), "--t-end", "0.1", "--fps", "20", "--speed", "1",
+                 "--size", "160x120"]) == 0
     from PIL import Image
 
     with Image.open(out) as im:
@@ -165,7 +166,7 @@ def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, caps
 def test_html_page_is_self_contained_and_replaceable(tmp_path):
     out = tmp_path / "p.html"
     args = ["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
-            "--trail", "bob"]
+            "--speed", "1", "--trail", "bob"]
     assert main(args) == 0
     text = out.read_text()
     assert text.count("iVBOR") == 3                      # three PNG frames inline
@@ -240,7 +241,7 @@ def test_mp4_frames_are_piped_to_ffmpeg(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("PATH", f"{fake.parent}{os.pathsep}{os.environ['PATH']}")
     out = tmp_path / "p.mp4"
     assert main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
-                 "--size", "100x80"]) == 0
+                 "--speed", "1", "--size", "100x80"]) == 0
     args, nbytes = out.read_text().split("\n")
     assert "-s 100x80" in args and "-r 10" in args and "-pix_fmt rgba" in args
     assert int(nbytes) == 3 * 100 * 80 * 4                       # three RGBA frames
