@@ -268,3 +268,70 @@ def test_a_failed_run_is_animated_up_to_the_failure_and_says_so(tmp_path, capsys
 
     with Image.open(out) as im:
         assert im.n_frames == 11
+
+
+# ----------------------------------------------------------------------------- frame timing (issue 27)
+
+
+@pytest.mark.parametrize("fps", [30, 24, 25, 50, 12.5, 7])
+def test_gif_frame_delays_add_up_to_the_frame_rate(fps):
+    from mechdsl.animate.writer import gif_durations
+
+    n = 97
+    d = np.array(gif_durations(n, fps))
+    assert (d % 10 == 0).all() and d.min() >= 20                      # whole centiseconds, none a browser stretches
+    starts = np.concatenate([[0], np.cumsum(d)])
+    assert np.abs(starts - 1000 * np.arange(n + 1) / fps).max() <= 5.0   # every frame starts within half a centisecond
+
+
+def test_a_30_fps_gif_plays_at_30_fps(tmp_path):
+    from PIL import Image
+
+    m = _load("pendulum")
+    r = m.simulate(1.0, points=31)
+    out = animate(r, m, fps=30, speed=1.0, size=(100, 80)).save(tmp_path / "p.gif")
+    total = 0
+    with Image.open(out) as im:
+        for k in range(im.n_frames):
+            im.seek(k)
+            total += im.info["duration"]
+        n = im.n_frames
+    assert n == 31 and total == pytest.approx(1000 * 31 / 30, abs=5)   # before: 31 x 30 ms, 11% fast
+
+
+def test_a_gif_faster_than_50_fps_is_refused_before_any_work(tmp_path, capsys):
+    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.gif"), "--fps", "60"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "a GIF cannot play 60 frames per second" in err and "--fps 50" in err
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_pick_speed_slows_short_runs_to_nice_numbers():
+    from mechdsl.animate import pick_speed
+
+    assert pick_speed(10.0) == 1.0 and pick_speed(1.0) == 1.0
+    assert pick_speed(0.03) == pytest.approx(0.01)
+    assert pick_speed(0.5) == pytest.approx(0.2)
+    assert pick_speed(0.1) == pytest.approx(0.05)
+    for d in np.geomspace(1e-6, 0.999, 40):
+        s = pick_speed(d)
+        assert 2.0 <= d / s <= 10.0 + 1e-9                            # plays 2 to 10 s
+    with pytest.raises(UsageError, match="use --speed 0.9 or less"):
+        frame_times(0.0, 0.03, 30, 1.0)
+
+
+def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
+    """`mech animate models/andrews.mech -o a.gif` (0.03 s; before: "end time 0.0 .. 0.0")."""
+    from PIL import Image
+
+    out = tmp_path / "a.gif"
+    assert main(["animate", str(ROOT / "models/andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
+    cap = capsys.readouterr()
+    assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
+    assert "91 frames at 30 fps at speed 0.01, 0.03 s of model time" in cap.out
+    total = 0
+    with Image.open(out) as im:                  # (Pillow merges repeated frames, adding their delays)
+        for k in range(im.n_frames):
+            im.seek(k)
+            total += im.info["duration"]
+    assert total == pytest.approx(1000 * 91 / 30, abs=5)
