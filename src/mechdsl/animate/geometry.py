@@ -89,8 +89,6 @@ def build(eom, p=None, traces=()) -> Geometry:
     """The drawables of ``eom.model`` and the one Function that places them."""
     import casadi as ca
 
-    from ..impacts.gaps import _env
-
     model: ir.Model = eom.model
     p = np.asarray(eom.param_values if p is None else p, float).ravel()
     cols: list = []
@@ -191,6 +189,19 @@ def build(eom, p=None, traces=()) -> Geometry:
     P = ca.horzcat(*poses) if poses else ca.SX.zeros(12, 0)
     fn = ca.Function("draw", [eom.t, eom.q, eom.p], [X, P], ["t", "q", "p"], ["X", "P"])
     return Geometry(items, fn, anchors, p, up, posed)
+
+
+def _env(eom):
+    """Translation of sizes, normals and offsets (parameters, positions of points) to CasADi.
+    (Not impacts.gaps._env: importing the impacts package costs seconds of scipy.optimize.)"""
+    from ..model import exprs as X
+
+    def query(n):
+        if isinstance(n, ir.PointPos):
+            return eom.point_position(n.point)[n.i]
+        raise ValueError(f"{X.to_text(n)} cannot size a drawing (positions only)")
+
+    return X.CasadiEnv(tuple(eom.coords), tuple(eom.params), eom.q, eom.qd, eom.t, eom.p, query)
 
 
 def _hoops(model, eom, p) -> dict[str, tuple]:
