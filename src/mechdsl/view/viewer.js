@@ -131,16 +131,28 @@
     scene.background = new THREE.Color(0xffffff);
     var camera = new THREE.PerspectiveCamera(35, 1, S * 0.005, S * 200);
     camera.up.copy(up);
-    var dist = 0.5 * new V3().fromArray(D.extent).length() / Math.sin(THREE.MathUtils.degToRad(17.5)) * 0.9;
-    var home = center.clone().addScaledVector(new V3().fromArray(D.toward_viewer), Math.max(dist, S));
+    var toward = new V3().fromArray(D.toward_viewer);
+    var right = new V3().crossVectors(up, toward).normalize(), sup = new V3().crossVectors(toward, right);
+    var home = new V3(), touched = false;
+    function frame(aspect) {                   // the distance that shows the box of every frame, with a margin
+      var tan = Math.tan(THREE.MathUtils.degToRad(17.5)), h = 0, w = 0, near = 0, e = D.extent;
+      for (var i = 0; i < 8; i++) {
+        var c = new V3((i & 1 ? 0.5 : -0.5) * e[0], (i & 2 ? 0.5 : -0.5) * e[1], (i & 4 ? 0.5 : -0.5) * e[2]);
+        h = Math.max(h, Math.abs(c.dot(sup))); w = Math.max(w, Math.abs(c.dot(right))); near = Math.max(near, c.dot(toward));
+      }
+      var dist = 1.12 * Math.max(h / tan, w / (tan * aspect), 0.1 * S) + near;
+      home.copy(center).addScaledVector(toward, dist);
+    }
+    frame(1.4);
     camera.position.copy(home);
     camera.lookAt(center);
     var controls = new OrbitControls(camera, canvas);
     controls.target.copy(center);
     controls.update();
     controls.addEventListener("change", function () { state.dirty = true; });
+    controls.addEventListener("start", function () { touched = true; });
     $("mv-reset").addEventListener("click", function () {
-      camera.position.copy(home); controls.target.copy(center); controls.update(); state.dirty = true;
+      camera.position.copy(home); controls.target.copy(center); controls.update(); touched = false; state.dirty = true;
     });
     var hemi = new THREE.HemisphereLight(0xffffff, 0x888888, 2.2);
     hemi.position.copy(up);
@@ -306,6 +318,8 @@
       renderer.setSize(w, h, false);
       camera.aspect = w / h;
       camera.updateProjectionMatrix();
+      frame(w / h);
+      if (!touched) { camera.position.copy(home); controls.target.copy(center); controls.update(); }
       state.dirty = true;
     }
     new ResizeObserver(resize).observe(canvas);
