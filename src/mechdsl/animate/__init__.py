@@ -109,16 +109,26 @@ def animate(result, model, *, fps: float = 30.0, speed: float | None = None, vie
     shorter than a second, :func:`pick_speed`); ``up``: the screen's up direction (a vector or
     'x', '-z', ...; None: against gravity)."""
     check_view(view)
+    f = frames_of(result, model, fps, speed, "animate")
+    return Animation(_stage(f.eom, f.times, f.Q, view, up, f.events, f.title, trails, size), fps, f.speed)
+
+
+def frames_of(result, model, fps: float, speed: float | None, verb: str = "animate"):
+    """The frames of a result: eom, times, Q (coordinates at the frame times), speed (picked
+    when None), title (saying where a failed run stopped) and the result's events."""
+    from types import SimpleNamespace
+
     eom = getattr(model, "eom", model)
     t = np.asarray(result.t, float)
     if len(t) == 0:
-        raise UsageError("the result has no time points to animate")
+        raise UsageError(f"the result has no time points to {verb}")
     if speed is None:
         speed = pick_speed(float(t[-1] - t[0]))
     times = frame_times(float(t[0]), float(t[-1]), fps, speed)
-    Q = _resample(t, np.asarray(result.q, float), times)
-    title = eom.name + (f" (stopped at t = {result.failure.time:.4g} s)" if result.failure is not None else "")
-    return Animation(_stage(eom, times, Q, view, up, list(result.events), title, trails, size), fps, speed)
+    failure = getattr(result, "failure", None)
+    title = eom.name + (f" (stopped at t = {failure.time:.4g} s)" if failure is not None else "")
+    return SimpleNamespace(eom=eom, times=times, Q=_resample(t, np.asarray(result.q, float), times), speed=speed,
+                           title=title, events=list(getattr(result, "events", ())))
 
 
 def draw(model, q=None, t: float = 0.0, *, view: str = "auto", up=None, trails=(), size=(480, 400)):
@@ -166,11 +176,16 @@ def _stage(eom, times, Q, view, up, events, title, trails, size):
             raise UsageError(f"--trail: {eom.name} has no points to trace (no bodies)")
         from .bars import BarStage
 
-        units = [getattr(c, "unit", None) or "" for c in (eom.model.coordinates if eom.model else ())]
-        return BarStage(eom.coords, units or [""] * eom.n, times, Q, title=title, size=size)
+        return BarStage(eom.coords, coordinate_units(eom), times, Q, title=title, size=size)
     from .stage import Stage
 
     return Stage(geo, times, geo.positions(times, Q), view=view, up=up, events=events, title=title, size=size)
+
+
+def coordinate_units(eom) -> list[str]:
+    """The unit of every coordinate ('' when undeclared): the labels of the bars."""
+    units = [getattr(c, "unit", None) or "" for c in (eom.model.coordinates if eom.model else ())]
+    return units or [""] * eom.n
 
 
 def _resample(t: np.ndarray, q: np.ndarray, times: np.ndarray) -> np.ndarray:

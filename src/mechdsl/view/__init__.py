@@ -78,19 +78,10 @@ def check_output(path, overwrite: bool = False) -> Path:
 
 def view(result, model, *, fps: float = 30.0, speed: float | None = None, up=None, trails=()) -> View:
     """The View of a simulation result of ``model`` (a mechdsl Model or its EOM)."""
-    from ..animate import _resample, frame_times, pick_speed
+    from ..animate import frames_of
 
-    eom = getattr(model, "eom", model)
-    t = np.asarray(result.t, float)
-    if len(t) == 0:
-        raise UsageError("the result has no time points to view")
-    if speed is None:
-        speed = pick_speed(float(t[-1] - t[0]))
-    times = frame_times(float(t[0]), float(t[-1]), fps, speed)
-    Q = _resample(t, np.asarray(result.q, float), times)
-    failure = getattr(result, "failure", None)
-    title = eom.name + (f" (stopped at t = {failure.time:.4g} s)" if failure is not None else "")
-    return _make(eom, times, Q, up, trails, title, speed, list(getattr(result, "events", ())))
+    f = frames_of(result, model, fps, speed, "view")
+    return _make(f.eom, f.times, f.Q, up, trails, f.title, f.speed, f.events)
 
 
 def still(model, q=None, t: float = 0.0, *, up=None, trails=()) -> View:
@@ -102,7 +93,7 @@ def still(model, q=None, t: float = 0.0, *, up=None, trails=()) -> View:
 
 
 def _make(eom, times, Q, up, trails, title, speed, events) -> View:
-    from ..animate import up_vector
+    from ..animate import coordinate_units, up_vector
     from ..animate.geometry import build
     from .scene import bars_scene, build_scene
 
@@ -111,8 +102,7 @@ def _make(eom, times, Q, up, trails, title, speed, events) -> View:
     if geo.empty:
         if trails:
             raise UsageError(f"--trail: {eom.name} has no points to trace (no bodies)")
-        units = [getattr(c, "unit", None) or "" for c in (eom.model.coordinates if eom.model else ())]
-        data = bars_scene(list(eom.coords), units or [""] * eom.n, times, Q, title=title, speed=speed)
+        data = bars_scene(list(eom.coords), coordinate_units(eom), times, Q, title=title, speed=speed)
     else:
         data = build_scene(geo, times, Q, up=up, title=title, speed=speed, events=events)
     return View(data, title)
