@@ -254,6 +254,14 @@ def test_page_is_one_file_with_three_js_and_no_network(tmp_path):
     assert text.count("</script>") == 5
 
 
+def test_the_same_view_twice_is_byte_identical(tmp_path):
+    m = _load("heavy_top")
+    r = m.simulate(0.5, points=6)
+    a = view(r, m, fps=10, speed=1.0).save(tmp_path / "a.html")
+    b = view(r, m, fps=10, speed=1.0).save(tmp_path / "b.html")
+    assert a.read_bytes() == b.read_bytes()
+
+
 def test_vendored_three_js_is_the_release_its_readme_names():
     folder = ROOT / "src" / "mechdsl" / "view" / "vendor" / "three"
     table = (folder / "README.md").read_text()

@@ -73,7 +73,7 @@ def page(data: dict, title: str = "mechdsl view") -> str:
 <input type="range" id="mv-range" min="0" max="0" value="0" step="1" aria-label="time">
 <span id="mv-clock"></span>
 <label>speed <select id="mv-speed" aria-label="playback speed">{speeds}</select></label>
-<span title="model seconds per second of playback at 1x">({base:g} s/s)</span>
+<span title="model seconds per second of playback at 1x">({"real time" if base == 1 else f"1x = {base:g} s per s"})</span>
 <button type="button" id="mv-reset">reset view</button>
 </div>
 </div>

@@ -88,6 +88,7 @@
     var pad = 0.05 * ((hi - lo) || 1); lo -= pad; hi += pad;
     var palette = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"];
     note.textContent = "no bodies to draw: the coordinates as bars";
+    $("mv-reset").style.display = "none";
     draw = function () {
       var w = canvas.clientWidth, h = canvas.clientHeight, r = window.devicePixelRatio || 1;
       if (canvas.width !== Math.round(w * r)) { canvas.width = Math.round(w * r); canvas.height = Math.round(h * r); }
