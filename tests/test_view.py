@@ -371,3 +371,23 @@ def test_every_shipped_model_views_from_the_command_line(path, tmp_path, capsys)
     out = tmp_path / f"{path.stem}.html"
     assert main(["view", str(path), "-o", str(out), "--t-end", "0.2", "--fps", "10", "--speed", "1"]) == 0
     assert "wrote" in capsys.readouterr().out and out.stat().st_size > 700_000
+
+
+BEAD = """model Bead "sin(s) = t: the mass matrix cos(s)^2 is singular at t = 1"
+  parameter Real m = 1;
+  coordinate Real s(start = 0, speed = 1);
+equation
+  kinetic = 1/2*m*cos(s)^2*der(s)^2;
+end Bead;
+"""
+
+
+def test_a_failed_run_is_viewed_up_to_the_failure_and_says_so(tmp_path, capsys):
+    src = tmp_path / "bead.mech"
+    src.write_text(BEAD)
+    out = tmp_path / "bead.html"
+    assert main(["view", str(src), "-o", str(out), "--t-end", "3", "--fps", "10"]) == 1
+    cap = capsys.readouterr()
+    assert "simulation failed at t = 1" in cap.err and "viewed up to t = 1" in cap.err
+    assert "11 frames for 10 fps, 1 s of model time" in cap.out
+    assert "stopped at t = 1" in out.read_text()
