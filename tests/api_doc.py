@@ -21,6 +21,7 @@ CLASSES = [
     ("mechdsl.output.result.Result", "what `Model.simulate` returns"),
     ("mechdsl.output.result.Failure", "`Result.failure` of a run that stopped early"),
     ("mechdsl.animate.Animation", "what `Result.animate` returns"),
+    ("mechdsl.view.View", "what `Result.view` and `Model.view` return"),
     ("mechdsl.output.display.Equations", "what `Model.equations` returns"),
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
     ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),

@@ -31,6 +31,15 @@ def _has_compiler() -> bool:
 needs_cc = pytest.mark.skipif(not _has_compiler(), reason="no C compiler: compiled code cannot be built")
 
 
+def chromium_path() -> str | None:
+    """The system's Chromium (the browser tests drive it with Playwright; nothing is downloaded)."""
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
 def pytest_unconfigure(config):
     shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
 

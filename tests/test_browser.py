@@ -8,20 +8,12 @@ with that reason (pytest reports the skip; CI installs it, so there it runs).
 """
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
+from conftest import chromium_path as _chromium
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _chromium() -> str | None:
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
 
 
 @pytest.fixture(scope="module")

@@ -36,6 +36,7 @@ def test_tour_notebook_executes_and_displays():
     assert "image/png" in outputs["r.plot(drift=True)"]
     assert "image/png" in outputs["m.draw(t=1.0)"]
     assert "mechdsl-animation" in outputs["anim"]["text/html"]
+    assert outputs['r.view(trails=["rod2.b"])']["text/html"].startswith("<iframe srcdoc=")
     assert "modes" in outputs["lin"]["text/html"]
     sweep = outputs["pd.DataFrame(rows)"]["text/plain"].splitlines()[1:]
     for line in sweep:

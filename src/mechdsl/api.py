@@ -524,6 +524,15 @@ class Model:
 
         return draw_model(self, t, q, **kw)
 
+    def view(self, t_end: float | None = None, q=None, **kw):
+        """The interactive 3-D view (mechdsl.view.View; ``.save("x.html")``, inline in Jupyter): the
+        motion of a run of t_end seconds from the start values, else the mechanism at coordinates
+        q (default: the start values) to turn around; up, trails (and fps, speed for a run) as
+        for animate (docs/animate.md)."""
+        from .output.display import view_model
+
+        return view_model(self, t_end, q, **kw)
+
     def equations(self, form: str = "lagrange"):
         """The equations of motion as sympy equations: form "lagrange" (M q'' = bias, one per
         coordinate) or "hamilton" (q' = dH/dp, p' = -dH/dq).  Displays typeset in notebooks."""

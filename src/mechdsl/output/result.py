@@ -171,6 +171,13 @@ class Result:
 
         return animate_result(self, model, **kw)
 
+    def view(self, model=None, **kw):
+        """The interactive 3-D view of the motion (mechdsl.view.View: ``.save("x.html")``; inline in
+        Jupyter); fps, speed, up, trails as for animate; model defaults to the one simulated."""
+        from .display import view_result
+
+        return view_result(self, model, **kw)
+
     def to_pandas(self):
         """A pandas DataFrame indexed by time, units in ``df.attrs["units"]`` (needs the 'table' extra)."""
         from .display import to_pandas
