@@ -244,6 +244,10 @@ ENTRIES = [
                                      "`mech check` analyzes and derives each of them.",
           "Split the file (or `--limit models=N`).", corpus="E317_too_many_models.mech",
           shown="model M1\nend M1;\n...\nmodel M501\nend M501;\n"),
+    Entry("E318", "not a rotation", "An orientation matrix `R` (of a point, joint or frame) that is not a "
+                                    "rotation: not orthonormal, or a reflection (determinant -1).",
+          "Build orientations with `rpy(r, p, y)`, `axis_angle(axis, angle)` or `rotation(axis, angle)`.",
+          corpus="E318_orientation_not_rotation.mech"),
     Entry("E401", "incompatible units", "Two quantities with different units added, subtracted, compared or "
                                         "given as the branches of an `if`.",
           "Check the formula and the parameters' units.", corpus="E401_kg_plus_m.mech"),
@@ -277,11 +281,16 @@ ENTRIES = [
                                    "in force (also after `--set` or `with_params`). The equations of motion "
                                    "would run on a negative kinetic energy without failing.",
           "Fix the sign of `m` or of the parameters it uses.", corpus="E508_negative_mass.mech"),
-    Entry("E509", "impossible inertia tensor", "An inertia tensor no rigid body can have: not symmetric, a "
-                                               "negative principal moment, or principal moments that break "
-                                               "the triangle inequality I1 + I2 >= I3.",
-          "Check the values and signs; each principal moment is at most the sum of the other two.",
-          corpus="E509_inertia_triangle_inequality.mech"),
+    Entry("E509", "impossible inertia tensor", "An inertia tensor no rigid body can have: not symmetric, not "
+                                               "positive semidefinite (a negative principal moment), or "
+                                               "principal moments that break the triangle inequality "
+                                               "I1 + I2 >= I3 by more than rounding (1e-6 of I3; less is the "
+                                               "warning W509). A body that turns about one axis of its own "
+                                               "only (a planar body on a hinge) is not judged by the triangle "
+                                               "inequality: only its moment about that axis enters.",
+          "Check the values and signs; each principal moment is at most the sum of the other two. For measured "
+          "data you stand by, add `measured_inertia = true` to the `Body` (the tensor must still be positive "
+          "semidefinite).", corpus="E509_inertia_triangle_inequality.mech"),
     Entry("E510", "value not finite", "A component value (a mass, length, inertia, spring coefficient, contact "
                                       "radius, axis) that evaluates to inf or nan with the parameter values in "
                                       "force (also after `--set` or `with_params`): a product of huge values that "
@@ -387,7 +396,8 @@ def generate() -> str:
         "The broken-input corpus in tests/corpus/ holds at least one file for every code.",
         "",
         "Warnings (`warning[W...]`) do not stop a model: W501 says a coordinate appears in no kinetic energy "
-        "and no joint; W401-W403 are the unit checks E401-E403 where a decimal literal (such as 9.81) may stand "
+        "and no joint; W509 says an inertia tensor breaks the triangle inequality by rounding (at most 1e-6 of "
+        "I3, the amount is given) and is accepted; W401-W403 are the unit checks E401-E403 where a decimal literal (such as 9.81) may stand "
         "for a quantity with a unit.",
         "",
         "Codes of later phases (deriving and simulating: E6xx from E605 on, E7xx, E8xx) are described with "

@@ -79,11 +79,11 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
     own = None if model is None else np.array([q.value for q in model.real_parameters], float)
     if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
         # the model's own values were judged when it was analyzed (or by with_params)
-        from ..semantic.physical import parameter_env, value_problems
+        from ..semantic.physical import errors, parameter_env, value_problems
 
         env = parameter_env(model)
         env.update(zip(eom.params, map(float, pv)))
-        found = value_problems(model, env)
+        found = errors(value_problems(model, env))
         if found:
             return found
     found = _negative_masses(eom, pv)

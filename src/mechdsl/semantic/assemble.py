@@ -200,7 +200,10 @@ def point_axes(fl, pname: str) -> ir.Mat3 | None:
     inst = fl.insts.get(pname)
     if inst is None or inst.cls.name != "Point":
         return None
-    return O.given_orientation({k: fl.field_value(inst, k) for k in ("rpy", "R")}, pname)
+    try:
+        return O.given_orientation({k: fl.field_value(inst, k) for k in ("rpy", "R")}, pname)
+    except ValError:
+        raise Failed() from None       # reported where the point is built
 
 
 def _build_force(fl, inst: CompInst, f, span) -> K.Built:
