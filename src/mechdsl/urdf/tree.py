@@ -48,7 +48,7 @@ class Group:
     com: np.ndarray = field(default_factory=lambda: np.zeros(3))
     I: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     verbatim: bool = False                   # one member, inertia in link axes: the URDF's numbers as they are
-    subtree_mass: float = 0.0
+    subtree_inertials: int = 0               # links with an <inertial> in the subtree
 
 
 @dataclass
@@ -91,27 +91,25 @@ def build(robot: Robot, diags: DiagnosticBag) -> Structure | None:
                     span(f, roots[1].el), "connect them with joints into one tree (one base link)")
         return None
     root = roots[0]
+    reached: dict[str, Joint | None] = {root.name: None}
+    changed = True
+    while changed:                            # sweep in the file's order: the first joint to reach a link wins
+        changed = False
+        for j in ok:
+            if j.parent in reached and j.child not in reached:
+                reached[j.child] = j
+                changed = True
+    left_out = [j for j in ok if j.child in reached and reached[j.child] is not j and j.parent in reached]
     by_parent: dict[str, list[Joint]] = {}
     for j in ok:
-        by_parent.setdefault(j.parent, []).append(j)
-    reached = {root.name: None}
+        if reached.get(j.child) is j:
+            by_parent.setdefault(j.parent, []).append(j)
     order: list[tuple[Link, Joint | None]] = []
-    left_out: list[Joint] = []
     stack = [(root, None)]
     while stack:                              # depth first, siblings in the file's order
         link, via = stack.pop()
         order.append((link, via))
-        kids = []
-        for j in by_parent.get(link.name, []):
-            if j.child in reached:
-                left_out.append(j)
-                continue
-            reached[j.child] = j
-            kids.append((links[j.child], j))
-        stack.extend(reversed(kids))
-    for j in ok:                              # a second parent joint found before the first one's turn
-        if j.child in reached and reached[j.child] is not j and j not in left_out:
-            left_out.append(j)
+        stack.extend(reversed([(links[j.child], j) for j in by_parent.get(link.name, [])]))
     for j in left_out:
         first = reached[j.child]
         diags.warning("W025", f"joint '{j.name}' closes a loop (link '{j.child}' already hangs from joint "
@@ -144,10 +142,10 @@ def _groups(robot: Robot, root: Link, order, left_out, diags) -> Structure:
     ordered = list(groups.values())
     for g in ordered:
         _combine(g)
-    _subtree_masses(ordered, placement)
+    _subtree_inertials(ordered, placement)
     for g in ordered:
         j = g.inbound
-        if j is not None and g.subtree_mass <= 0.0:
+        if j is not None and not g.subtree_inertials:
             diags.error("E023", f"joint '{j.name}' moves no mass: link '{g.link.name}' has no <inertial>, and "
                                 "neither has any link beyond it", span(robot.file, g.link.el),
                         "give the link an <inertial> (mass, inertia), or make the joint fixed")
@@ -182,13 +180,13 @@ def _combine(g: Group) -> None:
     g.I = 0.5 * (I + I.T)
 
 
-def _subtree_masses(groups: list[Group], placement) -> None:
+def _subtree_inertials(groups: list[Group], placement) -> None:
     by_link = {g.link.name: g for g in groups}
     for g in reversed(groups):               # children come after their parents
-        g.subtree_mass += g.mass
+        g.subtree_inertials += sum(mb.link.inertial is not None for mb in g.members)
         if g.inbound is not None:
             parent = by_link[placement[g.inbound.parent][0]]
-            parent.subtree_mass += g.subtree_mass
+            parent.subtree_inertials += g.subtree_inertials
 
 
 def _check_mimics(robot: Robot, movable: list[Joint], diags) -> None:

@@ -51,9 +51,10 @@ class _Refused(Exception):
     pass
 
 
-def read_bytes(path: str, limit: int = MAX_BYTES, what: str = "URDF file") -> bytes:
-    """The bytes of an ordinary file, at most ``limit`` (E001 missing, E003 a folder, E006 not a
-    regular file, E005 too large)."""
+def read_bytes(path: str, limit: int | None = None, what: str = "URDF file") -> bytes:
+    """The bytes of an ordinary file, at most ``limit`` (default MAX_BYTES; E001 missing, E003 a
+    folder, E006 not a regular file, E005 too large)."""
+    limit = MAX_BYTES if limit is None else limit
     p = Path(path)
     if not p.exists():
         raise MechError(Diagnostic("E001", f"file not found: {path}", Span(path), f"check the path of the {what}"))
@@ -115,9 +116,11 @@ def parse(data: bytes, name: str, code: str = "E020") -> Element:
     try:
         p.Parse(data, True)
     except _Refused:
+        at = data.find(b"<!DOCTYPE")
+        line = data.count(b"\n", 0, at) + 1 if at >= 0 else p.CurrentLineNumber
+        col = at - (data.rfind(b"\n", 0, at) + 1) + 1 if at >= 0 else p.CurrentColumnNumber + 1
         raise MechError(Diagnostic(code, "the file declares a document type (<!DOCTYPE ...>), which may define "
-                                         "entities: refused", Span(name, p.CurrentLineNumber,
-                                                                    p.CurrentColumnNumber + 1),
+                                         "entities: refused", Span(name, line, col, line, col + 9),
                                    "remove the <!DOCTYPE> declaration; URDF needs none")) from None
     except expat.ExpatError as e:
         raise MechError(Diagnostic(code, f"not well-formed XML: {expat.ErrorString(e.code)}",
