@@ -14,20 +14,19 @@ from mechdsl.urdf import convert
 from urdf_util import Pair, rel, robots_dir
 
 ARMS = {
-    "ur5": ("ur_description/urdf/ur5_robot.urdf", False),
-    "panda": ("panda_description/urdf/panda.urdf", True),            # its second finger mimics the first
-    "xarm7": ("xarm_description/urdf/xarm7.urdf", False),
-    "talos_left_arm": ("talos_data/robots/talos_left_arm.urdf", False),
-    "kinova": ("kinova_description/robots/kinova.urdf", False),
-    "z1": ("z1_description/urdf/z1.urdf", False),
+    "ur5": "ur_description/urdf/ur5_robot.urdf",
+    "panda": "panda_description/urdf/panda.urdf",            # its second finger mimics the first
+    "xarm7": "xarm_description/urdf/xarm7.urdf",
+    "talos_left_arm": "talos_data/robots/talos_left_arm.urdf",
+    "kinova": "kinova_description/robots/kinova.urdf",
+    "z1": "z1_description/urdf/z1.urdf",
 }
 TOL = 1e-10
 
 
 @pytest.fixture(scope="module", params=sorted(ARMS))
 def pair(request):
-    rel_path, mimic = ARMS[request.param]
-    return Pair(rel_path, mimic)
+    return Pair(ARMS[request.param])
 
 
 def test_joint_order_and_names_match_pinocchio(pair):
@@ -40,6 +39,8 @@ def test_joint_order_and_names_match_pinocchio(pair):
         assert pair.imp.coordinates[n] == (f"{pair.imp.joints[n]}.{role}",)
     order = [pair.imp.coordinates[n][0] for n in movable]
     assert list(pair.eom.coords) == order          # the same order as Pinocchio's joints
+    assert pair.imp.mimics == ({"panda_finger_joint2": ("panda_finger_joint1", 1.0, 0.0)} if "panda" in str(pair.path)
+                               else {})
 
 
 def _joints(path):
@@ -58,7 +59,7 @@ def test_mass_matrix_bias_and_accelerations_agree(pair, seed):
 
 
 def test_six_arms_at_least():
-    assert len(ARMS) >= 4 and len({p for p, _ in ARMS.values()}) == len(ARMS)
+    assert len(ARMS) >= 4 and len(set(ARMS.values())) == len(ARMS)
 
 
 def _quat_rates(quat_wxyz, w_body):
@@ -72,7 +73,7 @@ def test_floating_base_against_a_free_flyer():
     """`--floating` gives the root a Free joint (quaternion): at random states its kinetic and
     potential energies and accelerations equal Pinocchio's with a JointModelFreeFlyer root (whose
     velocity is the root's spatial velocity in its own axes)."""
-    path = robots_dir() / ARMS["ur5"][0]
+    path = robots_dir() / ARMS["ur5"]
     imp = convert(path, floating=True)
     m = mechdsl.loads(imp.text)
     e = m.eom
@@ -120,7 +121,7 @@ def test_five_seconds_under_gravity_agree_with_scipy_and_pin_aba():
     scipy's DOP853 with Pinocchio's ABA as the right-hand side, at the same tolerances."""
     from scipy.integrate import solve_ivp
 
-    pair = Pair(ARMS["ur5"][0])
+    pair = Pair(ARMS["ur5"])
     rng = np.random.default_rng(11)
     q0, v0, _ = pair.state(rng)
     n = len(q0)

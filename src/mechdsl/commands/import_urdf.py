@@ -69,8 +69,9 @@ def summary(source: str, output: str | None, imp, floating: bool) -> list[str]:
         lines.append(f"  root link \"{imp.root}\": free-floating (root_joint, a Free joint in quaternions)")
     else:
         lines.append(f"  root link \"{imp.root}\": fixed to the world (--floating gives it a Free joint)")
-    for j, target in imp.mimics.items():
-        lines.append(f"  mimic: joint \"{j}\" follows \"{target}\" (bound to it, no coordinate of its own)")
+    for j, (target, mult, offset) in imp.mimics.items():
+        lines.append(f"  mimic: joint \"{j}\" follows \"{target}\" ({mult:g} times it + {offset:g}: no coordinate "
+                     "of its own)")
     for j in imp.left_out:
         lines.append(f"  left out: joint \"{j}\" (closes a loop; URDF describes trees)")
     for link in imp.measured:

@@ -38,7 +38,8 @@ class Imported:
     coordinates: dict[str, tuple[str, ...]]      # URDF joint -> its coordinates ("" : the floating root)
     diagnostics: list[Diagnostic] = field(default_factory=list)   # warnings, located in the URDF
     left_out: list[str] = field(default_factory=list)             # joints left out (loops)
-    mimics: dict[str, str] = field(default_factory=dict)          # URDF joint -> the joint it follows
+    mimics: dict[str, tuple[str, float, float]] = field(default_factory=dict)  # URDF joint -> (joint it
+                                                                  # follows, multiplier, offset)
     root: str = ""
     measured: list[str] = field(default_factory=list)             # links whose inertia is taken as measured
 
@@ -81,7 +82,7 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
         diags.extend(problems["diagnostics"])
         break
     diags.raise_if_errors()
-    mimics = {j.name: j.mimic[0] for j in st.movable if j.mimic is not None}
+    mimics = {j.name: j.mimic for j in st.movable if j.mimic is not None}
     return Imported(w.text, w.model, w.bodies, w.joints, w.coordinates, diags.warnings,
                     [j.name for j in st.left_out], mimics, st.root.name, sorted(measured))
 
