@@ -59,12 +59,13 @@ SECTIONS = [
                      "an error; literal numbers are pure numbers."),
     ("Topology (E5xx)", "The kinematic graph: every body must hang from the world through joints."),
     ("Scenes (E6xx)", "Scene settings and the model a scene names."),
-    ("URDF import (E020-E029)", "`mech import ROBOT.urdf -o ROBOT.mech` (docs/import.md) locates every problem "
+    ("URDF import (E020-E027)", "`mech import ROBOT.urdf -o ROBOT.mech` (docs/import.md) locates every problem "
                                 "at the URDF element it is about. Besides these codes it reports the file "
                                 "errors E001-E006 and, for the inertia data of a link (after fixed links are "
                                 "merged into it), E508 and E509 at the link's `<inertial>`. Its warnings: W021 "
                                 "a mesh that cannot be found or read (the link is not drawn), W025 a joint that "
-                                "closes a loop (left out: URDF describes trees), W509 an inertia that breaks "
+                                "closes a loop (left out: URDF describes trees), W029 a mimic that names no "
+                                "movable joint (left out: the joint moves on its own), W509 an inertia that breaks "
                                 "the triangle inequality by rounding."),
 ]
 
@@ -344,9 +345,9 @@ ENTRIES = [
           "one joint.", urdf="E025_cycle.urdf"),
     Entry("E026", "a name used twice", "Two links, or two joints, with the same name.",
           "Rename one of them.", urdf="E026_link_twice.urdf"),
-    Entry("E029", "bad mimic joint", "A `<mimic>` that names no movable joint of the robot (or a cycle of "
-                                     "mimic joints).",
-          "Name the revolute, continuous or prismatic joint it follows.", urdf="E029_mimic_unknown_joint.urdf"),
+    Entry("E027", "nothing moves", "The robot has no movable joint (a quadrotor's body alone, a fixed "
+                                   "assembly): the model would have no coordinates.",
+          "Import it with `--floating` to give its root link a Free joint.", urdf="E027_nothing_moves.urdf"),
     Entry("E604", "bad setting value", "A setting of the wrong kind (a string for a number, a fraction for "
                                        "`points`, a negative tolerance, an unknown name).",
           "Give a value of the kind the message names.", corpus="E604_stop_time_string.mech"),

@@ -16,7 +16,7 @@ def body_model(I: str, joint: str = "Spherical j(parent = world, child = b, phi(
     return f"""
 model A
   Gravity g;
-  Body b(m = 1, r_cm = {{0.5, 0, 0}}, {I}{extra});
+  Body b(m = 1, r_cm = {{0.3, 0, 0}}, {I}{extra});
   {joint}
 end A;
 """
@@ -71,7 +71,7 @@ def test_sympy_planar_inertia_on_a_hinge_is_accepted_and_exact():
     """sympy's inertia(B, 0, 0, Izz): a body on a hinge about z feels only Izz, so the equations
     are those of a compound pendulum, theta'' = -m g r sin(theta) / (Izz + m r^2)."""
     text = body_model("I_33 = 0.2", joint="Revolute j(parent = world, child = b, axis = {0, 0, 1}, phi(start = 0.3));")
-    text = text.replace("Gravity g;", "Gravity g(g = {0, -9.81, 0});").replace("r_cm = {0.5, 0, 0}", "r_cm = {0, -0.5, 0}")
+    text = text.replace("Gravity g;", "Gravity g(g = {0, -9.81, 0});").replace("r_cm = {0.3, 0, 0}", "r_cm = {0, -0.5, 0}")
     m = mechdsl.loads(text)
     assert not m.warnings
     import casadi as ca
@@ -116,6 +116,21 @@ end C;
     with pytest.raises(MechError) as e:
         mechdsl.loads(chain.replace("RPY", ""))
     assert [(d.code, d.span.line) for d in e.value.diagnostics] == [("E509", 5)]     # b turns about two axes
+
+
+def test_a_zero_tensor_with_rounding_noise_is_zero():
+    """iCub's head: I = 0 but for ixz = 2.4e-35, beside 1.3 kg 0.11 m off the link origin. Beside the
+    mass's own moment about the origin (m |r_cm|^2 = 0.017) the tensor is zero, not 'negative'; so is
+    a 1e-20 tensor of any shape. Where m |r_cm|^2 is larger than I3 the tolerances are relative to it."""
+    noise = "I = {{0, 0, 2.40741e-35}, {0, 0, 0}, {2.40741e-35, 0, 0}}"
+    assert codes(body_model(noise).replace("m = 1, r_cm = {0.3, 0, 0}", "m = 1.33687, r_cm = {0.0185, -0.1108, 0}")) == []
+    tiny = "I = {{2.71e-20, -1.69e-21, 1.355e-20}, {-1.69e-21, 5.42e-20, 3.39e-21}, {1.355e-20, 3.39e-21, 1.355e-20}}"
+    assert codes(body_model(tiny)) == []
+    with pytest.raises(MechError) as e:                  # where the tensor is the scale, its shape counts
+        mechdsl.loads(body_model(tiny).replace("r_cm = {0.3, 0, 0}", "r_cm = {0, 0, 0}"))
+    assert e.value.diagnostics[0].code == "E509"
+    (w,) = mechdsl.loads(body_model("I = diagonal({0.01, 0.01, 0.02000002})")).warnings   # 2e-8 of m|r_cm|^2 = 0.09
+    assert w.code == "W509" and "of m |r_cm|^2 = 0.09" in w.message
 
 
 def test_with_params_judges_the_new_values():

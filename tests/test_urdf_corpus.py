@@ -76,6 +76,14 @@ def test_measured_inertia_accepts_the_triangle_example(tmp_path, capsys):
     assert m.model.body("fore").measured and not m.model.body("upper").measured
 
 
+def test_floating_moves_a_robot_without_joints(tmp_path, capsys):
+    out = tmp_path / "quad.mech"
+    assert main(["import", str(CORPUS / "E027_nothing_moves.urdf"), "-o", str(out), "--floating"]) == 0
+    m = mechdsl.load(out)
+    assert m.model.coordinate_names == tuple(f"root_joint.{c}" for c in ("x", "y", "z", "q0", "q1", "q2", "q3"))
+    assert "free-floating" in capsys.readouterr().out
+
+
 def test_output_is_never_overwritten_without_force(tmp_path, capsys):
     out = tmp_path / "robot.mech"
     out.write_text("// mine\n")

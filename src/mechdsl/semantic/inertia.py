@@ -9,7 +9,9 @@ What is refused, and why (docs/language.md, "Inertia data"):
 - principal moments that break the triangle inequality I1 + I2 >= I3 (no mass distribution has
   them) by more than ``ROUNDING`` = 1e-6 of I3 (E509, with a hint); up to that much it is the
   rounding of printed data (URDF files, CAD exports): accepted with a located warning that gives
-  the amount (W509); below ``NOISE`` = 1e-12 of I3 silently (floating-point noise);
+  the amount (W509); below ``NOISE`` = 1e-12 of I3 silently (floating-point noise).  Where the
+  mass's own moment about the body origin, m |r_cm|^2, is larger than I3 it is the reference
+  instead (a tensor of 1e-20 on a 1 kg link is zero up to noise, whatever its shape);
 - the triangle inequality is not judged for a body marked ``measured_inertia = true`` (measured
   data: the user takes responsibility), nor where it cannot matter: a body that turns about one
   fixed axis of its own only (a "planar" body, such as sympy's planar ``inertia(B, 0, 0, Izz)``
@@ -74,7 +76,8 @@ def mass_property_problems(model: ir.Model, env: dict[str, float]) -> list[Diagn
         inertia = _matrix(b.inertia, env)
         if inertia is None:
             continue
-        d = tensor_problem(b, inertia)
+        com = _vector(b.com, env)
+        d = tensor_problem(b, inertia, (m or 0.0) * float(com @ com) if com is not None else 0.0)
         if d is not None and d.code == "E509" and d.message.startswith("no rigid body"):
             if turning is None:
                 turning = turning_axes(model, env)
@@ -85,9 +88,14 @@ def mass_property_problems(model: ir.Model, env: dict[str, float]) -> list[Diagn
     return out
 
 
-def tensor_problem(b: ir.Body, inertia: np.ndarray) -> Diagnostic | None:
-    """What is wrong with one body's tensor (None: nothing), the planar exemption aside."""
-    scale = max(float(np.max(np.abs(inertia))), 1e-300)
+def tensor_problem(b: ir.Body, inertia: np.ndarray, offset_moment: float = 0.0) -> Diagnostic | None:
+    """What is wrong with one body's tensor (None: nothing), the planar exemption aside.
+
+    Tolerances are relative to the body's own scale of moments: the largest entry of I, or
+    ``offset_moment`` = m |r_cm|^2 (what the mass adds about the body's frame origin) when that is
+    larger, so that a link whose tensor is zero up to rounding noise (1e-35 beside a mass of 1 kg
+    off its origin) is judged as the zero tensor it stands for."""
+    scale = max(float(np.max(np.abs(inertia))), offset_moment, 1e-300)
     if np.max(np.abs(inertia - inertia.T)) > SYMMETRY_TOL * scale:
         return Diagnostic("E509", f"the inertia tensor of body '{b.name}' is not symmetric", b.span,
                           "I must equal its transpose: give I_21, I_31, I_32 once (or a symmetric I)")
@@ -100,10 +108,12 @@ def tensor_problem(b: ir.Body, inertia: np.ndarray) -> Diagnostic | None:
                           "their sign as written: I_21 is the tensor entry -sum(m x y), URDF's ixy)")
     if b.measured or moments[2] <= 0:
         return None
-    excess = (moments[2] - moments[0] - moments[1]) / moments[2]
+    ref = max(float(moments[2]), offset_moment)
+    excess = (moments[2] - moments[0] - moments[1]) / ref
     if excess <= NOISE:
         return None
-    amount = f"I3 - (I1 + I2) = {moments[2] - moments[0] - moments[1]:.3g}, {excess:.3g} of I3"
+    amount = f"I3 - (I1 + I2) = {moments[2] - moments[0] - moments[1]:.3g}, {excess:.3g} of " + (
+        "I3" if ref == moments[2] else f"m |r_cm|^2 = {ref:.3g}, the mass's moment about the body origin")
     if excess <= ROUNDING:
         shown = ", ".join(f"{x:.10g}" for x in moments)
         return Diagnostic("W509", f"the principal moments of '{b.name}' ({shown}) break the triangle inequality "

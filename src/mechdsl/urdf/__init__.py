@@ -56,7 +56,7 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
     being fixed to the world; ``measured_inertia``: inertias that break the triangle inequality
     beyond rounding are accepted as measured data (``measured_inertia = true`` on those bodies);
     ``package_dirs``: folders of ROS packages named in ``package://`` mesh paths.  Problems are
-    MechErrors located in the URDF (codes E020-E029, E508, E509); warnings are in
+    MechErrors located in the URDF (codes E020-E027, E508, E509); warnings are in
     ``Imported.diagnostics``."""
     from .. import __version__
 
@@ -68,6 +68,10 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
     st = T.build(robot, diags)
     diags.raise_if_errors()
     assert st is not None
+    if not st.movable and not floating:
+        raise MechError(Diagnostic("E027", f"robot '{robot.name}' has no movable joint: nothing in it moves",
+                                   span(name, robot.el), "import it with --floating (mech import) or floating=True "
+                                                         "to give its root link a Free joint"))
     cache: dict = {}
     shapes = {g.link.name: body_shape(g, name, dict(package_dirs or {}), diags, cache) for g in st.groups}
     mech_name = mech_name or str(Path(name).with_suffix(".mech").name)

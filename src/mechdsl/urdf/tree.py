@@ -11,7 +11,8 @@ their parent by fixed joints (with their inertias combined exactly), and what is
   theorem with each member's rotation: I = sum R_i I_i R_i^T + m_i (|d_i|^2 1 - d_i d_i^T)).
 - A movable joint that moves no mass at all (no <inertial> on its child link or beyond) is E023:
   its coordinate would have no inertia.
-- A mimic joint names a movable joint (E029), without a cycle of mimics.
+- A mimic joint names a movable joint, without a cycle of mimics; otherwise its mimic is left out
+  with the warning W029.
 """
 from __future__ import annotations
 
@@ -190,30 +191,34 @@ def _subtree_inertials(groups: list[Group], placement) -> None:
 
 
 def _check_mimics(robot: Robot, movable: list[Joint], diags) -> None:
+    """A mimic that cannot be honoured (it names no movable joint, or mimics form a cycle) is left
+    out, with the warning W029: the joint then moves on its own (as Pinocchio reads it by default)."""
     names = {j.name: j for j in movable}
     all_joints = {j.name: j for j in robot.joints}
+    follows = ("revolute", "continuous", "prismatic")
     for j in movable:
         if j.mimic is None:
             continue
         target = j.mimic[0]
         t = names.get(target)
-        if t is None or t.type not in ("revolute", "continuous", "prismatic") or j.type not in (
-                "revolute", "continuous", "prismatic"):
-            what = ("is not a joint of the robot" if target not in all_joints else
-                    f"is a {all_joints[target].type} joint" if t is None or t.type not in ("revolute", "continuous", "prismatic")
-                    else f"mimics from a {j.type} joint")
-            diags.error("E029", f"joint '{j.name}' mimics '{target}', which {what}", span(robot.file, j.mimic_el),
-                        "a mimic joint follows a revolute, continuous or prismatic joint of the robot")
-            continue
-        seen = {j.name}
-        k = t
-        while k is not None and k.mimic is not None:
-            if k.name in seen:
-                diags.error("E029", f"joint '{j.name}': its mimic joints form a cycle", span(robot.file, j.mimic_el),
-                            "one joint of the chain must move on its own")
-                break
-            seen.add(k.name)
-            k = names.get(k.mimic[0])
+        why = None
+        if t is None or t.type not in follows or j.type not in follows:
+            why = ("is not a joint of the robot" if target not in all_joints else
+                   f"is a {all_joints[target].type} joint" if t is None or t.type not in follows
+                   else f"is followed by a {j.type} joint")
+        else:
+            seen, k = {j.name}, t
+            while k is not None and k.mimic is not None and why is None:
+                if k.name in seen:
+                    why = "leads back to it through other mimic joints (a cycle)"
+                seen.add(k.name)
+                k = names.get(k.mimic[0])
+        if why is not None:
+            diags.warning("W029", f"joint '{j.name}' mimics '{target}', which {why}: the mimic is left out, the "
+                                  "joint moves on its own", span(robot.file, j.mimic_el),
+                          "a mimic joint follows a revolute, continuous or prismatic joint of the robot; fix the "
+                          "name to bind it")
+            j.mimic = None
 
 
 __all__ = ["build", "Structure", "Group", "Member", "MOVABLE", "rpy_matrix"]
