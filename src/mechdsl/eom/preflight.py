@@ -142,7 +142,10 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         G = _jacobian(eom, q, t, pv)
     else:
         M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
-        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
+        try:
+            rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
+        except RuntimeError:          # CasADi's QR refuses a singular M ("Evaluation failed"): M says why below
+            rhs = np.full(2 * eom.n, np.nan)
         G = None
     ok_rhs = bool(np.all(np.isfinite(rhs)))
     if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix

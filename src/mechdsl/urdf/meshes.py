@@ -26,7 +26,7 @@ MAX_MESH_BYTES = 200_000_000
 def resolve(filename: str, urdf_dir: Path, package_dirs: dict[str, str]) -> tuple[Path | None, str]:
     """(path, "") or (None, why)."""
     if filename.startswith("package://"):
-        rest = filename[len("package://"):]
+        rest = filename[len("package://"):].lstrip("/")     # (package:///name/... is seen in the wild)
         pkg, _, rel = rest.partition("/")
         for base in _package_candidates(pkg, urdf_dir, package_dirs):
             p = base / rel

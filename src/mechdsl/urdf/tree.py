@@ -9,8 +9,8 @@ their parent by fixed joints (with their inertias combined exactly), and what is
 - A link fixed to another is merged into it: one mechdsl body per group of links welded
   together; its mass, centre of mass and inertia combine the members' exactly (parallel-axis
   theorem with each member's rotation: I = sum R_i I_i R_i^T + m_i (|d_i|^2 1 - d_i d_i^T)).
-- A movable joint that moves no mass at all (no <inertial> on its child link or beyond) is E023:
-  its coordinate would have no inertia.
+- A movable joint that moves no mass at all (no <inertial>, or one of zeros, on its child link or
+  beyond) is E023: its coordinate would have no inertia.
 - A mimic joint names a movable joint, without a cycle of mimics; otherwise its mimic is left out
   with the warning W029.
 """
@@ -147,8 +147,9 @@ def _groups(robot: Robot, root: Link, order, left_out, diags) -> Structure:
     for g in ordered:
         j = g.inbound
         if j is not None and not g.subtree_inertials:
-            diags.error("E023", f"joint '{j.name}' moves no mass: link '{g.link.name}' has no <inertial>, and "
-                                "neither has any link beyond it", span(robot.file, g.link.el),
+            diags.error("E023", f"joint '{j.name}' moves no mass: link '{g.link.name}' has no mass or inertia "
+                                "(no <inertial>, or zeros), and neither has any link beyond it",
+                        span(robot.file, g.link.el),
                         "give the link an <inertial> (mass, inertia), or make the joint fixed")
     _check_mimics(robot, [g.inbound for g in ordered if g.inbound is not None], diags)
     return Structure(root, ordered, placement, [g.inbound for g in ordered if g.inbound is not None], left_out)
@@ -181,10 +182,16 @@ def _combine(g: Group) -> None:
     g.I = 0.5 * (I + I.T)
 
 
+def _has_mass(link: Link) -> bool:
+    """An <inertial> with a mass or an inertia that is not zero (a negative mass counts: E508 says so)."""
+    ine = link.inertial
+    return ine is not None and (ine.mass != 0.0 or bool(np.any(ine.I)))
+
+
 def _subtree_inertials(groups: list[Group], placement) -> None:
     by_link = {g.link.name: g for g in groups}
     for g in reversed(groups):               # children come after their parents
-        g.subtree_inertials += sum(mb.link.inertial is not None for mb in g.members)
+        g.subtree_inertials += sum(_has_mass(mb.link) for mb in g.members)
         if g.inbound is not None:
             parent = by_link[placement[g.inbound.parent][0]]
             parent.subtree_inertials += g.subtree_inertials
