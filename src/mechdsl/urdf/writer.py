@@ -81,13 +81,30 @@ class _Out:
             self.where[len(self.lines) + 1] = where
         self.lines.append(text)
 
-    def decl(self, head: str, args: list[str], where=None) -> None:
-        """``head(arg, arg, ...);`` wrapped under the opening bracket."""
+    def decl(self, head: str, args: list, where=None) -> None:
+        """``head(arg, arg, ...);`` wrapped under the opening bracket; an argument given as
+        (prefix, [row, row, ...]) is a matrix, its rows one under the other when it does not fit."""
         line = f"  {head}("
         indent = " " * len(line)
         rows, cur = [], line
         for k, a in enumerate(args):
-            piece = a + (", " if k < len(args) - 1 else ");")
+            end = ", " if k < len(args) - 1 else ");"
+            if isinstance(a, tuple):
+                prefix, mrows = a
+                flat = prefix + "{" + ", ".join(mrows) + "}"
+                if len(indent) + len(flat) + len(end) <= WIDTH:
+                    a = flat
+                else:
+                    if cur.strip() != head + "(":
+                        rows.append(cur.rstrip())
+                        cur = indent
+                    inner = " " * (len(indent) + len(prefix) + 1)
+                    rows.append(cur + prefix + "{" + (",\n" + inner).join(mrows).split("\n")[0])
+                    body = (",\n" + inner).join(mrows).split("\n")[1:]
+                    rows.extend(body[:-1])
+                    cur = body[-1] + "}" + end
+                    continue
+            piece = a + end
             if len(cur) + len(piece.rstrip()) > WIDTH and cur.strip() not in (head + "(",):
                 rows.append(cur.rstrip())
                 cur = indent
@@ -165,7 +182,7 @@ def _body(o, g: Group, name: str, shape: Shape | None, measured: str | None, w, 
     if np.any(g.com):
         args.append(f"r_cm = {vec(g.com)}")
     if np.any(g.I):
-        args.append(f"I = {mat(g.I)}")
+        args.append(("I = ", [vec(row) for row in g.I]))
     if measured:
         args.append("measured_inertia = true")
     if shape is not None:
