@@ -60,7 +60,7 @@ def run(args) -> int:
 def summary(source: str, output: str | None, imp, floating: bool) -> list[str]:
     from collections import Counter
 
-    kinds = Counter(c[0].rsplit(".", 1)[-1] for c in imp.coordinates.values() if c)
+    kinds = Counter(imp.kinds.values())
     n = sum(len(c) for c in imp.coordinates.values())
     lines = [f"{source} -> {output or 'standard output'}: model {imp.model}: {len(imp.bodies)} bodies, "
              f"{len(imp.joints)} joints, {n} coordinate{'s' * (n != 1)}"

@@ -42,6 +42,7 @@ class Imported:
                                                                   # follows, multiplier, offset)
     root: str = ""
     measured: list[str] = field(default_factory=list)             # links whose inertia is taken as measured
+    kinds: dict[str, str] = field(default_factory=dict)           # URDF movable joint -> its URDF type
 
 
 def import_urdf(path: str | os.PathLike, *, floating: bool = False, measured_inertia: bool = False,
@@ -74,6 +75,7 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
                                                          "to give its root link a Free joint"))
     cache: dict = {}
     shapes = {g.link.name: body_shape(g, name, dict(package_dirs or {}), diags, cache) for g in st.groups}
+    diags.items = _one_per_package(diags.items)
     mech_name = mech_name or str(Path(name).with_suffix(".mech").name)
     measured: dict[str, str] = {}
     for attempt in range(2):
@@ -88,7 +90,8 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
     diags.raise_if_errors()
     mimics = {j.name: j.mimic for j in st.movable if j.mimic is not None}
     return Imported(w.text, w.model, w.bodies, w.joints, w.coordinates, diags.warnings,
-                    [j.name for j in st.left_out], mimics, st.root.name, sorted(measured))
+                    [j.name for j in st.left_out], mimics, st.root.name, sorted(measured),
+                    {j.name: j.type for j in st.movable})
 
 
 def _check(text: str, model: str, mech_name: str, w, robot: R.Robot, st: T.Structure,
@@ -132,6 +135,25 @@ def _check(text: str, model: str, mech_name: str, w, robot: R.Robot, st: T.Struc
     if measured_ok and out["measured"]:
         out["diagnostics"] = [d for d in out["diagnostics"] if d.severity != "error" or d.code != "E509"
                               or "triangle inequality" not in d.message]
+    return out
+
+
+def _one_per_package(items: list[Diagnostic]) -> list[Diagnostic]:
+    """A package that is not found is said once, at its first mesh, with the number of meshes."""
+    out, first, count = [], {}, {}
+    for d in items:
+        key = d.message.split(" is not drawn: ", 1)[-1] if d.code == "W021" and "package '" in d.message else None
+        if key is None:
+            out.append(d)
+            continue
+        count[key] = count.get(key, 0) + 1
+        if key not in first:
+            first[key] = len(out)
+            out.append(d)
+    for key, i in first.items():
+        if count[key] > 1:
+            out[i] = dataclasses.replace(out[i], message=out[i].message.replace(
+                " is not drawn: ", f" and {count[key] - 1} more of its package are not drawn: ", 1))
     return out
 
 
