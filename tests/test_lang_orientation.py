@@ -54,12 +54,15 @@ end B;
     assert np.allclose(mat("C"), Rot.from_rotvec(rv).as_matrix(), atol=1e-14)
 
 
-ORIENTED = """
-model O
-  Gravity g(g = {0, 0, -9.81});
+BODIES = """  Gravity g(g = {0, 0, -9.81});
   Body a(m = 1.3, r_cm = {0.1, 0.02, -0.05}, I = {{0.02, 0.001, -0.002}, {0.001, 0.03, 0.0015}, {-0.002, 0.0015, 0.025}});
   Body b(m = 0.7, r_cm = {0.05, -0.1, 0.03}, I = {{0.01, 0.0005, 0}, {0.0005, 0.012, -0.001}, {0, -0.001, 0.008}});
   Body c(m = 0.4, r_cm = {0, 0, 0.1}, I = diagonal({0.004, 0.005, 0.003}));
+"""
+
+ORIENTED = """
+model O
+BODIES
   Point base(body = world, r = {0.1, -0.2, 0.3}, rpy = {0.3, -0.4, 0.5});
   Point pa(body = a, r = {0.2, 0.1, -0.1}, R = axis_angle({1, -2, 0.5}, 0.7));
   Point cb(body = b, r = {-0.05, 0.02, 0.1}, rpy = {-0.2, 0.1, 0.9});
@@ -72,16 +75,13 @@ model O
   output Real ob[3] = b.r;
   output Real Rcb[3, 3] = cb.R;
 end O;
-"""
+""".replace("BODIES\n", BODIES)
 
 # the same mechanism with constant Frames for the orientations (the pre-issue-26 workaround):
 # a joint frame is a Frame on the parent point; an oriented child point becomes an inverse placement
 FRAMES = """
 model F
-  Gravity g(g = {0, 0, -9.81});
-  Body a(m = 1.3, r_cm = {0.1, 0.02, -0.05}, I = {{0.02, 0.001, -0.002}, {0.001, 0.03, 0.0015}, {-0.002, 0.0015, 0.025}});
-  Body b(m = 0.7, r_cm = {0.05, -0.1, 0.03}, I = {{0.01, 0.0005, 0}, {0.0005, 0.012, -0.001}, {0, -0.001, 0.008}});
-  Body c(m = 0.4, r_cm = {0, 0, 0.1}, I = diagonal({0.004, 0.005, 0.003}));
+BODIES
   parameter Real P1[3, 3] = rotation({0, 0, 1}, 0.5)*rotation({0, 1, 0}, -0.4)*rotation({1, 0, 0}, 0.3)
                             *rotation({0, 0, 1}, -0.3)*rotation({0, 1, 0}, 0.2)*rotation({1, 0, 0}, 0.1);
   parameter Real P2[3, 3] = rotation({1, -2, 0.5}, 0.7);
@@ -97,7 +97,7 @@ model F
   Frame f3(parent = b, R = P3);
   Revolute j3(parent = f3, child = c, axis = {0, 0, 1}, phi(start = -0.2));
 end F;
-"""
+""".replace("BODIES\n", BODIES)
 
 
 def test_oriented_joints_place_bodies_as_scipy_composes_them():

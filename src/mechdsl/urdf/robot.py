@@ -125,6 +125,16 @@ class _Reader:
         v = self.numbers(el, key, 1)
         return None if v is None else float(v[0])
 
+    def attributes(self, el: Element | None, keys: tuple[str, ...]) -> dict[str, float]:
+        """The numbers of those of ``keys`` that the element gives."""
+        out = {}
+        for key in keys:
+            if el is not None and el.get(key) is not None:
+                v = self.number(el, key)
+                if v is not None:
+                    out[key] = v
+        return out
+
     def pose(self, parent: Element) -> Pose:
         o = parent.find("origin")
         if o is None:
@@ -214,20 +224,8 @@ class _Reader:
                 axis = np.array([1.0, 0.0, 0.0])
             axis = axis / n
         j = Joint(name, kind, pe.get("link"), ce.get("link"), self.pose(el), axis, el, pe, ce)
-        le = el.find("limit")
-        if le is not None:
-            for key in ("lower", "upper", "effort", "velocity"):
-                if le.get(key) is not None:
-                    v = self.number(le, key)
-                    if v is not None:
-                        j.limits[key] = v
-        de = el.find("dynamics")
-        if de is not None:
-            for key in ("damping", "friction"):
-                if de.get(key) is not None:
-                    v = self.number(de, key)
-                    if v is not None:
-                        j.dynamics[key] = v
+        j.limits = self.attributes(el.find("limit"), ("lower", "upper", "effort", "velocity"))
+        j.dynamics = self.attributes(el.find("dynamics"), ("damping", "friction"))
         me = el.find("mimic")
         if me is not None:
             target = me.get("joint")
