@@ -26,6 +26,7 @@ CLASSES = [
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
     ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),
+    ("mechdsl.urdf.Imported", "what `mechdsl.urdf.convert` returns (`mechdsl.import_urdf` returns its text)"),
 ]
 
 

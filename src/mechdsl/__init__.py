@@ -24,6 +24,13 @@ def loads(text, model=None, scene=None, filename="<string>", **kw):
     return _loads(text, model=model, scene=scene, filename=filename, **kw)
 
 
+def import_urdf(path, *, floating=False, measured_inertia=False, package_dirs=None):
+    """The .mech text of the robot described by a URDF file (mechdsl.urdf; docs/import.md)."""
+    from .urdf import import_urdf as _import
+
+    return _import(path, floating=floating, measured_inertia=measured_inertia, package_dirs=package_dirs)
+
+
 def table(times, values, hold="zoh"):
     """Samples of an input signal for ``simulate(inputs={name: table(...)})``: hold = "zoh"
     (zero-order hold) or "linear" (mechdsl.simulation.drive)."""
@@ -32,4 +39,4 @@ def table(times, values, hold="zoh"):
     return _table(times, values, hold)
 
 
-__all__ = ["load", "loads", "table", "Diagnostic", "MechError", "Span", "UsageError", "__version__"]
+__all__ = ["load", "loads", "import_urdf", "table", "Diagnostic", "MechError", "Span", "UsageError", "__version__"]

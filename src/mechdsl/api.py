@@ -282,9 +282,9 @@ class Model:
             env[p.name] = p.value
             params.append(p)
         model = dataclasses.replace(self.model, parameters=tuple(params))
-        from .semantic.physical import value_problems
+        from .semantic.physical import errors, value_problems
 
-        problems = value_problems(model)
+        problems = errors(value_problems(model))
         if problems:
             raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None

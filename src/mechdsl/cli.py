@@ -57,16 +57,16 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The argument parser; ``only``: import and register just that command (a run of one
     command imports only what it needs: bench, plotting and analysis stay unloaded)."""
     from . import __version__
-    from .commands import COMMANDS
+    from .commands import COMMANDS, module_of
 
     ap = _Parser(prog="mech", description="mechdsl: equation-based modelling of rigid-body mechanics")
     ap.add_argument("--version", action="version", version=f"mechdsl {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in ([only] if only in COMMANDS else COMMANDS):
         try:
-            mod = importlib.import_module(f".commands.{name}", __package__)
+            mod = importlib.import_module(f".commands.{module_of(name)}", __package__)
         except ModuleNotFoundError as e:
-            if e.name and e.name.endswith(f"commands.{name}"):
+            if e.name and e.name.endswith(f"commands.{module_of(name)}"):
                 continue  # command not built (yet)
             raise
         p = mod.add_parser(sub)

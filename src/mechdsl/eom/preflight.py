@@ -80,11 +80,11 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
     own = None if model is None else np.array([q.value for q in model.real_parameters], float)
     if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
         # the model's own values were judged when it was analyzed (or by with_params)
-        from ..semantic.physical import parameter_env, value_problems
+        from ..semantic.physical import errors, parameter_env, value_problems
 
         env = parameter_env(model)
         env.update(zip(eom.params, map(float, pv)))
-        found = value_problems(model, env)
+        found = errors(value_problems(model, env))
         if found:
             return found
     found = _negative_masses(eom, pv)
@@ -143,7 +143,10 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         G = _jacobian(eom, q, t, pv)
     else:
         M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
-        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
+        try:
+            rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
+        except RuntimeError:          # CasADi's QR refuses a singular M ("Evaluation failed"): M says why below
+            rhs = np.full(2 * eom.n, np.nan)
         G = None
     ok_rhs = bool(np.all(np.isfinite(rhs)))
     if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix

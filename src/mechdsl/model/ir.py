@@ -16,12 +16,14 @@ Conventions (documented in docs/language.md):
 - world frame: x right, y up, z out of the plane; gravity is whatever Gravity says.
 - every body has a body frame; ``com`` is the centre of mass in body coordinates and
   ``inertia`` the inertia tensor about the centre of mass in body axes.
-- a joint places a joint frame on the parent (at ``parent`` point, parent body axes) and one
-  on the child (at ``child`` point, child body axes).  At zero joint variables the two joint
+- a joint places a joint frame on the parent (at ``parent`` point, with the axes ``parent_R``
+  in parent body coordinates, default the body's axes) and one on the child (at ``child``
+  point, axes ``child_R`` in child body coordinates).  At zero joint variables the two joint
   frames coincide; the joint's motion is the child joint frame relative to the parent one.
   ``axis`` is a unit vector in those (coinciding) axes.
-  With (R_j, p_j) the joint's relative rotation and translation, the child body's pose is
-      R_child = R_parent R_j,   o_child = o_parent + R_parent (r_P + p_j) - R_child r_C
+  With (R_j, p_j) the joint's relative rotation and translation, P = parent_R, C = child_R
+  (identity when None), the child body's pose is
+      R_child = R_parent P R_j C^T,   o_child = o_parent + R_parent (r_P + P p_j) - R_child r_C
   where r_P is the parent point in parent body coordinates and r_C the child point in
   child body coordinates.  Per kind:
       revolute     R_j = rot(axis, phi),            p_j = 0
@@ -243,16 +245,21 @@ class Body:
     shape_size: tuple[Expr, ...] = ()  # rod: (L,), disk: (R,), cylinder: (R, L), sphere: (R,), box: (lx, ly, lz)
     axis: Vec3 = (ONE, ZERO, ZERO)   # symmetry axis of the shape, body coordinates
     span: Span = field(default_factory=Span)
+    measured: bool = False           # `measured_inertia = true`: the triangle inequality is not judged
 
 
 @record
 class Point:
-    """A point fixed on a body (or on 'world'), position r in body coordinates."""
+    """A point fixed on a body (or on 'world'), position r in body coordinates.
+
+    R (None: the body's axes) orients the point's own axes: a point with R is a frame fixed on
+    the body, R its axes in body coordinates (body <- point).  Joints at the point use them."""
 
     name: str
     body: str
     r: Vec3 = (ZERO, ZERO, ZERO)
     span: Span = field(default_factory=Span)
+    R: Mat3 | None = None
 
 
 @record
@@ -302,6 +309,8 @@ class Joint:
     closes_loop: bool = False        # set by topology: a cut joint; its variables are then () and its
                                      # loop-closure constraint removes only the joint's free directions
     span: Span = field(default_factory=Span)
+    parent_R: Mat3 | None = None     # axes of the parent joint frame in parent body axes (None: the same)
+    child_R: Mat3 | None = None      # axes of the child joint frame in child body axes (None: the same)
 
     def option(self, key: str, default: str = "") -> str:
         return dict(self.options).get(key, default)

@@ -93,8 +93,11 @@ def _model_parts(m):
         except Exception:  # noqa: BLE001 - a start value that needs more than parameters
             start = "?"
         coords.append([c.name, start, c.unit or "", c.doc])
+    from ..semantic.topology import counts as _counts
+
+    n = _counts(model)
     counts = [["coordinates", len(model.coordinates)], ["parameters", len(model.parameters)],
-              ["bodies", len(model.bodies)], ["joints", len(model.joints)],
+              ["bodies", n["bodies"]], ["joints", n["joints"]],
               ["constraints", len(model.constraints) + len(model.loops)], ["contacts", len(model.contacts)],
               ["outputs", len(model.outputs)]]
     title = f"{m.name}" + (f" (scene {m.scene.name})" if m.scene is not None else "")

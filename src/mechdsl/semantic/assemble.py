@@ -7,6 +7,7 @@ from __future__ import annotations
 from ..model import exprs as X
 from ..model import ir
 from . import components as K
+from . import orientation as O
 from .entries import CompInst, Failed
 from .evaluate import EvalError, fail
 from .friction import friction_force
@@ -83,14 +84,16 @@ def build_component(fl, inst: CompInst) -> K.Built:
                 out.joints.append(j)
     elif cls.category == "point":
         body = f["body"]
-        out.points.append(ir.Point(name, fl.body_of_point(body.name), K.as_vec3(f["r"], "r"), span))
+        out.points.append(ir.Point(name, fl.body_of_point(body.name), K.as_vec3(f["r"], "r"), span,
+                                   O.given_orientation(f, name)))
     elif cls.category == "frame":
         parent = f["parent"]
         axis = K.normalized(K.as_vec3(f["axis"], "axis"), "axis")
-        if f.get("R") is not None:
+        R = O.given_orientation(f, name)
+        if R is not None:
             if inst.entry.mod.sub.get("angle") is not None:
-                fail("E211", f"give either R or axis and angle for '{name}', not both", span, "remove one of them")
-            R = K.as_mat3(f["R"], "R")
+                fail("E211", f"give either {'R' if f.get('R') is not None else 'rpy'} or axis and angle for "
+                             f"'{name}', not both", span, "remove one of them")
         else:
             R = K.rodrigues(axis, K.as_expr(f["angle"], "angle"))
         for c in [*K.as_vec3(f["r"], "r"), *(x for row in R for x in row)]:
@@ -102,7 +105,7 @@ def build_component(fl, inst: CompInst) -> K.Built:
         out.points += [ir.Point(name, name, (z, z, z), span)]
         out.joints.append(ir.Joint(f"{name}.motion", "frame", parent.name, name, fl.body_of_point(parent.name),
                                    name, (z, z, X.const(1.0)), (), None, K.as_vec3(f["r"], "r"), R, (), False,
-                                   span))
+                                   span, parent_R=point_axes(fl, parent.name)))
     elif cls.category == "joint":
         out.joints.append(_build_joint(fl, inst, f, span, out))
     elif cls.category == "force":
@@ -150,7 +153,8 @@ def _build_joint(fl, inst: CompInst, f, span, out: K.Built) -> ir.Joint:
         out.points.append(ir.Point(end, fl.body_of_point(a.name), K.as_vec3(f["r"], "r"), span))
         z = X.const(0.0)
         return ir.Joint(name, "fixed", end, _point_name(b), fl.body_of_point(a.name), fl.body_of_point(b.name),
-                        (z, z, X.const(1.0)), (), None, None, None, (), False, span)
+                        (z, z, X.const(1.0)), (), None, None, None, (), False, span,
+                        child_R=point_axes(fl, _point_name(b)))
     parent, child = f["parent"], f["child"]
     if child is None:                   # the joint's own massless frame
         z = X.const(0.0)
@@ -176,8 +180,30 @@ def _build_joint(fl, inst: CompInst, f, span, out: K.Built) -> ir.Joint:
         except ValError as ve:
             fail(ve.code, ve.message, span, ve.help)
     jv = fl.joint_vars(inst)
+    P, C = joint_axes(fl, inst)
     return ir.Joint(name, kind, _point_name(parent), _point_name(child), pb, cb, axis, tuple(jv), plane,
-                    None, None, tuple(options), False, span)
+                    None, None, tuple(options), False, span, parent_R=P, child_R=C)
+
+
+def joint_axes(fl, inst: CompInst) -> tuple[ir.Mat3 | None, ir.Mat3 | None]:
+    """(P, C): the axes of a joint's parent joint frame in the parent body (the parent point's
+    orientation, then the joint's own rpy / R) and of its child joint frame in the child body
+    (the child point's orientation); None where they are the body's axes."""
+    parent, child = fl.field_value(inst, "parent"), fl.field_value(inst, "child")
+    own = {k: fl.field_value(inst, k) for k in ("rpy", "R")}
+    P = O.compose(point_axes(fl, _point_name(parent)), O.given_orientation(own, inst.name))
+    return P, (point_axes(fl, _point_name(child)) if child is not None else None)
+
+
+def point_axes(fl, pname: str) -> ir.Mat3 | None:
+    """The orientation of a named point in its body's axes (None: the body's own axes)."""
+    inst = fl.insts.get(pname)
+    if inst is None or inst.cls.name != "Point":
+        return None
+    try:
+        return O.given_orientation({k: fl.field_value(inst, k) for k in ("rpy", "R")}, pname)
+    except ValError:
+        raise Failed() from None       # reported where the point is built
 
 
 def _build_force(fl, inst: CompInst, f, span) -> K.Built:
