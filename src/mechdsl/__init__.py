@@ -8,6 +8,7 @@ Python API::
     r.t, r.q, r.qd, r["x"]
 """
 from .diagnostics import Diagnostic, MechError, Span, UsageError
+from .numbers import Quantity, deg, rad
 
 __version__ = "0.1.0"
 
@@ -39,4 +40,5 @@ def table(times, values, hold="zoh"):
     return _table(times, values, hold)
 
 
-__all__ = ["load", "loads", "import_urdf", "table", "Diagnostic", "MechError", "Span", "UsageError", "__version__"]
+__all__ = ["load", "loads", "import_urdf", "table", "Diagnostic", "MechError", "Span", "UsageError", "Quantity", "deg",
+           "rad", "__version__"]

@@ -24,6 +24,7 @@ import numpy as np
 from .model import ir
 from .model.records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
+from .numbers import Quantity, declared_value, in_declared_unit
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
 # (mechdsl.eom.modelcache) never needs it
@@ -244,9 +245,9 @@ class Model:
         structural: list[tuple[str, Any]] = []
         for k, v in values.items():
             if k in by_name and not by_name[k].integer:
-                real[k] = _number(k, v)
+                real[k] = declared_value(v, by_name[k].unit, k)       # a bare number: the declared unit
             elif k in by_name or "." in k or k in coords:
-                structural.append((k, v))
+                structural.append((k, _in_declared_unit(self.model, k, v)))
             else:
                 hint = did_you_mean(k, list(by_name) + [f"{c}.start" for c in coords])
                 raise UsageError(f"'{k}' is not a parameter of {self.name}" + (f"; {hint}" if hint else ""))
@@ -631,6 +632,21 @@ def _dependent_value(p: ir.Parameter, env: dict[str, float], evaluate) -> float:
     raise MechError(Diagnostic("E303", f"parameter '{p.name}' {problem} with the values given", p.span,
                                "it depends on the parameters changed (--set / with_params): check their "
                                "values against its formula (division by zero, a function's domain)"))
+
+
+def _in_declared_unit(model: ir.Model, key: str, v):
+    """A start value or speed given with a unit (``deg(30)``, ``"30 deg"``) -> a bare number in the
+    coordinate's declared unit, which the front end reads as it reads a scene modifier (issue 23)."""
+    if isinstance(v, bool) or not isinstance(v, (str, Quantity)):
+        return v
+    name, _, attr = key.rpartition(".")
+    if attr not in ("start", "speed"):
+        name, attr = key, "start"
+    try:
+        unit = model.coordinate(name).unit
+    except KeyError:
+        unit = None
+    return in_declared_unit(v, unit, key, speed=attr == "speed")
 
 
 def _number(name: str, v) -> float:

@@ -67,15 +67,21 @@ def split_starts(values: dict[str, float]) -> tuple[dict[str, float], dict[str, 
     return params, starts
 
 
-def start_overrides(coords, model_name: str, starts: dict[str, float]) -> dict[str, float]:
-    """Check start-value keys against the coordinates (did-you-mean on a typo)."""
-    for key in starts:
-        name = split_state(key)[0]
+def start_overrides(coords, model_name: str, starts: dict, model=None) -> dict[str, float]:
+    """Check start-value keys against the coordinates (did-you-mean on a typo); the values in SI
+    (a bare number in the coordinate's declared unit, as a scene modifier reads it)."""
+    from ..numbers import declared_value
+
+    out = {}
+    for key, v in starts.items():
+        name, speed = split_state(key)
         if name not in coords:
             hint = did_you_mean(name, list(coords))
             raise UsageError(f"--set {name}.start/.speed: '{name}' is not a coordinate of {model_name}"
                              + (f"; {hint}" if hint else f" (coordinates: {', '.join(coords)})"))
-    return dict(starts)
+        unit = model.coordinate(name).unit if model is not None else None
+        out[key] = declared_value(v, unit, f"--set {name}.{'speed' if speed else 'start'}", speed=speed)
+    return out
 
 
 # --------------------------------------------------------------------------- loading
@@ -94,7 +100,8 @@ def load_model(args, *, starts_in_model: bool = True):
              units=not getattr(args, "no_units", False), cache=not getattr(args, "no_cache", False))
     # where a later phase's diagnostic without a position of its own is shown (cli._locate)
     args._where = (m.scene or m.model).span
-    params, starts = split_starts(assignments(getattr(args, "set", None)))
+    # values keep their unit (45 deg, deg(45)); a bare number means the declared unit (issue 23)
+    params, starts = split_starts(assignments(getattr(args, "set", None), units=True))
     if starts_in_model:
         values = dict(params)
         for key, v in starts.items():
@@ -105,7 +112,7 @@ def load_model(args, *, starts_in_model: bool = True):
         return m.with_params(**values) if values else m
     if params:
         m = m.with_params(**params)
-    return m, start_overrides(m.coordinates, m.name, starts)
+    return m, start_overrides(m.coordinates, m.name, starts, m.model)
 
 
 def target_line(args, m) -> str:

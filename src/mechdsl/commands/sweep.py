@@ -65,7 +65,9 @@ def run(args) -> int:
         check_figure(args.plot, overwrite=args.force)
         if not args.metric:
             raise UsageError(f"--plot needs --metric ({METRICS})")
-    grid = dict(parse_range(g) for g in args.grid)
+    model, x0 = load_model(args, starts_in_model=False)
+    unit_of = declared_units(model)
+    grid = dict(parse_range(g, unit_of) for g in args.grid)
     params = grid or None
     sampled = [(uniform, a) for a in args.uniform] + [(normal, a) for a in args.normal]
     if sampled:
@@ -77,9 +79,11 @@ def run(args) -> int:
             parts = rhs.split(":")
             if len(parts) != 2 or not name.strip():
                 raise UsageError(f"{text!r}: expected NAME=A:B")
-            from ._common import number
+            from ..numbers import in_declared_unit
 
-            s = fn({name.strip(): (number(parts[0]), number(parts[1]))}, n=args.samples, seed=args.seed)
+            unit = unit_of(name.strip())
+            s = fn({name.strip(): tuple(in_declared_unit(v.strip(), unit, f"{text}") for v in parts)},
+                   n=args.samples, seed=args.seed)
             sampler = s if sampler is None else sampler & s
         if grid:
             raise UsageError("give either --grid or --uniform/--normal, not both")
@@ -88,7 +92,6 @@ def run(args) -> int:
         raise UsageError("--samples needs --uniform or --normal")
     if params is None:
         raise UsageError("nothing to sweep: give --grid NAME=A:B:N (or --uniform/--normal with --samples)")
-    model, x0 = load_model(args, starts_in_model=False)
     if x0:
         raise UsageError("--set of start values is not available in a sweep: sweep them with --grid c.start=...")
     t_end = args.t_end
@@ -146,3 +149,25 @@ def summary(ds, written=()) -> str:
 def _values(ds, i: int) -> str:
     names = [n for n in str(ds.attrs.get("swept", "")).split(",") if n]
     return ", ".join(f"{n} = {float(ds[n].values[i]):.6g}" for n in names)
+
+
+def declared_units(model):
+    """name -> the unit a swept value is declared in (parameters; c.start, c.speed and der(c) of
+    coordinates), so that ``30 deg`` on the command line becomes a number in that unit."""
+    from ..model.names import split_state
+
+    params = {p.name: p.unit for p in model.model.parameters}
+    coords = {c.name: c.unit for c in model.model.coordinates}
+
+    def unit_of(name: str):
+        if name in params:
+            return params[name]
+        base, speed = split_state(name)
+        for suffix, is_speed in ((".start", False), (".speed", True)):
+            if name.endswith(suffix):
+                base, speed = name[: -len(suffix)], is_speed
+        unit = coords.get(base)
+        if unit and speed:
+            return f"{unit}/s" if "/" not in unit else f"({unit})/s"
+        return unit
+    return unit_of

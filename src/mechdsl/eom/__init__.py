@@ -193,11 +193,14 @@ def parameter_vector(eom: "EOM", p=None) -> np.ndarray:
     if p is None:
         return base
     if isinstance(p, dict):
+        from ..numbers import declared_value
+
+        units = {q.name: q.unit for q in eom.model.parameters} if eom.model is not None else {}
         for k, v in p.items():
             if k not in eom.params:
                 hint = did_you_mean(k, eom.params)
                 raise UsageError(f"'{k}' is not a parameter of {eom.name}" + (f"; {hint}" if hint else ""))
-            base[list(eom.params).index(k)] = float(v)
+            base[list(eom.params).index(k)] = declared_value(v, units.get(k), k)   # by name: the declared unit
         return base
     arr = np.array(p, float).ravel()
     if arr.size != base.size:

@@ -66,12 +66,14 @@ def dump_model(model: ir.Model) -> str:
     c = counts(model)
     L.append("  counts: " + ", ".join(f"{k} {v}" for k, v in c.items()))
     if model.parameters:
+        from ..numbers import in_unit
+
         L.append("parameters:")
         for p in model.parameters:
             kind = "Integer " if p.integer else ("input " if p.input else "")
             b = f" := {to_text(p.binding)}" if p.binding is not None else ""
             u = f" [{p.unit}]" if p.unit else ""
-            L.append(f"  {kind}{p.name} = {fmt_num(p.value)}{u}{b}")
+            L.append(f"  {kind}{p.name} = {fmt_num(in_unit(p.value, p.unit))}{u}{b}")
     L.append("coordinates:")
     for q in model.coordinates:
         own = f" (joint {q.owner})" if q.owner else ""

@@ -85,14 +85,17 @@ def _model_parts(m):
 
     model = m.model
     env = {p.name: p.value for p in model.parameters}
-    params = [[p.name, p.value, p.unit or "", p.doc] for p in model.parameters]
+    from ..numbers import in_unit
+
+    # values in their declared units (a parameter declared in deg shows 30, not 0.5236)
+    params = [[p.name, in_unit(p.value, p.unit), p.unit or "", p.doc] for p in model.parameters]
     coords = []
     for c in model.coordinates:
         try:
             start = evaluate(c.start, env)
         except Exception:  # noqa: BLE001 - a start value that needs more than parameters
             start = "?"
-        coords.append([c.name, start, c.unit or "", c.doc])
+        coords.append([c.name, in_unit(start, c.unit) if start != "?" else start, c.unit or "", c.doc])
     from ..semantic.topology import counts as _counts
 
     n = _counts(model)

@@ -79,6 +79,7 @@ def run_chunk(job: Job, first: int, values: dict) -> Chunk:
 def _prepare(job: Job, row: dict):
     """The run's EOM and settings (the one place a run's p and x0 are built)."""
     from ..eom.start import start_vector
+    from ..numbers import start_value
 
     m = job.model
     if job.structural:
@@ -87,7 +88,7 @@ def _prepare(job: Job, row: dict):
         m = m.with_params(**{n: row[n] for n in job.real})
     eom = m.eom
     pv = np.asarray(m.parameter_values, float)
-    x0 = start_vector(eom, {key: row[name] for name, key in job.starts.items()} or None, pv)
+    x0 = start_vector(eom, {key: start_value(m.model, key, row[name]) for name, key in job.starts.items()} or None, pv)
     return eom, job.settings.replace(p=pv, x0=x0)
 
 

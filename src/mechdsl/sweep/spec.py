@@ -166,12 +166,18 @@ def _start_key(name: str, coords) -> str | None:
     return None
 
 
-def parse_range(text: str) -> tuple[str, np.ndarray]:
-    """The CLI's ``--grid NAME=A:B:N`` (N values from A to B) or ``NAME=v1,v2,...``."""
-    from ..numbers import number
+def parse_range(text: str, unit_of=None) -> tuple[str, np.ndarray]:
+    """The CLI's ``--grid NAME=A:B:N`` (N values from A to B) or ``NAME=v1,v2,...``; values in
+    NAME's declared unit (``unit_of(name)``; ``30 deg`` converted to it: numbers.in_declared_unit)."""
+    from ..numbers import in_declared_unit, number as plain
 
     name, sep, rhs = str(text).partition("=")
     name = name.strip()
+    unit = unit_of(name) if unit_of is not None and name else None
+
+    def number(v, what):
+        return in_declared_unit(v.strip(), unit, what)
+
     if not sep or not name:
         raise UsageError(f"--grid {text!r}: expected NAME=START:STOP:COUNT or NAME=V1,V2,...")
     if ":" in rhs:
@@ -179,7 +185,7 @@ def parse_range(text: str) -> tuple[str, np.ndarray]:
         if len(parts) != 3:
             raise UsageError(f"--grid {text!r}: a range is START:STOP:COUNT (three fields)")
         a, b = number(parts[0], f"--grid {name}"), number(parts[1], f"--grid {name}")
-        c = number(parts[2], f"--grid {name}")
+        c = plain(parts[2], f"--grid {name}")
         if c != int(c) or c < 1:
             raise UsageError(f"--grid {name}: the count must be an integer >= 1 (got {parts[2].strip()})")
         if c > MAX_RUNS:
