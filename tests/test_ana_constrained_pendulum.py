@@ -63,18 +63,20 @@ def test_equilibria_bottom_stable_top_unstable(pend):
     # the rod holds the weight: force (0, m g) on the mass at the bottom, (0, m g) pushing up at the top
     assert np.allclose(rod_force(pend, bottom), [0, M_ * G_], atol=1e-10)
     assert np.allclose(rod_force(pend, top), [0, M_ * G_], atol=1e-10)
-    # the multiplier named after the description "rod" is the rod tension |G| lambda_raw = m g
-    # (independent of writing g as x^2 + y^2 - L^2), negative (compression) at the top
-    assert bottom.lambdas["rod"] == pytest.approx(M_ * G_, rel=1e-12)
-    assert top.lambdas["rod"] == pytest.approx(-M_ * G_, rel=1e-12)
-    # the raw multiplier of M q'' = f - G' lambda with G = 2 (x, y) stays m g / (2 L)
+    # the multiplier named after the description "rod" is reported as it is (issue 23): for
+    # g = x^2 + y^2 - L^2 (G = 2 (x, y)) the rod tension m g over 2 L, in N/m; negative
+    # (compression) at the top
+    assert bottom.lambdas["rod"] == pytest.approx(M_ * G_ / (2 * L_), rel=1e-12)
+    assert top.lambdas["rod"] == pytest.approx(-M_ * G_ / (2 * L_), rel=1e-12)
+    assert bottom.lambda_units == {"rod": "N/m"}
     assert bottom.multipliers == pytest.approx([M_ * G_ / (2 * L_)], rel=1e-12)
     # reduced Hessian of V + lambda g on the tangent (unit vector along x): 2 lambda = +-m g / L
     assert bottom.hessian_eigenvalues == pytest.approx([M_ * G_ / L_], rel=1e-10)
     assert top.hessian_eigenvalues == pytest.approx([-M_ * G_ / L_], rel=1e-10)
     assert "lambda'g" in bottom.reason
     d = bottom.to_dict()
-    assert d["multipliers"] == {"rod": pytest.approx(M_ * G_)}
+    assert d["multipliers"] == {"rod": pytest.approx(M_ * G_ / (2 * L_))}
+    assert d["multiplier_units"] == {"rod": "N/m"}
     assert json.loads(json.dumps(d))["tangent_basis"] == [{"plane.x": 1.0, "plane.y": 0.0}]
 
 
@@ -128,7 +130,7 @@ def test_redundant_constraint(twice):
     assert bottom.stable is True and top.stable is False
     assert bottom.active_constraints == ("rod",)
     assert bottom.lambdas["rod_again"] == 0.0                 # dropped: reported as 0
-    assert bottom.lambdas["rod"] == pytest.approx(M_ * G_, rel=1e-12)
+    assert bottom.lambdas["rod"] == pytest.approx(M_ * G_ / (2 * L_), rel=1e-12)
     assert np.allclose(rod_force(twice, bottom), [0, M_ * G_], atol=1e-10)
     assert any("redundant constraint(s) rod_again dropped" in n for n in bottom.notes)
     assert bottom.hessian_eigenvalues == pytest.approx([M_ * G_ / L_], rel=1e-10)
@@ -143,12 +145,12 @@ def test_cli_prints_lambda(capsys):
     assert main(["equilibrium", str(MODELS / "pendulum_cartesian.mech"), "--model", "PendulumCartesian",
                  "--set", "m=3,L=2"]) == 0
     out = capsys.readouterr().out
-    assert "lambda[rod]" in out and "29.43" in out and "-29.43" in out      # tension m g
+    assert "lambda[rod] [N/m]" in out and "7.3575" in out and "-7.3575" in out   # tension m g over 2 L
     assert "stable" in out and "unstable" in out
     assert main(["linearize", str(MODELS / "pendulum_cartesian.mech"), "--model", "PendulumCartesian",
                  "--set", "L=2"]) == 0
     out = capsys.readouterr().out
-    assert "lambda[rod] = 9.81" in out                                      # m = 1
+    assert "lambda[rod] = 2.4525 N/m" in out                                # m g / (2 L), m = 1
     assert f"{math.sqrt(G_ / L_):.6g}" in out                                   # 2.21472 rad/s
     assert main(["linearize", str(MODELS / "pendulum_cartesian.mech"), "--model", "PendulumCartesian",
                  "--at", "t=1"]) == 1
@@ -179,8 +181,9 @@ def test_no_degree_of_freedom_and_moving_constraints():
     assert eq.q == pytest.approx([0.6, -0.8])
     lam1 = 9.81 / 1.6
     assert eq.multipliers == pytest.approx([lam1, -1.2 * lam1], rel=1e-12)
-    # reported: |G_i| lambda_i, |G_1| = 2 |q| = 2, |G_2| = 1
-    assert eq.lambdas == {"g1": pytest.approx(2 * lam1, rel=1e-12), "g2": pytest.approx(-1.2 * lam1, rel=1e-12)}
+    # reported as they are (issue 23); a hand-built EOM has no units to say
+    assert eq.lambdas == {"g1": pytest.approx(lam1, rel=1e-12), "g2": pytest.approx(-1.2 * lam1, rel=1e-12)}
+    assert eq.lambda_units == {"g1": None, "g2": None}
     assert eq.stable is None and "no degree of freedom" in eq.reason
     lin = linearize(e)
     assert lin.M.shape == (0, 0) and len(lin.modes()) == 0

@@ -391,10 +391,9 @@ def median(xs) -> float:
     return float(a[k]) if a.size % 2 else float(np.mean(a[k - 1:k + 1]))
 
 
-def named_multipliers(names, scales, values) -> dict[str, float]:
-    """Multipliers by constraint name, each times its scale (|dg/dq| of an explicit constraint
-    equation: the reaction along -grad g, eom.multiplier_scales); empty without multipliers."""
+def named_multipliers(names, values) -> dict[str, float]:
+    """Multipliers by constraint name, as they are (the lambda of M q'' = f - G' lambda, in the
+    units of eom.multiplier_units); empty without multipliers."""
     if values is None:
         return {}
-    scale = np.ones(len(values)) if scales is None else scales
-    return {c: float(s * v) for c, s, v in zip(names, scale, values)}
+    return {c: float(v) for c, v in zip(names, values)}

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
-from ..eom import fold_inputs, reported_multipliers
+from ..eom import fold_inputs, multiplier_units
 from ..output import display as _display
 from . import charts
 from .charts import chart, locked_joints, quaternion_blocks, quaternion_model
@@ -84,9 +84,8 @@ class Equilibrium:
     multipliers: np.ndarray | None = None
     constraint_names: tuple[str, ...] = ()
     active_constraints: tuple[str, ...] = ()
-    # |dg_i/dq| of explicit constraint equations (1 for cut-joint rows): `lambdas` reports
-    # scale * multiplier, the reaction along -grad g (eom.multiplier_scales)
-    multiplier_scales: np.ndarray | None = None
+    # the unit of each multiplier (eom.multiplier_units: N, N.m, N/m, ...; None: unknown)
+    multiplier_units: tuple = ()
     tangent_basis: np.ndarray | None = None
     # rotation joints: the classification was made in a chart (analysis.charts) whose
     # coordinates are these; hessian, symmetry_directions and the eigenvalues refer to them
@@ -94,8 +93,14 @@ class Equilibrium:
 
     @property
     def lambdas(self) -> dict[str, float]:
-        """Multipliers by constraint name (empty for unconstrained models)."""
-        return named_multipliers(self.constraint_names, self.multiplier_scales, self.multipliers)
+        """Multipliers by constraint name (empty for unconstrained models), unscaled, each in its
+        unit (``multiplier_units``; docs/constraints.md)."""
+        return named_multipliers(self.constraint_names, self.multipliers)
+
+    @property
+    def lambda_units(self) -> dict[str, str | None]:
+        """The unit of each multiplier, by constraint name."""
+        return dict(zip(self.constraint_names, self.multiplier_units))
 
     @property
     def values(self) -> dict[str, float]:
@@ -129,6 +134,7 @@ class Equilibrium:
             d["chart_coordinates"] = list(self.chart_coords)
         if self.multipliers is not None:
             d["multipliers"] = self.lambdas
+            d["multiplier_units"] = self.lambda_units
             d["active_constraints"] = list(self.active_constraints)
             d["tangent_basis"] = [{c: float(v) for c, v in zip(self.coords, col)} for col in self.tangent_basis.T]
         return d
@@ -691,7 +697,7 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     extra = {}
     if con is not None:
         extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
-                     multiplier_scales=reported_multipliers(eom, q, pv, np.ones(eom.m), t),
+                     multiplier_units=multiplier_units(eom),
                      active_constraints=tuple(eom.constraint_names[i] for i in con.active), tangent_basis=Z)
     return Equilibrium(coords=tuple(eom.coords), q=np.asarray(q, float), stable=stable,
                        hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,

@@ -48,9 +48,8 @@ class Linearization:
     multipliers: np.ndarray | None = None
     constraint_names: tuple[str, ...] = ()
     active_constraints: tuple[str, ...] = ()
-    # |dg_i/dq| of explicit constraint equations (1 for cut-joint rows): `lambdas` reports
-    # scale * multiplier, the reaction along -grad g (eom.multiplier_scales)
-    multiplier_scales: np.ndarray | None = None
+    # the unit of each multiplier (eom.multiplier_units: N, N.m, N/m, ...; None: unknown)
+    multiplier_units: tuple = ()
     stiffness: np.ndarray | None = None
 
     _repr_html_ = _display.linearization_html        # notebook displays (mechdsl.output.display)
@@ -67,7 +66,12 @@ class Linearization:
 
     @property
     def lambdas(self) -> dict[str, float]:
-        return named_multipliers(self.constraint_names, self.multiplier_scales, self.multipliers)
+        return named_multipliers(self.constraint_names, self.multipliers)
+
+    @property
+    def lambda_units(self) -> dict[str, str | None]:
+        """The unit of each multiplier, by constraint name."""
+        return dict(zip(self.constraint_names, self.multiplier_units))
 
     @property
     def n(self) -> int:
@@ -127,7 +131,7 @@ class Linearization:
             return {}
         return {"reduced_coordinates": list(self.reduced_coords),
                 "basis": [{c: float(v) for c, v in zip(self.coords, col)} for col in self.basis.T],
-                "multipliers": self.lambdas, "active_constraints": list(self.active_constraints),
+                "multipliers": self.lambdas, "multiplier_units": self.lambda_units, "active_constraints": list(self.active_constraints),
                 "stiffness_full": self.stiffness.tolist()}
 
     def to_json(self) -> str:

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..dae.init import initialize
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
-from ..eom import reported_multipliers
+from ..eom import multiplier_units
 from .constraints import independent_basis, project, rest_multipliers
 from .core import parts, structure
 from .equilibrium import Equilibrium, nearest_equilibrium, singular_mass
@@ -158,7 +158,7 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
                          q=np.asarray(q, float), qd=np.zeros(n), t=float(t), acceleration=np.asarray(acc, float),
                          kind=kind, p=pv, equilibrium=eq, notes=notes, eom=eom, basis=Z, reduced_coords=names,
                          multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
-                         multiplier_scales=reported_multipliers(eom, q, pv, np.ones(eom.m), t),
+                         multiplier_units=multiplier_units(eom),
                          active_constraints=tuple(eom.constraint_names[i] for i in con.active),
                          stiffness=Kfull)
 

@@ -110,8 +110,9 @@ def format_equilibria(name: str, coords, eqs) -> str:
         rows.append([str(i)] + [num(v) for v in e.q] + lam + [e.kind, e.stability,
                                                               "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
     head = "Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues"
-    lines.append(table(["#"] + list(coords) + [f"lambda[{c}]" for c in lam_names] + ["kind", "stability", head],
-                       rows))
+    units = eqs[0].lambda_units if lam_names else {}
+    lines.append(table(["#"] + list(coords) + [f"lambda[{c}]" + (f" [{units[c]}]" if units.get(c) else "")
+                                               for c in lam_names] + ["kind", "stability", head], rows))
     common = [n for n in eqs[0].notes if all(n in e.notes for e in eqs[1:])] if len(eqs) > 1 else []
     for i, e in enumerate(eqs, 1):
         lines.append(f"  {i}: {e.reason}")

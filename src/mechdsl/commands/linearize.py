@@ -91,8 +91,10 @@ def format_linearization(name: str, lin) -> str:
              "  " + ", ".join(f"{k} = {num(v)}" for k, v in lin.values.items())
              + ("" if not any(lin.qd) else "; " + ", ".join(f"der({k}) = {num(v)}" for k, v in zip(c, lin.qd)))]
     if lin.multipliers is not None:
-        lines.append("  constraint multipliers: " + ", ".join(f"lambda[{k}] = {num(lin.lambdas[k])}"
-                                                            for k in lin.active_constraints))
+        units = lin.lambda_units
+        lines.append("  constraint multipliers: " + ", ".join(
+            f"lambda[{k}] = {num(lin.lambdas[k])}" + (f" {units[k]}" if units.get(k) else "")
+            for k in lin.active_constraints))
         lines.append(f"  on the constraint manifold: {len(c)} independent coordinate(s) dz = ({', '.join(c)}), "
                      "dq = Z dz; K includes the geometric stiffness sum lambda_l d2g_l/dq2")
     elif lin.constrained:

@@ -19,6 +19,7 @@ what phases derive from it and keep (Functions, searches, caches) lives in its w
 from __future__ import annotations
 
 from dataclasses import field
+import re
 from typing import Callable
 
 import numpy as np
@@ -141,32 +142,29 @@ def explicit_constraints(eom: "EOM") -> tuple[bool, ...]:
     return tuple(n in names for n in eom.constraint_names)
 
 
-def multiplier_scales(eom: "EOM"):
-    """SX (m,) in q, t, p: the factor that turns each raw multiplier into the reaction it reports.
-
-    The constraint force of row i is -G_i' lambda_i = -(|G_i| lambda_i) n_i with n_i = G_i/|G_i|,
-    so the reported multiplier |G_i| lambda_i is the size of the reaction along -n_i, the same
-    however the equation is scaled (x^2 + y^2 = L^2 or sqrt(x^2 + y^2) = L give the rod tension,
-    positive when it pulls towards decreasing lhs - rhs).  Closure rows of cut joints: 1."""
-    import casadi as ca
-
-    def build():
-        G = ca.jacobian(eom.g, eom.q)
-        rows = [ca.norm_2(G[i, :]) if e else ca.SX(1) for i, e in enumerate(explicit_constraints(eom))]
-        return ca.vertcat(*rows) if rows else ca.SX(0, 1)
-    return eom.workspace.memo("multiplier_scales", build)
+CLOSURE_ROW = re.compile(r".+\.(f|t)[xyz123]")     # a cut joint's closure row: <joint>.fx, <joint>.ty, ...
 
 
-def reported_multipliers(eom: "EOM", q, p, lam, t: float = 0.0) -> np.ndarray:
-    """The reported multipliers (see multiplier_scales) of raw multipliers `lam` at (q, t, p)."""
-    import casadi as ca
+def multiplier_units(eom: "EOM") -> tuple[str | None, ...]:
+    """The unit of each multiplier, as reported (unscaled: the lambda of M q'' = f - G' lambda).
 
-    if eom.m == 0:
-        return np.zeros(0)
-    f = eom.workspace.memo("multiplier_scales_fn",
-                   lambda: ca.Function("scales", [eom.q, eom.t, eom.p], [multiplier_scales(eom)]))
-    s = np.array(f(np.asarray(q, float), t, np.asarray(p, float)), float).ravel()
-    return s * np.asarray(lam, float).ravel()
+    An explicit constraint g = lhs - rhs: J / [g] (model.units.multiplier_unit: N for a length,
+    N.m for an angle, N/m for a squared length; None when g's unit is unknown).  A cut joint's
+    closure rows are reaction components: N (``.f?``) and N.m (``.t?``).  Issue 23: the
+    multipliers were reported times |dg/dq| (issue 17), a number that is a force only when g
+    involves one point's coordinates."""
+    from ..model.units import multiplier_unit
+
+    dims = {c.name: c.dim for c in eom.model.constraints} if eom.model is not None else {}
+    out = []
+    for name in eom.constraint_names:
+        if name in dims:
+            out.append(multiplier_unit(dims[name]))
+        elif eom.model is not None and CLOSURE_ROW.fullmatch(name):
+            out.append("N" if name.rsplit(".", 1)[1].startswith("f") else "N.m")
+        else:
+            out.append(None)
+    return tuple(out)
 
 
 def fold_inputs(eom: "EOM", u=None) -> "EOM":

@@ -21,7 +21,7 @@ import numpy as np
 from .. import eom as eom_mod
 from ..model import exprs, ir
 from ..diagnostics import Diagnostic, MechError, UsageError
-from . import chain, dynamics
+from . import chain, constraint_loads, dynamics
 from . import templates as tpl
 from .constraints import loop_closures
 from .forces import Loads, add_terms, build_loads
@@ -116,12 +116,14 @@ class _Deriver:
         lr, ln, self.closures = loop_closures(model, tree, kin, offset=len(g_list))
         g_list += lr
         g_names += ln
+        self.g_names = g_names
         self.constrained = bool(g_list)
         if self.constrained:
             self._check_quadratic(M)
         g = ca.vertcat(*[ca.SX(x) for x in g_list]) if g_list else None
         self.g = g
         self.lam = ca.SX.sym("lam", len(g_list)) if g_list else None
+        query.constraint_load = self._constraint_load
 
         outputs = {o.name: _guard(lambda o=o: ca.SX(env.translate(o.expr))) for o in model.outputs}
         e0 = self.env0
@@ -313,6 +315,27 @@ class _Deriver:
         if ref.what not in ("force", "torque") or not 0 <= ref.i < 3:
             raise MechError(Diagnostic("E753", f"bad reaction component {ref.what}[{ref.i + 1}]"))
         return (f if ref.what == "force" else n)[ref.i]
+
+    def _constraint_load(self, ref: ir.ConstraintLoad):
+        """constraint_force/constraint_torque outputs: the force and torque a constraint exerts on a
+        body, world axes, in EOM.lam (mechanics/constraint_loads.py)."""
+        memo = self.__dict__.setdefault("_constraint_loads", {})
+        if ref.constraint not in memo:
+            names = list(self.g_names)
+            c = next((c for c in self.model.constraints if c.name == ref.constraint), None)
+            if c is not None:
+                memo[ref.constraint] = constraint_loads.explicit_loads(
+                    self.model, c, self.env, self.kin, self.env.query, self.lam[names.index(c.name)])
+            else:
+                clo = next((c for c in self.closures if c.joint.name == ref.constraint), None)
+                if clo is None:
+                    raise MechError(Diagnostic("E232", f"no constraint named '{ref.constraint}'"))
+                memo[ref.constraint] = constraint_loads.closure_loads(clo, self.kin, self.lam)
+        loads = memo[ref.constraint]
+        if ref.body not in loads:
+            raise MechError(Diagnostic("E233", f"the constraint '{ref.constraint}' does not act on '{ref.body}'"))
+        F, T = loads[ref.body]
+        return (F if ref.what == "force" else T)[ref.i]
 
     # -- accelerations (p.a, b.alpha) ----------------------------------------------------
     def _acceleration(self, key, velocity):

@@ -15,6 +15,7 @@ class Query:
         self.kin = kin
         self.energies: dict[str, object] | None = None       # set once T, V, D are known
         self.reaction: Callable[[ir.ReactionRef], object] | None = None
+        self.constraint_load: Callable[[ir.ConstraintLoad], object] | None = None
         self.acceleration: Callable[[object], object] | None = None   # SX (q, qd, t) -> its d/dt
         self._bodies = {b.name for b in model.bodies} | {"world"}
 
@@ -59,4 +60,9 @@ class Query:
                 raise MechError(Diagnostic("E725", f"reaction of joint '{n.joint}' used inside a force or term",
                                            help="reactions may appear in outputs only"))
             return self.reaction(n)
+        if isinstance(n, ir.ConstraintLoad):
+            if self.constraint_load is None:
+                raise MechError(Diagnostic("E725", f"constraint_{n.what}({n.constraint}, {n.body}) used inside a "
+                                                   "force or term", help="constraint forces may appear in outputs only"))
+            return self.constraint_load(n)
         raise MechError(Diagnostic("E726", f"cannot evaluate {type(n).__name__} here"))

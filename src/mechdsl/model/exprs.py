@@ -21,6 +21,7 @@ from .ir import (
     PointPos,
     PointVel,
     ReactionRef,
+    ConstraintLoad,
     Speed,
     Time,
     TimeDer,
@@ -52,13 +53,14 @@ def depends_on_time(e: Expr) -> bool:
 
 
 def has_speed(e: Expr) -> bool:
-    return any(isinstance(n, (Speed, PointVel, BodyOmega, EnergyRef, ReactionRef, PointAcc, BodyAlpha))
+    return any(isinstance(n, (Speed, PointVel, BodyOmega, EnergyRef, ReactionRef, PointAcc, BodyAlpha,
+                              ConstraintLoad))
                for n in walk(e))
 
 
 def needs_dynamics(e: Expr) -> bool:
     """True when e needs the forward dynamics (reactions, accelerations): outputs only."""
-    return any(isinstance(n, (ReactionRef, PointAcc, BodyAlpha)) for n in walk(e))
+    return any(isinstance(n, (ReactionRef, PointAcc, BodyAlpha, ConstraintLoad)) for n in walk(e))
 
 
 def substitute(e: Expr, fn: Callable[[Expr], Expr | None]) -> Expr:
@@ -228,6 +230,8 @@ def _text(e: Expr) -> tuple[str, int]:
         return f"{e.body}.alpha[{e.i + 1}]", 5
     if isinstance(e, EnergyRef):
         return f"{e.kind}_energy()" if e.kind in ("kinetic", "potential") else f"{e.kind}()", 5
+    if isinstance(e, ConstraintLoad):
+        return f"constraint_{e.what}({e.constraint}, {e.body})[{e.i + 1}]", 5
     if isinstance(e, ReactionRef):
         return f"reaction_{e.what}({e.joint})[{e.i + 1}]", 5
     if isinstance(e, Op):

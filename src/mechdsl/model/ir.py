@@ -172,6 +172,20 @@ class ReactionRef(Expr):
     i: int
 
 
+@record
+class ConstraintLoad(Expr):
+    """Component i of the force ('force') or torque ('torque') that a constraint exerts on a
+    body, in world axes, at the point where it acts (``constraint_force(c, body)``, issue 23).
+
+    ``constraint``: an explicit constraint's name, or a loop-closing joint.  In the multipliers
+    EOM.lam: computed only when an output asks for it (constrained runs record the multipliers)."""
+
+    constraint: str
+    body: str
+    what: str
+    i: int
+
+
 Vec3 = tuple[Expr, Expr, Expr]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
@@ -201,7 +215,7 @@ def walk(e: Expr) -> Iterator[Expr]:
 def depends_on_state(e: Expr) -> bool:
     """True when e depends on coordinates, speeds or kinematic queries (not only t, p)."""
     return any(isinstance(n, (Coord, Speed, PointPos, PointVel, BodyRot, BodyOmega, EnergyRef,
-                              ReactionRef, TimeDer, PointAcc, BodyAlpha)) for n in walk(e))
+                              ReactionRef, TimeDer, PointAcc, BodyAlpha, ConstraintLoad)) for n in walk(e))
 
 
 # --------------------------------------------------------------------------- declarations
@@ -412,6 +426,7 @@ class Constraint:
     doc: str = ""
     span: Span = field(default_factory=Span)
     alias: str = ""
+    dim: object = None               # units.Dim of the residual (lhs - rhs), None when unknown
 
 
 @record
@@ -478,6 +493,16 @@ class Model:
 
     def joint(self, name: str) -> Joint:
         return _find(self.joints, name)
+
+    def constraint_bodies(self, c: Constraint) -> list[str]:
+        """The bodies whose points (or orientations) the residual of ``c`` names, in order of appearance."""
+        points = {p.name: p.body for p in self.points}
+        out: list[str] = []
+        for n in walk(c.residual):
+            b = points.get(n.point) if isinstance(n, PointPos) else (n.body if isinstance(n, BodyRot) else None)
+            if b is not None and b not in out:
+                out.append(b)
+        return out
 
     @property
     def coordinate_names(self) -> tuple[str, ...]:

@@ -159,3 +159,24 @@ def parse_unit(s: str) -> tuple[float, Dim]:
         raise
     except Exception as ex:  # pint raises many kinds; all mean "not a unit"
         raise ValueError(str(ex)) from None
+
+
+def force_unit_text(d: "Dim") -> str:
+    """A dimension written the way forces are: N, N.m, N/m, N.m2, ... (else the SI base units)."""
+    per = d / FORCE
+    e = per.e
+    if all(a == 0 for i, a in enumerate(e) if i != 0) and e[0].denominator == 1:
+        k = int(e[0])
+        return "N" if k == 0 else ("N.m" if k == 1 else (f"N.m{k}" if k > 1 else ("N/m" if k == -1 else f"N/m{-k}")))
+    return str(d)
+
+
+def multiplier_unit(residual: "Dim | None") -> str | None:
+    """The unit of the multiplier of a constraint whose residual g has dimension ``residual``.
+
+    The constraint force on coordinate j is -(dg/dq_j) lambda, a generalized force, whose unit
+    times q_j's is an energy; so [lambda] = [Q_j] [q_j] / [g] = J / [g] whatever the coordinates:
+    N for a length (m), N.m for an angle (rad is 1), N/m for a squared length (x^2 + y^2 = L^2)."""
+    if residual is None:
+        return None
+    return force_unit_text(ENERGY / residual)

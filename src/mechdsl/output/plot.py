@@ -69,11 +69,12 @@ def signal_units(result, model=None) -> dict[str, str]:
         u = coords.get(c, "")
         units[c] = u
         units[f"der({c})"] = f"{u}/s" if u else ""
+    recorded = (getattr(result, "metadata", None) or {}).get("units") or {}    # multipliers (issue 23)
     for name in result.signals:
         if name in ("energy", "kinetic_energy", "potential_energy") or name.endswith("_energy"):
             units[name] = "J"
         else:
-            units[name] = outputs.get(name, "")
+            units[name] = outputs.get(name, "") or recorded.get(name, "")
     return units
 
 

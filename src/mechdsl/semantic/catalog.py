@@ -205,6 +205,11 @@ FUNCTIONS: dict[str, tuple[str, str]] = {
                                                 "outputs only"),
     "reaction_torque": ("reaction_torque(joint)", "the joint's reaction torque, in its child frame (N.m); "
                                                   "outputs only"),
+    "constraint_force": ("constraint_force(c, body)", "the force the constraint c (an equation's name or a "
+                                                      "loop-closing joint) exerts on the body, at the point where "
+                                                      "it acts, world axes (N); outputs only"),
+    "constraint_torque": ("constraint_torque(c, body)", "the torque the constraint c exerts on the body, about "
+                                                        "the point where it acts, world axes (N.m); outputs only"),
 }
 
 BUILTIN_VALUES: dict[str, str] = {

@@ -108,7 +108,8 @@ def _equation(fl, eq, connects: bool) -> None:
             nm = constraint_name(eq.doc, fl.loop_vars.values(), k if len(items) > 1 else None,
                                  fl.constraints) or alias
             fl.constraints.append(ir.Constraint(nm, s.expr, text + (f" [{k + 1}]" if len(items) > 1 else ""),
-                                                eq.span, alias=alias))
+                                                eq.span, alias=alias,
+                                                dim=s.dim if isinstance(s.dim, U.Dim) else None))
         return
     raise AssertionError(type(eq))
 

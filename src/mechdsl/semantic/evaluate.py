@@ -21,7 +21,8 @@ BUILTIN_NAMES = {"time", "pi", "world"}
 VECTOR_FUNCS = {"cross", "dot", "norm", "transpose", "identity", "zeros", "ones", "fill", "sum", "skew",
                 "diagonal", "rotation", "size", "normalize", "rpy", "axis_angle"}
 KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_energy", "energy",
-                   "dissipation_function", "reaction_force", "reaction_torque"}
+                   "dissipation_function", "reaction_force", "reaction_torque", "constraint_force",
+                   "constraint_torque"}
 ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
 
 
@@ -225,6 +226,8 @@ class Evaluator(abc.ABC):
             return Scalar(ir.EnergyRef(kind), U.POWER if kind == "dissipation" else U.ENERGY)
         if name in ("reaction_force", "reaction_torque"):
             return self._reaction(e, name)
+        if name in ("constraint_force", "constraint_torque"):
+            return self._constraint_load(e, name)
         if name == "size":
             return self._size(e)
         args = [self._sub(a) for a in e.args]
@@ -265,6 +268,30 @@ class Evaluator(abc.ABC):
         what = "force" if name == "reaction_force" else "torque"
         d = U.FORCE if what == "force" else U.TORQUE
         return Arr(tuple(Scalar(ir.ReactionRef(j.name, what, i), d) for i in range(3)))
+
+
+    def _constraint_load(self, e: ast.Call, name: str) -> Val:
+        """``constraint_force(c, body)`` / ``constraint_torque(c, body)``: what the constraint c (an
+        equation's name, or a loop-closing joint) exerts on the body, world axes, at the point where
+        it acts.  The name is checked once the equations are known (semantic/constraint_loads.py)."""
+        if len(e.args) != 2:
+            fail("E304", f"{name}() takes a constraint and a body", e.span, f"e.g. {name}(rod, bob)")
+        c = e.args[0]
+        if not isinstance(c, ast.Ref) or any(p.subscripts for p in c.parts):
+            fail("E209", f"the first argument of {name}() names a constraint (its description, e.g. rod) or a "
+                         "loop-closing joint", c.span, f"e.g. {name}(rod, bob) for `x^2 + y^2 = L^2 \"rod\";`")
+        try:
+            v = self._sub(c)
+        except EvalError:
+            v = None                          # not a declaration: the name of a constraint equation
+        cname = v.name if isinstance(v, CompRef) and v.kind == "joint" else c.dotted
+        b = self._sub(e.args[1])
+        if not isinstance(b, CompRef) or b.kind != "body":
+            fail("E209", f"{name}() needs a body as its second argument, got {V.describe_shape(b)}", e.args[1].span,
+                 "name the body the constraint acts on (a PointMass, Rod, Body, ...)")
+        what = "force" if name == "constraint_force" else "torque"
+        d = U.FORCE if what == "force" else U.TORQUE
+        return Arr(tuple(Scalar(ir.ConstraintLoad(cname, b.name, what, i), d) for i in range(3)))
 
 
 def _finite(v: Val) -> bool:

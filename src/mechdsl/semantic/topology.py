@@ -95,10 +95,13 @@ def check_model(model: ir.Model, diags: DiagnosticBag) -> ir.Model:
                     "declare `coordinate Real q(start = ...);` or add a joint with a free variable")
     _warn_unused_coordinates(model, diags)
     from .physical import value_problems
+    from .constraint_loads import check as check_constraint_loads
 
     diags.extend(value_problems(model))
+    model = dataclasses.replace(model, joints=joints, loops=loops)
+    diags.extend(check_constraint_loads(model))
     diags.raise_if_errors()
-    return dataclasses.replace(model, joints=joints, loops=loops)
+    return model
 
 
 def _warn_unused_coordinates(model: ir.Model, diags: DiagnosticBag) -> None:

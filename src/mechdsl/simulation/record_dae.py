@@ -7,8 +7,8 @@ Signals (Result.signals), in this order:
 - "constraint_drift"  ||g(q, t)||_inf over all constraints (redundant ones included)
 - "velocity_drift"    ||G q' + g_t||_inf
 - only when asked (option ``reactions=True``, or named in ``outputs``):
-  "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one; explicit
-  constraint equations report |dg/dq| lambda, the reaction along -grad g: eom.multiplier_scales), and
+  "lambda[<constraint name>]" for every constraint (0 for a dropped redundant one), unscaled:
+  the lambda of M q'' = f - G' lambda, in the unit eom.multiplier_units gives (issue 23), and
   reaction signals: entries of ``EOM.reactions`` (name -> SX in q, q', t, p and EOM.lam),
   and for constraint names of the form
   "<joint>.force[i]" / "<joint>.torque[i]" (the convention of cut joints, whose
@@ -24,7 +24,7 @@ import re
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
-from ..eom import multiplier_scales
+from ..eom import multiplier_units
 from . import record as R
 from .record import lam_symbol  # noqa: F401  (the one multiplier symbol)
 
@@ -44,10 +44,9 @@ def depends_on(expr, sym) -> bool:
 def reaction_sources(eom) -> dict[str, object]:
     """name -> SX in (q, qd, t, p, lam) for every reaction/multiplier signal of the model."""
     lam = lam_symbol(eom)
-    scale = multiplier_scales(eom)
     out = {}
     for i, name in enumerate(eom.constraint_names):
-        out[f"lambda[{name}]"] = scale[i] * lam[i]
+        out[f"lambda[{name}]"] = lam[i]
         if REACTION_NAME.fullmatch(name):
             out[name] = lam[i]
     for name, expr in (getattr(eom, "reactions", None) or {}).items():
@@ -138,3 +137,8 @@ def _names(eom, cols: dict) -> set:
         k_n = int(ca.SX(v).numel())
         out |= {k} if k_n == 1 else {f"{k}[{i + 1}]" for i in range(k_n)}
     return out
+
+
+def multiplier_column_units(eom) -> dict[str, str]:
+    """``lambda[<name>]`` -> the multiplier's unit (for Result.metadata["units"]); unknown ones left out."""
+    return {f"lambda[{n}]": u for n, u in zip(eom.constraint_names, multiplier_units(eom)) if u}

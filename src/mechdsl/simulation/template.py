@@ -86,6 +86,12 @@ def solve(problem: Problem, progress=None) -> Result:
     if renamed:                           # constraints named after their description: old names still read
         meta["aliases"] = {**{f"lambda[{c.alias}]": f"lambda[{c.name}]" for c in renamed},
                            **{f"residual({c.alias})": f"residual({c.name})" for c in renamed}}
+    if eom.m:                             # the unit of every multiplier recorded (issue 23)
+        from .record_dae import multiplier_column_units
+
+        units = {k: u for k, u in multiplier_column_units(eom).items() if k in r.signals}
+        if units:
+            meta.setdefault("units", {}).update(units)
     meta["versions"] = versions()        # provenance belongs to the Result, stamped here once
     if s.estimate_error:
         _estimate_error(r, problem)
