@@ -196,6 +196,18 @@ ENTRIES = [
                                                           "is zero or negative (the law is -F tanh(v/v_eps)).",
           "Give v_eps > 0 (default 1e-3); smaller is closer to dry friction and stiffer.",
           corpus="E241_friction_nonpositive_v_eps.mech"),
+    Entry("E232", "no such constraint", "`constraint_force(c, body)` / `constraint_torque(c, body)` names "
+                                        "neither a constraint equation (by its description) nor a loop-closing "
+                                        "joint.",
+          "Name the constraint as `lambda[...]` does (its description, `c1`, ... without one) or the joint that "
+          "closes the loop.", corpus="E232_constraint_force_unknown_constraint.mech"),
+    Entry("E233", "no force at a point", "`constraint_force(c, body)` for a constraint that exerts no force on "
+                                         "that body at a point: an equation written in coordinates (its "
+                                         "multiplier is a generalized force), one that names no point of that "
+                                         "body, or a joint of the tree (not closing a loop).",
+          "Read the multiplier `lambda[c]` (docs/constraints.md), write the constraint in points, name a body "
+          "it acts on, or use `reaction_force(j)` for a tree joint.",
+          corpus="E233_constraint_force_in_coordinates.mech"),
     # ------------------------------------------------------------------ E3xx
     Entry("E301", "shape mismatch", "Scalars, vectors and matrices combined in a way their sizes do not allow, "
                                     "or a value whose shape differs from its declaration.",

@@ -37,7 +37,7 @@ def _problem(model, n: ir.ConstraintLoad, explicit, joints, span) -> Diagnostic 
                                       f"({', '.join(coords)}), not in positions of body points, so it exerts no force "
                                       "at a point", span,
                               f"its multiplier lambda[{c.name}] is the generalized force it exerts on those "
-                              "coordinates (docs/constraints.md); write the constraint in points (p.x, p.r, ...) "
+                              "coordinates (docs/constraints.md); write the constraint in positions of points (a point's x, y, z, r) "
                               "to have its force")
         bodies = model.constraint_bodies(c)
         if n.body not in bodies:
