@@ -71,3 +71,17 @@ equation
   sqrt((a.x - b.x)^2 + (a.y - b.y)^2) = L "rod";
 end Dumbbell;
 """
+DISK_ODE = """
+model RollingDiskODE "the rolling disk of RollingDisk in its one coordinate s (down the slope)"
+  parameter Real m(unit = "kg") = 2;
+  parameter Real R(unit = "m") = 0.3;
+  parameter Real g(unit = "m/s2") = 9.81;
+  parameter Real alpha(unit = "deg") = 30 "slope";
+  parameter Real J(unit = "kg.m2") = 1 "inertia of an idle wheel";
+  coordinate Real s(start = 0, speed = 0, unit = "m");
+  coordinate Real turn(start = 0, speed = 0, unit = "deg") "an idle wheel, its angle in degrees";
+equation
+  kinetic = 3/4*m*der(s)^2 + 1/2*J*der(turn)^2;
+  potential = -m*g*sin(alpha)*s;
+end RollingDiskODE;
+"""
