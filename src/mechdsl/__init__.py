@@ -7,10 +7,18 @@ Python API::
     r = m.simulate(5.0, rtol=1e-8, atol=1e-10)
     r.t, r.q, r.qd, r["x"]
 """
-from .diagnostics import Diagnostic, MechError, Span, UsageError
+from .diagnostics import Diagnostic, MechError, MechWarning, Span, UsageError
 from .numbers import Quantity, deg, rad
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name):
+    if name == "SimulationFailed":          # output.result imports numpy: only when asked
+        from .output.result import SimulationFailed
+
+        return SimulationFailed
+    raise AttributeError(f"module 'mechdsl' has no attribute {name!r}")
 
 
 def load(path, model=None, scene=None, **kw):
@@ -40,5 +48,6 @@ def table(times, values, hold="zoh"):
     return _table(times, values, hold)
 
 
-__all__ = ["load", "loads", "import_urdf", "table", "Diagnostic", "MechError", "Span", "UsageError", "Quantity", "deg",
+__all__ = ["load", "loads", "import_urdf", "table", "Diagnostic", "MechError", "MechWarning", "Span", "UsageError",
+           "SimulationFailed", "Quantity", "deg",
            "rad", "__version__"]

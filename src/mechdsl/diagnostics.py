@@ -51,6 +51,13 @@ class Diagnostic:
         return render(self, source)
 
 
+class MechWarning(UserWarning):
+    """What a run warns about (issue 23): results less accurate than the tolerance suggests (the
+    error estimate or an invariant's drift), a failed run, and the other warnings a run records
+    in ``Result.metadata["warnings"]``.  A ``warnings`` category: filter it like any other
+    (``warnings.simplefilter("error", mechdsl.MechWarning)`` makes them exceptions)."""
+
+
 class MechError(Exception):
     """One or more user errors (bad model, bad input).  Carries Diagnostics."""
 

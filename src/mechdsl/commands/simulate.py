@@ -30,6 +30,9 @@ def add_parser(sub):
                    help="most output points a run may record (default 1000000; fixed steps: 10 N)")
     p.add_argument("--estimate-error", action="store_true",
                    help="run again at a 100 times tighter tolerance and report the difference per output")
+    p.add_argument("--error-estimate", choices=("on", "off", "coordinates"), default=None,
+                   help="the error estimate every run carries (default on: a companion run 10 times tighter on "
+                        "a coarse grid, docs/simulate.md); off to skip it, coordinates for one per coordinate")
     add_set_arg(p)
     p.add_argument("--input", action="append", metavar="NAME=VALUE", dest="inputs",
                    help="drive an input: NAME=3.0 (constant) or NAME=file.csv (rows: time, value; "
@@ -97,6 +100,8 @@ def cli_settings(args) -> dict:
             "compiled": True if args.compiled else (False if getattr(args, "no_compile", False) else None),
             "reactions": True if args.reactions else None,
             "budget": args.budget, "estimate_error": True if args.estimate_error else None,
+            "error_estimate": getattr(args, "error_estimate", None),
+            "warn": False,                      # the summary prints each warning once
             "output_events": True if getattr(args, "output_events", False) else None,
             "inputs": parse_inputs(getattr(args, "inputs", None))}
 
@@ -202,6 +207,7 @@ def summary(r, written=()) -> str:
         lines.append("invariant drift: " + ", ".join(f"{k} {v:.3g}" for k, v in inv.items()))
     if s.get("constraint_drift") is not None:
         lines.append(f"constraint drift: max ||g|| = {s['constraint_drift']:.3g}")
+    lines += accuracy_lines(m.get("accuracy") or {})
     est = m.get("error_estimate")
     if est and est.get("unavailable"):
         lines.append(f"error estimate unavailable: {est['unavailable']}")
@@ -223,6 +229,24 @@ def summary(r, written=()) -> str:
     for w in written:
         lines.append(f"wrote {w}")
     return "\n".join(lines)
+
+
+def accuracy_lines(acc: dict) -> list[str]:
+    """The error estimate on the summary: the largest over the coordinates, where, and its ratio to
+    the tolerance class (per coordinate with --error-estimate coordinates)."""
+    if acc.get("error_estimate") is None:
+        why = acc.get("error_estimate_unavailable")
+        return [f"error estimate: none ({why})"] if why and not why.startswith("turned off") else []
+    line = (f"error estimate: {acc['error_estimate']:.2g} (largest over the coordinates: "
+            f"{acc['error_estimate_coordinate']} at t = {acc['error_estimate_time']:.6g}; "
+            f"{acc['error_estimate_ratio']:.2g} x its tolerance class rtol |q|max + atol), from "
+            f"{acc.get('error_estimate_method', 'a companion run')}")
+    out = [line]
+    if acc.get("error_estimate_note"):
+        out.append(f"  note: {acc['error_estimate_note']}")
+    for c, v in (acc.get("error_estimate_by_coordinate") or {}).items():
+        out.append(f"  {c}: {v:.3g} ({v / acc['tolerance_class'][c]:.2g} x tolerance class)")
+    return out
 
 
 def _state_text(r, limit: int = 8) -> str:

@@ -62,6 +62,24 @@ class Result:
         return self.failure is None
 
     @property
+    def ok(self) -> bool:
+        """The run succeeded and nothing says its numbers are less accurate than its tolerance
+        asks (the error estimate and the invariants' drift within what the tolerance suggests:
+        ``metadata["accuracy"]["warning"]``)."""
+        acc = self.metadata.get("accuracy") if isinstance(self.metadata, dict) else None
+        return self.failure is None and not (acc or {}).get("warning")
+
+    def raise_for_failure(self, accuracy: bool = False) -> "Result":
+        """Raise :class:`SimulationFailed` when the run failed (with ``accuracy=True`` also when it is
+        not ``ok``: the accuracy warning); returns the Result otherwise, so that
+        ``r = m.simulate(5).raise_for_failure()`` reads well."""
+        if self.failure is not None:
+            raise SimulationFailed(str(self.failure), self)
+        if accuracy and not self.ok:
+            raise SimulationFailed(self.metadata["accuracy"]["warning"], self)
+        return self
+
+    @property
     def message(self) -> str:
         return "ok" if self.failure is None else str(self.failure)
 
@@ -230,6 +248,15 @@ def _jsonable(x):
     if isinstance(x, float) and not np.isfinite(x):
         return str(x)
     return x
+
+
+class SimulationFailed(RuntimeError):
+    """Raised by ``Result.raise_for_failure()``: the run failed (``.result`` keeps what it computed
+    up to the failure, ``.result.failure`` says when and why)."""
+
+    def __init__(self, message: str, result: Result):
+        super().__init__(message)
+        self.result = result
 
 
 class RunInterrupted(KeyboardInterrupt):

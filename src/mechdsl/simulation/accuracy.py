@@ -27,7 +27,8 @@ ALIASES = {"steps": ("steps", "nsteps", "n_steps"),
            "rejected_steps": ("rejected_steps", "error_test_failures", "netfails", "n_reject",
                               "rejected_subsegments"),
            "constraint_drift": ("constraint_drift", "max_constraint_drift")}
-DRIFT_FACTOR = 1e3     # invariant drift this many times the tolerance: the accuracy warning
+DRIFT_FACTOR = 100.0   # invariant drift this many times the tolerance: the accuracy warning (drift_limit)
+DRIFT_CAP = 0.05       # ... and never above this relative drift
 
 
 def check_finite(r: Result) -> None:
@@ -110,12 +111,22 @@ def energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
+def drift_limit(rtol: float) -> float:
+    """The relative drift of an invariant (the energy of a conservative model, a first integral, a
+    quaternion's norm) above which a run warns: DRIFT_FACTOR x rtol, never above DRIFT_CAP (a
+    loose tolerance does not excuse 80 %).  The one rule for every back end (the DAE back end's
+    energy check reads it too)."""
+    return min(DRIFT_CAP, DRIFT_FACTOR * rtol)
+
+
 def accuracy_report(r: Result, problem, fixed_step: bool) -> None:
-    """Invariant drift of every run; a warning when it shows the result is worse than the
-    tolerance suggests (adaptive methods: drift above DRIFT_FACTOR x rtol, relative)."""
+    """Invariant drift of every run (r.stats["invariant_drift"], metadata["accuracy"]["invariants"]);
+    a drift beyond what the tolerance suggests (adaptive methods: relative drift above
+    drift_limit(rtol) and absolute drift above DRIFT_FACTOR x atol) is marked for the accuracy
+    warning (accuracy_warning)."""
     s = problem.settings
     drift, report = {}, {}
-    names = list(problem.invariants) + [n for n in (r.stats.get("first_integral_drift") or {})]
+    names = list(dict.fromkeys(list(problem.invariants) + list(r.stats.get("first_integral_drift") or {})))
     for name in names:
         v = r.signals.get(name)
         if v is None or len(v) == 0 or not np.isfinite(v).all():
@@ -128,14 +139,39 @@ def accuracy_report(r: Result, problem, fixed_step: bool) -> None:
         rel = d / scale if scale > 1e-300 else d
         drift[name] = d
         report[name] = {"drift": d, "relative": rel}
-        if not fixed_step and rel > DRIFT_FACTOR * s.rtol and d > DRIFT_FACTOR * s.atol:
-            msg = (f"{name} should stay constant but drifted by {rel:.3g} (relative), more than {DRIFT_FACTOR:g} "
-                   f"times rtol = {s.rtol:g}: the results are less accurate than the tolerance suggests; tighten "
-                   f"rtol/atol or check them with --estimate-error")
-            r.metadata.setdefault("warnings", []).append(msg)
+        if not fixed_step and rel > drift_limit(s.rtol) and d > DRIFT_FACTOR * s.atol:
             report[name]["warning"] = True
     r.stats["invariant_drift"] = drift
-    r.metadata["accuracy"] = {"invariants": report, "rtol": s.rtol, "atol": s.atol}
+    r.metadata.setdefault("accuracy", {}).update({"invariants": report, "rtol": s.rtol, "atol": s.atol})
+
+
+def accuracy_warning(r: Result, problem) -> str | None:
+    """The one accuracy warning of a run (appended to metadata["warnings"] and kept in
+    metadata["accuracy"]["warning"]): the error estimate above estimate.WARN_FACTOR times the
+    tolerance class and/or invariants drifting beyond drift_limit; None when neither."""
+    from .estimate import WARN_FACTOR
+
+    s = problem.settings
+    acc = r.metadata.setdefault("accuracy", {})
+    parts = []
+    ratio = acc.get("error_estimate_ratio")
+    if acc.get("error_estimate") is not None and ratio is not None and ratio > WARN_FACTOR:
+        parts.append(f"the estimated error {acc['error_estimate']:.2g} (in {acc['error_estimate_coordinate']}, at "
+                     f"t = {acc['error_estimate_time']:.6g}) is {ratio:.3g} times what rtol = {s.rtol:g} and "
+                     f"atol = {s.atol:g} ask of it")
+    drifted = [(k, v) for k, v in (acc.get("invariants") or {}).items() if v.get("warning")]
+    for name, v in drifted:
+        parts.append(f"{name} should stay constant but drifted by {v['relative']:.3g} (relative), "
+                     f"{v['relative'] / s.rtol:.3g} times rtol")
+    if not parts:
+        acc.pop("warning", None)
+        return None
+    msg = ("the results are less accurate than the tolerance suggests: " + "; ".join(parts)
+           + ". The tolerance bounds the error of each step; over a long or chaotic run the errors add up: "
+             "tighten rtol/atol (or shorten the run) until the estimate is what you need")
+    acc["warning"] = msg
+    r.metadata.setdefault("warnings", []).append(msg)
+    return msg
 
 
 def error_estimate(r: Result, tight: Result) -> dict:

@@ -189,7 +189,9 @@ class SimulationSettings:
     max_steps: int | None = None       # integrator steps per output interval (ODE, DAE)
     integrator_options: dict | None = None
     budget: int = DEFAULT_BUDGET
-    estimate_error: bool = False
+    estimate_error: bool = False       # the thorough check: a second run 100x tighter, every output compared
+    error_estimate: str = "on"         # on | off | coordinates: the default estimate (simulation/estimate.py)
+    warn: bool = True                  # a MechWarning for what the run warns about (sweeps collect them instead)
     ode: OdeOptions = OdeOptions()
     dae: DaeOptions = DaeOptions()
     contacts: ContactOptions = ContactOptions()
@@ -395,12 +397,19 @@ def validate(s: SimulationSettings) -> SimulationSettings:
     for name in ("compiled", "estimate_error"):
         if not isinstance(getattr(s, name), (bool, int)) and not (name == "compiled" and s.compiled is None):
             raise UsageError(f"{name} must be true or false (got {getattr(s, name)!r})")
+    estimate = {True: "on", False: "off"}.get(s.error_estimate, s.error_estimate) \
+        if isinstance(s.error_estimate, bool) else str(s.error_estimate).lower()
+    if estimate not in ("on", "off", "coordinates"):
+        raise UsageError(f"error_estimate must be on, off or coordinates (got {s.error_estimate!r})")
+    if not isinstance(s.warn, (bool, int)):
+        raise UsageError(f"warn must be true or false (got {s.warn!r})")
     if s.integrator_options is not None and not isinstance(s.integrator_options, dict):
         raise UsageError(f"integrator_options must be a dict (got {type(s.integrator_options).__name__})")
     return dataclasses.replace(s, t_start=t0, t_end=t1, rtol=rtol, atol=atol, points=points,
                                method=method, outputs=outputs, max_steps=max_steps,
                                compiled=None if s.compiled is None else bool(s.compiled), budget=budget,
-                               estimate_error=bool(s.estimate_error), ode=s.ode.validated(), dae=dae,
+                               estimate_error=bool(s.estimate_error), error_estimate=estimate, warn=bool(s.warn),
+                               ode=s.ode.validated(), dae=dae,
                                contacts=s.contacts.validated(),
                                fixed_step=s.fixed_step.validated(t1 - t0, budget))
 

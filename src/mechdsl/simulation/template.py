@@ -27,15 +27,45 @@ from ..output.result import Result, versions
 from . import accuracy as A
 from .backends import backend, ignored_settings
 from .backends.ode import record_inputs
+from .estimate import estimate
 from .problem import Problem, formulate
 from .settings import MIN_RTOL, SimulationSettings
 
 
 def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
     """Formulate and solve one run, after the start check (mechdsl.eom.preflight: what
-    `mech check` accepts can start here; `p`, `x0` and `--set` values are judged too)."""
+    `mech check` accepts can start here; `p`, `x0` and `--set` values are judged too).  What the
+    run warns about is also a MechWarning (settings.warn; sweeps collect them instead)."""
     check_start(eom, p=settings.p, x0=settings.x0, t=settings.t_start, drift_bound=settings.dae.bound(settings.atol))
-    return solve(formulate(eom, settings), progress=progress)
+    r = solve(formulate(eom, settings), progress=progress)
+    if settings.warn:
+        announce(r)
+    return r
+
+
+def announce(r: Result) -> None:
+    """Each warning of the run (metadata["warnings"], the accuracy warning among them, once) and a
+    failure as a MechWarning: a ``warnings`` category Python users can filter or make an error."""
+    import warnings
+
+    from ..diagnostics import MechWarning
+
+    level = _caller_level()
+    for msg in dict.fromkeys(r.metadata.get("warnings") or ()):
+        warnings.warn(msg, MechWarning, stacklevel=level)
+    if r.failure is not None:
+        warnings.warn(f"{r.failure}; the results up to there are kept (Result.failure, Result.ok, "
+                      "Result.raise_for_failure())", MechWarning, stacklevel=level)
+
+
+def _caller_level() -> int:
+    """The stacklevel of the first frame outside mechdsl (the user's call), for warnings.warn."""
+    import sys
+
+    f, level = sys._getframe(1), 1
+    while f is not None and (f.f_globals.get("__name__") or "").startswith("mechdsl"):
+        f, level = f.f_back, level + 1
+    return level
 
 
 def solve(problem: Problem, progress=None) -> Result:
@@ -95,7 +125,23 @@ def solve(problem: Problem, progress=None) -> Result:
     meta["versions"] = versions()        # provenance belongs to the Result, stamped here once
     if s.estimate_error:
         _estimate_error(r, problem)
+    _default_estimate(r, problem)
+    A.accuracy_warning(r, problem)
     return r
+
+
+def _default_estimate(r: Result, problem: Problem) -> None:
+    """metadata["accuracy"]["error_estimate"] of every run (simulation/estimate.py), unless turned off."""
+    s = problem.settings
+    acc = r.metadata.setdefault("accuracy", {})
+    if s.error_estimate == "off":
+        acc.update(error_estimate=None, error_estimate_unavailable="turned off (error_estimate = off)")
+    elif r.failure is not None:
+        acc.update(error_estimate=None, error_estimate_unavailable="the run failed")
+    elif len(r.t) < 2:
+        acc.update(error_estimate=None, error_estimate_unavailable="fewer than two output times")
+    else:
+        estimate(r, problem, solve)
 
 
 def _record_inputs(r: Result, drive) -> None:

@@ -44,6 +44,7 @@ from ...diagnostics import UsageError
 from ...eom import parameter_vector
 from ...eom.start import fixed_start
 from ...output.result import Failure, Result, RunInterrupted
+from ..accuracy import DRIFT_CAP, DRIFT_FACTOR, drift_limit
 from ..monitors import energy_drift_stats, is_conservative
 from ..record_dae import constrained_signals, multipliers, select_signals
 from ..registry import dae_method
@@ -426,14 +427,12 @@ class SegmentRun:
             metadata["failure_code"] = failure_code
         if not drift_ok:
             msg = (f"constraint drift exceeded the bound {bound:.1e}: max ||g|| = {max_d:.2e}, "
-                   f"max ||G q' + g_t|| = {max_v:.2e} (formulation {opts.formulation}); "
-                   "tighten atol or use formulation = \"projection\"")
+                   f"max ||G q' + g_t|| = {max_v:.2e} (formulation {opts.formulation}); tighten atol"
+                   + ("" if opts.formulation == "projection" else " or use formulation = \"projection\""))
             metadata["drift_warning"] = msg
             metadata["warnings"].append(msg)
-        if energy.get("energy_warning"):
-            msg = energy["energy_warning"]
-            metadata["energy_warning"] = msg
-            metadata["warnings"].append(msg)
+        if energy.get("energy_warning"):           # warned once, by the run's accuracy warning
+            metadata["energy_warning"] = energy["energy_warning"]
         metadata["conservative"] = energy.get("conservative")
         events = sorted(getattr(stepper, "events", []) + events, key=lambda e: e["time"])
         result = Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
@@ -466,11 +465,6 @@ def integrator_failure(system, opts: DaeRun, saved, h: float, e: StepError):
                    "and lengths) or a stiff one (method = \"bdf\") ends here"), CODE_INTEGRATOR
 
 
-ENERGY_FACTOR = 1e4     # a conservative model whose relative energy drift exceeds this many rtol warns
-ENERGY_FLOOR = 1e-6      # ... and never below this relative drift
-ENERGY_CAP = 0.05        # ... and always above this one (a loose tolerance does not excuse 80 %)
-
-
 def energy_check(eom, signals, opts: DaeRun, complete: bool) -> dict:
     """Energy drift of the recorded states; for a conservative model (no damping, no other
     generalized forces, no explicit time in T, V or the constraints) a drift far above the
@@ -488,15 +482,15 @@ def energy_check(eom, signals, opts: DaeRun, complete: bool) -> dict:
     cons = eom.workspace.memo("dae_conservative", conservative)
     out["conservative"] = cons
     if cons and "energy_drift_relative" in out:
-        limit = min(ENERGY_CAP, max(ENERGY_FLOOR, ENERGY_FACTOR * opts.rtol))
+        limit = drift_limit(opts.rtol)          # the one rule of every run (simulation/accuracy.py)
         out["energy_bound_relative"] = limit
-        if out["energy_drift_relative"] > limit:
+        if out["energy_drift_relative"] > limit and out["energy_drift"] > DRIFT_FACTOR * opts.atol:
             out["energy_warning"] = (
                 f"the model is conservative but its energy changed by {out['energy_drift']:.3g} "
                 f"(relative {out['energy_drift_relative']:.2e}, more than {limit:.1e} = "
-                f"min({ENERGY_CAP:g}, max({ENERGY_FLOOR:g}, {ENERGY_FACTOR:g} rtol))): the results are not to be "
-                "trusted; "
-                f"tighten rtol/atol or use formulation = \"projection\" (formulation {opts.formulation})")
+                f"min({DRIFT_CAP:g}, {DRIFT_FACTOR:g} rtol)); tighten rtol/atol"
+                + ("" if opts.formulation == "projection" else
+                   f" or use formulation = \"projection\" (formulation {opts.formulation})"))
     return out
 
 

@@ -1,0 +1,154 @@
+"""The error estimate every run carries by default (issue 23): ``metadata["accuracy"]["error_estimate"]``.
+
+A companion run of the same problem, method and formulation at a tolerance ``TIGHTER`` = 10
+times tighter (a fixed-step run: half the step), recorded only on a coarse subset of the
+output times (at most ``COARSE`` points) with nothing but the states.  With the global error
+proportional to the tolerance, e(tol/10) = e(tol)/10, so the difference of the two runs is
+0.9 e(tol): the estimate is the largest difference over the coarse times, divided by
+1 - 1/TIGHTER (fixed steps: 1 - 2^-order, Richardson).  Why this one and not another:
+docs/internals/simulation.md ("The default error estimate"); its calibration on long,
+chaotic and constrained runs: benchmarks/error_estimate.py, docs/performance.md.
+
+    estimate(r, problem, solve) -> dict    fills r.metadata["accuracy"]: error_estimate (the
+                                           largest over the recorded coordinates, in their
+                                           units), where (coordinate, time), the ratio to the
+                                           tolerance class, per coordinate when asked
+    tolerance_class(r, rtol, atol)         rtol |q|max + atol per coordinate
+
+The tolerance class of a coordinate is rtol times its largest magnitude over the run plus
+atol: what the tolerances ask of it.  A run whose estimate exceeds ``WARN_FACTOR`` times its
+tolerance class warns (the accuracy warning: once, with the invariant drift,
+accuracy.accuracy_warning).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .settings import MIN_RTOL
+
+TIGHTER = 10.0       # the companion's tolerance is this many times tighter
+COARSE = 201         # the companion records at most this many of the run's output times
+WARN_FACTOR = 30.0   # estimate / tolerance class above this: the accuracy warning (docs/simulate.md)
+MODES = ("on", "off", "coordinates")
+
+
+def tolerance_class(q: np.ndarray, rtol: float, atol: float) -> np.ndarray:
+    """rtol * max_t |q_i| + atol per coordinate (what the tolerances ask of each)."""
+    if q.size == 0:
+        return np.zeros(q.shape[1] if q.ndim == 2 else 0)
+    return rtol * np.nanmax(np.abs(q), axis=0) + atol
+
+
+def coarse_points(n: int) -> tuple[int, int]:
+    """(points of the companion, stride in the run's output times): a uniform subset of the n
+    output times with at most COARSE points (n - 1 divisible by the stride), or all of them."""
+    if n <= COARSE:
+        return n, 1
+    for stride in range(int(np.ceil((n - 1) / (COARSE - 1))), n):
+        if (n - 1) % stride == 0 and (n - 1) // stride + 1 >= 11:
+            return (n - 1) // stride + 1, stride
+    return n, 1
+
+
+def companion(problem, r):
+    """(settings of the companion run, factor the difference is divided by, what it is) or
+    (None, None, why not)."""
+    from .backends import backend
+    from .registry import spec
+
+    s = problem.settings
+    fixed = backend(problem.backend).fixed_step
+    n = len(r.t)
+    base = dict(error_estimate="off", estimate_error=False, warn=False)
+    if fixed:
+        dt = float((r.stats or {}).get("dt") or s.dt or (s.t_end - s.t_start) / 1000.0)
+        order = spec(s.method).order or 1
+        steps = int(round((s.t_end - s.t_start) / dt))
+        tight = s.replace(**base, dt=dt / 2, points=n if n >= 2 else None,
+                          budget=max(s.budget, 4 * steps + 4))
+        return tight, 1.0 - 2.0 ** -order, f"a run with half the step (dt = {dt / 2:.3g}; order {order})"
+    k = TIGHTER
+    rtol = s.rtol / k
+    if rtol < MIN_RTOL:
+        k = s.rtol / MIN_RTOL
+        rtol = MIN_RTOL
+        if k < 2:
+            return None, None, (f"rtol = {s.rtol:g}: a companion run tighter than it would be below "
+                                f"{MIN_RTOL:g}, which double precision cannot deliver")
+    points, _ = coarse_points(n) if problem.kind == "ode" else (n, 1)
+    method = s.method
+    ran = r.metadata.get("run") or {}
+    if problem.kind == "ode" and s.method == "auto" and ran.get("method"):
+        method = ran["method"]             # auto chooses by tolerance: keep the method that ran
+    extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, outputs=())
+    if problem.kind == "ode":
+        extra["points"] = points
+        extra["compiled"] = bool(ran.get("compiled")) if s.compiled is None else s.compiled
+    if problem.drive is not None and problem.kind != "ode":
+        extra["inputs"] = None              # problem.eom has the inputs built in
+    return s.replace(**extra), 1.0 - 1.0 / k, f"a run at rtol = {rtol:.3g}, atol = {s.atol / k:.3g} ({k:g}x tighter)"
+
+
+def estimate(r, problem, solve) -> None:
+    """Run the companion and fill r.metadata["accuracy"] (the run must have succeeded)."""
+    from .problem import formulate
+
+    acc = r.metadata.setdefault("accuracy", {})
+    s = problem.settings
+    tight, factor, how = companion(problem, r)
+    acc["error_estimate_method"] = how
+    if tight is None:
+        acc.update(error_estimate=None, error_estimate_unavailable=how)
+        return
+    cpu0 = time.process_time()
+    try:
+        tp = formulate(problem.eom, tight.validated())
+        if problem.step_eom is not None:
+            tp = dataclasses.replace(tp, step_eom=problem.step_eom)
+        other = solve(tp)
+    except Exception as e:  # noqa: BLE001 - the run itself is fine; say why there is no estimate
+        acc.update(error_estimate=None, error_estimate_unavailable=f"the companion run could not run: "
+                                                                     f"{str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__}")
+        return
+    finally:
+        acc["error_estimate_cpu_time"] = time.process_time() - cpu0
+    idx, jdx = _common_times(r.t, other.t, s.t_end - s.t_start)
+    if idx.size == 0:
+        why = (f"the companion run failed at its start ({other.failure})" if other.failure is not None
+               else "no output time in common with the companion run")
+        acc.update(error_estimate=None, error_estimate_unavailable=why)
+        return
+    diff = np.abs(r.q[idx] - other.q[jdx]) / factor          # (times, coordinates)
+    diff = np.where(np.isfinite(diff), diff, np.inf)
+    per = diff.max(axis=0) if diff.size else np.zeros(len(r.coordinates))
+    tol = tolerance_class(r.q, s.rtol, s.atol)
+    if not len(per):
+        acc.update(error_estimate=0.0, error_estimate_ratio=0.0)
+        return
+    k = int(np.argmax(per))
+    it = int(np.argmax(diff[:, k]))
+    acc.update(error_estimate=float(per[k]), error_estimate_coordinate=r.coordinates[k],
+               error_estimate_time=float(r.t[idx[it]]), error_estimate_ratio=float((per / tol).max()))
+    if s.error_estimate == "coordinates":
+        acc["error_estimate_by_coordinate"] = {c: float(v) for c, v in zip(r.coordinates, per)}
+        acc["tolerance_class"] = {c: float(v) for c, v in zip(r.coordinates, tol)}
+    if other.failure is not None:
+        acc["error_estimate_note"] = (f"the companion run stopped at t = {other.failure.time:.6g} "
+                                      f"({other.failure.cause}): the estimate covers the times before")
+
+
+def _common_times(t: np.ndarray, u: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (i, j) with t[i] = u[j] up to 1e-12 of the span (grids computed alike may differ
+    in the last bit); rows of events (repeated times) are skipped."""
+    if not len(t) or not len(u):
+        return np.zeros(0, int), np.zeros(0, int)
+    j = np.clip(np.searchsorted(u, t), 0, len(u) - 1)
+    jm = np.clip(j - 1, 0, len(u) - 1)
+    j = np.where(np.abs(u[jm] - t) < np.abs(u[j] - t), jm, j)
+    ok = np.abs(u[j] - t) <= 1e-12 * max(span, 1e-300)
+    ok &= np.r_[True, np.diff(t) > 0] & np.r_[np.diff(t) > 0, True]
+    i = np.flatnonzero(ok)
+    return i, j[i]
