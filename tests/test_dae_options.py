@@ -25,16 +25,20 @@ def test_rheonomic_constraint_matches_minimal_coordinates(formulation):
 
 
 def test_drift_over_the_bound_is_reported():
-    """In the result (metadata warnings, which every command prints), not as a Python warning
-    on stderr: library code reports through its results, like every other back end."""
+    """In the result (metadata warnings, which every command prints) and as a MechWarning (issue
+    23), no other Python warning."""
     import warnings
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    from mechdsl import MechWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0, 0)), 10.0, formulation="baumgarte",
                          method="cvodes-bdf", rtol=1e-10, atol=1e-10, points=11)
     assert r.stats["drift_ok"] is False
     assert any("drift exceeded" in w for w in r.metadata["warnings"])
+    assert caught and all(w.category is MechWarning for w in caught)
+    assert sum("drift exceeded" in str(w.message) for w in caught) == 1
     assert "drift exceeded" in r.metadata["drift_warning"]
     assert r.stats["drift_bound"] == pytest.approx(1e-9, rel=1e-12)
     assert r.stats["max_velocity_drift"] > r.stats["drift_bound"]

@@ -19,9 +19,13 @@ G = 9.81
 
 
 def _run(t_end, points, **kw):
-    """The run and its warnings (in the result's metadata: the driver emits no Python warnings)."""
+    """The run and its warnings (in the result's metadata, and as MechWarnings: no other Python
+    warning is emitted)."""
+    from mechdsl import MechWarning
+
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        warnings.simplefilter("ignore", MechWarning)
         r = simulate_dae(pendulum_eom(gravity=G, v0=(0.0, 0.0)), t_end, formulation="partitioning",
                          points=points, **kw)
     return r, list(r.metadata.get("warnings", []))
@@ -36,8 +40,9 @@ def _check_on_branch(r, msgs, pos_tol, energy_tol):
     x, y = pendulum_exact(r.t)
     assert np.max(np.hypot(r["x"] - x, r["y"] - y)) < pos_tol
     assert np.max(np.abs(_energy(r) - _energy(r)[0])) < energy_tol
-    assert r.stats["energy_ok"]
-    assert not any("energy" in m for m in msgs)
+    # (a jump of branch changes the energy by joules; the drift of a run at rtol 1e-8 over 20 s,
+    # 5e-6 relative, is itself more than the tolerance suggests and says so: issue 23)
+    assert r.stats["energy_drift"] < energy_tol
 
 
 def test_a01_partitioning_20s_outputs_every_second_stays_on_branch():
@@ -68,8 +73,10 @@ def test_energy_check_warns_when_a_conservative_run_jumps(monkeypatch):
     assert np.max(np.abs(E - E[0])) > 1.0                 # the jump happened (sanity of the scenario)
     assert r.stats["energy_ok"] is False
     assert r.stats["energy_drift"] == pytest.approx(np.max(np.abs(E - E[0])), rel=1e-9)
-    assert any("conservative" in m and "energy" in m for m in msgs)
-    assert r.metadata["energy_warning"] in r.metadata["warnings"]
+    assert "conservative" in r.metadata["energy_warning"]
+    # said once, by the run's accuracy warning (issue 23: the energy warning was printed twice)
+    assert [m for m in msgs if "energy" in m] == [r.metadata["accuracy"]["warning"]]
+    assert r.metadata["accuracy"]["invariants"]["energy"]["warning"] is True
 
 
 @pytest.mark.parametrize("method, jacobians", [("erk", False), ("bdf", True), ("adams", True)])

@@ -470,9 +470,13 @@ class Model:
         """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
         docs/sweeps.md).  params/starts: a grid (dict), mechdsl.sweep.table(...) or a DataFrame,
         or a sampler (mechdsl.sample.uniform/normal); scheduler: vectorized | processes | dask |
-        tcp://host:port; out: a .nc file streamed chunk by chunk; other keywords: settings."""
+        tcp://host:port; out: a .nc file streamed chunk by chunk; other keywords: settings.
+        A sweep's runs carry no error estimate unless asked (error_estimate="on") and keep their
+        warnings in the status table instead of issuing MechWarnings."""
         from .sweep import sweep
 
+        kw.setdefault("error_estimate", "off")
+        kw.setdefault("warn", False)
         return sweep(self, params, starts, t_end, **kw)
 
     def settings(self, **args):

@@ -68,6 +68,8 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
             compiled_note, native_code = None, True
     free = eom.replace(g=None)
     free.workspace.first_integrals(lambda: None)   # the free system's symmetries are not the model's
+    kw.setdefault("error_estimate", "off")        # timed: the run alone
+    kw.setdefault("warn", False)
     r = simulate(free, t_end, method=method, p=pv, x0=xs, functions=funcs, **kw)
     r.metadata["compiled"] = native_code
     if compiled_note:

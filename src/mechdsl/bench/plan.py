@@ -63,7 +63,8 @@ def pilot(setup, cap: float = PILOT_CAP) -> tuple[float, float, object]:
             warnings.simplefilter("ignore")
             try:
                 return simulate(setup.eom, setup.t_end, t_start=setup.t_start, rtol=PILOT_TOL, atol=PILOT_TOL,
-                                points=setup.points, x0=setup.x0, p=setup.p, progress=cpu_cap(cap, marks), **kw)
+                                points=setup.points, x0=setup.x0, p=setup.p, progress=cpu_cap(cap, marks),
+                                error_estimate="off", warn=False, **kw)
             except OverBudget:
                 return None
 

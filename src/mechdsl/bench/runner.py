@@ -208,7 +208,7 @@ def simulate_variant(setup: Setup, variant: Variant, tol: float | None, points: 
         kw["compiled"] = True
     tol = 1e-8 if tol is None else tol
     common = dict(t_start=setup.t_start, rtol=tol, atol=tol, method=variant.method, points=points, outputs=outputs,
-                  x0=setup.x0, p=setup.p)
+                  x0=setup.x0, p=setup.p, error_estimate="off", warn=False)   # timed: the run alone
     with warnings.catch_warnings():        # the Result's metadata keeps the simulator's warnings
         warnings.simplefilter("ignore")
         if kw.get("formulation") == INDEX1:

@@ -104,6 +104,7 @@ def estimate(r, problem, solve) -> None:
         acc.update(error_estimate=None, error_estimate_unavailable=how)
         return
     cpu0 = time.process_time()
+    r.stats["error_estimate_cpu_time"] = None
     try:
         tp = formulate(problem.eom, tight.validated())
         if problem.step_eom is not None:
@@ -114,7 +115,7 @@ def estimate(r, problem, solve) -> None:
                                                                      f"{str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__}")
         return
     finally:
-        acc["error_estimate_cpu_time"] = time.process_time() - cpu0
+        r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0      # besides the run's own cpu_time
     idx, jdx = _common_times(r.t, other.t, s.t_end - s.t_start)
     if idx.size == 0:
         why = (f"the companion run failed at its start ({other.failure})" if other.failure is not None

@@ -233,6 +233,8 @@ class SimulationSettings:
         fields, then each group as a dict."""
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
+            if f.name == "warn":           # how the caller hears of warnings, not what runs
+                continue
             v = getattr(self, f.name)
             if f.name in GROUPS:
                 out[f.name] = {g.name: _plain(g.name, getattr(v, g.name)) for g in dataclasses.fields(v)}

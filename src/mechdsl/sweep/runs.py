@@ -209,6 +209,7 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
         A.check_finite(r)
         A.normalize_stats(r, cpu, wall)
         A.accuracy_report(r, problem, fixed_step=False)
+        A.accuracy_warning(r, problem)
         _store(job, out, i, r)
     return left
 
