@@ -166,6 +166,15 @@ class Structure:
     stiffness_scale: float = 0.0     # typical size of d bias/dq
     quadratic_T: bool = True
     notes: list[str] = field(default_factory=list)
+    # per coordinate: the typical size of its generalized force at rest (a coordinate without a
+    # force of its own: the smallest of the others), so that a stiff spring on one coordinate does
+    # not make a force of 10 N on another look like zero (issue 23)
+    force_scales: np.ndarray | None = None
+
+    def scales(self) -> np.ndarray:
+        if self.force_scales is None:
+            return np.full(self.n, max(self.force_scale, 1e-300))
+        return self.force_scales
 
     @property
     def scleronomic(self) -> bool:
@@ -233,9 +242,14 @@ def _structure(eom, pv) -> Structure:
 
     # rest forces (for tolerances): |bias(q, 0)|
     fM = pt.fn("M_bias")
-    rest = [np.max(np.abs(fM(pr.q[i], np.zeros(n), pr.t[i], pv)[1].full()), initial=0.0) for i, _ in rows]
-    rest = [r for r in rest if np.isfinite(r)]
+    rest_b = [np.abs(fM(pr.q[i], np.zeros(n), pr.t[i], pv)[1].full()).ravel() for i, _ in rows]
+    rest_b = [b for b in rest_b if np.all(np.isfinite(b))]
+    rest = [float(np.max(b, initial=0.0)) for b in rest_b]
     force_scale = median(rest) if rest else 0.0
+    per = np.array([median([b[j] for b in rest_b]) for j in range(n)]) if rest_b and n else np.zeros(n)
+    own = per[per > 1e-12 * max(force_scale, 1e-300)]
+    floor = float(np.min(own)) if own.size else max(force_scale, 1e-300)
+    force_scales = np.maximum(per, floor)
 
     stiff = [float(np.max(np.abs(o[9]), initial=0.0)) for _, o in rows]
     periodic = tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale) for k in range(n))
@@ -244,7 +258,7 @@ def _structure(eom, pv) -> Structure:
     st = Structure(n=n, autonomous=auto, lagrangian_time_free=lag_tf, has_T1=has_T1, has_T0=has_T0,
                    time_in_T=t_in_T, conservative=cons, periodic=periodic, angle_unit=angle_unit,
                    symmetry=N, force_scale=force_scale, stiffness_scale=median(stiff),
-                   quadratic_T=quad)
+                   quadratic_T=quad, force_scales=force_scales)
     return st
 
 

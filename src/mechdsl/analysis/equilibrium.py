@@ -239,9 +239,11 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     args = [w, qr, eom.p]
     F = ca.Function("eq_res", args, [r])
     JF = ca.Function("eq_jac", args, [ca.jacobian(r, w)])
-    rs = np.concatenate([np.full(n, scale), np.ones(ma), np.full(k, scale), np.ones(len(blocks))])
+    fscales = st.scales()
+    rs = np.concatenate([fscales, np.ones(ma), np.full(k, scale), np.ones(len(blocks))])
 
     tol = 1e-8 * scale
+    tols = 1e-8 * fscales           # per coordinate: a stiff spring elsewhere does not hide a force
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
     search = Search()
     # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
@@ -262,8 +264,8 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         if not np.all(np.isfinite(res)):
             continue
         resid = float(np.max(np.abs(res[:n])))
-        if resid > tol:
-            _note_failure(search, x[:n], g, resid / scale)
+        if np.any(np.abs(res[:n]) > tols):
+            _note_failure(search, x[:n], g, float(np.max(np.abs(res[:n]) / fscales)))
             continue
         if _decayed(x, g, n, JF, qref, pv, st):
             search.runaway += 1
@@ -284,7 +286,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
         for i, f_ in enumerate(found):
             if _same(qs, f_[0], st.periodic, blocks) or _euler_same(eom, qs, f_[0], st) or \
-                    _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tol, st.periodic, blocks, families) or \
+                    _joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tols, st.periodic, blocks, families) or \
                     (families and _rotation_joined(eom, qs, f_[0], t, pv, tol)):
                 if resid < f_[2]:
                     found[i] = (qs, x[n:].copy(), resid)
@@ -594,7 +596,7 @@ def _joined(F, q0, pv, a, b, alpha_a, alpha_b, tol, periodic, blocks=(), familie
                 return False
             w[idx] = w[idx] / nb
         r = dense(F(w, q0, pv)).ravel()[:n]
-        if not np.all(np.isfinite(r)) or np.max(np.abs(r), initial=0.0) > tol:
+        if not np.all(np.isfinite(r)) or np.any(np.abs(r) > tol):
             return False
     return True
 
@@ -613,12 +615,16 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         acc = np.zeros(n)
         M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
     Z = None
+    Kabs = np.abs(K)             # the sizes of the terms K adds up: what an eigenvalue is resolved against
     if con is not None:
-        K = K + con.geometric_stiffness(q, lam)
+        Kg = con.geometric_stiffness(q, lam)
+        Kabs = Kabs + np.abs(Kg)
+        K = K + Kg
         Z = tangent_basis(con.G_active(q))
         Mt, Ct, Kt, Nt = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ K @ Z, Z.T @ N
     else:
         Mt, Ct, Kt, Nt = M, C, K, N
+    R = active_basis(Mt, Ct, Kt)
     Mt, Ct, Kt, Nt, inert = drop_inert(Mt, Ct, Kt, Nt)
     if inert:
         notes = notes + [f"{inert} direction(s) carry neither inertia nor force here (the spin of a point "
@@ -633,7 +639,7 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     else:
         kind = "relative"
     Ksym = sym(Kr)
-    heig = np.sort(np.linalg.eigvalsh(Ksym)) if Kr.size else np.zeros(0)
+    heig, vecs = np.linalg.eigh(Ksym) if Kr.size else (np.zeros(0), np.zeros((0, 0)))
     kscale = max(np.max(np.abs(K), initial=0.0), st.stiffness_scale, 1e-300)
     if con is not None:      # the geometric stiffness is of the order force scale x curvature
         kscale = max(kscale, st.force_scale * con.curvature_scale(q))
@@ -644,7 +650,12 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     ev = ev[np.lexsort((ev.imag, ev.real))]
     lscale = max(1.0, np.max(np.abs(ev), initial=0.0))
     growth = float(np.max(ev.real, initial=-np.inf)) if ev.size else -np.inf
-    etol = 1e-9 * kscale
+    # each eigenvalue against the terms along its own direction u (full coordinates): |u|'|K||u|,
+    # so that 5.96 beside a spring of 1e12 N/m is resolved (issue 23: a global 1e-9 x max|K| called
+    # it zero); a floor at round-off of the largest terms anywhere
+    B = (Z if Z is not None else np.eye(n)) @ (R if R is not None else np.eye(Kt.shape[0] + inert)) @ P
+    U = np.abs(B @ vecs) if vecs.size else np.zeros((n, 0))
+    etol = 1e-9 * np.einsum("ij,ik,kj->j", U, Kabs, U) + 1e-13 * kscale if heig.size else np.zeros(0)
     Csym = sym(Ct)
     gyro = np.max(np.abs(Ct - Ct.T), initial=0.0) > 1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
     damping_ok = np.min(np.linalg.eigvalsh(Csym), initial=0.0) >= -1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
@@ -673,12 +684,12 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     elif circulatory:
         stable, reason = None, ("non-conservative positional (circulatory) forces: the stiffness is not "
                                 "symmetric, Lagrange-Dirichlet does not apply; linear model has no growing mode")
-    elif heig.size and heig[0] > etol and damping_ok:
+    elif heig.size and np.all(heig > etol) and damping_ok:
         stable, reason = True, (f"Lagrange-Dirichlet: Hessian of {potential} positive definite "
                                 f"(eigenvalues {_fmt_list(heig)})")
         if k:
             reason += "; neutral along the symmetry directions"
-    elif heig.size and heig[0] < -etol:
+    elif heig.size and np.any(heig < -etol):
         stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
                                 f"{_fmt_list(heig[heig < -etol])} but gyroscopic terms keep the linear "
                                 "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
@@ -686,9 +697,14 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         stable, reason = None, "no degree of freedom: the constraints fix the configuration"
     elif heig.size == 0:
         stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
-    else:
+    elif np.any(np.abs(heig) <= etol):
         stable, reason = None, (f"zero eigenvalue(s) of the Hessian of {potential} "
                                 f"({_fmt_list(heig[np.abs(heig) <= etol])}): higher-order terms decide")
+    else:
+        stable, reason = None, (f"Hessian of {potential} positive definite (eigenvalues {_fmt_list(heig)}) but "
+                                "the damping matrix is not positive semidefinite (a force that feeds energy in "
+                                "at some speeds): Lagrange-Dirichlet does not apply, and the linear model has no "
+                                "growing mode; stability is not decided")
     if gyro and stable is not None:
         notes = notes + ["gyroscopic terms present (T1 != 0)"]
     if accel:
