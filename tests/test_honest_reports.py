@@ -35,3 +35,60 @@ def test_a_positive_eigenvalue_beside_a_stiff_spring_is_not_zero():
     assert e.q == pytest.approx([0.0, -1.6454, 0.0], abs=1e-12)
     assert e.stable is True and "positive definite" in e.reason
     assert e.hessian_eigenvalues == pytest.approx([9.81 / 1.6454, 1e12], rel=1e-9)
+
+
+WALL = """
+model PendulumBesideWall "a pendulum beside a wall at x = wall"
+  parameter Real wall(unit = "m") = 0.5;
+  Gravity gravity(g = {0, -9.81, 0});
+  PointMass bob(m = 1);
+  Point top(body = bob, r = {0, 1, 0});
+  Revolute hinge(parent = world, child = top, axis = {0, 0, 1}, phi(start = 0.2));
+  Contact stop(point = bob, surface = "plane", normal = {-1, 0, 0}, offset = -wall, e = 0.5);
+end PendulumBesideWall;
+"""
+
+
+def test_equilibria_of_a_model_with_contacts_say_so(tmp_path, capsys):
+    """The contacts are not equilibrium conditions; `mech equilibrium` says so and checks every
+    equilibrium against them (before: not a word)."""
+    from mechdsl.cli import main
+
+    m = mechdsl.loads(WALL)
+    eqs = m.equilibria()
+    assert [round(float(e.q[0]), 9) for e in eqs] == [0.0, round(math.pi, 9)]
+    assert all(e.admissible for e in eqs)
+    assert any("stop are unilateral" in n for n in eqs.notes)
+    behind = m.with_params(wall=-0.2).equilibria()       # the wall stands where the pendulum hangs
+    assert not any(e.admissible for e in behind)
+    assert all(any("penetrates contact 'stop' (gap -0.2 m)" in n for n in e.notes) for e in behind)
+    path = tmp_path / "wall.mech"
+    path.write_text(WALL)
+    assert main(["equilibrium", str(path), "--set", "wall=-0.2"]) == 0
+    out = capsys.readouterr().out
+    assert "penetrates contact 'stop'" in out and "not searched" in out
+
+
+BALL = """
+model Ball
+  Gravity gravity(g = {0, -9.81, 0});
+  PointMass ball(m = 1, r(start = {0, -0.05}));
+  Contact floor(point = ball, radius = 0.1, surface = "plane", normal = {0, 1, 0}, offset = 0, e = 0.8);
+end Ball;
+"""
+
+
+def test_check_refuses_a_start_that_penetrates_a_contact(tmp_path, capsys):
+    """mech check used to say ok for a start that simulate then refused (E861): both refuse it now,
+    with the same located error."""
+    from mechdsl.cli import main
+
+    path = tmp_path / "ball.mech"
+    path.write_text(BALL)
+    assert main(["check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "ball.mech:5:3: error[E861]: the start state penetrates contact 'floor' (gap -0.15 m)" in err
+    assert main(["simulate", str(path), "--t-end", "1", "--no-progress"]) == 1
+    assert "error[E861]" in capsys.readouterr().err
+    path.write_text(BALL.replace("{0, -0.05}", "{0, 0.5}"))
+    assert main(["check", str(path)]) == 0

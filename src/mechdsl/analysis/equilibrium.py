@@ -41,6 +41,7 @@ from . import charts
 from .charts import chart, locked_joints, quaternion_blocks, quaternion_model
 from .charts import tangent_basis as zbasis
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
+from .contacts_at_rest import contact_notes
 from .core import dense, named_multipliers, null_space, param_vector, parts, structure, wrap_angle
 from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
@@ -87,6 +88,7 @@ class Equilibrium:
     # the unit of each multiplier (eom.multiplier_units: N, N.m, N/m, ...; None: unknown)
     multiplier_units: tuple = ()
     tangent_basis: np.ndarray | None = None
+    admissible: bool = True          # False: the state penetrates one of the model's contacts (notes)
     # rotation joints: the classification was made in a chart (analysis.charts) whose
     # coordinates are these; hessian, symmetry_directions and the eigenvalues refer to them
     chart_coords: tuple[str, ...] = ()
@@ -117,7 +119,7 @@ class Equilibrium:
         return self.values[name]
 
     def to_dict(self) -> dict:
-        d = {"kind": self.kind, "values": self.values, "stable": self.stable,
+        d = {"kind": self.kind, "values": self.values, "stable": self.stable, "admissible": self.admissible,
              "stability": self.stability, "reason": self.reason,
              "hessian_eigenvalues": [float(v) for v in self.hessian_eigenvalues],
              "residual": float(self.residual), "t": float(self.t), "notes": list(self.notes)}
@@ -171,9 +173,11 @@ class Search:
 
 
 class Equilibria(list):
-    """The equilibria found (a list of :class:`Equilibrium`) with ``search``, a :class:`Search`."""
+    """The equilibria found (a list of :class:`Equilibrium`) with ``search``, a :class:`Search`, and
+    ``notes`` on the search as a whole (contacts that are not equilibrium conditions)."""
 
     search: Search
+    notes: list
 
 
 def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = MAX_GUESSES
@@ -211,7 +215,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         e = _classify(eom, st, pv, qref, np.zeros(k), t, 0.0, notes + ["no generalized force acts at rest: "
                                                                        "every configuration is an equilibrium"],
                       con=con, lam=np.zeros(ma))
-        return _result([e], Search())
+        return _result([e], Search(), contact_notes(eom, [e], pv, t))
 
     # unknowns w = (q, mu, alpha), lambda = lam_scale * mu:
     # bias(q, 0, t) - G(q)' lambda - M(q) N alpha ; g(q) / |G row| ; N'(q - q_ref)
@@ -308,7 +312,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
         else:
             out.append(_classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
                                  lam=_clean(lam_scale * rest[:ma], lam_scale)))
-    return _result(out, search)
+    return _result(out, search, contact_notes(eom, out, pv, t))
 
 
 def chart_of(eom, q, t, pv):
@@ -454,9 +458,10 @@ def _family_directions(ch, st, pv, t, alpha, q=None) -> np.ndarray:
     return Q
 
 
-def _result(eqs, search: Search) -> Equilibria:
+def _result(eqs, search: Search, notes=()) -> Equilibria:
     out = Equilibria(eqs)
     out.search = search
+    out.notes = list(notes)
     return out
 
 

@@ -95,11 +95,12 @@ def format_steady(name: str, pins: dict, found) -> str:
 def format_equilibria(name: str, coords, eqs) -> str:
     from ..analysis.tables import num, table
 
+    search_notes = [f"  note: {n}" for n in getattr(eqs, "notes", None) or ()]
     if not eqs:
         why = eqs.search.why_none(coords) if hasattr(eqs, "search") else ""
-        return (f"{name}: no equilibrium found" + (f": {why}" if why else " (no starting guess converged)") + "\n"
-                "  hint: give a guess with --guess NAME=VALUE; a steady motion (a circular orbit, a "
-                "spinning top) is a relative equilibrium, not a rest state")
+        return "\n".join([f"{name}: no equilibrium found" + (f": {why}" if why else " (no starting guess converged)"),
+                          "  hint: give a guess with --guess NAME=VALUE; a steady motion (a circular orbit, a "
+                          "spinning top) is a relative equilibrium, not a rest state"] + search_notes)
     kinds = sorted({e.kind for e in eqs})
     lines = [f"{name}: {len(eqs)} equilibri{'um' if len(eqs) == 1 else 'a'} ({', '.join(kinds)})"]
     rows = []
@@ -120,4 +121,4 @@ def format_equilibria(name: str, coords, eqs) -> str:
             if note not in common:
                 lines.append(f"     note: {note}")
     lines += [f"  note: {n}" for n in common]
-    return "\n".join(lines)
+    return "\n".join(lines + search_notes)

@@ -129,10 +129,10 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]
-    return _dynamics_problems(eom, q, qd, t, pv)
+    return _dynamics_problems(eom, q, qd, t, pv, drift_bound)
 
 
-def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
+def _dynamics_problems(eom, q, qd, t, pv, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:
     from .codegen import casadi_functions
 
     x = np.r_[q, qd]
@@ -163,12 +163,15 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
                            "or choose units that keep the numbers moderate")]
     if not ok_rhs:
         return _force_problems(eom, q, t, pv, rhs)
-    return _gap_problems(eom, q, t, pv) or _output_problems(eom, q, qd, t, pv)
+    return _gap_problems(eom, q, t, pv, drift_bound) or _output_problems(eom, q, qd, t, pv)
 
 
-def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
+def _gap_problems(eom, q, t, pv, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:
     """E756: a contact whose gap is not finite at the start can never be located (the
-    newtons_cradle with r = 1e308: inf gaps in the results of a run that 'succeeded')."""
+    newtons_cradle with r = 1e308: inf gaps in the results of a run that 'succeeded').
+    E861: a start that penetrates a contact by more than the contact tolerance (the contact back
+    end's default gap_tol, max(1e-9, 100 atol) = max(1e-9, 10 x the drift bound)), which the run
+    would refuse: `mech check` says so too (issue 23)."""
     if eom.model is None or not eom.model.contacts:
         return []
     import casadi as ca
@@ -183,12 +186,16 @@ def _gap_problems(eom, q, t, pv) -> list[Diagnostic]:
     gaps, fn = eom.workspace.memo("preflight_gaps", build)
     if not gaps:
         return []
-    for g, v in zip(gaps, _value(fn, q, t, pv)):
+    values = _value(fn, q, t, pv)
+    for g, v in zip(gaps, values):
         if not math.isfinite(v):
             return [Diagnostic("E756", f"the gap of contact '{g.name}' is not finite at the start ({v:g})",
                                g.span or _model_span(eom),
                                "its sizes and positions overflow with these parameter values: keep them moderate")]
-    return []
+    touch = max(1e-9, 10.0 * drift_bound)
+    return [Diagnostic("E861", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
+                       g.span or _model_span(eom), "change the start values so that every gap is >= 0")
+            for g, v in zip(gaps, values) if v < -touch]
 
 
 def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
