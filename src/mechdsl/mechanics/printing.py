@@ -135,25 +135,67 @@ def lagrange_equations(model: ir.Model, max_ops: int = MAX_OPS, max_total_ops: i
     return sm, T, V, D, Q, eqs
 
 
+def multiplier_terms(model: ir.Model, sm) -> tuple[list, dict]:
+    """The constraint forces of Lagrange's equations, one term per multiplier:
+    ([-sum_c dg_c/dq_i lambda[c] for each coordinate i], {sympy name: "lambda[c]"}).  Explicit
+    constraints from their residuals; loop-closing joints from the closure rows of the derived
+    equations (their multipliers are reaction components).  ([0, ...], {}) without constraints."""
+    import sympy as sp
+
+    n = len(sm.coords)
+    if not model.constraints and not any(j.closes_loop for j in model.joints):
+        return [sp.S.Zero] * n, {}
+    from .symbolic import _Builder
+
+    b = _Builder(model)
+    b.build()
+    rows = [(c.name, b.tr(c.residual)) for c in model.constraints]
+    if any(j.closes_loop for j in model.joints):
+        import casadi as ca
+
+        from ..analysis.symbolic import sx_to_sympy
+        from .derive import derive
+
+        e = derive(model)
+        explicit = {c.name for c in model.constraints}
+        idx = [i for i, nm in enumerate(e.constraint_names) if nm not in explicit]
+        qs = [b.q[c] for c in e.coords]
+        ps = [b.p[p] for p in e.params]
+        (g,) = sx_to_sympy([ca.vertcat(*[e.g[i] for i in idx])], [e.q, e.p, e.t], [qs, ps, [b.t]])
+        rows += [(e.constraint_names[i], g[k, 0]) for k, i in enumerate(idx)]
+    names, terms = {}, [sp.S.Zero] * n
+    for k, (name, g) in enumerate(rows):
+        lam = sp.Symbol(f"lambda[{name}]")
+        names[lam.name] = f"lambda[{name}]"
+        for i, x in enumerate(sm.coords):
+            d = sp.diff(g, x)
+            if d != 0:
+                d = sp.trigsimp(sp.expand(d))
+            if d != 0:
+                terms[i] = terms[i] - d * lam
+    return terms, names
+
+
 def _format_small(model: ir.Model, latex: bool, max_ops: int, max_total_ops: int) -> str:
     sm, T, V, D, Q, eqs = lagrange_equations(model, max_ops, max_total_ops)
     q = sm.coords
     names = [c.name for c in model.coordinates]
+    lam_terms, lam_names = multiplier_terms(model, sm)
     if latex:
-        return _latex(model, sm, T, V, D, Q, eqs)
-    pr = _text_printer(sm.names)
+        return _latex(model, sm, T, V, D, Q, eqs, lam_terms, lam_names)
+    pr = _text_printer({**sm.names, **lam_names})
     out = [f"{model.name}: Lagrange's equations in {len(q)} coordinate{'s' * (len(q) != 1)} ({', '.join(names)})",
            "  d/dt(dL/d der(q)) - dL/dq + dD/d der(q) = Q,   L = T - V", "",
            f"  T = {pr(T)}", f"  V = {pr(V)}", f"  D = {pr(D)}"]
     nz = [(names[i], Q[i]) for i in range(len(q)) if Q[i] != 0]
     out += [f"  Q[{nm}] = {pr(x)}" for nm, x in nz] if nz else ["  Q = 0"]
     out.append("")
-    lam = " - (G^T lambda)[q]" if model.constraints or model.loops else ""
     quat = _quaternion_blocks(model)
-    for nm, (acc, rest, Qi) in zip(names, eqs):
+    for nm, (acc, rest, Qi), lt in zip(names, eqs, lam_terms):
         lhs = pr(acc) if rest == 0 else (pr(rest) if acc == 0 else f"{pr(acc)} + {pr(rest)}")
-        extra = lam + (f" + 2*mu[{quat[nm]}]*{nm}" if nm in quat else "")
-        rhs = (f"{pr(Qi)}{extra}" if Qi != 0 else extra.replace(" - ", "-", 1).replace(" + ", "", 1)) if extra else pr(Qi)
+        force = Qi + lt
+        extra = f" + 2*mu[{quat[nm]}]*{nm}" if nm in quat else ""
+        rhs = (f"{pr(force)}{extra}" if force != 0 else extra.replace(" + ", "", 1)) if extra else pr(force)
         out.append(f"  {nm}:  {lhs} = {rhs}")
     for j in dict.fromkeys(quat.values()):
         qs = [k for k, v in quat.items() if v == j]
@@ -181,7 +223,7 @@ def _constraint_lines(model: ir.Model, pr, sm) -> list[str]:
     from . import joints as J
     from .symbolic import _Builder
 
-    out = ["", "  constraints g(q, t) = 0, G = dg/dq:"]
+    out = ["", "  constraints g(q, t) = 0, each multiplier lambda[c] in J / [g_c] (docs/constraints.md):"]
     b = _Builder(model)
     b.build()
     for c in model.constraints:
@@ -195,17 +237,21 @@ def _constraint_lines(model: ir.Model, pr, sm) -> list[str]:
     return out
 
 
-def _latex(model, sm, T, V, D, Q, eqs) -> str:
+def _latex(model, sm, T, V, D, Q, eqs, lam_terms=None, lam_names=None) -> str:
+    import sympy as sp
     from sympy.physics.vector.printing import vlatex
 
     names = [c.name for c in model.coordinates]
+    sub = {sp.Symbol(k): sp.Symbol(r"\lambda_{\mathrm{" + _tex_escape(v[7:-1]) + "}}")
+           for k, v in (lam_names or {}).items()}
+    lam_terms = [x.subs(sub) for x in (lam_terms or [sp.S.Zero] * len(eqs))]
     rows = [f"T &= {vlatex(T)}", f"V &= {vlatex(V)}", f"D &= {vlatex(D)}"]
     for nm, x in zip(names, Q):
         if x != 0:
             rows.append(f"Q_{{\\mathrm{{{_tex_escape(nm)}}}}} &= {vlatex(x)}")
-    for acc, rest, Qi in eqs:
+    for (acc, rest, Qi), lt in zip(eqs, lam_terms):
         lhs = vlatex(acc) if rest == 0 else (vlatex(rest) if acc == 0 else f"{vlatex(acc)} + {vlatex(rest)}")
-        rows.append(f"{lhs} &= {vlatex(Qi)}")
+        rows.append(f"{lhs} &= {vlatex(Qi + lt)}")
     body = " \\\\\n".join(rows).replace("+ -", "- ")
     return (f"% {model.name}: Lagrange's equations, coordinates {', '.join(names)}\n"
             f"\\begin{{align}}\n{body}\n\\end{{align}}\n")

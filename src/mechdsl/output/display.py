@@ -216,18 +216,29 @@ def linearization_markdown(lin) -> str:
 
 class Equations(list):
     """sympy equations (``sympy.Eq``), one per coordinate (and momentum for Hamilton's form);
-    typeset in notebooks (``_repr_latex_``).  ``form`` says which; ``extra`` holds T, V, D or H."""
+    typeset in notebooks (``_repr_latex_``).  ``form`` says which; ``extra`` holds T, V, D or H.
+    A constrained model's equations carry one term per multiplier, ``lambda[<name>]``
+    (``multipliers`` maps each sympy symbol to that name)."""
 
-    def __init__(self, eqs, form: str, extra: dict):
+    def __init__(self, eqs, form: str, extra: dict, multipliers: dict | None = None):
         super().__init__(eqs)
         self.form = form
         self.extra = extra
+        self.multipliers = dict(multipliers or {})
 
-    def latex(self) -> str:
+    def latex(self, dots: bool = True) -> str:
+        """An aligned environment; ``dots=True`` (default) writes time derivatives as dots, as the
+        textbooks and ``mech equations --latex`` do; ``dots=False`` as d/dt (sympy's Derivative)."""
         import sympy as sp
 
-        lines = [f"{k} &= {sp.latex(v)}" for k, v in self.extra.items()]
-        lines += [sp.latex(eq.lhs) + " &= " + sp.latex(eq.rhs) for eq in self]
+        if dots:
+            from sympy.physics.vector.printing import vlatex as tex
+        else:
+            tex = sp.latex
+        sub = {sp.Symbol(k): sp.Symbol(r"\lambda_{\mathrm{" + v[7:-1].replace("_", r"\_") + "}}")
+               for k, v in self.multipliers.items()}
+        lines = [f"{k} &= {tex(v)}" for k, v in self.extra.items()]
+        lines += [tex(eq.lhs.subs(sub)) + " &= " + tex(eq.rhs.subs(sub)) for eq in self]
         return "\\begin{aligned}\n" + " \\\\\n".join(lines) + "\n\\end{aligned}"
 
     def _repr_latex_(self) -> str:
@@ -248,14 +259,15 @@ def equations(m, form: str = "lagrange") -> Equations:
     if form not in ("lagrange", "hamilton"):
         raise UsageError(f"form must be 'lagrange' or 'hamilton', not {form!r}")
     if form == "lagrange":
-        from ..mechanics.printing import _TooLarge, lagrange_equations
+        from ..mechanics.printing import _TooLarge, lagrange_equations, multiplier_terms
 
         try:
-            _, T, V, D, Q, eqs = lagrange_equations(m.model)
+            sm, T, V, D, Q, eqs = lagrange_equations(m.model)
         except _TooLarge as e:
             raise UsageError(f"the equations of {m.name} are too large to show symbolically: {e}") from None
         extra = {"T": T, "V": V} | ({"D": D} if D != 0 else {})
-        return Equations([sp.Eq(a + b, Qi) for a, b, Qi in eqs], form, extra)
+        lam, names = multiplier_terms(m.model, sm)
+        return Equations([sp.Eq(a + b, Qi + li) for (a, b, Qi), li in zip(eqs, lam)], form, extra, names)
     from ..analysis.hamilton import _lagrangian_for, symbolic_hamilton
 
     lg, _ = _lagrangian_for(m)
