@@ -136,3 +136,22 @@ def test_equations_in_python_carry_the_multipliers_and_write_dots():
     assert r"\ddot{x}_{plane}" in tex and r"\lambda_{\mathrm{rod}}" in tex and r"\frac{d" not in tex
     assert r"\frac{d^{2}}{d t^{2}}" in eqs.latex(dots=False)
     assert eqs._repr_latex_() == "$$" + tex + "$$"
+
+
+def test_e751_is_located_at_the_output(tmp_path, capsys):
+    from mechdsl.cli import main
+
+    path = tmp_path / "held.mech"
+    path.write_text("""model Held
+  Gravity gravity(g = {0, -9.81, 0});
+  Rod rod(m = 1, L = 1, axis = {0, -1, 0});
+  Revolute hinge(parent = world, child = rod.a, axis = {0, 0, 1}, phi(start = 0.3));
+  output Real F[3] = reaction_force(hinge);
+equation
+  rod.b.x = 0.2 "hold";
+end Held;
+""")
+    for cmd in (["check", str(path)], ["simulate", str(path), "--t-end", "1", "--no-progress"]):
+        assert main(cmd) == 1
+        err = capsys.readouterr().err
+        assert f"{path}:5:15: error[E751]" in err and "constraint_force(c, body)" in err and "<input>" not in err

@@ -125,7 +125,7 @@ class _Deriver:
         self.lam = ca.SX.sym("lam", len(g_list)) if g_list else None
         query.constraint_load = self._constraint_load
 
-        outputs = {o.name: _guard(lambda o=o: ca.SX(env.translate(o.expr))) for o in model.outputs}
+        outputs = {o.name: _at(o.span, lambda o=o: _guard(lambda: ca.SX(env.translate(o.expr)))) for o in model.outputs}
         e0 = self.env0
         q0 = ca.vertcat(*[ca.SX(_guard(lambda c=c: e0.translate(c.start))) for c in model.coordinates]) if n else ca.SX(0, 1)
         qd0 = ca.vertcat(*[ca.SX(_guard(lambda c=c: e0.translate(c.speed))) for c in model.coordinates]) if n else ca.SX(0, 1)
@@ -375,7 +375,9 @@ class _Deriver:
             if self.n_explicit:
                 raise MechError(Diagnostic("E751", f"reaction of joint '{ref.joint}' in a model with explicit "
                                                    "constraint equations",
-                                           help="reactions are available for trees and for loops closed by joints"))
+                                           help="reactions are available for trees and for loops closed by joints; "
+                                                "what a constraint equation exerts on a body is "
+                                                "constraint_force(c, body) (docs/constraints.md)"))
             loads = []
             for clo in self.closures:
                 F, T = clo.loads(kin, self.lam)
@@ -489,6 +491,20 @@ class LazyEOM(eom_mod.EOM):
 
 def _sub(v, idx):
     return ca.vertcat(*[v[i] for i in idx])
+
+
+def _at(span, fn):
+    """fn(), with a diagnostic that has no place of its own located at ``span`` (the output whose
+    expression needed it: E750-E753 reactions and accelerations used to print <input>)."""
+    import dataclasses
+
+    try:
+        return fn()
+    except MechError as e:
+        if span is None or not span.line:
+            raise
+        e.diagnostics = [dataclasses.replace(d, span=span) if not d.span.line else d for d in e.diagnostics]
+        raise
 
 
 def _guard(fn):
