@@ -130,7 +130,7 @@ def test_kepler_model_scene():
     m = mechdsl.load(MODELS / "kepler.mech", scene="Orbits")
     fis = {f.name for f in m.first_integrals()}
     assert {"p_(fs.x+fp.x)", "p_(fs.y+fp.y)", "p_(fs.z+fp.z)", "energy",
-            "L_(fs.x,fs.y+fp.x,fp.y)", "L_(fs.x,fs.z+fp.x,fp.z)", "L_(fs.y,fs.z+fp.y,fp.z)"} == fis
+            "L_(fs.x:fs.y+fp.x:fp.y)", "L_(fs.x:fs.z+fp.x:fp.z)", "L_(fs.y:fs.z+fp.y:fp.z)"} == fis
     s = m.scene_settings
     T = s["stop_time"] / 10
     sv = simulate_symplectic(m.eom, T, method="stormer-verlet", dt=s["dt"])

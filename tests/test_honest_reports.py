@@ -155,3 +155,34 @@ end Held;
         assert main(cmd) == 1
         err = capsys.readouterr().err
         assert f"{path}:5:15: error[E751]" in err and "constraint_force(c, body)" in err and "<input>" not in err
+
+
+KEPLER2 = """
+model Orbit "a body around a fixed centre, Cartesian x, y"
+  parameter Real mu(unit = "J.m") = 1;
+  PointMass bob(m = 1, r(start = {1, 0}), v(start = {0, 1.1}));
+  Potential centre(V = -mu*1/sqrt(bob.x^2 + bob.y^2));
+end Orbit;
+"""
+
+
+def test_automatic_names_read_as_csv_and_integrals_print_in_the_models_names(tmp_path):
+    """The angular momentum was named L_(bob.x,bob.y): a comma in a CSV header that ordinary
+    readers (split on ',') take apart; its repr showed CasADi's p_0*qd_1*q_0."""
+    import csv
+
+    m = mechdsl.loads(KEPLER2)
+    fis = {f.name: f for f in m.first_integrals()}
+    assert "L_(bob.x:bob.y)" in fis
+    text = repr(fis["L_(bob.x:bob.y)"])
+    assert "bob.x" in text and "der(bob.y)" in text and "qd_" not in text and "p_0" not in text
+    r = m.simulate(1.0, points=5)
+    path = tmp_path / "orbit.csv"
+    r.to_csv(path)
+    header = path.read_text().splitlines()[0]
+    assert header.split(",") == r.columns and all("," not in c for c in r.columns)
+    with open(path, newline="") as fh:
+        assert next(csv.reader(fh)) == r.columns
+    L = r["L_(bob.x:bob.y)"]
+    assert L == pytest.approx(np.full(5, 1.1), rel=1e-8)               # x v_y - y v_x at the start
+    assert np.array_equal(r["L_(bob.x,bob.y)"], L)                     # the old name still reads

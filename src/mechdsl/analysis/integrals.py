@@ -38,13 +38,19 @@ class FirstIntegral:
 
     name: str
     kind: str                          # 'momentum' | 'angular_momentum' | 'jacobi' | 'energy'
-    sx: object
+    sx: object = field(repr=False)     # CasADi's text (p_0*qd_1*q_0) is no one's to read: see __repr__
     coordinate: str | None = None      # the cyclic coordinate (momentum of one coordinate)
     direction: dict | None = None      # coordinate weights of a combined momentum p . N
     rotation: dict | None = None       # angular momentum p . A q: {"x,y": a_yx} (A skew, A[y, x] = a)
     note: str = ""
     _text: object = field(default=None, repr=False)       # str or a callable producing it
     _verified: object = field(default=None, repr=False)   # 'symbolic' | 'numeric' or a callable
+
+    def __repr__(self) -> str:
+        """In the model's names (issue 23: the repr showed CasADi's p_0*qd_1*q_0)."""
+        return f"FirstIntegral({self.name} = {self.expression} ({self.kind}: {self.note}))"
+
+    __str__ = __repr__
 
     @property
     def expression(self) -> str:

@@ -93,8 +93,9 @@ def rotation_symmetries(eom, pt, pv) -> list[np.ndarray]:
 
 
 def label(A: np.ndarray, coords) -> str:
-    """`x,y` for the rotation of the pair (x, y); several pairs joined by `+` (weights other than
-    1 written as factors): L_(x,y) means x p_y - y p_x."""
+    """`x:y` for the rotation of the pair (x, y); several pairs joined by `+` (weights other than
+    1 written as factors): L_(x:y) means x p_y - y p_x.  No comma: the name is a CSV column
+    (issue 23: `L_(bob.x,bob.y)` broke ordinary CSV readers)."""
     n = len(coords)
     parts = []
     for i in range(n):
@@ -104,5 +105,5 @@ def label(A: np.ndarray, coords) -> str:
                 continue
             coef = "" if abs(a) == 1 else f"{abs(a):g}*"
             sign = "-" if a < 0 else ("+" if parts else "")
-            parts.append(f"{sign}{coef}{coords[i]},{coords[j]}")
+            parts.append(f"{sign}{coef}{coords[i]}:{coords[j]}")
     return "".join(parts)

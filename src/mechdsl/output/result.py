@@ -229,6 +229,8 @@ def _plain(name: str) -> str:
 
 def _aliases(name: str):
     yield name
+    if name.startswith("L_(") and "," in name:       # an angular momentum's name before issue 23
+        yield name.replace(",", ":")
     m = re.fullmatch(r"([A-Za-z_]\w*)(\d+)", name)
     if m:
         yield f"{m.group(1)}[{m.group(2)}]"
