@@ -5,8 +5,10 @@ without scenes: its default run of 10 s), each run warm, side by side in one pro
   on     CPU of Model.simulate with the default estimate (the companion run included)
   ratio  on / off: what a run costs with its estimate
   estimate, x tol  the estimate and its ratio to the tolerance class; "warns" when the run warns
+  cli off/on  with --cli: CPU of the whole `mech simulate` command (a new process: start-up,
+              the model cache, the run, the summary), --error-estimate off against the default
 
-Usage:  PYTHONPATH=src python benchmarks/error_estimate_cost.py [--repeat 3] [--only NAME]
+Usage:  PYTHONPATH=src python benchmarks/error_estimate_cost.py [--repeat 3] [--only NAME] [--cli]
 The table goes into docs/simulate.md ("The error estimate").
 """
 from __future__ import annotations
@@ -54,14 +56,35 @@ def cpu(fn, repeat: int) -> tuple[float, object]:
     return min(times), r
 
 
+def cli_cpu(path, scene, model, t_end, estimate: str, repeat: int) -> float:
+    """Child CPU [s] of `mech simulate` (minimum of repeat), the model cache warm."""
+    import resource
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "mechdsl", "simulate", str(path), "--no-progress", "--error-estimate", estimate]
+    cmd += ["--scene", scene] if scene else ["--model", model]
+    if t_end is not None:
+        cmd += ["--t-end", str(t_end)]
+    best = float("inf")
+    for _ in range(repeat + 1):             # the first fills the model cache
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        best = min(best, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return best
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--only", default=None, help="run only targets whose label contains this")
+    ap.add_argument("--cli", action="store_true", help="also time the whole `mech simulate` command")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     rows = []
-    print(f"{'run':38s} {'off [s]':>9s} {'on [s]':>9s} {'ratio':>6s} {'estimate':>9s} {'x tol':>9s}  warns")
+    print(f"{'run':38s} {'off [s]':>9s} {'on [s]':>9s} {'ratio':>6s} {'estimate':>9s} {'x tol':>9s} {'warns':>5s}"
+          + (f" {'cli off':>8s} {'cli on':>8s}" if args.cli else ""))
     for label, path, scene, model in targets():
         if args.only and args.only not in label:
             continue
@@ -77,15 +100,26 @@ def main() -> None:
             continue
         acc = r.metadata.get("accuracy") or {}
         est, ratio = acc.get("error_estimate"), acc.get("error_estimate_ratio")
-        rows.append((label, off, on))
+        cli = ""
+        if args.cli:
+            c_off = cli_cpu(path, scene, model, t_end, "off", args.repeat)
+            c_on = cli_cpu(path, scene, model, t_end, "on", args.repeat)
+            cli = f" {c_off:8.3f} {c_on:8.3f}"
+            rows.append((label, off, on, c_off, c_on))
+        else:
+            rows.append((label, off, on))
         print(f"{label:38s} {off:9.4f} {on:9.4f} {on / off:6.2f} "
-              f"{'-' if est is None else f'{est:9.2g}':>9s} {'-' if ratio is None else f'{ratio:9.2g}':>9s}  "
-              f"{'yes' if acc.get('warning') else ''}"
+              f"{'-' if est is None else f'{est:9.2g}':>9s} {'-' if ratio is None else f'{ratio:9.2g}':>9s} "
+              f"{'yes' if acc.get('warning') else '':>5s}{cli}"
               + ("" if est is not None else f"  ({acc.get('error_estimate_unavailable')})"), flush=True)
     if rows:
         ratios = [on / off for _, off, on in rows]
         print(f"\n{len(rows)} runs: on/off median {statistics.median(ratios):.2f}, "
               f"max {max(ratios):.2f}; total CPU off {sum(r[1] for r in rows):.3f} s, on {sum(r[2] for r in rows):.3f} s")
+        if args.cli:
+            cl = [r[4] / r[3] for r in rows]
+            print(f"the whole command: on/off median {statistics.median(cl):.2f}, max {max(cl):.2f}; total CPU "
+                  f"off {sum(r[3] for r in rows):.2f} s, on {sum(r[4] for r in rows):.2f} s")
 
 
 if __name__ == "__main__":
