@@ -581,7 +581,7 @@ static int settle(Instance *I, double t, const double *q, const double *qd, cons
   int *before = (int *)calloc((size_t)(k + 1), sizeof(int));
   if (!buf || !before) { free(buf); free(before); eval_free(&E); return 1; }
   double *gap = buf, *u = gap + k, *a0 = u + k, *lr = a0 + n, *x = lr + NR, *qdd = x + 2 * n;
-  int st = mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap)) || eval_at(I, t, q, qd, &E, 1, 1);
+  int st = (k && mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap))) || eval_at(I, t, q, qd, &E, 1, 1);
   for (int i = 0; !st && i < k; i++) u[i] = row_dot(E.A, NR, n, contact_row(i), qd) + E.ct[contact_row(i)];
   memcpy(before, I->closed, sizeof(int) * (size_t)k);
   for (int i = 0; !st && i < k; i++) {

@@ -266,8 +266,10 @@ int mech_enter_init(Instance *I) {
 
 int mech_exit_init(Instance *I) {
   if (refresh_start(I)) return 1;
-  if (MECH.k || MECH.nfix)
-    if (!MECH.e.f || mech_call(I, &MECH.e, ARGS(I->p), RES(I->e))) return 1;
+  if (MECH.k && mech_call(I, &MECH.e, ARGS(I->p), RES(I->e))) {
+    mech_log(I, LOG_ERROR, "the coefficients of restitution cannot be evaluated");
+    return 1;
+  }
   for (int i = 0; i < MECH.k; i++)
     if (!(I->e[i] >= 0.0 && I->e[i] <= 1.0)) {
       mech_log(I, LOG_ERROR, "coefficient of restitution of '%s' must be in [0, 1] (got %g)", MECH.rows[MECH.m + i], I->e[i]);
