@@ -64,19 +64,10 @@ def _interfaces(model, fmi_type: str | None) -> tuple[bool, bool, list[str]]:
             raise MechError(Diagnostic(
                 "E882", f"model exchange cannot represent {model.name}: it has {what} ({names}), whose impacts "
                         "jump the speeds at events the importer's integrator would have to apply",
+                model.model.contacts[0].span,
                 help="export for co-simulation (--fmi-type cs): the FMU then steps itself and handles "
                      "contacts and impacts inside each step"))
     return want_me, want_cs, notes
-
-
-def _refusals(model, plan) -> None:
-    """Features a co-simulation FMU cannot represent: a MechError (E882) naming them."""
-    friction = [g.name for g in plan.gaps if getattr(g, "friction", None) is not None]
-    if friction:
-        raise MechError(Diagnostic(
-            "E882", f"the FMU cannot represent the sliding friction of the persistent contact(s) "
-                    f"{', '.join(friction)} (contact friction is not exported)",
-            help="remove the contact's friction for the export, or simulate it with mech simulate"))
 
 
 def _settings(model):
@@ -124,7 +115,6 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
     folder, suffix = build.platform_folder(fmi_version)
     s = _settings(model)
     plan = functions.build(model, model.casadi()["ode"])
-    _refusals(model, plan)
     defaults = _defaults(model, s, plan)
     start_calc = functions.start_depends_on_parameters(model.eom)
     table = variables.table(model, plan, defaults, start_calc, fmi_version)

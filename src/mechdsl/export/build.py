@@ -79,6 +79,7 @@ def model_data(meta: dict, plan, fn_counts: dict) -> str:
     lines.append(_array("char *const", "PARAM_NAMES", meta["params"], _c_string))
     lines.append(_array("char *const", "COORDS", meta["coords"], _c_string))
     lines.append(_array("char *const", "ROWS", meta["rows"], _c_string))
+    lines.append(_array("int", "FRIC_COL", plan.fric_col, str))
     rs, is_ = meta["real_settings"], meta["int_settings"]
 
     def fn(key):
@@ -97,8 +98,8 @@ def model_data(meta: dict, plan, fn_counts: dict) -> str:
               "  {" + ", ".join(_real(v) for v in rs) + "},",
               "  {" + ", ".join(str(int(v)) for v in is_) + "},",
               f"  {_real(meta['acc_tol'])}, {int(meta['samples'])},",
-              "  PARAM_NAMES, COORDS, ROWS,",
-              "  " + ", ".join(fn(k) for k in ("ode", "out", "jvp", "start", "params", "dyn", "cons", "gap", "e")),
+              "  PARAM_NAMES, COORDS, ROWS, FRIC_COL,",
+              "  " + ", ".join(fn(k) for k in ("ode", "out", "jvp", "start", "params", "dyn", "cons", "gap", "e", "fric")),
               "};", ""]
     return "\n".join(lines)
 

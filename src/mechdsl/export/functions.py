@@ -16,6 +16,9 @@
                                               A = dc/dq, ct = dc/dt, c'' = A q'' + gamma
     mech_gap    (t, q, p) -> g                the contacts' gaps (event location)
     mech_e      (p) -> e                      the contacts' coefficients of restitution
+    mech_fric   (t, q, qd, p) -> W            sliding friction of closed contacts: column j the
+                                              generalized force per unit normal force of the
+                                              j-th contact with friction
 
 Every output is dense.  ``Plan`` collects them with the sizes the runtime needs.
 """
@@ -44,6 +47,7 @@ class Plan:
     fix_times: tuple = ()
     gaps: list = field(default_factory=list)
     fixations: list = field(default_factory=list)
+    fric_col: tuple = ()    # per contact: column of mech_fric (its sliding friction), -1 without
 
 
 def _sx_or_mx(f):
@@ -118,6 +122,13 @@ def build(model, plain_ode) -> Plan:
         funcs.append(ca.Function("mech_cons", [t, q, qd, p], [ca.densify(c), ca.densify(A), ca.densify(ct),
                                                                ca.densify(gamma)],
                                  ["t", "q", "qd", "p"], ["c", "A", "ct", "gamma"]))
+    fric_col = [-1] * k
+    fric = [i for i, gi in enumerate(gaps) if getattr(gi, "friction", None) is not None]
+    if fric:
+        for j, i in enumerate(fric):
+            fric_col[i] = j
+        W = ca.horzcat(*[ca.reshape(ca.SX(gaps[i].friction), n, 1) for i in fric])
+        funcs.append(ca.Function("mech_fric", [t, q, qd, p], [ca.densify(W)], ["t", "q", "qd", "p"], ["W"]))
     if k:
         g = ca.vertcat(*[ca.SX(gi.gap) for gi in gaps])
         e = ca.vertcat(*[ca.SX(gi.e) for gi in gaps])
@@ -125,7 +136,7 @@ def build(model, plain_ode) -> Plan:
         funcs.append(ca.Function("mech_e", [p], [ca.densify(e)], ["p"], ["e"]))
     return Plan(functions=funcs, n=n, nu=nu, np=npar, m=m, k=k, nfix=nfix, nrows=nrows, nout=len(names),
                 base_rows=tuple(base_rows), fix_times=tuple(float(f.time) for f in fixes), gaps=gaps,
-                fixations=fixes)
+                fixations=fixes, fric_col=tuple(fric_col))
 
 
 def _jvp(ode, out, n, nu, npar, m):

@@ -43,7 +43,8 @@ typedef struct {
   const char *const *param_names;   /* np parameter names */
   const char *const *coords;   /* n coordinate names */
   const char *const *rows;     /* nrows constraint row names (constraints, contacts, fixations) */
-  MechFunction ode, out, jvp, start, params, dyn, cons, gap, e;
+  const int *fric_col;         /* k: column of mech_fric of each contact's sliding friction, -1 without */
+  MechFunction ode, out, jvp, start, params, dyn, cons, gap, e, fric;
 } MechModel;
 
 extern const MechModel MECH;

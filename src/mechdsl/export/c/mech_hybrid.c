@@ -123,16 +123,36 @@ int mech_accel_rows(Instance *I, double t, const double *x, const int *rows, int
   la_chol_solve(n, L, a0);
   if (nr_ == 0) { memcpy(qdd, a0, sizeof(double) * (size_t)n); return 0; }
   if (mech_call(I, &MECH.cons, ARGS(&t, q, qd, I->p), RES(c, A, ct, gam))) return 1;
+  /* sliding friction of closed contacts: M q'' = bias + (A' + B) lam, B the friction per unit
+     normal force (ContactSystem.accel); W = A M^-1 (A' + B) is then not symmetric */
+  int friction = 0;
+  double *Wf = Wc + (size_t)NR * NR;
+  for (int j = 0; MECH.fric.f && j < nr_; j++) {
+    int i = rows[j] - MECH.m;
+    friction |= i >= 0 && i < MECH.k && MECH.fric_col[i] >= 0;
+  }
+  if (friction && mech_call(I, &MECH.fric, ARGS(&t, q, qd, I->p), RES(Wf))) return 1;
   for (int j = 0; j < nr_; j++) {
     double *col = X + (size_t)j * n;
-    for (int i = 0; i < n; i++) col[i] = AT(A, NR, rows[j], i);
+    int i = rows[j] - MECH.m, fc = friction && i >= 0 && i < MECH.k ? MECH.fric_col[i] : -1;
+    for (int l = 0; l < n; l++) col[l] = AT(A, NR, rows[j], l) + (fc >= 0 ? Wf[(size_t)fc * n + l] : 0.0);
     la_chol_solve(n, L, col);
   }
   for (int i = 0; i < nr_; i++) {
     for (int j = 0; j < nr_; j++) AT(W, nr_, i, j) = row_dot(A, NR, n, rows[i], X + (size_t)j * n);
     rr[i] = -(row_dot(A, NR, n, rows[i], a0) + gam[rows[i]]);
   }
-  if (solve_sym(nr_, W, Wc, rr, I->ipiv)) return 3;
+  if (friction) {
+    double *b = (double *)malloc(sizeof(double) * (size_t)(nr_ + 1));
+    if (!b) return 1;
+    memcpy(Wc, W, sizeof(double) * (size_t)nr_ * nr_);
+    memcpy(b, rr, sizeof(double) * (size_t)nr_);
+    int st = la_lu_solve(nr_, Wc, b, I->ipiv);
+    if (st) st = la_min_norm(nr_, nr_, W, nr_, rr, b, NULL);
+    if (!st) memcpy(rr, b, sizeof(double) * (size_t)nr_);
+    free(b);
+    if (st) return 3;
+  } else if (solve_sym(nr_, W, Wc, rr, I->ipiv)) return 3;
   for (int i = 0; i < n; i++) {
     double v = a0[i];
     for (int j = 0; j < nr_; j++) v += X[(size_t)j * n + i] * rr[j];

@@ -29,7 +29,7 @@ static void grow(cint *have, cint want) { if (want > *have) *have = want; }
 
 static const MechFunction *functions(int i) {
   const MechFunction *all[] = {&MECH.ode, &MECH.out, &MECH.jvp, &MECH.start, &MECH.params, &MECH.dyn,
-                               &MECH.cons, &MECH.gap, &MECH.e};
+                               &MECH.cons, &MECH.gap, &MECH.e, &MECH.fric};
   return i < (int)(sizeof all / sizeof all[0]) ? all[i] : NULL;
 }
 
@@ -69,7 +69,7 @@ Instance *mech_new(const char *name, int kind, void *env, mech_logger log, int l
   I->ipiv = (int *)zalloc((size_t)(nr + n), sizeof(int));
   I->recent = (double *)zalloc(ZENO_EVENTS, sizeof(double));
   /* the hot scratch of mech_accel_rows and the event function (mech_hybrid.c) */
-  I->nwork = (size_t)(4 * n * n + 3 * nr * n + 3 * nr * nr + 8 * (n + nr) + 2 * k + 64);
+  I->nwork = (size_t)(4 * n * n + 5 * nr * n + 3 * nr * nr + 8 * (n + nr) + 2 * k + 64);
   I->work = (double *)zalloc(I->nwork, sizeof(double));
   if (!I->name || !I->arg || !I->res || !I->iw || !I->w || !I->p || !I->free || !I->x || !I->xdot || !I->u
       || !I->y || !I->lam || !I->x_set || !I->closed || !I->fix_done || !I->active || !I->fix_sel
