@@ -44,7 +44,7 @@ def identifier_of(name: str) -> str:
 
 
 def _interfaces(model, fmi_type: str | None) -> tuple[bool, bool, list[str]]:
-    """(model exchange, co-simulation, notes) for the requested type; a MechError (E882)
+    """(model exchange, co-simulation, notes) for the requested type; a MechError (E892)
     when the model cannot be represented as asked."""
     notes = []
     contacts = bool(model.model.contacts)
@@ -62,7 +62,7 @@ def _interfaces(model, fmi_type: str | None) -> tuple[bool, bool, list[str]]:
                          "state at events; the FMU is for co-simulation, which handles them inside its steps")
         else:
             raise MechError(Diagnostic(
-                "E882", f"model exchange cannot represent {model.name}: it has {what} ({names}), whose impacts "
+                "E892", f"model exchange cannot represent {model.name}: it has {what} ({names}), whose impacts "
                         "jump the speeds at events the importer's integrator would have to apply",
                 model.model.contacts[0].span,
                 help="export for co-simulation (--fmi-type cs): the FMU then steps itself and handles "

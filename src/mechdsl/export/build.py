@@ -35,13 +35,13 @@ def platform_folder(fmi_version: int) -> tuple[str, str]:
     if sys.platform.startswith("linux") and arch:
         if fmi_version == 2:
             if arch != "x86_64":
-                raise MechError(Diagnostic("E883", f"FMI 2.0 names no platform folder for Linux on {machine}",
+                raise MechError(Diagnostic("E893", f"FMI 2.0 names no platform folder for Linux on {machine}",
                                            help="export FMI 3.0 (--fmi-version 3)"))
             return "linux64", ".so"
         return f"{arch}-linux", ".so"
     if sys.platform == "darwin" and arch:
         return ("darwin64" if fmi_version == 2 else f"{arch}-darwin"), ".dylib"
-    raise MechError(Diagnostic("E883", f"exporting an FMU is not supported on this platform ({sys.platform}, {machine})",
+    raise MechError(Diagnostic("E893", f"exporting an FMU is not supported on this platform ({sys.platform}, {machine})",
                                help="export on Linux or macOS with a C compiler"))
 
 
@@ -141,7 +141,7 @@ def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
 
     cc = find_compiler()
     if cc is None:
-        raise MechError(Diagnostic("E883", "cannot build the FMU's binary: no C compiler found (looked for $CC, gcc, cc, clang)",
+        raise MechError(Diagnostic("E893", "cannot build the FMU's binary: no C compiler found (looked for $CC, gcc, cc, clang)",
                                    help="install a C compiler (gcc or clang), or set CC"))
     version = compiler_version(cc)
     headers = "".join(srcs[h] for h in sorted(srcs) if h.endswith(".h"))
@@ -149,7 +149,7 @@ def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
     try:
         objdir.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise MechError(Diagnostic("E883", f"cannot create the object cache {objdir}: {e.strerror or e}")) from None
+        raise MechError(Diagnostic("E893", f"cannot create the object cache {objdir}: {e.strerror or e}")) from None
     with tempfile.TemporaryDirectory(prefix="mechdsl-fmu-") as tmp:
         for name, text in srcs.items():
             (Path(tmp) / name).write_text(text)
@@ -180,13 +180,13 @@ def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
             except OSError:
                 pass
         if errors:
-            raise MechError(Diagnostic("E883", f"C compilation of the FMU failed ({Path(cc).name}): {errors[0]}"))
+            raise MechError(Diagnostic("E893", f"C compilation of the FMU failed ({Path(cc).name}): {errors[0]}"))
         lib = Path(tmp) / f"{identifier}{suffix}"
         r = subprocess.run([cc, "-shared", *(o.name for o in objs), "-o", lib.name, "-lm"], cwd=tmp,
                            capture_output=True, text=True)
         if r.returncode != 0:
             tail = " | ".join((r.stderr or r.stdout).strip().splitlines()[-3:])
-            raise MechError(Diagnostic("E883", f"linking the FMU's binary failed ({Path(cc).name}): {tail}"))
+            raise MechError(Diagnostic("E893", f"linking the FMU's binary failed ({Path(cc).name}): {tail}"))
         return lib.read_bytes()
 
 

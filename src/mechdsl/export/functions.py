@@ -94,7 +94,7 @@ def build(model, plain_ode) -> Plan:
     try:
         out = ca.Function("mech_out", [t, x, u, p, lam], [ca.densify(y)], ["t", "x", "u", "p", "lam"], ["y"])
     except RuntimeError as e:
-        raise MechError(Diagnostic("E880", f"cannot export the outputs of '{eom.name}': "
+        raise MechError(Diagnostic("E890", f"cannot export the outputs of '{eom.name}': "
                                    f"{str(e).strip().splitlines()[-1]}",
                                    help="an output must depend only on coordinates, speeds, time, "
                                         "inputs, parameters and constraint multipliers")) from None

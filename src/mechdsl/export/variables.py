@@ -154,7 +154,7 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
     if clash:
         from ..diagnostics import Diagnostic, MechError
 
-        raise MechError(Diagnostic("E881", f"cannot export '{model.name}': the name '{clash[0]}' is used twice "
+        raise MechError(Diagnostic("E891", f"cannot export '{model.name}': the name '{clash[0]}' is used twice "
                                    "among its variables and the FMU's own (mechdsl.*, time)",
                                    help="rename the model's declaration"))
     return out
