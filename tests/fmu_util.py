@@ -34,7 +34,12 @@ def run_fmu(path, model, fmi_type: str, t_end: float, dt: float, **kw):
     out = list(kw.pop("output", [])) + names
     res = fmpy.simulate_fmu(str(path), fmi_type=fmi_type, stop_time=t_end, output_interval=dt,
                             relative_tolerance=tol, output=out, record_events=False, **kw)
-    return np.array([[row[n] for n in names] for row in res]), res
+    # one row per output time (the last one recorded there: after an event at that time)
+    grid = np.linspace(0.0, t_end, int(round(t_end / dt)) + 1)
+    t = np.asarray(res["time"], float)
+    rows = [int(np.flatnonzero(np.abs(t - tg) <= 1e-9 * max(1.0, t_end))[-1]) for tg in grid
+            if np.any(np.abs(t - tg) <= 1e-9 * max(1.0, t_end))]
+    return np.array([[res[n][i] for n in names] for i in rows]), res[rows]
 
 
 def assert_agree(X, ref, what: str = "") -> float:
