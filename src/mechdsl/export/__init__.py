@@ -77,9 +77,13 @@ def _settings(model):
 
 
 def _defaults(model, s, plan) -> dict:
+    """The mechdsl.* settings' start values; those of contacts only for a model with contacts
+    (the others get placeholders the runtime never reads, and no variable: ``variables.table``)."""
     from . import formulate
 
-    c = formulate.contact_defaults(s)
+    contacts = bool(plan.k or plan.nfix)
+    c = formulate.contact_defaults(s) if contacts else \
+        {"rest_speed": 0.0, "impact_order": 0, "max_events": 0, "acc_tol": 0.0, "samples": 1}
     span = float(s.t_end) - float(s.t_start)
     method = str(s.method or "auto").lower()
     one = method in ("dopri5", "rk45", "scipy-rk45") or (method == "auto" and s.rtol >= 1e-5)

@@ -25,6 +25,9 @@ RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_hybrid.c", "mech_linalg.c")
 HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
            3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 CFLAGS = ["-O2", "-fPIC", "-fvisibility=hidden", "-std=gnu11"]
+# units off the stepping loop's hot path compile at -O1 (half gcc's time there; mech_hybrid's
+# constrained accelerations run in the loop only while contacts are closed or points fixed)
+LIGHT = ("mech_runtime.c", "mech_hybrid.c", "fmi2.c", "fmi3.c", "model_data.c")
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
@@ -132,12 +135,24 @@ def c_files(srcs: dict) -> list[str]:
     return [f for f in order if f in srcs]
 
 
+def unit_flags(name: str, text: str) -> list[str]:
+    """gcc flags of one source file (the model's optimization level by its size, codegen.cflags_for)."""
+    from ..eom.codegen import cflags_for
+
+    flags = list(CFLAGS)
+    if name == "model.c":
+        flags[0] = cflags_for(len(text))[0]
+    elif name in LIGHT:
+        flags[0] = "-O1"
+    return flags
+
+
 def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
     """The shared library of the sources (bytes); objects cached by content."""
     import subprocess
     import tempfile
 
-    from ..eom.codegen import cache_dir, cflags_for, compiler_version, find_compiler
+    from ..eom.codegen import cache_dir, compiler_version, find_compiler
 
     cc = find_compiler()
     if cc is None:
@@ -155,9 +170,7 @@ def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
             (Path(tmp) / name).write_text(text)
         procs, objs = [], []
         for name in c_files(srcs):
-            flags = list(CFLAGS)
-            if name == "model.c":
-                flags[0] = cflags_for(len(srcs[name]))[0]
+            flags = unit_flags(name, srcs[name])
             key = hashlib.sha256("\n".join([srcs[name], headers, repr(flags), version]).encode()).hexdigest()[:32]
             cached = objdir / f"{key}.o"
             obj = Path(tmp) / (name[:-2] + ".o")

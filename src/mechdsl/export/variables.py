@@ -128,17 +128,20 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
                             o.unit if o is not None else None, None, None, o.doc if o is not None else "",
                             kind="output"))
         vr += 1
+    used = _settings_used(plan)
     for name, doc, unit in REAL_SETTINGS:
-        out.append(Variable(name, vr, "Real", "parameter", "fixed", "exact", float(settings[name]), unit, 0.0, None,
-                            doc, kind="setting"))
+        if name in used:
+            out.append(Variable(name, vr, "Real", "parameter", "fixed", "exact", float(settings[name]), unit, 0.0,
+                                None, doc, kind="setting"))
         vr += 1
     for name, doc in STATISTICS:
         out.append(Variable(name, vr, "Real", "local", "discrete", "calculated", None, None, None, None, doc,
                             kind="statistic"))
         vr += 1
     for name, doc, lo, hi in INT_SETTINGS:
-        out.append(Variable(name, vr, "Integer", "parameter", "fixed", "exact", int(settings[name]), None, lo, hi, doc,
-                            kind="setting"))
+        if name in used:
+            out.append(Variable(name, vr, "Integer", "parameter", "fixed", "exact", int(settings[name]), None, lo, hi,
+                                doc, kind="setting"))
         vr += 1
     for p in model.model.parameters:
         if p.integer and not p.input:
@@ -158,6 +161,17 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
                                    "among its variables and the FMU's own (mechdsl.*, time)",
                                    help="rename the model's declaration"))
     return out
+
+
+def _settings_used(plan) -> set[str]:
+    """The mechdsl.* settings that mean something for this model (the others are left out of
+    the modelDescription; their value references stay reserved)."""
+    used = {"mechdsl.rtol", "mechdsl.atol", "mechdsl.method", "mechdsl.max_steps"}
+    if plan.m or plan.k or plan.nfix:
+        used |= {"mechdsl.drift_bound", "mechdsl.projection_interval"}
+    if plan.k or plan.nfix:
+        used |= {"mechdsl.rest_speed", "mechdsl.impact_order", "mechdsl.max_events"}
+    return used
 
 
 def unit_definition(unit: str) -> tuple[dict, float]:
