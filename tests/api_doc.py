@@ -25,6 +25,7 @@ CLASSES = [
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
     ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),
+    ("mechdsl.export.ExportInfo", "what `Model.export_fmu` returns"),
 ]
 
 
