@@ -206,14 +206,9 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
   info->valuesOfContinuousStatesChanged = fmi2False;
   info->nextEventTimeDefined = fmi2False;
   info->nextEventTime = 0.0;
-  if (MECH.m) {                 /* the drift of the constraints: project (positions, then speeds) */
-    double dq, dv, bound = mech_drift_bound(INST);
-    if (mech_drift(INST, &dq, &dv)) return fail(INST);
-    if (dq > 0.5 * bound || dv > 0.5 * bound) {
-      if (mech_project_model(INST, 1e-3 * bound)) return fail(INST);
-      info->valuesOfContinuousStatesChanged = fmi2True;
-    }
-  }
+  int changed = 0;
+  if (mech_me_event_update(INST, &changed)) return fail(INST);
+  info->valuesOfContinuousStatesChanged = changed ? fmi2True : fmi2False;
   return fmi2OK;
 }
 
@@ -227,14 +222,10 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStat
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
   (void)noSetFMUStatePriorToCurrentPoint;
   CHECK(INST->kind == KIND_ME && INST->mode == MODE_CONTINUOUS, "fmi2CompletedIntegratorStep");
-  *enterEventMode = fmi2False;
+  int enter = 0;
   *terminateSimulation = fmi2False;
-  INST->stats[STAT_STEPS] += 1;
-  if (MECH.m) {
-    double dq, dv, bound = mech_drift_bound(INST);
-    if (mech_drift(INST, &dq, &dv)) return fail(INST);
-    if (dq > 0.5 * bound || dv > 0.5 * bound) *enterEventMode = fmi2True;
-  }
+  if (mech_me_step_done(INST, &enter)) return fail(INST);
+  *enterEventMode = enter ? fmi2True : fmi2False;
   return fmi2OK;
 }
 
@@ -298,17 +289,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
   (void)noSetFMUStatePriorToCurrentPoint;
   CHECK(INST->kind == KIND_CS && INST->mode == MODE_STEP, "fmi2DoStep");
-  double t_end = currentCommunicationPoint + communicationStepSize;
-  if (!(communicationStepSize >= 0.0)) {
-    mech_log(INST, LOG_ERROR, "fmi2DoStep: the communication step size must be >= 0 (got %g)", communicationStepSize);
-    return fmi2Error;
-  }
-  if (currentCommunicationPoint > INST->t + 1e-9 * (1.0 + INST->t) || currentCommunicationPoint < INST->t - 1e-9 * (1.0 + INST->t)) {
-    mech_log(INST, LOG_ERROR, "fmi2DoStep from t = %.17g, but the FMU is at t = %.17g", currentCommunicationPoint, INST->t);
-    return fmi2Error;
-  }
-  INST->msg[0] = 0;
-  int st = mech_do_step(INST, t_end);
+  int st = mech_cs_step(INST, currentCommunicationPoint, communicationStepSize);
   if (st == LOG_OK) return fmi2OK;
   if (st == LOG_DISCARD) return fmi2Discard;
   return fail(INST);

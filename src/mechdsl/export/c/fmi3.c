@@ -353,14 +353,9 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
   *valuesOfContinuousStatesChanged = fmi3False;
   *nextEventTimeDefined = fmi3False;
   *nextEventTime = 0.0;
-  if (MECH.m) {                 /* the drift of the constraints: project (positions, then speeds) */
-    double dq, dv, bound = mech_drift_bound(INST);
-    if (mech_drift(INST, &dq, &dv)) return fail(INST);
-    if (dq > 0.5 * bound || dv > 0.5 * bound) {
-      if (mech_project_model(INST, 1e-3 * bound)) return fail(INST);
-      *valuesOfContinuousStatesChanged = fmi3True;
-    }
-  }
+  int changed = 0;
+  if (mech_me_event_update(INST, &changed)) return fail(INST);
+  *valuesOfContinuousStatesChanged = changed ? fmi3True : fmi3False;
   return fmi3OK;
 }
 
@@ -376,14 +371,10 @@ fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetF
                                        fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation) {
   (void)noSetFMUStatePriorToCurrentPoint;
   CHECK(INST->kind == KIND_ME && INST->mode == MODE_CONTINUOUS, "fmi3CompletedIntegratorStep");
-  *enterEventMode = fmi3False;
+  int enter = 0;
   *terminateSimulation = fmi3False;
-  INST->stats[STAT_STEPS] += 1;
-  if (MECH.m) {
-    double dq, dv, bound = mech_drift_bound(INST);
-    if (mech_drift(INST, &dq, &dv)) return fail(INST);
-    if (dq > 0.5 * bound || dv > 0.5 * bound) *enterEventMode = fmi3True;
-  }
+  if (mech_me_step_done(INST, &enter)) return fail(INST);
+  *enterEventMode = enter ? fmi3True : fmi3False;
   return fmi3OK;
 }
 
@@ -463,16 +454,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
   *eventHandlingNeeded = fmi3False;
   *terminateSimulation = fmi3False;
   *earlyReturn = fmi3False;
-  if (!(communicationStepSize >= 0.0)) {
-    mech_log(INST, LOG_ERROR, "fmi3DoStep: the communication step size must be >= 0 (got %g)", communicationStepSize);
-    return fmi3Error;
-  }
-  if (currentCommunicationPoint > INST->t + 1e-9 * (1.0 + INST->t) || currentCommunicationPoint < INST->t - 1e-9 * (1.0 + INST->t)) {
-    mech_log(INST, LOG_ERROR, "fmi3DoStep from t = %.17g, but the FMU is at t = %.17g", currentCommunicationPoint, INST->t);
-    return fmi3Error;
-  }
-  INST->msg[0] = 0;
-  int st = mech_do_step(INST, currentCommunicationPoint + communicationStepSize);
+  int st = mech_cs_step(INST, currentCommunicationPoint, communicationStepSize);
   *lastSuccessfulTime = INST->last_ok_time;
   if (st == LOG_OK) return fmi3OK;
   if (st == LOG_DISCARD) return fmi3Discard;

@@ -118,6 +118,9 @@ double mech_drift_bound(Instance *I);
 int mech_drift(Instance *I, double *dq, double *dv);
 int mech_project_model(Instance *I, double tol);
 int mech_consistent_start(Instance *I);
+int mech_me_step_done(Instance *I, int *enter_event);     /* model exchange: a completed step (drift check) */
+int mech_me_event_update(Instance *I, int *states_changed);   /* model exchange: project when drifted */
+int mech_cs_step(Instance *I, double t, double h);        /* co-simulation: checks, then mech_do_step */
 
 /* mech_hybrid.c */
 int mech_hybrid_start(Instance *I);        /* co-simulation: fixations due, impacts and contacts at the start */

@@ -325,6 +325,23 @@ int mech_project(Instance *I, double t, double *q, double *qd, const int *rows, 
 
 /* ------------------------------------------------------------------ impacts (impact_map.py) */
 
+/* v orthogonalized against the nb orthonormal columns of basis (n each; twice, for
+   accuracy); appended as column nb when its norm is above tol: 1, else 0 */
+static int append_orthonormal(int n, double *basis, int nb, double *v, double tol) {
+  for (int pass = 0; pass < 2; pass++)
+    for (int b = 0; b < nb; b++) {
+      double s = 0.0;
+      for (int j = 0; j < n; j++) s += basis[(size_t)b * n + j] * v[j];
+      for (int j = 0; j < n; j++) v[j] -= s * basis[(size_t)b * n + j];
+    }
+  double nr = 0.0;
+  for (int j = 0; j < n; j++) nr += v[j] * v[j];
+  nr = sqrt(nr);
+  if (!(nr > tol)) return 0;
+  for (int j = 0; j < n; j++) basis[(size_t)nb * n + j] = v[j] / nr;
+  return 1;
+}
+
 /* Lagrange's impact equations: v+ from v- = v with the candidate rows G (kc x n), the
    bilateral rows B (nb x n) held (B v+ + bt = 0); e restitution; 0 ok, 1 contradictory,
    2 the numerics failed.  Dense column-major, n small. */
@@ -378,37 +395,19 @@ static int solve_impact(const Eval *E, const double *v, int kc, const double *G,
     double res = 0.0, rn = 0.0;
     for (int i = 0; i < nb; i++) { double r = row_dot(Bt, nb, n, i, w0) - rB[i]; res += r * r; rn += rB[i] * rB[i]; }
     if (sqrt(res) > 1e-9 * fmax(1.0, sqrt(rn))) { free(rB); st = 1; goto done; }
-    /* null space by Gram-Schmidt of the unit vectors against the rows of Bt (twice, for accuracy) */
+    /* null space by Gram-Schmidt of the unit vectors against the rows of Bt */
     double *basis = (double *)malloc(sizeof(double) * (size_t)(n * n + 1));
     if (!basis) { free(rB); st = 2; goto done; }
     int nbasis = 0;
     for (int i = 0; i < nb; i++) {
       for (int j = 0; j < n; j++) tmp[j] = AT(Bt, nb, i, j);
-      for (int pass = 0; pass < 2; pass++)
-        for (int b = 0; b < nbasis; b++) {
-          double s = 0.0;
-          for (int j = 0; j < n; j++) s += basis[(size_t)b * n + j] * tmp[j];
-          for (int j = 0; j < n; j++) tmp[j] -= s * basis[(size_t)b * n + j];
-        }
-      double nr = 0.0;
-      for (int j = 0; j < n; j++) nr += tmp[j] * tmp[j];
-      nr = sqrt(nr);
-      if (nr > 1e-12) { for (int j = 0; j < n; j++) basis[(size_t)nbasis * n + j] = tmp[j] / nr; nbasis++; }
+      nbasis += append_orthonormal(n, basis, nbasis, tmp, 1e-12);
     }
     d = 0;
     for (int c = 0; c < n && nbasis < n; c++) {
       for (int j = 0; j < n; j++) tmp[j] = j == c ? 1.0 : 0.0;
-      for (int pass = 0; pass < 2; pass++)
-        for (int b = 0; b < nbasis; b++) {
-          double s = 0.0;
-          for (int j = 0; j < n; j++) s += basis[(size_t)b * n + j] * tmp[j];
-          for (int j = 0; j < n; j++) tmp[j] -= s * basis[(size_t)b * n + j];
-        }
-      double nr = 0.0;
-      for (int j = 0; j < n; j++) nr += tmp[j] * tmp[j];
-      nr = sqrt(nr);
-      if (nr > 1e-8) {
-        for (int j = 0; j < n; j++) { basis[(size_t)nbasis * n + j] = tmp[j] / nr; N[(size_t)d * n + j] = tmp[j] / nr; }
+      if (append_orthonormal(n, basis, nbasis, tmp, 1e-8)) {
+        memcpy(N + (size_t)d * n, basis + (size_t)nbasis * n, sizeof(double) * (size_t)n);
         nbasis++; d++;
       }
     }

@@ -482,3 +482,40 @@ fail:
   free(buf); free(freeq);
   return 1;
 }
+
+/* ----------------------------------------------------------------- the interfaces' common steps */
+
+int mech_me_step_done(Instance *I, int *enter_event) {
+  *enter_event = 0;
+  I->stats[STAT_STEPS] += 1;
+  if (!MECH.m) return 0;
+  double dq, dv, bound = mech_drift_bound(I);
+  if (mech_drift(I, &dq, &dv)) return 1;
+  *enter_event = dq > 0.5 * bound || dv > 0.5 * bound;
+  return 0;
+}
+
+int mech_me_event_update(Instance *I, int *states_changed) {
+  *states_changed = 0;
+  if (!MECH.m) return 0;
+  double dq, dv, bound = mech_drift_bound(I);
+  if (mech_drift(I, &dq, &dv)) return 1;
+  if (dq > 0.5 * bound || dv > 0.5 * bound) {      /* positions, then speeds, back onto the constraints */
+    if (mech_project_model(I, 1e-3 * bound)) return 1;
+    *states_changed = 1;
+  }
+  return 0;
+}
+
+int mech_cs_step(Instance *I, double t, double h) {
+  if (!(h >= 0.0)) {
+    mech_log(I, LOG_ERROR, "the communication step size must be >= 0 (got %g)", h);
+    return LOG_ERROR;
+  }
+  if (t > I->t + 1e-9 * (1.0 + fabs(I->t)) || t < I->t - 1e-9 * (1.0 + fabs(I->t))) {
+    mech_log(I, LOG_ERROR, "a step from t = %.17g, but the FMU is at t = %.17g", t, I->t);
+    return LOG_ERROR;
+  }
+  I->msg[0] = 0;
+  return mech_do_step(I, t + h);
+}
