@@ -27,6 +27,7 @@ CLASSES = [
     ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),
     ("mechdsl.urdf.Imported", "what `mechdsl.urdf.convert` returns (`mechdsl.import_urdf` returns its text)"),
+    ("mechdsl.export.ExportInfo", "what `Model.export_fmu` returns"),
 ]
 
 

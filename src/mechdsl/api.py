@@ -8,6 +8,7 @@
     m.parameter_vector(l=0.5)                            # p with dependent parameters recomputed
     m.inputs                                             # the control inputs u: name, unit, bounds, default
     m.simulate(3.0, inputs={"F": lambda t, x: -k @ x})   # inputs: number, table, u(t), u(t, x), Function
+    m.export_fmu("model.fmu", fmi_version=2)             # an FMU (docs/export.md)
 
 Phases: parse -> analyze (here) -> derive (mechdsl.mechanics) -> generate/simulate.  Each
 Model caches its derived equations; models that differ only in parameter values share them.
@@ -464,6 +465,14 @@ class Model:
             self._remember()                         # with what the run derived on the way (lazy M, bias)
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.output.display
         return r
+
+    def export_fmu(self, path, *, fmi_version: int = 2, fmi_type: str | None = None, overwrite: bool = False):
+        """Write this model as a Functional Mock-up Unit (mechdsl.export.export_fmu; docs/export.md):
+        fmi_version 2 or 3; fmi_type "me", "cs", "both" or None (every interface the model can
+        have: co-simulation only with contacts).  Returns an ExportInfo."""
+        from .export import export_fmu
+
+        return export_fmu(self, path, fmi_version=fmi_version, fmi_type=fmi_type, overwrite=overwrite)
 
     def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
         """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
