@@ -2,7 +2,7 @@
 
 The FMU's sources are the CasADi-generated C of the model (model.c), its table
 (model_data.c), the runtime (mech_*.c, the same for every model), the compiled stepping
-loop of ``mech simulate`` (crk.c, copied unchanged from mechdsl/simulation), one FMI
+loop of ``mech simulate`` (crk.c, copied unchanged from mechdsl/simulation/backends), one FMI
 interface (fmi2.c or fmi3.c) and the official FMI headers.  They are compiled into one
 shared library with the system C compiler (symbols hidden but the FMI functions); object
 files are cached under the model cache by the hash of their text, flags and compiler, so an
@@ -123,7 +123,7 @@ def sources(meta: dict, plan, fmi_version: int) -> dict[str, str]:
     out["model_data.c"] = model_data(meta, plan, counts)
     for name in RUNTIME:
         out[name] = (HERE / name).read_text()
-    out["crk.c"] = (HERE.parent.parent / "simulation" / "crk.c").read_text()
+    out["crk.c"] = (HERE.parent.parent / "simulation" / "backends" / "crk.c").read_text()
     out[f"fmi{fmi_version}.c"] = (HERE / f"fmi{fmi_version}.c").read_text()
     for name in HEADERS[fmi_version]:
         out[name] = (HERE / "fmi" / name).read_text()

@@ -61,20 +61,18 @@ def point_position(eom, point):
 
 
 def contact_defaults(settings) -> dict:
-    """The contact options of a run with these settings (mechdsl.impacts.options):
-    rest_speed, impact order (0 simultaneous, 1 sequential), event offset, touch distance,
-    v_eps, acc_tol, drift tolerance, max_events, samples."""
-    from ..impacts.options import ContactOptions
+    """The contact options of a run with these settings (the settings group ``contacts``, with
+    the tolerances the event loop derives from them, mechdsl.impacts.options.ContactRun):
+    rest_speed, impact order (0 simultaneous, 1 sequential), max_events, samples, acc_tol."""
+    from ..impacts.options import ContactRun
 
-    o = ContactOptions(rtol=float(settings.rtol), atol=float(settings.atol),
-                       rest_speed=float(settings.rest_speed if settings.rest_speed is not None else 1e-3),
-                       impact_order=settings.impact_order or "simultaneous")
+    o = ContactRun(settings.contacts, settings.rtol, settings.atol)
     return {"rest_speed": o.rest_speed, "impact_order": 1 if o.impact_order == "sequential" else 0,
             "max_events": o.max_events, "samples": o.samples, "acc_tol": o.acc_tol}
 
 
 def dae_drift_bound(atol: float) -> float:
-    """The DAE back end's default drift bound (dae.options.DaeOptions.bound)."""
-    from ..dae.options import DaeOptions
+    """The DAE back end's default drift bound (simulation.settings.DaeOptions.bound)."""
+    from ..simulation.settings import DaeOptions
 
-    return DaeOptions(atol=float(atol)).bound
+    return DaeOptions().bound(float(atol))
