@@ -3,4 +3,5 @@
 ``COMMANDS`` lists the module names in the order ``mech --help`` shows them.  A module
 that fails to import (an optional part missing) is left out of the CLI with a note.
 """
-COMMANDS = ["check", "compile", "simulate", "sweep", "equations", "equilibrium", "linearize", "animate", "bench"]
+COMMANDS = ["check", "compile", "simulate", "sweep", "equations", "equilibrium", "linearize", "animate", "bench",
+            "examples", "completion"]

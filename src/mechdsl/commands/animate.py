@@ -66,8 +66,13 @@ def run(args) -> int:
     path = anim.save(args.output, overwrite=args.force)
     what = "bars of the coordinates (no bodies to draw)" if anim.view == "bars" else f"view {anim.view}"
     print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps, {anim.times[-1] - anim.times[0]:g} s of model time, {what}")
+    args.out.wrote(path)
+    args.out.set(target=target_line(args, m), model=m.name, frames=len(anim), fps=args.fps, speed=args.speed,
+                 view=anim.view, t_start=float(anim.times[0]), t_end=float(anim.times[-1]),
+                 success=r.failure is None)
     if r.failure is not None:
         print(f"mech: error: {r.failure}; animated up to t = {r.t[-1]:.6g}", file=sys.stderr)
+        args.out.fail("simulation", f"{r.failure}; animated up to t = {r.t[-1]:.6g}")
         return 1
     return 0
 
