@@ -9,10 +9,12 @@ from what this script generates.
 from __future__ import annotations
 
 import inspect
+import os
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+# the page lives in the source checkout (MECHDSL_CHECKOUT when the tests run from a copy elsewhere)
+ROOT = Path(os.environ.get("MECHDSL_CHECKOUT") or Path(__file__).resolve().parents[1])
 DOCS = ROOT / "docs" / "api.md"
 
 # (import path, what it is) of the classes the top-level functions hand out

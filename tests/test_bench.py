@@ -28,10 +28,10 @@ from mechdsl.bench import measure
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 
-from conftest import MODELS, REFERENCES
+from conftest import CHECKOUT, MODELS, REFERENCES
 
 PENDULUM = MODELS / "pendulum.mech"
-STIFF = MODELS.parent / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
+STIFF = CHECKOUT / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
 T_END = 3.0
 POINTS = 31
 

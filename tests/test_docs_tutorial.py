@@ -5,11 +5,11 @@ import shlex
 
 import numpy as np
 
-from conftest import ROOT
+from conftest import CHECKOUT
 
 
 def test_tutorial_python_snippet(tmp_path, monkeypatch):
-    text = (ROOT / "docs" / "tutorial.md").read_text()
+    text = (CHECKOUT / "docs" / "tutorial.md").read_text()
     model = re.search(r"```\n(model Pendulum \"A point mass.*?end Pendulum;)\n```", text, re.S).group(1)
     code = re.search(r"```python\n(.*?)```", text, re.S).group(1)
     monkeypatch.chdir(tmp_path)
@@ -34,7 +34,7 @@ def test_tutorial_shell_sessions_print_what_the_text_shows(tmp_path, monkeypatch
 
     monkeypatch.chdir(tmp_path)
     ran = 0
-    for block in _blocks((ROOT / "docs" / "tutorial.md").read_text()):
+    for block in _blocks((CHECKOUT / "docs" / "tutorial.md").read_text()):
         if block.startswith("model Pendulum \"A point mass"):
             (tmp_path / "pendulum.mech").write_text(block)
         elif block.startswith("model Pendulum2"):

@@ -2,16 +2,16 @@
 import re
 import subprocess
 
-from conftest import ROOT
+from conftest import CHECKOUT
 
 MARKER = re.compile(rb"^(<{7}|>{7}) |^={7}$", re.M)
 
 
 def test_no_merge_conflict_markers():
-    files = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, check=True).stdout.decode().split()
+    files = subprocess.run(["git", "ls-files"], cwd=CHECKOUT, capture_output=True, check=True).stdout.decode().split()
     bad = []
     for name in files:
-        path = ROOT / name
+        path = CHECKOUT / name
         if path.suffix in (".md", ".py", ".toml", ".mech", ".lark", ".txt", ".json", ".ipynb", "") and path.is_file():
             if MARKER.search(path.read_bytes()):
                 bad.append(name)

@@ -7,9 +7,15 @@ Python API::
     r = m.simulate(5.0, rtol=1e-8, atol=1e-10)
     r.t, r.q, r.qd, r["x"]
 """
+import logging
+
 from .diagnostics import Diagnostic, MechError, Span, UsageError
 
 __version__ = "0.1.0"
+
+# Library messages (what is derived, loaded from a cache, compiled) go to the "mechdsl" logger;
+# nothing is shown unless the application configures logging (``mech`` does: -v, -vv)
+logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 
 def load(path, model=None, scene=None, **kw):

@@ -15,6 +15,7 @@ Model caches its derived equations; models that differ only in parameter values 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 from typing import TYPE_CHECKING, Any
@@ -29,6 +30,8 @@ from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 # (mechdsl.eom.modelcache) never needs it
 if TYPE_CHECKING:
     from .semantic import Program
+
+log = logging.getLogger(__name__)
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
@@ -70,7 +73,9 @@ def _load_text(text: str, filename: str, model, scene, units: bool, cache: bool)
     info = _Cache((text, filename, bool(units)), (model, scene), ()) if cache else None
     hit = info.lookup() if info is not None else None
     if hit is not None:
+        log.debug("%s: model %s read from the model cache", filename, hit.name)
         return hit
+    log.debug("%s: parsing and analysing", filename)
     m = Model._from_program(_program(text, True, filename, units), model, scene)
     if info is not None:
         info.claim(m)
@@ -317,6 +322,8 @@ class Model:
             if base is None:
                 from .mechanics import derive
 
+                log.info("deriving the equations of motion of %s (%d coordinates)", self.name,
+                         len(self.model.coordinates))
                 base = derive(self.model)
                 from .eom.modelcache import record_callables
 

@@ -95,10 +95,15 @@ def _limit(text: str) -> tuple[str, int]:
 def main(argv: list[str] | None = None) -> int:
     """Run ``mech`` with these words (default: sys.argv[1:]); returns the exit code."""
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    words = sys.argv[1:] if argv is None else list(argv)
+    if words == ["--version"]:           # without building every command's parser (imports)
+        from . import __version__
+
+        print(f"mechdsl {__version__}")
+        return 0
     from .commands import COMMANDS
     from .commands._output import Output
 
-    words = sys.argv[1:] if argv is None else list(argv)
     # known before parsing, so that a usage error is a JSON document too
     out = Output(words[0] if words and words[0] in COMMANDS else None, json_mode="--json" in words)
     with out.session():
@@ -113,11 +118,6 @@ def _run(words: list[str], out) -> int:
     try:
         from .commands import COMMANDS
 
-        if words == ["--version"]:           # without building every command's parser (imports)
-            from . import __version__
-
-            print(f"mechdsl {__version__}")
-            return 0
         ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
         args = ap.parse_args(words)
         if not getattr(args, "_run", None):
@@ -145,8 +145,6 @@ def _run(words: list[str], out) -> int:
         out.fail("usage", str(e))
         return 2
     except MechError as e:
-        from .diagnostics import print_diagnostics
-
         # diagnostics of later phases that carry no source position are located at the model
         # (or scene) the command worked on, else at the file
         path = getattr(args, "file", None) or (getattr(args, "files", None) or [None])[0]
@@ -170,6 +168,17 @@ def _run(words: list[str], out) -> int:
               file=sys.stderr)
         out.fail("internal", f"{type(e).__name__}: {e}")
         return 3
+
+
+def print_diagnostics(diags) -> None:
+    """The located diagnostics on stderr, and how many errors when more than one."""
+    from .diagnostics import format_diagnostics
+
+    diags = list(diags)
+    print(format_diagnostics(diags), file=sys.stderr)
+    n_err = sum(d.severity == "error" for d in diags)
+    if n_err > 1:
+        print(f"{n_err} errors", file=sys.stderr)
 
 
 def _locate(d, path, where=None):
