@@ -322,8 +322,7 @@ class Model:
             if base is None:
                 from .mechanics import derive
 
-                log.info("deriving the equations of motion of %s (%d coordinates)", self.name,
-                         len(self.model.coordinates))
+                log.info("deriving the equations of motion of %s", self.name)
                 base = derive(self.model)
                 from .eom.modelcache import record_callables
 
