@@ -94,6 +94,12 @@ def generate() -> str:
 
             doc = _doc(obj) or _doc(getattr(mechdsl.api, name, None)) or "(no docstring)"
             lines += [f"### `mechdsl.{_sig(name, obj)}`", "", doc, ""]
+    import mechdsl.examples
+
+    lines += ["## `mechdsl.examples`", "", _doc(mechdsl.examples), ""]
+    for name in mechdsl.examples.__all__:
+        lines += [f"### `mechdsl.examples.{_sig(name, getattr(mechdsl.examples, name))}`", "",
+                  _doc(getattr(mechdsl.examples, name)) or "(no docstring)", ""]
     lines += ["## Classes returned by the API", ""]
     for path, what in CLASSES:
         cls = _obj(path)

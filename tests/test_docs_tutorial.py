@@ -19,6 +19,12 @@ def test_tutorial_python_snippet(tmp_path, monkeypatch):
     assert ns["r"].q.shape == (501, 1)
     assert abs(ns["lin"].modes().frequencies[0] - np.sqrt(9.81)) < 1e-9
     assert [e.stable for e in ns["eq"]] == [True, False]
+    # the reprs the text shows in comments (`name  # <...>`) are what Python shows ("..." elides)
+    shown = re.findall(r"^(\w+)(?: = [^#]*?)?\s+# (\[?<.*>\]?)$", code, flags=re.M)
+    assert {name for name, _ in shown} >= {"m", "r", "eq", "lin"}
+    for name, text in shown:
+        pattern = ".*?".join(re.escape(part) for part in text.split("..."))
+        assert re.fullmatch(pattern, repr(ns[name])), f"tutorial shows {text!r}, Python {ns[name]!r}"
 
 
 def _blocks(text):
