@@ -122,3 +122,19 @@ def test_first_steps_in_an_empty_folder(tmp_path):
     assert res["t_end"] == pytest.approx(10.0) and res["points"] > 2
     assert res["accuracy"]["energy_drift_relative"] < 1e-6
     assert "model Pendulum" in r.stderr          # the human summary went to stderr
+
+
+def test_the_readme_shows_the_installed_form_and_it_works(tmp_path):
+    """README.md's command for an installed package (no checkout) runs as written in an empty folder."""
+    import shlex
+
+    from conftest import CHECKOUT
+
+    line = next(ln.strip() for ln in (CHECKOUT / "README.md").read_text().splitlines()
+                if ln.strip().startswith("mech examples --copy "))
+    for command in line.split("&&"):
+        words = shlex.split(command)
+        assert words[0] == "mech"
+        r = _mech(*words[1:], cwd=tmp_path)
+        assert r.returncode == 0, f"{command}: {r.stderr}"
+    assert (tmp_path / "double_pendulum.csv").is_file() and (tmp_path / "double_pendulum.png").is_file()
