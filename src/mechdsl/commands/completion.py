@@ -35,8 +35,6 @@ def run(args) -> int:
 
 def script(shell: str, shtab) -> str:
     """The completion script of the whole ``mech`` parser for ``shell``."""
-    import argparse
-
     from ..cli import build_parser
 
     parser = build_parser()

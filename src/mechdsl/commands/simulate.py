@@ -64,7 +64,7 @@ def run(args) -> int:
     interrupted = False
     try:
         r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
-                           progress=(not args.no_progress) and sys.stderr.isatty())
+                           progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty())
     except KeyboardInterrupt as e:
         # Ctrl-C: a back end that kept its results up to there (mechdsl.dae.RunInterrupted)
         # hands them over; they are written like a failed run's, and the exit code is 130

@@ -97,7 +97,7 @@ def run(args) -> int:
         print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
     nc = args.output if args.output and args.output.endswith(".nc") else None
     ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=nc, workers=args.workers,
-                     progress=(not args.no_progress) and sys.stderr.isatty(), overwrite=True,
+                     progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty(), overwrite=True,
                      rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
     written = [nc] if nc else []
     if args.output and args.output.endswith(".csv"):
