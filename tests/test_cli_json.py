@@ -189,3 +189,17 @@ def test_json_from_a_process_keeps_stdout_clean(tmp_path):
     doc = json.loads(r.stdout)
     validate(doc)
     assert doc["result"]["run"]["integrator"].startswith("casadi:cvodes")
+
+
+@pytest.mark.parametrize("shell", ["bash", "zsh", "tcsh"])
+def test_completion_scripts_know_every_command(capsys, tmp_path, shell):
+    assert main(["completion", shell]) == 0
+    script = capsys.readouterr().out
+    for name in COMMANDS:
+        assert name in script, name
+    assert "json" in script and "t-end" in script
+    if shell == "bash":                     # generated, so at least it parses
+        f = tmp_path / "mech.bash"
+        f.write_text(script)
+        r = subprocess.run(["bash", "-n", str(f)], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
