@@ -16,3 +16,23 @@ def test_no_merge_conflict_markers():
             if MARKER.search(path.read_bytes()):
                 bad.append(name)
     assert not bad, f"merge-conflict markers in {bad}"
+
+
+# the tests run against the installed wheel from a copy of tests/ (.ci/run): a path built from
+# the source tree's layout would find the checkout's files there, or nothing
+SOURCE_LAYOUT = re.compile(r'parents\[\d\]|\.parent\.parent|rsplit\("/src/"|"\.\.", "models"|CHECKOUT / "(models|src)"'
+                           r'|ROOT / "(models|src)"')
+# the pages generated from the checkout's docs/ (they fall back to the folder above tests/)
+ABOUT_THE_CHECKOUT = {"conftest.py", "api_doc.py", "errors_doc.py"}
+
+
+def test_no_test_finds_files_through_the_source_layout():
+    bad = []
+    for path in sorted((CHECKOUT / "tests").glob("*.py")):
+        if path.name in ABOUT_THE_CHECKOUT:
+            continue
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if SOURCE_LAYOUT.search(line):
+                bad.append(f"{path.name}:{n}: {line.strip()}")
+    assert not bad, ("use conftest.MODELS / mechdsl.examples, conftest.TESTS, mechdsl.__file__, or conftest.CHECKOUT "
+                     "for the repository's own docs:\n" + "\n".join(bad))
