@@ -203,3 +203,15 @@ def test_completion_scripts_know_every_command(capsys, tmp_path, shell):
         f.write_text(script)
         r = subprocess.run(["bash", "-n", str(f)], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr
+
+
+def test_the_schema_rejects_a_wrong_document(capsys):
+    import jsonschema
+
+    main(["examples", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    validate(doc)
+    for broken in ({**doc, "ok": "yes"}, {**doc, "result": {"examples": [{"name": 1}]}},
+                   {**doc, "diagnostics": [{"code": "E201"}]}, {k: v for k, v in doc.items() if k != "error"}):
+        with pytest.raises(jsonschema.ValidationError):
+            validate(broken)
