@@ -112,7 +112,7 @@ def test_equilibrium_and_linearize(capsys, tmp_path):
 def test_animate(capsys, tmp_path):
     out = tmp_path / "a.gif"
     rc, doc, _ = run_json(capsys, "animate", PENDULUM, "-o", str(out), "--t-end", "0.2", "--fps", "10",
-                          "--size", "64x64")
+                          "--speed", "1", "--size", "64x64")
     assert rc == 0 and doc["files_written"] == [str(out)] and out.is_file()
     assert doc["result"]["frames"] == 3 and doc["result"]["fps"] == 10
 

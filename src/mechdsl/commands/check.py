@@ -39,8 +39,9 @@ def run(args) -> int:
             else:
                 targets = check_targets(program)
             lines = []
+            parts = program.part_users()
             if not (args.scene or args.model):
-                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in program.part_users().items()]
+                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
                 problem = check_start_state(m)
