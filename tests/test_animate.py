@@ -301,7 +301,7 @@ def test_a_30_fps_gif_plays_at_30_fps(tmp_path):
 
 
 def test_a_gif_faster_than_50_fps_is_refused_before_any_work(tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.gif"), "--fps", "60"])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.gif"), "--fps", "60"])
     err = capsys.readouterr().err
     assert rc == 2 and "a GIF cannot play 60 frames per second" in err and "--fps 50" in err
     assert not (tmp_path / "x.gif").exists()
@@ -326,7 +326,7 @@ def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
     from PIL import Image
 
     out = tmp_path / "a.gif"
-    assert main(["animate", str(ROOT / "models/andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
+    assert main(["animate", str(MODEL_DIR / "andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
     cap = capsys.readouterr()
     assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
     assert "91 frames at 30 fps at speed 0.01, 0.03 s of model time" in cap.out

@@ -133,7 +133,7 @@ def test_textmate_engine_sees_comments_and_strings():
 
 # ----------------------------------------------------------------------------- the VS Code extension
 
-VSCODE = ROOT / "editors" / "vscode"
+VSCODE = CHECKOUT / "editors" / "vscode"
 
 
 def test_vscode_extension_contributes_files_that_exist():
@@ -158,8 +158,8 @@ def test_vscode_extension_contributes_files_that_exist():
 
 def test_vscode_extension_ships_the_committed_grammar():
     assert (VSCODE / "syntaxes" / "mech.tmLanguage.json").read_bytes() == \
-        (ROOT / "editors" / "mech.tmLanguage.json").read_bytes(), "stale copy: run python editors/make_textmate.py"
-    assert [p.relative_to(ROOT / "editors") for p in make_textmate.TARGETS] == \
+        (CHECKOUT / "editors" / "mech.tmLanguage.json").read_bytes(), "stale copy: run python editors/make_textmate.py"
+    assert [p.relative_to(CHECKOUT / "editors") for p in make_textmate.TARGETS] == \
         [Path("mech.tmLanguage.json"), Path("vscode/syntaxes/mech.tmLanguage.json")]
 
 
