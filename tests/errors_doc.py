@@ -18,8 +18,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT / "tests" / "corpus"
+# the page lives in the source checkout (MECHDSL_CHECKOUT when the tests run from a copy elsewhere)
+ROOT = Path(os.environ.get("MECHDSL_CHECKOUT") or Path(__file__).resolve().parents[1])
+CORPUS = Path(__file__).resolve().parent / "corpus"
 DOCS = ROOT / "docs" / "errors.md"
 FILE = "example.mech"
 URDF = "example.urdf"

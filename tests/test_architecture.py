@@ -13,7 +13,9 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-SRC = Path(__file__).resolve().parent.parent / "src"
+import mechdsl
+
+SRC = Path(mechdsl.__path__[0]).resolve().parent       # the folder holding the installed package
 PACKAGE = "mechdsl"
 LIBRARIES = ("mechdsl.dae", "mechdsl.impacts")        # mechanics the simulation layer uses
 MODULE_LEVEL = ("mechdsl.simulation", "mechdsl.dae", "mechdsl.impacts", "mechdsl.analysis")

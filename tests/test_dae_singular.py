@@ -28,8 +28,9 @@ from mechdsl.dae.augmented import augmented_ode, project_positions, project_velo
 from mechdsl.dae.dof import dof_report
 from mechdsl.dae.projection import project
 from mechdsl.dae.system import ConstrainedSystem
+import mechdsl.examples
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "nfourbar.mech"
+MODEL = mechdsl.examples.path("nfourbar")
 M_ROD, L_ROD, GRAV, V0 = 1.0, 1.0, 9.81, 1.0
 
 

@@ -11,7 +11,7 @@ import mechdsl
 from conftest import simulate_with_csv_input
 from mechdsl.diagnostics import MechError, UsageError
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import CHECKOUT, MODELS, TESTS  # noqa: E402
 
 SLIDER = """
 model Slider
@@ -52,7 +52,7 @@ def test_functions_take_t_x_u_p(slider):
 
 
 def test_functions_without_inputs_have_an_empty_u():
-    m = mechdsl.load(str(ROOT / "models" / "pendulum.mech"))
+    m = mechdsl.load(str(MODELS / "pendulum.mech"))
     f = m.casadi()["ode"]
     assert f.name_in() == ["t", "x", "u", "p"] and f.numel_in(2) == 0
     assert m.inputs == ()
@@ -291,7 +291,7 @@ def test_public_ode_is_sx_for_a_model_solved_numerically():
     glue; Model.casadi() now gives SX (unrolled LDL^T), equal to the numeric solve."""
     from mechdsl.eom.codegen import casadi_functions
 
-    m = mechdsl.load(str(ROOT / "models" / "andrews.mech"))
+    m = mechdsl.load(str(MODELS / "andrews.mech"))
     ode = m.casadi()["ode"]
     assert ode.class_name() == "SXFunction"
     numeric = casadi_functions(m.eom)["ode"]

@@ -10,11 +10,12 @@ from pathlib import Path
 import pytest
 
 import mechdsl
+import mechdsl.urdf
 from mechdsl.cli import main
 
-from conftest import ROOT
+from conftest import TESTS
 
-CORPUS = ROOT / "tests" / "corpus" / "urdf"
+CORPUS = TESTS / "corpus" / "urdf"
 EXPECT_LINE = re.compile(r"^<!-- expect: ([EW]\d{3}) (\d+):(\d+) -->\s*$")
 HEADER = re.compile(r"^(?P<file>.*):(?P<line>\d+):(?P<col>\d+): (?P<sev>error|warning)\[(?P<code>[EW]\d{3})\]: (?P<msg>.*)$")
 
@@ -33,7 +34,7 @@ EXPECT = expectations()
 
 def test_every_importer_code_has_a_file():
     codes = {c for exp in EXPECT.values() for c, _, _ in exp}
-    src = "".join(p.read_text() for p in (ROOT / "src" / "mechdsl" / "urdf").glob("*.py"))
+    src = "".join(p.read_text() for p in Path(mechdsl.urdf.__file__).parent.glob("*.py"))
     emitted = set(re.findall(r"[\"']([EW]0\d\d)[\"']", src))
     not_from_a_file = {"E001", "E003", "E005", "E006"}       # test_missing_and_unreadable_files
     assert emitted - not_from_a_file <= codes, f"importer codes with no corpus file: {sorted(emitted - codes)}"

@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import chromium_path
+from conftest import MODELS, chromium_path
 
-ROOT = Path(__file__).resolve().parents[1]
 # WebGL without a GPU: ANGLE on SwiftShader (Chromium asks for the flag since it is software)
 ARGS = ["--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 
@@ -27,15 +26,15 @@ def pages(tmp_path_factory):
     import mechdsl
 
     folder = tmp_path_factory.mktemp("view")
-    m = mechdsl.load(ROOT / "models" / "double_pendulum.mech")
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
     r = m.simulate(2.0, points=61)
     out = {"pendulum": r.view(fps=30, speed=1.0).save(folder / "dp.html"),
            "trail": r.view(fps=30, speed=1.0, trails=["rod2.b"]).save(folder / "dp_trail.html")}
-    andrews = mechdsl.load(ROOT / "models" / "andrews.mech")
+    andrews = mechdsl.load(MODELS / "andrews.mech")
     out["bars"] = andrews.view(t_end=0.03).save(folder / "andrews.html")
     notebook = folder / "notebook.html"
     notebook.write_text("<!DOCTYPE html><html><body><p>a notebook cell</p>\n"
-                        + mechdsl.load(ROOT / "models" / "heavy_top.mech").view(t_end=0.5)._repr_html_()
+                        + mechdsl.load(MODELS / "heavy_top.mech").view(t_end=0.5)._repr_html_()
                         + "\n</body></html>")
     out["notebook"] = notebook
     return out

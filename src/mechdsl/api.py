@@ -8,6 +8,7 @@
     m.parameter_vector(l=0.5)                            # p with dependent parameters recomputed
     m.inputs                                             # the control inputs u: name, unit, bounds, default
     m.simulate(3.0, inputs={"F": lambda t, x: -k @ x})   # inputs: number, table, u(t), u(t, x), Function
+    m.export_fmu("model.fmu", fmi_version=2)             # an FMU (docs/export.md)
 
 Phases: parse -> analyze (here) -> derive (mechdsl.mechanics) -> generate/simulate.  Each
 Model caches its derived equations; models that differ only in parameter values share them.
@@ -15,6 +16,7 @@ Model caches its derived equations; models that differ only in parameter values 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 from typing import TYPE_CHECKING, Any
@@ -30,6 +32,8 @@ from .numbers import Quantity, declared_value, in_declared_unit
 # (mechdsl.eom.modelcache) never needs it
 if TYPE_CHECKING:
     from .semantic import Program
+
+log = logging.getLogger(__name__)
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
@@ -53,8 +57,7 @@ def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True
 
 def load(path, model: str | None = None, scene: str | None = None, units: bool = True,
          cache: bool = True) -> "Model":
-    """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis.
-    cache=False: neither read nor write the model cache (mechdsl.eom.modelcache)."""
+    """Load a model (or a scene of it) from a .mech file: see ``mechdsl.load``."""
     from .frontend.source import read_source
 
     filename, text = read_source(str(path))
@@ -63,7 +66,7 @@ def load(path, model: str | None = None, scene: str | None = None, units: bool =
 
 def loads(text: str, model: str | None = None, scene: str | None = None, filename: str = "<string>",
           units: bool = True, cache: bool = True) -> "Model":
-    """Load a model from .mech source text (cache: as for ``load``)."""
+    """Load a model from .mech source text: see ``mechdsl.loads``."""
     return _load_text(text, filename, model, scene, units, cache)
 
 
@@ -71,7 +74,9 @@ def _load_text(text: str, filename: str, model, scene, units: bool, cache: bool)
     info = _Cache((text, filename, bool(units)), (model, scene), ()) if cache else None
     hit = info.lookup() if info is not None else None
     if hit is not None:
+        log.debug("%s: model %s read from the model cache", filename, hit.name)
         return hit
+    log.debug("%s: parsing and analysing", filename)
     m = Model._from_program(_program(text, True, filename, units), model, scene)
     if info is not None:
         info.claim(m)
@@ -146,10 +151,13 @@ class Model:
     # ------------------------------------------------------------------ description
     @property
     def name(self) -> str:
+        """The model's name (``model NAME ... end NAME;``), also when a scene selected it."""
         return self.model.name
 
     @property
     def coordinates(self) -> tuple[str, ...]:
+        """The generalized coordinates' names, in the order of ``q`` (``Result.q`` columns, the
+        CasADi state ``x = [q; der(q)]``): a joint's own, e.g. ``("j1.phi", "j2.phi")``."""
         return self.model.coordinate_names
 
     @property
@@ -159,6 +167,7 @@ class Model:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
+        """The Real parameters' names in the order of the CasADi input "p" (``parameter_values``)."""
         return tuple(p.name for p in self.model.real_parameters)
 
     @property
@@ -190,10 +199,12 @@ class Model:
 
     @property
     def scene_settings(self) -> dict[str, Any]:
+        """The scene's settings (``stop_time``, ``rtol``, ``method``, ...) by name; {} without a scene."""
         return dict(self.scene.settings) if self.scene else {}
 
     @property
     def warnings(self) -> list[Diagnostic]:
+        """The front end's warnings about this model (Diagnostics with severity "warning")."""
         if self._warnings is not None:
             return list(self._warnings)
         return list(getattr(self.program, "last_warnings", []))
@@ -228,7 +239,8 @@ class Model:
 
     def __repr__(self) -> str:
         scene = f", scene {self.scene.name}" if self.scene else ""
-        return f"<mechdsl.Model {self.name}{scene}: {len(self.coordinates)} coordinates>"
+        n = len(self.coordinates)
+        return f"<mechdsl.Model {self.name}{scene}: {n} coordinate{'' if n == 1 else 's'}>"
 
     # ------------------------------------------------------------------ new models
     def with_params(self, **values) -> "Model":
@@ -318,6 +330,7 @@ class Model:
             if base is None:
                 from .mechanics import derive
 
+                log.info("deriving the equations of motion of %s", self.name)
                 base = derive(self.model)
                 from .eom.modelcache import record_callables
 
@@ -466,6 +479,14 @@ class Model:
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.output.display
         return r
 
+    def export_fmu(self, path, *, fmi_version: int = 2, fmi_type: str | None = None, overwrite: bool = False):
+        """Write this model as a Functional Mock-up Unit (mechdsl.export.export_fmu; docs/export.md):
+        fmi_version 2 or 3; fmi_type "me", "cs", "both" or None (every interface the model can
+        have: co-simulation only with contacts).  Returns an ExportInfo."""
+        from .export import export_fmu
+
+        return export_fmu(self, path, fmi_version=fmi_version, fmi_type=fmi_type, overwrite=overwrite)
+
     def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
         """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
         docs/sweeps.md).  params/starts: a grid (dict), mechdsl.sweep.table(...) or a DataFrame,
@@ -492,6 +513,20 @@ class Model:
         return formulate(self.eom, self.settings(**args))
 
     def equilibria(self, guesses=None, **kw):
+        """The equilibria (rest states) of the model with their stability: a list of
+        mechdsl.analysis.equilibrium.Equilibrium.
+
+        ``guesses``: starting points, a list of {coordinate: value} (coordinates not named keep
+        their start values); without them a spread over each coordinate's range is searched.
+        Other keywords (``t``, ``p``, ...): mechdsl.analysis.equilibrium.equilibria.  Each one
+        has ``values`` ({coordinate: value}), ``stability`` ("stable", "unstable" or
+        "undetermined"), ``reason`` (the Lagrange-Dirichlet or eigenvalue argument) and
+        ``hessian_eigenvalues``.  See docs/analysis.md.
+
+            >>> m = mechdsl.load(mechdsl.examples.path("pendulum"), model="PendulumLagrange")
+            >>> sorted(e.stability for e in m.equilibria())
+            ['stable', 'unstable']
+        """
         from .analysis.equilibrium import equilibria
 
         try:
@@ -500,6 +535,14 @@ class Model:
             self._remember()
 
     def linearize(self, at="equilibrium", **kw):
+        """The linear model ``M dq'' + C dq' + K dq = B du`` about a point, and its modes: a
+        mechdsl.analysis.linearize.Linearization (``M``, ``C``, ``K``, ``A``, ``B``, ``modes()``).
+
+        ``at``: "equilibrium" (the one nearest to the start values; ``guesses=`` steers the
+        search), an Equilibrium from ``equilibria()``, "t=T" (the state reached at time T),
+        "start", or {name: value} (``der(name)`` for speeds).  ``inputs=``: the parameters
+        treated as inputs u (default: the model's ``input`` parameters).  See docs/analysis.md.
+        """
         from .analysis.linearize import linearize
 
         try:
@@ -515,6 +558,10 @@ class Model:
         return steady_motions(self.eom, pins, **kw)
 
     def first_integrals(self):
+        """The conserved quantities found in the equations, each a
+        mechdsl.analysis.integrals.FirstIntegral: ``name``, ``kind`` ("energy", "jacobi",
+        "momentum" of an ignorable coordinate, "angular_momentum" of a rotational symmetry),
+        ``expression`` (text) and ``verified`` ("symbolic" or "numeric").  See docs/analysis.md."""
         from .analysis.integrals import first_integrals
 
         try:

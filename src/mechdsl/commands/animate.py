@@ -90,8 +90,13 @@ def run(args) -> int:
     pace = "" if speed == 1.0 else f" at speed {speed:g}"
     print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps{pace}, {anim.times[-1] - anim.times[0]:g} s of model "
           f"time, {what}")
+    args.out.wrote(path)
+    args.out.set(target=target_line(args, m), model=m.name, frames=len(anim), fps=args.fps, speed=speed,
+                 view=anim.view, t_start=float(anim.times[0]), t_end=float(anim.times[-1]),
+                 success=r.failure is None)
     if r.failure is not None:
         print(f"mech: error: {r.failure}; animated up to t = {r.t[-1]:.6g}", file=sys.stderr)
+        args.out.fail("simulation", f"{r.failure}; animated up to t = {r.t[-1]:.6g}")
         return 1
     return 0
 

@@ -43,6 +43,7 @@ def run(args) -> int:
         program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
         print(f"mech: {target_line(args, m)}", file=sys.stderr)
+        args.out.set(target=target_line(args, m), model=m.name)
         if args.emit == "model":
             text = dump_model(m.model)
         elif args.emit == "problem":
@@ -56,8 +57,10 @@ def run(args) -> int:
             from ..eom.dump_eom import dump_eom
 
             text = dump_eom(m.eom)
+    args.out.set(emit=args.emit)
     if args.output:
         write_atomic(args.output, text, overwrite=args.force)
+        args.out.wrote(args.output)
     else:
-        sys.stdout.write(text)
+        args.out.product(text)
     return 0

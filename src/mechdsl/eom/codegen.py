@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -50,6 +51,7 @@ from ..diagnostics import Diagnostic, MechError
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
             "start", "parameters", "singularity", "invariants")
 LINSOL = "qr"          # sparse Householder QR: backward stable, code-generatable
+log = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------- building
@@ -672,6 +674,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     if lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
     else:
+        log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
         import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
         import tempfile        # loads the cached library)
 
@@ -711,6 +714,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
         if problem:
             note = f"the cached library {lib} {problem}: rebuilt; " + note
+    log.debug("%s", note)
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     return loaded, note, str(lib)
 

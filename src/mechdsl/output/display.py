@@ -227,8 +227,9 @@ class Equations(list):
         self.multipliers = dict(multipliers or {})
 
     def latex(self, dots: bool = True) -> str:
-        """An aligned environment; ``dots=True`` (default) writes time derivatives as dots, as the
-        textbooks and ``mech equations --latex`` do; ``dots=False`` as d/dt (sympy's Derivative)."""
+        """The equations (after T, V, D or H) as one LaTeX ``aligned`` environment; ``dots=True``
+        (default) writes time derivatives as dots, as the textbooks and ``mech equations --latex``
+        do; ``dots=False`` as d/dt (sympy's Derivative)."""
         import sympy as sp
 
         if dots:

@@ -507,7 +507,7 @@ static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const d
 
 static int crk_core(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev) {
+            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, double *h_io) {
   int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
@@ -554,13 +554,15 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
     if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
   }
   double h_abs;
-  if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
+  if (h_io && *h_io > 0) h_abs = fmin(*h_io, fabs(tb - t));   /* a step proposed by the caller's last call */
+  else if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
+  double h_keep = h_abs;        /* the step proposed for a next call (h_io) */
   while (k < ngrid) {
     if (ctl[1]) { status = CRK_CANCELLED; break; }
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
     if (h_abs < min_step) h_abs = min_step;
-    int accepted = 0, was_rejected = 0;
-    double h = 0.0, t_new = t;
+    int accepted = 0, was_rejected = 0, clipped = 0;
+    double h = 0.0, t_new = t, h_want = h_abs;
     while (!accepted) {
       if (h_abs < min_step) { status = CRK_TOO_SMALL; goto done; }
       if (hmin > 0 && h_abs < hmin && t + hmin < tb) {
@@ -570,8 +572,10 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
         h_abs = hmin;
       }
       h = h_abs;
+      h_want = h_abs;
       t_new = t + h;
-      if (t_new > tb) t_new = tb;
+      clipped = t_new > tb;
+      if (clipped) t_new = tb;
       h = t_new - t;
       h_abs = fabs(h);
       memcpy(K, f, (size_t)n * sizeof(double));
@@ -587,6 +591,9 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
         double factor = en == 0.0 ? MAX_FACTOR : fmin(MAX_FACTOR, SAFETY * pow(en, expo));
         if (was_rejected && factor > 1.0) factor = 1.0;
         h_abs *= factor;
+        /* a step shortened to end at tb says little about the next one: keep the step the
+           control wanted unless the short step's error already asks for less */
+        h_keep = (clipped && factor >= 1.0) ? fmax(h_abs, h_want) : h_abs;
         accepted = 1;
       } else {
         h_abs *= fmax(MIN_FACTOR, SAFETY * pow(en, expo));   /* fmax ignores a NaN norm, as scipy */
@@ -651,6 +658,7 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
     if (steps_here >= max_steps) { status = CRK_MAX_STEPS; break; }
   }
 done:
+  if (h_io) *h_io = h_keep;
   stats[0] = (double)steps; stats[1] = (double)r.nfev; stats[2] = (double)rejected; stats[3] = t;
   memcpy(xfail, y, (size_t)n * sizeof(double));
   ode_release(r.mem);
@@ -662,7 +670,17 @@ done:
 int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
             double *X, double *stats, volatile cint *ctl, double *xfail) {
-  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL);
+  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, NULL);
+}
+
+/* crk_run with the first step taken from *h_io when it is positive (else the initial-step
+   heuristic) and the step proposed after the last accepted step written back: a caller that
+   advances in many short calls (an FMU's co-simulation steps, mechdsl.export) keeps the
+   step size from one call to the next instead of starting each call afresh. */
+int crk_run_h(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+              const double *p, double rtol, double atol, double hmin, cint max_steps,
+              double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io) {
+  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, h_io);
 }
 
 /* crk_run watching the gaps `gap` (k outputs, CasADi signature, work sizes from `work`):
@@ -673,11 +691,29 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
    `buf` of `cap` rows of CRK_EVENT_ROW(nx) doubles, the simple impacts are applied in the loop
    (impact_in_c) and stepping goes on; stats[5] counts the records.  imp NULL: every event
    returns. */
+int crk_run_events_h(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                     const double *p, double rtol, double atol, double hmin, cint max_steps,
+                     double *X, double *stats, volatile cint *ctl, double *xfail,
+                     void *gap, void *gap_work, cint k, double offset, int samples, const double *gp,
+                     void *imp, void *imp_work, const double *rest, const double *limits, double *buf, cint cap,
+                     double *h_io);
+
 int crk_run_events(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
                    const double *p, double rtol, double atol, double hmin, cint max_steps,
                    double *X, double *stats, volatile cint *ctl, double *xfail,
                    void *gap, void *gap_work, cint k, double offset, int samples, const double *gp,
                    void *imp, void *imp_work, const double *rest, const double *limits, double *buf, cint cap) {
+  return crk_run_events_h(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail,
+                          gap, gap_work, k, offset, samples, gp, imp, imp_work, rest, limits, buf, cap, NULL);
+}
+
+/* crk_run_events with the step carried between calls in *h_io (as crk_run_h) */
+int crk_run_events_h(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                     const double *p, double rtol, double atol, double hmin, cint max_steps,
+                     double *X, double *stats, volatile cint *ctl, double *xfail,
+                     void *gap, void *gap_work, cint k, double offset, int samples, const double *gp,
+                     void *imp, void *imp_work, const double *rest, const double *limits, double *buf, cint cap,
+                     double *h_io) {
   Events e;
   memset(&e, 0, sizeof e);
   e.gap = (casadi_fn)gap; e.work = (casadi_work_fn)gap_work;
@@ -709,7 +745,7 @@ int crk_run_events(int method, cint nx, const double *grid, cint ngrid, const do
   }
   int status = CRK_NOMEM;
   if (ok)
-    status = crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e);
+    status = crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e, h_io);
   stats[4] = (double)e.nev;
   stats[5] = (double)e.count;
   free(e.arg); free(e.res); free(e.iw); free(e.w); free(e.g); free(e.x);
