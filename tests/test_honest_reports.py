@@ -186,3 +186,52 @@ def test_automatic_names_read_as_csv_and_integrals_print_in_the_models_names(tmp
     L = r["L_(bob.x:bob.y)"]
     assert L == pytest.approx(np.full(5, 1.1), rel=1e-8)               # x v_y - y v_x at the start
     assert np.array_equal(r["L_(bob.x,bob.y)"], L)                     # the old name still reads
+
+
+def test_projection_runs_are_not_told_to_use_projection():
+    """The energy warning advised `formulation = "projection"` to a run that already used it."""
+    m = mechdsl.load(MODELS / "pendulum_cartesian.mech", model="PendulumCartesian")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = m.simulate(100.0, rtol=1e-4, atol=1e-6, points=101)
+        b = m.simulate(100.0, rtol=1e-4, atol=1e-6, points=101, formulation="baumgarte")
+    assert r.metadata["run"]["formulation"] == "projection"
+    assert r.stats["energy_ok"] is False                    # the case: its energy drifts beyond the limit
+    said = " ".join(r.metadata["warnings"] + [r.metadata.get("energy_warning", "")])
+    assert "energy" in said and "projection" not in said
+    assert 'use formulation = "projection"' in b.metadata.get("energy_warning", "") + " ".join(b.metadata["warnings"])
+
+
+def test_the_energy_warning_of_an_ode_run_is_printed_once(capsys):
+    """It was printed twice: the energy is both an invariant and a first integral."""
+    from mechdsl.cli import main
+
+    assert main(["simulate", str(MODELS / "pendulum.mech"), "--model", "Pendulum", "--t-end", "2000",
+                 "--rtol", "1e-5", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("energy should stay constant") == 1
+    assert sum(line.startswith("warning:") for line in out.splitlines()) == 1
+
+
+def test_docs_and_code_give_the_same_warning_thresholds():
+    """The docs said 1000 rtol (ODE) and min(0.05, max(1e-6, 1e4 rtol)) (DAE), the code did a
+    third thing; one rule now, stated where the code reads it."""
+    from conftest import CHECKOUT as ROOT
+    from mechdsl.simulation.accuracy import DRIFT_CAP, DRIFT_FACTOR, drift_limit
+    from mechdsl.simulation.backends import dae
+    from mechdsl.simulation.estimate import WARN_FACTOR
+
+    rule = f"min({DRIFT_CAP:g}, {DRIFT_FACTOR:g} rtol)"
+    assert drift_limit(1e-8) == pytest.approx(DRIFT_FACTOR * 1e-8) and drift_limit(1.0) == DRIFT_CAP
+    assert dae.drift_limit is drift_limit                     # the DAE energy check reads the same
+    for doc in ("docs/simulate.md", "docs/constraints.md", "docs/analysis.md", "docs/internals/dae.md",
+                "docs/internals/simulation.md"):
+        text = (ROOT / doc).read_text()
+        assert rule in text, doc
+        for history in ("was min(0.05, max(1e-6, 1e4 rtol)) here and 1000 rtol elsewhere",
+                         "the ODE rule was 1000 rtol and the DAE one min(0.05, max(1e-6, 1e4 rtol))"):
+            text = text.replace(history, "")         # what the rule was before, said as such
+        old = text
+        assert "1000 rtol" not in old and "1000 times `rtol`" not in old and "max(1e-6, 1e4 rtol)" not in old, doc
+    sim = (ROOT / "docs/simulate.md").read_text()
+    assert f"{WARN_FACTOR:g} times the tolerance class" in sim
