@@ -26,7 +26,7 @@ import numpy as np
 from .model import ir
 from .model.records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
-from .numbers import Quantity, declared_value, in_declared_unit
+from .numbers import Quantity, declared_value, finite, in_declared_unit
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
 # (mechdsl.eom.modelcache) never needs it
@@ -701,13 +701,7 @@ def _in_declared_unit(model: ir.Model, key: str, v):
 
 
 def _number(name: str, v) -> float:
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        raise UsageError(f"value of '{name}' must be a number, got {v!r}") from None
-    if not math.isfinite(x):
-        raise UsageError(f"value of '{name}' must be finite")
-    return x
+    return finite(v, f"value of '{name}'")
 
 
 def _literal(v, name: str = "value"):

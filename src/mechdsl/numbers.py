@@ -56,12 +56,12 @@ class Quantity:
 
 def deg(x) -> Quantity:
     """An angle in degrees, for any parameter, start value or sweep value: ``deg(45)``."""
-    return Quantity(_finite(x, "deg(...)"), "deg")
+    return Quantity(finite(x, "deg(...)"), "deg")
 
 
 def rad(x) -> Quantity:
     """An angle in radians: ``rad(0.785)``."""
-    return Quantity(_finite(x, "rad(...)"), "rad")
+    return Quantity(finite(x, "rad(...)"), "rad")
 
 
 def quantity(text, what: str = "value") -> Quantity:
@@ -164,7 +164,7 @@ def declared_value(value, unit: str | None, name: str = "value", speed: bool = F
     unit, which must have the declared unit's dimension.  ``speed=True``: the value is the speed
     of a coordinate declared in ``unit`` (per second; the same factor)."""
     q = value if isinstance(value, Quantity) else (quantity(value, name) if isinstance(value, str)
-                                                   else Quantity(_finite(value, name)))
+                                                   else Quantity(finite(value, name)))
     if q.unit is None:
         return q.value * (_unit(unit, name)[0] if unit else 1.0)
     factor, dim = _unit(q.unit, name)
@@ -183,7 +183,7 @@ def in_declared_unit(value, unit: str | None, name: str = "value", speed: bool =
     """What was given, expressed in the declared unit (a bare number stays exactly as it is):
     the numbers a sweep's table holds, and start values handed to the front end."""
     q = value if isinstance(value, Quantity) else (quantity(value, name) if isinstance(value, str)
-                                                   else Quantity(_finite(value, name)))
+                                                   else Quantity(finite(value, name)))
     if q.unit is None:
         return q.value
     return declared_value(q, unit, name, speed) / (_unit(unit, name)[0] if unit else 1.0)
@@ -229,7 +229,8 @@ def _unit(unit: str, what: str):
         raise UsageError(f"{what}: unknown unit {unit!r} (units look like deg, rad, m, cm, kg, s)") from None
 
 
-def _finite(x, what: str) -> float:
+def finite(x, what: str) -> float:
+    """x as a finite float (bool and non-numbers refused): a UsageError naming ``what``."""
     if isinstance(x, bool):
         raise UsageError(f"{what} must be a number, got {x!r}")
     try:
