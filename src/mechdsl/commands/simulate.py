@@ -265,7 +265,8 @@ def accuracy_lines(acc: dict) -> list[str]:
     if acc.get("error_estimate") is None:
         why = acc.get("error_estimate_unavailable")
         return [f"error estimate: none ({why})"] if why and not why.startswith("turned off") else []
-    line = (f"error estimate: {acc['error_estimate']:.2g} (largest over the coordinates: "
+    unit = f" {acc['error_estimate_unit']}" if acc.get("error_estimate_unit") else ""
+    line = (f"error estimate: {acc['error_estimate']:.2g}{unit} (largest over the coordinates: "
             f"{acc['error_estimate_coordinate']} at t = {acc['error_estimate_time']:.6g}; "
             f"{acc['error_estimate_ratio']:.2g} x its tolerance class rtol |q|max + atol), from "
             f"{acc.get('error_estimate_method', 'a companion run')}")

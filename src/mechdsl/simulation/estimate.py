@@ -92,30 +92,35 @@ def companion(problem, r):
     return s.replace(**extra), 1.0 - 1.0 / k, f"a run at rtol = {rtol:.3g}, atol = {s.atol / k:.3g} ({k:g}x tighter)"
 
 
-def estimate(r, problem, solve) -> None:
-    """Run the companion and fill r.metadata["accuracy"] (the run must have succeeded)."""
+def estimate(r, problem, solve, given=None) -> None:
+    """Run the companion and fill r.metadata["accuracy"] (the run must have succeeded).  ``given``:
+    (a run already made at a tighter tolerance, its factor, what it is) to use instead."""
     from .problem import formulate
 
     acc = r.metadata.setdefault("accuracy", {})
     s = problem.settings
-    tight, factor, how = companion(problem, r)
-    acc["error_estimate_method"] = how
-    if tight is None:
-        acc.update(error_estimate=None, error_estimate_unavailable=how)
-        return
-    cpu0 = time.process_time()
-    r.stats["error_estimate_cpu_time"] = None
-    try:
-        tp = formulate(problem.eom, tight.validated())
-        if problem.step_eom is not None:
-            tp = dataclasses.replace(tp, step_eom=problem.step_eom)
-        other = solve(tp)
-    except Exception as e:  # noqa: BLE001 - the run itself is fine; say why there is no estimate
-        acc.update(error_estimate=None, error_estimate_unavailable=f"the companion run could not run: "
-                                                                     f"{str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__}")
-        return
-    finally:
-        r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0      # besides the run's own cpu_time
+    if given is not None:
+        other, factor, how = given
+        acc["error_estimate_method"] = how
+    else:
+        tight, factor, how = companion(problem, r)
+        acc["error_estimate_method"] = how
+        if tight is None:
+            acc.update(error_estimate=None, error_estimate_unavailable=how)
+            return
+        cpu0 = time.process_time()
+        r.stats["error_estimate_cpu_time"] = None
+        try:
+            tp = formulate(problem.eom, tight.validated())
+            if problem.step_eom is not None:
+                tp = dataclasses.replace(tp, step_eom=problem.step_eom)
+            other = solve(tp)
+        except Exception as e:  # noqa: BLE001 - the run itself is fine; say why there is no estimate
+            why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            acc.update(error_estimate=None, error_estimate_unavailable=f"the companion run could not run: {why}")
+            return
+        finally:
+            r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0      # besides the run's own cpu_time
     idx, jdx = _common_times(r.t, other.t, s.t_end - s.t_start)
     if idx.size == 0:
         why = (f"the companion run failed at its start ({other.failure})" if other.failure is not None
@@ -132,6 +137,7 @@ def estimate(r, problem, solve) -> None:
     k = int(np.argmax(per))
     it = int(np.argmax(diff[:, k]))
     acc.update(error_estimate=float(per[k]), error_estimate_coordinate=r.coordinates[k],
+               error_estimate_unit=_unit(problem.eom, r.coordinates[k]),
                error_estimate_time=float(r.t[idx[it]]), error_estimate_ratio=float((per / tol).max()))
     if s.error_estimate == "coordinates":
         acc["error_estimate_by_coordinate"] = {c: float(v) for c, v in zip(r.coordinates, per)}
@@ -139,6 +145,25 @@ def estimate(r, problem, solve) -> None:
     if other.failure is not None:
         acc["error_estimate_note"] = (f"the companion run stopped at t = {other.failure.time:.6g} "
                                       f"({other.failure.cause}): the estimate covers the times before")
+
+
+def _unit(eom, coordinate: str) -> str | None:
+    """The declared unit of a coordinate (its values are SI: rad for an angle declared in deg)."""
+    model = getattr(eom, "model", None)
+    try:
+        unit = model.coordinate(coordinate).unit if model is not None else None
+    except KeyError:
+        return None
+    if unit:
+        from ..model.units import parse_unit
+
+        try:
+            factor, _ = parse_unit(unit)
+        except ValueError:
+            return None
+        if factor != 1.0:            # results are SI: an angle declared in deg is recorded in rad
+            return "rad" if unit == "deg" else None
+    return unit
 
 
 def _common_times(t: np.ndarray, u: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:

@@ -123,15 +123,15 @@ def solve(problem: Problem, progress=None) -> Result:
         if units:
             meta.setdefault("units", {}).update(units)
     meta["versions"] = versions()        # provenance belongs to the Result, stamped here once
-    if s.estimate_error:
-        _estimate_error(r, problem)
-    _default_estimate(r, problem)
+    thorough = _estimate_error(r, problem) if s.estimate_error else None
+    _default_estimate(r, problem, thorough)
     A.accuracy_warning(r, problem)
     return r
 
 
-def _default_estimate(r: Result, problem: Problem) -> None:
-    """metadata["accuracy"]["error_estimate"] of every run (simulation/estimate.py), unless turned off."""
+def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:
+    """metadata["accuracy"]["error_estimate"] of every run (simulation/estimate.py), unless turned
+    off; from the thorough run of estimate_error when there is one (no third run)."""
     s = problem.settings
     acc = r.metadata.setdefault("accuracy", {})
     if s.error_estimate == "off":
@@ -141,7 +141,7 @@ def _default_estimate(r: Result, problem: Problem) -> None:
     elif len(r.t) < 2:
         acc.update(error_estimate=None, error_estimate_unavailable="fewer than two output times")
     else:
-        estimate(r, problem, solve)
+        estimate(r, problem, solve, thorough)
 
 
 def _record_inputs(r: Result, drive) -> None:
@@ -174,8 +174,9 @@ def _signal_failure(r: Result, drive) -> None:
         r.metadata.setdefault("warnings", []).extend(errors)
 
 
-def _estimate_error(r: Result, problem: Problem) -> None:
-    """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter)."""
+def _estimate_error(r: Result, problem: Problem):
+    """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter); returns
+    (that run, the factor its difference is divided by, what it is), or None."""
     s = problem.settings
     if backend(problem.backend).fixed_step:
         dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
@@ -186,7 +187,7 @@ def _estimate_error(r: Result, problem: Problem) -> None:
             "reference": None, "max_abs_difference": {},
             "unavailable": f"rtol = {s.rtol:g}: a run 100 times tighter would be below {MIN_RTOL:g}, which double "
                            "precision cannot deliver; estimate at a looser rtol"}
-        return
+        return None
     else:
         tighter = s.replace(rtol=s.rtol / 100, atol=s.atol / 100, estimate_error=False)
         how = f"rtol = {tighter.rtol:g}, atol = {tighter.atol:g}"
@@ -201,6 +202,13 @@ def _estimate_error(r: Result, problem: Problem) -> None:
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
+    if backend(problem.backend).fixed_step:
+        from .registry import spec
+
+        factor = 1.0 - 4.0 ** -(spec(s.method).order or 1)
+    else:
+        factor = 1.0 - 1.0 / 100
+    return tight, factor, f"the run of estimate_error ({how})"
 
 
 def _hold_warning(r: Result, problem: Problem) -> None:
