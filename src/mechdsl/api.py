@@ -246,6 +246,9 @@ class Model:
     def with_params(self, **values) -> "Model":
         """A new Model with parameter values (and start values, as 'q.start' / 'q.speed') changed.
 
+        A bare number means the unit the parameter (or coordinate) is declared in (``alpha=45`` is
+        45 degrees for ``alpha(unit = "deg")``, as a scene modifier); ``"45 deg"``,
+        ``mechdsl.deg(45)`` or ``mechdsl.Quantity(0.785, "rad")`` say theirs (mechdsl.numbers).
         Real parameters only change numbers (derived equations are shared); Integer and
         Boolean parameters and start values re-analyze the model.
         """
