@@ -109,8 +109,8 @@ def run_record(r) -> dict:
     for key in ("energy_drift", "energy_drift_relative", "constraint_drift", "invariant_drift"):
         if r.stats.get(key) is not None:
             accuracy[key] = r.stats[key]
-    if m.get("error_estimate"):
-        accuracy["error_estimate"] = m["error_estimate"]
+    if m.get("error_estimate"):               # the thorough check (--estimate-error), beside the default one
+        accuracy["estimate_error"] = m["error_estimate"]
     return {"target": m.get("target"), "model": m.get("model"), "scene": m.get("scene"),
             "source": m.get("source"), "success": bool(r.success),
             "failure": None if r.failure is None else {"time": r.failure.time, "cause": r.failure.cause,
