@@ -26,7 +26,7 @@ import numpy as np
 from .model import ir
 from .model.records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
-from .numbers import Quantity, declared_value, finite, in_declared_unit
+from .numbers import Quantity, declared_value, finite, in_declared_unit, quantity
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
 # (mechdsl.eom.modelcache) never needs it
@@ -693,6 +693,11 @@ def _in_declared_unit(model: ir.Model, key: str, v):
     coordinate's declared unit, which the front end reads as it reads a scene modifier (issue 23)."""
     if isinstance(v, bool) or not isinstance(v, (str, Quantity)):
         return v
+    if isinstance(v, str):
+        try:
+            v = quantity(v, key)
+        except UsageError:
+            return v                       # not a number: _literal says so, naming the parameter
     name, _, attr = key.rpartition(".")
     if attr not in ("start", "speed"):
         name, attr = key, "start"

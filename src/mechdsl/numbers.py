@@ -20,9 +20,8 @@ import ast
 import math
 import operator
 import re
-from dataclasses import dataclass
-
 from .diagnostics import UsageError
+from .model.records import record
 
 MAX_VALUE_TEXT = 200          # characters in one value: enough for any expression a person types
 
@@ -38,7 +37,7 @@ _TRAILING_UNIT = re.compile(r"^(.*?[0-9.)\s])\s*([A-Za-z][A-Za-z0-9_.*/^]*)$")
 HINT = "(numbers, pi, e, + - * / ^, sqrt, sin, cos, tan, asin, acos, atan, exp, log, abs, deg; a unit after the number: 45 deg)"
 
 
-@dataclass(frozen=True)
+@record
 class Quantity:
     """A number with the unit it was given in: ``Quantity(45, "deg")``; unit None is a bare
     number, which means the unit its quantity is declared in."""

@@ -4,7 +4,10 @@ and the search says that resting on a contact was not looked for (`mech equilibr
 ignore contacts without a word)."""
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
+
+from ..impacts.gaps import contact_gaps
 
 TOUCH = 1e-9        # |gap| below this (m, relative to the sizes): the state touches the contact
 
@@ -15,10 +18,6 @@ def contact_notes(eom, eqs, pv, t: float) -> list[str]:
     model = getattr(eom, "model", None)
     if model is None or not model.contacts:
         return []
-    import casadi as ca
-
-    from ..impacts.gaps import contact_gaps
-
     gaps, fixes = contact_gaps(eom)
     out = []
     if gaps:

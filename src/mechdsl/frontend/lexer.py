@@ -24,7 +24,8 @@ COMPONENTS = ("Body", "Box", "Contact", "Cylinder", "Cylindrical", "Damper", "Di
 FUNCTIONS = ("abs", "acos", "asin", "atan", "atan2", "ceil", "cos", "cosh", "cross", "der", "diagonal",
              "dissipation_function", "dot", "energy", "exp", "fill", "floor", "identity", "kinetic_energy", "log",
              "log10", "max", "min", "norm", "normalize", "ones", "position", "potential_energy",
-             "reaction_force", "reaction_torque", "rotation", "rpy", "axis_angle", "sign", "sin", "sinh", "size",
+             "reaction_force", "reaction_torque", "constraint_force", "constraint_torque", "rotation", "rpy",
+             "axis_angle", "sign", "sin", "sinh", "size",
              "skew", "sqrt", "sum", "tan", "tanh", "transpose", "velocity", "zeros")
 BUILTIN_NAMES = ("pi", "time", "world")
 

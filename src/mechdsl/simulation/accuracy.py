@@ -28,6 +28,7 @@ ALIASES = {"steps": ("steps", "nsteps", "n_steps"),
                               "rejected_subsegments"),
            "constraint_drift": ("constraint_drift", "max_constraint_drift")}
 DRIFT_FACTOR = 100.0   # invariant drift this many times the tolerance: the accuracy warning (drift_limit)
+WARN_FACTOR = 30.0     # error estimate / tolerance class above this: the accuracy warning (estimate.py)
 DRIFT_CAP = 0.05       # ... and never above this relative drift
 
 
@@ -147,10 +148,8 @@ def accuracy_report(r: Result, problem, fixed_step: bool) -> None:
 
 def accuracy_warning(r: Result, problem) -> str | None:
     """The one accuracy warning of a run (appended to metadata["warnings"] and kept in
-    metadata["accuracy"]["warning"]): the error estimate above estimate.WARN_FACTOR times the
+    metadata["accuracy"]["warning"]): the error estimate above accuracy.WARN_FACTOR times the
     tolerance class and/or invariants drifting beyond drift_limit; None when neither."""
-    from .estimate import WARN_FACTOR
-
     s = problem.settings
     acc = r.metadata.setdefault("accuracy", {})
     parts = []

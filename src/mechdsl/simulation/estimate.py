@@ -2,7 +2,7 @@
 
 A companion run of the same problem, method and formulation at a tolerance ``TIGHTER`` = 10
 times tighter (a fixed-step run: half the step), recorded only on a coarse subset of the
-output times (at most ``COARSE`` points) with nothing but the states.  With the global error
+output times (at most ``COARSE`` points), compiled or not as the run ran.  With the global error
 proportional to the tolerance, e(tol/10) = e(tol)/10, so the difference of the two runs is
 0.9 e(tol): the estimate is the largest difference over the coarse times, divided by
 1 - 1/TIGHTER (fixed steps: 1 - 2^-order, Richardson).  Why this one and not another:
@@ -27,11 +27,14 @@ import time
 
 import numpy as np
 
+from ..model.units import parse_unit
+from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
+from .problem import formulate
+from .registry import spec
 from .settings import MIN_RTOL
 
 TIGHTER = 10.0       # the companion's tolerance is this many times tighter
 COARSE = 201         # the companion records at most this many of the run's output times
-WARN_FACTOR = 30.0   # estimate / tolerance class above this: the accuracy warning (docs/simulate.md)
 MODES = ("on", "off", "coordinates")
 
 
@@ -56,11 +59,8 @@ def coarse_points(n: int) -> tuple[int, int]:
 def companion(problem, r):
     """(settings of the companion run, factor the difference is divided by, what it is) or
     (None, None, why not)."""
-    from .backends import backend
-    from .registry import spec
-
     s = problem.settings
-    fixed = backend(problem.backend).fixed_step
+    fixed = problem.kind == "canonical"          # the fixed-step back end
     n = len(r.t)
     base = dict(error_estimate="off", estimate_error=False, warn=False)
     if fixed:
@@ -83,10 +83,10 @@ def companion(problem, r):
     ran = r.metadata.get("run") or {}
     if problem.kind == "ode" and s.method == "auto" and ran.get("method"):
         method = ran["method"]             # auto chooses by tolerance: keep the method that ran
-    extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, outputs=())
+    # the outputs of the run (their recorder is built already and kept); compiled as the run ran
+    extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, compiled=bool(ran.get("compiled")))
     if problem.kind == "ode":
         extra["points"] = points
-        extra["compiled"] = bool(ran.get("compiled")) if s.compiled is None else s.compiled
     if problem.drive is not None and problem.kind != "ode":
         extra["inputs"] = None              # problem.eom has the inputs built in
     return s.replace(**extra), 1.0 - 1.0 / k, f"a run at rtol = {rtol:.3g}, atol = {s.atol / k:.3g} ({k:g}x tighter)"
@@ -95,8 +95,6 @@ def companion(problem, r):
 def estimate(r, problem, solve, given=None) -> None:
     """Run the companion and fill r.metadata["accuracy"] (the run must have succeeded).  ``given``:
     (a run already made at a tighter tolerance, its factor, what it is) to use instead."""
-    from .problem import formulate
-
     acc = r.metadata.setdefault("accuracy", {})
     s = problem.settings
     if given is not None:
@@ -155,8 +153,6 @@ def _unit(eom, coordinate: str) -> str | None:
     except KeyError:
         return None
     if unit:
-        from ..model.units import parse_unit
-
         try:
             factor, _ = parse_unit(unit)
         except ValueError:

@@ -28,6 +28,8 @@ from . import accuracy as A
 from .backends import backend, ignored_settings
 from .backends.ode import record_inputs
 from .estimate import estimate
+from .record_dae import multiplier_column_units
+from .registry import spec
 from .problem import Problem, formulate
 from .settings import MIN_RTOL, SimulationSettings
 
@@ -117,8 +119,6 @@ def solve(problem: Problem, progress=None) -> Result:
         meta["aliases"] = {**{f"lambda[{c.alias}]": f"lambda[{c.name}]" for c in renamed},
                            **{f"residual({c.alias})": f"residual({c.name})" for c in renamed}}
     if eom.m:                             # the unit of every multiplier recorded (issue 23)
-        from .record_dae import multiplier_column_units
-
         units = {k: u for k, u in multiplier_column_units(eom).items() if k in r.signals}
         if units:
             meta.setdefault("units", {}).update(units)
@@ -203,8 +203,6 @@ def _estimate_error(r: Result, problem: Problem):
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
     if backend(problem.backend).fixed_step:
-        from .registry import spec
-
         factor = 1.0 - 4.0 ** -(spec(s.method).order or 1)
     else:
         factor = 1.0 - 1.0 / 100
