@@ -180,7 +180,8 @@ def _estimate_error(r: Result, problem: Problem):
     s = problem.settings
     if backend(problem.backend).fixed_step:
         dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
-        tighter = s.replace(dt=dt / 4, estimate_error=False, budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
+        tighter = s.replace(dt=dt / 4, estimate_error=False, error_estimate="off",
+                            budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
         how = f"dt = {dt / 4:g}"
     elif s.rtol / 100 < MIN_RTOL:
         r.metadata["error_estimate"] = {
@@ -189,7 +190,7 @@ def _estimate_error(r: Result, problem: Problem):
                            "precision cannot deliver; estimate at a looser rtol"}
         return None
     else:
-        tighter = s.replace(rtol=s.rtol / 100, atol=s.atol / 100, estimate_error=False)
+        tighter = s.replace(rtol=s.rtol / 100, atol=s.atol / 100, estimate_error=False, error_estimate="off")
         how = f"rtol = {tighter.rtol:g}, atol = {tighter.atol:g}"
     if backend(problem.backend).fixed_step and s.points is None:
         tighter = tighter.replace(points=len(r.t)) if len(r.t) >= 2 else tighter
