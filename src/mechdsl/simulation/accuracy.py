@@ -157,7 +157,8 @@ def accuracy_warning(r: Result, problem) -> str | None:
     # a fixed step the user chose has no tolerance class to exceed (a step from rtol has)
     chosen_step = problem.kind == "canonical" and s.dt is not None
     if acc.get("error_estimate") is not None and ratio is not None and ratio > WARN_FACTOR and not chosen_step:
-        parts.append(f"the estimated error {acc['error_estimate']:.2g} (in {acc['error_estimate_coordinate']}, at "
+        unit = f" {acc['error_estimate_unit']}" if acc.get("error_estimate_unit") else ""
+        parts.append(f"the estimated error {acc['error_estimate']:.2g}{unit} (in {acc['error_estimate_coordinate']}, at "
                      f"t = {acc['error_estimate_time']:.6g}) is {ratio:.3g} times what rtol = {s.rtol:g} and "
                      f"atol = {s.atol:g} ask of it")
     drifted = [(k, v) for k, v in (acc.get("invariants") or {}).items() if v.get("warning")]
