@@ -15,8 +15,8 @@ Degenerate values make the numbers fail instead (nan at the first step, a singul
 a solver, a run that never ends), so they are named here with their component:
 
   E510  a component value that is not finite (a mass 1e308 * 10, a length 1/(r - r))
-  E511  a negative length, radius or size of a body or a contact
-  E512  a direction that is the zero vector (joint or body axis, contact normal)
+  E511  a negative length, radius or size of a body, a shape or a contact
+  E512  a direction that is the zero vector (joint, body or shape axis, contact normal)
 """
 from __future__ import annotations
 
@@ -120,6 +120,18 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
             if b.shape in ("rod", "disk", "cylinder") and zero_direction("the axis", owner, b.axis, b.span):
                 continue                       # (its inertia, built from the axis, says nothing more)
             not_finite("the inertia tensor", owner, [_raw(e, env) for row in b.inertia for e in row], b.span)
+    for sh in getattr(model, "shapes", ()):
+        owner = f"shape '{sh.name}'"
+        for name, e in zip(_LENGTHS.get(sh.kind, ()), sh.size):
+            v = _raw(e, env)
+            if v is None or not_finite(f"the {name}", owner, [v], sh.span):
+                continue
+            if v < 0:
+                out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", sh.span,
+                                      "lengths and radii are >= 0"))
+        not_finite("the placement r", owner, [_raw(e, env) for e in sh.r], sh.span)
+        if sh.kind in ("rod", "disk", "cylinder"):
+            zero_direction("the axis", owner, sh.axis, sh.span)
     for j in model.joints:
         if j.kind in ("revolute", "prismatic", "cylindrical", "planar"):
             zero_direction("the axis", f"joint '{j.name}'", j.axis, j.span)
