@@ -35,6 +35,7 @@ class Solid:
     size: tuple
     center: np.ndarray
     rot: np.ndarray
+    name: str = ""                # the Shape component it draws ("": the body's own shape)
 
 
 def frame_from_axis(axis) -> np.ndarray:
@@ -81,7 +82,10 @@ def body_solids(b, shapes, num) -> list[Solid]:
 def shape_solid(sh, num) -> Solid | None:
     """The Solid of an ir.Shape: centred at ``r``, its axes ``R`` (body axes)."""
     R = np.eye(3) if sh.R is None else np.array([[num(x) for x in row] for row in sh.R])
-    return _solid(sh.kind, sh.size, np.array([num(c) for c in sh.r]), R, sh.axis, num)
+    solid = _solid(sh.kind, sh.size, np.array([num(c) for c in sh.r]), R, sh.axis, num)
+    if solid is not None:
+        solid.name = sh.name
+    return solid
 
 
 def _solid(kind: str, size_exprs, center: np.ndarray, R: np.ndarray, axis, num) -> Solid | None:
