@@ -116,7 +116,7 @@ def report_missing(missing: list[Missing], file: str, diags: DiagnosticBag, skip
                           span(file, m.el), "the dynamics do not need meshes; give the package folder with "
                                             "--package-dir NAME=DIR to draw them")
         else:
-            diags.error("E028", f"mesh '{m.filename}'{also} not found: {m.why}", span(file, m.el),
-                        "give the package folder with --package-dir NAME=DIR (package_dirs=), or import with "
-                        "--skip-missing-meshes (skip_missing_meshes=True) to leave them undrawn: the dynamics "
-                        "do not need meshes")
+            first = "" if m.why.startswith("package '") else "check the path (relative to the URDF's folder); "
+            diags.error("E028", f"cannot find mesh '{m.filename}'{also}: {m.why}", span(file, m.el),
+                        f"{first}to go on without drawing {'them' if more else 'it'}, import with "
+                        "--skip-missing-meshes (skip_missing_meshes=True): the dynamics do not need meshes")
