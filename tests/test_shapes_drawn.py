@@ -6,8 +6,6 @@ times the solid's centre, quaternion and size); several shapes on one body, a sh
 world, a cylinder's axis; the language's checks."""
 from __future__ import annotations
 
-import base64
-
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgba
@@ -20,6 +18,8 @@ from mechdsl.animate.geometry import build
 from mechdsl.animate.stage import body_colours
 from mechdsl.diagnostics import MechError
 from mechdsl.view import still
+
+from draw_util import SIGNS, page_solids, quat_matrix
 
 MODEL = """
 model Placed
@@ -35,7 +35,6 @@ model Placed
 end Placed;
 """
 PHI = 0.7
-SIGNS = [np.array([sx, sy, sz]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
 
 
 def rx(a):
@@ -106,20 +105,8 @@ def test_the_drawing_function_puts_the_corners_there(model):
     assert solids["post"].body == "world" and {solids[n].body for n in ("plate", "fin", "shaft")} == {"b"}
 
 
-def quat_matrix(x, y, z, w) -> np.ndarray:
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 def test_the_page_data_puts_the_corners_there(model):
-    data = still(model, [PHI]).data
-    poses = np.frombuffer(base64.b64decode(data["poses"]), "<f4").reshape(len(data["bodies"]), 7).astype(float)
-    found = {}
-    for body, pose in zip(data["bodies"], poses):
-        o, R = pose[:3], quat_matrix(*pose[3:])
-        for s in body["solids"]:
-            found[s["name"]] = (body["name"], o, R, s)
+    found = {s["name"]: (body, o, R, s) for body, o, R, s in page_solids(still(model, [PHI]).data)}
     assert sorted(found) == ["fin", "plate", "post", "shaft"]
     for name in ("plate", "fin", "post"):
         body, o, R, s = found[name]

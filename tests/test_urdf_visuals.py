@@ -9,7 +9,6 @@ link's visuals, a scaled and mirrored STL) and the UR5 and Franka Panda of examp
 with their COLLADA meshes."""
 from __future__ import annotations
 
-import base64
 import struct
 
 import numpy as np
@@ -19,6 +18,7 @@ import mechdsl
 from mechdsl.animate.geometry import build
 from mechdsl.view import still
 
+from draw_util import SIGNS, page_solids, quat_matrix
 from urdf_util import Pair, robots_dir
 
 ROBOT = """<?xml version="1.0"?>
@@ -76,7 +76,6 @@ def synthetic(tmp_path_factory):
     return d / "shapes.urdf"
 
 
-SIGNS = [np.array([sx, sy, sz]) for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]   # animate's corner order
 
 
 class Visuals:
@@ -148,27 +147,17 @@ def compare_drawing(v: Visuals, q, tol: float) -> int:
     return seen
 
 
-def quat_matrix(x, y, z, w) -> np.ndarray:
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 def compare_page(v: Visuals, q, tol: float) -> int:
     """Every Shape in the page's data (body poses and the solids in body axes) against Pinocchio."""
-    data = still(v.pair.model, q).data
-    poses = np.frombuffer(base64.b64decode(data["poses"]), "<f4").reshape(1, len(data["bodies"]), 7)[0]
     seen = 0
-    for b, body in enumerate(data["bodies"]):
-        o, R = poses[b, :3].astype(float), quat_matrix(*poses[b, 3:].astype(float))
-        for s in body["solids"]:
-            if "name" not in s:
-                continue
-            Rs = quat_matrix(*s["quat"])
-            c = o + R @ np.array(s["center"])
-            corners = [c + R @ Rs @ (np.array(s["size"]) / 2 * sg) for sg in SIGNS] if s["kind"] == "box" else None
-            check(v.expected(s["name"], q), s["kind"], c, R @ Rs, tuple(s["size"]), corners, tol)
-            seen += 1
+    for _, o, R, s in page_solids(still(v.pair.model, q).data):
+        if "name" not in s:
+            continue
+        Rs = quat_matrix(*s["quat"])
+        c = o + R @ np.array(s["center"])
+        corners = [c + R @ Rs @ (np.array(s["size"]) / 2 * sg) for sg in SIGNS] if s["kind"] == "box" else None
+        check(v.expected(s["name"], q), s["kind"], c, R @ Rs, tuple(s["size"]), corners, tol)
+        seen += 1
     return seen
 
 
