@@ -226,7 +226,7 @@ def _orientation(R: np.ndarray, rpy: np.ndarray | None, fmt=vec) -> list[str]:
     if np.array_equal(R, np.eye(3)):
         return []
     found = rpy_of(R)
-    return [f"rpy = {fmt(found)}"] if found is not None else ["R = {" + ", ".join(fmt(row) for row in R) + "}"]
+    return [f"rpy = {fmt(found)}"] if found is not None else [f"R = {mat(R)}"]   # (exact: a rotation to 1e-6)
 
 
 def _joint(o, j: Joint, g: Group, st: Structure, body, jname, point_names, names, w) -> None:
