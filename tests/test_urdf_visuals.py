@@ -19,7 +19,7 @@ from mechdsl.animate.geometry import build
 from mechdsl.view import still
 
 from draw_util import SIGNS, page_solids, quat_matrix
-from urdf_util import Pair, robots_dir
+from urdf_util import Pair, robots_dir, share_dir
 
 ROBOT = """<?xml version="1.0"?>
 <robot name="shapes">
@@ -188,7 +188,7 @@ def test_the_text_keeps_the_urdf_numbers(synthetic):
 @pytest.mark.parametrize("rel_path", ["ur_description/urdf/ur5_robot.urdf", "panda_description/urdf/panda.urdf"])
 def test_arm_meshes_against_pinocchio(rel_path):
     pair = Pair(rel_path)
-    v = Visuals(pair, [str(robots_dir().parent.parent)])
+    v = Visuals(pair, [str(share_dir())])
     n = len(v.geom.geometryObjects)
     assert len(pair.imp.shapes) == n
     q = np.random.default_rng(4).uniform(-np.pi, np.pi, len(pair.eom.coords))
