@@ -341,10 +341,23 @@ class Model:
         if self._cache is not None and self._eom is not None:
             self._cache.remember(self._eom)
 
-    def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
-        """CasADi Functions (mechdsl.eom.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
-        "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds
-        the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``.
+    def casadi(self, compiled: bool = False, fixed_parameters=None, *, derivatives: int = 0,
+               compile_budget: int | None = None):
+        """The CasADi Functions of the problem a run solves (mechdsl.eom.codegen,
+        mechdsl.simulation.prepared.problem_functions): "ode" (t, x=[q; qd], u, p -> xdot),
+        "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "parameters" (free parameters
+        -> p), ...  u holds the inputs (``Model.inputs``; empty without), p is
+        ``parameter_vector()``.  A model with constraints: "ode" is the index-1 ODE the run
+        integrates (the accelerations with the multipliers solved), "outputs" its outputs
+        (reactions included), and the DAE pieces "multipliers", "constraints" (g, gdot),
+        "constraint_jacobian", "mass_matrix", "bias" (mechdsl.dae.functions).
+
+        compiled: each Function is compiled to C when it is first asked for, and only it;
+        derivatives=1 or 2 adds its first (and second) derivatives to its library (jac_, fwd1_,
+        adj1_, ..., which casadi.external finds by name: an exact Hessian for IPOPT).  A compile
+        that cannot be done raises (E804: no compiler or a failed build; E805: more than
+        compile_budget bytes of C, default 16 MB), never returning the virtual machine's
+        Functions silently.
 
         fixed_parameters: parameters an optimizer does not vary, built into the Functions as
         numbers so that CasADi folds the arithmetic on them (a leaner expression: the
@@ -354,15 +367,18 @@ class Model:
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
         recomputed value, so it cannot go stale.  p then holds the other parameters, in
         order, named by ``.parameter_names`` of the returned mapping."""
-        from .eom.codegen import casadi_functions
+        from .simulation.prepared import problem_functions
 
+        if isinstance(derivatives, bool) or derivatives not in (0, 1, 2):
+            raise UsageError(f"derivatives must be 0, 1 or 2 (got {derivatives!r})")
+        if compile_budget is not None and (isinstance(compile_budget, bool) or not isinstance(compile_budget, int)
+                                           or compile_budget < 1):
+            raise UsageError(f"compile_budget must be a number of bytes >= 1 (got {compile_budget!r})")
         fixed = self._fixed_entries(fixed_parameters)
-        # compiled: with first and second derivatives in the library, so that Jacobians and exact
-        # Hessians (IPOPT) work on the compiled Functions as on the virtual-machine ones
-        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates
-        # (SX glue works for all); the simulator keeps its numeric QR solve
-        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True,
-                                fixed=fixed)
+        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates (SX
+        # glue works for all); the simulator keeps its numeric QR solve
+        return problem_functions(self.eom, compiled=compiled, derivatives=derivatives if compiled else 0, sx=True,
+                                 fixed=fixed, each=bool(compiled), budget=compile_budget)
 
     def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
                    atol: float | None = None, steps: int | None = None, fixed_parameters=None):

@@ -50,8 +50,10 @@ def run(args) -> int:
     print(target_line(args, m))
     t_end = args.t_end if args.t_end is not None else m.scene_settings.get("stop_time")
     if t_end is None:
-        t_end = 10.0
-        print("mech: no --t-end and no scene stop_time: animating 10 s", file=sys.stderr)
+        from ..simulation.settings import DEFAULT_T_END      # the one default end of a run
+
+        t_end = DEFAULT_T_END
+        print(f"mech: no --t-end and no scene stop_time: animating {t_end:g} s", file=sys.stderr)
     t0 = float(m.scene_settings.get("start_time", 0.0))
     if not t_end > t0:
         from ..diagnostics import UsageError

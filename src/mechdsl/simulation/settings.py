@@ -292,6 +292,7 @@ def from_kwargs(t_end=None, **kw) -> SimulationSettings:
 
 def resolve(scene_settings: dict | None, args: dict, where=None) -> SimulationSettings:
     """argument > scene > default; ``args`` holds the CLI/API arguments (None = not given).
+    Without an end time from either, the run ends at DEFAULT_T_END (10 s), on every path.
 
     The scene's ``tolerance`` sets rtol and atol where neither the scene nor an argument
     sets them (docs/language.md).  A value the scene gave that fails validation (a scene's
@@ -324,10 +325,7 @@ def _resolve(scene_settings: dict | None, args: dict) -> SimulationSettings:
     for k, v in args.items():
         if v is not None:
             merged[_ALIASES.get(k, k)] = v
-    t_end = merged.pop("t_end", None)
-    if t_end is None:
-        raise UsageError("give t_end (no scene stop_time to default to)")
-    return from_kwargs(t_end, **merged)
+    return from_kwargs(merged.pop("t_end", None), **merged)     # no end time: DEFAULT_T_END
 
 
 class SettingError(UsageError):

@@ -119,7 +119,7 @@ class DaeBackend(Backend):
     groups = ("dae",)
     ignores = ("integrator_options",)
 
-    def run(self, problem, progress):
+    def run(self, problem, progress, setup=None):
         compiled, note = compiled_setting(problem)
         r = SegmentRun(problem.eom, problem.settings, progress, compiled).run()
         if note:

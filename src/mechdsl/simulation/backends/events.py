@@ -36,7 +36,7 @@ class EventsBackend(Backend):
     groups = ("contacts",)
     ignores = ("max_steps", "integrator_options")
 
-    def run(self, problem, progress):
+    def run(self, problem, progress, setup=None):
         return contact_run(problem.eom, problem.settings, progress)
 
     def describe(self, r):

@@ -58,7 +58,7 @@ class FixedStepBackend(Backend):
     ignores = ("rtol", "atol", "max_steps", "integrator_options", "compiled")
     fixed_step = True
 
-    def run(self, problem, progress):
+    def run(self, problem, progress, setup=None):
         return fixed_step_run(problem.eom, problem.settings, progress, step_eom=problem.step_eom)
 
     def describe(self, r):
