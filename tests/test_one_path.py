@@ -211,3 +211,80 @@ def test_the_entries_give_the_runs_of_model_simulate():
         a, b = model.simulate(0.5, points=11), entry(model.eom)
         np.testing.assert_array_equal(a.q, b.q)
         assert a.metadata["run"] == b.metadata["run"]
+
+
+# ------------------------------------------------------------------ one prepared problem
+
+
+@pytest.mark.parametrize("file, scene, kw", [
+    ("double_pendulum.mech", None, {"t_end": 1.0}),                  # ODE
+    ("four_bar.mech", None, {"t_end": 0.5}),                         # DAE
+    ("bouncing_ball.mech", None, {"t_end": 1.0}),                    # contacts
+    ("kepler.mech", "Orbits", {"t_end": 2.0, "points": 51}),          # fixed step
+])
+def test_prepared_equals_direct(file, scene, kw):
+    """solve(prepare(problem)) is solve(problem), number for number (rumoca's test pattern)."""
+    from mechdsl.simulation import solve
+    from mechdsl.simulation.prepared import prepare
+
+    m = mechdsl.load(MODELS / file, scene=scene)
+    problem = m.problem(points=kw.pop("points", 21), **kw)
+    a, b = solve(problem), solve(prepare(problem))
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(np.c_[a.q, a.qd], np.c_[b.q, b.qd])
+    assert a.signals.keys() == b.signals.keys()
+    for k in a.signals:
+        np.testing.assert_array_equal(a.signals[k], b.signals[k])
+    assert a.metadata["run"] == b.metadata["run"]
+
+
+def test_prepared_at_other_values_equals_a_direct_run_and_builds_nothing(monkeypatch):
+    """Parameters and start values are overridden without a rebuild: no CasADi Function, no
+    integrator and no library is built for the runs at other values, and each gives the direct
+    run's numbers (the method of auto is the one prepared)."""
+    from mechdsl import integrators as I
+    from mechdsl.eom import codegen
+    from mechdsl.simulation import formulate, simulate, solve
+    from mechdsl.simulation.prepared import prepare
+
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    problem = m.problem(t_end=1.0, points=21, method="cvodes-bdf")
+    prep = prepare(problem)
+    first = solve(prep)                     # builds the integrator (once)
+    builds = []
+    for mod, name in ((I, "make_integrator"), (codegen, "_build"), (codegen, "compile_functions")):
+        real = getattr(mod, name)
+        monkeypatch.setattr(mod, name, lambda *a, _real=real, _n=name, **k: builds.append(_n) or _real(*a, **k))
+    values = [({"l": 1.3}, None), (None, {"j1.phi": 0.4, "der(j2.phi)": -1.0}), ({"g": 3.7}, {"j2.phi": 2.0})]
+    runs = [solve(prep.at(p=p, x0=x0)) for p, x0 in values]
+    assert builds == []
+    assert prep.integrator() is prep.integrator()
+    for (p, x0), r in zip(values, runs):
+        direct = simulate(m.eom, problem.settings.replace(p=p, x0=x0))
+        np.testing.assert_array_equal(np.c_[r.q, r.qd], np.c_[direct.q, direct.qd])
+        assert not np.array_equal(r.q, first.q)
+    # auto: chosen once at prepare, kept by the runs at other values
+    auto = prepare(m.problem(t_end=1.0, points=21))
+    r = solve(auto.at(p={"l": 1.3}))
+    assert r.metadata["method"] == auto.method
+    direct = solve(formulate(m.eom, auto.problem.settings.replace(p={"l": 1.3}, method=auto.method)))
+    np.testing.assert_array_equal(r.q, direct.q)
+
+
+def test_the_prepared_integrator_is_the_runs_and_the_sweeps():
+    """The vectorized sweep maps the integrator a single run integrates with."""
+    from mechdsl.simulation.prepared import prepare
+    from mechdsl.sweep.runs import mapped_integrator
+
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    prep = prepare(m.problem(t_end=0.5, points=11, method="erk"))
+    integ = prep.integrator()
+    x0 = np.r_[m.eom.start()[0], m.eom.start()[1]]
+    xf = np.array(integ(x0=x0, p=m.parameter_values)["xf"], float).T
+    from mechdsl.simulation import solve
+
+    r = solve(prep)
+    np.testing.assert_array_equal(xf[1:], np.c_[r.q, r.qd][1:])
+    F = mapped_integrator(prep, 2, 1)
+    both = np.array(F(x0=np.c_[x0, x0], p=np.c_[m.parameter_values, m.parameter_values])["xf"], float)
+    np.testing.assert_array_equal(both[:, :11].T, xf)

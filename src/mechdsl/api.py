@@ -393,12 +393,7 @@ class Model:
         resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
         steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
         ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
-        from .eom.start import start_vector
-        from .simulation.choose import choose_method, default_inputs, fixed_step_count, min_step
-        from . import integrators as I
-        from .eom.codegen import casadi_functions
-        from .simulation.registry import METHODS
-        import casadi as ca
+        from .simulation.prepared import prepare, problem_functions
 
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
             raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
@@ -406,41 +401,14 @@ class Model:
         dt = _number("dt", dt)
         if not (math.isfinite(dt) and dt > 0):
             raise UsageError(f"dt must be a positive, finite interval (got {dt!r})")
-        s = self.settings(t_end=dt, rtol=rtol, atol=atol, method=method)
-        funcs = casadi_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
-                                 fixed=self._fixed_entries(fixed_parameters))
-        m = s.method
-        if m == "auto":
-            pv = self.parameter_values
-            m, _, _ = choose_method(self.eom, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
-                                    start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol)
-        if m not in METHODS or METHODS[m].family != "casadi":
-            casadi_methods = [k for k, v in METHODS.items() if v.family == "casadi"]
-            raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
         if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
             raise UsageError(f"steps must be a whole number of at least 1 (got {steps!r})")
-        if METHODS[m].fixed_step and steps is None:
-            pv = self.parameter_values
-            steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
-                                        start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol, None,
-                                        u=default_inputs(self.eom, np.zeros(0)))
-        opts = I.casadi_options(METHODS[m].plugin, METHODS[m].options, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
-                                hmin=min_step(0.0, s.t_end))
-        ode = funcs["ode"]
-        nu = ode.size1_in(2)
-        t0, x0 = ca.MX.sym("t0"), ca.MX.sym("x0", ode.size1_in(1))
-        u, p = ca.MX.sym("u", nu), ca.MX.sym("p", ode.size1_in(3))
-        if ode.is_a("SXFunction") and not ca.depends_on(ode.call(ode.sx_in())[0], ode.sx_in(0)):
-            shifted, args = ode, ca.vertcat(u, p)               # autonomous: t0 changes nothing
-        else:                                                  # the interval starts at t0: ode(t0 + s, ...)
-            ts, xs, us, ps = (ca.MX.sym(nm, ode.sparsity_in(i) if i != 2 else ca.Sparsity.dense(nu + 1, 1))
-                              for i, nm in enumerate(("t", "x", "u", "p")))
-            shifted = ca.Function("ode", [ts, xs, us, ps], [ode(ts + us[nu], xs, us[:nu], ps)],
-                                  ["t", "x", "u", "p"], ["xdot"])
-            args = ca.vertcat(u, t0, p)
-        integ = I.make_integrator("integrator", METHODS[m].plugin, I.dae_function(shifted), 0.0, s.t_end, opts)
-        xf = integ(x0=x0, p=args)["xf"]
-        return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
+        # the run's own preparation over [0, dt] (method auto resolved at the start values, as a
+        # run resolves it; never the compiled stepping loop: it has no CasADi integrator)
+        prep = prepare(self.problem(t_start=0.0, t_end=dt, rtol=rtol, atol=atol, method=method, compiled=False))
+        funcs = problem_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
+                                  fixed=self._fixed_entries(fixed_parameters))
+        return prep.interval_function(funcs, steps)
 
     def _fixed_entries(self, spec) -> tuple:
         """(index in p, value) pairs of ``casadi(fixed_parameters=spec)``."""
