@@ -23,7 +23,7 @@ CLASSES = [
     ("mechdsl.animate.Animation", "what `Result.animate` returns"),
     ("mechdsl.output.display.Equations", "what `Model.equations` returns"),
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
-    ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
+    ("mechdsl.analysis.linear_model.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),
 ]
 
