@@ -344,7 +344,7 @@ class Model:
     def casadi(self, compiled: bool = False, fixed_parameters=None, *, derivatives: int = 0,
                compile_budget: int | None = None):
         """The CasADi Functions of the problem a run solves (mechdsl.eom.codegen,
-        mechdsl.simulation.prepared.problem_functions): "ode" (t, x=[q; qd], u, p -> xdot),
+        mechdsl.simulation.functions.problem_functions): "ode" (t, x=[q; qd], u, p -> xdot),
         "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "parameters" (free parameters
         -> p), ...  u holds the inputs (``Model.inputs``; empty without), p is
         ``parameter_vector()``.  A model with constraints: "ode" is the index-1 ODE the run
@@ -367,7 +367,7 @@ class Model:
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
         recomputed value, so it cannot go stale.  p then holds the other parameters, in
         order, named by ``.parameter_names`` of the returned mapping."""
-        from .simulation.prepared import problem_functions
+        from .simulation.functions import problem_functions
 
         if isinstance(derivatives, bool) or derivatives not in (0, 1, 2):
             raise UsageError(f"derivatives must be 0, 1 or 2 (got {derivatives!r})")
@@ -393,7 +393,8 @@ class Model:
         resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
         steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
         ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
-        from .simulation.prepared import prepare, problem_functions
+        from .simulation.functions import problem_functions
+        from .simulation.prepared import prepare
 
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
             raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "

@@ -29,9 +29,10 @@ import casadi as ca
 from ..eom import fold_inputs
 from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of, specialize
 from ..eom.start import fixed_start
+from .constrained_system import ConstrainedSystem
 from .dof import dof_report
 from .init import initialize
-from .system import ConstrainedSystem
+
 
 OWN = ("ode", "multipliers", "outputs", "constraint_jacobian")      # built here (the rest: codegen's)
 

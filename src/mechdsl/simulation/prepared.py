@@ -13,8 +13,9 @@ once per model and solve each run ``at`` its values (the vectorized scheduler ma
 ``integrator()``), ``--estimate-error`` prepares the tighter problem, ``mech bench`` runs
 through ``solve``.  The method of ``auto`` is chosen once, at ``prepare``, from the problem's
 start: a run ``at`` other values keeps it (a direct run of those values might choose another).
-The model's Functions are those of ``Model.casadi`` (the formulated problem's: a constrained
-model's index-1 ODE with the multipliers solved, eom/functions.py).
+The Functions a problem's runs integrate are those ``Model.casadi`` returns
+(``functions.problem_functions``: a constrained model's index-1 ODE with the multipliers
+solved, mechdsl.dae.functions).
 """
 from __future__ import annotations
 
@@ -23,10 +24,8 @@ import dataclasses
 import casadi as ca
 
 from .. import integrators as I
-from ..dae.functions import ConstrainedFunctionSet
 from ..diagnostics import UsageError
 from ..eom import parameter_vector
-from ..eom.codegen import casadi_functions
 from ..eom.start import start_vector
 from .backends import backend
 from .choose import default_inputs, fixed_step_count, min_step
@@ -94,16 +93,6 @@ class Prepared:
         integ = I.make_integrator("integrator", m.plugin, I.dae_function(shifted), 0.0, span, opts)
         xf = integ(x0=x0, p=args)["xf"]
         return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
-
-
-def problem_functions(eom, *, compiled: bool = False, derivatives: int = 0, sx: bool = False, fixed=(),
-                      names=None, each: bool = False, budget: int | None = None):
-    """The CasADi Functions of the problem a run of ``eom`` solves (lazy mapping, built on first
-    use; ``codegen.casadi_functions``): a constrained model's are those of its index-1 ODE with
-    the multipliers solved, and its DAE pieces by name (mechdsl.dae.functions)."""
-    kind = ConstrainedFunctionSet if eom.g is not None and getattr(eom, "m", 0) > 0 else None
-    return casadi_functions(eom, compiled=compiled, derivatives=derivatives, sx=sx, fixed=fixed, names=names,
-                            each=each, budget=budget, kind=kind)
 
 
 def prepare(problem: Problem) -> Prepared:

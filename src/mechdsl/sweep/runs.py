@@ -37,6 +37,7 @@ from ..simulation.prepared import prepare
 from ..simulation.problem import formulate
 from ..simulation.template import solve
 
+
 STATUS = ("success", "failure_time", "cause", "detail", "steps", "rhs_evals", "rejected_steps", "points",
           "cpu_time", "wall_time", "energy_drift", "energy_drift_relative")
 

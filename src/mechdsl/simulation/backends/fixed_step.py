@@ -31,14 +31,14 @@ import numpy as np
 
 from ...analysis.hamilton import hamiltonian
 from ...analysis.integrals import integral_signals
+from ...dae.constrained_system import ConstrainedSystem
 from ...dae.dof import dof_report
 from ...dae.init import initialize
-from ...dae.system import ConstrainedSystem
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
+from ...eom.start import fixed_start, start_vector
 from ...output.result import Failure, Result
 from .. import record as R
-from ...eom.start import fixed_start, start_vector
 from ..monitors import compute_signals, energy_drift_stats
 from ..record_dae import constrained_signals as record_signals
 from ..record_dae import multipliers, select_signals

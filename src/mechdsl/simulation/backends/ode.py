@@ -19,12 +19,12 @@ from ... import integrators as I
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
 from ...eom.codegen import casadi_functions
+from ...eom.start import start_vector
 from ...output.result import Result
 from .. import monitors as Mon
 from ..choose import NO_U, choose_method, fixed_step_count, min_step
 from ..diagnose import diagnose
 from ..drive import build_drive
-from ...eom.start import start_vector
 from ..record import ENERGY_NAMES
 from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
