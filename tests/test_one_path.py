@@ -288,3 +288,18 @@ def test_the_prepared_integrator_is_the_runs_and_the_sweeps():
     F = mapped_integrator(prep, 2, 1)
     both = np.array(F(x0=np.c_[x0, x0], p=np.c_[m.parameter_values, m.parameter_values])["xf"], float)
     np.testing.assert_array_equal(both[:, :11].T, xf)
+
+
+def test_the_problems_functions_do_not_replace_the_models_in_the_model_cache(tmp_path, monkeypatch):
+    """The model cache stores the Functions codegen built for a model; a constrained problem's
+    ``ode`` (another Function under the same name) must not be stored as the model's."""
+    from mechdsl.eom import codegen, modelcache
+
+    m = mechdsl.load(MODELS / "four_bar.mech")
+    problem_ode = m.casadi()["ode"]
+    own = codegen.casadi_functions(m.eom, sx=True)["ode"]
+    stored = modelcache._functions(m.eom)
+    assert all(f is not problem_ode for f in stored.values())
+    x = np.r_[0.3, 0.2, 0.1, 1.0, 0.0, 0.0]
+    assert not np.allclose(np.array(problem_ode(0, x, [], m.parameter_values), float),
+                           np.array(own(0, x, [], m.parameter_values), float))
