@@ -147,9 +147,15 @@ class OdeOptions:
 class FixedStepOptions:
     """The settings group of the fixed-step methods (canonical ones and the ODE's rk, collocation)."""
 
-    dt: float | None = None             # the step (None: from rtol and the time scale, or span / 1000)
+    dt: float | None = None             # the step (None: from rtol and the time scale, or span / STEPS_DEFAULT)
     newton_tol: float = 1e-12           # implicit stages: Newton's tolerance
     max_newton: int = 30                # implicit stages: most Newton iterations a step
+
+    STEPS_DEFAULT = 1000                # (a class constant, not a field): canonical steps without dt
+
+    def step(self, span: float) -> float:
+        """The step of a canonical fixed-step run: dt, else span / 1000."""
+        return self.dt if self.dt is not None else span / self.STEPS_DEFAULT
 
     def validated(self, span: float, budget: int) -> "FixedStepOptions":
         dt = self.dt

@@ -132,7 +132,7 @@ def _estimate_error(r: Result, problem: Problem) -> None:
     """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter)."""
     s = problem.settings
     if backend(problem.backend).fixed_step:
-        dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
+        dt = s.fixed_step.step(s.t_end - s.t_start)
         tighter = s.replace(dt=dt / 4, estimate_error=False, budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
         how = f"dt = {dt / 4:g}"
     elif s.rtol / 100 < MIN_RTOL:

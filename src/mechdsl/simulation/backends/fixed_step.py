@@ -91,8 +91,8 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     t0, t_end = s.t_start, s.t_end
     notes = []
     if dt is None:
-        dt = (t_end - t0) / 1000.0
-        notes.append("no step size given: dt = (stop time - start time)/1000")
+        dt = fs.step(t_end - t0)
+        notes.append(f"no step size given: dt = (stop time - start time)/{fs.STEPS_DEFAULT}")
     wall0 = _time.perf_counter()
 
     pv = parameter_vector(eom, s.p)
