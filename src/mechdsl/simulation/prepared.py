@@ -27,13 +27,14 @@ from .. import integrators as I
 from ..diagnostics import UsageError
 from ..eom import parameter_vector
 from ..eom.start import start_vector
+from ..model.records import record
 from .backends import backend
 from .choose import default_inputs, fixed_step_count, min_step
 from .problem import Problem
 from .registry import METHODS, spec
 
 
-@dataclasses.dataclass(frozen=True)
+@record
 class Prepared:
     problem: Problem
     setup: object = None               # the back end's (OdeSetup for ODE problems; None: nothing kept)
