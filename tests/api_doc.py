@@ -26,7 +26,7 @@ CLASSES = [
     ("mechdsl.view.View", "what `Result.view` and `Model.view` return"),
     ("mechdsl.output.display.Equations", "what `Model.equations` returns"),
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
-    ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
+    ("mechdsl.analysis.linear_model.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),
     ("mechdsl.urdf.Imported", "what `mechdsl.urdf.convert` returns (`mechdsl.import_urdf` returns its text)"),
     ("mechdsl.export.ExportInfo", "what `Model.export_fmu` returns"),

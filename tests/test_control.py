@@ -239,8 +239,9 @@ def test_lqr_gain_satisfies_the_riccati_equation():
 
 @pytest.mark.slow          # compiles C (about 5 s)
 def test_compiled_functions_support_exact_hessian(tmp_path, monkeypatch):
-    """Model.casadi(compiled=True): IPOPT with the exact Hessian of the Lagrangian works and
-    takes the same iterations as the virtual machine (before: 'Derivatives cannot be calculated')."""
+    """Model.casadi(compiled=True, derivatives=2): IPOPT with the exact Hessian of the Lagrangian
+    works and takes the same iterations as the virtual machine (before: 'Derivatives cannot be
+    calculated')."""
     from mechdsl.eom.codegen import find_compiler
 
     if find_compiler() is None:
@@ -260,7 +261,7 @@ def test_compiled_functions_support_exact_hessian(tmp_path, monkeypatch):
         sol = opti.solve()
         return sol.value(x), sol.stats()["iter_count"]
 
-    fs = m.casadi(compiled=True)
+    fs = m.casadi(compiled=True, derivatives=2)     # derivatives only when asked (issue 22)
     ode_c = fs["ode"]                      # compiles on first use
     assert fs.compiled and ode_c.class_name() == "External", fs.notes
     x_c, it_c = solve(ode_c)

@@ -53,7 +53,7 @@ def test_nonfinite_equations_fail_with_time_and_coordinate(formulation):
 
 
 def test_nonfinite_state_error_names_the_first_bad_output():
-    from mechdsl.dae.stepper import NonFiniteError
+    from mechdsl.dae.segments import NonFiniteError
 
     e = NonFiniteError(1.25, "der(y)")
     assert e.t == 1.25 and "der(y)" in str(e)
@@ -181,7 +181,7 @@ def test_a_ctrl_c_taken_by_casadi_in_the_jacobian_is_not_swallowed(monkeypatch):
     method choice would otherwise be lost and the run go on to the end."""
     import mechdsl
     from conftest import MODELS
-    from mechdsl.dae.system import ConstrainedSystem
+    from mechdsl.dae.constrained_system import ConstrainedSystem
 
     m = mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
     pv = np.asarray(m.eom.param_values, float)

@@ -27,7 +27,7 @@ from mechdsl.dae import simulate_dae
 from mechdsl.dae.augmented import augmented_ode, project_positions, project_velocities, PENALTY
 from mechdsl.dae.dof import dof_report
 from mechdsl.dae.projection import project
-from mechdsl.dae.system import ConstrainedSystem
+from mechdsl.dae.constrained_system import ConstrainedSystem
 import mechdsl.examples
 
 MODEL = mechdsl.examples.path("nfourbar")

@@ -358,7 +358,7 @@ def test_mech_simulate_imports_only_what_it_needs(tmp_path):
 
 
 def test_settings_refuse_bad_values_for_every_model():
-    from mechdsl.dae.options import FORMULATIONS
+    from mechdsl.dae.dae_run import FORMULATIONS
     from mechdsl.simulation.registry import FORMULATIONS as KNOWN
 
     assert tuple(FORMULATIONS) == KNOWN

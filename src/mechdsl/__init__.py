@@ -72,11 +72,12 @@ def loads(text, model=None, scene=None, filename="<string>", **kw):
     return _loads(text, model=model, scene=scene, filename=filename, **kw)
 
 
-def import_urdf(path, *, floating=False, measured_inertia=False, package_dirs=None):
+def import_urdf(path, *, floating=False, measured_inertia=False, package_dirs=None, skip_missing_meshes=False):
     """The .mech text of the robot described by a URDF file (mechdsl.urdf; docs/import.md)."""
     from .urdf import import_urdf as _import
 
-    return _import(path, floating=floating, measured_inertia=measured_inertia, package_dirs=package_dirs)
+    return _import(path, floating=floating, measured_inertia=measured_inertia, package_dirs=package_dirs,
+                   skip_missing_meshes=skip_missing_meshes)
 
 
 def table(times, values, hold="zoh"):

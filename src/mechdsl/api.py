@@ -358,10 +358,23 @@ class Model:
         if self._cache is not None and self._eom is not None:
             self._cache.remember(self._eom)
 
-    def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
-        """CasADi Functions (mechdsl.eom.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
-        "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds
-        the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``.
+    def casadi(self, compiled: bool = False, fixed_parameters=None, *, derivatives: int = 0,
+               compile_budget: int | None = None):
+        """The CasADi Functions of the problem a run solves (mechdsl.eom.codegen,
+        mechdsl.simulation.functions.problem_functions): "ode" (t, x=[q; qd], u, p -> xdot),
+        "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "parameters" (free parameters
+        -> p), ...  u holds the inputs (``Model.inputs``; empty without), p is
+        ``parameter_vector()``.  A model with constraints: "ode" is the index-1 ODE the run
+        integrates (the accelerations with the multipliers solved), "outputs" its outputs
+        (reactions included), and the DAE pieces "multipliers", "constraints" (g, gdot),
+        "constraint_jacobian", "mass_matrix", "bias" (mechdsl.dae.functions).
+
+        compiled: each Function is compiled to C when it is first asked for, and only it;
+        derivatives=1 or 2 adds its first (and second) derivatives to its library (jac_, fwd1_,
+        adj1_, ..., which casadi.external finds by name: an exact Hessian for IPOPT).  A compile
+        that cannot be done raises (E804: no compiler or a failed build; E805: more than
+        compile_budget bytes of C, default 16 MB), never returning the virtual machine's
+        Functions silently.
 
         fixed_parameters: parameters an optimizer does not vary, built into the Functions as
         numbers so that CasADi folds the arithmetic on them (a leaner expression: the
@@ -371,15 +384,18 @@ class Model:
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
         recomputed value, so it cannot go stale.  p then holds the other parameters, in
         order, named by ``.parameter_names`` of the returned mapping."""
-        from .eom.codegen import casadi_functions
+        from .simulation.functions import problem_functions
 
+        if isinstance(derivatives, bool) or derivatives not in (0, 1, 2):
+            raise UsageError(f"derivatives must be 0, 1 or 2 (got {derivatives!r})")
+        if compile_budget is not None and (isinstance(compile_budget, bool) or not isinstance(compile_budget, int)
+                                           or compile_budget < 1):
+            raise UsageError(f"compile_budget must be a number of bytes >= 1 (got {compile_budget!r})")
         fixed = self._fixed_entries(fixed_parameters)
-        # compiled: with first and second derivatives in the library, so that Jacobians and exact
-        # Hessians (IPOPT) work on the compiled Functions as on the virtual-machine ones
-        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates
-        # (SX glue works for all); the simulator keeps its numeric QR solve
-        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True,
-                                fixed=fixed)
+        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates (SX
+        # glue works for all); the simulator keeps its numeric QR solve
+        return problem_functions(self.eom, compiled=compiled, derivatives=derivatives if compiled else 0, sx=True,
+                                 fixed=fixed, each=bool(compiled), budget=compile_budget)
 
     def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
                    atol: float | None = None, steps: int | None = None, fixed_parameters=None):
@@ -394,12 +410,8 @@ class Model:
         resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
         steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
         ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
-        from .eom.start import start_vector
-        from .simulation.choose import choose_method, default_inputs, fixed_step_count, min_step
-        from . import integrators as I
-        from .eom.codegen import casadi_functions
-        from .simulation.registry import METHODS
-        import casadi as ca
+        from .simulation.functions import problem_functions
+        from .simulation.prepared import prepare
 
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
             raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
@@ -407,41 +419,14 @@ class Model:
         dt = _number("dt", dt)
         if not (math.isfinite(dt) and dt > 0):
             raise UsageError(f"dt must be a positive, finite interval (got {dt!r})")
-        s = self.settings(t_end=dt, rtol=rtol, atol=atol, method=method)
-        funcs = casadi_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
-                                 fixed=self._fixed_entries(fixed_parameters))
-        m = s.method
-        if m == "auto":
-            pv = self.parameter_values
-            m, _, _ = choose_method(self.eom, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
-                                    start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol)
-        if m not in METHODS or METHODS[m].family != "casadi":
-            casadi_methods = [k for k, v in METHODS.items() if v.family == "casadi"]
-            raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
         if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
             raise UsageError(f"steps must be a whole number of at least 1 (got {steps!r})")
-        if METHODS[m].fixed_step and steps is None:
-            pv = self.parameter_values
-            steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
-                                        start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol, None,
-                                        u=default_inputs(self.eom, np.zeros(0)))
-        opts = I.casadi_options(METHODS[m].plugin, METHODS[m].options, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
-                                hmin=min_step(0.0, s.t_end))
-        ode = funcs["ode"]
-        nu = ode.size1_in(2)
-        t0, x0 = ca.MX.sym("t0"), ca.MX.sym("x0", ode.size1_in(1))
-        u, p = ca.MX.sym("u", nu), ca.MX.sym("p", ode.size1_in(3))
-        if ode.is_a("SXFunction") and not ca.depends_on(ode.call(ode.sx_in())[0], ode.sx_in(0)):
-            shifted, args = ode, ca.vertcat(u, p)               # autonomous: t0 changes nothing
-        else:                                                  # the interval starts at t0: ode(t0 + s, ...)
-            ts, xs, us, ps = (ca.MX.sym(nm, ode.sparsity_in(i) if i != 2 else ca.Sparsity.dense(nu + 1, 1))
-                              for i, nm in enumerate(("t", "x", "u", "p")))
-            shifted = ca.Function("ode", [ts, xs, us, ps], [ode(ts + us[nu], xs, us[:nu], ps)],
-                                  ["t", "x", "u", "p"], ["xdot"])
-            args = ca.vertcat(u, t0, p)
-        integ = I.make_integrator("integrator", METHODS[m].plugin, I.dae_function(shifted), 0.0, s.t_end, opts)
-        xf = integ(x0=x0, p=args)["xf"]
-        return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
+        # the run's own preparation over [0, dt] (method auto resolved at the start values, as a
+        # run resolves it; never the compiled stepping loop: it has no CasADi integrator)
+        prep = prepare(self.problem(t_start=0.0, t_end=dt, rtol=rtol, atol=atol, method=method, compiled=False))
+        funcs = problem_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
+                                  fixed=self._fixed_entries(fixed_parameters))
+        return prep.interval_function(funcs, steps)
 
     def _fixed_entries(self, spec) -> tuple:
         """(index in p, value) pairs of ``casadi(fixed_parameters=spec)``."""

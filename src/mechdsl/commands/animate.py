@@ -56,8 +56,10 @@ def plan_frames(args, m, what: str = "animating"):
 
     t_end = args.t_end if args.t_end is not None else m.scene_settings.get("stop_time")
     if t_end is None:
-        t_end = 10.0
-        print(f"mech: no --t-end and no scene stop_time: {what} 10 s", file=sys.stderr)
+        from ..simulation.settings import DEFAULT_T_END      # the one default end of a run
+
+        t_end = DEFAULT_T_END
+        print(f"mech: no --t-end and no scene stop_time: {what} {t_end:g} s", file=sys.stderr)
     t0 = float(m.scene_settings.get("start_time", 0.0))
     if not t_end > t0:
         raise UsageError(f"--t-end {t_end:g} must be after the start time {t0:g}")

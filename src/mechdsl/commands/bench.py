@@ -57,7 +57,7 @@ def default_methods(kind: str) -> list[str]:
         return ["cvodes-bdf", "rosenbrock", "scipy-radau", "erk"]
     if kind == "dae":
         try:
-            from ..dae.options import FORMULATIONS
+            from ..dae.dae_run import FORMULATIONS
         except ImportError:
             FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
         return [f"{f}+auto" for f in FORMULATIONS]

@@ -49,10 +49,7 @@ def run(args) -> int:
         elif args.emit == "problem":
             from ..simulation import dump
 
-            t_end = args.t_end
-            if t_end is None and m.scene_settings.get("stop_time") is None:
-                t_end = 10.0
-            text = dump(m.problem(t_end=t_end))
+            text = dump(m.problem(t_end=args.t_end))      # none given: the scene's, else the default
         else:
             from ..eom.dump_eom import dump_eom
 

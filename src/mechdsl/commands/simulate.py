@@ -5,6 +5,7 @@ import os
 import sys
 
 from ..diagnostics import UsageError
+from ..simulation.settings import DEFAULT_T_END
 from ._common import add_cache_arg, add_set_arg, add_target_args, load_model, number, target_line
 
 HELP = "simulate a model and write its results (CSV + JSON sidecar) and a plot"
@@ -59,9 +60,8 @@ def run(args) -> int:
         check_figure(args.plot, overwrite=args.force)
     model, x0 = load_model(args, starts_in_model=False)
     t_end = args.t_end
-    if t_end is None and model.scene_settings.get("stop_time") is None:
-        t_end = 10.0
-        print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
+    if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
+        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
     # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
     # caller (argument > scene > default), so CLI and API give the same run for the same scene
     interrupted = False

@@ -95,9 +95,10 @@ def run(args) -> int:
     if x0:
         raise UsageError("--set of start values is not available in a sweep: sweep them with --grid c.start=...")
     t_end = args.t_end
-    if t_end is None and model.scene_settings.get("stop_time") is None:
-        t_end = 10.0
-        print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
+    if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
+        from ..simulation.settings import DEFAULT_T_END
+
+        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
     nc = args.output if args.output and args.output.endswith(".nc") else None
     ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=nc, workers=args.workers,
                      progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty(), overwrite=True,

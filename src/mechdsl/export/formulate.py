@@ -19,12 +19,12 @@ def index1_ode(eom, pv):
     constraints (chosen at the consistent start, as the DAE back end does: dae.dof), lam of
     every constraint (0 for a dropped redundant one), in the EOM's sign convention
     (M q'' = bias - G' lam).  Inputs are folded into the parameters for the DAE pieces and
-    passed on as u.  Built from dae.system (the formulation), only here."""
+    passed on as u.  Built from dae.constrained_system (the formulation), only here."""
     import casadi as ca
 
     from ..dae.dof import dof_report
     from ..dae.init import initialize
-    from ..dae.system import ConstrainedSystem
+    from ..dae.constrained_system import ConstrainedSystem
     from ..eom import fold_inputs
 
     folded = fold_inputs(eom)
@@ -62,9 +62,9 @@ def point_position(eom, point):
 
 def contact_defaults(settings) -> dict:
     """The contact options of a run with these settings (the settings group ``contacts``, with
-    the tolerances the event loop derives from them, mechdsl.impacts.options.ContactRun):
+    the tolerances the event loop derives from them, mechdsl.impacts.contact_run.ContactRun):
     rest_speed, impact order (0 simultaneous, 1 sequential), max_events, samples, acc_tol."""
-    from ..impacts.options import ContactRun
+    from ..impacts.contact_run import ContactRun
 
     o = ContactRun(settings.contacts, settings.rtol, settings.atol)
     return {"rest_speed": o.rest_speed, "impact_order": 1 if o.impact_order == "sequential" else 0,

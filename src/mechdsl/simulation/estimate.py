@@ -29,6 +29,7 @@ import numpy as np
 
 from ..model.units import parse_unit
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
+from .prepared import prepare
 from .problem import formulate
 from .registry import spec
 from .settings import MIN_RTOL
@@ -64,7 +65,7 @@ def companion(problem, r):
     n = len(r.t)
     base = dict(error_estimate="off", estimate_error=False, warn=False)
     if fixed:
-        dt = float((r.stats or {}).get("dt") or s.dt or (s.t_end - s.t_start) / 1000.0)
+        dt = float((r.stats or {}).get("dt") or s.fixed_step.step(s.t_end - s.t_start))
         order = spec(s.method).order or 1
         steps = int(round((s.t_end - s.t_start) / dt))
         tight = s.replace(**base, dt=dt / 2, points=n if n >= 2 else None,
@@ -112,7 +113,7 @@ def estimate(r, problem, solve, given=None) -> None:
             tp = formulate(problem.eom, tight.validated())
             if problem.step_eom is not None:
                 tp = dataclasses.replace(tp, step_eom=problem.step_eom)
-            other = solve(tp)
+            other = solve(prepare(tp))
         except Exception as e:  # noqa: BLE001 - the run itself is fine; say why there is no estimate
             why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
             acc.update(error_estimate=None, error_estimate_unavailable=f"the companion run could not run: {why}")

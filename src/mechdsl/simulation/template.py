@@ -28,6 +28,7 @@ from . import accuracy as A
 from .backends import backend, ignored_settings
 from .backends.ode import record_inputs
 from .estimate import estimate
+from .prepared import Prepared, prepare
 from .record_dae import multiplier_column_units
 from .registry import spec
 from .problem import Problem, formulate
@@ -70,7 +71,12 @@ def _caller_level() -> int:
     return level
 
 
-def solve(problem: Problem, progress=None) -> Result:
+def solve(problem: Problem | Prepared, progress=None) -> Result:
+    """Solve a problem through the template: a ``Prepared`` problem (prepared.py) runs with what
+    was built for it; a Problem is prepared inside the timed run."""
+    setup = None
+    if isinstance(problem, Prepared):
+        problem, setup = problem.problem, problem.setup
     s = problem.settings
     back = backend(problem.backend)
     bar = None
@@ -80,7 +86,7 @@ def solve(problem: Problem, progress=None) -> Result:
         callback = lambda t, t1: bar.update(float(t))   # noqa: E731
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        r = back.run(problem, callback)
+        r = back.run(problem, callback) if setup is None else back.run(problem, callback, setup=setup)
     except MechError:
         _blame_signals(problem)
         raise
@@ -179,7 +185,7 @@ def _estimate_error(r: Result, problem: Problem):
     (that run, the factor its difference is divided by, what it is), or None."""
     s = problem.settings
     if backend(problem.backend).fixed_step:
-        dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
+        dt = s.fixed_step.step(s.t_end - s.t_start)
         tighter = s.replace(dt=dt / 4, estimate_error=False, error_estimate="off",
                             budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
         how = f"dt = {dt / 4:g}"
@@ -199,7 +205,7 @@ def _estimate_error(r: Result, problem: Problem):
     tight_problem = formulate(problem.eom, tighter.validated())
     if problem.step_eom is not None:                  # the holds kept over each step there too
         tight_problem = dataclasses.replace(tight_problem, step_eom=problem.step_eom)
-    tight = solve(tight_problem)
+    tight = solve(prepare(tight_problem))
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}
