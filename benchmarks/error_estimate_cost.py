@@ -113,7 +113,7 @@ def main() -> None:
               f"{'yes' if acc.get('warning') else '':>5s}{cli}"
               + ("" if est is not None else f"  ({acc.get('error_estimate_unavailable')})"), flush=True)
     if rows:
-        ratios = [on / off for _, off, on in rows]
+        ratios = [row[2] / row[1] for row in rows]
         print(f"\n{len(rows)} runs: on/off median {statistics.median(ratios):.2f}, "
               f"max {max(ratios):.2f}; total CPU off {sum(r[1] for r in rows):.3f} s, on {sum(r[2] for r in rows):.3f} s")
         if args.cli:

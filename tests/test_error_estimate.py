@@ -137,3 +137,24 @@ def test_sweeps_carry_no_estimate_and_issue_no_warnings():
         warnings.simplefilter("error", MechWarning)
         ds = m.sweep(params={"L": [1.0, 2.0]}, t_end=2000.0, points=11)      # far off its tolerance
     assert int(ds.attrs["n_failed"]) == 0
+    assert np.isnan(ds["error_estimate"].values).all()                   # not asked: NaN, not 0
+
+
+def test_sweeps_on_request_carry_each_runs_estimate(pendulum, tmp_path, capsys):
+    """error_estimate="on": each run's estimate in the status table, the number a single run of
+    the same values reports (each run with its own companion, not the vectorized back end)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MechWarning)
+        ds = pendulum.sweep(params={"L": [1.0, 2.0]}, t_end=20.0, points=21, rtol=1e-6, atol=1e-8,
+                            error_estimate="on")
+        single = [pendulum.with_params(L=L).simulate(20.0, points=21, rtol=1e-6, atol=1e-8)
+                  .metadata["accuracy"]["error_estimate"] for L in (1.0, 2.0)]
+    assert ds.attrs["scheduler"] != "vectorized"
+    assert ds["error_estimate"].values == pytest.approx(single, rel=1e-9)
+    assert all(e > 0 for e in single)
+    assert main(["sweep", str(MODELS / "pendulum.mech"), "--model", "Pendulum", "--grid", "L=1,2",
+                 "--t-end", "20", "--points", "21", "--rtol", "1e-6", "--atol", "1e-8",
+                 "--error-estimate", "on", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    worst = int(np.argmax(single))
+    assert f"error estimate: largest {single[worst]:.2g} (run {worst}: L = {worst + 1:g})" in out

@@ -108,6 +108,8 @@ def test_equations_print_each_multipliers_terms(file, model, capsys):
     assert main(["equations", str(MODELS / file), "--model", model]) == 0
     out = capsys.readouterr().out
     assert "G^T lambda" not in out and "lambda[" in out
+    if model == "PendulumCartesian":                   # each constraint says its multiplier's unit
+        assert "(lambda[rod] in N/m)" in out             # g = x^2 + y^2 - L^2, in m2
     m = mechdsl.load(MODELS / file, model=model)
     sm = lagrange_equations(m.model)[0]
     terms, names = multiplier_terms(m.model, sm)

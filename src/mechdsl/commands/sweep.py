@@ -45,6 +45,9 @@ def add_parser(sub):
     p.add_argument("-o", "--output", metavar="OUT", help="results: .nc (netCDF, streamed) or .csv (long table)")
     p.add_argument("--plot", metavar="PNG", help="heat map of --metric over the two --grid axes")
     p.add_argument("--metric", metavar="M", help=f"per-run value to plot: {METRICS}")
+    p.add_argument("--error-estimate", choices=("off", "on"), default="off",
+                   help="on: every run carries the error estimate of mech simulate (a companion run each; "
+                        "the status column error_estimate); default off")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_force_arg(p)
     return p
@@ -102,7 +105,8 @@ def run(args) -> int:
     nc = args.output if args.output and args.output.endswith(".nc") else None
     ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=nc, workers=args.workers,
                      progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty(), overwrite=True,
-                     rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
+                     rtol=args.rtol, atol=args.atol, method=args.method, points=args.points,
+                     error_estimate=args.error_estimate)
     written = [nc] if nc else []
     if args.output and args.output.endswith(".csv"):
         from ..output.fileio import write_atomic
@@ -166,6 +170,11 @@ def summary(ds, written=()) -> str:
         lines.append(f"first failed run: {first} ({_values(ds, first)}): {ds['cause'].values[first]}"
                      + (f" at t = {ft:.6g}" if np.isfinite(ft) else "")
                      + (f" ({ds['detail'].values[first]})" if str(ds['detail'].values[first]) else ""))
+    est = np.asarray(ds["error_estimate"].values, float) if "error_estimate" in ds else np.zeros(0)
+    if np.isfinite(est).any():
+        worst = int(np.nanargmax(est))
+        lines.append(f"error estimate: largest {est[worst]:.2g} (run {worst}: {_values(ds, worst)}), in the "
+                     "coordinates' units (the status column error_estimate)")
     if int(a.get("n_warnings", 0)):
         lines.append(f"warnings in {a['n_warnings']} runs; first: " + str(a.get("warnings", "")).splitlines()[0])
     if int(a.get("interrupted", 0)):

@@ -220,6 +220,7 @@ def _constraint_lines(model: ir.Model, pr, sm) -> list[str]:
     """The constraints g = 0 whose multipliers lambda enter as -G^T lambda, G = dg/dq."""
     if not model.constraints and not any(j.closes_loop for j in model.joints):
         return []
+    from ..model.units import multiplier_unit
     from . import joints as J
     from .symbolic import _Builder
 
@@ -227,7 +228,8 @@ def _constraint_lines(model: ir.Model, pr, sm) -> list[str]:
     b = _Builder(model)
     b.build()
     for c in model.constraints:
-        out.append(f"  {c.name}:  {pr(b.tr(c.residual))} = 0")
+        unit = multiplier_unit(c.dim)
+        out.append(f"  {c.name}:  {pr(b.tr(c.residual))} = 0" + (f"   (lambda[{c.name}] in {unit})" if unit else ""))
     for j in model.joints:
         if j.closes_loop:
             cl = J.kind_of(j).closure

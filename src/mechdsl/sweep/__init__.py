@@ -199,6 +199,8 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
         return f"method {m} is not a CasADi integrator"
     if problem.settings.ode.functions is not None:
         return "the functions option replaces the model's Functions"
+    if problem.settings.error_estimate != "off":
+        return "each run carries an error estimate (error_estimate on): a companion run of its own"
     return None
 
 

@@ -39,7 +39,7 @@ from ..simulation.template import solve
 
 
 STATUS = ("success", "failure_time", "cause", "detail", "steps", "rhs_evals", "rejected_steps", "points",
-          "cpu_time", "wall_time", "energy_drift", "energy_drift_relative")
+          "cpu_time", "wall_time", "energy_drift", "energy_drift_relative", "error_estimate")
 
 
 @dataclass
@@ -145,6 +145,7 @@ def _store(job: Job, out: Chunk, i: int, r) -> None:
         if isinstance(v, np.ndarray) and v.ndim == 1:
             out.signals[i, :len(v), j] = v
     st = {k: r.stats.get(k) for k in STATUS if k in r.stats}
+    st["error_estimate"] = (r.metadata.get("accuracy") or {}).get("error_estimate")   # None: not asked
     f = r.failure
     st.update(success=f is None, failure_time=np.nan if f is None else float(f.time),
               cause="" if f is None else f.cause, detail="" if f is None else (f.detail or ""))
