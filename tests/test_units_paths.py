@@ -150,3 +150,30 @@ def test_tables_show_the_declared_unit(ode):
     text = dump_model(ode.model)
     assert "alpha = 30 [deg]" in text
     assert "alpha = 45 [deg]" in dump_model(ode.with_params(alpha=45).model)
+
+
+DEPENDENT = DISK_ODE.replace('  parameter Real J(unit = "kg.m2") = 1 "inertia of an idle wheel";', '''  parameter Real J(unit = "kg.m2") = 1 "inertia of an idle wheel";
+  parameter Real base(unit = "deg") = 45;
+  parameter Real L(unit = "mm") = 250;
+  parameter Real Lm(unit = "mm") = L "the same length, in the same unit";
+  parameter Real w(unit = "deg/s") = 10;''').replace(
+    'parameter Real alpha(unit = "deg") = 30 "slope";', 'parameter Real alpha(unit = "deg") = base "slope";').replace(
+    'coordinate Real turn(start = 0, speed = 0, unit = "deg")', 'coordinate Real turn(start = base/3, speed = w, unit = "deg")')
+
+
+def test_a_value_computed_from_parameters_with_units_is_not_converted_again():
+    """alpha(unit = "deg") = base, base = 45 deg: alpha is 45 degrees (it was read as 45 deg x
+    pi/180 = 0.785 deg, the slope almost flat); lengths alike (250 mm, not 0.25 mm), and start
+    values and speeds computed from parameters.  Bare numbers still mean the declared unit.
+    with_params re-evaluates the dependents in the order they depend on each other (alpha refers
+    to base, declared after it: a KeyError traceback before)."""
+    m = mechdsl.loads(DEPENDENT)
+    p = dict(zip(m.eom.params, m.parameter_values))
+    assert p["alpha"] == pytest.approx(math.pi / 4, rel=1e-15)
+    assert p["Lm"] == pytest.approx(0.25, rel=1e-15)
+    r = m.simulate(T_END, points=3, **TIGHT)
+    check(r["s"], r.t)
+    assert r["turn"][0] == pytest.approx(math.radians(15), rel=1e-15)
+    assert r["der(turn)"][0] == pytest.approx(math.radians(10), rel=1e-15)
+    r = m.with_params(base=60).simulate(T_END, points=3, **TIGHT)            # alpha follows base
+    assert r["s"][-1] == pytest.approx(closed_form(T_END, 60.0)[()], rel=1e-9)

@@ -288,15 +288,21 @@ class Model:
     def _with_real(self, values: dict[str, float]) -> "Model":
         from .model.exprs import evaluate
 
-        env: dict[str, float] = {}
-        params = []
-        for p in self.model.parameters:
-            if p.name in values:
-                p = dataclasses.replace(p, value=values[p.name], binding=None)
-            elif p.binding is not None and not p.integer:
-                p = dataclasses.replace(p, value=_dependent_value(p, env, evaluate))
-            env[p.name] = p.value
-            params.append(p)
+        params = [dataclasses.replace(p, value=values[p.name], binding=None) if p.name in values else p
+                  for p in self.model.parameters]
+        dependent = [k for k, p in enumerate(params) if p.binding is not None and not p.integer]
+        env = {p.name: p.value for k, p in enumerate(params) if k not in dependent}
+        while dependent:              # in the order they depend on each other (a value may refer ahead)
+            left = []
+            for k in dependent:
+                try:
+                    params[k] = dataclasses.replace(params[k], value=_dependent_value(params[k], env, evaluate))
+                    env[params[k].name] = params[k].value
+                except KeyError:      # refers to a dependent parameter not yet evaluated
+                    left.append(k)
+            if len(left) == len(dependent):
+                raise UsageError(f"parameter {params[left[0]].name} depends on parameters that cannot be evaluated")
+            dependent = left
         model = dataclasses.replace(self.model, parameters=tuple(params))
         from .semantic.physical import errors, value_problems
 

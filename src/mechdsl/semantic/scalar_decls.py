@@ -95,7 +95,9 @@ class ScalarDeclarations:
                 out_items.append(Scalar(ir.Const(float(s.const)), U.ONE if d.type_name == "Boolean" else ANY,
                                         integer=d.type_name == "Integer", boolean=d.type_name == "Boolean"))
                 continue
-            binding = s.expr if factor == 1.0 else X.mul(X.const(factor), s.expr)
+            # numbers are in the declared unit (alpha(unit = "deg") = 30: 30 degrees); a value computed
+            # from parameters with units (beta(unit = "deg") = alpha) is a quantity, already SI
+            binding = s.expr if factor == 1.0 or isinstance(s.dim, U.Dim) else X.mul(X.const(factor), s.expr)
             try:
                 with _quiet_numpy():
                     value = X.evaluate(binding, self.param_values)
@@ -198,7 +200,7 @@ class ScalarDeclarations:
                      "start values are numbers or expressions in parameters")
             if dim is not None and attr in ("start", "speed"):
                 self.check_dim(s, dim, f"the {attr} value", m.value.span)
-            out.append(s.expr if factor == 1.0 else X.mul(X.const(factor), s.expr))
+            out.append(s.expr if factor == 1.0 or isinstance(s.dim, U.Dim) else X.mul(X.const(factor), s.expr))
         return out
 
     def _output(self, e: Entry, dims: tuple[int, ...]) -> Val:
