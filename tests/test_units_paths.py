@@ -177,3 +177,24 @@ def test_a_value_computed_from_parameters_with_units_is_not_converted_again():
     assert r["der(turn)"][0] == pytest.approx(math.radians(10), rel=1e-15)
     r = m.with_params(base=60).simulate(T_END, points=3, **TIGHT)            # alpha follows base
     assert r["s"][-1] == pytest.approx(closed_form(T_END, 60.0)[()], rel=1e-9)
+
+
+@pytest.mark.parametrize("value", ["45", "deg(45)", "rad(pi/4)", "deg(90)/2", "base", "deg(base/deg(1))"])
+def test_explicit_units_in_the_file(value):
+    """deg(x) and rad(x) in a .mech file: the number in that unit, an angle (as `45 deg` on the
+    command line); a scene modifier and the declaration alike."""
+    src = DEPENDENT.replace('parameter Real base(unit = "deg") = 45;', 'parameter Real base(unit = "deg") = deg(45);')
+    scene = src + f"scene Steep\n  model RollingDiskODE(alpha = {value});\n  stop_time = 1;\nend Steep;\n"
+    r = mechdsl.loads(scene, scene="Steep").simulate(points=3, **TIGHT)
+    check(r["s"], r.t)
+    decl = src.replace('parameter Real alpha(unit = "deg") = base "slope";', f'parameter Real alpha(unit = "deg") = {value};')
+    r = mechdsl.loads(decl).simulate(T_END, points=3, **TIGHT)
+    check(r["s"], r.t)
+
+
+def test_a_unit_function_of_a_length_is_a_located_error(tmp_path, capsys):
+    path = tmp_path / "disk.mech"
+    path.write_text(DEPENDENT.replace('Real base(unit = "deg") = 45;', 'Real base(unit = "deg") = deg(L);'))
+    assert main(["check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert f"{path}:" in err and "error[E402]: deg() takes a number, got a value in m" in err

@@ -22,10 +22,10 @@ COMPONENTS = ("Body", "Box", "Contact", "Cylinder", "Cylindrical", "Damper", "Di
               "Potential", "Prismatic", "Revolute", "RigidLink", "Rod", "Shape", "Sphere", "Spherical", "Spring",
               "SpringDamper",
               "Torque")
-FUNCTIONS = ("abs", "acos", "asin", "atan", "atan2", "ceil", "cos", "cosh", "cross", "der", "diagonal",
+FUNCTIONS = ("abs", "acos", "asin", "atan", "atan2", "ceil", "cos", "cosh", "cross", "deg", "der", "diagonal",
              "dissipation_function", "dot", "energy", "exp", "fill", "floor", "identity", "kinetic_energy", "log",
              "log10", "max", "min", "norm", "normalize", "ones", "position", "potential_energy",
-             "reaction_force", "reaction_torque", "constraint_force", "constraint_torque", "rotation", "rpy",
+             "rad", "reaction_force", "reaction_torque", "constraint_force", "constraint_torque", "rotation", "rpy",
              "axis_angle", "sign", "sin", "sinh", "size",
              "skew", "sqrt", "sum", "tan", "tanh", "transpose", "velocity", "zeros")
 BUILTIN_NAMES = ("pi", "time", "world")

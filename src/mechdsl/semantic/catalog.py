@@ -180,6 +180,9 @@ FUNCTIONS: dict[str, tuple[str, str]] = {
     "sqrt": ("sqrt(x)", "square root"), "abs": ("abs(x)", "absolute value"),
     "sign": ("sign(x)", "-1, 0 or 1"), "floor": ("floor(x)", "largest integer not above x"),
     "ceil": ("ceil(x)", "smallest integer not below x"),
+    "deg": ("deg(x)", "x degrees, as an angle: deg(45) = pi/4 rad; a parameter declared in any angle unit "
+                      "takes it as it is"),
+    "rad": ("rad(x)", "x radians, as an angle: a parameter declared in degrees takes rad(0.785) as 45 deg"),
     "min": ("min(a, b)", "the smaller of a and b"), "max": ("max(a, b)", "the larger of a and b"),
     "cross": ("cross(a, b)", "cross product of two 3-vectors"), "dot": ("dot(a, b)", "dot product"),
     "norm": ("norm(v)", "Euclidean length of a vector"), "normalize": ("normalize(v)", "v / norm(v)"),

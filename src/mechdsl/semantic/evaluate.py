@@ -23,7 +23,8 @@ VECTOR_FUNCS = {"cross", "dot", "norm", "transpose", "identity", "zeros", "ones"
 KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_energy", "energy",
                    "dissipation_function", "reaction_force", "reaction_torque", "constraint_force",
                    "constraint_torque"}
-ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
+UNIT_FUNCS = {"deg": math.pi / 180, "rad": 1.0}     # a number in that unit, as an angle (SI): deg(45)
+ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS | set(UNIT_FUNCS)
 
 
 
@@ -239,6 +240,10 @@ class Evaluator(abc.ABC):
             if len(args) != 1 or not isinstance(args[0], CompRef):
                 fail("E209", f"{name}() takes a point or body", e.span, f"e.g. {name}(rod.b)")
             return self.attribute(args[0], "r" if name == "position" else "v", e.span)
+        if name in UNIT_FUNCS:
+            if len(args) != 1:
+                fail("E304", f"{name}() takes 1 argument, got {len(args)}", e.span, f"write {name}(45)")
+            return V.map1(args[0], lambda s: _in_unit(s, name, e.args[0].span))
         if name in X.MATH_FUNCS:
             return V.apply_func(name, args)
         return _vector_func(name, args, e)
@@ -421,3 +426,15 @@ def _filled(v: Val, dims: list[int]) -> Val:
 
 
 __all__ = ["Evaluator", "EvalError", "fail", "BUILTIN_NAMES", "ALL_FUNCS", "math"]
+
+
+def _in_unit(s: Val, name: str, span: Span) -> Scalar:
+    """deg(x), rad(x): the number x in that unit, an angle in SI (a quantity: a parameter declared
+    in any angle unit takes it as it is, semantic/scalar_decls.py)."""
+    if not isinstance(s, Scalar) or (isinstance(s.dim, U.Dim) and s.dim != U.ONE):
+        fail("E402", f"{name}() takes a number" + (f", got a value in {s.dim}" if isinstance(s, Scalar) else ""), span,
+             f"write {name}(45): the number in {'degrees' if name == 'deg' else 'radians'}")
+    f = UNIT_FUNCS[name]
+    if s.const is not None:
+        return Scalar(ir.Const(float(s.const) * f), U.ONE, approx=s.approx)
+    return Scalar(s.expr if f == 1.0 else X.mul(X.const(f), s.expr), U.ONE, approx=s.approx)
