@@ -166,3 +166,14 @@ def test_virtual_power_identity_at_random_states(src, out):
         q, qd, lam = rng.normal(size=eom.n), rng.normal(size=eom.n), rng.normal(size=eom.m)
         a, b = (float(v) for v in f(q, qd, 0.0, eom.param_values, lam))
         assert a == pytest.approx(b, rel=1e-10, abs=1e-12)
+
+
+def test_the_equilibrium_table_says_each_numbers_unit(tmp_path, capsys):
+    from mechdsl.cli import main
+
+    path = tmp_path / "link.mech"
+    path.write_text(LINKAGE)
+    assert main(["equilibrium", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "jA.phi [rad]" in out and "jB.phi [rad]" in out and "lambda[floor] [N]" in out
+    assert out.count("-14.905 ") == 2

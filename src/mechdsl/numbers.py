@@ -219,6 +219,23 @@ def show(si_value: float, unit: str | None, digits: int = 6) -> str:
     return f"{v:.{digits}g}" + (f" {unit}" if unit else "")
 
 
+def si_unit(unit: str | None) -> str | None:
+    """The unit the values of a quantity declared in ``unit`` are held in (results, the parameter
+    vector, equilibria are SI): "rad" for deg, "rad/s" for rpm, "m" for mm; None when unknown."""
+    if not unit:
+        return None
+    try:
+        factor, dim = _unit(unit, "unit")
+    except UsageError:
+        return None
+    if factor == 1.0:
+        return unit
+    text = str(dim)
+    if re.search(r"deg|rev|rpm|turn|grad|arcmin|arcsec", unit):        # an angle in another unit
+        return "rad" if text == "1" else "rad" + text[1:] if text.startswith("1/") else None
+    return None if text == "1" else text
+
+
 def _unit(unit: str, what: str):
     from .model.units import parse_unit
 

@@ -50,7 +50,7 @@ def run(args) -> int:
     if args.steady:
         return _steady(args, m, guesses)
     eqs = equilibria(m.eom, guesses or None, t=args.time)
-    print(format_equilibria(m.name, m.eom.coords, eqs))
+    print(format_equilibria(m.name, m.eom.coords, eqs, _si_units(m)))
     data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
             "equilibria": [e.to_dict() for e in eqs]}
     args.out.set(target=target_line(args, m), **data)
@@ -97,7 +97,15 @@ def format_steady(name: str, pins: dict, found) -> str:
     return "\n".join(lines)
 
 
-def format_equilibria(name: str, coords, eqs) -> str:
+def _si_units(m) -> dict:
+    """coordinate -> the unit its values are in (SI; rad for an angle declared in deg)."""
+    from ..numbers import si_unit
+
+    return {c.name: si_unit(c.unit) for c in m.model.coordinates}
+
+
+def format_equilibria(name: str, coords, eqs, units: dict | None = None) -> str:
+    """The table of equilibria; ``units``: each coordinate's unit (SI), said in its column's head."""
     from ..analysis.tables import num, table
 
     search_notes = [f"  note: {n}" for n in getattr(eqs, "notes", None) or ()]
@@ -116,9 +124,10 @@ def format_equilibria(name: str, coords, eqs) -> str:
         rows.append([str(i)] + [num(v) for v in e.q] + lam + [e.kind, e.stability,
                                                               "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
     head = "Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues"
-    units = eqs[0].lambda_units if lam_names else {}
-    lines.append(table(["#"] + list(coords) + [f"lambda[{c}]" + (f" [{units[c]}]" if units.get(c) else "")
-                                               for c in lam_names] + ["kind", "stability", head], rows))
+    units, lam_units = units or {}, eqs[0].lambda_units if lam_names else {}
+    heads = [c + (f" [{units[c]}]" if units.get(c) else "") for c in coords]
+    lines.append(table(["#"] + heads + [f"lambda[{c}]" + (f" [{lam_units[c]}]" if lam_units.get(c) else "")
+                                       for c in lam_names] + ["kind", "stability", head], rows))
     common = [n for n in eqs[0].notes if all(n in e.notes for e in eqs[1:])] if len(eqs) > 1 else []
     for i, e in enumerate(eqs, 1):
         lines.append(f"  {i}: {e.reason}")

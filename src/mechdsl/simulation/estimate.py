@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from ..model.units import parse_unit
+from ..numbers import si_unit
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
 from .prepared import prepare
 from .problem import formulate
@@ -147,20 +147,12 @@ def estimate(r, problem, solve, given=None) -> None:
 
 
 def _unit(eom, coordinate: str) -> str | None:
-    """The declared unit of a coordinate (its values are SI: rad for an angle declared in deg)."""
+    """The unit of a coordinate's values (SI: rad for an angle declared in deg)."""
     model = getattr(eom, "model", None)
     try:
-        unit = model.coordinate(coordinate).unit if model is not None else None
+        return si_unit(model.coordinate(coordinate).unit) if model is not None else None
     except KeyError:
         return None
-    if unit:
-        try:
-            factor, _ = parse_unit(unit)
-        except ValueError:
-            return None
-        if factor != 1.0:            # results are SI: an angle declared in deg is recorded in rad
-            return "rad" if unit == "deg" else None
-    return unit
 
 
 def _common_times(t: np.ndarray, u: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:
