@@ -158,3 +158,29 @@ def test_sweeps_on_request_carry_each_runs_estimate(pendulum, tmp_path, capsys):
     out = capsys.readouterr().out
     worst = int(np.argmax(single))
     assert f"error estimate: largest {single[worst]:.2g} (run {worst}: L = {worst + 1:g})" in out
+
+
+def test_a_fixed_step_the_user_chose_warns_when_the_error_is_a_large_part_of_the_motion():
+    """kepler.mech's Orbits scene (Stormer-Verlet, 400 steps an orbit, dt chosen): its energy
+    stays bounded, but after 20 orbits the planet is 0.58 m off (the orbit's phase); rtol does
+    not apply to a chosen step, so the rule is the error against the coordinate's size
+    (accuracy.STEP_LIMIT).  The estimate against a run with dt/8; one orbit at dt/4 does not warn."""
+    from mechdsl.simulation.accuracy import STEP_LIMIT
+
+    m = mechdsl.load(MODELS / "kepler.mech", scene="Orbits")
+    dt = float(m.scene_settings["dt"])
+    T = 20 * 2 * math.pi
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = m.simulate(T, points=201)
+    ref = m.simulate(T, points=201, dt=dt / 8, error_estimate="off")
+    acc = r.metadata["accuracy"]
+    true = np.abs(r.q - ref.q).max(axis=0)
+    assert 0.5 <= acc["error_estimate"] / true.max() <= 2
+    assert true.max() / np.abs(r.q).max(axis=0)[np.argmax(true)] > 10 * STEP_LIMIT
+    said = [str(w.message) for w in caught if issubclass(w.category, MechWarning)]
+    assert len(said) == 1 and f"dt = {dt:g}" in said[0] and not r.ok
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MechWarning)
+        short = m.simulate(2 * math.pi, points=51, dt=dt / 4)
+    assert short.ok and short.metadata["accuracy"]["error_estimate_relative"] < STEP_LIMIT

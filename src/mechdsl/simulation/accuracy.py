@@ -30,6 +30,7 @@ ALIASES = {"steps": ("steps", "nsteps", "n_steps"),
 DRIFT_FACTOR = 100.0   # invariant drift this many times the tolerance: the accuracy warning (drift_limit)
 WARN_FACTOR = 30.0     # error estimate / tolerance class above this: the accuracy warning (estimate.py)
 DRIFT_CAP = 0.05       # ... and never above this relative drift
+STEP_LIMIT = 0.01      # a fixed step the user chose: the estimate above this fraction of the coordinate's size warns
 
 
 def check_finite(r: Result) -> None:
@@ -156,8 +157,15 @@ def accuracy_warning(r: Result, problem) -> str | None:
     ratio = acc.get("error_estimate_ratio")
     # a fixed step the user chose has no tolerance class to exceed (a step from rtol has)
     chosen_step = problem.kind == "canonical" and s.dt is not None
+    unit = f" {acc['error_estimate_unit']}" if acc.get("error_estimate_unit") else ""
+    relative = acc.get("error_estimate_relative")
+    if chosen_step and acc.get("error_estimate") is not None and relative is not None and relative > STEP_LIMIT:
+        where = acc["error_estimate_relative_coordinate"]
+        parts.append(f"the estimated error of {where} is {relative:.2g} times its largest magnitude over the run "
+                     f"(largest error {acc['error_estimate']:.2g}{unit}, in {acc['error_estimate_coordinate']}, at "
+                     f"t = {acc['error_estimate_time']:.6g}): the step dt = {s.dt:g} sets the accuracy of a fixed-step "
+                     "method; a shorter dt reduces it (as dt^order)")
     if acc.get("error_estimate") is not None and ratio is not None and ratio > WARN_FACTOR and not chosen_step:
-        unit = f" {acc['error_estimate_unit']}" if acc.get("error_estimate_unit") else ""
         parts.append(f"the estimated error {acc['error_estimate']:.2g}{unit} (in {acc['error_estimate_coordinate']}, at "
                      f"t = {acc['error_estimate_time']:.6g}) is {ratio:.3g} times what rtol = {s.rtol:g} and "
                      f"atol = {s.atol:g} ask of it")
@@ -168,9 +176,12 @@ def accuracy_warning(r: Result, problem) -> str | None:
     if not parts:
         acc.pop("warning", None)
         return None
-    msg = ("the results are less accurate than the tolerance suggests: " + "; ".join(parts)
-           + ". The tolerance bounds the error of each step; over a long or chaotic run the errors add up: "
-             "tighten rtol/atol (or shorten the run) until the estimate is what you need")
+    if chosen_step and not drifted:
+        msg = "the results are less accurate than they may seem: " + "; ".join(parts)
+    else:
+        msg = ("the results are less accurate than the tolerance suggests: " + "; ".join(parts)
+               + ". The tolerance bounds the error of each step; over a long or chaotic run the errors add up: "
+                 "tighten rtol/atol (or shorten the run) until the estimate is what you need")
     acc["warning"] = msg
     r.metadata.setdefault("warnings", []).append(msg)
     return msg

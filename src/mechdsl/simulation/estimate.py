@@ -138,6 +138,10 @@ def estimate(r, problem, solve, given=None) -> None:
     acc.update(error_estimate=float(per[k]), error_estimate_coordinate=r.coordinates[k],
                error_estimate_unit=_unit(problem.eom, r.coordinates[k]),
                error_estimate_time=float(r.t[idx[it]]), error_estimate_ratio=float((per / tol).max()))
+    size = np.nanmax(np.abs(r.q), axis=0) + s.atol            # each coordinate's largest magnitude
+    rel = per / size
+    kr = int(np.argmax(rel))
+    acc.update(error_estimate_relative=float(rel[kr]), error_estimate_relative_coordinate=r.coordinates[kr])
     if s.error_estimate == "coordinates":
         acc["error_estimate_by_coordinate"] = {c: float(v) for c, v in zip(r.coordinates, per)}
         acc["tolerance_class"] = {c: float(v) for c, v in zip(r.coordinates, tol)}
