@@ -46,7 +46,9 @@ def test_a_scene_that_records_no_reaction_builds_none(monkeypatch):
     assert r.success and "crank_angle" in r.signals
     assert not [k for k in r.signals if k.startswith("F_close") or k.startswith("lambda[")]
     built = [name for name in seen if name in m.eom.outputs or name.startswith("lambda[") or "F_close" in name]
-    assert built == ["crank_angle"]           # neither the other outputs nor the reactions were generated
+    # neither the other outputs nor the reactions were generated (the error estimate's companion
+    # run records the run's own columns again)
+    assert sorted(set(built)) == ["crank_angle"]
 
 
 def test_a_scene_whose_output_uses_reactions_computes_them():
