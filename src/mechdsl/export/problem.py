@@ -131,8 +131,6 @@ def rules(s, constrained: bool, contacts: bool) -> dict:
         out["init_tol"] = float(inspect.signature(initialize).parameters["tol"].default)
     if contacts:
         from ..impacts.contact_run import ContactRun
-        from ..impacts.contact_system import RANK_TOL
-        from ..simulation.backends.event_loop import ZENO_EVENTS, ZENO_SPAN
 
         group = s.contacts
 
@@ -148,8 +146,34 @@ def rules(s, constrained: bool, contacts: bool) -> dict:
         factor, floor = linear_rule(lambda v: run(float(s.atol), v).v_eps, "the speed threshold (ContactRun.v_eps)")
         if floor != 0.0:
             raise AssertionError("internal: ContactRun.v_eps is no longer proportional to rest_speed")
-        out.update(v_eps=factor, rank_tol=float(RANK_TOL), zeno_events=int(ZENO_EVENTS), zeno_span=float(ZENO_SPAN))
+        out.update(v_eps=factor, rank_tol=float(module_constant("mechdsl.impacts.contact_system", "RANK_TOL")),
+                   zeno_events=int(module_constant("mechdsl.simulation.backends.event_loop", "ZENO_EVENTS")),
+                   zeno_span=float(module_constant("mechdsl.simulation.backends.event_loop", "ZENO_SPAN")))
     return out
+
+
+def module_constant(module: str, name: str):
+    """A module's constant ``NAME = <literal>``, read from its source when the module is not
+    imported yet (the contact system and the event loop import scipy: 2.4 s of an export),
+    else from the module."""
+    import ast
+    import importlib
+    import importlib.util
+    import sys
+
+    if module not in sys.modules:
+        spec = importlib.util.find_spec(module)
+        try:
+            tree = ast.parse(spec.loader.get_source(module))
+        except (AttributeError, ImportError, OSError, SyntaxError):
+            tree = None
+        for node in (tree.body if tree is not None else ()):
+            if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == name for t in node.targets):
+                try:
+                    return ast.literal_eval(node.value)
+                except ValueError:
+                    break
+    return getattr(importlib.import_module(module), name)
 
 
 def contacts(eom):
