@@ -19,6 +19,7 @@ pytestmark = [needs_cc, pytest.mark.slow]
 # (file, model or None for the file's default target, t_end, output interval)
 TARGETS = [
     ("andrews.mech", None, 0.03, 0.001),
+    ("arm7.mech", None, 2.0, 0.01),
     ("bead_on_hoop.mech", None, 2.0, 0.01),
     ("bead_on_hoop.mech", "BeadOnHoopLagrange", 2.0, 0.01),
     ("bouncing_ball.mech", None, 5.0, 0.01),                 # about 38 impacts, then at rest
