@@ -19,7 +19,7 @@ pytestmark = [needs_cc, pytest.mark.slow]
 # (file, model or None for the file's default target, t_end, output interval)
 TARGETS = [
     ("andrews.mech", None, 0.03, 0.001),
-    ("arm7.mech", None, 2.0, 0.01),
+    ("arm7.mech", None, 2.0, 0.01),                         # fast whip: model exchange at ME_TOLS
     ("bead_on_hoop.mech", None, 2.0, 0.01),
     ("bead_on_hoop.mech", "BeadOnHoopLagrange", 2.0, 0.01),
     ("bouncing_ball.mech", None, 5.0, 0.01),                 # about 38 impacts, then at rest
@@ -47,6 +47,11 @@ TARGETS = [
 ]
 
 
+# fmpy's CVode on arm7 at rtol 1e-12 is off by 1.3e-6 at t = 2 s (58e-6, 8.7e-6, 1.3e-6, 1.9e-7 at
+# 1e-10 ... 1e-13 against mech simulate at 1e-13: CVode's own error, shrinking with its tolerance)
+ME_TOLS = {"arm7.mech": 1e-13}
+
+
 def _id(t):
     return t[0][:-5] + (f"-{t[1]}" if t[1] else "")
 
@@ -72,7 +77,7 @@ def test_shipped_model(target, version, tmp_path):
         assert d.code == "E892" and ("contact" in d.message or "fixation" in d.message)
         assert not (tmp_path / "me.fmu").exists()
     else:
-        X, _ = run_fmu(path, m, "ModelExchange", t_end, dt)
+        X, _ = run_fmu(path, m, "ModelExchange", t_end, dt, tol=ME_TOLS.get(file))
         assert_agree(X, ref, f"{_id(target)} FMI {version} model exchange")
 
 
