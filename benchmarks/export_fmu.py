@@ -239,7 +239,7 @@ def main(argv=None):
 
 def export_report(repeat):
     cold, warm = export_times(repeat)
-    print("## 1. Export time of the double pendulum (`mech export`, a fresh process: import, load, derive, "
+    print("### 1. Export time of the double pendulum (`mech export`, a fresh process: import, load, derive, "
           f"generate, compile, zip; minimum of {repeat})\n")
     print(markdown_table(["object cache", "wall s", "CPU s (gcc included)", "goal < 5 s (CPU)"],
                          [["empty: the runtime compiled too", f"{cold[0]:.2f}", f"{cold[1]:.2f}",
@@ -253,7 +253,7 @@ def export_report(repeat):
 def speed_report(repeat, work):
     sp = speed(repeat, work)
     t_mech = sp["mech"][0]
-    print("\n## 2. Co-simulation speed: double pendulum, scene Chaos (20 s, 2000 steps of 0.01 s, rtol 1e-9, "
+    print("\n### 2. Co-simulation speed: double pendulum, scene Chaos (20 s, 2000 steps of 0.01 s, rtol 1e-9, "
           f"dop853); CPU s, minimum of {repeat}\n")
     body = []
     for key, label in (("mech", "mech simulate, compiled loop (Model.simulate(compiled=True), warm)"),
@@ -275,7 +275,7 @@ def speed_report(repeat, work):
 
 def size_report(ns, work):
     rows = sizes(ns, work)
-    print("\n## 3. FMU size against model size (N-link chain)\n")
+    print("\n### 3. FMU size against model size (N-link chain)\n")
     body = []
     for i, (n, fmu, binary, code) in enumerate(rows):
         inc = "" if i == 0 else f"{(fmu - rows[i - 1][1]) / (n - rows[i - 1][0]) / 1000:.1f}"
