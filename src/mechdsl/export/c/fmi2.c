@@ -168,44 +168,29 @@ static fmi2Status unsupported(fmi2Component c, const char *what) {
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) {
   CHECK(INST->mode != MODE_ERROR && s, "fmi2GetFMUstate");
-  void *state = mech_state_get(INST, *s);
-  if (!state) { *s = NULL; return fmi2Error; }
-  *s = state;
-  return fmi2OK;
+  return mech_state_get(INST, s) ? fmi2Error : fmi2OK;
 }
-
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) {
   CHECK(INST->mode != MODE_ERROR, "fmi2SetFMUstate");
   return mech_state_set(INST, s) ? fmi2Error : fmi2OK;
 }
-
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) {
   if (!c) return fmi2Error;
-  if (s) { free(*s); *s = NULL; }
+  mech_state_free(s);
   return fmi2OK;
 }
-
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size) {
   CHECK(s && size, "fmi2SerializedFMUstateSize");
   *size = mech_state_size(s);
   return fmi2OK;
 }
-
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size) {
   CHECK(s && b, "fmi2SerializeFMUstate");
-  if (size != mech_state_size(s)) { mech_log(INST, LOG_ERROR, "fmi2SerializeFMUstate: %zu bytes given, the state has %zu",
-                                             size, mech_state_size(s)); return fmi2Error; }
-  memcpy(b, s, size);
-  return fmi2OK;
+  return mech_state_serialize(INST, s, b, size) ? fmi2Error : fmi2OK;
 }
-
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size, fmi2FMUstate *s) {
   CHECK(s && b, "fmi2DeSerializeFMUstate");
-  void *state = mech_state_from_bytes(INST, b, size);
-  if (!state) return fmi2Error;
-  free(*s);
-  *s = state;
-  return fmi2OK;
+  return mech_state_deserialize(INST, b, size, s) ? fmi2Error : fmi2OK;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,

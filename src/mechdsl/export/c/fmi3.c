@@ -250,10 +250,7 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
   CHECK(INST->mode != MODE_ERROR && FMUState, "fmi3GetFMUState");
-  void *state = mech_state_get(INST, *FMUState);
-  if (!state) { *FMUState = NULL; return fmi3Error; }
-  *FMUState = state;
-  return fmi3OK;
+  return mech_state_get(INST, FMUState) ? fmi3Error : fmi3OK;
 }
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
   CHECK(INST->mode != MODE_ERROR, "fmi3SetFMUState");
@@ -261,7 +258,7 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
 }
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
   if (!instance) return fmi3Error;
-  if (FMUState) { free(*FMUState); *FMUState = NULL; }
+  mech_state_free(FMUState);
   return fmi3OK;
 }
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
@@ -271,21 +268,12 @@ fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUSta
 }
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
   CHECK(FMUState && serializedState, "fmi3SerializeFMUState");
-  if (size != mech_state_size(FMUState)) {
-    mech_log(INST, LOG_ERROR, "fmi3SerializeFMUState: %zu bytes given, the state has %zu", size, mech_state_size(FMUState));
-    return fmi3Error;
-  }
-  memcpy(serializedState, FMUState, size);
-  return fmi3OK;
+  return mech_state_serialize(INST, FMUState, serializedState, size) ? fmi3Error : fmi3OK;
 }
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState *FMUState) {
   CHECK(FMUState && serializedState, "fmi3DeserializeFMUState");
-  void *state = mech_state_from_bytes(INST, serializedState, size);
-  if (!state) return fmi3Error;
-  free(*FMUState);
-  *FMUState = state;
-  return fmi3OK;
+  return mech_state_deserialize(INST, serializedState, size, FMUState) ? fmi3Error : fmi3OK;
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,

@@ -86,34 +86,51 @@ int mech_cs_start(Instance *I) {
   return st;
 }
 
+int mech_stepper_begin(Instance *I, double t_end, MechStepper *S) {
+  const int nx = 2 * MECH.n;
+  memset(S, 0, sizeof *S);
+  mech_rtol_atol(I, &S->rtol, &S->atol);
+  S->method = I->int_settings[SET_METHOD] == 1 ? 0 : 1;
+  S->max_steps = I->int_settings[SET_MAX_STEPS] > 0 ? I->int_settings[SET_MAX_STEPS] : 100000;
+  S->interval = I->real_settings[SET_PROJECTION_INTERVAL];
+  S->tiny = 4 * DBL_EPSILON * fmax(1.0, fabs(t_end));
+  S->X = (double *)malloc(sizeof(double) * (size_t)(3 * nx + 1));
+  if (!S->X) { mech_log(I, LOG_ERROR, "out of memory"); return LOG_ERROR; }
+  S->xfail = S->X + 2 * nx;
+  return LOG_OK;
+}
+
+void mech_stepper_call(MechStepper *S, double t0, double t1) {
+  S->grid[0] = t0; S->grid[1] = t1;
+  S->ctl[0] = S->ctl[1] = 0;
+  memset(S->stats, 0, sizeof S->stats);
+}
+
+void mech_stepper_count(Instance *I, const MechStepper *S) {
+  I->stats[STAT_STEPS] += S->stats[0];
+  I->stats[STAT_RHS] += S->stats[1];
+  I->stats[STAT_REJECTED] += S->stats[2];
+}
+
+void mech_stepper_end(MechStepper *S) { free(S->X); S->X = NULL; }
+
 /* models without contacts: the stepper's steps run past t_end (dense output, above) */
 static int dense_step(Instance *I, double t_end) {
-  const int n = MECH.n, nx = 2 * n;
-  double rtol, atol;
-  mech_rtol_atol(I, &rtol, &atol);
-  const int method = I->int_settings[SET_METHOD] == 1 ? 0 : 1;
-  const cint max_steps = I->int_settings[SET_MAX_STEPS] > 0 ? I->int_settings[SET_MAX_STEPS] : 100000;
-  const double interval = I->real_settings[SET_PROJECTION_INTERVAL];
-  const double tiny = 4 * DBL_EPSILON * fmax(1.0, fabs(t_end));
-  double *X = (double *)malloc(sizeof(double) * (size_t)(3 * nx + 1));
-  if (!X) { mech_log(I, LOG_ERROR, "out of memory"); return LOG_ERROR; }
-  double *xfail = X + 2 * nx, grid[2], stats[8];
-  cint ctl[2];
+  const int nx = 2 * MECH.n;
+  MechStepper S;
+  if (mech_stepper_begin(I, t_end, &S)) return LOG_ERROR;
+  const double tiny = S.tiny, interval = S.interval;
   int result = LOG_OK;
   while (I->ti < t_end - tiny) {
     double limit = I->stop_defined && I->t_stop > I->ti + tiny ? I->t_stop : INFINITY;
     if (I->nactive > 0 && interval > 0 && I->next_projection > I->ti + tiny) limit = fmin(limit, I->next_projection);
-    grid[0] = I->ti; grid[1] = fmin(t_end, limit);
-    ctl[0] = ctl[1] = 0;
-    memset(stats, 0, sizeof stats);
-    int st = crk_run_dense(method, nx, grid, 2, I->xi, I->u, I->p, rtol, atol, 0.0, max_steps, X, stats, ctl, xfail,
-                           &I->h_next, limit, I->fi_ok ? crk_dense_rhs(I->dense, nx) : NULL, I->dense);
-    I->stats[STAT_STEPS] += stats[0];
-    I->stats[STAT_RHS] += stats[1];
-    I->stats[STAT_REJECTED] += stats[2];
+    mech_stepper_call(&S, I->ti, fmin(t_end, limit));
+    int st = crk_run_dense(S.method, nx, S.grid, 2, I->xi, I->u, I->p, S.rtol, S.atol, 0.0, S.max_steps, S.X, S.stats,
+                           S.ctl, S.xfail, &I->h_next, limit, I->fi_ok ? crk_dense_rhs(I->dense, nx) : NULL, I->dense);
+    mech_stepper_count(I, &S);
     if (st != CRK_OK) {
       mech_log(I, LOG_DISCARD, "the step from t = %.12g to %.12g failed at t = %.12g: %s (rtol %g, atol %g)", I->t,
-               t_end, stats[3], mech_crk_message(st), rtol, atol);
+               t_end, S.stats[3], mech_crk_message(st), S.rtol, S.atol);
       I->ahead = I->fi_ok = 0;          /* the kept step may be overwritten: restart from (ti, xi) */
       result = LOG_DISCARD;
       break;
@@ -128,7 +145,7 @@ static int dense_step(Instance *I, double t_end) {
       if (interval > 0) while (I->next_projection <= I->ti + tiny) I->next_projection += interval;
     }
   }
-  free(X);
+  mech_stepper_end(&S);
   if (result != LOG_OK) return result;
   if (I->ahead && t_end < I->ti - tiny) crk_dense_eval(I->dense, nx, t_end, I->x);
   else memcpy(I->x, I->xi, sizeof(double) * (size_t)nx);

@@ -186,16 +186,29 @@ int mech_me_step_done(Instance *I, int *enter_event);     /* model exchange: a c
 int mech_me_event_update(Instance *I, int *states_changed);   /* model exchange: project when drifted */
 
 /* mech_cosim.c */
+typedef struct {                 /* one co-simulation step's stepper settings and crk.c buffers */
+  double rtol, atol, interval, tiny;
+  int method;
+  cint max_steps;
+  double *X, *xfail, grid[2], stats[8];
+  cint ctl[2];
+} MechStepper;
+int mech_stepper_begin(Instance *I, double t_end, MechStepper *S);   /* LOG_OK, or LOG_ERROR (memory) */
+void mech_stepper_call(MechStepper *S, double t0, double t1);       /* grid, controls and stats of one crk.c call */
+void mech_stepper_count(Instance *I, const MechStepper *S);         /* its statistics into the instance's */
+void mech_stepper_end(MechStepper *S);
 extern _Thread_local Instance *mech_current;   /* the instance crk.c is stepping (its `ode`) */
 int mech_cs_start(Instance *I);            /* co-simulation: at the end of initialization */
 int mech_cs_step(Instance *I, double t, double h);        /* co-simulation: advance (LOG_OK / LOG_DISCARD / LOG_ERROR) */
 const char *mech_crk_message(int status);
 
-/* mech_state.c */
-void *mech_state_get(Instance *I, void *reuse);     /* a snapshot (reuse: a snapshot to overwrite, or NULL) */
+/* mech_state.c (0: done; else logged) */
+int mech_state_get(Instance *I, void **state);      /* a snapshot into *state (reused when it fits, else replaced) */
 int mech_state_set(Instance *I, const void *state);
+void mech_state_free(void **state);
 size_t mech_state_size(const void *state);
-void *mech_state_from_bytes(Instance *I, const void *bytes, size_t size);
+int mech_state_serialize(Instance *I, const void *state, void *bytes, size_t size);
+int mech_state_deserialize(Instance *I, const void *bytes, size_t size, void **state);   /* *state replaced */
 
 /* mech_constraints.c (with mech_linalg.c) */
 typedef struct { double *M, *bias, *L, *c, *A, *ct, *gam, *zero; } Eval;   /* dyn and cons at a state */

@@ -613,26 +613,21 @@ static int start(Instance *I) {
    the communication points (an event may lie past one) */
 static int step(Instance *I, double t_end) {
   const int n = MECH.n, nx = 2 * n;
-  double rtol, atol;
-  mech_rtol_atol(I, &rtol, &atol);
-  const int method = I->int_settings[SET_METHOD] == 1 ? 0 : 1;
-  const cint max_steps = I->int_settings[SET_MAX_STEPS] > 0 ? I->int_settings[SET_MAX_STEPS] : 100000;
-  const double interval = I->real_settings[SET_PROJECTION_INTERVAL];
-  double *X = (double *)malloc(sizeof(double) * (size_t)(3 * nx + 1));
-  if (!X) { mech_log(I, LOG_ERROR, "out of memory"); return LOG_ERROR; }
-  double *xfail = X + 2 * nx, grid[2], stats[8];
-  cint ctl[2];
+  MechStepper S;
+  if (mech_stepper_begin(I, t_end, &S)) return LOG_ERROR;
+  const double tiny = S.tiny, interval = S.interval, rtol = S.rtol, atol = S.atol;
+  const int method = S.method;
+  const cint max_steps = S.max_steps;
+  double *X = S.X, *xfail = S.xfail, *grid = S.grid, *stats = S.stats;
+  cint *ctl = S.ctl;
   int result = LOG_OK, at_start = 0;
-  const double tiny = 4 * DBL_EPSILON * fmax(1.0, fabs(t_end));
   while (I->t < t_end - tiny) {
     double t_stop = t_end;
     for (int j = 0; j < MECH.nfix; j++)
       if (!I->fix_done[j] && MECH.fix_time[j] > I->t && MECH.fix_time[j] < t_stop) t_stop = MECH.fix_time[j];
     if (I->nactive > 0 && interval > 0 && I->next_projection > I->t + tiny && I->next_projection < t_stop)
       t_stop = I->next_projection;
-    grid[0] = I->t; grid[1] = t_stop;
-    ctl[0] = ctl[1] = 0;
-    memset(stats, 0, sizeof stats);
+    mech_stepper_call(&S, I->t, t_stop);
     int st;
     if (MECH.k)
       st = crk_run_events_h(method, nx, grid, 2, I->x, I->u, I->p, rtol, atol, 0.0, max_steps, X, stats, ctl, xfail,
@@ -641,9 +636,7 @@ static int step(Instance *I, double t_end) {
     else
       st = crk_run_dense(method, nx, grid, 2, I->x, I->u, I->p, rtol, atol, 0.0, max_steps, X, stats, ctl, xfail,
                          &I->h_next, 0.0, NULL, NULL);
-    I->stats[STAT_STEPS] += stats[0];
-    I->stats[STAT_RHS] += stats[1];
-    I->stats[STAT_REJECTED] += stats[2];
+    mech_stepper_count(I, &S);
     I->valid = 0;
     if (st == CRK_OK) {
       I->t = t_stop;
@@ -681,7 +674,7 @@ static int step(Instance *I, double t_end) {
       if (interval > 0) while (I->next_projection <= I->t + tiny) I->next_projection += interval;
     }
   }
-  free(X);
+  mech_stepper_end(&S);
   I->valid = 0;
   return result;
 }

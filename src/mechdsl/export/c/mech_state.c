@@ -66,18 +66,22 @@ static int header_ok(Instance *I, const Header *h, size_t have) {
   return 1;
 }
 
-void *mech_state_get(Instance *I, void *reuse) {
+int mech_state_get(Instance *I, void **state) {
   size_t size = walk(I, NULL, MEASURE);
-  unsigned char *buf = (unsigned char *)reuse;
+  unsigned char *buf = (unsigned char *)*state;
   if (!buf || ((Header *)buf)->size != size) {
     free(buf);
-    buf = (unsigned char *)malloc(size);
-    if (!buf) { mech_log(I, LOG_ERROR, "out of memory"); return NULL; }
+    *state = buf = (unsigned char *)malloc(size);
+    if (!buf) { mech_log(I, LOG_ERROR, "out of memory"); return 1; }
   }
   Header h = {STATE_MAGIC, STATE_VERSION, size, token_hash()};
   memcpy(buf, &h, sizeof h);
   walk(I, buf, SAVE);
-  return buf;
+  return 0;
+}
+
+void mech_state_free(void **state) {
+  if (state) { free(*state); *state = NULL; }
 }
 
 int mech_state_set(Instance *I, const void *state) {
@@ -96,13 +100,24 @@ size_t mech_state_size(const void *state) {
   return h.size;
 }
 
-void *mech_state_from_bytes(Instance *I, const void *bytes, size_t size) {
+int mech_state_serialize(Instance *I, const void *state, void *bytes, size_t size) {
+  if (size != mech_state_size(state)) {
+    mech_log(I, LOG_ERROR, "serializing an FMU state: %zu bytes given, the state has %zu", size, mech_state_size(state));
+    return 1;
+  }
+  memcpy(bytes, state, size);
+  return 0;
+}
+
+int mech_state_deserialize(Instance *I, const void *bytes, size_t size, void **state) {
   Header h;
-  if (!bytes || size < sizeof h) { mech_log(I, LOG_ERROR, "a serialized FMU state too short (%zu bytes)", size); return NULL; }
+  if (!bytes || size < sizeof h) { mech_log(I, LOG_ERROR, "a serialized FMU state too short (%zu bytes)", size); return 1; }
   memcpy(&h, bytes, sizeof h);
-  if (!header_ok(I, &h, size)) return NULL;
+  if (!header_ok(I, &h, size)) return 1;
   void *buf = malloc(size);
-  if (!buf) { mech_log(I, LOG_ERROR, "out of memory"); return NULL; }
+  if (!buf) { mech_log(I, LOG_ERROR, "out of memory"); return 1; }
   memcpy(buf, bytes, size);
-  return buf;
+  free(*state);
+  *state = buf;
+  return 0;
 }
