@@ -395,6 +395,36 @@ def test_export_is_deterministic(tmp_path):
     assert 'causality="parameter" variability="tunable"' in md and 'description="mass of each rod"' in md
 
 
+BOUNDED = """model Bounded "a mass on a spring, pushed"
+  parameter Real m(unit = "kg", min = 0.1, max = 10) = 1 "mass";
+  parameter Real k(unit = "N/m", min = 0) = 4 "stiffness";
+  input Real F(unit = "N", min = -5, max = 5) = 0 "push";
+  coordinate Real x(start = 0.2, unit = "m");
+equation
+  kinetic = 1/2*m*der(x)^2;
+  potential = 1/2*k*x^2;
+  force(x) = F;
+end Bounded;
+"""
+
+
+def test_parameters_and_inputs_carry_unit_bounds_and_description(tmp_path):
+    from fmpy import read_model_description
+
+    m = mechdsl.loads(BOUNDED, filename="bounded.mech")
+    path = tmp_path / "bounded.fmu"
+    m.export_fmu(path, fmi_type="cs")
+    by = {v.name: v for v in read_model_description(str(path)).modelVariables}
+    for name, causality, unit, lo, hi, start, doc in (("m", "parameter", "kg", 0.1, 10, 1, "mass"),
+                                                      ("k", "parameter", "N/m", 0, None, 4, "stiffness"),
+                                                      ("F", "input", "N", -5, 5, 0, "push")):
+        v = by[name]
+        assert (v.causality, v.unit, v.description) == (causality, unit, doc), name
+        for got, want in ((v.min, lo), (v.max, hi), (v.start, start)):
+            assert (got is None) == (want is None) and (want is None or float(got) == pytest.approx(want)), name
+    assert by["m"].variability == "tunable"
+
+
 def test_bad_input_is_refused_and_nothing_is_written(tmp_path, monkeypatch):
     ball = mechdsl.load(MODELS / "bouncing_ball.mech")
     with pytest.raises(UsageError, match="does not exist"):
