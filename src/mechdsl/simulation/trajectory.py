@@ -14,7 +14,7 @@ model's index-1 ODE with the multipliers solved, ``functions.problem_functions``
 (``auto`` resolved as the run resolved it), the integrator's options (tolerances, step
 budget, fixed steps, the user's integrator_options) and the pieces between the input tables'
 samples; and records what a run records (``record.function``: coordinates, speeds, outputs,
-energies, with the multipliers a constrained model's outputs read).  Its derivatives are
+energies, with the multipliers a constrained model's outputs read; the inputs' values).  Its derivatives are
 CasADi's: ``Function.forward(k)`` / ``.reverse(m)`` of the integrator (forward sensitivities
 and adjoints of CVODES / IDAS, the exact derivatives of the discrete solution for erk, rk and
 collocation), never a second integrator written here.  Used by ``Model.sensitivities`` and
@@ -128,6 +128,10 @@ class Trajectory:
             lam = ca.MX.zeros(R.lam_symbol(eom).numel())
         y = ca.vertcat(x, rec(t, x[:n], x[n:], U, p, lam))
         names = list(eom.coords) + [f"der({c})" for c in eom.coords] + list(col_names)
+        if self.drive is not None and self.drive.signals:     # the inputs' values, as the run records them
+            fresh = [j for j, k in enumerate(self.drive.names) if k not in names]
+            y = ca.vertcat(y, U[fresh])
+            names += [self.drive.names[j] for j in fresh]
         return tuple(names), ca.Function("signals", [t, x, u, p], [y], TXUP, ["y"])
 
     # ------------------------------------------------------------------ the Function
