@@ -28,7 +28,7 @@ from ..eom import parameter_vector
 from ..model.records import record
 from ..simulation.prepared import prepare
 from . import data as D
-from .identify import RANK_TOL, identifiability, log_scale
+from .identify import RANK_TOL, determined, identifiability, log_scale
 from .sensitivity import check_kind, signal_units
 from .unknowns import unknowns
 
@@ -74,7 +74,9 @@ class FitResult:
         if self.unidentifiable:
             lines.append("  cannot be determined from these data:")
             for c in self.unidentifiable:
-                lines.append(f"    {c.text}" + (f"  (only {c.determinable} can)" if c.determinable else ""))
+                lines.append(f"    {c.text}" + (f"  (only {c.determinable} can: {num(c.value)} +- "
+                                                  f"{num(c.standard_error)}{' ' + c.unit if c.unit else ''})"
+                                                  if c.determinable else ""))
         lines.append(f"  residual norm {num(self.residual_norm)} (weighted), noise estimate s = {num(self.sigma)} "
                      f"from {self.degrees_of_freedom} degrees of freedom")
         for name, (rms, unit) in self.rms.items():
@@ -357,8 +359,9 @@ def _result(model, exps, runs, names, kinds, theta, theta0, factors, units, r, J
     rank = int(keep.sum())
     dof = max(n_obs - rank, 0)
     s2 = float(r @ r) / dof if dof > 0 else np.nan
-    Cs = (Vt[keep].T / s[keep] ** 2) @ Vt[keep] * s2
+    Cs = (Vt[keep].T / s[keep] ** 2) @ Vt[keep] * s2       # of theta / scale: the logarithms' covariance
     cov = Cs * scale[:, None] * scale[None, :]
+    combos = [determined(c, names, theta, Cs, units) for c in combos]
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     blind = np.zeros(k, bool)                   # unknowns in a direction the data cannot see
     for i in np.flatnonzero(~keep):

@@ -15,6 +15,7 @@ Start values (and parameters whose value is 0) enter additively, not as powers.
 """
 from __future__ import annotations
 
+import dataclasses
 from fractions import Fraction
 
 import numpy as np
@@ -32,10 +33,15 @@ class Combination:
     text: str                          # what cannot be determined, in the model's terms
     determinable: str | None           # what can (two names: the complementary ratio), else None
     singular_value: float              # relative to the largest
+    determinable_exponents: tuple[float, ...] = ()
+    value: float | None = None         # the determinable combination's estimate (SI), a fit's
+    standard_error: float | None = None
+    unit: str = ""                     # its SI unit
 
     def to_dict(self) -> dict:
         return {"names": list(self.names), "exponents": [float(e) for e in self.exponents], "text": self.text,
-                "determinable": self.determinable, "relative_singular_value": float(self.singular_value)}
+                "determinable": self.determinable, "relative_singular_value": float(self.singular_value),
+                "value": self.value, "standard_error": self.standard_error, "unit": self.unit}
 
 
 def log_scale(values, kinds) -> np.ndarray:
@@ -92,11 +98,35 @@ def _combination(v, names, kinds, values, rel) -> Combination:
         return Combination(nm, ex, f"{nm[0]} (the measured outputs do not depend on it)", None, rel)
     if logs:
         text = power_product(nm, ex)
-        other = power_product(nm, (ex[1], -ex[0])) if len(idx) == 2 else None
-        return Combination(nm, ex, text, other, rel)
+        other = (ex[1], -ex[0]) if len(idx) == 2 else ()
+        if other and other[int(np.argmax(np.abs(other)))] < 0:      # written with the larger power on top
+            other = (-other[0], -other[1])
+        return Combination(nm, ex, text, power_product(nm, other) if other else None, rel, other)
     terms = " ".join(f"{'+' if e >= 0 else '-'} {_num(abs(e))}*{'log ' if kinds[j] == 'parameter' and values[j] != 0 else ''}{n}"
                      for j, n, e in zip(idx, nm, ex))
     return Combination(nm, ex, f"the direction {terms.lstrip('+ ')}", None, rel)
+
+
+def determined(c: Combination, names, theta, cov_log, units) -> Combination:
+    """The determinable combination's value, standard error (from the covariance of the
+    logarithms ``cov_log``) and SI unit, for a combination of two parameters."""
+    from ..model.units import parse_unit
+
+    if not c.determinable_exponents:
+        return c
+    idx = [list(names).index(n) for n in c.names]
+    e = np.array(c.determinable_exponents, float)
+    value = float(np.prod([abs(theta[j]) ** ej for j, ej in zip(idx, e)]))
+    var = float(e @ cov_log[np.ix_(idx, idx)] @ e)
+    dim = None
+    try:
+        for j, ej in zip(idx, e):
+            d = parse_unit(units[j] or "1")[1] ** Fraction(ej).limit_denominator(12)
+            dim = d if dim is None else dim * d
+    except ValueError:
+        dim = None
+    return dataclasses.replace(c, value=value, standard_error=value * np.sqrt(max(var, 0.0)),
+                               unit="" if dim is None or dim.dimensionless else str(dim))
 
 
 def _num(e: float) -> str:
