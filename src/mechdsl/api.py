@@ -485,11 +485,12 @@ class Model:
         if "integrator" in settings:          # the run's method (``method`` names the derivatives')
             settings["method"] = settings.pop("integrator")
         try:
-            return sensitivities(self, t_end, params, starts, outputs, method, points, times, integral, **settings)
+            return sensitivities(self, t_end, params, starts, outputs, method, points, times, integral, settings)
         finally:
             self._remember()
 
-    def fit(self, data, params=(), starts=(), weights=None, bounds=None, experiments=None, **kw):
+    def fit(self, data, params=(), starts=(), weights=None, bounds=None, experiments=None, *, method: str = "lm",
+            max_iterations: int = 100, rank_tol: float | None = None, t_end: float | None = None, **settings):
         """Least-squares estimates of parameters and start values from measured motion
         (mechdsl.estimation.fit; docs/fitting.md): a FitResult with estimates, standard errors,
         correlations, residuals and the combinations the data cannot determine.
@@ -499,13 +500,19 @@ class Model:
         outputs, energies), or a list of them (one per experiment).  experiments: one dict per
         table of that experiment's settings (``x0``, ``inputs``, ``p``).  weights: {column:
         weight} (default 1); bounds: {name: (lo, hi)} (default the parameters' min / max).
-        Other keywords: ``method`` ("lm": Levenberg-Marquardt with exact sensitivities, or
-        "ipopt"), ``max_iterations``, ``rank_tol``, and the run's settings (rtol, atol,
-        ``integrator``, ...)."""
-        from .estimation.fit import fit
+        method: "lm" (Gauss-Newton / Levenberg-Marquardt with exact sensitivities);
+        max_iterations; rank_tol: singular values of the (log-scaled) sensitivity matrix below
+        this fraction of the largest count as directions the data cannot determine (default
+        1e-6); t_end: end of the runs (default: each experiment's last sample).  Other
+        keywords: the runs' settings (rtol, atol, ``integrator`` = the integration method, ...)."""
+        from .estimation.fit import RANK_TOL, fit
 
+        if "integrator" in settings:
+            settings["method"] = settings.pop("integrator")
         try:
-            return fit(self, data, params, starts, weights, bounds, experiments, **kw)
+            return fit(self, data, params, starts, weights, bounds, experiments, method=method,
+                       max_iterations=max_iterations, rank_tol=RANK_TOL if rank_tol is None else rank_tol,
+                       t_end=t_end, settings=settings)
         finally:
             self._remember()
 

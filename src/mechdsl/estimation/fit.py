@@ -119,16 +119,15 @@ def _f(v) -> float | None:
 
 
 def fit(model, data, params=(), starts=(), weights=None, bounds=None, experiments=None, *, method: str = "lm",
-        max_iterations: int = 100, rank_tol: float = RANK_TOL, t_end=None, **settings) -> FitResult:
-    """See ``Model.fit``."""
+        max_iterations: int = 100, rank_tol: float = RANK_TOL, t_end=None, settings=None) -> FitResult:
+    """See ``Model.fit`` (``settings``: the runs', ``method`` there the integrator's)."""
+    settings = dict(settings or {})
     cpu0 = time.process_time()
     if method not in SOLVERS:
         hint = did_you_mean(str(method), SOLVERS)
         raise UsageError(f"method must be one of {', '.join(SOLVERS)} (got {method!r})" + (f"; {hint}" if hint else ""))
     if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
         raise UsageError(f"max_iterations must be a whole number >= 1 (got {max_iterations!r})")
-    if "integrator" in settings:
-        settings["method"] = settings.pop("integrator")
     if settings.get("compiled"):
         raise UsageError("compiled = true: a fit differentiates the run's Functions in CasADi's virtual machine")
     settings["compiled"] = False
@@ -379,7 +378,7 @@ def _result(model, exps, runs, names, kinds, theta, theta0, factors, units, r, J
     np.fill_diagonal(corr, 1.0)
     residuals, fitted, rms = [], [], {}
     pos = 0
-    sig_units = signal_units(model, [c for run in runs for c in run.exp.columns if c not in model.coordinates])
+    sig_units = signal_units(model, [c for run in runs for c in run.exp.columns])
     for run in runs:
         size = run.w.size
         res = (r[pos:pos + size].reshape(run.w.shape) / run.w)

@@ -2,6 +2,7 @@
 per measured signal, every experiment in its panel (matplotlib's Figure, no pyplot)."""
 from __future__ import annotations
 
+import numpy as np
 
 
 MAX_PANELS = 12
@@ -10,17 +11,13 @@ MAX_PANELS = 12
 def fit_figure(result, title: str | None = None):
     from matplotlib.figure import Figure
 
-    from ..output.plot import signal_units
+    from .sensitivity import signal_units
 
     columns = list(dict.fromkeys(c for e in result.experiments for c in e.columns))
     shown = columns[:MAX_PANELS]
     fig = Figure(figsize=(8.0, 1.9 * len(shown) + 1.0))
     axes = fig.subplots(len(shown), 1, squeeze=False, sharex=True)[:, 0]
-    import types
-
-    fake = types.SimpleNamespace(coordinates=tuple(result.source_model.coordinates),
-                                 signals={c: None for c in columns})
-    units = signal_units(fake, result.source_model)
+    units = signal_units(result.source_model, columns)
     colors = [f"C{k % 10}" for k in range(len(result.experiments))]
     for ax, c in zip(axes, shown):
         for k, (e, fitted) in enumerate(zip(result.experiments, result.fitted)):
@@ -37,8 +34,8 @@ def fit_figure(result, title: str | None = None):
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     axes[-1].set_xlabel("time [s]")
-    est = ", ".join(f"{n} = {result.estimates[n]:.4g}" + (f" {result.units[n]}" if result.units[n] else "")
-                    for n in result.names[:6])
+    est = ", ".join((f"{n} = {result.estimates[n]:.4g}" + (f" {result.units[n]}" if result.units[n] else ""))
+                    if np.isfinite(result.standard_errors[n]) else f"{n} not determined" for n in result.names[:6])
     more = f" (+{len(columns) - len(shown)} signals not shown)" if len(columns) > len(shown) else ""
     fig.suptitle(title or f"{result.model_name}: fit ({est}){more}", fontsize=9)
     fig.tight_layout()

@@ -109,7 +109,9 @@ def signal_units(model, names) -> dict[str, str]:
     """The unit of each recorded signal, as a Result labels it (output.plot.signal_units)."""
     from ..output.plot import signal_units as units_of
 
-    fake = types.SimpleNamespace(coordinates=tuple(model.coordinates), signals={n: None for n in names})
+    coords = tuple(model.coordinates)
+    states = set(coords) | {f"der({c})" for c in coords}
+    fake = types.SimpleNamespace(coordinates=coords, signals={n: None for n in names if n not in states})
     return units_of(fake, model)
 
 
@@ -139,8 +141,9 @@ def _method(method: str) -> str:
 
 
 def sensitivities(model, t_end=None, params=(), starts=(), outputs=None, method="forward", points=None,
-                  times=None, integral=None, **settings) -> Sensitivities:
-    """See ``Model.sensitivities``."""
+                  times=None, integral=None, settings=None) -> Sensitivities:
+    """See ``Model.sensitivities`` (``settings``: the run's, ``method`` there the integrator's)."""
+    settings = dict(settings or {})
     method = _method(method)
     cpu0 = time.process_time()
     if "compiled" in settings and settings["compiled"]:
@@ -203,7 +206,7 @@ def sensitivities(model, t_end=None, params=(), starts=(), outputs=None, method=
                 values[o] = Y[tr.names.index(o), cols]
                 for j, n in enumerate(unk.names):
                     data[o, n] = G[rows, j]
-    ounits = signal_units(model, [o for o in tr.names if o not in model.coordinates])
+    ounits = signal_units(model, tr.names)
     out_units = {o: _unit_of(o, ounits) for o in names}
     name_units = {u.name: u.unit for u in unk.items}
     units = {(o, n): per(out_units[o], name_units[n]) for o in names for n in unk.names}
