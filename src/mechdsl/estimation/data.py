@@ -142,8 +142,9 @@ def _csv(path: str, st) -> Experiment:
                 v = None
             if v is None or not np.isfinite(v):
                 col = _col(lines[line - 1], j)
+                what = "a number" if v is None else "a finite number"
                 raise MechError(Diagnostic(CODE_VALUE, f"the value {c.strip()!r} of '{header[j]}' at line {line} is not "
-                                           "a finite number", Span(path, line, col, line, col + max(1, len(c))),
+                                           f"{what}", Span(path, line, col, line, col + max(1, len(c))),
                                            help="every value must be a finite number; drop samples that were not "
                                                 "measured (a row, or a column from the fit)"))
             data[k, j] = v

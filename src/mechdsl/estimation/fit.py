@@ -69,7 +69,7 @@ class FitResult:
                          num(self.initial[n])])
         lines = [f"{self.model_name}: least-squares fit to {self.n_observations} values "
                  f"({len(self.experiments)} experiment{'s' if len(self.experiments) > 1 else ''}), "
-                 f"{self.iterations} iterations, {'converged' if self.success else 'NOT converged'}: {self.message}",
+                 f"{self.iterations} iterations, {self.message if self.success else 'NOT converged: ' + self.message}",
                  table(["name", "estimate", "std error", "unit", "rel.", "start"], rows, "  ")]
         if self.unidentifiable:
             lines.append("  cannot be determined from these data:")
@@ -186,7 +186,7 @@ class Solution:
     jacobians: int
 
 
-def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iterations, ftol=1e-12, xtol=1e-10,
+def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iterations, ftol=1e-10, xtol=1e-10,
                         gtol=1e-12) -> Solution:
     """Gauss-Newton steps damped by Levenberg-Marquardt (Nielsen's update of the damping), in the
     variables theta / scale (log-parameter space), each step the minimum-norm solution over the
@@ -198,7 +198,7 @@ def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iteration
     cost = 0.5 * float(r @ r)
     lam, nu = None, 2.0
     n_eval, n_jac, it = 1, 1, 0
-    message, success = f"stopped after {max_iterations} iterations", False
+    message, success = f"stopped after {max_iterations} iterations (max_iterations)", False
     while it < max_iterations:
         Js = J * scale[None, :]
         U, s, Vt = np.linalg.svd(Js, full_matrices=False)
@@ -207,7 +207,7 @@ def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iteration
         Ur = U[:, keep].T @ r
         grad = Js.T @ r
         if smax == 0.0 or np.max(np.abs(grad), initial=0.0) <= gtol * max(1.0, 2 * cost):
-            message, success = "the gradient vanishes (first-order optimal)", True
+            message, success = "converged: the gradient vanishes", True
             break
         if lam is None:
             lam = 1e-3 * smax ** 2
@@ -217,6 +217,9 @@ def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iteration
             new = np.clip(theta + scale * du, lo, hi)
             du = (new - theta) / scale
             pred = -(grad @ du) - 0.5 * float(np.sum((Js @ du) ** 2))
+            if 0 <= pred <= ftol * cost and lam <= 1e-3 * smax ** 2:    # Gauss-Newton itself gains nothing
+                rho = None
+                break
             try:
                 r_new = evaluate(new, False)[0]
                 n_eval += 1
@@ -233,8 +236,11 @@ def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iteration
             nu *= 2.0
             if lam > 1e16 * max(smax ** 2, 1e-300):
                 break
+        if rho is None:
+            message, success = "converged: a Gauss-Newton step would lower the residual by less than 1e-10", True
+            break
         if not rho > 0:
-            message, success = "no step lowers the residual (a local minimum, to the run's accuracy)", True
+            message, success = "converged: no step lowers the residual (a minimum, to the runs' accuracy)", True
             break
         it += 1
         small_step = np.linalg.norm(du) <= xtol * (np.linalg.norm(theta / scale) + xtol)
@@ -243,8 +249,8 @@ def levenberg_marquardt(evaluate, theta0, lo, hi, scale, rank_tol, max_iteration
         r, J = evaluate(theta, True)
         n_jac += 1
         if small_step or small_gain:
-            message = ("the step is below the tolerance" if small_step else "the residual no longer decreases "
-                       "(relative change below 1e-12)")
+            message = ("converged: the step is below the tolerance" if small_step else
+                       "converged: the residual no longer decreases (relative change below 1e-10)")
             success = True
             break
     return Solution(theta, success, message, it, n_eval, n_jac)

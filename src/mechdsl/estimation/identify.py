@@ -99,7 +99,7 @@ def _combination(v, names, kinds, values, rel) -> Combination:
     if logs:
         text = power_product(nm, ex)
         other = (ex[1], -ex[0]) if len(idx) == 2 else ()
-        if other and other[int(np.argmax(np.abs(other)))] < 0:      # written with the larger power on top
+        if other and other[_lead(other)] < 0:      # the larger power on top (a tie: the name given first)
             other = (-other[0], -other[1])
         return Combination(nm, ex, text, power_product(nm, other) if other else None, rel, other)
     terms = " ".join(f"{'+' if e >= 0 else '-'} {_num(abs(e))}*{'log ' if kinds[j] == 'parameter' and values[j] != 0 else ''}{n}"
@@ -129,6 +129,12 @@ def determined(c: Combination, names, theta, cov_log, units) -> Combination:
                                unit="" if dim is None or dim.dimensionless else str(dim))
 
 
+def _lead(exponents) -> int:
+    """The exponent that decides the orientation: the largest in size, the first of a tie."""
+    a = np.abs(np.asarray(exponents, float))
+    return int(np.flatnonzero(a >= a.max() * (1 - 1e-6))[0])
+
+
 def _num(e: float) -> str:
     f = Fraction(e).limit_denominator(4)
     if abs(float(f) - e) <= 1e-3 * max(1.0, abs(e)):
@@ -142,7 +148,7 @@ def power_product(names, exponents) -> str:
         a = _num(abs(e))
         return n if a == "1" else f"{n}^{a}"
 
-    sign = 1.0 if exponents[int(np.argmax(np.abs(exponents)))] > 0 else -1.0
+    sign = 1.0 if exponents[_lead(exponents)] > 0 else -1.0
     num = [term(n, e) for n, e in zip(names, exponents) if sign * e > 0]
     den = [term(n, e) for n, e in zip(names, exponents) if sign * e < 0]
     top = "*".join(num) if num else "1"
