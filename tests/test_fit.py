@@ -242,3 +242,46 @@ def test_mech_fit_bad_input_writes_nothing(tmp_path, capsys):
     assert rc == 1 and f"{data}:1:8: error[E771]" in err and "did you mean 'y'" in err and not out.exists()
     rc = main(["fit", str(PENDULUM), "--model", "Pendulum", "--data", data, "--fit", "Lx", "-o", str(out)])
     assert rc == 2 and "did you mean 'L'" in capsys.readouterr().err and not out.exists()
+
+
+def _pendulum_csv(tmp_path, seed=5, points=101):
+    m = mechdsl.load(PENDULUM, model="Pendulum")
+    r = m.simulate(2.0, points=points, **TIGHT)
+    rng = np.random.default_rng(seed)
+    rows = ["time,x,y"] + [f"{t!r},{x + 0.01 * rng.standard_normal()!r},{y + 0.01 * rng.standard_normal()!r}"
+                           for t, x, y in zip(r.t.tolist(), r["x"].tolist(), r["y"].tolist())]
+    return _csv(tmp_path / "d.csv", "\n".join(rows) + "\n")
+
+
+def test_mech_fit_json_document(tmp_path, capsys):
+    from cli_json import validate
+
+    data = _pendulum_csv(tmp_path, points=41)
+    rc = main(["fit", str(PENDULUM), "--model", "Pendulum", "--data", data, "--fit", "L,g", "--start", "L=0.9",
+               "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    validate(doc)
+    res = doc["result"]
+    assert rc == 0 and doc["ok"] and res["names"] == ["L", "g"] and res["units"]["L"] == "m"
+    assert abs(res["estimates"]["L"] - 1.0) < 4 * res["standard_errors"]["L"] and res["unidentifiable"] == []
+    bad = _csv(tmp_path / "bad.csv", "time,x\n0,1\n0.1,inf\n")
+    rc = main(["fit", str(PENDULUM), "--model", "Pendulum", "--data", bad, "--fit", "L", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    validate(doc)
+    (d,) = doc["diagnostics"]
+    assert rc == 1 and doc["error"]["kind"] == "model"
+    assert (d["code"], d["file"], d["line"], d["column"]) == ("E773", bad, 3, 5) and d["hint"]
+
+
+def test_mech_fit_does_not_overwrite_without_force(tmp_path, capsys):
+    data = _pendulum_csv(tmp_path, points=21)
+    out, png = tmp_path / "fit.json", tmp_path / "fit.png"
+    out.write_text("mine\n")
+    png.write_text("mine\n")
+    args = ["fit", str(PENDULUM), "--model", "Pendulum", "--data", data, "--fit", "L"]
+    assert main([*args, "-o", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err and out.read_text() == "mine\n"
+    assert main([*args, "--plot", str(png)]) == 2 and png.read_text() == "mine\n"
+    capsys.readouterr()
+    assert main([*args, "-o", str(out), "--force"]) == 0
+    assert json.loads(out.read_text())["names"] == ["L"]
