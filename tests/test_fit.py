@@ -191,7 +191,7 @@ def _csv(path, text):
     ("time,x,y\n-1,1,0\n0.1,0.9,-0.05\n", "E772", 2, 1),
     ("time,x,y\n0,1,0\n0,0.9,-0.05\n", "E772", 3, 1),
     ("x,y\n1,0\n", "E772", 1, 1),
-    ("time,x,y\n", "E772", 0, 0),
+    ("time,x,y\n", "E772", 1, 1),
 ])
 def test_bad_data_files_are_located_errors(pendulum, tmp_path, text, code, line, col):
     path = _csv(tmp_path / "d.csv", text)
@@ -285,3 +285,28 @@ def test_mech_fit_does_not_overwrite_without_force(tmp_path, capsys):
     capsys.readouterr()
     assert main([*args, "-o", str(out), "--force"]) == 0
     assert json.loads(out.read_text())["names"] == ["L"]
+
+
+def test_a_free_coordinate_is_a_straight_line_fit():
+    """q'' = 0 (the equations' right side structurally zero, which CasADi's integrators refused
+    until it was densified): fitting the start value and speed to samples of a line is linear
+    least squares, so the estimates and standard errors equal numpy's polyfit's."""
+    m = mechdsl.loads("""
+model Free
+  parameter Real m(unit = "kg") = 2;
+  coordinate Real s(start = 0, speed = 0, unit = "m");
+equation
+  kinetic = 1/2*m*der(s)^2;
+end Free;
+""")
+    rng = np.random.default_rng(8)
+    t = np.linspace(0, 2, 41)
+    y = 0.3 + 1.7 * t + 0.05 * rng.standard_normal(t.size)
+    f = m.fit({"time": t, "s": y}, starts=["s", "der(s)"], **TIGHT)
+    (b, a), cov = np.polyfit(t, y, 1, cov="unscaled")
+    s2 = float(np.sum((y - a - b * t) ** 2)) / (t.size - 2)
+    se = {"s": math.sqrt(s2 * cov[1, 1]), "der(s)": math.sqrt(s2 * cov[0, 0])}
+    for n, v in (("s", a), ("der(s)", b)):      # the stopping rule (relative gain < 1e-10) leaves ~1e-5 se
+        assert abs(f.estimates[n] - v) < 1e-4 * se[n], (n, f.estimates[n], v)
+        assert f.standard_errors[n] == pytest.approx(se[n], rel=1e-6)
+    assert f.units == {"s": "m", "der(s)": "m/s"}

@@ -132,7 +132,7 @@ def _csv(path: str, st) -> Experiment:
     data = np.empty((len(rows) - 1, len(header)))
     for k, (line, r) in enumerate(rows[1:]):
         if len(r) != len(header):
-            raise MechError(Diagnostic(CODE_VALUE, f"line {line} has {len(r)} values for {len(header)} columns",
+            raise MechError(Diagnostic(CODE_VALUE, f"line {line} has {len(r)} value{'s' if len(r) != 1 else ''} for {len(header)} columns",
                                        Span(path, line, 1, line, len(lines[line - 1]) + 1),
                                        help="one value per column on every line"))
         for j, c in enumerate(r):
@@ -148,6 +148,10 @@ def _csv(path: str, st) -> Experiment:
                                            help="every value must be a finite number; drop samples that were not "
                                                 "measured (a row, or a column from the fit)"))
             data[k, j] = v
+    if len(rows) == 1:
+        raise MechError(Diagnostic(CODE_TIMES, f"no samples in {path}: a header line and no rows",
+                                   Span(path, head_line, 1, head_line, len(lines[head_line - 1]) + 1),
+                                   help="a fit needs measured samples: rows of numbers under the header"))
     t = data[:, tcol]
     keep = [j for j in range(len(header)) if j != tcol]
     exp = Experiment(path, t, tuple(header[j] for j in keep), data[:, keep].T.copy(), st, where,
@@ -169,6 +173,11 @@ def _col(line: str, j: int) -> int:
     return len(line) + 1
 
 
+def _who(exp: Experiment) -> str:
+    """The message's prefix naming the table: none for a CSV file (its diagnostic names the file)."""
+    return "" if exp.rows or exp.where else f"{exp.label}: "
+
+
 def _row_span(exp: Experiment, k: int, name: str | None = None) -> Span:
     if exp.rows:
         line = exp.rows[k]
@@ -180,25 +189,25 @@ def _row_span(exp: Experiment, k: int, name: str | None = None) -> Span:
 def _check_values(exp: Experiment, tname: str) -> None:
     """Times and values finite, times increasing."""
     if exp.t.size == 0:
-        raise MechError(Diagnostic(CODE_TIMES, f"{exp.label}: no samples (a header and no rows)", Span(exp.label),
+        raise MechError(Diagnostic(CODE_TIMES, f"{_who(exp)}no samples (a header and no rows)", Span(exp.label),
                                    help="a fit needs measured samples"))
     bad = np.flatnonzero(~np.isfinite(exp.t))
     if bad.size:
-        raise MechError(Diagnostic(CODE_VALUE, f"{exp.label}: the time of sample {bad[0] + 1} is not a finite number",
+        raise MechError(Diagnostic(CODE_VALUE, f"{_who(exp)}the time of sample {bad[0] + 1} is not a finite number",
                                    _row_span(exp, int(bad[0]), tname), help="every time must be a finite number"))
     for i, name in enumerate(exp.columns):
         bad = np.flatnonzero(~np.isfinite(exp.Y[i]))
         if bad.size:
             k = int(bad[0])
             raise MechError(Diagnostic(
-                CODE_VALUE, f"{exp.label}: the value of '{name}' at t = {exp.t[k]:g} s (sample {k + 1}) is not a "
+                CODE_VALUE, f"{_who(exp)}the value of '{name}' at t = {exp.t[k]:g} s (sample {k + 1}) is not a "
                 f"finite number ({exp.Y[i, k]})", _row_span(exp, k, name),
                 help="every value must be a finite number; drop samples that were not measured (a row, or the "
                      "column from the fit)"))
     step = np.diff(exp.t)
     if (step <= 0).any():
         k = int(np.flatnonzero(step <= 0)[0]) + 1
-        raise MechError(Diagnostic(CODE_TIMES, f"{exp.label}: the times are not increasing: t = {exp.t[k]:g} s "
+        raise MechError(Diagnostic(CODE_TIMES, f"{_who(exp)}the times are not increasing: t = {exp.t[k]:g} s "
                                    f"(sample {k + 1}) after t = {exp.t[k - 1]:g} s", _row_span(exp, k, tname),
                                    help="sort the samples by time, one sample per time"))
 
@@ -208,7 +217,7 @@ def check_columns(exp: Experiment, signals, model: str) -> None:
     signals = list(signals)
     if not exp.columns:
         line, col = next(iter(exp.where.values()), (0, 0))
-        raise MechError(Diagnostic(CODE_COLUMN, f"{exp.label}: no measured column besides the time",
+        raise MechError(Diagnostic(CODE_COLUMN, f"{_who(exp)}no measured column besides the time",
                                    exp.span(line, col),
                                    help=f"name columns like the recorded signals of {model}: {', '.join(signals)}"))
     for name in exp.columns:
@@ -226,7 +235,7 @@ def check_times(exp: Experiment, t_start: float, t_end: float) -> None:
     out = np.flatnonzero((exp.t < t_start - tol) | (exp.t > t_end + tol))
     if out.size:
         k = int(out[0])
-        raise MechError(Diagnostic(CODE_TIMES, f"{exp.label}: t = {exp.t[k]:g} s (sample {k + 1}) is outside the run "
+        raise MechError(Diagnostic(CODE_TIMES, f"{_who(exp)}t = {exp.t[k]:g} s (sample {k + 1}) is outside the run "
                                    f"[{t_start:g}, {t_end:g}] s", _row_span(exp, k, exp.time_name),
                                    help="the run starts at the scene's start_time (t_start) and ends at the last "
                                         "sample unless t_end is given: drop the samples outside it or move the start"))

@@ -197,7 +197,8 @@ class Trajectory:
         y = self.signal(t, x, u, p)
         rows = [self.names.index(k) for k in self.integrals]
         e = ca.MX(0, 1)
-        return ca.Function("dae", [t, x, e, pp, e], [ode(t, x, u, p), e, y[rows], e], ca.dyn_in(), ca.dyn_out())
+        return ca.Function("dae", [t, x, e, pp, e], [ca.densify(ode(t, x, u, p)), e, ca.densify(y[rows]), e],
+                           ca.dyn_in(), ca.dyn_out())          # dense: CasADi's integrators refuse sparse outputs
 
     # ------------------------------------------------------------------ the start
     def start(self, pv, x0=None):
