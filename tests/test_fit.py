@@ -285,6 +285,12 @@ def test_mech_fit_does_not_overwrite_without_force(tmp_path, capsys):
     capsys.readouterr()
     assert main([*args, "-o", str(out), "--force"]) == 0
     assert json.loads(out.read_text())["names"] == ["L"]
+    capsys.readouterr()
+    assert main([*args, "-o", str(out)]) == 0          # its own output: a rerun replaces it
+    capsys.readouterr()
+    assert main([*args, "-o", str(out), "--plot"]) == 2 and png.read_text() == "mine\n"   # bare: next to -o
+    assert "fit.png" in capsys.readouterr().err
+    assert main([*args, "-o", str(out), "--plot", "--force"]) == 0 and png.read_bytes()[:4] == b"\x89PNG"
 
 
 def test_a_free_coordinate_is_a_straight_line_fit():

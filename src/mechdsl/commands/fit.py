@@ -3,6 +3,8 @@ measured motion (Model.fit, docs/fitting.md): the estimates with standard errors
 the combinations the data cannot determine, the residual; JSON and a plot of data and model."""
 from __future__ import annotations
 
+from pathlib import Path
+
 from ._common import (
     add_cache_arg,
     add_force_arg,
@@ -43,7 +45,9 @@ def add_parser(sub):
                         "rk, collocation; default auto)")
     p.add_argument("--max-iterations", type=int, default=100, metavar="N", help="Levenberg-Marquardt iterations")
     p.add_argument("-o", "--output", metavar="OUT.json", help="write the fit (estimates, errors, correlations, ...)")
-    p.add_argument("--plot", metavar="OUT.png", help="draw the data and the fitted model")
+    p.add_argument("--plot", nargs="?", const="", metavar="OUT.png",
+                   help="draw the data and the fitted model (.png, .svg or .pdf; bare --plot: next to -o OUT.json "
+                        "as OUT.png, else fit.png)")
     add_force_arg(p)
     return p
 
@@ -53,6 +57,8 @@ def run(args) -> int:
     from ..output.fileio import check_figure, check_writable, write_atomic
     from ._output import jsonable
 
+    if args.plot == "":                 # bare --plot
+        args.plot = str(Path(args.output).with_suffix(".png")) if args.output else "fit.png"
     if args.output:
         check_writable(args.output, args.force)
     if args.plot:
@@ -81,8 +87,8 @@ def run(args) -> int:
     if args.output:
         import json
 
-        write_atomic(args.output, json.dumps(jsonable(r.to_dict()), indent=2, sort_keys=True) + "\n",
-                     overwrite=args.force)
+        doc = {"generator": "mechdsl", **jsonable(r.to_dict())}      # the marker: a rerun may replace it
+        write_atomic(args.output, json.dumps(doc, indent=2) + "\n", overwrite=args.force)
         print(f"wrote {args.output}")
         out.wrote(args.output)
     if args.plot:
