@@ -193,7 +193,7 @@ def sensitivities(model, t_end=None, params=(), starts=(), outputs=None, method=
             sy[r, tr.names.index(o), c] = 1.0
         for r, o in enumerate(ints, start=len(pairs)):
             sq[r, tr.integrals.index(o[len("integral("):-1]), -1] = 1.0
-        ax, ap, Y, Q = tr.reverse(x, pv, sy, sq)
+        ax, ap, Y, Q = tr.reverse(x, pv, sy, sq, nominal=(Y, Q))
         G = (ax @ DX + ap @ DP) * f[None, :]
         for o in names:
             if o.startswith("integral("):

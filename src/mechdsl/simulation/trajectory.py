@@ -38,6 +38,9 @@ from .registry import METHODS, spec
 from .settings import DEFAULT_POINTS
 
 
+_START_JACOBIANS: dict = {}       # id(start Function) -> (it, the Function of its Jacobian): holding it keeps the id
+
+
 def casadi_methods() -> list[str]:
     return [k for k, v in METHODS.items() if v.family == "casadi"]
 
@@ -218,13 +221,14 @@ class Trajectory:
 
     def _start_jacobian(self, pv):
         f = casadi_functions(self.eom, names=("start",))["start"]
-        key = ("start_jacobian", id(f))
-        J = self.__dict__.get(key)
-        if J is None:
+        hit = _START_JACOBIANS.get(id(f))          # per model's start Function: a trajectory is built per call
+        if hit is None or hit[0] is not f:
             p = ca.SX.sym("p", f.size1_in(0))
             q0, qd0 = f(p)
-            J = self.__dict__[key] = ca.Function("dstart", [p], [ca.jacobian(ca.vertcat(q0, qd0), p)])
-        return np.array(J(pv), float).reshape(2 * self.eom.n, -1)
+            if len(_START_JACOBIANS) > 32:
+                _START_JACOBIANS.clear()
+            hit = _START_JACOBIANS[id(f)] = (f, ca.Function("dstart", [p], [ca.jacobian(ca.vertcat(q0, qd0), p)]))
+        return np.array(hit[1](pv), float).reshape(2 * self.eom.n, -1)
 
     # ------------------------------------------------------------------ derivatives
     def evaluate(self, x0, p):
@@ -252,10 +256,11 @@ class Trajectory:
         dQ = _split(np.array(res[1], float), k) if Q is not None else None
         return Y, Q, dY, dQ
 
-    def reverse(self, x0, p, seed_y, seed_q=None):
+    def reverse(self, x0, p, seed_y, seed_q=None, nominal=None):
         """Adjoint: seeds (m, n_signals, n_times) on Y and (m, n_integrals, n_times) on Q ->
-        (d/dx0 (m, nx), d/dp (m, np)), one row per seed, and the nominal (Y, Q)."""
-        Y, Q = self.evaluate(x0, p)
+        (d/dx0 (m, nx), d/dp (m, np)), one row per seed, and the nominal (Y, Q) (``nominal``:
+        already evaluated at x0, p; else one run more)."""
+        Y, Q = self.evaluate(x0, p) if nominal is None else nominal
         seed_y = np.asarray(seed_y, float)
         m = seed_y.shape[0]
         f = self._rev.get(m)
