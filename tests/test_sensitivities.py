@@ -230,3 +230,24 @@ end Bar;
         m.sensitivities(1.0, params=["J"])
     S = m.sensitivities(1.0, params=["l"], points=5, **TIGHT)       # theta'' = -3 g/(2 l) sin(theta)
     assert _rel(S["th", "l"], _fd_param(m, "l", 1e-5, "th", 1.0, points=5, **TIGHT)) < 1e-6
+
+
+def test_the_run_function_is_reused_only_for_the_same_run():
+    """cached_trajectory: the same equations, settings and times give the same Trajectory (its
+    derivative Functions built once); other parameters, tolerances or times another, and the
+    values always those of a run at those parameters."""
+    from mechdsl.simulation.prepared import prepare
+
+    m = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum")
+
+    def traj(model, **kw):
+        return prepare(model.problem(t_end=1.0, points=5, compiled=False, **kw)).trajectory()
+
+    a = traj(m)
+    assert traj(m) is a and traj(m, rtol=1e-9) is not a
+    assert prepare(m.problem(t_end=1.0, points=5, compiled=False)).trajectory(times=[0.5, 1.0]) is not a
+    for L in (1.0, 2.0, 1.0):
+        mm = m.with_params(L=L)
+        S = mm.sensitivities(1.0, params=["g"], points=5, rtol=1e-10, atol=1e-10)
+        r = mm.simulate(1.0, points=5, rtol=1e-10, atol=1e-10, compiled=False)
+        assert np.allclose(S.values["x"], r["x"], rtol=0, atol=1e-8), L

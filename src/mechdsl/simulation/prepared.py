@@ -34,7 +34,7 @@ from .backends import backend
 from .choose import default_inputs, fixed_step_count, min_step
 from .problem import Problem
 from .registry import METHODS, spec
-from .trajectory import Trajectory
+from .trajectory import cached_trajectory
 
 
 @record
@@ -108,7 +108,7 @@ class Prepared:
         if self.problem.kind not in ("ode", "dae"):
             raise UsageError(f"a {self.problem.kind} problem has no differentiable trajectory Function "
                              f"({'contacts make the motion jump at impacts' if self.problem.kind == 'hybrid' else 'the fixed-step canonical methods are not CasADi integrators'})")
-        return Trajectory(self.problem, self.setup, times=times, integrals=tuple(integrals))
+        return cached_trajectory(self.problem, self.setup, times, tuple(integrals))
 
 
 def prepare(problem: Problem) -> Prepared:

@@ -39,6 +39,29 @@ from .settings import DEFAULT_POINTS
 
 
 _START_JACOBIANS: dict = {}       # id(start Function) -> (it, the Function of its Jacobian): holding it keeps the id
+_TRAJECTORIES: dict = {}          # (id(eom), kind, settings, times, integrals) -> (eom, Trajectory)
+_TRAJECTORY_CACHE_SIZE = 8
+
+
+def cached_trajectory(problem, setup, times, integrals) -> "Trajectory":
+    """The Trajectory of ``problem`` on ``times`` with ``integrals``, reused while the model's
+    equations, the settings and the times are the same: building the Function and, above
+    all, its derivative Functions (``function.forward(k)``: 0.1 s for the double pendulum on
+    1,000 points) costs more than a run, and a sensitivity study or a fit calls again and
+    again.  Settings that cannot be hashed (input functions) build afresh."""
+    grid = None if times is None else np.atleast_1d(np.asarray(times, float)).tobytes()
+    key = (id(problem.eom), problem.kind, problem.backend, problem.settings, grid, tuple(integrals))
+    try:
+        hit = _TRAJECTORIES.get(key)
+    except TypeError:                 # an unhashable setting
+        return Trajectory(problem, setup, times=times, integrals=tuple(integrals))
+    if hit is not None and hit[0] is problem.eom:
+        return hit[1]
+    tr = Trajectory(problem, setup, times=times, integrals=tuple(integrals))
+    if len(_TRAJECTORIES) >= _TRAJECTORY_CACHE_SIZE:
+        _TRAJECTORIES.pop(next(iter(_TRAJECTORIES)))
+    _TRAJECTORIES[key] = (problem.eom, tr)
+    return tr
 
 
 def casadi_methods() -> list[str]:
@@ -217,6 +240,8 @@ class Trajectory:
         dstart = self._start_jacobian(pv)
         dstart[_overridden(eom, x0), :] = 0.0
         x, Jx, Jp = self.backend.start(self.problem, xs, pv, x0)
+        if not self.constrained:        # the start as given (Jx = I, Jp = 0): no product of n x n matrices
+            return x, dstart + Jp, Jx
         return x, Jx @ dstart + Jp, Jx
 
     def _start_jacobian(self, pv):
