@@ -57,6 +57,11 @@ class OdeBackend(Backend):
         pv = parameter_vector(problem.eom, problem.settings.p)
         return setup.run(pv, start_vector(problem.eom, problem.settings.x0, pv), progress)
 
+    def integration(self, problem, setup, pv, xs):
+        if setup.method is None:
+            raise UsageError(f"{problem.model} has no coordinates: nothing is integrated")
+        return setup.method, setup.funcs, setup.reason
+
     def describe(self, r):
         method = r.metadata.get("method")
         m = spec(method) if method in ode_methods() else None
