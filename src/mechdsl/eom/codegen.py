@@ -610,14 +610,16 @@ def derivative_functions(funcs, order: int = 2) -> list:
 
 
 def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
-                      extra_units: tuple[str, ...] = ()):
+                      extra_units: tuple[str, ...] = (), extra_flags: list[str] | None = None):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
     from it by sweeps if one is ever evaluated), never the dense Jacobian.
 
     ``extra_units``: hand-written C sources linked into the same library (the compiled
-    stepping loop of mechdsl.simulation.crk); they are part of the cache key.
+    stepping loop of mechdsl.simulation.crk, code of mechdsl.eom.sxcode); they are part of the
+    cache key.  ``extra_flags``: their optimization flags instead of the size rule (sxcode's
+    chunked code compiles in linear time at any level).  No ``funcs``: only the extra units.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -637,7 +639,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
     for f in funcs:
         main.add(f)
-    units.append(main.dump())
+    if funcs or not extra_units:
+        units.append(main.dump())
     odes = [f for f in funcs if f.name() == "ode"] if jacobian and not derivatives else []
     if derivatives:
         dg = ca.CodeGenerator("mechdsl_derivatives.c", {"with_header": False, "verbose": False})
@@ -660,8 +663,10 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
-    units += list(extra_units)
     flags = [cflags_for(len(code)) for code in units]
+    units += list(extra_units)
+    env_flags = os.environ.get("MECHDSL_CFLAGS")
+    flags += [cflags_for(len(code)) if extra_flags is None or env_flags else list(extra_flags) for code in extra_units]
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
     digest = hashlib.sha256(key.encode()).hexdigest()[:24]

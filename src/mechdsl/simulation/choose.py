@@ -32,7 +32,7 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     info: dict[str, Any] = {}
     u = default_inputs(eom, u)
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+        J = numeric_jacobian(funcs["ode"], t0, x0, u, pv)
         lam = jacobian_eigenvalues(J) if np.isfinite(J).all() else None
     except Exception:  # noqa: BLE001
         lam = None
@@ -53,6 +53,31 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     return ("erk", f"not stiff (stiffness ratio {ratio:.3g} < 1e3 from the Jacobian at t = {t0:g}); the adaptive "
             f"explicit Runge-Kutta 5(4) needs no Jacobian and was fastest for a given accuracy in "
             f"benchmarks/integrators.py", info)
+
+
+def numeric_jacobian(ode, t0, x0, u, pv) -> np.ndarray:
+    """d xdot / dx at (t0, x0) by central differences of ``ode`` (one mapped call of 4n
+    evaluations, steps cbrt(eps) max(1, |x_j|)), not from a symbolic Jacobian: the dense
+    Jacobian of the 200-link chain took 12-16 s to build and gcc 30 s, for a stiffness test
+    that needs its eigenvalues to a few digits.  Where xdot = (qd, ...) (every model's ode) the
+    rows of qd are set exactly ([0, I]), so ``jacobian_eigenvalues`` can halve its work."""
+    x0 = np.asarray(x0, float)
+    nx = x0.size
+    h = np.cbrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x0))
+    X = np.repeat(x0[:, None], 2 * nx + 1, axis=1)
+    idx = np.arange(nx)
+    X[idx, 1 + idx] += h
+    X[idx, 1 + nx + idx] -= h
+    k = X.shape[1]
+    F = FastFunction(ode.map(k))(np.full((1, k), float(t0)), X, np.repeat(np.reshape(u, (-1, 1)), k, axis=1),
+                                 np.repeat(np.reshape(pv, (-1, 1)), k, axis=1))
+    F = np.reshape(F, (nx, k), order="F") if F.ndim == 1 else F
+    J = (F[:, 1:1 + nx] - F[:, 1 + nx:]) / (2 * h)
+    n = nx // 2
+    if nx == 2 * n and np.array_equal(F[:n, 0], x0[n:]):
+        J[:n] = 0.0
+        J[:n, n:] = np.eye(n)
+    return J
 
 
 def jacobian_eigenvalues(J: np.ndarray) -> np.ndarray:
@@ -105,7 +130,7 @@ def time_scale(funcs, x0, pv, t0, t1, u=NO_U, rho=None) -> tuple[float, float]:
     try:
         if rho is None:
             rho = 0.0
-            J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+            J = numeric_jacobian(funcs["ode"], t0, x0, u, pv)
             rho = float(np.abs(jacobian_eigenvalues(J)).max()) if np.isfinite(J).all() else 0.0
         f = FastFunction(funcs["ode"])(t0, x0, u, pv)
         n = len(x0) // 2

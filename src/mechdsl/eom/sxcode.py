@@ -1,0 +1,239 @@
+"""Straight-line code from CasADi SX algorithms: C source in chunks, and interpreter programs.
+
+An SX Function is a list of scalar instructions on work slots.  Two translations of that list:
+
+``c_source(f, name)``
+    C with CasADi's calling convention (``name(arg, res, iw, w, mem)``, ``name_work``,
+    ``name_n_in``, ``name_sparsity_in``, ...), so ``casadi.external`` and the compiled loop
+    (simulation/backends/crk.c) call it like CasADi's own generated code.  Unlike CasADi's code
+    generator, which writes one C function holding every operation in local variables (gcc's
+    register allocation then grows faster than linearly: the 200-link chain's 25,000
+    operations took 10-14 s at -O1), the instructions are split into functions of
+    ``CHUNK`` operations on a work array, so gcc's time grows linearly with the model
+    (docs/internals/numerics.md, "Compiled code").
+``program(f)``
+    the instruction list for the interpreter of simulation/backends/vm.c: no compile at all.
+
+Both write each operation as the C expression CasADi's code generator prints for it, in the
+same order on the same operands, so compiled code, a program and CasADi's generated C give
+the same bits (tests/test_sxcode.py).  Functions with other instructions (calls of other
+Functions, ...) are refused with ``Unsupported``: callers use CasADi's code generator then.
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+CHUNK = 256          # operations per C function: gcc's time per operation stays flat
+
+
+class Unsupported(ValueError):
+    """The Function is not an SX Function of scalar instructions this module translates."""
+
+
+# CasADi op name -> C expression of the generated code (calculus.hpp's print), {0}, {1} the operands
+BINARY = {"ADD": "{0}+{1}", "SUB": "{0}-{1}", "MUL": "{0}*{1}", "DIV": "{0}/{1}", "POW": "pow({0},{1})",
+          "CONSTPOW": "pow({0},{1})", "LT": "{0}<{1}", "LE": "{0}<={1}", "EQ": "{0}=={1}", "NE": "{0}!={1}",
+          "AND": "{0}&&{1}", "OR": "{0}||{1}", "FMOD": "fmod({0},{1})", "COPYSIGN": "copysign({0},{1})",
+          "IF_ELSE_ZERO": "{0}?{1}:0", "FMIN": "sx_fmin({0},{1})", "FMAX": "sx_fmax({0},{1})",
+          "ATAN2": "atan2({0},{1})", "HYPOT": "sx_hypot({0},{1})", "REMAINDER": "remainder({0},{1})"}
+UNARY = {"ASSIGN": "{0}", "NEG": "-{0}", "EXP": "exp({0})", "LOG": "log({0})", "SQRT": "sqrt({0})",
+         "SQ": "{0}*{0}", "TWICE": "2.*{0}", "SIN": "sin({0})", "COS": "cos({0})", "TAN": "tan({0})",
+         "ASIN": "asin({0})", "ACOS": "acos({0})", "ATAN": "atan({0})", "NOT": "!{0}", "FLOOR": "floor({0})",
+         "CEIL": "ceil({0})", "FABS": "fabs({0})", "SIGN": "sx_sign({0})", "ERF": "erf({0})", "INV": "1./{0}",
+         "SINH": "sinh({0})", "COSH": "cosh({0})", "TANH": "tanh({0})", "ASINH": "asinh({0})",
+         "ACOSH": "acosh({0})", "ATANH": "atanh({0})", "LOG1P": "log1p({0})", "EXPM1": "expm1({0})"}
+
+# fmin, fmax and hypot are commutative to gcc, which may swap their operands (and merge
+# fmax(a, b) with fmax(b, a)); on signed zeros the C library's answer depends on the order, and
+# CasADi's generated code calls them through a function of its own in the written order
+_HELPERS = """#if defined(__GNUC__)
+#define SX_KEEP __attribute__((noinline))
+#else
+#define SX_KEEP
+#endif
+static double sx_sign(double x) { return x < 0 ? -1. : x > 0 ? 1. : x; }
+static SX_KEEP double sx_fmin(double x, double y) { return fmin(x, y); }
+static SX_KEEP double sx_fmax(double x, double y) { return fmax(x, y); }
+static SX_KEEP double sx_hypot(double x, double y) { return hypot(x, y); }"""
+
+# the interpreter's opcodes, in the order of vm.c's enum
+VM_OPS = ("END", "OUT", "ASSIGN", "ADD", "SUB", "MUL", "DIV", "NEG", "EXP", "LOG", "POW", "SQRT", "SQ", "TWICE",
+          "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "LT", "LE", "EQ", "NE", "NOT", "AND", "OR", "FLOOR", "CEIL",
+          "FMOD", "FABS", "SIGN", "COPYSIGN", "IF_ELSE_ZERO", "ERF", "FMIN", "FMAX", "INV", "SINH", "COSH", "TANH",
+          "ASINH", "ACOSH", "ATANH", "ATAN2", "LOG1P", "EXPM1", "HYPOT", "REMAINDER")
+_VM_CODE = {name: i for i, name in enumerate(VM_OPS)}
+_VM_CODE["CONSTPOW"] = _VM_CODE["POW"]
+
+_NAMES: dict | None = None
+
+
+def _op_names() -> dict:
+    global _NAMES
+    if _NAMES is None:
+        import casadi as ca
+
+        _NAMES = {getattr(ca, n): n[3:] for n in dir(ca) if n.startswith("OP_")}
+    return _NAMES
+
+
+def instructions(f) -> list[tuple[str, list, list, float]]:
+    """(op name, inputs, outputs, constant) of every instruction of the SX Function ``f``."""
+    if not f.is_a("SXFunction"):
+        raise Unsupported(f"{f.name()} is a {f.class_name()}, not an SX Function")
+    names = _op_names()
+    out = []
+    for k in range(f.n_instructions()):
+        op = names.get(f.instruction_id(k), str(f.instruction_id(k)))
+        const = float(f.instruction_constant(k)) if op == "CONST" else 0.0
+        if op not in BINARY and op not in UNARY and op not in ("INPUT", "OUTPUT", "CONST"):
+            raise Unsupported(f"{f.name()} has an instruction {op} (not translated)")
+        out.append((op, list(f.instruction_input(k)), list(f.instruction_output(k)), const))
+    return out
+
+
+def supported(f) -> bool:
+    try:
+        instructions(f)
+    except Unsupported:
+        return False
+    return True
+
+
+# --------------------------------------------------------------------------- C source
+
+
+def _const(v: float) -> str:
+    if v != v:
+        return "NAN"
+    if v in (float("inf"), float("-inf")):
+        return "INFINITY" if v > 0 else "-INFINITY"
+    return repr(v) if "." in repr(v) or "e" in repr(v) else repr(v) + "."
+
+
+def _compress(sp) -> list[int]:
+    return [int(v) for v in sp.compress()]
+
+
+def c_source(f, name: str | None = None, chunk: int = CHUNK) -> str:
+    """C for the SX Function ``f`` under ``name`` (default: its own), CasADi's calling convention."""
+    name = name or f.name()
+    ins = instructions(f)
+    n_in, n_out = f.n_in(), f.n_out()
+    lines = ["#include <math.h>", "typedef long long sx_int;", _HELPERS]
+    bodies, body, used_in, used_out = [], [], set(), set()
+
+    def flush():
+        head = "".join(f"const double *restrict i{a} = in[{a}]; " for a in sorted(used_in))
+        head += "".join(f"double *restrict o{a} = out[{a}]; " for a in sorted(used_out))
+        bodies.append(f"static void {name}_c{len(bodies)}(const double *const *in, double *const *out, "
+                      f"double *restrict w) {{\n  {head}\n  " + "\n  ".join(body) + "\n}")
+        body.clear(), used_in.clear(), used_out.clear()
+
+    for op, a, o, const in ins:
+        if op == "INPUT":
+            used_in.add(a[0])
+            body.append(f"w[{o[0]}]=i{a[0]}[{a[1]}];")
+        elif op == "OUTPUT":
+            used_out.add(o[0])
+            body.append(f"o{o[0]}[{o[1]}]=w[{a[0]}];")
+        elif op == "CONST":
+            body.append(f"w[{o[0]}]={_const(const)};")
+        elif op in BINARY:
+            body.append(f"w[{o[0]}]=" + BINARY[op].format(f"w[{a[0]}]", f"w[{a[1]}]") + ";")
+        else:
+            body.append(f"w[{o[0]}]=" + UNARY[op].format(f"w[{a[0]}]") + ";")
+        if len(body) >= chunk:
+            flush()
+    if body or not bodies:
+        flush()
+    lines += bodies
+    max_in = max([f.nnz_in(i) for i in range(n_in)] + [1])
+    max_out = max([f.nnz_out(i) for i in range(n_out)] + [1])
+    call = "".join(f"  {name}_c{j}(in, out, w);\n" for j in range(len(bodies)))
+    lines.append(
+        f"static const double {name}_zeros[{max_in}];\n"
+        f"int {name}(const double **arg, double **res, sx_int *iw, double *w, int mem) {{\n"
+        f"  const double *in[{max(n_in, 1)}]; double *out[{max(n_out, 1)}]; double sink[{max_out}];\n"
+        f"  for (int i = 0; i < {n_in}; i++) in[i] = arg[i] ? arg[i] : {name}_zeros;\n"
+        f"  for (int i = 0; i < {n_out}; i++) out[i] = res[i] ? res[i] : sink;\n"
+        f"{call}  return 0;\n}}")
+    sps_in = [_compress(f.sparsity_in(i)) for i in range(n_in)]
+    sps_out = [_compress(f.sparsity_out(i)) for i in range(n_out)]
+    for kind, sps in (("in", sps_in), ("out", sps_out)):
+        for i, sp in enumerate(sps):
+            lines.append(f"static const sx_int {name}_sp_{kind}{i}[{len(sp)}] = {{{', '.join(map(str, sp))}}};")
+        cases = "".join(f"    case {i}: return {name}_sp_{kind}{i};\n" for i in range(len(sps)))
+        lines.append(f"const sx_int* {name}_sparsity_{kind}(sx_int i) {{\n  switch (i) {{\n{cases}"
+                     f"    default: return 0;\n  }}\n}}")
+        names = [f.name_in(i) for i in range(n_in)] if kind == "in" else [f.name_out(i) for i in range(n_out)]
+        cases = "".join(f'    case {i}: return "{nm}";\n' for i, nm in enumerate(names))
+        lines.append(f"const char* {name}_name_{kind}(sx_int i) {{\n  switch (i) {{\n{cases}"
+                     f"    default: return 0;\n  }}\n}}")
+    lines.append(
+        f"sx_int {name}_n_in(void) {{ return {n_in}; }}\n"
+        f"sx_int {name}_n_out(void) {{ return {n_out}; }}\n"
+        f"double {name}_default_in(sx_int i) {{ return 0; }}\n"
+        f"int {name}_work(sx_int *sz_arg, sx_int *sz_res, sx_int *sz_iw, sx_int *sz_w) {{\n"
+        f"  if (sz_arg) *sz_arg = {n_in}; if (sz_res) *sz_res = {n_out}; if (sz_iw) *sz_iw = 0; "
+        f"if (sz_w) *sz_w = {max(f.sz_w(), 1)}; return 0;\n}}\n"
+        f"int {name}_checkout(void) {{ return 0; }}\nvoid {name}_release(int mem) {{ }}\n"
+        f"void {name}_incref(void) {{ }}\nvoid {name}_decref(void) {{ }}")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- interpreter programs
+
+
+_CI = ctypes.c_longlong
+
+
+class _Prog(ctypes.Structure):
+    _fields_ = [("ins", ctypes.POINTER(ctypes.c_int)), ("nins", _CI), ("consts", ctypes.POINTER(ctypes.c_double)),
+                ("nconst", _CI), ("const_off", _CI), ("nin", ctypes.c_int), ("in_off", ctypes.POINTER(_CI)),
+                ("in_nnz", ctypes.POINTER(_CI))]
+
+
+class Program:
+    """An SX Function as vm.c's program: ``prog`` (a ctypes record the interpreter reads; this
+    object keeps its arrays alive) and ``nreg``, the work memory it needs (doubles)."""
+
+    def __init__(self, f):
+        ins = instructions(f)
+        nnz = [f.nnz_in(i) for i in range(f.n_in())]
+        off = np.cumsum([0, *nnz])
+        consts: dict = {}
+        for op, _, _, c in ins:
+            if op == "CONST":
+                consts.setdefault(np.float64(c).tobytes(), c)      # -0.0 and 0.0 kept apart
+        const_off = int(off[-1])
+        creg = {k: const_off + j for j, k in enumerate(consts)}
+        base = const_off + len(consts)
+        where: dict[int, int] = {}     # work slot -> register holding its current value
+        code = []
+        for op, a, o, c in ins:
+            if op == "INPUT":
+                where[o[0]] = int(off[a[0]] + a[1])
+            elif op == "CONST":
+                where[o[0]] = creg[np.float64(c).tobytes()]
+            elif op == "OUTPUT":
+                code.append((_VM_CODE["OUT"], o[1], where[a[0]], o[0]))
+            else:
+                code.append((_VM_CODE[op], base + o[0], where[a[0]], where[a[1]] if len(a) > 1 else 0))
+                where[o[0]] = base + o[0]
+        code.append((_VM_CODE["END"], 0, 0, 0))
+        self.ins = np.ascontiguousarray(np.array(code, dtype=np.intc).ravel())
+        self.consts = np.array(list(consts.values()), float)
+        self.in_off = np.ascontiguousarray(off[:-1], dtype=np.int64)
+        self.in_nnz = np.ascontiguousarray(nnz, dtype=np.int64)
+        self.nreg = max(base + f.sz_w(), 1)
+        self.n_in, self.n_out = f.n_in(), f.n_out()
+        self.prog = _Prog(self.ins.ctypes.data_as(ctypes.POINTER(ctypes.c_int)), len(code),
+                          self.consts.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(self.consts), const_off,
+                          f.n_in(), self.in_off.ctypes.data_as(ctypes.POINTER(_CI)),
+                          self.in_nnz.ctypes.data_as(ctypes.POINTER(_CI)))
+
+
+def program(f) -> Program:
+    return Program(f)
