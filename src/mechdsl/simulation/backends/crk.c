@@ -573,14 +573,16 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     if (ctl[1]) { status = CRK_CANCELLED; break; }
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
     if (h_abs < min_step) h_abs = min_step;
-    int accepted = 0, was_rejected = 0;
+    int accepted = 0, was_rejected = 0, nan_norm = 0;
     double h = 0.0, t_new = t;
     while (!accepted) {
-      if (h_abs < min_step) { status = CRK_TOO_SMALL; goto done; }
+      /* a step that shrank to nothing because its stages were not finite (NaN error norm):
+         the right-hand side fails just ahead, which is the cause to report */
+      if (h_abs < min_step) { status = nan_norm ? CRK_RHS_ERROR : CRK_TOO_SMALL; goto done; }
       if (hmin > 0 && h_abs < hmin && t + hmin < tb) {
         /* hmin bounds the step from below: a proposal under it (the initial step's heuristic,
            a growth step) is raised to it; error control rejecting a step down below it fails */
-        if (was_rejected) { status = CRK_HMIN; goto done; }
+        if (was_rejected) { status = nan_norm ? CRK_RHS_ERROR : CRK_HMIN; goto done; }
         h_abs = hmin;
       }
       h = h_abs;
@@ -604,6 +606,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
         accepted = 1;
       } else {
         h_abs *= fmax(MIN_FACTOR, SAFETY * pow(en, expo));   /* fmax ignores a NaN norm, as scipy */
+        nan_norm = en != en;
         was_rejected = 1;
         rejected++;
       }
