@@ -22,6 +22,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 typedef long long cint;   /* casadi_int of the generated code */
 
@@ -58,7 +59,19 @@ static void work_free(Work *k) { free(k->arg); free(k->res); free(k->iw); free(k
 
 enum { CRK_OK = 0, CRK_MAX_STEPS = 1, CRK_HMIN = 2, CRK_TOO_SMALL = 3, CRK_NONFINITE = 4,
        CRK_CANCELLED = 5, CRK_NOMEM = 6, CRK_RHS_ERROR = 7, CRK_BAD_METHOD = 8,
-       CRK_EVENT = 9, CRK_EVENT_AT_START = 10 };
+       CRK_EVENT = 9, CRK_EVENT_AT_START = 10, CRK_YIELD = 11 };
+
+/* A run in slices (crk_run with a Resume): a call returns CRK_YIELD after about `slice` seconds
+   of CPU with its state here, and the next call goes on from it, step for step as one call
+   would: the caller (Python) shows progress and lets Ctrl-C through between slices, in its
+   own thread.  y and f (nx each) are the caller's. */
+typedef struct {
+  double slice;
+  int started;
+  double t, h_abs;
+  cint k, steps, rejected, steps_here, nfev;
+  double *y, *f;
+} Resume;
 
 static const double P5_A[6 * 5] = {
     0.0, 0.0, 0.0,
@@ -529,7 +542,7 @@ static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const d
 
 static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev) {
+            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, Resume *rs) {
   int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
@@ -555,20 +568,29 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
   (void)F;
   const double tb = grid[ngrid - 1];
   const double expo = -1.0 / (tab.err_order + 1.0);
-  memcpy(y, x0, (size_t)n * sizeof(double));
-  memcpy(X, x0, (size_t)n * sizeof(double));
-  ctl[0] = 1;
-  if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
   double e_start = INFINITY;      /* the event function at the current step's start */
-  if (ev) {
-    flags = (int *)calloc((size_t)(ev->k > 0 ? ev->k : 1), sizeof(int));
-    if (!flags) { status = CRK_NOMEM; goto done; }
-    if (gaps_at(ev, t, y)) { status = CRK_RHS_ERROR; goto done; }
-    e_start = event_value(ev, NULL);
-    if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
+  double h_abs = 0.0;
+  clock_t deadline = 0;
+  if (rs && rs->slice > 0) deadline = clock() + (clock_t)(rs->slice * CLOCKS_PER_SEC);
+  if (rs && rs->started) {        /* go on where the last slice stopped */
+    t = rs->t; h_abs = rs->h_abs; k = rs->k; steps = rs->steps; rejected = rs->rejected;
+    steps_here = rs->steps_here; r.nfev = rs->nfev;
+    memcpy(y, rs->y, (size_t)n * sizeof(double));
+    memcpy(f, rs->f, (size_t)n * sizeof(double));
+  } else {
+    memcpy(y, x0, (size_t)n * sizeof(double));
+    memcpy(X, x0, (size_t)n * sizeof(double));
+    ctl[0] = 1;
+    if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
+    if (ev) {
+      flags = (int *)calloc((size_t)(ev->k > 0 ? ev->k : 1), sizeof(int));
+      if (!flags) { status = CRK_NOMEM; goto done; }
+      if (gaps_at(ev, t, y)) { status = CRK_RHS_ERROR; goto done; }
+      e_start = event_value(ev, NULL);
+      if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
+    }
+    if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
   }
-  double h_abs;
-  if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
   while (k < ngrid) {
     if (ctl[1]) { status = CRK_CANCELLED; break; }
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
@@ -666,6 +688,14 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       continue;
     }
     if (steps_here >= max_steps) { status = CRK_MAX_STEPS; break; }
+    if (deadline && (steps & 15) == 0 && k < ngrid && clock() >= deadline) {
+      rs->t = t; rs->h_abs = h_abs; rs->k = k; rs->steps = steps; rs->rejected = rejected;
+      rs->steps_here = steps_here; rs->nfev = r.nfev; rs->started = 1;
+      memcpy(rs->y, y, (size_t)n * sizeof(double));
+      memcpy(rs->f, f, (size_t)n * sizeof(double));
+      status = CRK_YIELD;
+      break;
+    }
   }
 done:
   stats[0] = (double)steps; stats[1] = (double)r.nfev; stats[2] = (double)rejected; stats[3] = t;
@@ -676,8 +706,8 @@ done:
 
 int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail) {
-  return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL);
+            double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs) {
+  return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs);
 }
 
 /* crk_run watching the gaps `gap` (a Fun (t, x, p) -> k gaps): stops at the first event
@@ -712,7 +742,8 @@ int crk_run_events(const Fun *ode, int method, cint nx, const double *grid, cint
   }
   int status = CRK_NOMEM;
   if (ok)
-    status = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e);
+    status = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e,
+                      NULL);
   stats[4] = (double)e.nev;
   stats[5] = (double)e.count;
   work_free(&e.gw); free(e.g); free(e.x);
