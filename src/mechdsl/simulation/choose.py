@@ -35,6 +35,8 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     again); it does not depend on rtol.
     """
     u = default_inputs(eom, u)
+    if getattr(funcs, "tables_only", False):      # tables: the model's own ode at the inputs' values at t0
+        funcs, u = funcs.base, funcs.drive.vector_at(t0)
     ode = funcs["ode"]
     key = (id(ode), float(t0), float(t1), np.asarray(x0, float).tobytes(), np.asarray(pv, float).tobytes(),
            np.asarray(u, float).tobytes())

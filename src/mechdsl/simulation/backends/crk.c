@@ -244,14 +244,72 @@ static const double P8_D[4 * 16] = {
 #define MIN_FACTOR 0.2
 #define MAX_FACTOR 10.0
 
+/* ---------------------------------------------------------------- input tables
+
+   The inputs u of a run whose signals are constants and tables (mechdsl.simulation.drive):
+   the tables are data read here at run time, never code.  A zero-order hold (hold 0) keeps
+   value k on [t_k, t_k+1); every stage of a step reads the value held at the step's start.
+   A linear table (hold 1) is interpolated at each stage's time.  No step crosses a sample
+   (a jump or a kink): steps end on the merged samples `breaks`, where the held values and
+   the FSAL derivative are renewed (as a restart there would), the step size proposal kept.  The cursors make a run's lookups O(1) on
+   average, so 10^6 samples cost about what reading them costs. */
+typedef struct { int hold; cint n; const double *t, *v; cint cur; } Tab;
+typedef struct {
+  cint nu; Tab *tab;            /* nu entries; n == 0: the constant u0[j] */
+  const double *u0; double *u;  /* constants; the vector passed to the model (nu) */
+  cint nb; const double *breaks; cint bcur;     /* the holds' samples inside the run, a cursor */
+} Drive;
+
+/* the piece of a table holding time tt: the last k with t_k <= tt (0 before the first) */
+static cint tab_piece(Tab *b, double tt) {
+  cint k = b->cur;
+  if (k < 0) k = 0;
+  if (k > b->n - 1) k = b->n - 1;
+  while (k > 0 && b->t[k] > tt) k--;
+  while (k + 1 < b->n && b->t[k + 1] <= tt) k++;
+  b->cur = k;
+  return k;
+}
+
+/* the held values at a step's start ts (a round-off short of a sample already shows it) */
+static void drive_hold(Drive *d, double ts) {
+  double slack = 1e-12 * fmax(1.0, fabs(ts));
+  for (cint j = 0; j < d->nu; j++) {
+    Tab *b = d->tab + j;
+    if (b->n == 0) d->u[j] = d->u0[j];
+    else if (b->hold == 0) d->u[j] = b->v[tab_piece(b, ts + slack)];
+  }
+}
+
+static void drive_at(Drive *d, double tt) {
+  for (cint j = 0; j < d->nu; j++) {
+    Tab *b = d->tab + j;
+    if (b->n == 0 || b->hold == 0) continue;
+    if (b->n == 1) { d->u[j] = b->v[0]; continue; }
+    cint k = tab_piece(b, tt);
+    if (k > b->n - 2) k = b->n - 2;
+    double t0 = b->t[k], t1 = b->t[k + 1];
+    d->u[j] = b->v[k] + (b->v[k + 1] - b->v[k]) * ((tt - t0) / (t1 - t0));
+  }
+}
+
+/* the first sample strictly after ts (beyond its slack), or INFINITY */
+static double drive_next_break(Drive *d, double ts) {
+  double slack = 1e-12 * fmax(1.0, fabs(ts));
+  while (d->bcur < d->nb && d->breaks[d->bcur] <= ts + slack) d->bcur++;
+  return d->bcur < d->nb ? d->breaks[d->bcur] : INFINITY;
+}
+
 typedef struct {
   const Fun *f; Work k;
   double t; const double *u, *p; cint nfev;
+  Drive *d;
 } Rhs;
 
 static int rhs(Rhs *r, double t, const double *x, double *f) {
   r->t = t;
-  r->k.arg[0] = &r->t; r->k.arg[1] = x; r->k.arg[2] = r->u; r->k.arg[3] = r->p;
+  if (r->d) drive_at(r->d, t);
+  r->k.arg[0] = &r->t; r->k.arg[1] = x; r->k.arg[2] = r->d ? r->d->u : r->u; r->k.arg[3] = r->p;
   r->k.res[0] = f;
   r->nfev++;
   return r->f->eval(r->f->ctx, r->k.arg, r->k.res, r->k.iw, r->k.w);
@@ -542,7 +600,8 @@ static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const d
 
 static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, Resume *rs) {
+            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, Resume *rs,
+            Drive *drv) {
   int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
@@ -561,7 +620,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     work_free(&r.k); free(mem);
     return CRK_NOMEM;
   }
-  r.u = u; r.p = p; r.nfev = 0;
+  r.u = u; r.p = p; r.nfev = 0; r.d = drv;
   double *K = mem;                               /* extended x n stages */
   double *y = K + (cint)tab.extended * n, *ynew = y + n, *f = ynew + n, *yold = f + n;
   double *scale = yold + n, *tmp = scale + n, *F = tmp + n;   /* F: 7 x n for DOP853 dense output */
@@ -581,6 +640,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     memcpy(y, x0, (size_t)n * sizeof(double));
     memcpy(X, x0, (size_t)n * sizeof(double));
     ctl[0] = 1;
+    if (drv) { drv->bcur = 0; drive_hold(drv, t); }
     if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
     if (ev) {
       flags = (int *)calloc((size_t)(ev->k > 0 ? ev->k : 1), sizeof(int));
@@ -596,7 +656,9 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
     if (h_abs < min_step) h_abs = min_step;
     int accepted = 0, was_rejected = 0, nan_norm = 0;
-    double h = 0.0, t_new = t;
+    double h = 0.0, t_new = t, h_kept = 0.0;
+    const double t_break = drv ? drive_next_break(drv, t) : INFINITY;   /* steps end on samples */
+    if (drv) drive_hold(drv, t);
     while (!accepted) {
       /* a step that shrank to nothing because its stages were not finite (NaN error norm):
          the right-hand side fails just ahead, which is the cause to report */
@@ -610,6 +672,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       h = h_abs;
       t_new = t + h;
       if (t_new > tb) t_new = tb;
+      if (t_new > t_break) { t_new = t_break; h_kept = h_abs; }    /* clipped: the proposal is kept */
       h = t_new - t;
       h_abs = fabs(h);
       memcpy(K, f, (size_t)n * sizeof(double));
@@ -638,6 +701,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     memcpy(y, ynew, (size_t)n * sizeof(double));
     memcpy(f, K + (cint)S * n, (size_t)n * sizeof(double));
     t = t_new;
+    int renew = drv && t_new == t_break;     /* a sample: a hold's jump makes the last stage's f stale */
     steps++; steps_here++;
     int finite = 1;
     for (cint i = 0; i < n; i++) if (!isfinite(y[i])) { finite = 0; break; }
@@ -668,6 +732,11 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
         ctl[0] = k;
       }
       if (!ev) steps_here = 0;     /* with events max_steps bounds the whole call */
+    }
+    if (renew) {
+      if (h_abs < h_kept) h_abs = h_kept;    /* the step was cut short by the sample, not by the error */
+      drive_hold(drv, t);
+      if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
     }
     if (event) {
       memcpy(y, ev->x, (size_t)n * sizeof(double));
@@ -706,8 +775,9 @@ done:
 
 int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs) {
-  return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs);
+            double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv) {
+  return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs,
+                  drv);
 }
 
 /* crk_run watching the gaps `gap` (a Fun (t, x, p) -> k gaps): stops at the first event
@@ -743,7 +813,7 @@ int crk_run_events(const Fun *ode, int method, cint nx, const double *grid, cint
   int status = CRK_NOMEM;
   if (ok)
     status = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e,
-                      NULL);
+                      NULL, NULL);
   stats[4] = (double)e.nev;
   stats[5] = (double)e.count;
   work_free(&e.gw); free(e.g); free(e.x);

@@ -102,7 +102,7 @@ def runtime():
     if loaded is not None:
         try:
             lib = ctypes.CDLL(path)
-            for name, args in (("crk_run", RUN_ARGTYPES + [_VP]), ("crk_run_events", EVENTS_ARGTYPES)):
+            for name, args in (("crk_run", RUN_ARGTYPES + [_VP, _VP]), ("crk_run_events", EVENTS_ARGTYPES)):
                 fn = getattr(lib, name)
                 fn.restype, fn.argtypes = ctypes.c_int, args
         except (OSError, AttributeError) as e:
@@ -250,11 +250,51 @@ class Resume(ctypes.Structure):
                 ("y", _DP), ("f", _DP)]
 
 
+class _Tab(ctypes.Structure):
+    _fields_ = [("hold", ctypes.c_int), ("n", ctypes.c_longlong), ("t", _DP), ("v", _DP), ("cur", ctypes.c_longlong)]
+
+
+class _Drive(ctypes.Structure):
+    _fields_ = [("nu", ctypes.c_longlong), ("tab", ctypes.POINTER(_Tab)), ("u0", _DP), ("u", _DP),
+                ("nb", ctypes.c_longlong), ("breaks", _DP), ("bcur", ctypes.c_longlong)]
+
+
+def tables_in_loop(drive) -> bool:
+    """Whether the loop reads every input itself: constants and tables only (a Python callable
+    or a Function of (t, x) is closed into the model's ode instead)."""
+    return drive is not None and bool(drive.signals) and all(
+        s.kind in ("default", "constant", "table") for s in drive.signals) and not drive.constant
+
+
+def loop_drive(drive, t0, t1, u0):
+    """(crk.c's Drive for one run, what keeps its arrays alive): the tables as data, their
+    samples inside (t0, t1) the times steps end on."""
+    sigs = drive.signals
+    tabs = (_Tab * max(len(sigs), 1))()
+    keep = []
+    for j, s in enumerate(sigs):
+        if s.kind == "table":
+            tt = np.ascontiguousarray(s.table.times, float)
+            vv = np.ascontiguousarray(s.table.values, float)
+            keep += [tt, vv]
+            tabs[j] = _Tab(0 if s.table.hold == "zoh" else 1, tt.size, _ptr(tt), _ptr(vv), 0)
+    # steps end on every sample: a hold's jump, and a linear table's kink (stepping across kinks
+    # left errors 1000 times the tolerance on the cart-pole with 11 samples)
+    held = [s.table.times for s in sigs if s.kind == "table"]
+    tol = 1e-12 * max(1.0, abs(t0), abs(t1))
+    br = np.unique(np.concatenate(held)) if held else np.zeros(0)
+    br = np.ascontiguousarray(br[(br > t0 + tol) & (br < t1 - tol)], float)
+    u0 = np.ascontiguousarray(u0, float)
+    u = np.zeros(max(len(sigs), 1))
+    keep += [br, u0, u, tabs]
+    return _Drive(len(sigs), tabs, _ptr(u0), _ptr(u), br.size, _ptr(br), 0), keep
+
+
 SLICE = 0.05            # CPU seconds of one C call of a run: progress and Ctrl-C between calls
 YIELD = 11
 
 
-def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress) -> I.Run:
+def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None) -> I.Run:
     """The run as C calls of SLICE seconds of CPU each in the calling thread (the state carried
     from call to call: the steps are those of one call), progress shown and Ctrl-C let through
     between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run)."""
@@ -269,9 +309,10 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
     xfail = np.zeros(nx)
     carry = np.zeros((2, max(nx, 1)))
     rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, _ptr(carry[0]), _ptr(carry[1]))
+    drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
     args = (loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
             float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats), ctl.ctypes.data_as(_I64P),
-            _ptr(xfail), ctypes.byref(rs))
+            _ptr(xfail), ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
     while True:
         status = loop.run(*args)
         if status != YIELD:
@@ -323,9 +364,10 @@ class LoopFunctions(dict):
     fallback) with the Function the loop integrates and its engine, decided once by the back
     end (``compiled = true`` compiles whatever the size)."""
 
-    def __init__(self, funcs, ode, engine):
-        super().__init__({k: funcs[k] for k in ("ode",)})
+    def __init__(self, funcs, ode, engine, drive=None):
+        super().__init__()
         self.funcs, self.loop_ode, self.engine = funcs, ode, engine
+        self.drive = drive if tables_in_loop(drive) else None      # tables read by the loop
         self.eom = getattr(funcs, "eom", None)
         self.notes = list(getattr(funcs, "notes", []))
 
@@ -342,6 +384,8 @@ def loop_ode(funcs):
 
     if isinstance(funcs, LoopFunctions):
         return funcs.loop_ode
+    if getattr(funcs, "tables_only", False):      # the loop reads the tables: the model's own ode
+        funcs = funcs.base
     ode = funcs["ode"]
     eom = getattr(funcs, "eom", None)
     if (ode.is_a("SXFunction") or not isinstance(funcs, FunctionSet) or eom is None or funcs.fixed

@@ -97,7 +97,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
         funcs = functions
     elif spec(method).compiled_loop:     # the stepping loop, the model compiled or interpreted (crk.py)
         funcs, loop_compiled = _compile_loop(eom, vm, meta, fallback="erk" if auto_compiled else None,
-                                             compiled=compiled)
+                                             compiled=compiled, drive=drive)
         if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
             method, loop_compiled = "erk", None
             meta.update(method=method, integrator=spec(method).description,
@@ -122,7 +122,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
     bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
     breaks = drive.breakpoints(t0, t1)
     try:
-        if breaks.size:
+        if breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
             run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar, eom,
                                      t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
         else:
@@ -166,7 +166,7 @@ def simulate_ode(eom, s, progress=None, drive=None) -> Result:
                   stats=stats, metadata=meta, failure=failure)
 
 
-def _compile_loop(eom, funcs, meta, fallback=None, compiled=None):
+def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None):
     """(Functions of the run, whether the loop runs) for a dopri5/dop853 run: the stepping loop
     with the model compiled or interpreted (crk.engine_for; compiled = true compiles), built
     or loaded from the cache; a fallback to scipy's stepping in Python (or to ``fallback``) is
@@ -182,7 +182,11 @@ def _compile_loop(eom, funcs, meta, fallback=None, compiled=None):
     meta["loop_engine"] = engine
     if note:
         meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
-    return LoopFunctions(funcs, ode, engine), True
+    loop_funcs = LoopFunctions(funcs, ode, engine, drive)
+    if loop_funcs.drive is not None:
+        meta["notes"].append("the input tables are read by the stepping loop (data, not code); steps end on the "
+                             "zero-order holds' samples")
+    return loop_funcs, True
 
 
 def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):

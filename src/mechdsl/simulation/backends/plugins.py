@@ -91,7 +91,8 @@ class CrkPlugin(IntegratorPlugin):
             run.stats = {"n_steps": run.stats.get("steps"), "n_rhs": run.stats.get("rhs_evals"),
                          "n_reject": None, "fallback": "scipy"}
             return run
-        return crk.run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress)
+        return crk.run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress,
+                                drive=getattr(funcs, "drive", None))
 
     def counts(self, method, raw):
         return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,

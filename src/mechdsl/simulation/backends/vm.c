@@ -46,6 +46,11 @@ void vm_init(const void *ctx, double *w) {
   if (P->nconst) memcpy(w + P->const_off, P->consts, (size_t)P->nconst * sizeof(double));
 }
 
+/* gcc merges the handlers' common tails (store, fetch, jump) into one indirect jump, which the
+   branch predictor cannot learn: the interpreter ran at half speed */
+#if defined(__GNUC__) && !defined(__clang__)
+__attribute__((optimize("no-crossjumping", "no-gcse")))
+#endif
 int vm_eval(const void *ctx, const double **arg, double **res, cint *iw, double *w) {
   const Prog *P = (const Prog *)ctx;
   (void)iw;
