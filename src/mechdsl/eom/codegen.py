@@ -601,11 +601,18 @@ def cflags_for(code_size: int) -> list[str]:
 
 
 def derivative_functions(funcs, order: int = 2) -> list:
-    """Derivatives of ``funcs`` up to ``order`` under the names casadi.external looks for."""
-    out, level = [], list(funcs)
-    for _ in range(order):
-        level = [d for f in level for d in (f.jacobian(), f.forward(1), f.reverse(1))]
-        out += level
+    """Derivatives of ``funcs`` up to ``order`` under the names casadi.external looks for:
+    directional ones only, whose size grows like the Function's own (a dense ``jac_`` of a
+    7-joint arm's ode is 8x the ode, its second Jacobian 100x; with them the arm's library was
+    43 MB of C, 75 s of gcc and 3 GB): first order ``fwd1_`` and ``adj1_`` (CasADi assembles
+    Jacobians from sweeps of them), second order ``fwd1_adj1_`` (forward over reverse: the
+    Hessian-vector products of an exact Hessian, e.g. IPOPT's)."""
+    out = []
+    for f in funcs:
+        fwd, adj = f.forward(1), f.reverse(1)
+        out += [fwd, adj]
+        if order >= 2:
+            out.append(adj.forward(1))
     return out
 
 
@@ -635,18 +642,16 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                   else "looked for $CC, gcc, cc, clang")
         return None, (f"no C compiler found ({looked}); "
                       "using the CasADi virtual machine instead of compiled code"), None
+    from .sxcode import c_unit
+
     units = []
-    main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
-    for f in funcs:
-        main.add(f)
+    # SX Functions as chunked straight-line C (mechdsl.eom.sxcode: gcc's time linear in the
+    # code; CasADi's one-function-per-Function C took gcc 10-14 s for 25,000 operations)
     if funcs or not extra_units:
-        units.append(main.dump())
+        units.append(c_unit(funcs, "mechdsl_model.c"))
     odes = [f for f in funcs if f.name() == "ode"] if jacobian and not derivatives else []
     if derivatives:
-        dg = ca.CodeGenerator("mechdsl_derivatives.c", {"with_header": False, "verbose": False})
-        for d in derivative_functions(funcs, derivatives):
-            dg.add(d)
-        units.append(dg.dump())
+        units.append(c_unit(derivative_functions(funcs, derivatives), "mechdsl_derivatives.c"))
     jac_kind = None
     if odes:
         code, jac_kind = "", None
@@ -663,7 +668,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
-    flags = [cflags_for(len(code)) for code in units]
+    # chunked C (no CasADi-generated function in the unit) compiles in linear time: -O1 at any size
+    flags = [cflags_for(len(code)) if "CASADI_PREFIX" in code or os.environ.get("MECHDSL_CFLAGS")
+             else ["-O1"] for code in units]
     units += list(extra_units)
     env_flags = os.environ.get("MECHDSL_CFLAGS")
     flags += [cflags_for(len(code)) if extra_flags is None or env_flags else list(extra_flags) for code in extra_units]

@@ -48,7 +48,9 @@ UNARY = {"ASSIGN": "{0}", "NEG": "-{0}", "EXP": "exp({0})", "LOG": "log({0})", "
 # fmin, fmax and hypot are commutative to gcc, which may swap their operands (and merge
 # fmax(a, b) with fmax(b, a)); on signed zeros the C library's answer depends on the order, and
 # CasADi's generated code calls them through a function of its own in the written order
-_HELPERS = """#if defined(__GNUC__)
+_HELPERS = """#ifndef SX_HELPERS
+#define SX_HELPERS
+#if defined(__GNUC__)
 #define SX_KEEP __attribute__((noinline))
 #else
 #define SX_KEEP
@@ -56,7 +58,8 @@ _HELPERS = """#if defined(__GNUC__)
 static double sx_sign(double x) { return x < 0 ? -1. : x > 0 ? 1. : x; }
 static SX_KEEP double sx_fmin(double x, double y) { return fmin(x, y); }
 static SX_KEEP double sx_fmax(double x, double y) { return fmax(x, y); }
-static SX_KEEP double sx_hypot(double x, double y) { return hypot(x, y); }"""
+static SX_KEEP double sx_hypot(double x, double y) { return hypot(x, y); }
+#endif"""
 
 # the interpreter's opcodes, in the order of vm.c's enum
 VM_OPS = ("END", "OUT", "ASSIGN", "ADD", "SUB", "MUL", "DIV", "NEG", "EXP", "LOG", "POW", "SQRT", "SQ", "TWICE",
@@ -237,3 +240,19 @@ class Program:
 
 def program(f) -> Program:
     return Program(f)
+
+
+def c_unit(funcs, unit: str = "mechdsl_model.c") -> str:
+    """One translation unit for ``funcs``: SX Functions as chunked C (``c_source``), the others
+    through CasADi's code generator (MX Functions: calls, linear solves)."""
+    import casadi as ca
+
+    mine = [f for f in funcs if supported(f)]
+    rest = [f for f in funcs if not any(f is g for g in mine)]
+    parts = [c_source(f) for f in mine]
+    if rest or not parts:
+        cg = ca.CodeGenerator(unit, {"with_header": False, "verbose": False})
+        for f in rest:
+            cg.add(f)
+        parts.insert(0, cg.dump())
+    return "\n".join(parts)
