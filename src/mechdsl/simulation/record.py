@@ -64,6 +64,14 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
     QT = np.asarray(Q, float).reshape(N, n).T
     QDT = np.asarray(QD, float).reshape(N, n).T
     P = np.asarray(p, float).reshape(-1)
+    interp = maps.get("interpreted", False)
+    if interp is False:                        # the runtime's interpreter (no compile), once per Function
+        from .backends.crk import mapped as _interpreted
+
+        interp = maps["interpreted"] = _interpreted(F)
+    if interp is not None:
+        vals = interp(N, (t.reshape(N, 1), QT.T, QDT.T, UT.T, P, LT.T)).T
+        return {k: vals[i] for i, k in enumerate(names)}
     mapped = maps.get(N)
     if mapped is None:
         # p shared by the points (reduce_in), called through a buffer (FastFunction): a plain
@@ -71,7 +79,7 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
         mapped = _Mapped(F.map("record_map", "serial", N, [4], []))
         if len(maps) >= MAPS_KEPT:             # a few point counts per Function (runs that failed early)
             try:
-                maps.pop(next(iter(maps)), None)
+                maps.pop(next(k for k in maps if isinstance(k, int)), None)
             except (RuntimeError, StopIteration):  # another thread changed it meanwhile: keep it
                 pass
         maps[N] = mapped

@@ -102,7 +102,11 @@ def runtime():
     if loaded is not None:
         try:
             lib = ctypes.CDLL(path)
-            for name, args in (("crk_run", RUN_ARGTYPES + [_VP, _VP]), ("crk_run_events", EVENTS_ARGTYPES)):
+            for name, args in (("crk_run", RUN_ARGTYPES + [_VP, _VP]), ("crk_run_events", EVENTS_ARGTYPES),
+                               ("crk_eval_n", [ctypes.POINTER(Fun), ctypes.c_double, _DP, _DP, _DP, _DP,
+                                               ctypes.c_longlong]),
+                               ("crk_map", [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_longlong, _VP, _VP,
+                                            _DP, ctypes.c_longlong])):
                 fn = getattr(lib, name)
                 fn.restype, fn.argtypes = ctypes.c_int, args
         except (OSError, AttributeError) as e:
@@ -188,6 +192,60 @@ def build_loop(funcs: dict, tag: str, engine: str):
     except (OSError, AttributeError) as e:
         return None, f"cannot load the model's library {path}: {e}"
     return Loop(rt, funs, engine, [lib]), note
+
+
+class Mapped:
+    """An SX Function evaluated at many points by the runtime's interpreter (``crk_map``): what
+    the recorder evaluates on the output grid, without compiling and at about half the cost
+    of CasADi's virtual machine."""
+
+    def __init__(self, rt, f):
+        self.rt, self.prog = rt, sxcode.program(f)
+        self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
+                       ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
+        self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
+        self.nout = f.nnz_out(0)
+
+    def __call__(self, npts: int, rows) -> np.ndarray:
+        """Values (npts, nnz of output 0); ``rows``: per input an array of npts rows (its
+        entries, C order) or one row shared by every point."""
+        arrs, strides = [], []
+        for a, nnz in zip(rows, self.nnz_in):
+            a = np.ascontiguousarray(a, float)
+            shared = a.size == nnz and not (npts == 1 and a.ndim > 1)
+            arrs.append(a)
+            strides.append(0 if shared or nnz == 0 else nnz)
+        out = np.zeros((npts, max(self.nout, 1)))
+        ptrs = (_VP * len(arrs))(*[a.ctypes.data if a.size else None for a in arrs])
+        st = np.array(strides, dtype=np.int64)
+        status = self.rt.crk_map(ctypes.byref(self.fun), npts, len(arrs), ptrs, st.ctypes.data, _ptr(out),
+                                 out.shape[1])
+        if status:
+            raise RuntimeError(f"evaluation failed (status {status})")
+        return out[:, :self.nout]
+
+
+def mapped(f):
+    """A Mapped of the SX Function ``f``, or None (no runtime library, an MX Function)."""
+    rt, _ = runtime()
+    if rt is None or not sxcode.supported(f):
+        return None
+    return Mapped(rt, f)
+
+
+def rhs_seconds(loop, x, u, p, reps: int) -> float:
+    """CPU seconds of one evaluation of the loop's ``ode`` at (0, x, u, p), from ``reps``
+    evaluations in C (the right-hand side's own cost, without the loop)."""
+    import time
+
+    x, u, p = (np.ascontiguousarray(np.ravel(v), float) for v in (x, u, p))
+    out = np.zeros(x.size)
+    c = time.process_time()
+    status = loop.rt.crk_eval_n(loop.fun("ode"), 0.0, _ptr(x), _ptr(u), _ptr(p), _ptr(out), int(reps))
+    dt = time.process_time() - c
+    if status:
+        raise RuntimeError(f"the right-hand side failed (status {status})")
+    return dt / reps
 
 
 def library(ode, tag: str = "model", engine: str | None = None):
