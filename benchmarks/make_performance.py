@@ -249,8 +249,8 @@ mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [
   `mechdsl.dae` does not offer; like `mechdsl.dae` it builds its system on every run. Options in
   brackets are passed to the simulator by name: `rk[dt=0.01]` (a fixed step: run once,
   not over the sweep), `baumgarte[baumgarte=(0 0)]+cvodes-bdf` (a tuple is written with
-  spaces). Defaults: non-stiff models `erk,cvodes-adams,cvodes-bdf,scipy-dop853`; stiff ones
-  (what `method = auto` calls stiff) `cvodes-bdf,rosenbrock,scipy-radau,erk`; constrained
+  spaces). Defaults: non-stiff models `auto,dop853,erk,cvodes-adams,cvodes-bdf,scipy-dop853`; stiff ones
+  (what `method = auto` calls stiff) `auto,cvodes-bdf,rosenbrock,scipy-radau,erk`; constrained
   ones every formulation with its automatic integrator.
 - **Default plan**: what is not given is chosen in proportion to the model and printed
   (`plan:` lines). The end time is the scene's stop time, else 10 s (as for `mech simulate`).

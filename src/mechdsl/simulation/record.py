@@ -31,6 +31,7 @@ import threading
 import numpy as np
 
 from ..eom.codegen import singularity_monitors
+from .backends.crk import mapped as _interpreted
 
 
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
@@ -66,8 +67,6 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
     P = np.asarray(p, float).reshape(-1)
     interp = maps.get("interpreted", False)
     if interp is False:                        # the runtime's interpreter (no compile), once per Function
-        from .backends.crk import mapped as _interpreted
-
         interp = maps["interpreted"] = _interpreted(F)
     if interp is not None:
         vals = interp(N, (t.reshape(N, 1), QT.T, QDT.T, UT.T, P, LT.T)).T

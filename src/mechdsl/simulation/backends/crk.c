@@ -422,8 +422,9 @@ typedef struct {
   /* impacts applied in C (impacts/compiled.py; NULL imp: every event returns to Python) */
   const Fun *imp; Work iwk;
   const double *e;      /* k coefficients of restitution */
-  double rest_speed, v_eps, touch;
+  double rest_speed, v_eps, touch, band;
   double *ig, *iu, *iD, *iW, *xa;       /* impact outputs (k, k, n x k, k); the state after */
+  double *iacc;                          /* k normal accelerations */
   double *buf; cint cap, count;          /* event records, CRK_EVENT_ROW(nx) doubles each */
 } Events;
 
@@ -529,9 +530,17 @@ static int impact_eval(Events *e, double t, const double *x) {
    steps q -= D_j g_j / W_j while a gap is below -offset/2, to |g_j| <= 1e-3 offset).  On
    success 1, the state after in e->xa and the record appended to e->buf; 0 (nothing changed)
    whenever anything else could happen: Python then handles the event as before. */
-static int impact_in_c(Events *e, double t, const double *x, cint n, cint nx) {
+static int impact_in_c(Events *e, double t, const double *x, const double *xdot, cint n, cint nx) {
   if (!e->imp || e->count >= e->cap) return 0;
+  /* the contacts' normal accelerations along the flow (a forward difference of u): a rebound
+     rising less than `band` (a few event offsets) is below what the run resolves: Python closes
+     the contact instead of letting it chatter (event_loop.Run._rest_speeds) */
+  const double eps = 1e-7 * fmax(1.0, fabs(t));
+  for (cint j = 0; j < nx; j++) e->xa[j] = x[j] + eps * xdot[j];
+  if (impact_eval(e, t + eps, e->xa)) return 0;
+  for (cint j = 0; j < e->k; j++) e->iacc[j] = e->iu[j];
   if (impact_eval(e, t, x)) return 0;
+  for (cint j = 0; j < e->k; j++) e->iacc[j] = (e->iacc[j] - e->iu[j]) / eps;
   cint i = -1;
   for (cint j = 0; j < e->k; j++) {
     if (!(e->ig[j] == e->ig[j])) return 0;
@@ -540,7 +549,8 @@ static int impact_in_c(Events *e, double t, const double *x, cint n, cint nx) {
   if (i < 0) return 0;
   double u = e->iu[i], W = e->iW[i];
   if (!(u < -e->v_eps) || !(W > 0.0 && isfinite(W))) return 0;
-  if (!(e->e[i] * -u >= e->rest_speed)) return 0;
+  double rest = fmax(e->rest_speed, sqrt(2.0 * fmax(0.0, -e->iacc[i]) * e->band));
+  if (!(e->e[i] * -u >= rest)) return 0;
   double h = -e->e[i] * u;
   double lam = fmax(0.0, h - u) / W;
   double *xa = e->xa;
@@ -753,7 +763,8 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     if (event) {
       memcpy(y, ev->x, (size_t)n * sizeof(double));
       t = ev->t_event;
-      if (!impact_in_c(ev, t, y, n / 2, n)) { status = CRK_EVENT; break; }
+      if (ev->imp && rhs(&r, t, y, tmp)) { status = CRK_RHS_ERROR; goto done; }
+      if (!impact_in_c(ev, t, y, tmp, n / 2, n)) { status = CRK_EVENT; break; }
       /* handled in C: a new segment from the event, as Python would start it */
       memcpy(y, ev->xa, (size_t)n * sizeof(double));
       while (k < ngrid - 1 && grid[k] <= t) {        /* points at the event time: the state after it */
@@ -795,7 +806,7 @@ int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid,
 /* crk_run watching the gaps `gap` (a Fun (t, x, p) -> k gaps): stops at the first event
    (CRK_EVENT, the time in stats[3], the state in xfail); stats[4] counts the gap evaluations of
    root finding; max_steps bounds the whole call.  With `imp` (the Fun of `contact_impact(t, x,
-   p) -> g, u, D, W`), restitution coefficients `rest` (k), limits = {rest_speed, v_eps, touch}
+   p) -> g, u, D, W`), restitution coefficients `rest` (k), limits = {rest_speed, v_eps, touch, band}
    and a record buffer `buf` of `cap` rows of CRK_EVENT_ROW(nx) doubles, the simple impacts are
    applied in the loop (impact_in_c) and stepping goes on; stats[5] counts the records.  imp
    NULL: every event returns. */
@@ -812,15 +823,16 @@ int crk_run_events(const Fun *ode, int method, cint nx, const double *grid, cint
   e.g = (double *)calloc((size_t)(k > 0 ? k : 1), sizeof(double));
   e.x = (double *)calloc((size_t)(nx > 0 ? nx : 1), sizeof(double));
   ok = ok && e.g && e.x;
-  if (imp && ok) {       /* impacts in C: limits = rest_speed, v_eps, touch */
+  if (imp && ok) {       /* impacts in C: limits = rest_speed, v_eps, touch, band */
     e.imp = imp; e.e = rest; e.rest_speed = limits[0]; e.v_eps = limits[1]; e.touch = limits[2];
+    e.band = limits[3];
     e.buf = buf; e.cap = cap;
     cint nq = nx / 2;
     ok = !work_alloc(imp, 3, 4, &e.iwk);
-    e.ig = (double *)calloc((size_t)(3 * k + nq * k + 1), sizeof(double));
+    e.ig = (double *)calloc((size_t)(4 * k + nq * k + 1), sizeof(double));
     e.xa = (double *)calloc((size_t)(nx + 1), sizeof(double));
     ok = ok && e.ig && e.xa;
-    if (ok) { e.iu = e.ig + k; e.iW = e.iu + k; e.iD = e.iW + k; }
+    if (ok) { e.iu = e.ig + k; e.iW = e.iu + k; e.iacc = e.iW + k; e.iD = e.iacc + k; }
   }
   int status = CRK_NOMEM;
   if (ok)

@@ -44,7 +44,7 @@ class CompiledFlight:
                 impacts=None):
         """One C call from grid[0] to grid[-1]: (status, time reached, state there, rows written,
         stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; others: failed.
-        ``impacts`` (restitution (k,), rest_speed, v_eps, touch, capacity) lets the loop apply
+        ``impacts`` (restitution (k,), rest_speed, v_eps, touch, rest band, capacity) lets the loop apply
         the simple impacts itself (``impact_in_c`` in crk.c); their records are in
         stats["impacts"], an (m, 5 + 2 nx) array of rows (time, contact, impulse, speed before,
         speed after, state before, state after)."""
@@ -55,14 +55,14 @@ class CompiledFlight:
         pc = np.ascontiguousarray(np.ravel(p), float)
         uc = np.zeros(0)
         stats = np.zeros(6)
-        use = impacts is not None and self.impact is not None and impacts[4] > 0
+        use = impacts is not None and self.impact is not None and impacts[5] > 0
         if use:
             rest = np.ascontiguousarray(impacts[0], float)
-            limits = np.array(impacts[1:4], float)
-            buf = np.zeros((int(impacts[4]), 5 + 2 * nx))
-            imp, cap = self.impact, int(impacts[4])
+            limits = np.array(impacts[1:5], float)
+            buf = np.zeros((int(impacts[5]), 5 + 2 * nx))
+            imp, cap = self.impact, int(impacts[5])
         else:
-            rest, limits, buf = np.zeros(1), np.zeros(3), np.zeros((1, 5 + 2 * nx))
+            rest, limits, buf = np.zeros(1), np.zeros(4), np.zeros((1, 5 + 2 * nx))
             imp, cap = None, 0
         ctl = np.zeros(2, dtype=np.int64)
         xend = np.zeros(nx)
