@@ -160,16 +160,19 @@ def build_ode(eom, sx: bool = False, loop: bool = False):
         f = looped_ode(eom)
         if f is not None:
             return f
+    from .lean import lean_ode      # sx: small models' M and bias without the terms that cancel
+
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
-        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        f = _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        return lean_ode(eom, f) if sx else f
     _check_mass_matrix(eom)
     if n == 1:  # one coordinate: the "solve" is a division, exact in SX
         xdot = ca.vertcat(s.qd, eom.bias / eom.M)
         return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
     if sx and n <= SX_SOLVE_MAX:
         xdot = ca.vertcat(s.qd, ldl_solve(ca.SX(eom.M), ca.SX(eom.bias)))
-        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        return lean_ode(eom, _function("ode", s.txup, [xdot], TXUP, ["xdot"]))
     mb = _function("mass_bias", s.txup, [eom.M, eom.bias], TXUP, ["M", "bias"])
     t = ca.MX.sym("t")
     x = ca.MX.sym("x", 2 * n)

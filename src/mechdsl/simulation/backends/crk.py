@@ -435,9 +435,10 @@ class LoopFunctions(dict):
 
 def loop_ode(funcs):
     """The Function the loop integrates for the Functions ``funcs`` of a run: the model's own
-    ``ode`` as an SX Function where it has one (for M qdd = bias the unrolled LDL^T solve,
-    ``codegen.ldl_solve``, up to SX_SOLVE_MAX coordinates), which both engines run; otherwise
-    ``funcs["ode"]`` (a closed loop with input signals, larger Lagrange-route models)."""
+    ``ode`` as an SX Function where it has one (``Model.casadi()``'s: for M qdd = bias the
+    unrolled LDL^T solve, ``codegen.ldl_solve``, up to SX_SOLVE_MAX coordinates; small models'
+    leaned, ``eom.lean``), which both engines run; otherwise ``funcs["ode"]`` (a closed loop
+    with input signals, larger Lagrange-route models)."""
     from ...eom.codegen import SX_SOLVE_MAX, FunctionSet, casadi_functions
 
     if isinstance(funcs, LoopFunctions):
@@ -446,8 +447,8 @@ def loop_ode(funcs):
         funcs = funcs.base
     ode = funcs["ode"]
     eom = getattr(funcs, "eom", None)
-    if (ode.is_a("SXFunction") or not isinstance(funcs, FunctionSet) or eom is None or funcs.fixed
-            or funcs.want_compiled or eom.n > SX_SOLVE_MAX):
+    if (not isinstance(funcs, FunctionSet) or eom is None or funcs.fixed or funcs.want_compiled or funcs.sx
+            or (eom.n > SX_SOLVE_MAX and not ode.is_a("SXFunction"))):
         return ode
     return casadi_functions(eom, names=("ode",), sx=True)["ode"]
 
