@@ -364,6 +364,19 @@ class Model:
         return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True,
                                 fixed=fixed)
 
+    def fast_function(self, name: str = "ode", *, compiled: bool = True, p=None, u=None):
+        """``casadi()[name]`` for calls from Python in a loop: compiled to C (when a compiler
+        exists; ``compiled=False``: the virtual machine) and called through preallocated
+        buffers, with the parameters ``p`` (default: the model's values) and the inputs ``u``
+        (default: their declared defaults) bound once.  ``f = m.fast_function(); xdot = f(t,
+        x)``: one call of a 7-joint arm's ``ode`` costs a few microseconds, against 30-120 us
+        for a plain call of the Function (docs/control.md, benchmarks/python_call.py).  The
+        result is a new array; ``f.function`` is the Function called."""
+        from .eom.fastcall import fast_function
+
+        return fast_function(self.eom, name, compiled=compiled,
+                             p=self.parameter_vector() if p is None else p, u=u)
+
     def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
                    atol: float | None = None, steps: int | None = None, fixed_parameters=None):
         """The simulation layer's own integrator over one interval, as a CasADi Function
