@@ -82,7 +82,12 @@ def _op_names() -> dict:
 
 
 def instructions(f) -> list[tuple[str, list, list, float]]:
-    """(op name, inputs, outputs, constant) of every instruction of the SX Function ``f``."""
+    """(op name, inputs, outputs, constant) of every instruction of the SX Function ``f``
+    (kept: in this process and on disk, see ``_kept``)."""
+    return _kept(f, "instr", lambda: _instructions(f), _pack_instr, _unpack_instr)
+
+
+def _instructions(f) -> list[tuple[str, list, list, float]]:
     if not f.is_a("SXFunction"):
         raise Unsupported(f"{f.name()} is a {f.class_name()}, not an SX Function")
     names = _op_names()
@@ -97,11 +102,104 @@ def instructions(f) -> list[tuple[str, list, list, float]]:
 
 
 def supported(f) -> bool:
-    try:
-        instructions(f)
-    except Unsupported:
+    """Whether ``f`` is an SX Function of instructions this module translates (kept)."""
+    if not f.is_a("SXFunction"):
         return False
-    return True
+
+    def check():
+        try:
+            instructions(f)
+        except Unsupported:
+            return False
+        return True
+    return _kept(f, "ok", check, lambda v: b"1" if v else b"0", lambda b: b == b"1")
+
+
+# --------------------------------------------------------------------------- kept translations
+
+# Reading an instruction list through CasADi's Python interface costs ~5 us an instruction (20
+# ms of a 12-link chain's warm run, 125 ms at 200 links), and the C text and the program are
+# built from it on every run: both are kept per Function in this process and on disk under
+# <cache>/sxcode/, keyed by the SHA-256 of the serialized Function and of this module's code.
+_MEMO: dict = {}
+_MEMO_MAX = 64
+_CODE: list = []
+
+
+def _code_tag() -> str:
+    if not _CODE:
+        import hashlib
+        from pathlib import Path
+
+        _CODE.append(hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16])
+    return _CODE[0]
+
+
+_KEYS: dict = {}
+
+
+def _key(f, extra: str = "") -> str:
+    import hashlib
+
+    hit = _KEYS.get(id(f))
+    if hit is None or hit[0] is not f:      # one serialization per Function and process
+        if len(_KEYS) >= _MEMO_MAX:
+            _KEYS.pop(next(iter(_KEYS)), None)
+        hit = _KEYS[id(f)] = (f, hashlib.sha256(f.serialize().encode()).hexdigest())
+    return hashlib.sha256((hit[1] + _code_tag() + extra).encode()).hexdigest()[:32]
+
+
+def _kept(f, kind: str, build, pack, unpack, extra: str = ""):
+    mem = _MEMO.get((id(f), kind, extra))
+    if mem is not None and mem[0] is f:
+        return mem[1]
+    value, path = None, None
+    try:
+        from .codegen import cache_dir
+
+        path = cache_dir() / "sxcode" / f"{_key(f, extra)}.{kind}"
+        value = unpack(path.read_bytes()) if path.is_file() else None
+    except Exception:  # noqa: BLE001 - an unreadable entry is rebuilt
+        value = None
+    if value is None:
+        value = build()
+        if path is not None:
+            try:
+                import os
+                import tempfile
+
+                path.parent.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
+                with os.fdopen(fd, "wb") as fh:
+                    fh.write(pack(value))
+                os.replace(tmp, path)
+            except OSError:     # a cache that cannot be written is only slower
+                pass
+    if len(_MEMO) >= _MEMO_MAX:
+        _MEMO.pop(next(iter(_MEMO)), None)
+    _MEMO[(id(f), kind, extra)] = (f, value)      # the Function kept: its id stays unique
+    return value
+
+
+def _pack_instr(ins) -> bytes:
+    import io
+
+    names = {n: i for i, n in enumerate(sorted({op for op, _, _, _ in ins}))}
+    arr = np.array([[names[op], *(list(a) + [-1, -1])[:2], *(list(o) + [-1, -1])[:2], len(a), len(o)]
+                    for op, a, o, _ in ins], dtype=np.int64).reshape(-1, 7)
+    buf = io.BytesIO()
+    np.savez(buf, ops=np.array(sorted(names, key=names.get)), arr=arr,
+             const=np.array([c for _, _, _, c in ins], float))
+    return buf.getvalue()
+
+
+def _unpack_instr(data: bytes):
+    import io
+
+    z = np.load(io.BytesIO(data), allow_pickle=False)
+    ops, arr, const = [str(o) for o in z["ops"]], z["arr"], z["const"]
+    return [(ops[r[0]], list(r[1:1 + r[5]]), list(r[3:3 + r[6]]), float(c))
+            for r, c in zip(arr.tolist(), const.tolist())]
 
 
 # --------------------------------------------------------------------------- C source
@@ -122,6 +220,10 @@ def _compress(sp) -> list[int]:
 def c_source(f, name: str | None = None, chunk: int = CHUNK) -> str:
     """C for the SX Function ``f`` under ``name`` (default: its own), CasADi's calling convention."""
     name = name or f.name()
+    return _kept(f, "c", lambda: _c_source(f, name, chunk), str.encode, bytes.decode, extra=f"{name}/{chunk}")
+
+
+def _c_source(f, name: str, chunk: int) -> str:
     ins = instructions(f)
     n_in, n_out = f.n_in(), f.n_out()
     lines = ["#include <math.h>", "typedef long long sx_int;", _HELPERS]
@@ -203,39 +305,62 @@ class Program:
     object keeps its arrays alive) and ``nreg``, the work memory it needs (doubles)."""
 
     def __init__(self, f):
-        ins = instructions(f)
-        nnz = [f.nnz_in(i) for i in range(f.n_in())]
-        off = np.cumsum([0, *nnz])
-        consts: dict = {}
-        for op, _, _, c in ins:
-            if op == "CONST":
-                consts.setdefault(np.float64(c).tobytes(), c)      # -0.0 and 0.0 kept apart
-        const_off = int(off[-1])
-        creg = {k: const_off + j for j, k in enumerate(consts)}
-        base = const_off + len(consts)
-        where: dict[int, int] = {}     # work slot -> register holding its current value
-        code = []
-        for op, a, o, c in ins:
-            if op == "INPUT":
-                where[o[0]] = int(off[a[0]] + a[1])
-            elif op == "CONST":
-                where[o[0]] = creg[np.float64(c).tobytes()]
-            elif op == "OUTPUT":
-                code.append((_VM_CODE["OUT"], o[1], where[a[0]], o[0]))
-            else:
-                code.append((_VM_CODE[op], base + o[0], where[a[0]], where[a[1]] if len(a) > 1 else 0))
-                where[o[0]] = base + o[0]
-        code.append((_VM_CODE["END"], 0, 0, 0))
-        self.ins = np.ascontiguousarray(np.array(code, dtype=np.intc).ravel())
-        self.consts = np.array(list(consts.values()), float)
-        self.in_off = np.ascontiguousarray(off[:-1], dtype=np.int64)
-        self.in_nnz = np.ascontiguousarray(nnz, dtype=np.int64)
-        self.nreg = max(base + f.sz_w(), 1)
+        code, consts, in_off, in_nnz, nreg = _kept(f, "prog", lambda: _program_arrays(f), _pack_prog, _unpack_prog)
+        self.ins, self.consts, self.in_off, self.in_nnz, self.nreg = code, consts, in_off, in_nnz, nreg
         self.n_in, self.n_out = f.n_in(), f.n_out()
-        self.prog = _Prog(self.ins.ctypes.data_as(ctypes.POINTER(ctypes.c_int)), len(code),
-                          self.consts.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(self.consts), const_off,
-                          f.n_in(), self.in_off.ctypes.data_as(ctypes.POINTER(_CI)),
+        self.prog = _Prog(self.ins.ctypes.data_as(ctypes.POINTER(ctypes.c_int)), self.ins.size // 4,
+                          self.consts.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(self.consts),
+                          int(self.in_off[-1] + self.in_nnz[-1]) if self.in_nnz.size else 0, f.n_in(),
+                          self.in_off.ctypes.data_as(ctypes.POINTER(_CI)),
                           self.in_nnz.ctypes.data_as(ctypes.POINTER(_CI)))
+
+
+def _pack_prog(value) -> bytes:
+    import io
+
+    code, consts, in_off, in_nnz, nreg = value
+    buf = io.BytesIO()
+    np.savez(buf, code=code, consts=consts, in_off=in_off, in_nnz=in_nnz, nreg=np.array([nreg]))
+    return buf.getvalue()
+
+
+def _unpack_prog(data: bytes):
+    import io
+
+    z = np.load(io.BytesIO(data), allow_pickle=False)
+    return (np.ascontiguousarray(z["code"], dtype=np.intc), np.ascontiguousarray(z["consts"], float),
+            np.ascontiguousarray(z["in_off"], dtype=np.int64), np.ascontiguousarray(z["in_nnz"], dtype=np.int64),
+            int(z["nreg"][0]))
+
+
+def _program_arrays(f):
+    """(instructions (4 ints each), constants, inputs' offsets, inputs' sizes, registers)."""
+    ins = instructions(f)
+    nnz = [f.nnz_in(i) for i in range(f.n_in())]
+    off = np.cumsum([0, *nnz])
+    consts: dict = {}
+    for op, _, _, c in ins:
+        if op == "CONST":
+            consts.setdefault(np.float64(c).tobytes(), c)      # -0.0 and 0.0 kept apart
+    const_off = int(off[-1])
+    creg = {k: const_off + j for j, k in enumerate(consts)}
+    base = const_off + len(consts)
+    where: dict[int, int] = {}     # work slot -> register holding its current value
+    code = []
+    for op, a, o, c in ins:
+        if op == "INPUT":
+            where[o[0]] = int(off[a[0]] + a[1])
+        elif op == "CONST":
+            where[o[0]] = creg[np.float64(c).tobytes()]
+        elif op == "OUTPUT":
+            code.append((_VM_CODE["OUT"], o[1], where[a[0]], o[0]))
+        else:
+            code.append((_VM_CODE[op], base + o[0], where[a[0]], where[a[1]] if len(a) > 1 else 0))
+            where[o[0]] = base + o[0]
+    code.append((_VM_CODE["END"], 0, 0, 0))
+    return (np.ascontiguousarray(np.array(code, dtype=np.intc).ravel()), np.array(list(consts.values()), float),
+            np.ascontiguousarray(off[:-1], dtype=np.int64), np.ascontiguousarray(nnz, dtype=np.int64),
+            max(base + f.sz_w(), 1))
 
 
 def program(f) -> Program:
