@@ -629,7 +629,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     ``extra_units``: hand-written C sources linked into the same library (the compiled
     stepping loop of mechdsl.simulation.crk, code of mechdsl.eom.sxcode); they are part of the
     cache key.  ``extra_flags``: their optimization flags instead of the size rule (sxcode's
-    chunked code compiles in linear time at any level).  No ``funcs``: only the extra units.
+    chunked code compiles in linear time at any level), one list for all or one per unit.  No ``funcs``: only the extra units.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -676,7 +676,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
              else ["-O1"] for code in units]
     units += list(extra_units)
     env_flags = os.environ.get("MECHDSL_CFLAGS")
-    flags += [cflags_for(len(code)) if extra_flags is None or env_flags else list(extra_flags) for code in extra_units]
+    per_unit = extra_flags is not None and bool(extra_flags) and isinstance(extra_flags[0], (list, tuple))
+    flags += [cflags_for(len(code)) if extra_flags is None or env_flags else
+              list(extra_flags[i] if per_unit else extra_flags) for i, code in enumerate(extra_units)]
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
     digest = hashlib.sha256(key.encode()).hexdigest()[:24]
