@@ -233,7 +233,7 @@ USAGE = """\
 mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [--tolerances SPEC]
                 [--reference auto|FILE.csv] [--reference-methods A,B] [--compare WHAT]
                 [--repeats K] [--budget S] [--t-end T] [--points N] [--set NAME=VALUE ...]
-                [--compiled] [-o DIR] [--no-chart] [--force] [--quiet]
+                [--compiled] [-o DIR] [--no-chart] [--force] [-q] [-v] [--json]
 ```
 
 - **Methods** (`--methods`, comma separated, repeatable): any method of `mech simulate`

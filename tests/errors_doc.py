@@ -18,8 +18,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT / "tests" / "corpus"
+# the page lives in the source checkout (MECHDSL_CHECKOUT when the tests run from a copy elsewhere)
+ROOT = Path(os.environ.get("MECHDSL_CHECKOUT") or Path(__file__).resolve().parents[1])
+CORPUS = Path(__file__).resolve().parent / "corpus"
 DOCS = ROOT / "docs" / "errors.md"
 FILE = "example.mech"
 URDF = "example.urdf"
@@ -59,11 +60,12 @@ SECTIONS = [
                      "an error; literal numbers are pure numbers."),
     ("Topology (E5xx)", "The kinematic graph: every body must hang from the world through joints."),
     ("Scenes (E6xx)", "Scene settings and the model a scene names."),
-    ("URDF import (E020-E027)", "`mech import ROBOT.urdf -o ROBOT.mech` (docs/import.md) locates every problem "
+    ("URDF import (E020-E028)", "`mech import ROBOT.urdf -o ROBOT.mech` (docs/import.md) locates every problem "
                                 "at the URDF element it is about. Besides these codes it reports the file "
                                 "errors E001-E006 and, for the inertia data of a link (after fixed links are "
                                 "merged into it), E508 and E509 at the link's `<inertial>`. Its warnings: W021 "
-                                "a mesh that cannot be found or read (the link is not drawn), W025 a joint that "
+                                "a mesh that cannot be read (an unknown format, a damaged file), or one not found "
+                                "with `--skip-missing-meshes` (that visual is not drawn), W025 a joint that "
                                 "closes a loop (left out: URDF describes trees), W029 a mimic that names no "
                                 "movable joint (left out: the joint moves on its own), W509 an inertia that breaks "
                                 "the triangle inequality by rounding."),
@@ -348,6 +350,12 @@ ENTRIES = [
     Entry("E027", "nothing moves", "The robot has no movable joint (a quadrotor's body alone, a fixed "
                                    "assembly): the model would have no coordinates.",
           "Import it with `--floating` to give its root link a Free joint.", urdf="E027_nothing_moves.urdf"),
+    Entry("E028", "mesh file not found", "A `<mesh filename>` names a file that is not there, or a "
+                                         "`package://` whose ROS package is not found; a package is named "
+                                         "once, at its first mesh, with the number of its meshes.",
+          "Give the package's folder with `--package-dir NAME=DIR` (`package_dirs=` in Python), or import with "
+          "`--skip-missing-meshes` (`skip_missing_meshes=True`): those visuals are then not drawn (the warning "
+          "W021), which the dynamics do not need.", urdf="E028_missing_mesh.urdf"),
     Entry("E604", "bad setting value", "A setting of the wrong kind (a string for a number, a fraction for "
                                        "`points`, a negative tolerance, an unknown name).",
           "Give a value of the kind the message names.", corpus="E604_stop_time_string.mech"),

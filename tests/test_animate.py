@@ -14,12 +14,13 @@ from mechdsl.animate.stage import FLASH, detect_view
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 
-ROOT = Path(__file__).resolve().parents[1]
-MODELS = sorted((ROOT / "models").glob("*.mech"))
+from conftest import MODELS as MODEL_DIR
+
+MODELS = sorted(MODEL_DIR.glob("*.mech"))
 
 
 def _load(name, **kw):
-    return mechdsl.load(ROOT / "models" / f"{name}.mech", **kw)
+    return mechdsl.load(MODEL_DIR / f"{name}.mech", **kw)
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -165,7 +166,7 @@ def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, caps
 
 def test_html_page_is_self_contained_and_replaceable(tmp_path):
     out = tmp_path / "p.html"
-    args = ["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
+    args = ["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
             "--speed", "1", "--trail", "bob"]
     assert main(args) == 0
     text = out.read_text()
@@ -178,7 +179,7 @@ def test_html_page_is_self_contained_and_replaceable(tmp_path):
 def test_the_same_animation_twice_is_byte_identical(tmp_path):
     a, b = tmp_path / "a.gif", tmp_path / "b.gif"
     for out in (a, b):
-        assert main(["animate", str(ROOT / "models/double_pendulum.mech"), "-o", str(out), "--t-end", "0.2",
+        assert main(["animate", str(MODEL_DIR / "double_pendulum.mech"), "-o", str(out), "--t-end", "0.2",
                      "--fps", "10", "--size", "120x100"]) == 0
     assert a.read_bytes() == b.read_bytes()
 
@@ -195,30 +196,30 @@ def test_the_same_animation_twice_is_byte_identical(tmp_path):
     (["--t-end", "-1"], "must be after the start time"),
 ])
 def test_bad_options_are_usage_errors(extra, message, tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/double_pendulum.mech"), "-o", str(tmp_path / "x.gif")] + extra)
+    rc = main(["animate", str(MODEL_DIR / "double_pendulum.mech"), "-o", str(tmp_path / "x.gif")] + extra)
     err = capsys.readouterr().err
     assert rc == 2 and message in err and "Traceback" not in err
 
 
 def test_unsupported_extension_names_the_supported_ones(tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.avi")])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.avi")])
     err = capsys.readouterr().err
     assert rc == 2 and "cannot write '.avi' animations; supported: .gif" in err and ".html" in err
 
 
 def test_mp4_without_ffmpeg_says_so(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("shutil.which", lambda name: None)
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.mp4")])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.mp4")])
     err = capsys.readouterr().err
     assert rc == 2 and "no 'ffmpeg'" in err and ".gif" in err
 
 
 def test_missing_folder_and_foreign_file_are_refused_before_any_work(tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "nope" / "x.gif")])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "nope" / "x.gif")])
     assert rc == 2 and "does not exist" in capsys.readouterr().err
     foreign = tmp_path / "mine.gif"
     foreign.write_bytes(b"GIF89a not ours")
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(foreign)])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(foreign)])
     assert rc == 2 and "--force" in capsys.readouterr().err
     assert foreign.read_bytes() == b"GIF89a not ours"
 
@@ -240,7 +241,7 @@ def test_mp4_frames_are_piped_to_ffmpeg(tmp_path, monkeypatch, capsys):
     fake.chmod(fake.stat().st_mode | stat.S_IXUSR)
     monkeypatch.setenv("PATH", f"{fake.parent}{os.pathsep}{os.environ['PATH']}")
     out = tmp_path / "p.mp4"
-    assert main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
+    assert main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
                  "--speed", "1", "--size", "100x80"]) == 0
     args, nbytes = out.read_text().split("\n")
     assert "-s 100x80" in args and "-r 10" in args and "-pix_fmt rgba" in args
@@ -300,7 +301,7 @@ def test_a_30_fps_gif_plays_at_30_fps(tmp_path):
 
 
 def test_a_gif_faster_than_50_fps_is_refused_before_any_work(tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.gif"), "--fps", "60"])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.gif"), "--fps", "60"])
     err = capsys.readouterr().err
     assert rc == 2 and "a GIF cannot play 60 frames per second" in err and "--fps 50" in err
     assert not (tmp_path / "x.gif").exists()
@@ -325,7 +326,7 @@ def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
     from PIL import Image
 
     out = tmp_path / "a.gif"
-    assert main(["animate", str(ROOT / "models/andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
+    assert main(["animate", str(MODEL_DIR / "andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
     cap = capsys.readouterr()
     assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
     assert "91 frames at 30 fps at speed 0.01, 0.03 s of model time" in cap.out

@@ -13,14 +13,14 @@ from pathlib import Path
 import pytest
 from conftest import chromium_path as _chromium
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import CHECKOUT, MODELS, TESTS  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def page_file(tmp_path_factory):
     import mechdsl
 
-    m = mechdsl.load(ROOT / "models" / "pendulum.mech")
+    m = mechdsl.load(MODELS / "pendulum.mech")
     r = m.simulate(1.0, points=11)
     out = tmp_path_factory.mktemp("browser") / "pendulum.html"
     r.animate(fps=10, size=(200, 160)).save(out)

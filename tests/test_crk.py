@@ -16,6 +16,7 @@ from mechdsl.eom.codegen import find_compiler
 from mechdsl.simulate import simulate
 from mechdsl.simulation.backends import crk
 from sim_models import blowup, chain, pendulum
+import mechdsl.examples
 
 PAIRS = {"dopri5": "scipy-rk45", "dop853": "scipy-dop853"}
 
@@ -235,7 +236,7 @@ def test_cli_no_compile_opts_out(tmp_path, monkeypatch, capsys):
 
     monkeypatch.chdir(tmp_path)
 
-    model = Path(__file__).resolve().parents[1] / "models" / "pendulum.mech"
+    model = mechdsl.examples.path("pendulum")
     out = tmp_path / "p.csv"
     assert main(["simulate", str(model), "--t-end", "150", "--points", "11", "--no-compile", "-o", str(out),
                  "--no-progress"]) == 0
@@ -297,7 +298,7 @@ def test_twelve_link_chain_compiled_loop_equals_scipy_dop853_on_the_virtual_mach
 
     import mechdsl
 
-    text = (Path(__file__).resolve().parents[1] / "models" / "nlink_pendulum.mech").read_text()
+    text = mechdsl.examples.path("nlink_pendulum").read_text()
     m = mechdsl.loads(re.sub(r"parameter Integer N = \d+", "parameter Integer N = 12", text))
     r = m.simulate(t_end=5, rtol=1e-8, method="dop853")
     ref = m.simulate(t_end=5, rtol=1e-8, method="scipy-dop853")

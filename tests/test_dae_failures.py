@@ -21,7 +21,7 @@ from dae_models import _syms
 from mechdsl.dae import simulate_dae
 from mechdsl.eom import from_lagrangian
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import MODELS  # noqa: E402
 
 
 def nan_pendulum():
@@ -53,7 +53,7 @@ def test_nonfinite_equations_fail_with_time_and_coordinate(formulation):
 
 
 def test_nonfinite_state_error_names_the_first_bad_output():
-    from mechdsl.dae.stepper import NonFiniteError
+    from mechdsl.dae.segments import NonFiniteError
 
     e = NonFiniteError(1.25, "der(y)")
     assert e.t == 1.25 and "der(y)" in str(e)
@@ -67,7 +67,7 @@ def test_four_bar_with_a_tiny_crank_ends_with_a_coded_failure():
     below (test_the_driver_loop_is_bounded)."""
     code = textwrap.dedent(f"""
         import time, mechdsl
-        m = mechdsl.load({str(ROOT / "models" / "four_bar.mech")!r}).with_params(a=1e-12)
+        m = mechdsl.load({str(MODELS / "four_bar.mech")!r}).with_params(a=1e-12)
         c = time.process_time()
         try:
             r = m.simulate(10.0, points=501)
@@ -86,7 +86,7 @@ def test_four_bar_with_a_tiny_crank_ends_with_a_coded_failure():
     assert ("steps" if code_ == "E824" else "mass matrix") in failure
 
 
-MECH = (ROOT / "models" / "pendulum_cartesian.mech").read_text()
+MECH = (MODELS / "pendulum_cartesian.mech").read_text()
 
 
 def _undefined_model(constraint):
@@ -181,7 +181,7 @@ def test_a_ctrl_c_taken_by_casadi_in_the_jacobian_is_not_swallowed(monkeypatch):
     method choice would otherwise be lost and the run go on to the end."""
     import mechdsl
     from conftest import MODELS
-    from mechdsl.dae.system import ConstrainedSystem
+    from mechdsl.dae.constrained_system import ConstrainedSystem
 
     m = mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
     pv = np.asarray(m.eom.param_values, float)

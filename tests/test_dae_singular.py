@@ -27,9 +27,10 @@ from mechdsl.dae import simulate_dae
 from mechdsl.dae.augmented import augmented_ode, project_positions, project_velocities, PENALTY
 from mechdsl.dae.dof import dof_report
 from mechdsl.dae.projection import project
-from mechdsl.dae.system import ConstrainedSystem
+from mechdsl.dae.constrained_system import ConstrainedSystem
+import mechdsl.examples
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "nfourbar.mech"
+MODEL = mechdsl.examples.path("nfourbar")
 M_ROD, L_ROD, GRAV, V0 = 1.0, 1.0, 9.81, 1.0
 
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from conftest import MODELS, ROOT, model_files
+from conftest import MODELS, CHECKOUT, model_files
 
-sys.path.insert(0, str(ROOT / "editors"))
+sys.path.insert(0, str(CHECKOUT / "editors"))
 import make_textmate  # noqa: E402
 
 from mechdsl.frontend import lexer as L  # noqa: E402
@@ -23,7 +23,7 @@ def test_word_lists_match_the_language():
     from mechdsl.semantic.components import CLASSES
     from mechdsl.semantic.evaluate import ALL_FUNCS, BUILTIN_NAMES
 
-    lark = (ROOT / "grammar" / "mech.lark").read_text()
+    lark = (CHECKOUT / "grammar" / "mech.lark").read_text()
     keywords = set(re.findall(r'"([a-z_]+)"', lark))
     ours = set(L.KEYWORDS) | set(L.DECLARATIONS) | set(L.ENERGY_WORDS) | set(L.CONSTANTS)
     assert ours == keywords, (sorted(ours - keywords), sorted(keywords - ours))
@@ -52,7 +52,7 @@ def test_pygments_lexes_every_model_without_errors(path):
 
 
 def test_textmate_grammar_is_generated_from_the_lexer():
-    assert (ROOT / "editors" / "mech.tmLanguage.json").read_text() == make_textmate.text(), \
+    assert (CHECKOUT / "editors" / "mech.tmLanguage.json").read_text() == make_textmate.text(), \
         "stale: run python editors/make_textmate.py"
 
 
@@ -110,7 +110,7 @@ def _textmate_scopes(grammar: dict, text: str) -> list[str | None]:
 
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_textmate_grammar_covers_every_model(path):
-    grammar = json.loads((ROOT / "editors" / "mech.tmLanguage.json").read_text())
+    grammar = json.loads((CHECKOUT / "editors" / "mech.tmLanguage.json").read_text())
     text = path.read_text()
     scopes = _textmate_scopes(grammar, text)
     bare = [(i, c) for i, (c, s) in enumerate(zip(text, scopes)) if s is None and not c.isspace()]
@@ -121,7 +121,7 @@ def test_textmate_grammar_covers_every_model(path):
 
 def test_textmate_engine_sees_comments_and_strings():
     """The engine above is itself checked on a hand-made line."""
-    grammar = json.loads((ROOT / "editors" / "mech.tmLanguage.json").read_text())
+    grammar = json.loads((CHECKOUT / "editors" / "mech.tmLanguage.json").read_text())
     text = 'model A "doc // not a comment" /* c\nc */ Revolute j; // end\n'
     s = _textmate_scopes(grammar, text)
     assert s[text.index("doc")] == "string.quoted.double.mech"
@@ -133,7 +133,7 @@ def test_textmate_engine_sees_comments_and_strings():
 
 # ----------------------------------------------------------------------------- the VS Code extension
 
-VSCODE = ROOT / "editors" / "vscode"
+VSCODE = CHECKOUT / "editors" / "vscode"
 
 
 def test_vscode_extension_contributes_files_that_exist():
@@ -158,8 +158,8 @@ def test_vscode_extension_contributes_files_that_exist():
 
 def test_vscode_extension_ships_the_committed_grammar():
     assert (VSCODE / "syntaxes" / "mech.tmLanguage.json").read_bytes() == \
-        (ROOT / "editors" / "mech.tmLanguage.json").read_bytes(), "stale copy: run python editors/make_textmate.py"
-    assert [p.relative_to(ROOT / "editors") for p in make_textmate.TARGETS] == \
+        (CHECKOUT / "editors" / "mech.tmLanguage.json").read_bytes(), "stale copy: run python editors/make_textmate.py"
+    assert [p.relative_to(CHECKOUT / "editors") for p in make_textmate.TARGETS] == \
         [Path("mech.tmLanguage.json"), Path("vscode/syntaxes/mech.tmLanguage.json")]
 
 

@@ -201,7 +201,7 @@ def test_the_work_estimate_is_a_lower_bound(method, rtol):
     estimate rho T / (2 pi) * steps_per_period(method, rtol), and within a factor 4 of it."""
     import mechdsl
     from conftest import MODELS
-    from mechdsl.impacts.stepper import steps_per_period
+    from mechdsl.impacts.one_step import steps_per_period
     from mechdsl.simulation.registry import events_method
 
     m = mechdsl.load(MODELS / "pendulum_wall.mech", model="PendulumWall")

@@ -17,8 +17,9 @@ from mechdsl.diagnostics import UsageError
 from mechdsl.simulate import simulate
 from conftest import needs_cc
 from sim_models import pendulum
+import mechdsl.examples
 
-MODELS = Path(__file__).resolve().parent.parent / "models"
+MODELS = mechdsl.examples.folder()
 SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
           "energy_drift", "energy_drift_relative", "invariant_drift", "constraint_drift")
 
@@ -357,7 +358,7 @@ def test_mech_simulate_imports_only_what_it_needs(tmp_path):
 
 
 def test_settings_refuse_bad_values_for_every_model():
-    from mechdsl.dae.options import FORMULATIONS
+    from mechdsl.dae.dae_run import FORMULATIONS
     from mechdsl.simulation.registry import FORMULATIONS as KNOWN
 
     assert tuple(FORMULATIONS) == KNOWN

@@ -1,7 +1,8 @@
 """Every URDF of example-robot-data through the importer (slow): how many import, which fail and
 why (printed as a table; docs/import.md quotes it). Every failure is a located diagnostic in the
-URDF, never a traceback; every import loads, derives and passes the start check; and most of the
-URDFs with a link whose inertia breaks the triangle inequality (issue 26 counted 18) now import."""
+URDF, never a traceback; every import loads, derives and passes the start check, draws each of its
+visuals once and builds its 3-D page; and most of the URDFs with a link whose inertia breaks the
+triangle inequality (issue 26 counted 18) now import."""
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
@@ -11,8 +12,10 @@ import pytest
 
 import mechdsl
 from mechdsl.diagnostics import MechError
+from mechdsl.animate.geometry import build
 from mechdsl.eom.preflight import check_start
 from mechdsl.urdf import convert
+from mechdsl.view import still
 
 from urdf_util import all_urdfs, robots_dir
 
@@ -41,6 +44,9 @@ def attempt(path, **kw):
         return None, sorted({x.code for x in e.diagnostics}), d.message
     m = mechdsl.loads(imp.text)
     check_start(m.eom)                                # derives and checks the start state
+    drawn = [it.extra["solid"].name for it in build(m.eom).items if it.extra.get("solid") is not None]
+    assert sorted(n for n in drawn if n) == sorted(imp.shapes), path    # every visual drawn, once
+    assert still(m).data["bodies"]                    # and the 3-D page of it builds
     return m, [w.code for w in imp.diagnostics], ""
 
 

@@ -10,11 +10,12 @@ from pathlib import Path
 import pytest
 
 import mechdsl
+import mechdsl.urdf
 from mechdsl.cli import main
 
-from conftest import ROOT
+from conftest import TESTS
 
-CORPUS = ROOT / "tests" / "corpus" / "urdf"
+CORPUS = TESTS / "corpus" / "urdf"
 EXPECT_LINE = re.compile(r"^<!-- expect: ([EW]\d{3}) (\d+):(\d+) -->\s*$")
 HEADER = re.compile(r"^(?P<file>.*):(?P<line>\d+):(?P<col>\d+): (?P<sev>error|warning)\[(?P<code>[EW]\d{3})\]: (?P<msg>.*)$")
 
@@ -33,7 +34,7 @@ EXPECT = expectations()
 
 def test_every_importer_code_has_a_file():
     codes = {c for exp in EXPECT.values() for c, _, _ in exp}
-    src = "".join(p.read_text() for p in (ROOT / "src" / "mechdsl" / "urdf").glob("*.py"))
+    src = "".join(p.read_text() for p in Path(mechdsl.urdf.__file__).parent.glob("*.py"))
     emitted = set(re.findall(r"[\"']([EW]0\d\d)[\"']", src))
     not_from_a_file = {"E001", "E003", "E005", "E006"}       # test_missing_and_unreadable_files
     assert emitted - not_from_a_file <= codes, f"importer codes with no corpus file: {sorted(emitted - codes)}"
@@ -87,11 +88,11 @@ def test_floating_moves_a_robot_without_joints(tmp_path, capsys):
 def test_output_is_never_overwritten_without_force(tmp_path, capsys):
     out = tmp_path / "robot.mech"
     out.write_text("// mine\n")
-    src = str(CORPUS / "W021_missing_mesh.urdf")
+    src = str(CORPUS / "W021_unreadable_mesh.urdf")
     assert main(["import", src, "-o", str(out)]) == 2
     assert out.read_text() == "// mine\n" and "--force" in capsys.readouterr().err
     assert main(["import", src, "-o", str(out), "--force"]) == 0
-    assert out.read_text().startswith("// arm: imported from W021_missing_mesh.urdf")
+    assert out.read_text().startswith("// arm: imported from W021_unreadable_mesh.urdf")
     assert main(["import", src, "-o", str(tmp_path / "robot.txt")]) == 2
 
 
@@ -111,5 +112,40 @@ def test_missing_and_unreadable_files(tmp_path, capsys, monkeypatch):
     from mechdsl.urdf import xmltree
 
     monkeypatch.setattr(xmltree, "MAX_BYTES", 100)
-    assert main(["import", str(CORPUS / "W021_missing_mesh.urdf")]) == 1
+    assert main(["import", str(CORPUS / "E028_missing_mesh.urdf")]) == 1
     assert "error[E005]" in capsys.readouterr().err
+
+
+def test_skip_missing_meshes_goes_on_without_drawing_them(tmp_path, capsys):
+    """--skip-missing-meshes (skip_missing_meshes=True): the absent mesh is the warning W021 at the
+    same <mesh>, the model is written and loads, and that link has no Shape (drawn by its inertia)."""
+    src = CORPUS / "E028_missing_mesh.urdf"
+    out = tmp_path / "robot.mech"
+    assert main(["import", str(src), "-o", str(out), "--skip-missing-meshes"]) == 0
+    err = capsys.readouterr().err
+    assert f"{src}:7:23: warning[W021]: mesh 'package://arm_description/meshes/upper.stl' is not drawn" in err
+    m = mechdsl.load(out)
+    assert m.model.shapes == () and m.model.coordinate_names == ("shoulder.phi",)
+    assert mechdsl.import_urdf(src, skip_missing_meshes=True) == out.read_text()
+    with pytest.raises(mechdsl.MechError) as e:
+        mechdsl.import_urdf(src)
+    assert [d.code for d in e.value.diagnostics] == ["E028"]
+
+
+def test_missing_meshes_are_counted_by_package_and_named_by_file(tmp_path, capsys):
+    link = ('<link name="{n}"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.01"/></inertial>'
+            '<visual><geometry><mesh filename="{f}"/></geometry></visual></link>')
+    joint = '<joint name="j{n}" type="revolute"><parent link="{p}"/><child link="{n}"/><axis xyz="0 0 1"/></joint>'
+    files = ["package://gone/a.stl", "package://gone/b.stl", "meshes/c.stl", "package://gone/d.stl"]
+    parts = ['<robot name="r">', '<link name="base"/>']
+    for k, f in enumerate(files):
+        parts += [link.format(n=f"l{k}", f=f), joint.format(n=f"l{k}", p="base" if k == 0 else f"l{k - 1}")]
+    src = tmp_path / "r.urdf"
+    src.write_text("\n".join(parts + ["</robot>"]))
+    assert main(["import", str(src)]) == 1
+    err = capsys.readouterr().err
+    heads = [line for line in err.splitlines() if "error[E028]" in line]
+    assert len(heads) == 2, err
+    assert heads[0].startswith(f"{src}:3:") and "'package://gone/a.stl' and 2 more of its package: package 'gone'" in heads[0]
+    assert heads[1].startswith(f"{src}:7:") and f"'meshes/c.stl': no file {tmp_path / 'meshes' / 'c.stl'}" in heads[1]
+    assert "check the path" in err

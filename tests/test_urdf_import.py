@@ -121,23 +121,32 @@ def test_names_limits_and_shapes(arm):
     assert 'parameter Real world_2_damping(unit = "N.m.s") = 0.5' in t and "// to apply it: GeneralizedForce" in t
     assert "Point tool(body = link_1_0," in t and "Point flange(body = link_1_0" in t    # merged frames kept
     m = mechdsl.loads(t)
-    body = m.model.body("link_1_0")
-    assert body.shape == "box"                      # a cylinder and a turned box: their bounding box
     assert m.parameters["world_2_lower"] == -1.0
 
 
-def test_one_primitive_visual_is_kept():
-    text = ARM.replace('<visual><origin rpy="0 0 1.5707963267948966"/><geometry><box size="0.1 0.2 0.05"/></geometry></visual>', "")
-    import tempfile
-    from pathlib import Path
+def test_each_visual_is_a_shape_where_the_urdf_puts_it(arm):
+    """The cylinder of link_1.0 with the URDF's numbers; the box of the merged flange placed by the
+    fixed joint (xyz 0.02 0 0.3, rpy 0.2 0.1 -0.4) composed with its own rpy (0 0 pi/2), checked
+    against the composition of elementary rotations written here."""
+    imp = convert(arm)
+    assert 'Shape link_1_0_visual(body = link_1_0, shape = "cylinder", size = {0.04, 0.3}, r = {0, 0, 0.15});' in imp.text
+    assert imp.shapes == {"link_1_0_visual": ("link_1.0", 0), "flange_visual": ("flange", 0)}
+    m = mechdsl.loads(imp.text).model
+    cyl, box = m.shapes
+    assert (cyl.body, cyl.kind, box.body, box.kind) == ("link_1_0", "cylinder", "link_1_0", "box")
+    assert [c.value for c in box.r] == pytest.approx([0.02, 0, 0.3], abs=1e-12)
 
-    with tempfile.TemporaryDirectory() as d:
-        p = Path(d) / "a.urdf"
-        p.write_text(text)
-        m = mechdsl.loads(convert(p).text)
-    b = m.model.body("link_1_0")
-    assert b.shape == "cylinder" and [c.value for c in b.shape_size] == [0.04, 0.3]
-    assert [c.value for c in b.axis] == [0, 0, 1]
+    def rot(axis, a):
+        c, s = np.cos(a), np.sin(a)
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        R = np.eye(3)
+        R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+        return R
+
+    weld = rot(2, -0.4) @ rot(1, 0.1) @ rot(0, 0.2)
+    expected = weld @ rot(2, np.pi / 2)
+    got = np.array([[c.value for c in row] for row in box.R])
+    assert np.max(np.abs(got - expected)) < 5e-6          # (written with 6 digits: a drawing)
 
 
 def test_planar_and_floating_joint_types(tmp_path):

@@ -23,12 +23,13 @@ from mechdsl.diagnostics import UsageError
 from mechdsl.view import View, still, view
 from mechdsl.view.scene import continuous, quaternions
 
-ROOT = Path(__file__).resolve().parents[1]
-MODELS = sorted((ROOT / "models").glob("*.mech"))
+from conftest import MODELS as MODEL_DIR
+
+MODELS = sorted(MODEL_DIR.glob("*.mech"))
 
 
 def _load(name, **kw):
-    return mechdsl.load(ROOT / "models" / f"{name}.mech", **kw)
+    return mechdsl.load(MODEL_DIR / f"{name}.mech", **kw)
 
 
 def _rotation(rng) -> np.ndarray:
@@ -263,7 +264,7 @@ def test_the_same_view_twice_is_byte_identical(tmp_path):
 
 
 def test_vendored_three_js_is_the_release_its_readme_names():
-    folder = ROOT / "src" / "mechdsl" / "view" / "vendor" / "three"
+    folder = Path(mechdsl.view.__file__).parent / "vendor" / "three"
     table = (folder / "README.md").read_text()
     listed = dict(re.findall(r"\| `([\w.]+)` \| [^|]+ \| `([0-9a-f]{64})` \|", table))
     assert set(listed) == {"three.core.min.js", "three.module.min.js", "OrbitControls.js", "LICENSE"}
@@ -321,7 +322,7 @@ def test_every_shipped_model_views(path, tmp_path):
 
 def test_mech_view_writes_the_page_and_replaces_its_own(tmp_path, capsys):
     out = tmp_path / "arm.html"
-    args = ["view", str(ROOT / "models/arm7.mech"), "-o", str(out), "--t-end", "0.5", "--fps", "20", "--speed", "1"]
+    args = ["view", str(MODEL_DIR / "arm7.mech"), "-o", str(out), "--t-end", "0.5", "--fps", "20", "--speed", "1"]
     assert main(args) == 0
     said = capsys.readouterr().out
     assert "wrote" in said and "11 frames" in said and "z up" in said
@@ -331,14 +332,14 @@ def test_mech_view_writes_the_page_and_replaces_its_own(tmp_path, capsys):
 
 
 def test_mech_view_picks_the_speed_of_a_short_run_and_says_so(tmp_path, capsys):
-    assert main(["view", str(ROOT / "models/andrews.mech"), "-o", str(tmp_path / "a.html")]) == 0
+    assert main(["view", str(MODEL_DIR / "andrews.mech"), "-o", str(tmp_path / "a.html")]) == 0
     cap = capsys.readouterr()
     assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
     assert "91 frames" in cap.out and "bars of the coordinates" in cap.out
 
 
 def test_mech_view_still(tmp_path, capsys):
-    assert main(["view", str(ROOT / "models/heavy_top.mech"), "-o", str(tmp_path / "t.html"), "--still"]) == 0
+    assert main(["view", str(MODEL_DIR / "heavy_top.mech"), "-o", str(tmp_path / "t.html"), "--still"]) == 0
     assert "at its start values, z up" in capsys.readouterr().out
 
 
@@ -351,7 +352,7 @@ def test_mech_view_still(tmp_path, capsys):
     (["--scene", "Nope"], "x.html", "Nope"),
 ])
 def test_mech_view_bad_input_is_a_usage_error(extra, out, message, tmp_path, capsys):
-    rc = main(["view", str(ROOT / "models/double_pendulum.mech"), "-o", str(tmp_path / out)] + extra)
+    rc = main(["view", str(MODEL_DIR / "double_pendulum.mech"), "-o", str(tmp_path / out)] + extra)
     err = capsys.readouterr().err
     assert rc == 2 and message in err and "Traceback" not in err
 
@@ -359,9 +360,9 @@ def test_mech_view_bad_input_is_a_usage_error(extra, out, message, tmp_path, cap
 def test_mech_view_refuses_a_foreign_file_and_a_missing_folder(tmp_path, capsys):
     foreign = tmp_path / "mine.html"
     foreign.write_text("<html>mine</html>")
-    assert main(["view", str(ROOT / "models/pendulum.mech"), "-o", str(foreign)]) == 2
+    assert main(["view", str(MODEL_DIR / "pendulum.mech"), "-o", str(foreign)]) == 2
     assert "--force" in capsys.readouterr().err and foreign.read_text() == "<html>mine</html>"
-    assert main(["view", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "no" / "x.html")]) == 2
+    assert main(["view", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "no" / "x.html")]) == 2
     assert "does not exist" in capsys.readouterr().err
 
 

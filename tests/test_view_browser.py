@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import chromium_path
+from conftest import MODELS, chromium_path
 
-ROOT = Path(__file__).resolve().parents[1]
 # WebGL without a GPU: ANGLE on SwiftShader (Chromium asks for the flag since it is software)
 ARGS = ["--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 
@@ -27,17 +26,23 @@ def pages(tmp_path_factory):
     import mechdsl
 
     folder = tmp_path_factory.mktemp("view")
-    m = mechdsl.load(ROOT / "models" / "double_pendulum.mech")
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
     r = m.simulate(2.0, points=61)
     out = {"pendulum": r.view(fps=30, speed=1.0).save(folder / "dp.html"),
            "trail": r.view(fps=30, speed=1.0, trails=["rod2.b"]).save(folder / "dp_trail.html")}
-    andrews = mechdsl.load(ROOT / "models" / "andrews.mech")
+    andrews = mechdsl.load(MODELS / "andrews.mech")
     out["bars"] = andrews.view(t_end=0.03).save(folder / "andrews.html")
     notebook = folder / "notebook.html"
     notebook.write_text("<!DOCTYPE html><html><body><p>a notebook cell</p>\n"
-                        + mechdsl.load(ROOT / "models" / "heavy_top.mech").view(t_end=0.5)._repr_html_()
+                        + mechdsl.load(MODELS / "heavy_top.mech").view(t_end=0.5)._repr_html_()
                         + "\n</body></html>")
     out["notebook"] = notebook
+    from mechdsl.view import still
+    from urdf_util import robots_dir
+
+    panda = mechdsl.loads(mechdsl.import_urdf(robots_dir() / "panda_description/urdf/panda.urdf"))
+    out["panda_view"] = still(panda, [0.3, -0.8, 0.4, -2.0, 0.5, 1.6, 0.7, 0.03])   # an imported arm, its
+    out["panda"] = out["panda_view"].save(folder / "panda.html")                   # visuals placed and turned
     return out
 
 
@@ -188,3 +193,36 @@ def test_view_inside_a_notebooks_iframe(browser, pages):
         assert (a.sum(axis=2) < 600).sum() > 200
         p.page.wait_for_timeout(400)
         assert _changed(a, p.canvas(frame)) > 50                          # it plays in the iframe
+
+
+@pytest.mark.slow
+def test_imported_arm_boxes_are_drawn_where_the_page_data_puts_them(browser, pages):
+    """What three.js draws: the world corners of every box mesh in the scene (its BoxGeometry and
+    matrixWorld after the render) are the corners the page's data gives each Shape of the
+    imported Franka Panda (body pose times the solid's centre, quaternion and size; that data is
+    checked against Pinocchio's visual placements in tests/test_urdf_visuals.py); some of its
+    visuals are turned in their links (the hand, the right finger)."""
+    from draw_util import SIGNS, page_solids, quat_matrix
+
+    with opened(browser, pages["panda"]) as p:
+        drawn = p.page.evaluate("""() => {
+            const out = [];
+            window.mechdsl_view.scene.traverse((o) => {
+              if (o.isMesh && o.geometry.type === 'BoxGeometry') {
+                const g = o.geometry.parameters;
+                out.push({size: [g.width, g.height, g.depth], m: o.matrixWorld.elements.slice()});
+              }
+            });
+            return out; }""")
+    got = []
+    for d in drawn:
+        M = np.array(d["m"]).reshape(4, 4).T                            # three.js stores by columns
+        got.append(np.array([M[:3, :3] @ (np.array(d["size"]) / 2 * s) + M[:3, 3] for s in SIGNS]))
+    expected = []
+    for _, o, R, s in page_solids(pages["panda_view"].data):
+        if s["kind"] == "box":
+            S, c = quat_matrix(*s["quat"]), np.array(s["center"])
+            expected.append(np.array([o + R @ (c + S @ (np.array(s["size"]) / 2 * sg)) for sg in SIGNS]))
+    assert len(expected) == 11 and len(got) == len(expected)
+    for e in expected:
+        assert min(np.abs(g - e).max() for g in got) < 1e-5

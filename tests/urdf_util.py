@@ -14,6 +14,12 @@ def robots_dir() -> Path:
     return Path(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))
 
 
+def share_dir() -> Path:
+    """The folder holding example-robot-data's ``package://`` roots (its share/ folder)."""
+    dist = importlib.metadata.distribution("example-robot-data")
+    return Path(dist.locate_file("cmeel.prefix/share"))
+
+
 def all_urdfs() -> list[Path]:
     return sorted(robots_dir().rglob("*.urdf"))
 

@@ -47,10 +47,14 @@ class _Parser(argparse.ArgumentParser):
         kw.setdefault("formatter_class", _Formatter)
         super().__init__(*a, **kw)
 
-    def error(self, message):  # usage errors: exit 2, no traceback
-        self.print_usage(sys.stderr)
-        print(f"mech: error: {message}", file=sys.stderr)
-        raise SystemExit(2)
+    def error(self, message):  # usage errors: exit 2, no traceback (cli.main prints them)
+        raise _BadArguments(self, message)
+
+
+class _BadArguments(Exception):
+    def __init__(self, parser, message):
+        super().__init__(message)
+        self.parser = parser
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -58,6 +62,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     command imports only what it needs: bench, plotting and analysis stay unloaded)."""
     from . import __version__
     from .commands import COMMANDS, module_of
+    from .commands._common import add_common_args
 
     ap = _Parser(prog="mech", description="mechdsl: equation-based modelling of rigid-body mechanics")
     ap.add_argument("--version", action="version", version=f"mechdsl {__version__}")
@@ -73,6 +78,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         p.add_argument("--limit", action="append", default=[], metavar="NAME=N", type=_limit,
                        help="raise a size budget of the front end, e.g. coordinates=5000 "
                             "(names and defaults: docs/language.md, Limits)")
+        add_common_args(p)
         p.set_defaults(_run=mod.run)
     return ap
 
@@ -87,41 +93,70 @@ def _limit(text: str) -> tuple[str, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run ``mech`` with these words (default: sys.argv[1:]); returns the exit code."""
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    words = sys.argv[1:] if argv is None else list(argv)
+    if words == ["--version"]:           # without building every command's parser (imports)
+        from . import __version__
+
+        print(f"mechdsl {__version__}")
+        return 0
+    from .commands import COMMANDS
+    from .commands._output import Output
+
+    # known before parsing, so that a usage error is a JSON document too
+    out = Output(words[0] if words and words[0] in COMMANDS else None, json_mode="--json" in words)
+    with out.session():
+        code = _run(words, out)
+    if out.json:
+        out.write_document(code)
+    return code
+
+
+def _run(words: list[str], out) -> int:
     args = None
     try:
         from .commands import COMMANDS
 
-        words = sys.argv[1:] if argv is None else list(argv)
-        if words == ["--version"]:           # without building every command's parser (imports)
-            from . import __version__
-
-            print(f"mechdsl {__version__}")
-            return 0
         ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
-        args = ap.parse_args(argv)
+        args = ap.parse_args(words)
         if not getattr(args, "_run", None):
             ap.print_help(sys.stderr)
+            out.fail("usage", "no command given")
             return 2
+        from .commands._common import verbosity
+
+        out.verbosity = verbosity(args)
+        out.reconfigure()
+        args.out = out
         from .frontend.limits import override
 
         with override(dict(getattr(args, "limit", None) or [])):
             return int(args._run(args) or 0)
+    except _BadArguments as e:
+        e.parser.print_usage(sys.stderr)
+        print(f"mech: error: {e}", file=sys.stderr)
+        out.fail("usage", str(e))
+        return 2
     except SystemExit as e:
         return int(e.code) if isinstance(e.code, int) else (0 if e.code is None else 2)
     except UsageError as e:
         print(f"mech: error: {e}", file=sys.stderr)
+        out.fail("usage", str(e))
         return 2
     except MechError as e:
-        from .diagnostics import print_diagnostics
-
         # diagnostics of later phases that carry no source position are located at the model
         # (or scene) the command worked on, else at the file
         path = getattr(args, "file", None) or (getattr(args, "files", None) or [None])[0]
-        print_diagnostics([_locate(d, path, getattr(args, "_where", None)) for d in e.diagnostics])
+        located = [_locate(d, path, getattr(args, "_where", None)) for d in e.diagnostics]
+        print_diagnostics(located)
+        for d in located:
+            out.diagnostic(d)
+        out.fail("model", located[0].message if located else str(e))
         return 1
     except KeyboardInterrupt:
         print("mech: interrupted", file=sys.stderr)
+        out.fail("interrupted", "interrupted")
         return 130
     except BrokenPipeError:
         return 0
@@ -131,7 +166,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"mech: internal error: {type(e).__name__}: {e}\n"
               "  this is a bug in mechdsl; rerun with MECHDSL_DEBUG=1 for the traceback and report it",
               file=sys.stderr)
+        out.fail("internal", f"{type(e).__name__}: {e}")
         return 3
+
+
+def print_diagnostics(diags) -> None:
+    """The located diagnostics on stderr, and how many errors when more than one."""
+    from .diagnostics import format_diagnostics
+
+    diags = list(diags)
+    print(format_diagnostics(diags), file=sys.stderr)
+    n_err = sum(d.severity == "error" for d in diags)
+    if n_err > 1:
+        print(f"{n_err} errors", file=sys.stderr)
 
 
 def _locate(d, path, where=None):

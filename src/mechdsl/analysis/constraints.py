@@ -25,7 +25,7 @@ import numpy as np
 
 from ..dae.dof import dependent_columns, dof_report
 from ..dae.init import initialize
-from ..dae.system import kkt_solve, scale_jacobian
+from ..dae.constrained_system import kkt_solve, scale_jacobian
 from ..diagnostics import Diagnostic, MechError
 from .core import Probe, dense, null_space, vanishes
 

@@ -99,19 +99,28 @@ class Equilibrium:
 
     @property
     def values(self) -> dict[str, float]:
+        """The coordinates' values at the equilibrium, by name."""
         return {c: float(v) for c, v in zip(self.coords, self.q)}
 
     _repr_html_ = _display.equilibrium_html          # notebook displays (mechdsl.output.display)
     _repr_markdown_ = _display.equilibrium_markdown
 
+    def __repr__(self) -> str:
+        """One line: kind, stability and where (the HTML display and ``to_dict()`` hold the rest)."""
+        where = ", ".join(f"{c} = {v:.6g}" for c, v in list(self.values.items())[:6])
+        more = f", ... ({len(self.coords) - 6} more)" if len(self.coords) > 6 else ""
+        return f"<Equilibrium {self.kind}, {self.stability}: {where}{more}>"
+
     @property
     def stability(self) -> str:
+        """"stable", "unstable" or "undetermined" (``stable`` True, False or None; ``reason`` says why)."""
         return {True: "stable", False: "unstable", None: "undetermined"}[self.stable]
 
     def __getitem__(self, name: str) -> float:
         return self.values[name]
 
     def to_dict(self) -> dict:
+        """Plain JSON types: kind, values, stability and reason, eigenvalues, Hessian, notes, ..."""
         d = {"kind": self.kind, "values": self.values, "stable": self.stable,
              "stability": self.stability, "reason": self.reason,
              "hessian_eigenvalues": [float(v) for v in self.hessian_eigenvalues],

@@ -56,8 +56,20 @@ class Linearization:
     _repr_html_ = _display.linearization_html        # notebook displays (mechdsl.output.display)
     _repr_markdown_ = _display.linearization_markdown
 
+    def __repr__(self) -> str:
+        """One line: about what, how many coordinates, the modes' frequencies (the HTML display
+        and ``to_dict()`` hold the matrices)."""
+        where = {"equilibrium": "about the equilibrium", "accelerated-reference": "about the accelerated reference",
+                 "state": f"about the state at t = {self.t:g}"}.get(self.kind, self.kind)
+        n = len(self.matrix_coords)
+        md = self.modes()
+        w = ", ".join(f"{v:.6g}" for v in md.frequencies[:4]) + (", ..." if len(md.frequencies) > 4 else "")
+        return (f"<Linearization {where}: {n} coordinate{'' if n == 1 else 's'}, "
+                f"{len(md)} mode{'' if len(md) == 1 else 's'}" + (f", w = {w} rad/s" if w else "") + ">")
+
     @property
     def constrained(self) -> bool:
+        """True for a constrained model: M, C, K are then those of the reduced coordinates."""
         return self.basis is not None
 
     @property
@@ -67,10 +79,12 @@ class Linearization:
 
     @property
     def lambdas(self) -> dict[str, float]:
+        """The constraint multipliers at the reference state, by constraint name ({} if none)."""
         return named_multipliers(self.constraint_names, self.multiplier_scales, self.multipliers)
 
     @property
     def n(self) -> int:
+        """The number of coordinates."""
         return len(self.coords)
 
     @property
@@ -85,9 +99,12 @@ class Linearization:
 
     @property
     def values(self) -> dict[str, float]:
+        """The coordinates' values at the reference state, by name."""
         return {c: float(v) for c, v in zip(self.coords, self.q)}
 
     def modes(self) -> Modes:
+        """The modes (mechdsl.analysis.modes.Modes): frequencies [rad/s], ``hz``, damping
+        ratios, shapes (in the original coordinates) and kinds, slowest first."""
         if self._modes is None:
             md = modes_of(self.M, self.C, self.K, self.A, self.matrix_coords)
             self._modes = md.in_coordinates(self.basis, self.coords) if self.constrained else md
@@ -95,6 +112,7 @@ class Linearization:
 
     @property
     def eigenvalues(self) -> np.ndarray:
+        """The eigenvalues of the first-order system matrix A [1/s]."""
         return self.modes().eigenvalues
 
     def lqr(self, Q, R):
@@ -112,6 +130,7 @@ class Linearization:
                                       inputs=self.inputs, exact=exact)
 
     def to_dict(self) -> dict:
+        """Plain JSON types: coordinates, state, M, C, K, A, B, modes, eigenvalues, notes, ..."""
         md = self.modes().to_dict()
         return {"coordinates": list(self.coords), "kind": self.kind, "t": self.t,
                 "state": {"q": self.values, "qd": {c: float(v) for c, v in zip(self.coords, self.qd)}},
@@ -131,6 +150,7 @@ class Linearization:
                 "stiffness_full": self.stiffness.tolist()}
 
     def to_json(self) -> str:
+        """``to_dict()`` as JSON text (what ``mech linearize -o OUT.json`` writes)."""
         return json.dumps({"generator": "mechdsl", **self.to_dict()}, indent=2) + "\n"
 
 

@@ -34,14 +34,17 @@ class Animation:
 
     @property
     def figure(self):
+        """The matplotlib Figure the frames are drawn on."""
         return self.stage.figure
 
     @property
     def times(self) -> np.ndarray:
+        """The model time [s] of each frame."""
         return self.stage.t
 
     @property
     def view(self) -> str:
+        """The view drawn: 'xy', 'xz', 'yz', '3d' or 'bars'."""
         return self.stage.view
 
     def __len__(self) -> int:
@@ -58,6 +61,7 @@ class Animation:
         return save(self.stage, path, self.fps, overwrite=overwrite)
 
     def to_html(self) -> str:
+        """A self-contained HTML fragment that plays the frames (play/pause and a scrubber)."""
         from .writer import html_fragment
 
         return html_fragment(self.stage, self.fps)

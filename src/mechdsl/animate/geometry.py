@@ -22,9 +22,10 @@ of world points the Function returns:
     trace     1 column: a point whose path is drawn
 
 The Function's second output places every body that carries a solid or a hoop (``posed``):
-its frame origin and rotation matrix (12 rows a body), for the interactive 3-D view.  Shapes
-sit at the body's centre of mass, oriented by ``ir.Body.axis`` (docs/animate.md); ``up`` is
-against gravity (:mod:`.camera`).
+its frame origin and rotation matrix (12 rows a body), for the interactive 3-D view.  A body's
+own shape sits at its centre of mass, oriented by ``ir.Body.axis``; ``Shape`` components
+(``ir.Model.shapes``) sit where they are placed, on bodies, moving frames or the world
+(:mod:`.shapes`, docs/animate.md); ``up`` is against gravity (:mod:`.camera`).
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ import numpy as np
 from ..model import ir
 from ..diagnostics import UsageError, did_you_mean
 from .camera import gravity_up
-from .shapes import body_solid, circle_samples, circle_through, outline_samples
+from .shapes import body_solids, circle_samples, circle_through, outline_samples, shape_solid
 
 PINNED = ("revolute", "spherical", "cylindrical", "universal")   # joints drawn as pins
 
@@ -123,41 +124,62 @@ def build(eom, p=None, traces=()) -> Geometry:
             posed.append(body)
             poses.append(ca.vertcat(ca.reshape(eom.point_position(body), 3, 1), ca.reshape(rot(body), 9, 1)))
 
+    shapes = tuple(getattr(model, "shapes", ()))
+
+    def add_solid(body: str, solid, world, moving: bool = True) -> None:
+        """One drawable for a solid of ``body`` (body axes -> world by ``world``)."""
+        if solid.kind == "rod":
+            h = 0.5 * solid.size[0] * solid.rot[:, 2]
+            add("rod", body, [world(solid.center - h), world(solid.center + h)], anchor=moving, body=body,
+                extra={"solid": solid})
+        elif solid.kind == "sphere":
+            add("sphere", body, [world(solid.center)], anchor=moving, radius=solid.size[0], body=body,
+                extra={"solid": solid})
+        elif solid.kind == "ellipsoid":
+            tips = [solid.center + solid.rot[:, i] * solid.size[i] for i in range(3)]
+            add("ellipsoid", body, [world(solid.center)] + [world(r) for r in tips], anchor=False, body=body,
+                extra={"solid": solid})
+            if moving:
+                anchors.append(len(cols) - 4)                    # the centre moves with the mechanism
+        else:
+            add("solid", body, [world(r) for r in outline_samples(solid)], anchor=False, body=body,
+                extra={"solid": solid})
+
     for b in model.bodies:
         if b.kind in ("world", "frame"):
             continue
         o = ca.reshape(eom.point_position(b.name), 3, 1)
         R = rot(b.name)
-        world = lambda r: o + ca.mtimes(R, ca.DM(r))  # noqa: E731   body axes -> world
-        solid = body_solid(b, num)
-        com = solid.center if solid is not None else np.array([num(c) for c in b.com])
-        if solid is not None:
+        world = lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r))  # noqa: E731   body axes -> world
+        solids = body_solids(b, shapes, num)
+        com = np.array([num(c) for c in b.com])
+        if solids:
             pose(b.name)
-        if solid is not None and solid.kind == "rod":
-            h = 0.5 * solid.size[0] * solid.rot[:, 2]
-            add("rod", b.name, [world(com - h), world(com + h)], body=b.name, extra={"solid": solid})
-        elif solid is not None and solid.kind == "sphere":
-            add("sphere", b.name, [world(com)], radius=solid.size[0], body=b.name, extra={"solid": solid})
-        elif solid is not None and solid.kind == "ellipsoid":
-            tips = [solid.center + solid.rot[:, i] * solid.size[i] for i in range(3)]
-            add("ellipsoid", b.name, [world(solid.center)] + [world(r) for r in tips], anchor=False, body=b.name,
-                extra={"solid": solid})
-            anchors.append(len(cols) - 4)                        # the centre moves with the mechanism
-        elif solid is not None:
-            add("solid", b.name, [world(r) for r in outline_samples(solid)], anchor=False, body=b.name,
-                extra={"solid": solid})
-            anchors.append(len(cols))
+        for solid in solids:
+            add_solid(b.name, solid, world)
+        if any(s.kind in ("box", "disk", "cylinder") for s in solids):   # (an outline is not an anchor)
             add("point", b.name + ".com", [world(com)], body=b.name, radius=0.0, extra={"hidden": True})
-        else:
+        if not solids:
             r = contact_radius.get(b.name, 0.0)
             add("sphere" if r > 0 else "point", b.name, [world(com)], radius=r, body=b.name)
-        if b.kind == "rigid" and not b.shape and np.linalg.norm(com) > 0:   # a general body: its frame to its centre
+        drawn = b.shape or any(sh.body == b.name for sh in shapes)
+        if b.kind == "rigid" and not drawn and np.linalg.norm(com) > 0:   # a general body: its frame to its centre
             add("link", b.name + ".frame", [o, world(com)], body=b.name)
+    frames = ["world"] + [b.name for b in model.bodies if b.kind == "frame"]
+    for name in frames:                          # shapes on the world (fixed) and on moving frames
+        placed = [s for s in (shape_solid(sh, num) for sh in shapes if sh.body == name) if s is not None]
+        if not placed:
+            continue
+        pose(name)
+        o = ca.reshape(eom.point_position(name), 3, 1)
+        R = rot(name)
+        for solid in placed:
+            add_solid(name, solid, lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r)), moving=name != "world")
     for f in model.forces:
         if isinstance(f, ir.SpringDamper):
             add("damper" if f.kind == "damper" else "spring", f.name,
                 [eom.point_position(f.a), eom.point_position(f.b)])
-    shaped = {b.name for b in model.bodies if b.shape}
+    shaped = {b.name for b in model.bodies if b.shape} | {sh.body for sh in shapes}
     hoops = _hoops(model, eom, p)
     for j in model.joints:
         if j.name in hoops:

@@ -5,7 +5,12 @@ A :class:`Solid` is a shape in the body's axes: ``kind`` (rod, disk, cylinder, b
 ellipsoid), ``size`` (rod (L,), disk (R,), cylinder (R, L), box (lx, ly, lz), sphere (R,),
 ellipsoid its semi-axes (a, b, c)), ``center`` (its centre, body axes, from the body origin)
 and ``rot`` (3x3, its own axes as columns in body axes; the symmetry axis of rods, disks and
-cylinders is the third column).
+cylinders is the third column, a box's edges lie along the three).
+
+A body is drawn with its own shape (``Body(shape = ...)``: at its centre of mass, the axis in
+body axes, a box along the body's axes) and every ``Shape`` component placed on it (centre
+``r``, axes ``R`` or ``rpy``, the axis in the shape's own axes); a rigid body with neither is
+drawn as its equivalent ellipsoid.
 
 The equivalent ellipsoid: a uniform solid ellipsoid of mass m and semi-axes a, b, c has the
 principal moments m (b^2 + c^2)/5, m (a^2 + c^2)/5, m (a^2 + b^2)/5, so from the principal
@@ -30,6 +35,7 @@ class Solid:
     size: tuple
     center: np.ndarray
     rot: np.ndarray
+    name: str = ""                # the Shape component it draws ("": the body's own shape)
 
 
 def frame_from_axis(axis) -> np.ndarray:
@@ -60,19 +66,51 @@ def equivalent_ellipsoid(mass: float, inertia) -> tuple[np.ndarray, np.ndarray] 
     return semi, axes
 
 
+def body_solids(b, shapes, num) -> list[Solid]:
+    """The Solids of an ir.Body: its own shape and the ``Shape`` components placed on it
+    (``shapes``: the model's ir.Shape records, those of other bodies ignored); a rigid body
+    with neither is drawn as its equivalent ellipsoid."""
+    own = [s for s in [_solid(b.shape, b.shape_size, np.array([num(c) for c in b.com]), np.eye(3), b.axis, num)]
+           if s is not None]
+    placed = [s for s in (shape_solid(sh, num) for sh in shapes if sh.body == b.name) if s is not None]
+    if own or placed or any(sh.body == b.name for sh in shapes):
+        return own + placed
+    ellipsoid = body_solid(b, num)
+    return [ellipsoid] if ellipsoid is not None else []
+
+
+def shape_solid(sh, num) -> Solid | None:
+    """The Solid of an ir.Shape: centred at ``r``, its axes ``R`` (body axes)."""
+    R = np.eye(3) if sh.R is None else np.array([[num(x) for x in row] for row in sh.R])
+    solid = _solid(sh.kind, sh.size, np.array([num(c) for c in sh.r]), R, sh.axis, num)
+    if solid is not None:
+        solid.name = sh.name
+    return solid
+
+
+def _solid(kind: str, size_exprs, center: np.ndarray, R: np.ndarray, axis, num) -> Solid | None:
+    """A shape of a kind and size, centred at ``center``, in axes R (body axes); the symmetry axis
+    of a rod, disk or cylinder is ``axis`` in those axes; a box's edges lie along them."""
+    size = tuple(num(s) for s in size_exprs)
+    if not kind or not size:
+        return None
+    if kind in ("rod", "disk", "cylinder"):
+        if kind == "cylinder" and len(size) < 2:
+            size = (size[0], size[0])
+        return Solid(kind, size, center, R @ frame_from_axis(np.array([num(a) for a in axis])))
+    if kind == "box":
+        return Solid("box", (size + (size[-1],) * 3)[:3], center, R)
+    if kind == "sphere":
+        return Solid("sphere", size[:1], center, R)
+    return None
+
+
 def body_solid(b, num) -> Solid | None:
     """The Solid of an ir.Body: its declared shape, else its equivalent ellipsoid."""
     com = np.array([num(c) for c in b.com])
-    size = tuple(num(s) for s in b.shape_size)
-    if b.shape in ("rod", "disk", "cylinder") and size:
-        axis = np.array([num(a) for a in b.axis])
-        if b.shape == "cylinder" and len(size) < 2:
-            size = (size[0], size[0])
-        return Solid(b.shape, size, com, frame_from_axis(axis))
-    if b.shape == "box" and size:
-        return Solid("box", (size + (size[-1],) * 3)[:3], com, np.eye(3))
-    if b.shape == "sphere" and size:
-        return Solid("sphere", size[:1], com, np.eye(3))
+    solid = _solid(b.shape, b.shape_size, com, np.eye(3), b.axis, num)
+    if solid is not None:
+        return solid
     if b.kind == "rigid" and not b.shape:
         I = np.array([[num(x) for x in row] for row in b.inertia])
         found = equivalent_ellipsoid(num(b.mass), I)

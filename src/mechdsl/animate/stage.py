@@ -44,15 +44,19 @@ def detect_view(X: np.ndarray, anchors: list[int]) -> str:
 BODY_KINDS = ("rod", "solid", "ellipsoid", "sphere", "point", "link")
 
 
+GROUND = "#b0b0b0"                # shapes fixed on the world
+
+
 def body_colours(geometry) -> dict[str, str]:
-    """One colour per drawn body (its solid, dot and frame link share it), in order of drawing."""
+    """One colour per drawn body (its solids, dot and frame link share it), in order of drawing;
+    shapes on the world are grey."""
     from ..output.plot import colours
 
     names: list[str] = []
     for it in geometry.items:
-        if it.kind in BODY_KINDS and not it.extra.get("hidden") and it.body not in names:
+        if it.kind in BODY_KINDS and not it.extra.get("hidden") and it.body not in names and it.body != "world":
             names.append(it.body)
-    return dict(zip(names, colours(len(names))))
+    return dict(zip(names, colours(len(names)))) | {"world": GROUND}
 
 
 def check_view(view: str) -> str:

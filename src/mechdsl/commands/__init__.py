@@ -4,7 +4,7 @@
 that fails to import (an optional part missing) is left out of the CLI with a note.
 """
 COMMANDS = ["check", "compile", "simulate", "sweep", "equations", "equilibrium", "linearize", "animate", "view",
-            "bench", "import", "lsp"]
+            "export", "bench", "import", "lsp", "examples", "completion"]
 
 # a command whose name is not a module name (``import`` is a Python keyword)
 MODULES = {"import": "import_urdf"}

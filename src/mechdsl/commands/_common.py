@@ -21,6 +21,24 @@ from ..model.names import split_state
 # --------------------------------------------------------------------------- argparse pieces
 
 
+def add_common_args(p) -> None:
+    """The options every command has (cli.build_parser adds them to each): --json, -q, -v.
+    What they do is in commands/_output.py (one place for every command)."""
+    g = p.add_argument_group("output")
+    g.add_argument("--json", action="store_true",
+                   help="print one JSON document on stdout (result, files written, warnings, diagnostics; "
+                        "schema: docs/json.md); human text goes to stderr")
+    g.add_argument("-q", "--quiet", action="count", default=0,
+                   help="print no results text, only errors and warnings")
+    g.add_argument("-v", "--verbose", action="count", default=0,
+                   help="also print what mechdsl does (-vv: in detail)")
+
+
+def verbosity(args) -> int:
+    """-q / -v as one number: -1 quiet, 0 default, 1 and 2 more."""
+    return int(getattr(args, "verbose", 0) or 0) - int(getattr(args, "quiet", 0) or 0)
+
+
 def add_target_args(p, *, what: str = "use") -> None:
     """FILE, --model and --scene (exclusive)."""
     p.add_argument("file", metavar="FILE", help=".mech file")

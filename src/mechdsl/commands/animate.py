@@ -56,8 +56,10 @@ def plan_frames(args, m, what: str = "animating"):
 
     t_end = args.t_end if args.t_end is not None else m.scene_settings.get("stop_time")
     if t_end is None:
-        t_end = 10.0
-        print(f"mech: no --t-end and no scene stop_time: {what} 10 s", file=sys.stderr)
+        from ..simulation.settings import DEFAULT_T_END      # the one default end of a run
+
+        t_end = DEFAULT_T_END
+        print(f"mech: no --t-end and no scene stop_time: {what} {t_end:g} s", file=sys.stderr)
     t0 = float(m.scene_settings.get("start_time", 0.0))
     if not t_end > t0:
         raise UsageError(f"--t-end {t_end:g} must be after the start time {t0:g}")
@@ -90,8 +92,13 @@ def run(args) -> int:
     pace = "" if speed == 1.0 else f" at speed {speed:g}"
     print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps{pace}, {anim.times[-1] - anim.times[0]:g} s of model "
           f"time, {what}")
+    args.out.wrote(path)
+    args.out.set(target=target_line(args, m), model=m.name, frames=len(anim), fps=args.fps, speed=speed,
+                 view=anim.view, t_start=float(anim.times[0]), t_end=float(anim.times[-1]),
+                 success=r.failure is None)
     if r.failure is not None:
         print(f"mech: error: {r.failure}; animated up to t = {r.t[-1]:.6g}", file=sys.stderr)
+        args.out.fail("simulation", f"{r.failure}; animated up to t = {r.t[-1]:.6g}")
         return 1
     return 0
 

@@ -15,7 +15,6 @@ def add_parser(sub):
     p.add_argument("files", nargs="+", metavar="FILE")
     p.add_argument("--model", help="check only this model")
     p.add_argument("--scene", help="check only this scene")
-    p.add_argument("-q", "--quiet", action="store_true", help="print only errors")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
     return p
 
@@ -26,7 +25,11 @@ def run(args) -> int:
     from ..semantic import analyze
 
     status = 0
+    out = args.out
+    files = []
     for path in args.files:
+        record = {"file": str(path), "ok": False, "targets": []}
+        files.append(record)
         try:
             program = analyze(parse_file(path), units=not args.no_units)
             if args.scene:
@@ -36,26 +39,42 @@ def run(args) -> int:
             else:
                 targets = check_targets(program)
             lines = []
+            parts = program.part_users()
             if not (args.scene or args.model):
-                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in program.part_users().items()]
+                lines += [f"  {p}: a part of {', '.join(users)} (checked there)" for p, users in parts.items()]
             for kind, name in targets:
                 m = Model._from_program(program, name if kind == "model" else None, name if kind == "scene" else None)
                 problem = check_start_state(m)
                 for w in m.warnings:
                     print(format_diagnostics([w]), file=sys.stderr)
+                    out.diagnostic(w)
+                entry = {"kind": kind, "name": name, "model": m.name}
+                record["targets"].append(entry)
                 if kind == "scene":
                     settings = ", ".join(f"{k} = {_fmt(v)}" for k, v in m.scene.settings)
                     lines.append(f"  scene {name} -> {m.name}" + (f" ({settings})" if settings else ""))
                     lines += [f"    {topic}: {text}" for topic, text in problem.plan]
+                    entry.update(settings={k: v for k, v in m.scene.settings},
+                                 plan={topic: text for topic, text in problem.plan})
                 else:
-                    lines.append("  " + m.summary(derive=True))
-                    lines += _extra_lines(m)
-            if not args.quiet:
-                print(f"{path}: ok")
-                print("\n".join(lines))
+                    entry["summary"] = m.summary(derive=True)
+                    lines.append("  " + entry["summary"])
+                    extra = _extra_lines(m)
+                    entry["notes"] = [s.strip() for s in extra]
+                    lines += extra
+            record["ok"] = True
+            if not (args.scene or args.model):
+                record["parts"] = {p: list(users) for p, users in parts.items()}
+            print(f"{path}: ok")
+            print("\n".join(lines))
         except MechError as e:
             print(format_diagnostics(e.diagnostics), file=sys.stderr)
+            for d in e.diagnostics:
+                out.diagnostic(d)
             status = 1
+    out.set(files=files)
+    if status:
+        out.fail("model", f"{sum(not f['ok'] for f in files)} of {len(files)} file(s) have errors")
     return status
 
 

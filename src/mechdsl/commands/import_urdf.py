@@ -23,6 +23,9 @@ def add_parser(sub):
                         "(measured_inertia = true on those bodies)")
     p.add_argument("--package-dir", action="append", default=[], metavar="NAME=DIR",
                    help="the folder of the ROS package NAME, for package://NAME/... mesh paths (repeatable)")
+    p.add_argument("--skip-missing-meshes", action="store_true",
+                   help="a mesh file that is not found is a warning and is not drawn, instead of an error "
+                        "(the dynamics do not need meshes)")
     return p
 
 
@@ -44,7 +47,8 @@ def run(args) -> int:
     from pathlib import Path
 
     imp = convert(args.file, floating=args.floating, measured_inertia=args.measured_inertia, package_dirs=dirs,
-                  mech_name=Path(args.output).name if args.output else None)
+                  mech_name=Path(args.output).name if args.output else None,
+                  skip_missing_meshes=args.skip_missing_meshes)
     if imp.diagnostics:
         print(format_diagnostics(imp.diagnostics), file=sys.stderr)
     report = sys.stdout if args.output else sys.stderr

@@ -62,17 +62,18 @@ def run(args) -> int:
         inputs = [s for item in args.inputs for s in item.split(",") if s.strip()]
     lin = linearize(m.eom, at=at, inputs=inputs, guesses=guesses)
     print(format_linearization(m.name, lin))
+    out = args.out
+    out.set(target=target_line(args, m), model=m.name, **lin.to_dict())
     if args.symbolic:
         print(format_symbolic(lin))
-    if args.output:
-        write_atomic(args.output, lin.to_json(), overwrite=args.force)
-        print(f"wrote {args.output}")
-    if args.csv:
-        lin.modes().write_csv(args.csv, overwrite=args.force)
-        print(f"wrote {args.csv}")
-    if args.plot:
-        lin.modes().plot(args.plot, title=f"{m.name}: mode shapes", overwrite=args.force)
-        print(f"wrote {args.plot}")
+    for path, write in ((args.output, lambda p: write_atomic(p, lin.to_json(), overwrite=args.force)),
+                        (args.csv, lambda p: lin.modes().write_csv(p, overwrite=args.force)),
+                        (args.plot, lambda p: lin.modes().plot(p, title=f"{m.name}: mode shapes",
+                                                               overwrite=args.force))):
+        if path:
+            write(path)
+            print(f"wrote {path}")
+            out.wrote(path)
     return 0
 
 

@@ -26,7 +26,7 @@ __all__ = ["simulate_dae", "RunInterrupted", "dof_report", "DofReport", "initial
 
 def __getattr__(name):
     # the package's face: each name is imported from its module on first use, so that reading
-    # the options (dae.options, which every run's settings hold) imports nothing else; the public
+    # the options (dae.dae_run, which every run's settings hold) imports nothing else; the public
     # entry of a constrained run is the simulation layer's (this package holds the mechanics of
     # constrained systems; the run itself lives in mechdsl.simulation)
     if name in ("DofReport", "dof_report"):
@@ -36,11 +36,11 @@ def __getattr__(name):
     elif name in ("InitReport", "check_report", "initialize"):
         from . import init as module
     elif name in ("DEFAULT_FORMULATION", "FORMULATIONS"):
-        from . import options as module
+        from . import dae_run as module
     elif name == "RunInterrupted":
         from ..output import result as module
     elif name == "simulate_dae":
-        from ..simulation import entries as module
+        from ..simulation import shims as module
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     return getattr(module, name)

@@ -53,7 +53,7 @@ from ..diagnostics import Diagnostic, MechError
 from .baumgarte import _user_rates
 from .dof import short_list
 from .projection import ProjectionStepper
-from .stepper import GridIntegrators, StepError, Stepper, integrator_options, ode_plugin, scaled_dae
+from .segments import GridIntegrators, StepError, Stepper, integrator_options, ode_plugin, scaled_dae
 
 
 PENALTY = 1e8          # rho: penalty relative to the equilibrated mass matrix (cond(W) ~ rho)

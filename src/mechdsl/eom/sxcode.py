@@ -181,23 +181,46 @@ def _kept(f, kind: str, build, pack, unpack, extra: str = ""):
     return value
 
 
-def _pack_instr(ins) -> bytes:
-    import io
+def _pack_arrays(arrays: dict, **extra) -> bytes:
+    """Arrays and small JSON values as bytes (a JSON header line, then the raw arrays): the
+    cache entries of this module, read without numpy's npz (zipfile and shutil: 20 ms of
+    imports on a warm run)."""
+    import json
 
+    head, blobs, at = {}, [], 0
+    for name, a in arrays.items():
+        a = np.ascontiguousarray(a)
+        head[name] = [a.dtype.str, list(a.shape), at]
+        blobs.append(a.tobytes())
+        at += len(blobs[-1])
+    return json.dumps({"arrays": head, "extra": extra}).encode() + b"\n" + b"".join(blobs)
+
+
+def _unpack_arrays(data: bytes):
+    import json
+
+    line = data.index(b"\n")
+    head = json.loads(data[:line])
+    body = memoryview(data)[line + 1:]
+    out = {}
+    for name, (dtype, shape, at) in head["arrays"].items():
+        dt = np.dtype(dtype)
+        count = int(np.prod(shape)) if shape else 1
+        out[name] = np.frombuffer(body, dt, count, at).reshape(shape).copy()
+    return out, head["extra"]
+
+
+def _pack_instr(ins) -> bytes:
     names = {n: i for i, n in enumerate(sorted({op for op, _, _, _ in ins}))}
     arr = np.array([[names[op], *(list(a) + [-1, -1])[:2], *(list(o) + [-1, -1])[:2], len(a), len(o)]
                     for op, a, o, _ in ins], dtype=np.int64).reshape(-1, 7)
-    buf = io.BytesIO()
-    np.savez(buf, ops=np.array(sorted(names, key=names.get)), arr=arr,
-             const=np.array([c for _, _, _, c in ins], float))
-    return buf.getvalue()
+    return _pack_arrays({"arr": arr, "const": np.array([c for _, _, _, c in ins], float)},
+                        ops=sorted(names, key=names.get))
 
 
 def _unpack_instr(data: bytes):
-    import io
-
-    z = np.load(io.BytesIO(data), allow_pickle=False)
-    ops, arr, const = [str(o) for o in z["ops"]], z["arr"], z["const"]
+    z, extra = _unpack_arrays(data)
+    ops, arr, const = [str(o) for o in extra["ops"]], z["arr"], z["const"]
     return [(ops[r[0]], list(r[1:1 + r[5]]), list(r[3:3 + r[6]]), float(c))
             for r, c in zip(arr.tolist(), const.tolist())]
 
@@ -316,21 +339,15 @@ class Program:
 
 
 def _pack_prog(value) -> bytes:
-    import io
-
     code, consts, in_off, in_nnz, nreg = value
-    buf = io.BytesIO()
-    np.savez(buf, code=code, consts=consts, in_off=in_off, in_nnz=in_nnz, nreg=np.array([nreg]))
-    return buf.getvalue()
+    return _pack_arrays({"code": code, "consts": consts, "in_off": in_off, "in_nnz": in_nnz}, nreg=int(nreg))
 
 
 def _unpack_prog(data: bytes):
-    import io
-
-    z = np.load(io.BytesIO(data), allow_pickle=False)
+    z, extra = _unpack_arrays(data)
     return (np.ascontiguousarray(z["code"], dtype=np.intc), np.ascontiguousarray(z["consts"], float),
             np.ascontiguousarray(z["in_off"], dtype=np.int64), np.ascontiguousarray(z["in_nnz"], dtype=np.int64),
-            int(z["nreg"][0]))
+            int(extra["nreg"]))
 
 
 def _program_arrays(f):

@@ -88,6 +88,12 @@ def dump_model(model: ir.Model) -> str:
         L.append("points:")
         for p in pts:
             L.append(f"  {p.name} on {p.body} at {_v(p.r)}" + (f", axes {_m(p.R)}" if p.R is not None else ""))
+    if model.shapes:
+        L.append("shapes:")
+        for sh in model.shapes:
+            axes = f", axes {_m(sh.R)}" if sh.R is not None else ""
+            along = f", axis {_v(sh.axis)}" if sh.kind in ("rod", "disk", "cylinder") else ""
+            L.append(f"  {sh.name} on {sh.body}: {sh.kind} {_v(sh.size)} at {_v(sh.r)}{axes}{along}")
     if model.joints:
         L.append("joints:")
         for j in model.joints:

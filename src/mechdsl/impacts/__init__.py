@@ -33,7 +33,7 @@ def __getattr__(name):
     elif name in ("events_table", "print_events"):
         from . import table as module
     elif name == "simulate_with_contacts":
-        from ..simulation import entries as module
+        from ..simulation import shims as module
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     return getattr(module, name)

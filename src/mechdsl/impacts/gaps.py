@@ -11,7 +11,7 @@ around it; x_P its world position from ``EOM.point_position``):
     gap                gap = the expression given (equation-layer models without points)
 
 Its Jacobian G = dgap/dq (a row) and the normal speed u = G q' + dgap/dt follow by
-automatic differentiation in :mod:`mechdsl.impacts.system`.
+automatic differentiation in :mod:`mechdsl.impacts.contact_system`.
 """
 from __future__ import annotations
 

@@ -249,6 +249,25 @@ class Body:
 
 
 @record
+class Shape:
+    """A shape drawn on a body (the component ``Shape``; drawing only, no mass).
+
+    kind: 'box' | 'cylinder' | 'sphere' | 'disk' | 'rod'; size as for ``Body.shape_size``.
+    Centred at ``r`` (body coordinates); its own axes are ``R`` in body axes (None: the body's);
+    ``axis`` is the symmetry axis of a cylinder, disk or rod in its own axes (a box's edges lie
+    along its own x, y, z)."""
+
+    name: str
+    body: str
+    kind: str
+    size: tuple[Expr, ...] = ()
+    r: Vec3 = (ZERO, ZERO, ZERO)
+    R: Mat3 | None = None
+    axis: Vec3 = (ZERO, ZERO, ONE)
+    span: Span = field(default_factory=Span)
+
+
+@record
 class Point:
     """A point fixed on a body (or on 'world'), position r in body coordinates.
 
@@ -462,6 +481,7 @@ class Model:
     outputs: tuple[Output, ...] = ()
     contacts: tuple[Contact, ...] = ()
     span: Span = field(default_factory=Span)
+    shapes: tuple[Shape, ...] = ()       # drawn shapes placed on bodies (the component Shape)
 
     # -- lookups -------------------------------------------------------------------
     def parameter(self, name: str) -> Parameter:

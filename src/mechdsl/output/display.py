@@ -221,6 +221,7 @@ class Equations(list):
         self.extra = extra
 
     def latex(self) -> str:
+        """The equations (after T, V, D or H) as one LaTeX ``aligned`` environment."""
         import sympy as sp
 
         lines = [f"{k} &= {sp.latex(v)}" for k, v in self.extra.items()]

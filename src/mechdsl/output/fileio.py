@@ -72,6 +72,8 @@ MARKER = b"mechdsl"
 def is_own_output(p: Path) -> bool:
     """True for a file mechdsl wrote (so re-running a command may replace it)."""
     try:
+        if p.suffix == ".fmu":                                  # mech export: its modelDescription says so
+            return _own_fmu(p)
         if p.suffix == ".csv":
             if p.read_bytes()[:32].startswith(b"mode,kind,frequency_rad_s,"):    # mech linearize --csv
                 return True
@@ -83,6 +85,17 @@ def is_own_output(p: Path) -> bool:
         return _has_marker(p)
     except OSError:
         return False
+
+
+def _own_fmu(p: Path) -> bool:
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(p) as zf:
+            head = zf.read("modelDescription.xml")[:4096]
+    except (zipfile.BadZipFile, KeyError, OSError, RuntimeError):
+        return False
+    return b'generationTool="mechdsl' in head
 
 
 def _has_marker(p: Path) -> bool:

@@ -37,7 +37,7 @@ def build_model(fl) -> ir.Model:
                     fl.diags.error(ve.code, ve.message, inst.entry.decl.span, ve.help)
                     continue
                 coords += inst.coords
-                for k in ("bodies", "points", "joints", "forces", "terms", "contacts"):
+                for k in ("bodies", "points", "joints", "forces", "terms", "contacts", "shapes"):
                     getattr(built, k).extend(getattr(b, k))
         # joints own coordinates too: the exact count, located at the declaration that passes it
         fl.charge("coordinates", 0, e.decl.span, total=len(coords))
@@ -57,7 +57,7 @@ def build_model(fl) -> ir.Model:
         bodies=tuple(built.bodies), points=(ir.Point("world", "world", span=fl.model.span),) + tuple(built.points),
         joints=tuple(built.joints), forces=tuple(forces), terms=tuple(built.terms + fl.terms),
         constraints=tuple(fl.constraints), outputs=tuple(outputs), contacts=tuple(built.contacts),
-        span=fl.model.span)
+        span=fl.model.span, shapes=tuple(built.shapes))
     from .topology import check_model
 
     return check_model(model, fl.diags)
@@ -86,6 +86,8 @@ def build_component(fl, inst: CompInst) -> K.Built:
         body = f["body"]
         out.points.append(ir.Point(name, fl.body_of_point(body.name), K.as_vec3(f["r"], "r"), span,
                                    O.given_orientation(f, name)))
+    elif cls.category == "shape":
+        out.shapes.append(_build_shape(fl, inst, f, span))
     elif cls.category == "frame":
         parent = f["parent"]
         axis = K.normalized(K.as_vec3(f["axis"], "axis"), "axis")
@@ -125,6 +127,19 @@ def build_component(fl, inst: CompInst) -> K.Built:
         out.contacts.append(ir.Contact(name, _contact_kind(fl, inst, f, span), tuple(fields), span))
     inst.built = out
     return out
+
+
+def _build_shape(fl, inst: CompInst, f, span) -> ir.Shape:
+    """A Shape: what is drawn, where on its body and turned how; all of it constant in time."""
+    name = inst.name
+    kind, size, axis = K.drawn_shape(f)
+    r = K.as_vec3(f["r"], "r")
+    R = O.given_orientation(f, name)
+    for c in [*size, *r, *axis, *(x for row in (R or ()) for x in row)]:
+        if X.depends_on_state(c) or X.depends_on_time(c):
+            fail("E306", f"the size and placement of shape '{name}' may depend on parameters only", span,
+                 "a shape is fixed on its body; it moves with the body")
+    return ir.Shape(name, fl.body_of_point(f["body"].name), kind, size, r, R, axis, span)
 
 
 def _contact_kind(fl, inst: CompInst, f, span) -> str:

@@ -193,6 +193,10 @@ FUNCTIONS: dict[str, tuple[str, str]] = {
     "diagonal": ("diagonal(v)", "the diagonal matrix with v on its diagonal"),
     "size": ("size(a) or size(a, k)", "the length of a vector, or of dimension k of an array"),
     "rotation": ("rotation(axis, angle)", "the rotation matrix about a unit axis by an angle (Rodrigues)"),
+    "rpy": ("rpy(r, p, y) or rpy({r, p, y})", "the rotation matrix of roll, pitch, yaw in URDF's convention: "
+                                               "Rz(y) Ry(p) Rx(r) (fixed axes x, y, z)"),
+    "axis_angle": ("axis_angle(axis, angle) or axis_angle(v)", "the rotation matrix about an axis by an angle; "
+                                                               "from one vector: about v by norm(v)"),
     "der": ("der(x)", "the speed of a coordinate, or the time derivative of an expression in coordinates "
                       "and time"),
     "position": ("position(p)", "the position of a point or body, the same as p.r (m)"),

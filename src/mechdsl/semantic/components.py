@@ -115,6 +115,15 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                                                                      "axes: roll, pitch, yaw (rad, URDF's rpy)"),
                                       _f("R", "mat3", None, U.ONE, "orientation as a rotation matrix (instead of rpy)")),
                    "a named point fixed on a body (with an orientation: a frame fixed on the body)"),
+    ComponentClass("Shape", "shape", (
+        _f("body", "body", doc="the body it is drawn on (or world)"),
+        _f("shape", "string", choices=("box", "cylinder", "sphere", "disk", "rod"), doc="what is drawn"),
+        _f("size", "vector", dim=U.LENGTH, doc="box {lx, ly, lz}, cylinder {R, L}, sphere, disk {R}, rod {L}"),
+        _f("r", "vec3", _ZERO3, U.LENGTH, "its centre in body coordinates"),
+        _f("rpy", "vec3", None, U.ONE, "orientation of its axes in body axes: roll, pitch, yaw (rad, URDF's rpy)"),
+        _f("R", "mat3", None, U.ONE, "orientation as a rotation matrix (instead of rpy)"),
+        _f("axis", "vec3", _Z, U.ONE, "the symmetry axis of a cylinder, disk or rod, in its own axes")),
+        "a shape drawn on a body, placed in its axes (drawing only: no mass); a body may have several"),
     ComponentClass("Frame", "frame", (
         _f("parent", "point", "world", doc="where the frame's motion is measured from"),
         _f("r", "vec3", _ZERO3, U.LENGTH, "origin relative to parent (may depend on time)"),
@@ -318,8 +327,8 @@ def check_sequence(seq: str) -> None:
 _SHAPE_SIZES = {"box": 3, "cylinder": 2, "sphere": 1, "disk": 1, "rod": 1}
 
 
-def _drawn_shape(f: dict[str, Val]) -> tuple[str, tuple[ir.Expr, ...], ir.Vec3]:
-    """A Body's `shape`, `size` and `axis`: what it is drawn with (its inertia stays I)."""
+def drawn_shape(f: dict[str, Val]) -> tuple[str, tuple[ir.Expr, ...], ir.Vec3]:
+    """A Body's or a Shape's `shape`, `size` and `axis`: what it is drawn with (a Body's inertia stays I)."""
     shape = f["shape"].value if isinstance(f.get("shape"), Str) else ""
     size_val = f.get("size")
     size = tuple(as_expr(x, "size") for x in size_val.items) if isinstance(size_val, Arr) else ()
@@ -341,6 +350,7 @@ class Built:
     forces: list = field(default_factory=list)
     terms: list = field(default_factory=list)
     contacts: list = field(default_factory=list)
+    shapes: list = field(default_factory=list)
 
 
 def build_body(cls: ComponentClass, name: str, f: dict[str, Val], span) -> Built:
@@ -364,7 +374,7 @@ def build_body(cls: ComponentClass, name: str, f: dict[str, Val], span) -> Built
             g = {k: as_expr(f[k], k) for k in ("I_11", "I_22", "I_33", "I_21", "I_31", "I_32")}
             inertia = ((g["I_11"], g["I_21"], g["I_31"]), (g["I_21"], g["I_22"], g["I_32"]),
                        (g["I_31"], g["I_32"], g["I_33"]))
-        shape, size, axis = _drawn_shape(f)
+        shape, size, axis = drawn_shape(f)
     else:
         kind = "rigid"
         shape = cls.name.lower()

@@ -37,7 +37,7 @@ class ComponentElements:
             for inst in e.elements:
                 self.insts[inst.name] = inst
         kind = {"body": "body", "point": "point", "frame": "body", "joint": "joint", "force": "force",
-                "contact": "contact"}[e.cls.category]
+                "contact": "contact", "shape": "shape"}[e.cls.category]
         refs = [CompRef(kind, i.name, e.cls.name) for i in e.elements]
         return Arr(tuple(refs)) if dims else refs[0]
 

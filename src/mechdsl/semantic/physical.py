@@ -15,8 +15,8 @@ Degenerate values make the numbers fail instead (nan at the first step, a singul
 a solver, a run that never ends), so they are named here with their component:
 
   E510  a component value that is not finite (a mass 1e308 * 10, a length 1/(r - r))
-  E511  a negative length, radius or size of a body or a contact
-  E512  a direction that is the zero vector (joint or body axis, contact normal)
+  E511  a negative length, radius or size of a body, a shape or a contact
+  E512  a direction that is the zero vector (joint, body or shape axis, contact normal)
 """
 from __future__ import annotations
 
@@ -102,6 +102,14 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
             return True
         return False
 
+    def negative_lengths(kind: str, sizes, owner: str, span, hint: str) -> None:
+        for name, e in zip(_LENGTHS.get(kind, ()), sizes):
+            v = _raw(e, env)
+            if v is None or not_finite(f"the {name}", owner, [v], span):
+                continue
+            if v < 0:
+                out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", span, hint))
+
     for b in model.bodies:
         if b.kind not in ("point", "rigid"):
             continue
@@ -109,17 +117,17 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
         if not_finite("the mass", owner, [_raw(b.mass, env)], b.span):
             continue
         if b.kind == "rigid":
-            for name, e in zip(_LENGTHS.get(b.shape, ()), b.shape_size):
-                v = _raw(e, env)
-                if v is None or not_finite(f"the {name}", owner, [v], b.span):
-                    continue
-                if v < 0:
-                    out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", b.span,
-                                          "lengths and radii are >= 0; reverse the body's axis instead of "
-                                          "the sign of its length"))
+            negative_lengths(b.shape, b.shape_size, owner, b.span,
+                             "lengths and radii are >= 0; reverse the body's axis instead of the sign of its length")
             if b.shape in ("rod", "disk", "cylinder") and zero_direction("the axis", owner, b.axis, b.span):
                 continue                       # (its inertia, built from the axis, says nothing more)
             not_finite("the inertia tensor", owner, [_raw(e, env) for row in b.inertia for e in row], b.span)
+    for sh in getattr(model, "shapes", ()):
+        owner = f"shape '{sh.name}'"
+        negative_lengths(sh.kind, sh.size, owner, sh.span, "lengths and radii are >= 0")
+        not_finite("the placement r", owner, [_raw(e, env) for e in sh.r], sh.span)
+        if sh.kind in ("rod", "disk", "cylinder"):
+            zero_direction("the axis", owner, sh.axis, sh.span)
     for j in model.joints:
         if j.kind in ("revolute", "prismatic", "cylindrical", "planar"):
             zero_direction("the axis", f"joint '{j.name}'", j.axis, j.span)

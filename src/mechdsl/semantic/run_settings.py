@@ -53,7 +53,7 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
 
 
 def _contact_rules(out: dict[str, object], spans: dict, diags: DiagnosticBag) -> None:
-    """The contact back end's own rules (impacts/stepper.py, impacts/options.py) for a model with
+    """The contact back end's own rules (impacts/one_step.py, impacts/contact_run.py) for a model with
     contacts: its method names (no `rk4`, no symplectic method), rest_speed and impact_order."""
     from ..diagnostics import UsageError
     from ..simulation.settings import ContactOptions

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import analysis     # its face: the first-integral search is imported when a run first searches
+from .. import analysis  # its face: the first-integral search is imported when a run first searches
 from ..eom import fold_inputs
 from ..eom.codegen import cache_dir
 from ..output.fileio import write_atomic

@@ -15,10 +15,10 @@ from dataclasses import field
 import casadi as ca
 
 from ..eom import fold_inputs, parameter_vector
+from ..eom.start import start_vector
 from ..model.records import record
 from .backends import backend
 from .drive import build_drive
-from ..eom.start import start_vector
 from .monitors import is_conservative
 from .plan import plan, reaction_signals
 from .registry import FIXED, check_method

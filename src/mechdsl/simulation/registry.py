@@ -100,7 +100,7 @@ SPECS: tuple[MethodSpec, ...] = (
 )
 METHODS: dict[str, MethodSpec] = {m.name: m for m in SPECS}
 
-# formulations of constrained models (mechdsl.dae.options.FORMULATIONS, checked by a test) and
+# formulations of constrained models (mechdsl.dae.dae_run.FORMULATIONS, checked by a test) and
 # their aliases; 'ode' names the unconstrained problem
 FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning", "augmented")
 FORMULATION_NAMES = ("auto", "ode", "dae", "index1", *FORMULATIONS)

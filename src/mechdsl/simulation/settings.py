@@ -147,9 +147,15 @@ class OdeOptions:
 class FixedStepOptions:
     """The settings group of the fixed-step methods (canonical ones and the ODE's rk, collocation)."""
 
-    dt: float | None = None             # the step (None: from rtol and the time scale, or span / 1000)
+    dt: float | None = None             # the step (None: from rtol and the time scale, or span / STEPS_DEFAULT)
     newton_tol: float = 1e-12           # implicit stages: Newton's tolerance
     max_newton: int = 30                # implicit stages: most Newton iterations a step
+
+    STEPS_DEFAULT = 1000                # (a class constant, not a field): canonical steps without dt
+
+    def step(self, span: float) -> float:
+        """The step of a canonical fixed-step run: dt, else span / 1000."""
+        return self.dt if self.dt is not None else span / self.STEPS_DEFAULT
 
     def validated(self, span: float, budget: int) -> "FixedStepOptions":
         dt = self.dt
@@ -292,6 +298,7 @@ def from_kwargs(t_end=None, **kw) -> SimulationSettings:
 
 def resolve(scene_settings: dict | None, args: dict, where=None) -> SimulationSettings:
     """argument > scene > default; ``args`` holds the CLI/API arguments (None = not given).
+    Without an end time from either, the run ends at DEFAULT_T_END (10 s), on every path.
 
     The scene's ``tolerance`` sets rtol and atol where neither the scene nor an argument
     sets them (docs/language.md).  A value the scene gave that fails validation (a scene's
@@ -324,10 +331,7 @@ def _resolve(scene_settings: dict | None, args: dict) -> SimulationSettings:
     for k, v in args.items():
         if v is not None:
             merged[_ALIASES.get(k, k)] = v
-    t_end = merged.pop("t_end", None)
-    if t_end is None:
-        raise UsageError("give t_end (no scene stop_time to default to)")
-    return from_kwargs(t_end, **merged)
+    return from_kwargs(merged.pop("t_end", None), **merged)     # no end time: DEFAULT_T_END
 
 
 class SettingError(UsageError):

@@ -27,6 +27,7 @@ from ..output.result import Result, versions
 from . import accuracy as A
 from .backends import backend, ignored_settings
 from .backends.ode import record_inputs
+from .prepared import Prepared, prepare
 from .problem import Problem, formulate
 from .settings import MIN_RTOL, SimulationSettings
 
@@ -38,7 +39,12 @@ def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
     return solve(formulate(eom, settings), progress=progress)
 
 
-def solve(problem: Problem, progress=None) -> Result:
+def solve(problem: Problem | Prepared, progress=None) -> Result:
+    """Solve a problem through the template: a ``Prepared`` problem (prepared.py) runs with what
+    was built for it; a Problem is prepared inside the timed run."""
+    setup = None
+    if isinstance(problem, Prepared):
+        problem, setup = problem.problem, problem.setup
     s = problem.settings
     back = backend(problem.backend)
     bar = None
@@ -48,7 +54,7 @@ def solve(problem: Problem, progress=None) -> Result:
         callback = lambda t, t1: bar.update(float(t))   # noqa: E731
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        r = back.run(problem, callback)
+        r = back.run(problem, callback) if setup is None else back.run(problem, callback, setup=setup)
     except MechError:
         _blame_signals(problem)
         raise
@@ -126,7 +132,7 @@ def _estimate_error(r: Result, problem: Problem) -> None:
     """A second run at a tolerance 100 times tighter (fixed step: a step 4 times shorter)."""
     s = problem.settings
     if backend(problem.backend).fixed_step:
-        dt = s.dt if s.dt is not None else (s.t_end - s.t_start) / 1000.0
+        dt = s.fixed_step.step(s.t_end - s.t_start)
         tighter = s.replace(dt=dt / 4, estimate_error=False, budget=max(s.budget, 4 * int((s.t_end - s.t_start) / dt) + 4))
         how = f"dt = {dt / 4:g}"
     elif s.rtol / 100 < MIN_RTOL:
@@ -145,7 +151,7 @@ def _estimate_error(r: Result, problem: Problem) -> None:
     tight_problem = formulate(problem.eom, tighter.validated())
     if problem.step_eom is not None:                  # the holds kept over each step there too
         tight_problem = dataclasses.replace(tight_problem, step_eom=problem.step_eom)
-    tight = solve(tight_problem)
+    tight = solve(prepare(tight_problem))
     est = A.error_estimate(r, tight)
     r.metadata["error_estimate"] = {"reference": how, "max_abs_difference": est,
                                     "reference_failed": None if tight.success else str(tight.failure)}

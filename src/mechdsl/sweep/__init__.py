@@ -69,7 +69,8 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     first = run_chunk  # noqa: F841  (keeps the import visible to pickling tools)
     method_note = None
     vector_why = _vectorizable(problem, names)
-    if vector_why is None and settings.method == "auto":
+    if problem.kind == "ode" and settings.method == "auto" and not names.structural:
+        # once for the sweep (the runs are prepared once and share the method, whatever the scheduler)
         settings, method_note = _resolve_auto(job, d, settings)
         job.settings = settings
         vector_why = _vectorizable(problem, names, settings.method)
@@ -209,7 +210,7 @@ def _resolve_auto(job, d, settings):
 
     row = {k: float(v[0]) for k, v in d.values.items()}
     try:
-        eom, s = _prepare(job, row)
+        eom, s, _ = _prepare(job, row)
     except Exception:  # noqa: BLE001 - an invalid first run: decide at the model's own start
         eom, s = job.model.eom, settings.replace(p=job.model.parameter_values, x0=None)
         from ..eom.start import start_vector

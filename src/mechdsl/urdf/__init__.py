@@ -22,7 +22,7 @@ import numpy as np
 from ..diagnostics import Diagnostic, DiagnosticBag, MechError, remember_source
 from . import robot as R
 from . import tree as T
-from .shapes import body_shape
+from .shapes import body_shapes, report_missing
 from .writer import write
 from .xmltree import read_bytes, span
 
@@ -43,22 +43,26 @@ class Imported:
     root: str = ""
     measured: list[str] = field(default_factory=list)             # links whose inertia is taken as measured
     kinds: dict[str, str] = field(default_factory=dict)           # URDF movable joint -> its URDF type
+    shapes: dict[str, tuple[str, int]] = field(default_factory=dict)  # Shape -> (URDF link, index of its <visual>)
 
 
 def import_urdf(path: str | os.PathLike, *, floating: bool = False, measured_inertia: bool = False,
-                package_dirs: dict[str, str] | None = None) -> str:
+                package_dirs: dict[str, str] | None = None, skip_missing_meshes: bool = False) -> str:
     """The .mech text of the robot in the URDF file ``path`` (see :func:`convert`)."""
-    return convert(path, floating=floating, measured_inertia=measured_inertia, package_dirs=package_dirs).text
+    return convert(path, floating=floating, measured_inertia=measured_inertia, package_dirs=package_dirs,
+                   skip_missing_meshes=skip_missing_meshes).text
 
 
 def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia: bool = False,
-            package_dirs: dict[str, str] | None = None, mech_name: str | None = None) -> Imported:
+            package_dirs: dict[str, str] | None = None, mech_name: str | None = None,
+            skip_missing_meshes: bool = False) -> Imported:
     """Import a URDF file.  ``floating``: the root link gets a Free joint (quaternion) instead of
     being fixed to the world; ``measured_inertia``: inertias that break the triangle inequality
     beyond rounding are accepted as measured data (``measured_inertia = true`` on those bodies);
-    ``package_dirs``: folders of ROS packages named in ``package://`` mesh paths.  Problems are
-    MechErrors located in the URDF (codes E020-E027, E508, E509); warnings are in
-    ``Imported.diagnostics``."""
+    ``package_dirs``: folders of ROS packages named in ``package://`` mesh paths;
+    ``skip_missing_meshes``: a mesh file that is absent is the warning W021 and is not drawn,
+    instead of the error E028.  Problems are MechErrors located in the URDF (codes E020-E028,
+    E508, E509); warnings are in ``Imported.diagnostics``."""
     from .. import __version__
 
     name = str(path)
@@ -74,8 +78,10 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
                                    span(name, robot.el), "import it with --floating (mech import) or floating=True "
                                                          "to give its root link a Free joint"))
     cache: dict = {}
-    shapes = {g.link.name: body_shape(g, name, dict(package_dirs or {}), diags, cache) for g in st.groups}
-    diags.items = _one_per_package(diags.items)
+    missing: list = []
+    shapes = {g.link.name: body_shapes(g, name, dict(package_dirs or {}), diags, cache, missing) for g in st.groups}
+    report_missing(missing, name, diags, skip_missing_meshes)
+    diags.raise_if_errors()
     mech_name = mech_name or str(Path(name).with_suffix(".mech").name)
     measured: dict[str, str] = {}
     for attempt in range(2):
@@ -91,7 +97,7 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
     mimics = {j.name: j.mimic for j in st.movable if j.mimic is not None}
     return Imported(w.text, w.model, w.bodies, w.joints, w.coordinates, diags.warnings,
                     [j.name for j in st.left_out], mimics, st.root.name, sorted(measured),
-                    {j.name: j.type for j in st.movable})
+                    {j.name: j.type for j in st.movable}, w.shapes)
 
 
 def _check(text: str, model: str, mech_name: str, w, robot: R.Robot, st: T.Structure,
@@ -135,25 +141,6 @@ def _check(text: str, model: str, mech_name: str, w, robot: R.Robot, st: T.Struc
     if measured_ok and out["measured"]:
         out["diagnostics"] = [d for d in out["diagnostics"] if d.severity != "error" or d.code != "E509"
                               or "triangle inequality" not in d.message]
-    return out
-
-
-def _one_per_package(items: list[Diagnostic]) -> list[Diagnostic]:
-    """A package that is not found is said once, at its first mesh, with the number of meshes."""
-    out, first, count = [], {}, {}
-    for d in items:
-        key = d.message.split(" is not drawn: ", 1)[-1] if d.code == "W021" and "package '" in d.message else None
-        if key is None:
-            out.append(d)
-            continue
-        count[key] = count.get(key, 0) + 1
-        if key not in first:
-            first[key] = len(out)
-            out.append(d)
-    for key, i in first.items():
-        if count[key] > 1:
-            out[i] = dataclasses.replace(out[i], message=out[i].message.replace(
-                " is not drawn: ", f" and {count[key] - 1} more of its package are not drawn: ", 1))
     return out
 
 

@@ -1,10 +1,16 @@
-"""The drawn shape of an imported body, from the <visual> elements of its links.
+"""The drawn shapes of an imported body, from the <visual> elements of its links.
 
-A body is drawn with one shape (``ir.Body.shape``, ``shape_size``, ``axis``), centred at its
-centre of mass (docs/animate.md): one primitive visual is kept as it is (a cylinder with its
-axis; a box turned by a multiple of 90 degrees with its edges permuted; a sphere); anything
-else (a mesh, a box turned otherwise, several visuals) becomes the box that bounds it, in body
-axes.  A mesh file that cannot be found or read is the located warning W021 and is not drawn.
+Every visual becomes one ``Shape`` component on its body (docs/language.md), placed where the
+URDF puts it: the visual's ``<origin xyz rpy>`` in its link's frame, composed with the link's
+placement in the body when the link is merged into another by a fixed joint.  Boxes, cylinders
+(axis along the visual's z, as in URDF) and spheres are kept as they are; a mesh becomes its
+bounding box in the mesh's own axes, scaled, its centre the centre of that box (so a mesh whose
+origin is at one end is drawn where it is).
+
+A mesh file that is absent (no such file, or its ROS package not found) is the located error
+E028 naming the <mesh> element, said once per missing package; with ``skip_missing_meshes``
+it is the warning W021 and the visual is not drawn (the dynamics do not need it).  A mesh file
+that is there but cannot be read (an unknown format, a damaged file) is W021 either way.
 """
 from __future__ import annotations
 
@@ -17,74 +23,100 @@ from ..diagnostics import DiagnosticBag
 from . import meshes
 from .robot import Visual
 from .tree import Group
-from .xmltree import span
+from .xmltree import Element, span
 
 
 @dataclass
-class Shape:
+class Placed:
+    """One drawn shape of a body, in the body's (the group link's) frame."""
+
     kind: str                     # box | cylinder | sphere
-    size: tuple[float, ...]
-    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    size: tuple[float, ...]       # box (lx, ly, lz), cylinder (R, L), sphere (R,)
+    p: np.ndarray                 # its centre
+    R: np.ndarray                 # its axes (columns) in body axes; a cylinder's axis is the third
+    rpy: np.ndarray | None        # the URDF's own rpy when R is exactly the visual's (no composition)
+    link: str                     # the URDF link of the visual
+    index: int                    # which <visual> of that link (0, 1, ...), Pinocchio's geometry suffix
+    verbatim: bool = False        # size and p are the URDF's numbers as written (not computed)
 
 
-def body_shape(g: Group, file: str, package_dirs: dict[str, str], diags: DiagnosticBag,
-               bbox_cache: dict) -> Shape | None:
-    placed = []
+@dataclass
+class Missing:
+    """A mesh file that is not there."""
+
+    el: Element
+    filename: str
+    why: str
+
+
+def body_shapes(g: Group, file: str, package_dirs: dict[str, str], diags: DiagnosticBag, cache: dict,
+                missing: list[Missing]) -> list[Placed]:
+    """The shapes of group ``g``, in the order of its links and their visuals.  Meshes that are
+    absent are appended to ``missing`` (reported by :func:`report_missing`); meshes that cannot
+    be read are the warning W021 in ``diags``."""
+    out: list[Placed] = []
     for mb in g.members:
-        for v in mb.link.visuals:
-            R = mb.R @ v.origin.R
-            p = mb.p + mb.R @ v.origin.p
-            placed.append((v, R, p))
-    if not placed:
-        return None
-    if len(placed) == 1:
-        v, R, p = placed[0]
-        if v.kind == "sphere":
-            return Shape("sphere", v.size)
-        if v.kind == "cylinder":
-            return Shape("cylinder", v.size, tuple(float(x) for x in R[:, 2]))
-        if v.kind == "box":
-            perm = np.abs(np.round(R))
-            if np.allclose(np.abs(R), perm, atol=1e-9) and np.allclose(perm.sum(axis=0), 1):
-                return Shape("box", tuple(float(x) for x in perm @ np.array(v.size)))
-    boxes = [b for b in (_bounds(v, R, p, file, package_dirs, diags, bbox_cache) for v, R, p in placed)
-             if b is not None]
-    if not boxes:
-        return None
-    lo = np.min([b[0] for b in boxes], axis=0)
-    hi = np.max([b[1] for b in boxes], axis=0)
-    size = hi - lo
-    if not np.any(size > 0):
-        return None
-    return Shape("box", tuple(float(x) for x in size))
+        own = mb is g.members[0]                  # the group's own link: the URDF's placement as it is
+        for k, v in enumerate(mb.link.visuals):
+            R = v.origin.R if own else mb.R @ v.origin.R
+            p = v.origin.p if own else mb.p + mb.R @ v.origin.p
+            rpy = v.origin.rpy if own else None
+            if v.kind in ("box", "cylinder", "sphere"):
+                out.append(Placed(v.kind, tuple(float(x) for x in v.size), np.array(p, float), R, rpy,
+                                  mb.link.name, k, own))
+                continue
+            box = _mesh_box(v, file, package_dirs, diags, cache, missing)
+            if box is None:
+                continue
+            lo, hi = box
+            size = hi - lo
+            if not np.any(size > 0):
+                continue
+            out.append(Placed("box", tuple(float(x) for x in size), p + R @ ((lo + hi) / 2), R, rpy,
+                              mb.link.name, k))
+    return out
 
 
-def _bounds(v: Visual, R, p, file, package_dirs, diags, cache) -> np.ndarray | None:
-    """The (min, max) corners of a visual in body axes."""
-    if v.kind == "box":
-        h = np.array(v.size) / 2
-        local = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
-    elif v.kind == "sphere":
-        r = v.size[0]
-        local = np.array([[-r, -r, -r], [r, r, r]])
-    elif v.kind == "cylinder":
-        r, L = v.size
-        ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-        rim = np.stack([r * np.cos(ang), r * np.sin(ang)], axis=1)
-        local = np.vstack([np.hstack([rim, np.full((16, 1), z)]) for z in (-L / 2, L / 2)])
-    else:
-        key = (v.filename, str(Path(file).parent))
-        if key not in cache:
-            path, why = meshes.resolve(v.filename, Path(file).parent, package_dirs)
-            cache[key] = meshes.bounding_box(path) if path is not None else (None, why)
-        box, why = cache[key]
-        if box is None:
-            diags.warning("W021", f"mesh '{v.filename}' is not drawn: {why}", span(file, v.el),
-                          "the dynamics do not need it; give the package folder with --package-dir NAME=DIR "
-                          "to draw the body with the mesh's bounding box")
-            return None
-        lo, hi = box * v.scale[None, :]
-        lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-        local = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    pts = local @ R.T + p
-    return np.array([pts.min(axis=0), pts.max(axis=0)])
+def _mesh_box(v: Visual, file, package_dirs, diags, cache, missing) -> tuple[np.ndarray, np.ndarray] | None:
+    """The (min, max) corners of a mesh in its own axes, scaled; None when not drawn."""
+    key = (v.filename, str(Path(file).parent))
+    if key not in cache:
+        path, why = meshes.resolve(v.filename, Path(file).parent, package_dirs)
+        cache[key] = ("absent", why) if path is None else meshes.bounding_box(path)
+    box, why = cache[key]
+    if isinstance(box, str):
+        missing.append(Missing(v.el, v.filename, why))
+        return None
+    if box is None:
+        diags.warning("W021", f"mesh '{v.filename}' is not drawn: {why}", span(file, v.el),
+                      "the dynamics do not need it; the link is drawn with its other visuals, or as the "
+                      "ellipsoid of its inertia")
+        return None
+    lo, hi = box * v.scale[None, :]
+    return np.minimum(lo, hi), np.maximum(lo, hi)
+
+
+def report_missing(missing: list[Missing], file: str, diags: DiagnosticBag, skip: bool) -> None:
+    """E028 (W021 when ``skip``) for the absent meshes: a package that is not found is said once,
+    at its first mesh, with the number of its meshes."""
+    first: dict[str, int] = {}
+    groups: list[list[Missing]] = []
+    for m in missing:
+        key = m.why if m.why.startswith("package '") else f"{len(groups)}"
+        if key in first:
+            groups[first[key]].append(m)
+        else:
+            first[key] = len(groups)
+            groups.append([m])
+    for grp in groups:
+        m, more = grp[0], len(grp) - 1
+        also = f" and {more} more of its package" if more else ""
+        if skip:
+            diags.warning("W021", f"mesh '{m.filename}'{also} {'are' if more else 'is'} not drawn: {m.why}",
+                          span(file, m.el), "the dynamics do not need meshes; give the package folder with "
+                                            "--package-dir NAME=DIR to draw them")
+        else:
+            first = "" if m.why.startswith("package '") else "check the path (relative to the URDF's folder); "
+            diags.error("E028", f"cannot find mesh '{m.filename}'{also}: {m.why}", span(file, m.el),
+                        f"{first}to go on without drawing {'them' if more else 'it'}, import with "
+                        "--skip-missing-meshes (skip_missing_meshes=True): the dynamics do not need meshes")

@@ -15,7 +15,7 @@ import numpy as np
 
 from .names import Names
 from .robot import Joint, Robot, rpy_matrix
-from .shapes import Shape
+from .shapes import Placed
 from .tree import Group, Structure
 
 WIDTH = 100
@@ -36,6 +36,7 @@ class Written:
     joints: dict[str, str] = field(default_factory=dict)       # URDF joint -> joint name
     coordinates: dict[str, tuple[str, ...]] = field(default_factory=dict)  # URDF joint -> its coordinates
     lines: dict[int, tuple[str, str]] = field(default_factory=dict)        # line -> ("link" | "joint", URDF name)
+    shapes: dict[str, tuple[str, int]] = field(default_factory=dict)       # Shape -> (URDF link, its <visual> index)
 
 
 def num(x: float) -> str:
@@ -51,9 +52,10 @@ def vec(v) -> str:
     return "{" + ", ".join(num(x) for x in v) + "}"
 
 
-def short(v) -> str:
-    """A drawing size: 6 significant digits are plenty."""
-    return "{" + ", ".join(num(float(f"{x:.6g}")) for x in v) + "}"
+def short(v, tiny: float = 1e-12) -> str:
+    """A drawing size or placement: 6 significant digits are plenty; entries below ``tiny``
+    (what composing rotations leaves of a zero, float32 noise of a mesh) are 0."""
+    return "{" + ", ".join(num(float(f"{x:.6g}") if abs(x) >= tiny else 0.0) for x in v) + "}"
 
 
 def mat(m) -> str:
@@ -114,7 +116,7 @@ class _Out:
             self.add(r, where if k == 0 else None)
 
 
-def write(robot: Robot, st: Structure, shapes: dict[str, Shape | None], *, floating: bool,
+def write(robot: Robot, st: Structure, shapes: dict[str, list[Placed]], *, floating: bool,
           measured: dict[str, str], version: str) -> Written:
     names = Names()
     o = _Out()
@@ -150,8 +152,10 @@ def write(robot: Robot, st: Structure, shapes: dict[str, Shape | None], *, float
             _root(o, g, body, names, floating, world_root, w, shapes, measured)
         else:
             _joint(o, g.inbound, g, st, body, jname, point_names, names, w)
-            _body(o, g, body[g.link.name], shapes.get(g.link.name), measured.get(g.link.name), w)
-        _members(o, g, body, point_names)
+            _body(o, g, body[g.link.name], measured.get(g.link.name), w)
+        placed = shapes.get(g.link.name, [])
+        _shapes(o, body[g.link.name], [sh for sh in placed if sh.link == g.link.name], names, w)
+        _members(o, g, body, point_names, placed, names, w)
     o.add(f"end {model};")
     w.text = "\n".join(o.lines) + "\n"
     w.lines = o.where
@@ -163,7 +167,7 @@ def _root(o, g: Group, body, names, floating, world_root, w, shapes, measured) -
     if world_root:
         o.add(f"  // link \"{g.link.name}\" (the root) is the world")
         return
-    _body(o, g, name, shapes.get(g.link.name), measured.get(g.link.name), w,
+    _body(o, g, name, measured.get(g.link.name), w,
           "the root: free-floating" if floating else "the root: fixed to the world")
     if floating:
         jn = names.take("root_joint")
@@ -173,7 +177,7 @@ def _root(o, g: Group, body, names, floating, world_root, w, shapes, measured) -
         o.add(f"  Fixed {names.take(g.link.name + '_fixed')}(parent = world, child = {name});")
 
 
-def _body(o, g: Group, name: str, shape: Shape | None, measured: str | None, w, note: str = "") -> None:
+def _body(o, g: Group, name: str, measured: str | None, w, note: str = "") -> None:
     what = f"  // link \"{g.link.name}\"" + (f" ({note})" if note else "")
     o.add(what)
     if measured:
@@ -185,15 +189,26 @@ def _body(o, g: Group, name: str, shape: Shape | None, measured: str | None, w, 
         args.append(("I = ", [vec(row) for row in g.I]))
     if measured:
         args.append("measured_inertia = true")
-    if shape is not None:
-        args.append(f'shape = "{shape.kind}"')
-        args.append(f"size = {short(shape.size)}")
-        if shape.kind == "cylinder" and tuple(shape.axis) != (1.0, 0.0, 0.0):
-            args.append(f"axis = {short(shape.axis)}")
     o.decl(f"Body {name}", args, ("link", g.link.name))
 
 
-def _members(o, g: Group, body, point_names) -> None:
+def _shapes(o, body: str, placed: list[Placed], names, w) -> None:
+    """One Shape per visual, named after its link, where the URDF places it (a cylinder's axis is
+    its z, the default); a visual's own rpy is written as the URDF gives it."""
+    for sh in placed:
+        sname = names.take(f"{sh.link}_visual")
+        w.shapes[sname] = (sh.link, sh.index)
+        tiny = 1e-6 * max(sh.size)                    # a micron on a metre-sized shape
+        fmt = vec if sh.verbatim else short          # the URDF's numbers as they are, else 6 digits
+        args = [f"body = {body}", f'shape = "{sh.kind}"', f"size = {fmt(sh.size)}"]
+        if sh.verbatim and np.any(sh.p) or not sh.verbatim and np.any(np.abs(sh.p) >= tiny):
+            args.append(f"r = {vec(sh.p) if sh.verbatim else short(sh.p, tiny)}")
+        if sh.kind != "sphere":
+            args += _orientation(sh.R, sh.rpy, vec if sh.rpy is not None else short)
+        o.decl(f"Shape {sname}", args, ("link", sh.link))
+
+
+def _members(o, g: Group, body, point_names, placed: list[Placed], names, w) -> None:
     for mb in g.members[1:]:
         o.add(f"  // link \"{mb.link.name}\", fixed to \"{mb.via.parent}\" by joint \"{mb.via.name}\": merged "
               f"into {body[g.link.name]}")
@@ -202,15 +217,16 @@ def _members(o, g: Group, body, point_names) -> None:
             args.append(f"r = {vec(mb.p)}")
         args += _orientation(mb.R, mb.rpy)
         o.decl(f"Point {point_names[mb.link.name]}", args, ("link", mb.link.name))
+        _shapes(o, body[g.link.name], [sh for sh in placed if sh.link == mb.link.name], names, w)
 
 
-def _orientation(R: np.ndarray, rpy: np.ndarray | None) -> list[str]:
+def _orientation(R: np.ndarray, rpy: np.ndarray | None, fmt=vec) -> list[str]:
     if rpy is not None:
-        return [f"rpy = {vec(rpy)}"] if np.any(rpy) else []
+        return [f"rpy = {fmt(rpy)}"] if np.any(rpy) else []
     if np.array_equal(R, np.eye(3)):
         return []
     found = rpy_of(R)
-    return [f"rpy = {vec(found)}"] if found is not None else [f"R = {mat(R)}"]
+    return [f"rpy = {fmt(found)}"] if found is not None else [f"R = {mat(R)}"]   # (exact: a rotation to 1e-6)
 
 
 def _joint(o, j: Joint, g: Group, st: Structure, body, jname, point_names, names, w) -> None:

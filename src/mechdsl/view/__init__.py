@@ -40,6 +40,7 @@ class View:
 
     @property
     def times(self) -> np.ndarray:
+        """The model times of the page's frames [s]."""
         import base64
 
         return np.frombuffer(base64.b64decode(self.data["times"]), "<f8")

@@ -75,8 +75,9 @@ def continuous(q: np.ndarray) -> np.ndarray:
 
 
 def _local(solid) -> dict:
-    return {"kind": solid.kind, "size": [float(v) for v in solid.size], "center": [float(v) for v in solid.center],
-            "quat": [float(v) for v in quaternions(solid.rot)]}
+    out = {"kind": solid.kind, "size": [float(v) for v in solid.size], "center": [float(v) for v in solid.center],
+           "quat": [float(v) for v in quaternions(solid.rot)]}
+    return out | ({"name": solid.name} if solid.name else {})
 
 
 def build_scene(geo, times, Q, *, up=None, title="", speed=1.0, events=()) -> dict:

@@ -39,9 +39,16 @@ class Backend(abc.ABC):
     accepts: dict[str, tuple] = {}            # values of other groups' settings that mean nothing to note
     fixed_step = False                        # fixed step (accuracy report and error estimate differ)
 
+    def prepare(self, problem):
+        """What a run builds before it integrates, built once for several runs that differ only
+        in parameters and start values (``simulation.prepared``); None: nothing to keep (the
+        back end's Functions are kept in the EOM's workspace anyway)."""
+        return None
+
     @abc.abstractmethod
-    def run(self, problem, progress) -> Result:
-        """Integrate the problem; a failure is kept in Result.failure, never raised."""
+    def run(self, problem, progress, setup=None) -> Result:
+        """Integrate the problem (with ``setup`` from ``prepare`` when given); a failure is kept
+        in Result.failure, never raised."""
 
     def describe(self, result: Result) -> dict:
         return {}

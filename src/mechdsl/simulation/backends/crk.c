@@ -30,7 +30,7 @@ typedef long long cint;   /* casadi_int of the generated code */
    an optional init(ctx, w) run once on freshly allocated work memory (the interpreter's
    constants).  Compiled code: ctx is the CasADi-convention function, eval crk_casadi_eval. */
 typedef int (*eval_fn)(const void *ctx, const double **arg, double **res, cint *iw, double *w);
-typedef struct {
+typedef struct Fun {
   eval_fn eval; const void *ctx; void (*init)(const void *ctx, double *w);
   cint sz_arg, sz_res, sz_iw, sz_w;
 } Fun;
@@ -39,6 +39,17 @@ typedef int (*casadi_fn)(const double **arg, double **res, cint *iw, double *w, 
 
 int crk_casadi_eval(const void *ctx, const double **arg, double **res, cint *iw, double *w) {
   return (*(const casadi_fn *)&ctx)(arg, res, iw, w, 0);
+}
+
+typedef int (*casadi_work_fn)(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w);
+
+/* A Fun of a C function with CasADi's calling convention and its work-size function, filled
+   into *out (for C callers without Python: an FMU's runtime, mechdsl.export). */
+void crk_fun_casadi(Fun *out, void *fn, void *work) {
+  memset(out, 0, sizeof *out);
+  out->eval = crk_casadi_eval;
+  out->ctx = fn;
+  ((casadi_work_fn)work)(&out->sz_arg, &out->sz_res, &out->sz_iw, &out->sz_w);
 }
 
 /* work memory of one Fun (arg, res, iw, w), at least na args and nr results */
@@ -623,7 +634,7 @@ static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const d
 static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
             double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, Resume *rs,
-            Drive *drv) {
+            Drive *drv, double *h_io) {
   int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
@@ -650,7 +661,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
   const double tb = grid[ngrid - 1];
   const double expo = -1.0 / (tab.err_order + 1.0);
   double e_start = INFINITY;      /* the event function at the current step's start */
-  double h_abs = 0.0;
+  double h_abs = 0.0, h_keep = 0.0;    /* h_keep: the step proposed for a next call (h_io) */
   clock_t deadline = 0;
   if (rs && rs->slice > 0) deadline = clock() + (clock_t)(rs->slice * CLOCKS_PER_SEC);
   if (rs && rs->started) {        /* go on where the last slice stopped */
@@ -671,14 +682,16 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       e_start = event_value(ev, NULL);
       if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
     }
-    if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
+    if (h_io && *h_io > 0) h_abs = fmin(*h_io, fabs(tb - t));   /* a step proposed by the caller's last call */
+    else if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
   }
+  h_keep = h_abs;
   while (k < ngrid) {
     if (ctl[1]) { status = CRK_CANCELLED; break; }
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
     if (h_abs < min_step) h_abs = min_step;
-    int accepted = 0, was_rejected = 0, nan_norm = 0;
-    double h = 0.0, t_new = t, h_kept = 0.0;
+    int accepted = 0, was_rejected = 0, nan_norm = 0, clipped = 0;
+    double h = 0.0, t_new = t, h_kept = 0.0, h_want = h_abs;
     const double t_break = drv ? drive_next_break(drv, t) : INFINITY;   /* steps end on samples */
     if (drv) drive_hold(drv, t);
     while (!accepted) {
@@ -692,8 +705,10 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
         h_abs = hmin;
       }
       h = h_abs;
+      h_want = h_abs;
       t_new = t + h;
-      if (t_new > tb) t_new = tb;
+      clipped = t_new > tb;
+      if (clipped) t_new = tb;
       if (t_new > t_break) { t_new = t_break; h_kept = h_abs; }    /* clipped: the proposal is kept */
       h = t_new - t;
       h_abs = fabs(h);
@@ -710,6 +725,9 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
         double factor = en == 0.0 ? MAX_FACTOR : fmin(MAX_FACTOR, SAFETY * pow(en, expo));
         if (was_rejected && factor > 1.0) factor = 1.0;
         h_abs *= factor;
+        /* a step shortened to end at tb says little about the next one: keep the step the
+           control wanted unless the short step's error already asks for less */
+        h_keep = (clipped && factor >= 1.0) ? fmax(h_abs, h_want) : h_abs;
         accepted = 1;
       } else {
         h_abs *= fmax(MIN_FACTOR, SAFETY * pow(en, expo));   /* fmax ignores a NaN norm, as scipy */
@@ -790,6 +808,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     }
   }
 done:
+  if (h_io) *h_io = h_keep;
   stats[0] = (double)steps; stats[1] = (double)r.nfev; stats[2] = (double)rejected; stats[3] = t;
   memcpy(xfail, y, (size_t)n * sizeof(double));
   work_free(&r.k); free(mem); free(flags);
@@ -800,8 +819,25 @@ int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
             double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv) {
   return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs,
-                  drv);
+                  drv, NULL);
 }
+
+/* crk_run with the first step taken from *h_io when it is positive (else the initial-step
+   heuristic) and the step proposed after the last accepted step written back: a caller that
+   advances in many short calls (an FMU's co-simulation steps, mechdsl.export) keeps the
+   step size from one call to the next instead of starting each call afresh. */
+int crk_run_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+              const double *p, double rtol, double atol, double hmin, cint max_steps,
+              double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io) {
+  return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, NULL,
+                  NULL, h_io);
+}
+
+int crk_run_events_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0,
+                     const double *u, const double *p, double rtol, double atol, double hmin, cint max_steps,
+                     double *X, double *stats, volatile cint *ctl, double *xfail,
+                     const Fun *gap, cint k, double offset, int samples, const double *gp,
+                     const Fun *imp, const double *rest, const double *limits, double *buf, cint cap, double *h_io);
 
 /* crk_run watching the gaps `gap` (a Fun (t, x, p) -> k gaps): stops at the first event
    (CRK_EVENT, the time in stats[3], the state in xfail); stats[4] counts the gap evaluations of
@@ -815,6 +851,16 @@ int crk_run_events(const Fun *ode, int method, cint nx, const double *grid, cint
                    double *X, double *stats, volatile cint *ctl, double *xfail,
                    const Fun *gap, cint k, double offset, int samples, const double *gp,
                    const Fun *imp, const double *rest, const double *limits, double *buf, cint cap) {
+  return crk_run_events_h(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail,
+                          gap, k, offset, samples, gp, imp, rest, limits, buf, cap, NULL);
+}
+
+/* crk_run_events with the step carried between calls in *h_io (as crk_run_h) */
+int crk_run_events_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0,
+                     const double *u, const double *p, double rtol, double atol, double hmin, cint max_steps,
+                     double *X, double *stats, volatile cint *ctl, double *xfail,
+                     const Fun *gap, cint k, double offset, int samples, const double *gp,
+                     const Fun *imp, const double *rest, const double *limits, double *buf, cint cap, double *h_io) {
   Events e;
   memset(&e, 0, sizeof e);
   e.gap = gap;
@@ -837,7 +883,7 @@ int crk_run_events(const Fun *ode, int method, cint nx, const double *grid, cint
   int status = CRK_NOMEM;
   if (ok)
     status = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e,
-                      NULL, NULL);
+                      NULL, NULL, h_io);
   stats[4] = (double)e.nev;
   stats[5] = (double)e.count;
   work_free(&e.gw); free(e.g); free(e.x);

@@ -32,14 +32,14 @@ import numpy as np
 
 from ...dae.augmented import AugmentedStepper, ode_eigenvalues
 from ...dae.baumgarte import BaumgarteStepper
+from ...dae.constrained_system import ConstrainedSystem
+from ...dae.dae_run import FORMULATIONS, DaeRun, resolve_formulation
 from ...dae.dof import dof_report, short_list, singular_ratio, singular_ratios
 from ...dae.ggl import GGLStepper
 from ...dae.init import initialize
-from ...dae.options import FORMULATIONS, DaeRun, resolve_formulation
 from ...dae.partitioning import PartitioningStepper
 from ...dae.projection import ProjectionStepper
-from ...dae.stepper import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
-from ...dae.system import ConstrainedSystem
+from ...dae.segments import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
 from ...diagnostics import UsageError
 from ...eom import parameter_vector
 from ...eom.start import fixed_start
@@ -119,7 +119,7 @@ class DaeBackend(Backend):
     groups = ("dae",)
     ignores = ("integrator_options",)
 
-    def run(self, problem, progress):
+    def run(self, problem, progress, setup=None):
         compiled, note = compiled_setting(problem)
         r = SegmentRun(problem.eom, problem.settings, progress, compiled).run()
         if note:
@@ -552,7 +552,7 @@ def choose_dae_method(opts: DaeRun, system, q, qd, t0, span) -> tuple[str, np.nd
 
 
 WORK_BUDGET = 1e7     # coordinate-steps (steps x (n + m)) a constrained run may be estimated to need
-# steps a period of an oscillation take at rtol: c rtol^(-1/order), lower bounds as in impacts/stepper.py
+# steps a period of an oscillation take at rtol: c rtol^(-1/order), lower bounds as in impacts/one_step.py
 PERIOD_STEPS = {"erk": (5, 1.0), "bdf": (5, 2.0), "adams": (12, 5.0)}
 
 

@@ -27,7 +27,7 @@ from ...eom.workspace import of
 from . import crk
 
 
-# scipy class (impacts.stepper) -> method of the compiled loop
+# scipy class (impacts.one_step) -> method of the compiled loop
 COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
 OK, EVENT = 0, 9
 

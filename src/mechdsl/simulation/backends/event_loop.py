@@ -23,8 +23,8 @@ import math
 import numpy as np
 
 from ...impacts.impact_map import ImpactError, ImpactSolution, solve_impact
+from ...impacts.one_step import IMPLICIT, make_solver, steps_per_period
 from ...impacts.rootfind import bracket_root
-from ...impacts.stepper import IMPLICIT, make_solver, steps_per_period
 from .event_flight import COMPILED_CLASSES, EVENT, OK
 
 

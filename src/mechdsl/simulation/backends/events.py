@@ -14,13 +14,13 @@ import numpy as np
 
 from ...diagnostics import Diagnostic, MechError, Span, UsageError
 from ...eom import parameter_vector
+from ...eom.start import start_vector
 from ...eom.workspace import of
+from ...impacts.contact_run import ContactRun
+from ...impacts.contact_system import ContactSystem, contact_functions
 from ...impacts.gaps import contact_gaps
-from ...impacts.options import ContactRun
-from ...impacts.system import ContactSystem, contact_functions
 from ...output import result as R
 from .. import record as Rec
-from ...eom.start import start_vector
 from ..monitors import is_conservative
 from ..record import ENERGY_NAMES
 from ..registry import events_method, spec
@@ -36,7 +36,7 @@ class EventsBackend(Backend):
     groups = ("contacts",)
     ignores = ("max_steps", "integrator_options")
 
-    def run(self, problem, progress):
+    def run(self, problem, progress, setup=None):
         return contact_run(problem.eom, problem.settings, progress)
 
     def describe(self, r):

@@ -31,14 +31,14 @@ import numpy as np
 
 from ...analysis.hamilton import hamiltonian
 from ...analysis.integrals import integral_signals
+from ...dae.constrained_system import ConstrainedSystem
 from ...dae.dof import dof_report
 from ...dae.init import initialize
-from ...dae.system import ConstrainedSystem
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
+from ...eom.start import fixed_start, start_vector
 from ...output.result import Failure, Result
 from .. import record as R
-from ...eom.start import fixed_start, start_vector
 from ..monitors import compute_signals, energy_drift_stats
 from ..record_dae import constrained_signals as record_signals
 from ..record_dae import multipliers, select_signals
@@ -58,7 +58,7 @@ class FixedStepBackend(Backend):
     ignores = ("rtol", "atol", "max_steps", "integrator_options", "compiled")
     fixed_step = True
 
-    def run(self, problem, progress):
+    def run(self, problem, progress, setup=None):
         return fixed_step_run(problem.eom, problem.settings, progress, step_eom=problem.step_eom)
 
     def describe(self, r):
@@ -91,8 +91,8 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     t0, t_end = s.t_start, s.t_end
     notes = []
     if dt is None:
-        dt = (t_end - t0) / 1000.0
-        notes.append("no step size given: dt = (stop time - start time)/1000")
+        dt = fs.step(t_end - t0)
+        notes.append(f"no step size given: dt = (stop time - start time)/{fs.STEPS_DEFAULT}")
     wall0 = _time.perf_counter()
 
     pv = parameter_vector(eom, s.p)

@@ -9,6 +9,7 @@ docs/simulate.md (users) and docs/internals/numerics.md (design).
 """
 from __future__ import annotations
 
+import copy
 import time
 from typing import Any
 
@@ -18,12 +19,12 @@ from ... import integrators as I
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
 from ...eom.codegen import casadi_functions
+from ...eom.start import start_vector
 from ...output.result import Result
 from .. import monitors as Mon
 from ..choose import NO_U, choose_method, fixed_step_count, min_step
 from ..diagnose import diagnose
 from ..drive import build_drive
-from ...eom.start import start_vector
 from ..record import ENERGY_NAMES
 from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
@@ -41,8 +42,13 @@ class OdeBackend(Backend):
     groups = ("ode", "fixed_step")
     accepts = {"formulation": ("ode",)}     # the unconstrained problem's own name: no note
 
-    def run(self, problem, progress):
-        return simulate_ode(problem.eom, problem.settings, progress, drive=problem.drive)
+    def prepare(self, problem) -> "OdeSetup":
+        return OdeSetup.build(problem.eom, problem.settings, problem.drive)
+
+    def run(self, problem, progress, setup=None):
+        setup = setup if setup is not None else self.prepare(problem)
+        pv = parameter_vector(problem.eom, problem.settings.p)
+        return setup.run(pv, start_vector(problem.eom, problem.settings.x0, pv), progress)
 
     def describe(self, r):
         method = r.metadata.get("method")
@@ -52,118 +58,174 @@ class OdeBackend(Backend):
 
 
 def simulate_ode(eom, s, progress=None, drive=None) -> Result:
-    """The ODE back end: minimal coordinates, CasADi integrator plugins or scipy (settings
-    ``s`` validated by mechdsl.simulation.settings; ``drive``: the inputs' signals,
-    mechdsl.simulation.drive, built by formulate)."""
-    wall0 = time.perf_counter()
-    functions = s.ode.functions
-    method = s.method
-    if method != "auto" and spec(method).family not in ODE_FAMILIES:
-        raise UsageError(f"method '{method}' does not apply to an ODE model (methods: "
-                         f"{', '.join(['auto', *ode_methods()])}, or a fixed-step method)")
-    t0, t1, rtol, atol, npts = s.t_start, s.t_end, s.rtol, s.atol, s.points or DEFAULT_POINTS
+    """One ODE run (settings ``s`` validated by mechdsl.simulation.settings; ``drive``: the
+    inputs' signals, mechdsl.simulation.drive, built by formulate): ``OdeSetup.build`` then
+    ``OdeSetup.run`` at the settings' parameters and start values."""
+    setup = OdeSetup.build(eom, s, drive)
     pv = parameter_vector(eom, s.p)
-    xs = start_vector(eom, s.x0, pv)
-    out_names = _check_outputs(eom, s.outputs)
-    compiled = s.compiled
-    if drive is None:
-        drive = build_drive(eom, s.inputs, t0, t1, xs)
-    uv = drive.vector(t0)
-    vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
-    post = casadi_functions(eom, names=("mass_matrix",))     # the failure diagnosis reads M
-    grid = np.linspace(t0, t1, npts)
-    meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
-                            "warnings": [], "notes": []}
-    if eom.inputs:
-        meta["inputs"] = drive.describe()
-    if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
-        return _no_state_result(eom, grid, pv, out_names, meta, wall0, drive)
-    auto_compiled = None
-    if method == "auto":
-        method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
-        meta["auto"] = info
-        if method == "erk" and compiled is not False and functions is None:
-            method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
-    else:
-        reason = "requested"
-    if spec(method).compiled_loop and compiled is False:     # compiled = false wins: never compile
-        method, reason = scipy_name(method), (f"{method} requested with compiled = false: its loop would compile; "
-                                              f"{scipy_name(method)} is the same method stepped in Python")
-    if "compiled" not in meta:
-        meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
-    meta.update(method=method, method_reason=reason, integrator=spec(method).description)
-    loop_compiled = None
-    if functions is not None:
-        funcs = functions
-    elif spec(method).compiled_loop:     # the stepping loop, the model compiled or interpreted (crk.py)
-        funcs, loop_compiled = _compile_loop(eom, vm, meta, fallback="erk" if auto_compiled else None,
-                                             compiled=compiled, drive=drive)
-        if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
-            method, loop_compiled = "erk", None
-            meta.update(method=method, integrator=spec(method).description,
-                        method_reason=reason.split(";")[0] + "; the compiled stepping loop it would pick could "
-                                                             "not be built (see the warning): erk in the virtual machine")
-            meta["compiled"] = "no: auto (the compiled loop could not be built)"
-    elif compiled:
-        funcs = casadi_functions(eom, compiled=True,
-                                 names=("ode", "ode_jacobian") if spec(method).needs_jacobian else ("ode",),
-                                 jacobian="forward" if spec(method).forward_only else "full")
-        funcs["ode"]  # compile now (notes below)
-        funcs = drive.closed(funcs)
-    else:
-        funcs = vm
-    unavailable = compiled and loop_compiled is None and not getattr(funcs, "compiled", False)
-    if unavailable:     # said once, as a warning (not also as a note)
-        meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
-    else:
-        meta["notes"] += list(getattr(funcs, "notes", []))
-    max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
-    extra = dict(s.integrator_options or {})
-    bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
-    breaks = drive.breakpoints(t0, t1)
-    try:
-        if breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
-            run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar, eom,
-                                     t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
+    return setup.run(pv, start_vector(eom, s.x0, pv), progress)
+
+
+class OdeSetup:
+    """What an ODE run builds before it integrates, built once (``prepare`` of the simulation
+    layer): the method (``auto`` resolved at the settings' start values and parameters), the
+    Functions it integrates (virtual machine, compiled, or the compiled stepping loop), the
+    output grid, the step budget and the integrator's options.  ``run(pv, xs)`` integrates
+    from any start and parameter values with them: nothing is built again (CasADi plug-ins:
+    ``integrator()`` is the integrator a run uses, cached with its Functions)."""
+
+    def __init__(self, eom, s, drive, grid, method, reason, funcs, post, meta, loop_compiled, out_names):
+        self.eom, self.settings, self.drive, self.grid = eom, s, drive, grid
+        self.method, self.reason, self.funcs, self.post = method, reason, funcs, post
+        self.meta, self.loop_compiled, self.out_names = meta, loop_compiled, out_names
+        npts = len(grid)
+        self.max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
+        self.extra = dict(s.integrator_options or {})
+
+    @classmethod
+    def build(cls, eom, s, drive=None) -> "OdeSetup":
+        functions = s.ode.functions
+        method = s.method
+        if method != "auto" and spec(method).family not in ODE_FAMILIES:
+            raise UsageError(f"method '{method}' does not apply to an ODE model (methods: "
+                             f"{', '.join(['auto', *ode_methods()])}, or a fixed-step method)")
+        t0, t1, rtol, npts = s.t_start, s.t_end, s.rtol, s.points or DEFAULT_POINTS
+        pv = parameter_vector(eom, s.p)
+        xs = start_vector(eom, s.x0, pv)
+        out_names = _check_outputs(eom, s.outputs)
+        compiled = s.compiled
+        if drive is None:
+            drive = build_drive(eom, s.inputs, t0, t1, xs)
+        uv = drive.vector(t0)
+        vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
+        post = casadi_functions(eom, names=("mass_matrix",))     # the failure diagnosis reads M
+        grid = np.linspace(t0, t1, npts)
+        meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
+                                "warnings": [], "notes": []}
+        if eom.inputs:
+            meta["inputs"] = drive.describe()
+        if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
+            return cls(eom, s, drive, grid, None, None, vm, post, meta, None, out_names)
+        auto_compiled = None
+        if method == "auto":
+            method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
+            meta["auto"] = info
+            if method == "erk" and compiled is not False and functions is None:
+                method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
         else:
-            run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar, eom, t0, t1,
-                              meta["notes"], 10 * s.budget, u=uv)
-    finally:
-        bar.close()
-    if fixed is not None:
-        meta["fixed_steps"] = fixed
-    failure = None
-    if run.error is not None or run.reached < len(grid):
-        u_fail = drive.vector(float(grid[max(run.reached - 1, 0)]))
-        failure = diagnose(eom, funcs, post, method, run, grid, xs, pv, rtol, atol, max_steps, extra, u=u_fail)
-    n_ok = max(run.reached, 1)
-    X = run.X[:n_ok].copy()
-    X[0] = xs
-    t = grid[:n_ok].copy()
-    U = drive.values(t, X)
-    signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
-    record_inputs(drive, U, signals, meta)
-    Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
-    stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
-             "points": int(n_ok), "wall_time": time.perf_counter() - wall0}
-    stats.update(Mon.energy_drift_stats(signals))
-    stats.update(Mon.integral_drift(signals, eom))
-    stats["raw"] = run.stats
-    if run.messages.strip():
-        meta["integrator_messages"] = _dedup(run.messages)
-    meta["conservative"] = Mon.is_conservative(eom)
-    meta["options"] = {"t_start": t0, "t_end": t1, "rtol": rtol, "atol": atol, "points": npts,
-                       "method": method,
-                       "compiled": (bool(getattr(funcs, "compiled", False)) if loop_compiled is None
-                                    else bool(loop_compiled) and meta.get("loop_engine") == "compiled"),
-                       "max_steps": max_steps, "outputs": list(out_names),
-                       "parameters": dict(zip(eom.params, map(float, pv))),
-                       "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
-                                 **{f"der({c})": float(v) for c, v in zip(eom.coords, xs[eom.n:])}},
-                       **({"integrator_options": extra} if extra else {})}
-    n = eom.n
-    return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
-                  stats=stats, metadata=meta, failure=failure)
+            reason = "requested"
+        if spec(method).compiled_loop and compiled is False:     # compiled = false wins: never compile
+            method, reason = scipy_name(method), (f"{method} requested with compiled = false: its loop would "
+                                                  f"compile; {scipy_name(method)} is the same method stepped in Python")
+        if "compiled" not in meta:
+            meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
+        meta.update(method=method, method_reason=reason, integrator=spec(method).description)
+        loop_compiled = None
+        if functions is not None:
+            funcs = functions
+        elif spec(method).compiled_loop:     # the stepping loop, the model compiled or interpreted (crk.py)
+            funcs, loop_compiled = _compile_loop(eom, vm, meta, fallback="erk" if auto_compiled else None,
+                                                 compiled=compiled, drive=drive)
+            if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
+                method, loop_compiled = "erk", None
+                meta.update(method=method, integrator=spec(method).description,
+                            method_reason=reason.split(";")[0] + "; the compiled stepping loop it would pick "
+                                                                 "could not be built (see the warning): erk in "
+                                                                 "the virtual machine")
+                meta["compiled"] = "no: auto (the compiled loop could not be built)"
+        elif compiled:
+            funcs = casadi_functions(eom, compiled=True,
+                                     names=("ode", "ode_jacobian") if spec(method).needs_jacobian else ("ode",),
+                                     jacobian="forward" if spec(method).forward_only else "full")
+            funcs["ode"]  # compile now (notes below)
+            funcs = drive.closed(funcs)
+        else:
+            funcs = vm
+        unavailable = compiled and loop_compiled is None and not getattr(funcs, "compiled", False)
+        if unavailable:     # said once, as a warning (not also as a note)
+            meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
+        else:
+            meta["notes"] += list(getattr(funcs, "notes", []))
+        return cls(eom, s, drive, grid, method, meta["method_reason"], funcs, post, meta, loop_compiled, out_names)
+
+    def options(self, fixed_steps: int | None = None, hmin: float | None = None) -> dict:
+        """The CasADi integrator options a run of this setup uses (CasADi plug-ins)."""
+        s, m = self.settings, spec(self.method)
+        return I.casadi_options(m.plugin, m.options, s.rtol, s.atol, self.max_steps, fixed_steps, self.extra,
+                                hmin=min_step(s.t_start, s.t_end) if hmin is None else hmin)
+
+    def integrator(self, ode=None):
+        """The casadi.integrator a run of this setup integrates with over its output grid (a
+        CasADi plug-in without fixed steps): the same cached Function a run builds."""
+        m = spec(self.method)
+        if m.family != "casadi" or m.fixed_step:
+            raise ValueError(f"{self.method} has no CasADi integrator over a grid")
+        return I.cached_integrator(m.plugin, self.funcs["ode"] if ode is None else ode, self.grid, self.options())
+
+    def run(self, pv, xs, progress=None) -> Result:
+        """Integrate from the start ``xs`` at the parameters ``pv`` (nothing is built again)."""
+        eom, s, drive, grid = self.eom, self.settings, self.drive, self.grid
+        wall0 = time.perf_counter()
+        meta = copy.deepcopy(self.meta)
+        out_names = self.out_names
+        if self.method is None:
+            return _no_state_result(eom, grid, pv, out_names, meta, wall0, drive)
+        method, funcs, max_steps, extra = self.method, self.funcs, self.max_steps, self.extra
+        t0, t1, rtol, atol = s.t_start, s.t_end, s.rtol, s.atol
+        uv = drive.vector(t0)
+        loop_compiled = self.loop_compiled
+        bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
+        breaks = drive.breakpoints(t0, t1)
+        try:
+            if breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
+                run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra,
+                                         bar, eom, t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
+            else:
+                run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar,
+                                  eom, t0, t1, meta["notes"], 10 * s.budget, u=uv)
+        finally:
+            bar.close()
+        if fixed is not None:
+            meta["fixed_steps"] = fixed
+        failure = None
+        if run.error is not None or run.reached < len(grid):
+            u_fail = drive.vector(float(grid[max(run.reached - 1, 0)]))
+            failure = diagnose(eom, funcs, self.post, method, run, grid, xs, pv, rtol, atol, max_steps, extra,
+                               u=u_fail)
+        n_ok = max(run.reached, 1)
+        X = run.X[:n_ok].copy()
+        X[0] = xs
+        t = grid[:n_ok].copy()
+        return self.record(t, X, pv, xs, meta, run, failure, loop_compiled, wall0)
+
+    def record(self, t, X, pv, xs, meta, run, failure, loop_compiled, wall0) -> Result:
+        """The Result of a trajectory X on the times t: signals, statistics, metadata."""
+        eom, s, drive, funcs = self.eom, self.settings, self.drive, self.funcs
+        method, max_steps, extra, out_names = self.method, self.max_steps, self.extra, self.out_names
+        U = drive.values(t, X)
+        signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
+        record_inputs(drive, U, signals, meta)
+        Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
+        stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
+                 "points": int(len(t)), "wall_time": time.perf_counter() - wall0}
+        stats.update(Mon.energy_drift_stats(signals))
+        stats.update(Mon.integral_drift(signals, eom))
+        stats["raw"] = run.stats
+        if run.messages.strip():
+            meta["integrator_messages"] = _dedup(run.messages)
+        meta["conservative"] = Mon.is_conservative(eom)
+        meta["options"] = {"t_start": s.t_start, "t_end": s.t_end, "rtol": s.rtol, "atol": s.atol,
+                           "points": len(self.grid), "method": method,
+                           "compiled": (bool(getattr(funcs, "compiled", False)) if loop_compiled is None
+                                        else bool(loop_compiled) and meta.get("loop_engine") == "compiled"),
+                           "max_steps": max_steps, "outputs": list(out_names),
+                           "parameters": dict(zip(eom.params, map(float, pv))),
+                           "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
+                                     **{f"der({c})": float(v) for c, v in zip(eom.coords, xs[eom.n:])}},
+                           **({"integrator_options": extra} if extra else {})}
+        n = eom.n
+        return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
+                      stats=stats, metadata=meta, failure=failure)
 
 
 def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None):

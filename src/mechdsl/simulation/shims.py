@@ -15,8 +15,8 @@ import numpy as np
 
 from ..diagnostics import UsageError
 from ..eom import parameter_vector
-from ..output.result import Result
 from ..eom.start import start_vector
+from ..output.result import Result
 from .settings import from_kwargs
 from .template import simulate
 

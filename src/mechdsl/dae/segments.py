@@ -20,8 +20,8 @@ import numpy as np
 
 from ..eom.codegen import compile_functions
 from ..integrators import captured_messages, dae_function, make_integrator
-from .options import DaeRun
-from .system import ConstrainedSystem
+from .constrained_system import ConstrainedSystem
+from .dae_run import DaeRun
 
 
 class StepError(Exception):
