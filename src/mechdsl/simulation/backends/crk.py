@@ -110,6 +110,11 @@ def runtime():
                                             _DP, ctypes.c_longlong])):
                 fn = getattr(lib, name)
                 fn.restype, fn.argtypes = ctypes.c_int, args
+            lib.crk_run_batch.restype = ctypes.c_longlong
+            lib.crk_run_batch.argtypes = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong,
+                                          ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_longlong, ctypes.c_double,
+                                          ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P,
+                                          _I64P, _I64P]
         except (OSError, AttributeError) as e:
             lib, note = None, f"cannot load the stepping loop's library {path}: {e}"
     out = (lib, note)
@@ -387,6 +392,27 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
         run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
         run.fail_time, run.fail_state = t_end, xfail.copy()
     return run
+
+
+def run_batch(loop, method, grid, X0, P, u, rtol, atol, max_steps, hmin):
+    """An ensemble in one C call (crk_run_batch): run j from X0[j] at the parameters P[j], the
+    inputs u shared, each taking the steps a single run takes.  Returns (X (m, ngrid, nx),
+    stats (m, 4): steps, evaluations, rejected, last time; status (m); rows reached (m))."""
+    grid = np.ascontiguousarray(grid, float)
+    X0 = np.ascontiguousarray(np.atleast_2d(X0), float)
+    m, nx = X0.shape
+    P = np.ascontiguousarray(np.reshape(P, (m, -1)), float)
+    uc = np.ascontiguousarray(np.zeros(0) if u is None else np.ravel(u), float)
+    X = np.full((m, len(grid), nx), np.nan)
+    stats = np.zeros((m, 4))
+    status = np.zeros(m, dtype=np.int64)
+    reached = np.zeros(m, dtype=np.int64)
+    ctl = np.zeros(2, dtype=np.int64)
+    loop.rt.crk_run_batch(loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), m, _ptr(X0),
+                          _ptr(uc), _ptr(P), P.shape[1], float(rtol), float(atol), float(hmin), int(max_steps),
+                          _ptr(X), _ptr(stats), status.ctypes.data_as(_I64P), reached.ctypes.data_as(_I64P),
+                          ctl.ctypes.data_as(_I64P))
+    return X, stats, status, reached
 
 
 # --------------------------------------------------------------------------- method = auto
