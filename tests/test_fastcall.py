@@ -3,20 +3,19 @@ preallocated buffers, compiled, with p and u bound.  It must give what the plain
 gives (at random states, the parameters and inputs bound as asked)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import mechdsl
+
+from conftest import MODELS
 from mechdsl.eom.codegen import find_compiler
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("compiled", [True, False])
 def test_fast_function_equals_the_plain_call(compiled):
-    m = mechdsl.load(str(ROOT / "models" / "arm7.mech"))
+    m = mechdsl.load(str(MODELS / "arm7.mech"))
     f = m.fast_function(compiled=compiled)
     plain = m.casadi()["ode"]
     assert f.inputs == ("t", "x")
@@ -32,7 +31,7 @@ def test_fast_function_equals_the_plain_call(compiled):
 
 
 def test_fast_function_binds_parameters_and_inputs():
-    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    m = mechdsl.load(str(MODELS / "cart_pole.mech"), model="CartPole")
     p = m.parameter_vector(l=2.0)
     f = m.fast_function(p=p, u=[3.0])
     x = np.array([0.1, 0.4, -0.2, 0.3])

@@ -8,19 +8,18 @@ physics says: the rod ends at rest flat on the floor, the impacts' energy losses
 the energy it had, and loosening the tolerance never adds events."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import mechdsl
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import MODELS
+
 
 
 @pytest.fixture(scope="module")
 def rod():
-    return mechdsl.load(str(ROOT / "models" / "falling_rod.mech"), scene="Drop")
+    return mechdsl.load(str(MODELS / "falling_rod.mech"), scene="Drop")
 
 
 def test_the_falling_rod_comes_to_rest_at_every_tolerance_with_fewer_events_when_looser(rod):
@@ -42,7 +41,7 @@ def test_the_falling_rod_comes_to_rest_at_every_tolerance_with_fewer_events_when
 
 
 def test_a_bouncing_ball_at_a_loose_tolerance_closes_its_contact():
-    m = mechdsl.load(str(ROOT / "models" / "bouncing_ball.mech"), scene="Bounce")
+    m = mechdsl.load(str(MODELS / "bouncing_ball.mech"), scene="Bounce")
     tight = m.simulate(rtol=1e-8, atol=1e-8)
     loose = m.simulate(rtol=1e-5, atol=1e-5)
     for r in (tight, loose):

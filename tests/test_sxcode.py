@@ -131,11 +131,10 @@ def test_c_size_and_chunks_grow_linearly_with_the_operations():
     """The C of an N-link chain's ode: bytes per operation flat from N = 10 to 80, every chunk
     at most CHUNK operations (gcc's time then grows linearly; benchmarks/codegen_scaling.py)."""
     import mechdsl
-    from pathlib import Path
-
+    from conftest import MODELS
     from mechdsl.eom.codegen import casadi_functions
 
-    text = (Path(__file__).resolve().parents[1] / "models" / "nlink_pendulum.mech").read_text()
+    text = (MODELS / "nlink_pendulum.mech").read_text()
     per_op = []
     for n in (10, 40, 80):
         m = mechdsl.loads(re.sub(r"parameter Integer N = \d+", f"parameter Integer N = {n}", text))

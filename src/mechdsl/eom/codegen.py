@@ -106,6 +106,16 @@ def _check_mass_matrix(eom):
 SX_SOLVE_MAX = 40      # sx=True: unrolled LDL^T up to this many coordinates (O(n^3/6) SX operations)
 
 
+def _lean(eom, plain):
+    """Small models' ode from M and bias without the terms that cancel (mechdsl.eom.lean)."""
+    from .lean import lean_ode
+
+    ca = _ca()
+    s = _Symbols(eom)
+    return lean_ode(eom, plain, s, lambda M, b: _function("ode", s.txup, [ca.vertcat(s.qd, ldl_solve(M, b))], TXUP,
+                                                          ["xdot"]), _SMOOTH_OPS)
+
+
 def ldl_solve(M, b):
     """M^-1 b for a symmetric M by an unrolled LDL^T factorization without pivoting (SX).
 
@@ -162,19 +172,18 @@ def build_ode(eom, sx: bool = False, loop: bool = False):
         f = looped_ode(eom)
         if f is not None:
             return f
-    from .lean import lean_ode      # sx: small models' M and bias without the terms that cancel
 
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
         f = _function("ode", s.txup, [xdot], TXUP, ["xdot"])
-        return lean_ode(eom, f) if sx else f
+        return _lean(eom, f) if sx else f
     _check_mass_matrix(eom)
     if n == 1:  # one coordinate: the "solve" is a division, exact in SX
         xdot = ca.vertcat(s.qd, eom.bias / eom.M)
         return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
     if sx and n <= SX_SOLVE_MAX:
         xdot = ca.vertcat(s.qd, ldl_solve(ca.SX(eom.M), ca.SX(eom.bias)))
-        return lean_ode(eom, _function("ode", s.txup, [xdot], TXUP, ["xdot"]))
+        return _lean(eom, _function("ode", s.txup, [xdot], TXUP, ["xdot"]))
     mb = _function("mass_bias", s.txup, [eom.M, eom.bias], TXUP, ["M", "bias"])
     t = ca.MX.sym("t")
     x = ca.MX.sym("x", 2 * n)
@@ -544,12 +553,7 @@ _SETS_MAX = 64
 # --------------------------------------------------------------------------- C code generation
 
 
-def cache_dir() -> Path:
-    d = os.environ.get("MECHDSL_CACHE")
-    if d:
-        return Path(d)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "mechdsl"
+from .cachedir import cache_dir  # noqa: E402,F401  (codegen.cache_dir: where libraries and entries go)
 
 
 def _which(name: str) -> str | None:

@@ -23,20 +23,19 @@ LEAN_MAX = 6          # coordinates: above this the recursive route's ode is the
 PROBES = 16
 
 
-def _smooth(e) -> bool:
+def _smooth(e, smooth_ops) -> bool:
     import casadi as ca
-
-    from .codegen import _SMOOTH_OPS
 
     f = ca.Function("e", ca.symvar(e), [e]) if ca.symvar(e) else None
     if f is None:
         return True
-    ok = {getattr(ca, "OP_" + o) for o in _SMOOTH_OPS if hasattr(ca, "OP_" + o)}
+    ok = {getattr(ca, "OP_" + o) for o in smooth_ops if hasattr(ca, "OP_" + o)}
     return all(f.instruction_id(k) in ok for k in range(f.n_instructions()))
 
 
-def lean_entries(entries, inputs, rng) -> list:
-    """Each scalar SX entry with the scalar ``inputs`` it does not depend on set to 0."""
+def lean_entries(entries, inputs, rng, smooth_ops) -> list:
+    """Each scalar SX entry with the scalar ``inputs`` it does not depend on set to 0 (entries
+    made of ``smooth_ops`` only: codegen._SMOOTH_OPS)."""
     import casadi as ca
 
     z = ca.vertcat(*inputs)
@@ -50,32 +49,30 @@ def lean_entries(entries, inputs, rng) -> list:
     for i in range(E.numel()):
         e = E[i]
         zero = [j for j in range(n) if scale[i, j] <= 1e-12 * max(1.0, scale[i].max()) and ca.depends_on(e, z[j])]
-        if zero and _smooth(e):
+        if zero and _smooth(e, smooth_ops):
             e = ca.substitute(e, ca.vertcat(*[z[j] for j in zero]), ca.SX.zeros(len(zero)))
         out.append(e)
     return out
 
 
-def lean_ode(eom, plain):
-    """The ``ode`` of leaned M and bias solved by ``codegen.ldl_solve``, when it has fewer
-    instructions than ``plain`` (an SX Function) and equals it at random points; else ``plain``."""
+def lean_ode(eom, plain, s, build, smooth_ops):
+    """The ``ode`` of leaned M and bias, when it has fewer instructions than ``plain`` (an SX
+    Function) and equals it at random points; else ``plain``.  ``s``: codegen's symbols of
+    ``eom``; ``build(M, b)``: the ode Function of M qdd = b (codegen: its LDL^T solve);
+    ``smooth_ops``: codegen._SMOOTH_OPS (this module imports nothing of codegen's)."""
     import casadi as ca
-
-    from .codegen import TXUP, _Symbols, _function, ldl_solve
 
     n = eom.n
     if n < 2 or n > LEAN_MAX or not plain.is_a("SXFunction"):
         return plain
-    s = _Symbols(eom)
     inputs = ca.vertsplit(ca.vertcat(s.t, s.x, s.u, s.p))
     rng = np.random.default_rng(20250611)
     M, b = ca.SX(eom.M), ca.SX(eom.bias)
     if M.shape != (n, n):
         return plain
-    ml = lean_entries([M[i, j] for j in range(n) for i in range(n)], inputs, rng)
-    bl = lean_entries([b[i] for i in range(n)], inputs, rng)
-    lean = _function("ode", s.txup, [ca.vertcat(s.qd, ldl_solve(ca.reshape(ca.vertcat(*ml), n, n), ca.vertcat(*bl)))],
-                     TXUP, ["xdot"])
+    ml = lean_entries([M[i, j] for j in range(n) for i in range(n)], inputs, rng, smooth_ops)
+    bl = lean_entries([b[i] for i in range(n)], inputs, rng, smooth_ops)
+    lean = build(ca.reshape(ca.vertcat(*ml), n, n), ca.vertcat(*bl))
     if lean.n_instructions() >= plain.n_instructions():
         return plain
     for _ in range(PROBES):
