@@ -211,9 +211,12 @@ class Mapped:
                        ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
         self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.nout = f.nnz_out(0)
+        sp = f.sparsity_out(0)      # the program writes the nonzeros: entries that are structurally 0 are not
+        self.dense = sp.numel()
+        self.where = None if sp.is_dense() else np.array(sp.find(), dtype=np.int64)
 
     def __call__(self, npts: int, rows) -> np.ndarray:
-        """Values (npts, nnz of output 0); ``rows``: per input an array of npts rows (its
+        """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its
         entries, C order) or one row shared by every point."""
         arrs, strides = [], []
         for a, nnz in zip(rows, self.nnz_in):
@@ -228,7 +231,11 @@ class Mapped:
                                  out.shape[1])
         if status:
             raise RuntimeError(f"evaluation failed (status {status})")
-        return out[:, :self.nout]
+        if self.where is None:
+            return out[:, :self.nout]
+        full = np.zeros((npts, self.dense))
+        full[:, self.where] = out[:, :self.nout]
+        return full
 
 
 def mapped(f):
