@@ -631,10 +631,24 @@ static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const d
   return 0;
 }
 
+/* The last step's continuous extension, kept for a caller that interpolates after the call
+   (crk_run_dense): method, t_old, h, t_new, then y_old, y_new and f(t_new, y_new) (n each),
+   then the interpolant's coefficients (7 x n: the stages K of dopri5, F of dop853). */
+#define CRK_DENSE_SIZE(nx) (4 + 10 * (nx))
+
+static void dense_keep(double *out, const Dense *d, const double *y, const double *f) {
+  const cint n = d->n;
+  out[0] = (double)d->method; out[1] = d->t_old; out[2] = d->h; out[3] = d->t_old + d->h;
+  memcpy(out + 4, d->yold, (size_t)n * sizeof(double));
+  memcpy(out + 4 + n, y, (size_t)n * sizeof(double));
+  memcpy(out + 4 + 2 * n, f, (size_t)n * sizeof(double));
+  memcpy(out + 4 + 3 * n, d->method == 0 ? d->K : d->F, (size_t)(7 * n) * sizeof(double));
+}
+
 static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
             double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, Resume *rs,
-            Drive *drv, double *h_io) {
+            Drive *drv, double *h_io, double t_limit, const double *f0, double *dense) {
   int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
@@ -659,6 +673,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
   double *scale = yold + n, *tmp = scale + n, *F = tmp + n;   /* F: 7 x n for DOP853 dense output */
   (void)F;
   const double tb = grid[ngrid - 1];
+  const double tlim = t_limit > tb ? t_limit : tb;   /* steps end at or before this (past tb: dense) */
   const double expo = -1.0 / (tab.err_order + 1.0);
   double e_start = INFINITY;      /* the event function at the current step's start */
   double h_abs = 0.0, h_keep = 0.0;    /* h_keep: the step proposed for a next call (h_io) */
@@ -674,7 +689,8 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     memcpy(X, x0, (size_t)n * sizeof(double));
     ctl[0] = 1;
     if (drv) { drv->bcur = 0; drive_hold(drv, t); }
-    if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
+    if (f0) memcpy(f, f0, (size_t)n * sizeof(double));         /* f(t0, x0) from the caller's last step */
+    else if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
     if (ev) {
       flags = (int *)calloc((size_t)(ev->k > 0 ? ev->k : 1), sizeof(int));
       if (!flags) { status = CRK_NOMEM; goto done; }
@@ -682,8 +698,8 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       e_start = event_value(ev, NULL);
       if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
     }
-    if (h_io && *h_io > 0) h_abs = fmin(*h_io, fabs(tb - t));   /* a step proposed by the caller's last call */
-    else if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
+    if (h_io && *h_io > 0) h_abs = fmin(*h_io, fabs(tlim - t));   /* a step proposed by the caller's last call */
+    else if (initial_step(&r, &tab, t, tlim, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
   }
   h_keep = h_abs;
   while (k < ngrid) {
@@ -707,8 +723,8 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       h = h_abs;
       h_want = h_abs;
       t_new = t + h;
-      clipped = t_new > tb;
-      if (clipped) t_new = tb;
+      clipped = t_new > tlim;
+      if (clipped) t_new = tlim;
       if (t_new > t_break) { t_new = t_break; h_kept = h_abs; }    /* clipped: the proposal is kept */
       h = t_new - t;
       h_abs = fabs(h);
@@ -725,7 +741,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
         double factor = en == 0.0 ? MAX_FACTOR : fmin(MAX_FACTOR, SAFETY * pow(en, expo));
         if (was_rejected && factor > 1.0) factor = 1.0;
         h_abs *= factor;
-        /* a step shortened to end at tb says little about the next one: keep the step the
+        /* a step shortened to end at tlim says little about the next one: keep the step the
            control wanted unless the short step's error already asks for less */
         h_keep = (clipped && factor >= 1.0) ? fmax(h_abs, h_want) : h_abs;
         accepted = 1;
@@ -772,6 +788,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
         ctl[0] = k;
       }
       if (!ev) steps_here = 0;     /* with events max_steps bounds the whole call */
+      if (dense && k == ngrid) dense_keep(dense, &dn, y, K + (cint)S * n);
     }
     if (renew) {
       if (h_abs < h_kept) h_abs = h_kept;    /* the step was cut short by the sample, not by the error */
@@ -819,21 +836,50 @@ int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
             double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv) {
   return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs,
-                  drv, NULL);
+                  drv, NULL, 0.0, NULL, NULL);
 }
 
 /* crk_run with the first step taken from *h_io when it is positive (else the initial-step
    heuristic) and the step proposed after the last accepted step written back: a caller that
    advances in many short calls (an FMU's co-simulation steps, mechdsl.export) keeps the
    step size from one call to the next instead of starting each call afresh. */
-int crk_run_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+int crk_fun_run_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
               const double *p, double rtol, double atol, double hmin, cint max_steps,
               double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io) {
   return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, NULL,
-                  NULL, h_io);
+                  NULL, h_io, 0.0, NULL, NULL);
 }
 
-int crk_run_events_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0,
+/* crk_run_h whose steps are not shortened to end at the last output time: the last step may
+   end past it, up to t_limit (an event time, an input change, the end of the run; t_limit <=
+   the last output time: shortened as crk_run_h), the output rows interpolated on the continuous
+   extension.  f0 (when not NULL): f(grid[0], x0), carried from the caller's last call (one
+   evaluation fewer).  On success `dense` (crk_dense_size(nx) doubles) holds the last step:
+   its end t_new = dense[3] and state (crk_dense_state), f there (crk_dense_rhs), and its
+   interpolant (crk_dense_eval) for output times up to t_new without another call.  A caller
+   that advances in short calls (an FMU's co-simulation steps, mechdsl.export) so takes the
+   steps one long call takes. */
+int crk_fun_run_dense(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                  const double *p, double rtol, double atol, double hmin, cint max_steps,
+                  double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io,
+                  double t_limit, const double *f0, double *dense) {
+  return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, NULL,
+                  NULL, h_io, t_limit, f0, dense);
+}
+
+cint crk_dense_size(cint nx) { return CRK_DENSE_SIZE(nx); }
+const double *crk_dense_state(const double *dense, cint nx) { return dense + 4 + nx; }
+const double *crk_dense_rhs(const double *dense, cint nx) { return dense + 4 + 2 * nx; }
+
+/* the state at tt (t_old <= tt <= t_new) on the step kept by crk_run_dense */
+void crk_dense_eval(const double *dense, cint nx, double tt, double *out) {
+  const double *coef = dense + 4 + 3 * nx;
+  Dense d = {(int)dense[0], coef, coef, dense + 4, dense[2], dense[1], nx};
+  if (tt == dense[3]) memcpy(out, dense + 4 + nx, (size_t)nx * sizeof(double));
+  else dense_eval(&d, tt, out);
+}
+
+int crk_fun_run_events_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0,
                      const double *u, const double *p, double rtol, double atol, double hmin, cint max_steps,
                      double *X, double *stats, volatile cint *ctl, double *xfail,
                      const Fun *gap, cint k, double offset, int samples, const double *gp,
@@ -851,12 +897,12 @@ int crk_run_events(const Fun *ode, int method, cint nx, const double *grid, cint
                    double *X, double *stats, volatile cint *ctl, double *xfail,
                    const Fun *gap, cint k, double offset, int samples, const double *gp,
                    const Fun *imp, const double *rest, const double *limits, double *buf, cint cap) {
-  return crk_run_events_h(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail,
+  return crk_fun_run_events_h(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail,
                           gap, k, offset, samples, gp, imp, rest, limits, buf, cap, NULL);
 }
 
 /* crk_run_events with the step carried between calls in *h_io (as crk_run_h) */
-int crk_run_events_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0,
+int crk_fun_run_events_h(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0,
                      const double *u, const double *p, double rtol, double atol, double hmin, cint max_steps,
                      double *X, double *stats, volatile cint *ctl, double *xfail,
                      const Fun *gap, cint k, double offset, int samples, const double *gp,
@@ -883,7 +929,7 @@ int crk_run_events_h(const Fun *ode, int method, cint nx, const double *grid, ci
   int status = CRK_NOMEM;
   if (ok)
     status = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e,
-                      NULL, NULL, h_io);
+                      NULL, NULL, h_io, 0.0, NULL, NULL);
   stats[4] = (double)e.nev;
   stats[5] = (double)e.count;
   work_free(&e.gw); free(e.g); free(e.x);
@@ -911,7 +957,7 @@ cint crk_run_batch(const Fun *ode, int method, cint nx, const double *grid, cint
     volatile cint one[2] = {0, 0};
     if (ctl && ctl[1]) { for (; j < m; j++) { status[j] = CRK_CANCELLED; reached[j] = 0; bad++; } break; }
     int st = crk_core(ode, method, nx, grid, ngrid, X0 + j * nx, u, P + j * np_, rtol, atol, hmin, max_steps,
-                      X + j * ngrid * nx, stats + 4 * j, one, xfail, NULL, NULL, NULL, NULL);
+                      X + j * ngrid * nx, stats + 4 * j, one, xfail, NULL, NULL, NULL, NULL, 0.0, NULL, NULL);
     status[j] = st;
     reached[j] = one[0];
     if (st != CRK_OK || one[0] < ngrid) bad++;

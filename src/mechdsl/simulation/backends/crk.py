@@ -498,7 +498,7 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     ops = rhs_cost(ode)
     if ops is None:
         return None, "the right-hand side calls Python (an input given as a callable): no C code for it", {}
-    method = "dopri5" if rtol >= DOPRI5_RTOL else "dop853"
+    method = loop_method(rtol)
     engine = engine_for(ode)
     info = {"rhs_operations": ops, "engine": engine}
     why = (f"{ops} operations a right-hand side: compiled (at most {COMPILE_OPS}), cached on disk"
@@ -506,6 +506,12 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
            f"{ops} operations a right-hand side: interpreted in C (above {COMPILE_OPS}, a first run would "
            "spend seconds compiling; compiled = true compiles)")
     return method, why, info
+
+
+def loop_method(rtol: float) -> str:
+    """The stepping loop's method when the choice is automatic (auto_choice; the FMU's
+    co-simulation stepper, mechdsl.export): dopri5 at rtol >= DOPRI5_RTOL, else dop853."""
+    return "dopri5" if rtol >= DOPRI5_RTOL else "dop853"
 
 
 def scipy_name(method: str) -> str:
