@@ -9,8 +9,8 @@ with IPOPT (exact Hessian) on
              gives the accelerations explicitly), the parameters as the input p
   fixed      m.casadi(fixed_parameters=True)["ode"]: the parameters built in as numbers
              (what the hand-written model does), p empty
-  compiled   m.casadi(compiled=True)["ode"] (C code, derivatives included)
-  comp+fixed m.casadi(compiled=True, fixed_parameters=True)["ode"]
+  compiled   m.casadi(compiled=True, derivatives=2)["ode"] (C code with its first and second derivatives)
+  comp+fixed m.casadi(compiled=True, derivatives=2, fixed_parameters=True)["ode"]
 and, as a last row per N, docs/control.md example 2:
   integrator multiple shooting on m.integrator(h, method="erk", rtol=1e-8, atol=1e-10,
              fixed_parameters=True): the simulator's own integrator as the OCP's dynamics
@@ -107,8 +107,8 @@ def rows(Ns, repeat):
     hand, hp = hand_ode()
     odes = [("hand", hand, hp), ("mechdsl", m.casadi()["ode"], pv),
             ("fixed", m.casadi(fixed_parameters=True)["ode"], np.zeros(0)),
-            ("compiled", m.casadi(compiled=True)["ode"], pv),
-            ("comp+fixed", m.casadi(compiled=True, fixed_parameters=True)["ode"], np.zeros(0))]
+            ("compiled", m.casadi(compiled=True, derivatives=2)["ode"], pv),
+            ("comp+fixed", m.casadi(compiled=True, derivatives=2, fixed_parameters=True)["ode"], np.zeros(0))]
     variants = [(n, (lambda f, p: lambda N: rk4_step(f, p, T / N))(f, p), None) for n, f, p in odes]
     variants.append(("integrator", lambda N: (lambda F: lambda x, u: F(0, x, u, []))(   # autonomous: t0 = 0 will do
         m.integrator(T / N, fixed_parameters=True, **SHOOT)), SHOOT))

@@ -13,9 +13,13 @@ For each N (models/nlink_pendulum.mech, q1 = pi/2, the rest 0, at rest) it print
   right-hand side x' = (v, pin.aba(q, v, 0)) (Pinocchio, C++ called from Python), same CPU
   timing; without pin (``pip install pin``) the right-hand side is mechdsl's own ``ode``
   Function through a buffer call and the column says so;
-- ratio = mechdsl / scipy (goal: at most 0.5), and the largest difference of the final joint
-  angles between the two runs (both at rtol 1e-8 on a chaotic chain: agreement to about
-  1e-6..1e-4 is what the tolerance allows).
+- ratio = mechdsl / scipy (issue 24's goal at N = 2 and 5: at most 0.1), and the largest
+  difference of the final joint angles between the two runs (both at rtol 1e-8 on a chaotic
+  chain: agreement to about 1e-6..1e-4 is what the tolerance allows);
+- RHS work: the run's right-hand side evaluations times the cost of one evaluation of the same
+  compiled (or interpreted) ``ode`` in C (``crk.rhs_seconds``: 10^5 evaluations, minimum of
+  3), and whole / RHS = the whole warm ``simulate`` call over that work (issue 24's goal at
+  N = 2: at most 3).
 """
 from __future__ import annotations
 
@@ -70,22 +74,38 @@ def own_rhs(m):
     return lambda t, x: fast(t, x)
 
 
+def rhs_work(m, r):
+    """(seconds of one right-hand side evaluation in C, the run's evaluations times it)."""
+    from mechdsl.eom.codegen import casadi_functions
+    from mechdsl.simulation.backends import crk
+
+    ode = crk.loop_ode(casadi_functions(m.eom, names=("ode",)))
+    loop, _ = crk.library(ode, tag=m.eom.name)
+    if loop is None:
+        return None, None
+    x = np.r_[r.q[-1], r.qd[-1]]
+    reps = max(1000, int(2e5 / max(ode.n_instructions(), 1)) * 100)
+    one = min(crk.rhs_seconds(loop, x, np.zeros(0), m.parameter_vector(), reps) for _ in range(3))
+    return one, one * r.stats["rhs_evals"]
+
+
 def row(N, repeats, use_pin):
     from scipy.integrate import solve_ivp
 
     m = model(N)
-    t0 = time.perf_counter()
     r = m.simulate(t_end=T_END, rtol=RTOL)
-    first = time.perf_counter() - t0
     t_mech, r = cpu(lambda: m.simulate(t_end=T_END, rtol=RTOL), repeats)
+    one, work = rhs_work(m, r)
     x0 = np.r_[r.q[0], r.qd[0]]
     rhs, kind = (pin_rhs(N), "pin.aba") if use_pin else (own_rhs(m), "mechdsl ode (VM)")
     grid = np.linspace(0, T_END, POINTS)
     t_sp, s = cpu(lambda: solve_ivp(rhs, (0, T_END), x0, method="DOP853", rtol=RTOL, atol=ATOL, t_eval=grid),
                   repeats)
     diff = float(np.abs(r.q[-1] - s.y[:N, -1]).max())
-    return {"N": N, "method": r.metadata["method"], "compiled": r.metadata["options"]["compiled"],
-            "mech_ms": 1e3 * t_mech, "first_s": first, "steps": r.stats.get("steps"), "evals": r.stats.get("rhs_evals"),
+    return {"N": N, "method": r.metadata["method"], "compiled": r.metadata.get("loop_engine") or
+            ("compiled" if r.metadata["options"]["compiled"] else "no"), "rhs_us": None if one is None else 1e6 * one,
+            "work_ms": None if work is None else 1e3 * work,
+            "mech_ms": 1e3 * t_mech, "steps": r.stats.get("steps"), "evals": r.stats.get("rhs_evals"),
             "scipy_ms": 1e3 * t_sp, "scipy_steps": None, "scipy_evals": s.nfev, "ratio": t_mech / t_sp,
             "diff": diff, "kind": kind}
 
@@ -106,13 +126,15 @@ def main(argv=None):
             use_pin = False
     print(f"5 s of the N-link chain, rtol {RTOL:g}, atol {ATOL:g}, {POINTS} points; CPU ms (min of {a.repeats}, warm)")
     print()
-    print("|   N | mechdsl method | compiled | mechdsl CPU [ms] | first run [s] | evals | scipy DOP853 + RHS | scipy CPU [ms] | evals | ratio | final diff |")
-    print("|----:|---|---|---:|---:|---:|---|---:|---:|---:|---:|")
+    print("|   N | mechdsl method | model code | mechdsl CPU [ms] | evals | RHS us | RHS work [ms] | whole / RHS | "
+          "scipy DOP853 + RHS | scipy CPU [ms] | evals | ratio | final diff |")
+    print("|----:|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|")
     for N in [int(x) for x in a.sizes.split(",")]:
         d = row(N, a.repeats, use_pin)
-        print(f"| {d['N']:3d} | {d['method']} | {'yes' if d['compiled'] else 'no'} | {d['mech_ms']:.1f} | "
-              f"{d['first_s']:.2f} | {d['evals']} | {d['kind']} | {d['scipy_ms']:.1f} | {d['scipy_evals']} | "
-              f"{d['ratio']:.2f} | {d['diff']:.1e} |", flush=True)
+        w = "-" if d["work_ms"] is None else f"{d['work_ms']:.2f} | {d['mech_ms'] / d['work_ms']:.1f}"
+        print(f"| {d['N']:3d} | {d['method']} | {d['compiled']} | {d['mech_ms']:.2f} | {d['evals']} | "
+              f"{'-' if d['rhs_us'] is None else format(d['rhs_us'], '.3f')} | {w} | {d['kind']} | "
+              f"{d['scipy_ms']:.1f} | {d['scipy_evals']} | {d['ratio']:.3f} | {d['diff']:.1e} |", flush=True)
 
 
 if __name__ == "__main__":

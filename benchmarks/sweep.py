@@ -5,8 +5,9 @@
 Reports, per run: a hand-written CasADi ``Function.map`` of the same integrator (the floor),
 the vectorized sweep on 1 thread and on every core, the processes back end, and a Dask
 LocalCluster with 2 workers (bit-identical check against the in-process run, scheduling
-overhead per run).  The full --runs sweep runs vectorized on every core.  Numbers go to
-docs/performance.md by hand (they depend on the machine).
+overhead per run).  The full --runs sweep runs vectorized on every core.  Every sweep here
+is method erk (the mapped CasADi integrator); the default sweep (the stepping loop's ensemble
+call) against the map and mujoco.rollout is benchmarks/ensemble.py.
 """
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 import mechdsl
+from mechdsl.simulation import formulate
+from mechdsl.simulation.prepared import prepare
 from mechdsl.sweep.runs import mapped_integrator, scheme_parameter
 
 MODEL = Path(__file__).resolve().parents[1] / "models" / "double_pendulum.mech"
@@ -31,12 +34,11 @@ def hand_map(m, starts, points, threads):
     """The floor: the integrator a single run uses, mapped by hand, called once."""
     s = m.settings(t_end=10.0, rtol=1e-8, method="erk", points=points)
     eom = m.eom
-    g = np.linspace(0, 10, points)
     a, b = np.meshgrid(starts["j1.phi"], starts["j2.phi"], indexing="ij")
     N = a.size
     X0 = np.vstack([a.ravel(), b.ravel(), np.zeros(N), np.zeros(N)])
     P = np.tile(scheme_parameter(m.parameter_values)[:, None], (1, N))
-    F = mapped_integrator(eom, s, g, N, threads)
+    F = mapped_integrator(prepare(formulate(eom, s)), N, threads)
     t0 = time.perf_counter()
     xf = np.asarray(F(x0=X0, p=P)["xf"])
     return (time.perf_counter() - t0) / N, xf

@@ -103,12 +103,14 @@ def test_step_limit_is_a_failure_with_its_cause():
 def test_without_a_compiler_the_same_method_runs_in_python(monkeypatch):
     monkeypatch.setenv("CC", "/nonexistent/cc")
     monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.setattr(crk, "_RUNTIME", {})
     e = oscillator(2.0)
     r = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
     assert r.success
     assert r.metadata["options"]["compiled"] is False
     assert any("no C compiler" in w for w in r.metadata["warnings"])
     monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.setattr(crk, "_RUNTIME", {})
     monkeypatch.delenv("CC")
     c = simulate(e, 2.0, method="dop853", rtol=1e-9, atol=1e-9, points=21)
     _compiled(c)
@@ -132,40 +134,87 @@ def test_registry_names_and_no_jacobian():
     assert "events" in methods()["dop853"].kinds      # the contact back end's name is kept
 
 
-# --------------------------------------------------------------------------- method auto compiles when it pays
+# --------------------------------------------------------------------------- method auto: the stepping loop
 
 
-def test_auto_compiles_a_long_run_and_says_why():
+def test_auto_runs_the_stepping_loop_for_short_and_long_runs_and_says_why():
+    """auto no longer weighs a compile against the run's length (a loose tolerance used to fall
+    back to erk in the virtual machine, slower than a tight one): short and long runs, loose and
+    tight tolerances all run the stepping loop, the model compiled by its size."""
     e = pendulum(theta0=2.5)
-    r = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301)
     if find_compiler() is None:
+        r = simulate(e, 2.0, rtol=1e-8, atol=1e-8)
         assert r.metadata["method"] == "erk" and "no C compiler" in r.metadata["compiled"]
         return
-    assert r.metadata["method"] == "dop853"
-    assert r.metadata["compiled"].startswith("auto (estimated") and "pays back" in r.metadata["compiled"]
-    assert "compiled stepping loop" in r.metadata["method_reason"]
-    assert r.metadata["options"]["compiled"] is True
-    est = r.metadata["auto"]["compile"]
-    assert est["estimated_vm_time"] > est["estimated_compiled_time"] > 0
+    for t_end, rtol, method in ((2.0, 1e-8, "dop853"), (300.0, 1e-8, "dop853"), (2.0, 1e-3, "dop853"),
+                                (300.0, 1e-12, "dop853")):
+        r = simulate(e, t_end, rtol=rtol, atol=rtol, points=31)
+        assert r.success and r.metadata["method"] == method, (t_end, rtol, r.metadata["method"])
+        assert r.metadata["compiled"].startswith("auto (") and "operations a right-hand side" in r.metadata["compiled"]
+        assert "stepping loop" in r.metadata["method_reason"]
+        assert r.metadata["options"]["compiled"] is True and r.metadata["loop_engine"] == "compiled"
+        assert r.metadata["auto"]["compile"]["engine"] == "compiled"
     # opting out keeps the virtual machine's erk; both within the tolerance of each other
+    r = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301)
     off = simulate(e, 300.0, rtol=1e-8, atol=1e-8, points=301, compiled=False)
     assert off.metadata["method"] == "erk" and off.metadata["compiled"] == "off (requested)"
     assert off.metadata["options"]["compiled"] is False
     np.testing.assert_allclose(r.q[:, 0], off.q[:, 0], rtol=0, atol=1e-4)
 
 
-def test_auto_does_not_compile_a_short_run_of_a_small_model():
-    r = simulate(pendulum(), 2.0, rtol=1e-8, atol=1e-8)
-    assert r.metadata["method"] == "erk"
-    assert r.metadata["compiled"].startswith("no: auto (")
-    assert r.metadata["options"]["compiled"] is False
+def _fresh(monkeypatch, folder):
+    """A new cache folder and nothing kept in this process: as a first run on a new machine."""
+    monkeypatch.setenv("MECHDSL_CACHE", str(folder))
+    monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.setattr(crk, "_RUNTIME", {})
 
 
-def test_auto_without_a_compiler_stays_in_the_virtual_machine(monkeypatch):
-    monkeypatch.setenv("CC", "/nonexistent/cc")
-    r = simulate(pendulum(theta0=2.5), 300.0, rtol=1e-8, atol=1e-8, points=11)
-    assert r.success and r.metadata["method"] == "erk"
-    assert r.metadata["compiled"] == "no: auto (no C compiler)"
+@pytest.mark.skipif(find_compiler() is None, reason="without a compiler auto is erk whatever the cache")
+def test_auto_choice_and_numbers_do_not_depend_on_what_the_cache_holds(tmp_path, monkeypatch):
+    """Same model and options -> same method, engine, metadata and bits: in an empty cache (the
+    loop and the model are compiled during the run), in the warm cache, and again after the
+    model's library was deleted."""
+    e = chain(3)
+    kw = dict(rtol=1e-7, atol=1e-9, points=41)
+    runs = []
+    _fresh(monkeypatch, tmp_path / "c")
+    runs.append(simulate(e, 3.0, **kw))                # empty cache: builds
+    runs.append(simulate(e, 3.0, **kw))                # warm, in process
+    _fresh(monkeypatch, tmp_path / "c")
+    runs.append(simulate(e, 3.0, **kw))                # warm on disk, new process
+    libs = sorted((tmp_path / "c").glob("*.so"))
+    assert len(libs) == 2                              # the runtime and the model's library
+    for lib in libs:
+        lib.unlink()
+    _fresh(monkeypatch, tmp_path / "c")
+    runs.append(simulate(e, 3.0, **kw))                # libraries gone: rebuilt
+    first = runs[0]
+    for r in runs:
+        assert r.success
+        for key in ("method", "compiled", "method_reason", "loop_engine", "auto"):
+            assert r.metadata[key] == first.metadata[key], key
+        assert r.metadata["run"]["compiled"] == first.metadata["run"]["compiled"]
+        assert r.stats["steps"] == first.stats["steps"] and r.stats["rhs_evals"] == first.stats["rhs_evals"]
+        assert np.array_equal(r.q, first.q) and np.array_equal(r.qd, first.qd)
+
+
+@pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
+def test_engines_give_the_same_bits_and_the_size_decides(monkeypatch):
+    """The interpreted and the compiled model take the same steps to the last bit (the stepping
+    loop's two engines, crk.engine_for); above COMPILE_OPS auto interprets, compiled = true
+    compiles whatever the size."""
+    for e in (chain(2), pendulum(theta0=2.5), oscillator(2.0)):
+        c = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51)
+        monkeypatch.setattr(crk, "COMPILE_OPS", 0)
+        i = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51)
+        forced = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51, compiled=True)
+        monkeypatch.undo()
+        assert c.metadata["loop_engine"] == "compiled" and i.metadata["loop_engine"] == "interpreted"
+        assert "interpreted in C" in i.metadata["compiled"] and i.metadata["options"]["compiled"] is False
+        assert forced.metadata["loop_engine"] == "compiled" and forced.metadata["options"]["compiled"] is True
+        assert i.stats["steps"] == c.stats["steps"]
+        for r in (i, forced):
+            assert np.array_equal(r.q, c.q) and np.array_equal(r.qd, c.qd)
 
 
 def test_rhs_cost_counts_instructions_and_the_linear_solve():
@@ -218,8 +267,8 @@ def test_cvodes_adams_compiled_holds_no_dense_jacobian(tmp_path, monkeypatch):
 
 
 def test_run_record_says_whether_compiled_code_ran():
-    small = simulate(pendulum(), 1.0)
-    assert small.metadata["compiled"].startswith("no: auto") and small.metadata["run"]["compiled"] is False
+    off = simulate(pendulum(), 1.0, compiled=False)
+    assert off.metadata["run"]["compiled"] is False
     r = simulate(pendulum(), 1.0, method="dopri5")
     assert r.metadata["run"]["compiled"] is _compiled(r)
     assert r.metadata["run"]["integrator"] == "crk:dopri5"
@@ -303,14 +352,15 @@ def test_compiled_false_runs_the_named_loop_method_in_python(method, monkeypatch
 
 
 def test_auto_whose_loop_cannot_be_built_says_erk_runs(monkeypatch, tmp_path):
-    """auto decides to compile, the build fails (a cache path that is a file): the run is erk
-    and its reason says so (it kept the reason of the compiled loop it did not run)."""
+    """auto picks the stepping loop, the build fails (a cache path that is a file): the run is
+    erk and its reason says so (it kept the reason of the loop it did not run)."""
     if find_compiler() is None:
-        pytest.skip("needs a C compiler: without one auto never decides to compile")
+        pytest.skip("needs a C compiler: without one auto never picks the stepping loop")
     blocked = tmp_path / "file"
     blocked.write_text("")
     monkeypatch.setenv("MECHDSL_CACHE", str(blocked))
     monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.setattr(crk, "_RUNTIME", {})
     r = simulate(pendulum(theta0=2.5), 300.0, rtol=1e-8, atol=1e-8, points=11)
     assert r.success and r.metadata["method"] == "erk"
     assert r.metadata["compiled"] == "no: auto (the compiled loop could not be built)"

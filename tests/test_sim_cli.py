@@ -55,7 +55,7 @@ def test_simulate_writes_csv_json_plot_and_summary(tmp_path, files, capsys):
                  "--plot", str(png), "--set", "L=2", "--set", "theta.start=pi/4", "--no-progress"])
     text = capsys.readouterr().out
     assert code == 0
-    assert "method: erk (not stiff" in text and "energy drift" in text and f"wrote {out}" in text
+    assert "method: dop853 (not stiff" in text and "energy drift" in text and f"wrote {out}" in text
     lines = out.read_text().splitlines()
     assert lines[0].startswith("time,theta,der(theta),x,y,kinetic_energy") and len(lines) == 7
     first = [float(v) for v in lines[1].split(",")]

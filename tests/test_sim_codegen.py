@@ -224,8 +224,11 @@ def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
     libs = {lib for _, _, lib in results}
     assert len(libs) == 1 and all(loaded is not None for loaded, _, _ in results)
     lib = Path(next(iter(libs)))
-    # no debris (compilers: the compiler's version, kept for later runs)
-    assert sorted(p.name for p in tmp_path.iterdir()) == [lib.with_suffix(".sha256").name, lib.name, "compilers"]
+    # no debris (compilers: the compiler's version, kept for later runs; sxcode: the Functions'
+    # instruction lists, mechdsl.eom.sxcode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([lib.with_suffix(".sha256").name, lib.name,
+                                                                 "compilers", "sxcode"])
+    assert not [p.name for p in (tmp_path / "sxcode").iterdir() if p.name.startswith(".tmp")]
     x = np.array([0.3, -0.2])
     for loaded, _, _ in results:
         np.testing.assert_array_equal(np.array(loaded["ode"](0.0, x, [], e.param_values)),

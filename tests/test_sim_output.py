@@ -44,7 +44,7 @@ def test_json_sidecar(tmp_path):
     r.to_csv(tmp_path / "p.csv")
     meta = json.loads((tmp_path / "p.json").read_text())
     m = meta["metadata"]
-    assert m["model"] == "Pendulum" and m["method"] == "erk" and "not stiff" in m["method_reason"]
+    assert m["model"] == "Pendulum" and m["method"] == "dop853" and "not stiff" in m["method_reason"]
     assert m["options"]["rtol"] == 1e-7 and m["options"]["points"] == 5
     assert m["options"]["parameters"] == {"m": 1.0, "L": 1.0, "g": 9.81}
     assert m["options"]["start"]["theta"] == pytest.approx(math.pi / 2)

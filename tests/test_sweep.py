@@ -271,3 +271,43 @@ def test_ctrl_c_on_the_process_pool_keeps_finished_runs(tmp_path):
     assert ds.attrs["interrupted"] == 1 and 0 < ok.sum() < 4000
     assert set(ds["cause"].values[~ok]) == {"not run"}
     ds.close()
+
+
+def test_default_sweep_is_one_ensemble_call_of_the_stepping_loop(dp, monkeypatch):
+    """Issue 24 item 5: method auto sweeps through the stepping loop (as a single run resolves
+    auto), the whole chunk in one C call (crk_run_batch), each run bit-identical to the same
+    run alone (same steps, same states)."""
+    from mechdsl.simulation.backends import crk
+
+    if crk.compiler() is None:
+        pytest.skip("no C compiler: auto is erk in the virtual machine (the mapped integrator)")
+    sizes = []
+    batch = crk.run_batch
+    monkeypatch.setattr(crk, "run_batch", lambda loop, method, grid, X0, *a: sizes.append(len(X0)) or
+                        batch(loop, method, grid, X0, *a))
+    ds = dp.sweep(params={"l": [0.5, 1.5]}, starts={"j1.phi": [0.3, 1.0, 2.0]}, t_end=1.0, points=21,
+                  progress=False)
+    assert ds.attrs["scheduler"] == "vectorized" and ds.attrs["method"] == "dop853" and sizes == [6]
+    for i in range(6):
+        r = _alone(dp, i, ds, None)
+        assert r.metadata["method"] == "dop853"
+        np.testing.assert_array_equal(ds["j1.phi"].values[i], r.q[:, 0])
+        np.testing.assert_array_equal(ds["der(j2.phi)"].values[i], r.qd[:, 1])
+        assert int(ds["steps"].values[i]) == r.stats["steps"] and int(ds["rhs_evals"].values[i]) == r.stats["rhs_evals"]
+
+
+def test_a_run_failing_in_the_ensemble_is_rerun_alone_with_its_cause(dp):
+    from mechdsl.simulation.backends import crk
+
+    if crk.compiler() is None:
+        pytest.skip("no C compiler")
+    # max_steps bounds the steps between two output times: 2 points, 60 steps for 5 s
+    ds = dp.sweep(starts={"j1.phi": [0.1, 3.0]}, t_end=5.0, points=2, max_steps=60, rtol=1e-10, method="dop853",
+                  progress=False)
+    bad = ~ds["success"].values
+    assert bad.any() and bad.sum() == ds.attrs["n_failed"]
+    i = int(np.flatnonzero(bad)[0])
+    r = dp.simulate(5.0, x0={"j1.phi": float(ds["j1.phi.start"].values[i])}, points=2, max_steps=60, rtol=1e-10,
+                    method="dop853")
+    assert not r.success and r.failure.time == pytest.approx(float(ds["failure_time"].values[i]))
+    assert str(ds["cause"].values[i]) == r.failure.cause

@@ -376,15 +376,16 @@ class Model:
         "constraint_jacobian", "mass_matrix", "bias" (mechdsl.dae.functions).
 
         compiled: each Function is compiled to C when it is first asked for, and only it;
-        derivatives=1 or 2 adds its first (and second) derivatives to its library (jac_, fwd1_,
-        adj1_, ..., which casadi.external finds by name: an exact Hessian for IPOPT).  A compile
+        derivatives=1 or 2 adds its directional derivatives to its library (fwd1_, adj1_; with 2
+        also fwd1_adj1_, forward over reverse), which casadi.external finds by name (CasADi
+        assembles Jacobians from their sweeps; an exact Hessian for IPOPT).  A compile
         that cannot be done raises (E804: no compiler or a failed build; E805: more than
         compile_budget bytes of C, default 16 MB), never returning the virtual machine's
         Functions silently.
 
         fixed_parameters: parameters an optimizer does not vary, built into the Functions as
         numbers so that CasADi folds the arithmetic on them (a leaner expression: the
-        cart-pole ``ode`` has 53 instructions instead of 72; codegen.drop_cancelled).  True fixes them all at the
+        cart-pole ``ode`` has 30 instructions instead of 43; codegen.drop_cancelled, eom.lean).  True fixes them all at the
         model's values (p is then empty: pass ``[]``); a list of names fixes those at the
         model's values, a dict {name: value} at the given values.  A dependent parameter
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
@@ -402,6 +403,19 @@ class Model:
         # glue works for all); the simulator keeps its numeric QR solve
         return problem_functions(self.eom, compiled=compiled, derivatives=derivatives if compiled else 0, sx=True,
                                  fixed=fixed, each=bool(compiled), budget=compile_budget)
+
+    def fast_function(self, name: str = "ode", *, compiled: bool = True, p=None, u=None):
+        """``casadi()[name]`` for calls from Python in a loop: compiled to C (when a compiler
+        exists; ``compiled=False``: the virtual machine) and called through preallocated
+        buffers, with the parameters ``p`` (default: the model's values) and the inputs ``u``
+        (default: their declared defaults) bound once.  ``f = m.fast_function(); xdot = f(t,
+        x)``: one call of a 7-joint arm's ``ode`` costs a few microseconds, against 30-120 us
+        for a plain call of the Function (docs/control.md, benchmarks/python_call.py).  The
+        result is a new array; ``f.function`` is the Function called."""
+        from .eom.fastcall import fast_function
+
+        return fast_function(self.eom, name, compiled=compiled,
+                             p=self.parameter_vector() if p is None else p, u=u)
 
     def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
                    atol: float | None = None, steps: int | None = None, fixed_parameters=None):

@@ -116,11 +116,14 @@ def default_plan(setup, *, t_end_given: bool, tolerances_given: bool, repeats_gi
         by_failure = nice_below(0.5 * (reached - setup.t_start)) if failed and reached > setup.t_start else span
         new_span = min(by_cost, by_failure, span)
         if new_span < span:
+            new_span = _keep_events(setup, result, new_span, span, by_failure)
+        if new_span < span:
             plan.t_end = setup.t_start + new_span
             why = (f"one run at tolerance {PILOT_TOL:g} over the whole horizon costs about {cost:.3g} s of CPU"
                    if by_cost <= by_failure else "it ends well before the pilot's failure")
             plan.notes.append(f"horizon shortened to t = {plan.t_end:g} (from {setup.t_end:g}): {why}; "
                               "give --t-end for another")
+    _event_note(plan, setup, result)
     what = {"cheap": f"cheap (a run at {PILOT_TOL:g} costs {cost:.2g} s of CPU)",
             "moderate": f"moderately costly (a run at {PILOT_TOL:g} costs {cost:.2g} s of CPU)",
             "costly": f"costly (a run at {PILOT_TOL:g} over the scene's horizon costs {cost:.3g} s of CPU)"}[level]
@@ -141,6 +144,54 @@ def default_plan(setup, *, t_end_given: bool, tolerances_given: bool, repeats_gi
         plan.notes.append(f"default plan for a model that is {what}: " + ", ".join(chosen)
                           + "; give --tolerances, --repeats or --budget for others")
     return plan
+
+
+def _event_times(result) -> list[float] | None:
+    ev = getattr(result, "events", None) if result is not None else None
+    return None if ev is None else sorted(float(e["time"]) for e in ev)
+
+
+def _keep_events(setup, result, new_span: float, span: float, by_failure: float) -> float:
+    """A shortened horizon of a contact scene reaches past its first event (a benchmark of free
+    flight alone said nothing of the scene: the falling rod's was cut to 0.2 s, before the first
+    impact), unless the pilot failed before it."""
+    times = _event_times(result)
+    if not times:
+        return new_span
+    first = times[0] - setup.t_start
+    if new_span > first:
+        return new_span
+    want = nice_above(1.2 * first) if first > 0 else new_span
+    return min(span, by_failure if by_failure < span else span, max(new_span, want))
+
+
+def nice_above(x: float) -> float:
+    """The smallest of 1, 2, 5 x 10^k not below x."""
+    k = math.floor(math.log10(x))
+    for m in (1, 2, 5, 10):
+        if m * 10.0 ** k >= x * (1 - 1e-12):
+            return float(f"{m * 10.0 ** k:.12g}")
+    return float(f"{10.0 ** (k + 1):.12g}")
+
+
+def _event_note(plan: Plan, setup, result) -> None:
+    """Say how many of the scene's events (the pilot run's) the benchmark's horizon holds."""
+    times = _event_times(result)
+    if times is None:
+        if result is None and getattr(getattr(setup, "eom", None), "model", None) is not None \
+                and getattr(setup.eom.model, "contacts", None):
+            plan.notes.append("the pilot run stopped early: how many events the horizon holds is not known")
+        return
+    inside = [t for t in times if t <= plan.t_end]
+    if not times:
+        plan.notes.append("the pilot run had no events (no contact closed, no impact) up to t = "
+                          f"{plan.t_end:g}: the benchmark measures free flight only")
+    elif len(inside) < len(times):
+        plan.notes.append(f"the horizon holds {len(inside)} of the pilot run's {len(times)} events "
+                          f"(first at t = {times[0]:.6g}, last at t = {times[-1]:.6g}); give --t-end for all")
+    else:
+        plan.notes.append(f"the horizon holds all {len(times)} events of the pilot run (t = {times[0]:.6g} .. "
+                          f"{times[-1]:.6g})")
 
 
 def plan_methods(plan: Plan, labels: list[str]) -> list[str]:

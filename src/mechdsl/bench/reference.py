@@ -154,8 +154,15 @@ def from_runs(primary, check, columns, t_start_rows: np.ndarray, labels, tol, cp
     scales = measure.component_scales(values, columns)
     acc = measure.errors(C, R, scales)
     t = np.asarray(primary.t, float)[t_start_rows]
+    notes = []
+    ev = getattr(primary, "events", None)
+    if ev is not None and (primary.metadata or {}).get("run", {}).get("problem") == "hybrid":
+        # a contact scene: the events the compared runs go through
+        times = [float(e["time"]) for e in ev]
+        notes.append(f"events in the reference run: {len(times)}" + (f" (t = {min(times):.6g} .. {max(times):.6g})"
+                                                                      if times else " (free flight only)"))
     return Reference(t=t, values=values, source=f"auto: {labels[0]} at rtol = atol = {tol:g}",
-                     methods=tuple(labels), tolerance=tol, accuracy=acc, cpu=dict(zip(labels, cpu)))
+                     methods=tuple(labels), tolerance=tol, accuracy=acc, cpu=dict(zip(labels, cpu)), notes=notes)
 
 
 def fmt_accuracy(ref: Reference) -> str:

@@ -352,7 +352,7 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
         if len(good) == 2:
             (l1, r1, c1), (l2, r2, c2) = good
             ref = R.from_runs(r1, r2, columns, idx, (l1, l2), t, (c1, c2))
-            ref.notes = [f"not used: {f}" for f in failures]
+            ref.notes = ref.notes + [f"not used: {f}" for f in failures]
             return ref, points, idx
     raise R.reference_failed(failures, setup.span, given)
 

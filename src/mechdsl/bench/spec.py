@@ -24,7 +24,8 @@ from ..diagnostics import UsageError
 from ..simulation.registry import SPECS
 
 DEFAULT_TOLERANCES = "1e-2..1e-12"
-DEFAULT_ODE_METHODS = ("erk", "cvodes-adams", "cvodes-bdf", "scipy-dop853")
+# auto first: the work-precision chart shows it against what else mechdsl offers (issue 24)
+DEFAULT_ODE_METHODS = ("auto", "dop853", "erk", "cvodes-adams", "cvodes-bdf", "scipy-dop853")
 # methods whose step is fixed: the tolerance of the sweep sets their step (see step_for)
 # fixed-step methods in canonical variables (rk4: not symplectic; rattle: stormer-verlet of a
 # constrained model) and their orders, from the method registry

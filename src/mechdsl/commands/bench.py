@@ -54,7 +54,7 @@ def default_methods(kind: str) -> list[str]:
     from ..bench.spec import DEFAULT_ODE_METHODS
 
     if kind == "stiff":
-        return ["cvodes-bdf", "rosenbrock", "scipy-radau", "erk"]
+        return ["auto", "cvodes-bdf", "rosenbrock", "scipy-radau", "erk"]
     if kind == "dae":
         try:
             from ..dae.dae_run import FORMULATIONS

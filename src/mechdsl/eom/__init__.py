@@ -127,10 +127,18 @@ class EOM:
         """Numeric start values (q0, qd0) for parameter vector p (default: model values)."""
         import casadi as ca
 
-        pv = self.param_values if p is None else np.asarray(p, float)
-        f = self.workspace.start_function(self)
-        a, b = f(pv)
-        return np.array(a, float).ravel(), np.array(b, float).ravel()
+        pv = np.asarray(self.param_values if p is None else p, float)
+        kept = self.workspace.memo("start_values", dict)      # by parameter values: a run asks twice
+        key = pv.tobytes()
+        hit = kept.get(key)
+        if hit is None:
+            f = self.workspace.start_function(self)
+            a, b = f(pv)
+            hit = (np.array(a, float).ravel(), np.array(b, float).ravel())
+            if len(kept) >= 64:
+                kept.pop(next(iter(kept)), None)
+            kept[key] = hit
+        return hit[0].copy(), hit[1].copy()
 
 
 def explicit_constraints(eom: "EOM") -> tuple[bool, ...]:

@@ -106,6 +106,16 @@ def _check_mass_matrix(eom):
 SX_SOLVE_MAX = 40      # sx=True: unrolled LDL^T up to this many coordinates (O(n^3/6) SX operations)
 
 
+def _lean(eom, plain):
+    """Small models' ode from M and bias without the terms that cancel (mechdsl.eom.lean)."""
+    from .lean import lean_ode
+
+    ca = _ca()
+    s = _Symbols(eom)
+    return lean_ode(eom, plain, s, lambda M, b: _function("ode", s.txup, [ca.vertcat(s.qd, ldl_solve(M, b))], TXUP,
+                                                          ["xdot"]), _SMOOTH_OPS)
+
+
 def ldl_solve(M, b):
     """M^-1 b for a symmetric M by an unrolled LDL^T factorization without pivoting (SX).
 
@@ -162,16 +172,18 @@ def build_ode(eom, sx: bool = False, loop: bool = False):
         f = looped_ode(eom)
         if f is not None:
             return f
+
     if eom.qdd is not None:
         xdot = ca.vertcat(s.qd, eom.qdd)
-        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        f = _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        return _lean(eom, f) if sx else f
     _check_mass_matrix(eom)
     if n == 1:  # one coordinate: the "solve" is a division, exact in SX
         xdot = ca.vertcat(s.qd, eom.bias / eom.M)
         return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
     if sx and n <= SX_SOLVE_MAX:
         xdot = ca.vertcat(s.qd, ldl_solve(ca.SX(eom.M), ca.SX(eom.bias)))
-        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        return _lean(eom, _function("ode", s.txup, [xdot], TXUP, ["xdot"]))
     mb = _function("mass_bias", s.txup, [eom.M, eom.bias], TXUP, ["M", "bias"])
     t = ca.MX.sym("t")
     x = ca.MX.sym("x", 2 * n)
@@ -541,12 +553,7 @@ _SETS_MAX = 64
 # --------------------------------------------------------------------------- C code generation
 
 
-def cache_dir() -> Path:
-    d = os.environ.get("MECHDSL_CACHE")
-    if d:
-        return Path(d)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "mechdsl"
+from .cachedir import cache_dir  # noqa: E402,F401  (codegen.cache_dir: where libraries and entries go)
 
 
 def _which(name: str) -> str | None:
@@ -634,23 +641,33 @@ def cflags_for(code_size: int) -> list[str]:
 
 
 def derivative_functions(funcs, order: int = 2) -> list:
-    """Derivatives of ``funcs`` up to ``order`` under the names casadi.external looks for."""
-    out, level = [], list(funcs)
-    for _ in range(order):
-        level = [d for f in level for d in (f.jacobian(), f.forward(1), f.reverse(1))]
-        out += level
+    """Derivatives of ``funcs`` up to ``order`` under the names casadi.external looks for:
+    directional ones only, whose size grows like the Function's own (a dense ``jac_`` of a
+    7-joint arm's ode is 8x the ode, its second Jacobian 100x; with them the arm's library was
+    43 MB of C, 75 s of gcc and 3 GB): first order ``fwd1_`` and ``adj1_`` (CasADi assembles
+    Jacobians from sweeps of them), second order ``fwd1_adj1_`` (forward over reverse: the
+    Hessian-vector products of an exact Hessian, e.g. IPOPT's)."""
+    out = []
+    for f in funcs:
+        fwd, adj = f.forward(1), f.reverse(1)
+        out += [fwd, adj]
+        if order >= 2:
+            out.append(adj.forward(1))
     return out
 
 
 def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
-                      extra_units: tuple[str, ...] = (), budget: int | None = None, strict: bool = False):
+                      extra_units: tuple[str, ...] = (), extra_flags: list[str] | None = None,
+                      budget: int | None = None, strict: bool = False):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
     from it by sweeps if one is ever evaluated), never the dense Jacobian.
 
     ``extra_units``: hand-written C sources linked into the same library (the compiled
-    stepping loop of mechdsl.simulation.crk); they are part of the cache key.
+    stepping loop of mechdsl.simulation.crk, code of mechdsl.eom.sxcode); they are part of the
+    cache key.  ``extra_flags``: their optimization flags instead of the size rule (sxcode's
+    chunked code compiles in linear time at any level), one list for all or one per unit.  No ``funcs``: only the extra units.
 
     ``budget``: most bytes of generated C to hand to the compiler (default COMPILE_BUDGET;
     the compiler's time and memory grow faster than the code: a 7-joint arm's 40 MB took 298 s,
@@ -676,17 +693,16 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                                             "virtual-machine Functions (compiled=False)"))
         return None, (f"no C compiler found ({looked}); "
                       "using the CasADi virtual machine instead of compiled code"), None
+    from .sxcode import c_unit
+
     units = []
-    main = ca.CodeGenerator("mechdsl_model.c", {"with_header": False, "verbose": False})
-    for f in funcs:
-        main.add(f)
-    units.append(main.dump())
+    # SX Functions as chunked straight-line C (mechdsl.eom.sxcode: gcc's time linear in the
+    # code; CasADi's one-function-per-Function C took gcc 10-14 s for 25,000 operations)
+    if funcs or not extra_units:
+        units.append(c_unit(funcs, "mechdsl_model.c"))
     odes = [f for f in funcs if f.name() == "ode"] if jacobian and not derivatives else []
     if derivatives:
-        dg = ca.CodeGenerator("mechdsl_derivatives.c", {"with_header": False, "verbose": False})
-        for d in derivative_functions(funcs, derivatives):
-            dg.add(d)
-        units.append(dg.dump())
+        units.append(c_unit(derivative_functions(funcs, derivatives), "mechdsl_derivatives.c"))
     jac_kind = None
     if odes:
         code, jac_kind = "", None
@@ -703,7 +719,14 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
+    # chunked C (no CasADi-generated function in the unit) compiles in linear time: -O1 at any size
+    flags = [cflags_for(len(code)) if "CASADI_PREFIX" in code or os.environ.get("MECHDSL_CFLAGS")
+             else ["-O1"] for code in units]
     units += list(extra_units)
+    env_flags = os.environ.get("MECHDSL_CFLAGS")
+    per_unit = extra_flags is not None and bool(extra_flags) and isinstance(extra_flags[0], (list, tuple))
+    flags += [cflags_for(len(code)) if extra_flags is None or env_flags else
+              list(extra_flags[i] if per_unit else extra_flags) for i, code in enumerate(extra_units)]
     limit = COMPILE_BUDGET if budget is None else int(budget)
     total = sum(len(code) for code in units)
     if total > limit:
@@ -714,7 +737,6 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                                        help="ask for fewer Functions or no derivatives, use the virtual-machine "
                                             "Functions (compiled=False), or raise compile_budget (bytes of C)"))
         return None, f"not compiled: {what} (compile_budget); using the CasADi virtual machine", None
-    flags = [cflags_for(len(code)) for code in units]
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
     digest = hashlib.sha256(key.encode()).hexdigest()[:24]

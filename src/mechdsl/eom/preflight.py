@@ -52,11 +52,39 @@ _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the
                         "or give the body a Sphere/Body inertia")
 
 
+PASSED_KEPT = 64      # starts that passed, kept per EOM: a repeated run is not checked again
+
+
 def check_start(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_BOUND) -> None:
-    """Raise a MechError with the start problems of ``eom`` (see the module docstring)."""
+    """Raise a MechError with the start problems of ``eom`` (see the module docstring).  A start
+    that passed (same parameters, start values, time and drift bound) passes again without
+    being evaluated: the check is a pure function of them (0.7 ms of a 3 ms run)."""
+    key = _start_key(p, x0, t, drift_bound)
+    passed = eom.workspace.memo("preflight_passed", dict) if key is not None else None
+    if passed is not None and key in passed:
+        return
     problems = preflight(eom, p, x0, t, drift_bound)
     if problems:
         raise MechError(problems)
+    if passed is not None:
+        if len(passed) >= PASSED_KEPT:
+            passed.pop(next(iter(passed)), None)
+        passed[key] = True
+
+
+def _start_key(p, x0, t, drift_bound):
+    """A hashable key of the check's inputs, or None when they have no plain numeric form."""
+    def norm(v):
+        if v is None:
+            return None
+        if isinstance(v, dict):
+            return tuple(sorted((str(k), float(x)) for k, x in v.items()))
+        a = np.asarray(v, float)
+        return (a.shape, a.tobytes())
+    try:
+        return (norm(p), norm(x0), float(t), float(drift_bound))
+    except (TypeError, ValueError):
+        return None
 
 
 def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:

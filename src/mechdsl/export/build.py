@@ -22,7 +22,7 @@ from pathlib import Path
 from ..diagnostics import Diagnostic, MechError
 
 HERE = Path(__file__).with_name("c")
-RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_cosim.c", "mech_state.c")     # every FMU
+RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_cosim.c", "mech_state.c", "mech_crk.c")     # every FMU
 CONSTRAINT_UNITS = ("mech_constraints.c", "mech_linalg.c")      # constraint rows: constraints, contacts, fixations
 CONTACT_UNITS = ("mech_hybrid.c",)                               # contacts, fixations
 HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
@@ -31,7 +31,7 @@ CFLAGS = ["-O2", "-fPIC", "-fvisibility=hidden", "-std=gnu11"]
 # units off the stepping loop's hot path compile at -O1 (half gcc's time there; mech_hybrid's
 # constrained accelerations run in the loop only while contacts are closed or points fixed)
 LIGHT = ("mech_runtime.c", "mech_cosim.c", "mech_state.c", "mech_constraints.c", "mech_hybrid.c", "fmi2.c", "fmi3.c",
-         "model_data.c")
+         "model_data.c", "mech_crk.c")
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
@@ -142,7 +142,7 @@ def sources(meta: dict, plan, fmi_version: int) -> dict[str, str]:
 
 def c_files(srcs: dict) -> list[str]:
     order = ["model.c", "model_data.c", "mech_runtime.c", "mech_cosim.c", "mech_state.c", "mech_constraints.c",
-             "mech_hybrid.c", "mech_linalg.c", "crk.c", "fmi2.c", "fmi3.c"]
+             "mech_hybrid.c", "mech_linalg.c", "mech_crk.c", "crk.c", "fmi2.c", "fmi3.c"]
     return [f for f in order if f in srcs]
 
 

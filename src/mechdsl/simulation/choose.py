@@ -8,6 +8,7 @@ loop's cost estimate (backends/crk.py).
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -20,19 +21,40 @@ from .registry import spec
 NO_U = np.zeros(0)                   # the input vector u of a model without inputs
 
 
+_CHOICES: dict = {}
+_CHOICES_MAX = 64
+
+
 def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, dict]:
-    """method=auto: stiffness from the Jacobian's eigenvalues at the start, then the tolerance.
+    """method=auto: stiffness from the Jacobian's eigenvalues at the start.
 
     Rules (docs/internals/numerics.md): stiff (a decay rate much faster than the slowest
-    time scale and than the horizon) -> cvodes-bdf; otherwise erk (adaptive explicit
-    Runge-Kutta 5(4)), which beat cvodes-adams, idas and scipy at every tolerance from 1e-4
-    to 1e-12 on the work-precision benchmark.
+    time scale and than the horizon) -> cvodes-bdf; otherwise erk, which the ODE back end
+    replaces by the stepping loop where it can (backends/crk.auto_choice).  The answer is kept
+    for the same right-hand side, start, parameters and span (a repeated run decides nothing
+    again); it does not depend on rtol.
     """
+    u = default_inputs(eom, u)
+    if getattr(funcs, "tables_only", False):      # tables: the model's own ode at the inputs' values at t0
+        funcs, u = funcs.base, funcs.drive.vector_at(t0)
+    ode = funcs["ode"]
+    key = (id(ode), float(t0), float(t1), np.asarray(x0, float).tobytes(), np.asarray(pv, float).tobytes(),
+           np.asarray(u, float).tobytes())
+    hit = _CHOICES.get(key)
+    if hit is not None and hit[0] is ode:
+        return hit[1][0], hit[1][1], dict(hit[1][2])
+    out = _choose(ode, x0, pv, t0, t1, u)
+    if len(_CHOICES) >= _CHOICES_MAX:
+        _CHOICES.pop(next(iter(_CHOICES)))
+    _CHOICES[key] = (ode, out)       # the Function kept: its id stays unique
+    return out[0], out[1], dict(out[2])
+
+
+def _choose(ode, x0, pv, t0, t1, u) -> tuple[str, str, dict]:
     span = t1 - t0
     info: dict[str, Any] = {}
-    u = default_inputs(eom, u)
     try:
-        J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+        J = numeric_jacobian(ode, t0, x0, u, pv)
         lam = jacobian_eigenvalues(J) if np.isfinite(J).all() else None
     except Exception:  # noqa: BLE001
         lam = None
@@ -53,6 +75,48 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     return ("erk", f"not stiff (stiffness ratio {ratio:.3g} < 1e3 from the Jacobian at t = {t0:g}); the adaptive "
             f"explicit Runge-Kutta 5(4) needs no Jacobian and was fastest for a given accuracy in "
             f"benchmarks/integrators.py", info)
+
+
+def numeric_jacobian(ode, t0, x0, u, pv) -> np.ndarray:
+    """d xdot / dx at (t0, x0) by central differences of ``ode`` (one mapped call of 4n
+    evaluations, steps cbrt(eps) max(1, |x_j|)), not from a symbolic Jacobian: the dense
+    Jacobian of the 200-link chain took 12-16 s to build and gcc 30 s, for a stiffness test
+    that needs its eigenvalues to a few digits.  Where xdot = (qd, ...) (every model's ode) the
+    rows of qd are set exactly ([0, I]), so ``jacobian_eigenvalues`` can halve its work."""
+    x0 = np.asarray(x0, float)
+    nx = x0.size
+    h = np.cbrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x0))
+    X = np.repeat(x0[:, None], 2 * nx + 1, axis=1)
+    idx = np.arange(nx)
+    X[idx, 1 + idx] += h
+    X[idx, 1 + nx + idx] -= h
+    k = X.shape[1]
+    with _MAPPED_LOCK:
+        F = _mapped(ode, k)(np.full((1, k), float(t0)), X, np.repeat(np.reshape(u, (-1, 1)), k, axis=1),
+                            np.repeat(np.reshape(pv, (-1, 1)), k, axis=1))
+    F = np.reshape(F, (nx, k), order="F") if F.ndim == 1 else F
+    J = (F[:, 1:1 + nx] - F[:, 1 + nx:]) / (2 * h)
+    n = nx // 2
+    if nx == 2 * n and np.array_equal(F[:n, 0], x0[n:]):
+        J[:n] = 0.0
+        J[:n, n:] = np.eye(n)
+    return J
+
+
+_MAPPED: dict = {}
+_MAPPED_LOCK = threading.Lock()       # a FastFunction's buffers are not shared between threads
+
+
+def _mapped(ode, k):
+    """FastFunction of ``ode.map(k)``, kept per Function (building the map costs ~0.5 ms)."""
+    hit = _MAPPED.get((id(ode), k))
+    if hit is not None and hit[0] is ode:
+        return hit[1]
+    fast = FastFunction(ode.map(k))
+    if len(_MAPPED) >= 16:
+        _MAPPED.pop(next(iter(_MAPPED)))
+    _MAPPED[(id(ode), k)] = (ode, fast)
+    return fast
 
 
 def jacobian_eigenvalues(J: np.ndarray) -> np.ndarray:
@@ -105,7 +169,7 @@ def time_scale(funcs, x0, pv, t0, t1, u=NO_U, rho=None) -> tuple[float, float]:
     try:
         if rho is None:
             rho = 0.0
-            J = FastFunction(funcs["ode_jacobian"])(t0, x0, u, pv)
+            J = numeric_jacobian(funcs["ode"], t0, x0, u, pv)
             rho = float(np.abs(jacobian_eigenvalues(J)).max()) if np.isfinite(J).all() else 0.0
         f = FastFunction(funcs["ode"])(t0, x0, u, pv)
         n = len(x0) // 2

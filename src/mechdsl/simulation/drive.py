@@ -147,17 +147,29 @@ class Drive:
         ``funcs`` itself when every signal is a constant or a zero-order hold."""
         if all(s.kind in ("default", "constant") or _zoh(s) for s in self.signals):
             return funcs             # zero-order holds come in through u, piece by piece (vector(t))
-        import casadi as ca
 
+        def build():
+            import casadi as ca
 
-        ode = funcs["ode"]
-        t = ca.MX.sym("t")
-        x = ca.MX.sym("x", ode.size1_in(1))
-        u = ca.MX.sym("u", ode.size1_in(2))
-        p = ca.MX.sym("p", ode.size1_in(3))
-        U = self.expression(t, x, held=u)
-        closed = ca.Function("ode", [t, x, u, p], [ode(t, x, U, p)], TXUP, ["xdot"])
-        return _Closed({"ode": closed, "ode_jacobian": jacobian_of(closed)}, funcs)
+            ode = funcs["ode"]
+            t = ca.MX.sym("t")
+            x = ca.MX.sym("x", ode.size1_in(1))
+            u = ca.MX.sym("u", ode.size1_in(2))
+            p = ca.MX.sym("p", ode.size1_in(3))
+            U = self.expression(t, x, held=u)
+            closed = ca.Function("ode", [t, x, u, p], [ode(t, x, U, p)], TXUP, ["xdot"])
+            return {"ode": closed, "ode_jacobian": jacobian_of(closed)}
+        return _Closed(build, funcs, self)
+
+    @property
+    def tables_only(self) -> bool:
+        """Every signal a constant or a table: the stepping loop reads the tables as data."""
+        return all(s.kind in ("default", "constant", "table") for s in self.signals)
+
+    def vector_at(self, t: float) -> np.ndarray:
+        """u at t of a drive of constants and tables (linear tables interpolated)."""
+        return np.array([_table_value(s, t) if s.kind == "table" else s.value if s.value is not None else 0.0
+                         for s in self.signals], float)
 
     def expression(self, t, x, held=None, hold_time=None):
         """U(t, x) as a column of the type of ``t`` (MX or SX: in SX, Python signals and MX
@@ -219,6 +231,10 @@ class Drive:
         N = len(t)
         if self.constant or N == 0:
             return np.tile(self.vector(), (N, 1))
+        if self.tables_only:          # numpy lookups: a table is data (a CasADi pw_lin of 10^6 samples is not)
+            t = np.asarray(t, float)
+            return np.column_stack([_table_values(s, t) if s.kind == "table" else np.full(N, s.value)
+                                    for s in self.signals])
         import casadi as ca
 
         tt = ca.MX.sym("t")
@@ -245,15 +261,22 @@ class Drive:
 
 
 class _Closed(dict):
-    """The closed-loop Functions, with the other Functions of the model passed through."""
+    """The closed-loop Functions (built on first use: a run of the stepping loop reads the tables
+    itself and never builds them), with the other Functions of the model passed through."""
 
-    def __init__(self, own, base):
-        super().__init__(own)
-        self.base = base
+    def __init__(self, build, base, drive):
+        super().__init__()
+        self._build, self.base, self.drive = build, base, drive
+        self.tables_only = drive.tables_only
         self.compiled = getattr(base, "compiled", False)
         self.notes = list(getattr(base, "notes", []))
 
     def __missing__(self, key):
+        if key in ("ode", "ode_jacobian"):
+            if self._build is not None:
+                self.update(self._build())
+                self._build = None
+            return dict.__getitem__(self, key)
         return self.base[key]
 
 
@@ -266,6 +289,20 @@ def _held(s: Signal, t: float) -> float:
     tb = s.table
     k = int(np.searchsorted(tb.times, t + 1e-12 * max(1.0, abs(t)), side="right")) - 1
     return float(tb.values[min(max(k, 0), tb.values.size - 1)])
+
+
+def _table_value(s: Signal, t: float) -> float:
+    return float(_table_values(s, np.array([t], float))[0])
+
+
+def _table_values(s: Signal, t: np.ndarray) -> np.ndarray:
+    """A table's values at the times t: the zero-order hold as ``_held``, a linear table
+    interpolated (ends held)."""
+    tb = s.table
+    if tb.hold == "linear" or tb.times.size == 1:
+        return np.interp(t, tb.times, tb.values)
+    k = np.searchsorted(tb.times, t + 1e-12 * np.maximum(1.0, np.abs(t)), side="right") - 1
+    return tb.values[np.clip(k, 0, tb.values.size - 1)]
 
 
 def _expr(s: Signal, t, x, sym, span):

@@ -30,7 +30,10 @@ def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
           else np.asarray(U, float).reshape(N, -1).T)
     steady = UT[:, 0] if UT.size and np.all(UT == UT[:, :1]) else (UT[:, 0] if not UT.size else None)
     f, folded = _integral_search(eom, pv, steady)
-    cols = R.model_columns(eom, out_names, f, folded)
+    # the columns' expressions are built once per model, outputs and integrals (the recorder
+    # keys its Function by their names; building them is a tenth of a small model's run)
+    cols = eom.workspace.memo(("model_columns", tuple(out_names), id(f), folded),
+                              lambda: (f, R.model_columns(eom, out_names, f, folded)))[1]
     return R.record(eom, cols, t, X[:, :n], X[:, n:], pv, UT.T, using=(f,))
 
 
@@ -146,12 +149,16 @@ def is_conservative(eom) -> bool:
     """D = 0, Q = 0 and T, V independent of time.  Builds Q when the recursive route has not
     yet: an answer that depended on whether another caller had built it would make the
     metadata and ``--emit problem`` depend on what ran before in the process."""
-    import casadi as ca
+    def answer():
+        import casadi as ca
 
-    try:
-        D, Q = ca.SX(eom.D), ca.SX(eom.Q)
-        return bool(D.is_zero() and Q.is_zero()
-                    and not ca.depends_on(ca.vertcat(ca.SX(eom.T), ca.SX(eom.V)), eom.t))
-    except Exception:  # noqa: BLE001
-        return False
+        try:
+            D, Q = ca.SX(eom.D), ca.SX(eom.Q)
+            return bool(D.is_zero() and Q.is_zero()
+                        and not ca.depends_on(ca.vertcat(ca.SX(eom.T), ca.SX(eom.V)), eom.t))
+        except Exception:  # noqa: BLE001
+            return False
+
+    # kept for the EOM's copies with the same T, V, D, Q (every run asks, twice)
+    return eom.workspace.by_content(eom, ("T", "V", "D", "Q", "t"), "is_conservative", answer)
 

@@ -26,9 +26,12 @@ values are judged once, after recording, by ``accuracy.check_finite`` in the run
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..eom.codegen import singularity_monitors
+from .backends.crk import mapped as _interpreted
 
 
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
@@ -61,18 +64,45 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
           else np.zeros((m, N)))
     QT = np.asarray(Q, float).reshape(N, n).T
     QDT = np.asarray(QD, float).reshape(N, n).T
-    P = np.asarray(p, float).reshape(-1, 1)
+    P = np.asarray(p, float).reshape(-1)
+    interp = maps.get("interpreted", False)
+    if interp is False:                        # the runtime's interpreter (no compile), once per Function
+        interp = maps["interpreted"] = _interpreted(F)
+    if interp is not None:
+        vals = interp(N, (t.reshape(N, 1), QT.T, QDT.T, UT.T, P, LT.T)).T
+        return {k: vals[i] for i, k in enumerate(names)}
     mapped = maps.get(N)
     if mapped is None:
-        mapped = F.map(N)
+        # p shared by the points (reduce_in), called through a buffer (FastFunction): a plain
+        # call converts every argument to DM and back, 2-3 times the evaluation itself
+        mapped = _Mapped(F.map("record_map", "serial", N, [4], []))
         if len(maps) >= MAPS_KEPT:             # a few point counts per Function (runs that failed early)
             try:
-                maps.pop(next(iter(maps)), None)
+                maps.pop(next(k for k in maps if isinstance(k, int)), None)
             except (RuntimeError, StopIteration):  # another thread changed it meanwhile: keep it
                 pass
         maps[N] = mapped
-    vals = np.array(mapped(t.reshape(1, N), QT, QDT, UT, P, LT), float).reshape(len(names), N)
+    vals = np.reshape(mapped(t.reshape(1, N), QT, QDT, UT, P, LT), (len(names), N), order="F")
     return {k: vals[i] for i, k in enumerate(names)}
+
+
+class _Mapped:
+    """A mapped recorder Function called through its buffer (FastFunction), one thread at a
+    time; a concurrent caller (another thread's run) makes a plain call instead."""
+
+    def __init__(self, f):
+        from ..eom.codegen import FastFunction
+
+        self.f, self.fast = f, FastFunction(f)
+        self.lock = threading.Lock()
+
+    def __call__(self, *args):
+        if self.lock.acquire(blocking=False):
+            try:
+                return self.fast(*args)
+            finally:
+                self.lock.release()
+        return np.array(self.f(*args), float)
 
 
 def lam_symbol(eom):

@@ -195,8 +195,8 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
         return {"dae": "the model has constraints (a DAE)", "hybrid": "the model has contacts (events)",
                 "canonical": f"method {problem.settings.method} is a fixed-step canonical method"}[problem.kind]
     m = method or problem.settings.method
-    if m != "auto" and R.spec(m).family != "casadi":
-        return f"method {m} is not a CasADi integrator"
+    if m != "auto" and R.spec(m).family not in ("casadi", "crk"):
+        return f"method {m} is neither the stepping loop nor a CasADi integrator"
     if problem.settings.ode.functions is not None:
         return "the functions option replaces the model's Functions"
     if problem.settings.error_estimate != "off":
@@ -205,9 +205,10 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
 
 
 def _resolve_auto(job, d, settings):
-    """method=auto, once for the sweep: the choice of a single run at the first run's start."""
-    from ..eom.codegen import casadi_functions
-    from ..simulation.choose import choose_method
+    """method=auto, once for the sweep: the method a single run at the first run's start would
+    use (prepared as that run: the stepping loop where a single run takes it)."""
+    from ..simulation import formulate
+    from ..simulation.prepared import prepare
     from .runs import _prepare
 
     row = {k: float(v[0]) for k, v in d.values.items()}
@@ -218,8 +219,9 @@ def _resolve_auto(job, d, settings):
         from ..eom.start import start_vector
 
         s = s.replace(x0=start_vector(eom, None, s.p))
-    funcs = casadi_functions(eom, names=("ode", "ode_jacobian"))
-    method, reason, _ = choose_method(eom, funcs, s.x0, s.p, settings.t_start, settings.t_end, settings.rtol)
+    prep = prepare(formulate(eom, s))
+    method = prep.method
+    reason = (prep.setup.meta.get("method_reason") if prep.setup is not None else None) or "auto"
     return settings.replace(method=method), f"auto -> {method} (from the first run's start: {reason})"
 
 

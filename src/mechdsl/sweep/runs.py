@@ -8,15 +8,17 @@ once per chunk and model structure (``simulation.prepared.prepare``: Functions, 
 integrator), and every run is that preparation ``at`` its values.  Two ways to integrate:
 
     per run     the start check, then ``solve(prepared.at(p=..., x0=...))``: any problem kind
-    vectorized  the prepared integrator ``map``-ped over the chunk (ODE problems, CasADi
-                methods); the layer's post steps (the run's signals and metadata, non-finite
-                check, statistics schema, accuracy report) then run per run on its
-                trajectory.  A run whose trajectory is not finite (or a chunk the mapped call
-                rejects) is rerun per run, so its failure says when and why exactly as a
-                single run would.
+    vectorized  ODE problems without inputs: the chunk in one call, either the compiled
+                stepping loop's ensemble call (``crk.run_batch``: dopri5/dop853, method =
+                auto's choice) or the prepared CasADi integrator ``map``-ped over the chunk;
+                the layer's post steps (the run's signals and metadata, non-finite check,
+                statistics schema, accuracy report) then run per run on its trajectory.  A
+                run that fails or is not finite (or a chunk the call rejects) is rerun per
+                run, so its failure says when and why exactly as a single run would.
 
-The mapped integrator is the Function a single run of the prepared problem integrates with
-(``Prepared.integrator``, same options), so both ways give bit-identical numbers.
+The ensemble call and the mapped integrator integrate with what a single run of the prepared
+problem integrates with (the loop's Function and options; ``Prepared.integrator``), so both
+ways give the same numbers (bit-identical: the same C code or the same CasADi Function).
 """
 from __future__ import annotations
 
@@ -180,36 +182,68 @@ def scheme_parameter(pv) -> np.ndarray:
     return np.r_[NO_U, np.asarray(pv, float).ravel()]
 
 
+def _ensemble(prep, todo: list, runs: dict):
+    """(trajectories (run, time, state), raw statistics per run or None, runs that failed) of
+    ``todo`` in one C call of the stepping loop (crk_run_batch), or None when the prepared
+    problem does not run in the loop (then the mapped CasADi integrator)."""
+    from ..simulation.backends import crk
+
+    setup = prep.setup
+    funcs = setup.funcs
+    if not isinstance(funcs, crk.LoopFunctions) or funcs.drive is not None or setup.extra:
+        return None
+    loop, _ = crk.library(funcs.loop_ode, tag=setup.eom.name, engine=funcs.engine)
+    if loop is None:
+        return None
+    s = setup.settings
+    X0 = np.vstack([runs[i][1].x0 for i in todo])
+    P = np.vstack([np.ravel(runs[i][1].p) for i in todo])
+    from ..simulation.choose import min_step
+
+    X, stats, status, reached = crk.run_batch(loop, setup.method, setup.grid, X0, P, setup.drive.vector(s.t_start),
+                                              s.rtol, s.atol, setup.max_steps, min_step(s.t_start, s.t_end))
+    raw = [{"n_steps": int(st[0]), "n_rhs": int(st[1]), "n_reject": int(st[2]), "status": 0, "engine": loop.engine}
+           for st in stats]
+    failed = {j for j in range(len(todo)) if status[j] != 0 or reached[j] < len(setup.grid)}
+    return X, raw, failed
+
+
 def _mapped(job: Job, todo: list, runs: dict, out: Chunk, prepared: dict) -> list:
-    """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
+    """Integrate ``todo`` runs in one call (the stepping loop's ensemble call, else the mapped
+    integrator); returns the runs left for the per-run path."""
     eom0, s0, key0 = runs[todo[0]]
     k = len(todo)
-    X0 = np.column_stack([runs[i][1].x0 for i in todo])
-    P = np.column_stack([scheme_parameter(runs[i][1].p) for i in todo])
     wall0, cpu0 = time.perf_counter(), time.process_time()
+    raw, failed = [{}] * k, set()
     try:
         prep = _prepared(prepared, key0, eom0, s0)
-        F = mapped_integrator(prep, k, job.threads)
-        with I.captured_messages():
-            xf = np.asarray(F(x0=X0, p=P)["xf"], float)
+        batch = _ensemble(prep, todo, runs)
+        if batch is not None:
+            traj, raw, failed = batch
+        else:
+            X0 = np.column_stack([runs[i][1].x0 for i in todo])
+            P = np.column_stack([scheme_parameter(runs[i][1].p) for i in todo])
+            F = mapped_integrator(prep, k, job.threads)
+            with I.captured_messages():
+                xf = np.asarray(F(x0=X0, p=P)["xf"], float)
+            traj = xf.reshape(X0.shape[0], k, len(job.grid)).transpose(1, 2, 0)        # (run, time, state)
     except Exception:  # noqa: BLE001 - a run failed inside the map: every run of the chunk alone
         return todo
     cpu = (time.process_time() - cpu0) / k
     wall = (time.perf_counter() - wall0) / k
-    nx, nt = X0.shape[0], len(job.grid)
-    traj = xf.reshape(nx, k, nt).transpose(1, 2, 0)        # (run, time, state)
+    nt = len(job.grid)
     setup, problem = prep.setup, prep.problem
     left = []
     for j, i in enumerate(todo):
         X = traj[j]
-        if not np.isfinite(X).all():
+        if j in failed or not np.isfinite(X).all():
             left.append(i)
             continue
         eom, s, _ = runs[i]
         X[0] = s.x0
         # the layer's post steps on the trajectory: the run's signals and metadata (OdeSetup.record),
         # non-finite check, statistics schema, accuracy report
-        r = setup.record(job.grid.copy(), X, s.p, s.x0, copy.deepcopy(setup.meta), I.Run(X=X, reached=nt),
+        r = setup.record(job.grid.copy(), X, s.p, s.x0, copy.deepcopy(setup.meta), I.Run(X=X, reached=nt, stats=raw[j]),
                          None, setup.loop_compiled, time.perf_counter())
         A.check_finite(r)
         A.normalize_stats(r, cpu, wall)

@@ -2,14 +2,23 @@
 
 Methods ``dopri5`` (Dormand-Prince 5(4)) and ``dop853`` (Dormand-Prince 8(5,3)), each with
 the step-size control, initial step, error norm and dense output of scipy's RK45 and DOP853
-(``crk.c`` beside this file, a small hand-written driver).  The driver and the CasADi C of
-the model's right-hand side ``ode`` are compiled into one shared library with the cached
-compile machinery of ``mechdsl.eom.codegen`` (cache key: the code, flags, compiler and CasADi
-versions), loaded with ctypes and called once per run in a worker thread (ctypes releases
-the GIL; the main thread shows progress from the rows written and can cancel).  No
-Jacobian is generated.
+(``crk.c`` beside this file, a small hand-written driver).  The driver and the interpreter of
+``vm.c`` are one model-independent library (the *runtime*, compiled once per cache folder
+with the cached compile machinery of ``mechdsl.eom.codegen``); the model's Functions reach it
+as ``Fun`` records, in one of two engines that give the same bits (tests/test_sxcode.py):
 
-Without a C compiler, or when the model's code cannot be generated or compiled, the same
+``compiled``
+    the model's C (``mechdsl.eom.sxcode.c_source`` for SX Functions, CasADi's code generator
+    for the others) in a library of its own, cached by its code;
+``interpreted``
+    programs of vm.c's interpreter (``sxcode.program``): nothing to compile.
+
+``engine_for(f)`` decides from the Function alone (its operation count), never from what the
+cache holds, so a run's metadata and numbers do not depend on what ran before.  Runs are one
+ctypes call in a worker thread (ctypes releases the GIL; the main thread shows progress from
+the rows written and can cancel).  No Jacobian is generated.
+
+Without a C compiler, or when the model's code cannot be translated or compiled, the same
 algorithm runs as scipy's RK45/DOP853 stepped in Python on the virtual machine (the same
 steps up to round-off), and the run's warnings say so.
 
@@ -18,20 +27,19 @@ The outcome is a ``mechdsl.integrators.Run`` like every other integrator plug-in
 from __future__ import annotations
 
 import ctypes
-import math
 import threading
 from pathlib import Path
 
 import numpy as np
 
 from ... import integrators as I
+from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
-from ..choose import time_scale
 
 
 # method -> (id in crk.c, scipy class of the same algorithm)
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
-SOURCE = Path(__file__).with_name("crk.c")
+SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
 STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)",
           2: "error control needs a step below the minimum {hmin:.3g} (min_step_size)",
           3: "Required step size is less than spacing between numbers.",
@@ -40,11 +48,23 @@ STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)
           6: "out of memory in the compiled stepping loop",
           7: "the right-hand side returned an error (non-finite or failed evaluation, NaN)",
           8: "unknown method"}
+RUNTIME_FLAGS = (["-O1"], ["-O2"])   # crk.c, vm.c: the loop is as fast at -O1 (0.3 s less gcc on an empty
+                                    # cache), the interpreter 1.4x faster at -O2
+MODEL_FLAGS = ["-O1"]       # sxcode's chunks: within a few % of -O2 at 3/4 of its compile time
+COMPILE_OPS = 12_000        # models up to this many operations are compiled (about a second of gcc)
 
 _LIBS: dict = {}
 _LOCK = threading.Lock()
+_RUNTIME: dict = {}
 _I64P = ctypes.POINTER(ctypes.c_longlong)
 _DP = ctypes.POINTER(ctypes.c_double)
+_VP = ctypes.c_void_p
+
+
+class Fun(ctypes.Structure):
+    """crk.c's Fun: how the loop calls one model Function."""
+    _fields_ = [("eval", _VP), ("ctx", _VP), ("init", _VP), ("sz_arg", ctypes.c_longlong),
+                ("sz_res", ctypes.c_longlong), ("sz_iw", ctypes.c_longlong), ("sz_w", ctypes.c_longlong)]
 
 
 def dense_ode(ode):
@@ -53,50 +73,217 @@ def dense_ode(ode):
         return ode
     import casadi as ca
 
-    args = [ca.MX.sym(ode.name_in(i), ode.sparsity_in(i)) for i in range(4)]
-    return ca.Function("ode", args, [ca.densify(ode(*args))], [ode.name_in(i) for i in range(4)], ["xdot"])
+    if ode.is_a("SXFunction"):
+        args = [ca.SX.sym(ode.name_in(i), ode.sparsity_in(i)) for i in range(ode.n_in())]
+    else:
+        args = [ca.MX.sym(ode.name_in(i), ode.sparsity_in(i)) for i in range(ode.n_in())]
+    outs = ode.call(args)
+    return ca.Function(ode.name(), args, [ca.densify(o) for o in outs], ode.name_in(), ode.name_out())
 
 
-RUN_ARGTYPES = [ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_double,
-                ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P, _DP]
+RUN_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP,
+                ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P, _DP]
+EVENTS_ARGTYPES = RUN_ARGTYPES + [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_double, ctypes.c_int, _DP,
+                                  ctypes.POINTER(Fun), _DP, _DP, _DP, ctypes.c_longlong]
 
 
-def library(ode, tag: str = "model"):
-    """(ctypes function crk_run or None, note) for the model Function ``ode``; cached per Function."""
+def runtime():
+    """(the runtime library (ctypes) or None, note): crk.c and vm.c, compiled once per cache
+    folder and loaded once per process."""
+    with _LOCK:
+        hit = _RUNTIME.get("lib")
+    if hit is not None:
+        return hit
+    if find_compiler() is None:
+        return None, "no C compiler"
+    loaded, note, path = compile_functions([], tag="crk", jacobian=False,
+                                           extra_units=tuple(p.read_text() for p in SOURCES),
+                                           extra_flags=RUNTIME_FLAGS)
+    lib = None
+    if loaded is not None:
+        try:
+            lib = ctypes.CDLL(path)
+            for name, args in (("crk_run", RUN_ARGTYPES + [_VP, _VP]), ("crk_run_events", EVENTS_ARGTYPES),
+                               ("crk_eval_n", [ctypes.POINTER(Fun), ctypes.c_double, _DP, _DP, _DP, _DP,
+                                               ctypes.c_longlong]),
+                               ("crk_map", [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_longlong, _VP, _VP,
+                                            _DP, ctypes.c_longlong])):
+                fn = getattr(lib, name)
+                fn.restype, fn.argtypes = ctypes.c_int, args
+            lib.crk_run_batch.restype = ctypes.c_longlong
+            lib.crk_run_batch.argtypes = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong,
+                                          ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_longlong, ctypes.c_double,
+                                          ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P,
+                                          _I64P, _I64P]
+        except (OSError, AttributeError) as e:
+            lib, note = None, f"cannot load the stepping loop's library {path}: {e}"
+    out = (lib, note)
+    with _LOCK:
+        _RUNTIME.setdefault("lib", out)
+        return _RUNTIME["lib"]
 
-    def load(lib):
-        fn = lib.crk_run
-        fn.restype = ctypes.c_int
-        fn.argtypes = RUN_ARGTYPES
-        fn._keep = lib
-        return fn
 
-    return cached_library(id(ode), ode, (), tag, load, "the compiled stepping loop")
+_COMPILER: dict = {}
 
 
-def cached_library(key, ode, extra, tag, load, what):
-    """(load(ctypes library) or None, note): the C of ``ode`` (dense output), of the Functions
-    ``extra`` and of crk.c in one cached shared library; cached in memory under ``key``."""
+def compiler() -> str | None:
+    """codegen.find_compiler, kept per $CC and $PATH (method = auto asks on every run)."""
+    import os
+
+    key = (os.environ.get("CC"), os.environ.get("PATH"))
+    if key not in _COMPILER:
+        _COMPILER.clear()
+        _COMPILER[key] = find_compiler()
+    return _COMPILER[key]
+
+
+def engine_for(f) -> str:
+    """``compiled`` or ``interpreted``: from the Function alone (deterministic: not from what the
+    cache holds).  SX Functions of at most COMPILE_OPS operations are compiled (their compile
+    takes up to about a second and is cached on disk by the code), larger ones interpreted (a
+    first run of a 200-link chain would otherwise spend seconds in gcc); others (MX: the
+    numeric linear solve) are compiled by CasADi's code generator, which the interpreter does
+    not run."""
+    if not f.is_a("SXFunction"):
+        return "compiled"
+    return "compiled" if f.n_instructions() <= COMPILE_OPS else "interpreted"
+
+
+class Loop:
+    """The model's Functions as the runtime calls them (``funs``: name -> Fun), the runtime's
+    entry points, and what keeps both alive (programs, the model's library)."""
+
+    def __init__(self, rt, funs: dict, engine: str, keep):
+        self.rt, self.funs, self.engine, self._keep = rt, funs, engine, keep
+        self.run = rt.crk_run
+        self.run_events = rt.crk_run_events
+
+    def fun(self, name):
+        f = self.funs.get(name)
+        return None if f is None else ctypes.byref(f)
+
+
+def build_loop(funcs: dict, tag: str, engine: str):
+    """(Loop or None, note) for the Functions ``funcs`` (name -> casadi.Function, each called by
+    its name) in ``engine``."""
+    rt, note = runtime()
+    if rt is None:
+        return None, note
+    funs, keep = {}, []
+    if engine == "interpreted":
+        ev = ctypes.cast(rt.vm_eval, _VP).value
+        init = ctypes.cast(rt.vm_init, _VP).value
+        for name, f in funcs.items():
+            prog = sxcode.program(f)
+            keep.append(prog)
+            funs[name] = Fun(ev, ctypes.addressof(prog.prog), init, f.n_in(), f.n_out(), 0, prog.nreg)
+        return Loop(rt, funs, engine, keep), ""
+    mine = {n: f for n, f in funcs.items() if sxcode.supported(f)}
+    theirs = [f for n, f in funcs.items() if n not in mine]
+    try:
+        loaded, note, path = compile_functions(theirs, tag=tag, jacobian=False,
+                                               extra_units=tuple(sxcode.c_source(f, n) for n, f in mine.items()),
+                                               extra_flags=MODEL_FLAGS)
+    except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
+        return None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})"
+    if loaded is None:
+        return None, note
+    try:
+        lib = ctypes.CDLL(path)
+        ev = ctypes.cast(rt.crk_casadi_eval, _VP).value
+        for name in funcs:
+            sz = [ctypes.c_longlong(0) for _ in range(4)]
+            getattr(lib, name + "_work")(*map(ctypes.byref, sz))
+            funs[name] = Fun(ev, ctypes.cast(getattr(lib, name), _VP).value, None, *(v.value for v in sz))
+    except (OSError, AttributeError) as e:
+        return None, f"cannot load the model's library {path}: {e}"
+    return Loop(rt, funs, engine, [lib]), note
+
+
+class Mapped:
+    """An SX Function evaluated at many points by the runtime's interpreter (``crk_map``): what
+    the recorder evaluates on the output grid, without compiling and at about half the cost
+    of CasADi's virtual machine."""
+
+    def __init__(self, rt, f):
+        self.rt, self.prog = rt, sxcode.program(f)
+        self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
+                       ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
+        self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
+        self.nout = f.nnz_out(0)
+        sp = f.sparsity_out(0)      # the program writes the nonzeros: entries that are structurally 0 are not
+        self.dense = sp.numel()
+        self.where = None if sp.is_dense() else np.array(sp.find(), dtype=np.int64)
+
+    def __call__(self, npts: int, rows) -> np.ndarray:
+        """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its
+        entries, C order) or one row shared by every point."""
+        arrs, strides = [], []
+        for a, nnz in zip(rows, self.nnz_in):
+            a = np.ascontiguousarray(a, float)
+            shared = a.size == nnz and not (npts == 1 and a.ndim > 1)
+            arrs.append(a)
+            strides.append(0 if shared or nnz == 0 else nnz)
+        out = np.zeros((npts, max(self.nout, 1)))
+        ptrs = (_VP * len(arrs))(*[a.ctypes.data if a.size else None for a in arrs])
+        st = np.array(strides, dtype=np.int64)
+        status = self.rt.crk_map(ctypes.byref(self.fun), npts, len(arrs), ptrs, st.ctypes.data, _ptr(out),
+                                 out.shape[1])
+        if status:
+            raise RuntimeError(f"evaluation failed (status {status})")
+        if self.where is None:
+            return out[:, :self.nout]
+        full = np.zeros((npts, self.dense))
+        full[:, self.where] = out[:, :self.nout]
+        return full
+
+
+def mapped(f):
+    """A Mapped of the SX Function ``f``, or None (no runtime library, an MX Function)."""
+    rt, _ = runtime()
+    if rt is None or not sxcode.supported(f):
+        return None
+    return Mapped(rt, f)
+
+
+def rhs_seconds(loop, x, u, p, reps: int) -> float:
+    """CPU seconds of one evaluation of the loop's ``ode`` at (0, x, u, p), from ``reps``
+    evaluations in C (the right-hand side's own cost, without the loop)."""
+    import time
+
+    x, u, p = (np.ascontiguousarray(np.ravel(v), float) for v in (x, u, p))
+    out = np.zeros(x.size)
+    c = time.process_time()
+    status = loop.rt.crk_eval_n(loop.fun("ode"), 0.0, _ptr(x), _ptr(u), _ptr(p), _ptr(out), int(reps))
+    dt = time.process_time() - c
+    if status:
+        raise RuntimeError(f"the right-hand side failed (status {status})")
+    return dt / reps
+
+
+def library(ode, tag: str = "model", engine: str | None = None):
+    """(Loop or None, note) for the model Function ``ode`` (its engine: ``engine_for`` unless
+    given); cached per Function and engine."""
+    engine = engine or engine_for(ode)
+    return cached_library((id(ode), engine), ode, {}, tag, engine)
+
+
+def cached_library(key, ode, extra: dict, tag, engine):
+    """(Loop or None, note): ``ode`` (dense output) and the Functions ``extra`` (name ->
+    Function) in ``engine``; cached in memory under ``key``."""
     with _LOCK:
         hit = _LIBS.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1], hit[2]
     try:
-        loaded, note, path = compile_functions([dense_ode(ode), *extra], tag=tag, jacobian=False,
-                                               extra_units=(SOURCE.read_text(),))
-    except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
-        loaded, note, path = None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})", None
-    obj = None
-    if loaded is not None:
-        try:
-            obj = load(ctypes.CDLL(path))
-        except (OSError, AttributeError) as e:
-            obj, note = None, f"cannot load {what} {path}: {e}"
+        loop, note = build_loop({"ode": dense_ode(ode), **extra}, tag, engine)
+    except sxcode.Unsupported as e:
+        loop, note = None, f"cannot translate the model ({e})"
     with _LOCK:
         if len(_LIBS) >= 16:
             _LIBS.pop(next(iter(_LIBS)))
-        _LIBS[key] = (ode, obj, note)
-    return obj, note
+        _LIBS[key] = (ode, loop, note)
+    return loop, note
 
 
 def _ptr(a):
@@ -126,8 +313,62 @@ def call_in_thread(call, ctl, tick):
     return box.get("status", 7)
 
 
-def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress) -> I.Run:
-    """One C call over the whole output grid, in a worker thread (progress and Ctrl-C stay live)."""
+class Resume(ctypes.Structure):
+    """crk.c's Resume: the state of a run in slices."""
+    _fields_ = [("slice", ctypes.c_double), ("started", ctypes.c_int), ("t", ctypes.c_double),
+                ("h_abs", ctypes.c_double), ("k", ctypes.c_longlong), ("steps", ctypes.c_longlong),
+                ("rejected", ctypes.c_longlong), ("steps_here", ctypes.c_longlong), ("nfev", ctypes.c_longlong),
+                ("y", _DP), ("f", _DP)]
+
+
+class _Tab(ctypes.Structure):
+    _fields_ = [("hold", ctypes.c_int), ("n", ctypes.c_longlong), ("t", _DP), ("v", _DP), ("cur", ctypes.c_longlong)]
+
+
+class _Drive(ctypes.Structure):
+    _fields_ = [("nu", ctypes.c_longlong), ("tab", ctypes.POINTER(_Tab)), ("u0", _DP), ("u", _DP),
+                ("nb", ctypes.c_longlong), ("breaks", _DP), ("bcur", ctypes.c_longlong)]
+
+
+def tables_in_loop(drive) -> bool:
+    """Whether the loop reads every input itself: constants and tables only (a Python callable
+    or a Function of (t, x) is closed into the model's ode instead)."""
+    return drive is not None and bool(drive.signals) and all(
+        s.kind in ("default", "constant", "table") for s in drive.signals) and not drive.constant
+
+
+def loop_drive(drive, t0, t1, u0):
+    """(crk.c's Drive for one run, what keeps its arrays alive): the tables as data, their
+    samples inside (t0, t1) the times steps end on."""
+    sigs = drive.signals
+    tabs = (_Tab * max(len(sigs), 1))()
+    keep = []
+    for j, s in enumerate(sigs):
+        if s.kind == "table":
+            tt = np.ascontiguousarray(s.table.times, float)
+            vv = np.ascontiguousarray(s.table.values, float)
+            keep += [tt, vv]
+            tabs[j] = _Tab(0 if s.table.hold == "zoh" else 1, tt.size, _ptr(tt), _ptr(vv), 0)
+    # steps end on every sample: a hold's jump, and a linear table's kink (stepping across kinks
+    # left errors 1000 times the tolerance on the cart-pole with 11 samples)
+    held = [s.table.times for s in sigs if s.kind == "table"]
+    tol = 1e-12 * max(1.0, abs(t0), abs(t1))
+    br = np.unique(np.concatenate(held)) if held else np.zeros(0)
+    br = np.ascontiguousarray(br[(br > t0 + tol) & (br < t1 - tol)], float)
+    u0 = np.ascontiguousarray(u0, float)
+    u = np.zeros(max(len(sigs), 1))
+    keep += [br, u0, u, tabs]
+    return _Drive(len(sigs), tabs, _ptr(u0), _ptr(u), br.size, _ptr(br), 0), keep
+
+
+SLICE = 0.05            # CPU seconds of one C call of a run: progress and Ctrl-C between calls
+YIELD = 11
+
+
+def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None) -> I.Run:
+    """The run as C calls of SLICE seconds of CPU each in the calling thread (the state carried
+    from call to call: the steps are those of one call), progress shown and Ctrl-C let through
+    between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run)."""
     grid = np.ascontiguousarray(grid, float)
     nx = x0.size
     X = np.full((len(grid), nx), np.nan)
@@ -137,16 +378,21 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
     stats = np.zeros(4)
     ctl = np.zeros(2, dtype=np.int64)
     xfail = np.zeros(nx)
-
-    def call():
-        return fn(CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
-                  float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats),
-                  ctl.ctypes.data_as(_I64P), _ptr(xfail))
-
-    status = call_in_thread(call, ctl, lambda rows: progress.update(float(grid[rows - 1])))
+    carry = np.zeros((2, max(nx, 1)))
+    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, _ptr(carry[0]), _ptr(carry[1]))
+    drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
+    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
+            float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats), ctl.ctypes.data_as(_I64P),
+            _ptr(xfail), ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+    while True:
+        status = loop.run(*args)
+        if status != YIELD:
+            break
+        progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
     reached = int(ctl[0])
     progress.update(float(grid[max(reached, 1) - 1]))
-    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status)}
+    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
+           "engine": loop.engine}
     run = I.Run(X=X, reached=reached, stats=raw)
     if status != 0 or reached < len(grid):
         t_end = float(stats[3])
@@ -155,19 +401,30 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
     return run
 
 
-# --------------------------------------------------------------------------- when compiling pays
+def run_batch(loop, method, grid, X0, P, u, rtol, atol, max_steps, hmin):
+    """An ensemble in one C call (crk_run_batch): run j from X0[j] at the parameters P[j], the
+    inputs u shared, each taking the steps a single run takes.  Returns (X (m, ngrid, nx),
+    stats (m, 4): steps, evaluations, rejected, last time; status (m); rows reached (m))."""
+    grid = np.ascontiguousarray(grid, float)
+    X0 = np.ascontiguousarray(np.atleast_2d(X0), float)
+    m, nx = X0.shape
+    P = np.ascontiguousarray(np.reshape(P, (m, -1)), float)
+    uc = np.ascontiguousarray(np.zeros(0) if u is None else np.ravel(u), float)
+    X = np.full((m, len(grid), nx), np.nan)
+    stats = np.zeros((m, 4))
+    status = np.zeros(m, dtype=np.int64)
+    reached = np.zeros(m, dtype=np.int64)
+    ctl = np.zeros(2, dtype=np.int64)
+    loop.rt.crk_run_batch(loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), m, _ptr(X0),
+                          _ptr(uc), _ptr(P), P.shape[1], float(rtol), float(atol), float(hmin), int(max_steps),
+                          _ptr(X), _ptr(stats), status.ctypes.data_as(_I64P), reached.ctypes.data_as(_I64P),
+                          ctl.ctypes.data_as(_I64P))
+    return X, stats, status, reached
 
-# Cost model (measured on this project's 2-core machine, N-link chains N = 2..30, rtol 1e-8,
-# docs/internals/numerics.md): erk in the virtual machine costs about 3 us of step machinery
-# plus 2 ns per operation of the right-hand side per evaluation; the compiled dop853 loop
-# 0.3 us + 0.6 ns per operation and 0.65x erk's evaluations; gcc 0.35 s + 0.17 ms per
-# operation.  erk's evaluations ~ 2.6 sqrt(n) * span * omega * rtol^(-1/5), omega the time
-# scale at the start (simulate.time_scale); the sqrt(n) is the chains' whip (faster motion
-# than at the start), fitted within 2x on N = 2..30 and the shipped double pendulum.
-VM_CALL, VM_OP = 3e-6, 2e-9
-C_CALL, C_OP, C_EVALS = 0.3e-6, 0.6e-9, 0.65
-GCC_FIXED, GCC_OP = 0.35, 1.7e-4
-PAYBACK_RUNS = 20     # the library is cached on disk by the model's structure: later runs reuse it
+
+# --------------------------------------------------------------------------- method = auto
+
+DOPRI5_RTOL = 1.0    # auto: always dop853 (benchmarks/auto_wp.py: dopri5 was never cheaper by more than noise, and less accurate)
 
 
 def rhs_cost(f) -> int | None:
@@ -194,38 +451,67 @@ def rhs_cost(f) -> int | None:
     return total
 
 
+class LoopFunctions(dict):
+    """The Functions of a loop run (``funcs``' own, for the failure diagnosis and the Python
+    fallback) with the Function the loop integrates and its engine, decided once by the back
+    end (``compiled = true`` compiles whatever the size)."""
+
+    def __init__(self, funcs, ode, engine, drive=None):
+        super().__init__()
+        self.funcs, self.loop_ode, self.engine = funcs, ode, engine
+        self.drive = drive if tables_in_loop(drive) else None      # tables read by the loop
+        self.eom = getattr(funcs, "eom", None)
+        self.notes = list(getattr(funcs, "notes", []))
+
+    def __missing__(self, name):
+        return self.funcs[name]
+
+
+def loop_ode(funcs):
+    """The Function the loop integrates for the Functions ``funcs`` of a run: the model's own
+    ``ode`` as an SX Function where it has one (``Model.casadi()``'s: for M qdd = bias the
+    unrolled LDL^T solve, ``codegen.ldl_solve``, up to SX_SOLVE_MAX coordinates; small models'
+    leaned, ``eom.lean``), which both engines run; otherwise ``funcs["ode"]`` (a closed loop
+    with input signals, larger Lagrange-route models)."""
+    from ...eom.codegen import SX_SOLVE_MAX, FunctionSet, casadi_functions
+
+    if isinstance(funcs, LoopFunctions):
+        return funcs.loop_ode
+    if getattr(funcs, "tables_only", False):      # the loop reads the tables: the model's own ode
+        funcs = funcs.base
+    ode = funcs["ode"]
+    eom = getattr(funcs, "eom", None)
+    if (not isinstance(funcs, FunctionSet) or eom is None or funcs.fixed or funcs.want_compiled or funcs.sx
+            or (eom.n > SX_SOLVE_MAX and not ode.is_a("SXFunction"))):
+        return ode
+    return casadi_functions(eom, names=("ode",), sx=True)["ode"]
+
+
 def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | None, str, dict]:
-    """(method or None, reason, numbers): compile the dop853 loop (dopri5 at rtol >= 1e-5) when
-    the time it saves per run, estimated from the model's size and the run's length, repays the
-    estimated compile time within PAYBACK_RUNS runs."""
-    if find_compiler() is None:
+    """(method or None, reason, numbers) for method = auto on a non-stiff model: the stepping
+    loop, dop853 (dopri5 at rtol >= DOPRI5_RTOL), its engine by ``engine_for``; None (erk in the
+    virtual machine) without a C compiler or when the right-hand side calls Python.  From the
+    model and the options alone: the same choice whatever the cache holds."""
+    if compiler() is None:
         return None, "no C compiler", {}
-    ops = rhs_cost(funcs["ode"])
+    ode = loop_ode(funcs)
+    ops = rhs_cost(ode)
     if ops is None:
         return None, "the right-hand side calls Python (an input given as a callable): no C code for it", {}
-    omega, _ = time_scale(funcs, x0, pv, t0, t1, u, rho=rho)
-    span = t1 - t0
-    evals = 2.6 * math.sqrt(max(eom.n, 1)) * span * omega * rtol ** -0.2
-    if not math.isfinite(evals):        # a subnormal span or an overflowing time scale
-        return None, f"no estimate of the run's work (span {span:.3g} s, time scale {omega:.3g} rad/s)", {}
-    vm = evals * (VM_CALL + VM_OP * ops)
-    comp = C_EVALS * evals * (C_CALL + C_OP * ops)
-    gcc = GCC_FIXED + GCC_OP * ops
-    info = {"rhs_operations": ops, "estimated_rhs_evals": round(evals), "estimated_vm_time": vm,
-            "estimated_compiled_time": comp, "estimated_compile_time": gcc}
-    numbers = (f"estimated {vm * 1e3:.3g} ms a run in the virtual machine, {comp * 1e3:.3g} ms compiled; "
-               f"compiling ~{gcc:.2g} s once, cached on disk")
-    if (vm - comp) * PAYBACK_RUNS < gcc:
-        return None, numbers + f": does not pay back within {PAYBACK_RUNS} runs", info
     method = loop_method(rtol)
-    return method, numbers + f": pays back within {PAYBACK_RUNS} runs", info
+    engine = engine_for(ode)
+    info = {"rhs_operations": ops, "engine": engine}
+    why = (f"{ops} operations a right-hand side: compiled (at most {COMPILE_OPS}), cached on disk"
+           if engine == "compiled" else
+           f"{ops} operations a right-hand side: interpreted in C (above {COMPILE_OPS}, a first run would "
+           "spend seconds compiling; compiled = true compiles)")
+    return method, why, info
 
 
 def loop_method(rtol: float) -> str:
-    """The compiled loop's method when the choice is automatic: dopri5 at rtol >= 1e-5 (its
-    lower order pays at loose tolerances), else dop853 (auto_choice; the FMU's co-simulation
-    stepper, mechdsl.export)."""
-    return "dopri5" if rtol >= 1e-5 else "dop853"
+    """The stepping loop's method when the choice is automatic (auto_choice; the FMU's
+    co-simulation stepper, mechdsl.export): dopri5 at rtol >= DOPRI5_RTOL, else dop853."""
+    return "dopri5" if rtol >= DOPRI5_RTOL else "dop853"
 
 
 def scipy_name(method: str) -> str:

@@ -20,8 +20,6 @@ whole run is Python.
 """
 from __future__ import annotations
 
-import ctypes
-
 import numpy as np
 
 from ...eom.codegen import casadi_functions, find_compiler
@@ -32,21 +30,21 @@ from . import crk
 # scipy class (impacts.one_step) -> method of the compiled loop
 COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
 OK, EVENT = 0, 9
-_VP = ctypes.c_void_p
 
 
 class CompiledFlight:
-    """The compiled loop with gap events for one ContactSystem."""
+    """The compiled loop with gap events for one ContactSystem (``loop``: crk.Loop of the
+    model's ode, contact_gap and, when the simple impacts run in C, contact_impact)."""
 
-    def __init__(self, fn, gap_addr: int, work_addr: int, lib, impact=None):
-        self.fn, self.gap, self.work, self._lib = fn, gap_addr, work_addr, lib
-        self.impact = impact      # (function, work) addresses of contact_impact, or None
+    def __init__(self, loop):
+        self.loop = loop
+        self.impact = loop.fun("contact_impact")
 
     def segment(self, method: str, grid, y0, p, rtol, atol, max_steps, k, offset, samples, tick=None,
                 impacts=None):
         """One C call from grid[0] to grid[-1]: (status, time reached, state there, rows written,
         stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; others: failed.
-        ``impacts`` (restitution (k,), rest_speed, v_eps, touch, capacity) lets the loop apply
+        ``impacts`` (restitution (k,), rest_speed, v_eps, touch, rest band, capacity) lets the loop apply
         the simple impacts itself (``impact_in_c`` in crk.c); their records are in
         stats["impacts"], an (m, 5 + 2 nx) array of rows (time, contact, impulse, speed before,
         speed after, state before, state after)."""
@@ -57,24 +55,26 @@ class CompiledFlight:
         pc = np.ascontiguousarray(np.ravel(p), float)
         uc = np.zeros(0)
         stats = np.zeros(6)
-        use = impacts is not None and self.impact is not None and impacts[4] > 0
+        use = impacts is not None and self.impact is not None and impacts[5] > 0
         if use:
             rest = np.ascontiguousarray(impacts[0], float)
-            limits = np.array(impacts[1:4], float)
-            buf = np.zeros((int(impacts[4]), 5 + 2 * nx))
-            imp, imp_work, cap = self.impact[0], self.impact[1], int(impacts[4])
+            limits = np.array(impacts[1:5], float)
+            buf = np.zeros((int(impacts[5]), 5 + 2 * nx))
+            imp, cap = self.impact, int(impacts[5])
         else:
-            rest, limits, buf = np.zeros(1), np.zeros(3), np.zeros((1, 5 + 2 * nx))
-            imp, imp_work, cap = None, None, 0
+            rest, limits, buf = np.zeros(1), np.zeros(4), np.zeros((1, 5 + 2 * nx))
+            imp, cap = None, 0
         ctl = np.zeros(2, dtype=np.int64)
         xend = np.zeros(nx)
         _P = crk._ptr
 
+        loop = self.loop
+
         def call():
-            return self.fn(crk.CRK_METHODS[method][0], nx, _P(grid), len(grid), _P(x0c), _P(uc), _P(pc),
-                           float(rtol), float(atol), 0.0, int(max_steps), _P(X), _P(stats),
-                           ctl.ctypes.data_as(crk._I64P), _P(xend), self.gap, self.work, int(k), float(offset),
-                           int(samples), _P(pc), imp, imp_work, _P(rest), _P(limits), _P(buf), cap)
+            return loop.run_events(loop.fun("ode"), crk.CRK_METHODS[method][0], nx, _P(grid), len(grid), _P(x0c),
+                                   _P(uc), _P(pc), float(rtol), float(atol), 0.0, int(max_steps), _P(X), _P(stats),
+                                   ctl.ctypes.data_as(crk._I64P), _P(xend), loop.fun("contact_gap"), int(k),
+                                   float(offset), int(samples), _P(pc), imp, _P(rest), _P(limits), _P(buf), cap)
 
         status = call() if tick is None else crk.call_in_thread(call, ctl, lambda r: tick(float(grid[r - 1])))
         st = {"steps": int(stats[0]), "rhs": int(stats[1]), "rejected": int(stats[2]), "root": int(stats[4]),
@@ -110,21 +110,11 @@ def _build_flight(system, ode, tag: str) -> tuple[CompiledFlight | None, str]:
     gapv = ca.vertcat(*[ca.SX(g.gap) for g in system.gaps]) if system.gaps else ca.SX.zeros(0, 1)
     gapf = ca.Function("contact_gap", [eom.t, x, eom.p], [gapv], ["t", "x", "p"], ["gap"])
     impf = impact_function(system, x)
-    extra = (gapf,) if impf is None else (gapf, impf)
-
-    def load(lib):
-        fn = lib.crk_run_events
-        fn.restype = ctypes.c_int
-        fn.argtypes = crk.RUN_ARGTYPES + [_VP, _VP, ctypes.c_longlong, ctypes.c_double, ctypes.c_int, crk._DP,
-                                          _VP, _VP, crk._DP, crk._DP, crk._DP, ctypes.c_longlong]
-        imp = None if impf is None else (ctypes.cast(lib.contact_impact, _VP).value,
-                                         ctypes.cast(lib.contact_impact_work, _VP).value)
-        return CompiledFlight(fn, ctypes.cast(lib.contact_gap, _VP).value,
-                              ctypes.cast(lib.contact_gap_work, _VP).value, lib, imp)
-
-    fl, note = crk.cached_library((id(ode), gapf.serialize(), None if impf is None else impf.serialize()),
-                                  ode, extra, tag, load, "the compiled contact loop")
-    return fl, note or ""
+    extra = {"contact_gap": gapf} if impf is None else {"contact_gap": gapf, "contact_impact": impf}
+    engine = crk.engine_for(ode)
+    loop, note = crk.cached_library((id(ode), gapf.serialize(), None if impf is None else impf.serialize(), engine),
+                                    ode, extra, tag, engine)
+    return (None if loop is None else CompiledFlight(loop)), note or ""
 
 
 MAX_IMPACT_DOF = 12     # the symbolic M^-1 A^T of contact_impact grows as n^3

@@ -30,7 +30,7 @@ from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
 from . import plugins as P
-from .crk import auto_choice, library, scipy_name
+from .crk import LoopFunctions, auto_choice, engine_for, library, loop_ode, scipy_name
 
 
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
@@ -121,7 +121,7 @@ class OdeSetup:
         if method == "auto":
             method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
             meta["auto"] = info
-            if method == "erk" and compiled is None and functions is None:
+            if method == "erk" and compiled is not False and functions is None:
                 method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
         else:
             reason = "requested"
@@ -134,9 +134,9 @@ class OdeSetup:
         loop_compiled = None
         if functions is not None:
             funcs = functions
-        elif spec(method).compiled_loop:     # the loop compiles the model's C together with its own
-            funcs = vm
-            loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
+        elif spec(method).compiled_loop:     # the stepping loop, the model compiled or interpreted (crk.py)
+            funcs, loop_compiled = _compile_loop(eom, vm, meta, fallback="erk" if auto_compiled else None,
+                                                 compiled=compiled, drive=drive)
             if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
                 method, loop_compiled = "erk", None
                 meta.update(method=method, integrator=spec(method).description,
@@ -188,7 +188,7 @@ class OdeSetup:
         bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
         breaks = drive.breakpoints(t0, t1)
         try:
-            if breaks.size:
+            if breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
                 run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra,
                                          bar, eom, t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
             else:
@@ -228,7 +228,7 @@ class OdeSetup:
         meta["options"] = {"t_start": s.t_start, "t_end": s.t_end, "rtol": s.rtol, "atol": s.atol,
                            "points": len(self.grid), "method": method,
                            "compiled": (bool(getattr(funcs, "compiled", False)) if loop_compiled is None
-                                        else loop_compiled),
+                                        else bool(loop_compiled) and meta.get("loop_engine") == "compiled"),
                            "max_steps": max_steps, "outputs": list(out_names),
                            "parameters": dict(zip(eom.params, map(float, pv))),
                            "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
@@ -239,18 +239,27 @@ class OdeSetup:
                       stats=stats, metadata=meta, failure=failure)
 
 
-def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
-    """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
-    fallback to scipy's stepping in Python (or to ``fallback``) is a warning of the run."""
-    fn, note = library(funcs["ode"], tag=eom.name)
-    if fn is None:
+def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None):
+    """(Functions of the run, whether the loop runs) for a dopri5/dop853 run: the stepping loop
+    with the model compiled or interpreted (crk.engine_for; compiled = true compiles), built
+    or loaded from the cache; a fallback to scipy's stepping in Python (or to ``fallback``) is
+    a warning of the run."""
+    ode = loop_ode(funcs)
+    engine = "compiled" if compiled else engine_for(ode)
+    loop, note = library(ode, tag=eom.name, engine=engine)
+    if loop is None:
         instead = (f"{fallback} runs instead" if fallback else
                    f"{meta['method']} runs as scipy's same method stepped in Python")
         meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {instead}")
-        return False
+        return funcs, False
+    meta["loop_engine"] = engine
     if note:
         meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
-    return True
+    loop_funcs = LoopFunctions(funcs, ode, engine, drive)
+    if loop_funcs.drive is not None:
+        meta["notes"].append("the input tables are read by the stepping loop (data, not code); steps end on the "
+                             "zero-order holds' samples")
+    return loop_funcs, True
 
 
 def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
@@ -262,7 +271,7 @@ def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
         meta["compiled"] = f"no: auto ({why})"
         return "erk", reason, None
     meta["compiled"] = f"auto ({why})"
-    return pick, (reason.split(";")[0] + f"; compiled stepping loop {pick} (Dormand-Prince, C): {why}"), True
+    return pick, (reason.split(";")[0] + f"; stepping loop {pick} (Dormand-Prince, C): {why}"), True
 
 
 def record_inputs(drive, U, signals, meta) -> None:

@@ -81,16 +81,18 @@ class CrkPlugin(IntegratorPlugin):
                 u=None):
         if extra:
             raise RuntimeError(f"{method} takes no integrator options (got {', '.join(sorted(extra))})")
-        ode = funcs["ode"]
-        fn, _ = crk.library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"))
-        if fn is None:
-            rhs = FastFunction(ode).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
+        ode = crk.loop_ode(funcs)
+        loop, _ = crk.library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
+                              engine=getattr(funcs, "engine", None))
+        if loop is None:
+            rhs = FastFunction(funcs["ode"]).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
             run = run_scipy(spec(crk.scipy_name(method)).plugin, rhs, None, grid, x0, rtol, atol, max_steps,
                             progress, {}, hmin=hmin)
             run.stats = {"n_steps": run.stats.get("steps"), "n_rhs": run.stats.get("rhs_evals"),
                          "n_reject": None, "fallback": "scipy"}
             return run
-        return crk.run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress)
+        return crk.run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress,
+                                drive=getattr(funcs, "drive", None))
 
     def counts(self, method, raw):
         return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,

@@ -1,0 +1,103 @@
+"""Whole-process cost of ``mech simulate`` on a cold and a warm cache (issue 24, items 3 and 8).
+
+    PYTHONPATH=src python benchmarks/first_run.py [--sizes 12,25,50,100,200] [--runs K]
+
+For the N-link chain (models/nlink_pendulum.mech --set N=... --t-end 5) runs ``python -m
+mechdsl simulate ... --no-progress`` as a fresh process and reads its CPU time (user + system)
+and peak resident memory from the operating system (os.wait4: the process and the compiler
+processes it waited for).  Three states of the cache folder ($MECHDSL_CACHE):
+
+- ``empty``: a new, empty folder (nothing compiled, nothing derived: a first run on a new
+  machine; the stepping loop's runtime library, crk.c + vm.c, is compiled in this run);
+- ``new model``: a folder where another model ran before (the runtime library built, the
+  chain never seen: parsed, derived and its code compiled in this run);
+- ``warm``: the same command a second time (everything read from the cache).
+
+Each figure is the median of K processes (default 3), one new folder per process for the
+first two states; Python's bytecode caches are written (as after ``pip install``: the
+PYTHONDONTWRITEBYTECODE variable is removed).  Goals: the 12-link chain warm 0.15 s and from
+an empty cache 0.5 s (item 8); the 200-link chain's first run at most 3 s and 200 MB, growing
+linearly with N (item 3).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def env(cache):
+    e = dict(os.environ)
+    e.pop("PYTHONDONTWRITEBYTECODE", None)
+    e["MECHDSL_CACHE"] = str(cache)
+    e["PYTHONPATH"] = str(ROOT / "src") + os.pathsep + e.get("PYTHONPATH", "")
+    return e
+
+
+def process(args, cache) -> tuple[float, float]:
+    """(CPU seconds, peak MB) of one process and the processes it waited for."""
+    p = subprocess.Popen([sys.executable, "-m", "mechdsl", *args], cwd=ROOT, env=env(cache),
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, ru = os.wait4(p.pid, 0)
+    err = p.stderr.read().decode(errors="replace")
+    p.stderr.close()
+    p.returncode = os.waitstatus_to_exitcode(status)
+    if p.returncode != 0:
+        raise RuntimeError(f"mech {' '.join(args)} failed ({p.returncode}): {err[-800:]}")
+    return ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024
+
+
+def chain_args(n):
+    return ["simulate", "models/nlink_pendulum.mech", "--set", f"N={n}", "--t-end", "5", "--no-progress"]
+
+
+def measure(n, runs) -> dict:
+    out = {}
+    empty, new, warm = [], [], []
+    for _ in range(runs):
+        d = Path(tempfile.mkdtemp(prefix="mechdsl-first-"))
+        try:
+            empty.append(process(chain_args(n), d))
+        finally:
+            shutil.rmtree(d, ignore_errors=True)
+        d = Path(tempfile.mkdtemp(prefix="mechdsl-first-"))
+        try:
+            process(["simulate", "models/pendulum.mech", "--t-end", "1", "--no-progress"], d)   # builds the runtime
+            new.append(process(chain_args(n), d))
+            warm.append(process(chain_args(n), d))
+        finally:
+            shutil.rmtree(d, ignore_errors=True)
+    for key, vals in (("empty", empty), ("new model", new), ("warm", warm)):
+        out[key] = (statistics.median(v[0] for v in vals), max(v[1] for v in vals))
+    return out
+
+
+def table(sizes, runs) -> str:
+    lines = [f"`benchmarks/first_run.py` (median of {runs} processes; CPU = user + system of the process and the "
+             "compilers it ran; peak = largest resident size)", "",
+             "| chain | empty cache: CPU s | peak MB | new model: CPU s | peak MB | warm: CPU s | peak MB |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for n in sizes:
+        m = measure(n, runs)
+        lines.append(f"| N = {n} | " + " | ".join(f"{m[k][0]:.2f} | {m[k][1]:.0f}" for k in ("empty", "new model",
+                                                                                              "warm")) + " |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="12,25,50,100,200")
+    ap.add_argument("--runs", type=int, default=3)
+    a = ap.parse_args(argv)
+    print(table([int(s) for s in a.sizes.split(",")], a.runs))
+
+
+if __name__ == "__main__":
+    main()
