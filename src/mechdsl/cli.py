@@ -101,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
         args = ap.parse_args(argv)
+        _log_setup(bool(os.environ.get("MECHDSL_DEBUG")) or bool(getattr(args, "verbose", False)))
         if not getattr(args, "_run", None):
             ap.print_help(sys.stderr)
             return 2
@@ -142,6 +143,26 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except (InternalError, Exception) as e:  # a bug in mechdsl, not in the model
         return _internal(e)
+
+
+def _log_setup(debug: bool) -> None:
+    """mechdsl's library messages (the ``mechdsl`` loggers) as ``mech: warning: ...`` lines on
+    stderr; DEBUG ones (the reason of each cache miss) with MECHDSL_DEBUG=1 or -v.  Without
+    a debug request the logging module is imported only when a message is logged."""
+    if not debug:
+        return
+    import logging
+
+    class Lines(logging.Formatter):
+        def format(self, record):
+            return f"mech: {record.levelname.lower()}: {record.getMessage()}"
+
+    h = logging.StreamHandler(sys.stderr)
+    h.setFormatter(Lines())
+    log = logging.getLogger("mechdsl")
+    log.addHandler(h)
+    log.setLevel(logging.DEBUG)
+    log.propagate = False
 
 
 # what the environment did, not a bug: a full or read-only device, a quota, permissions, an I/O

@@ -16,6 +16,8 @@ def add_parser(sub):
     p.add_argument("--model", help="check only this model")
     p.add_argument("--scene", help="check only this scene")
     p.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="also print debugging notes (why each cache entry was or was not used)")
     p.add_argument("--no-units", action="store_true", help="skip dimensional analysis")
     return p
 
@@ -27,6 +29,10 @@ def run(args) -> int:
     from ..semantic import analyze
 
     status = 0
+    if getattr(args, "verbose", False):
+        from ..eom.cachefiles import describe
+
+        describe()
     for path in args.files:
         try:
             program = analyze(parse_file(path), units=not args.no_units)

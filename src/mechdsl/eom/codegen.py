@@ -37,7 +37,6 @@ loop.
 """
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
 from collections.abc import Mapping
@@ -556,14 +555,14 @@ def compiler_version(cc: str) -> str:
         tag = f"{os.path.realpath(cc)}\t{st.st_size}\t{st.st_mtime_ns}\t"
     except OSError:
         tag = None
+    from . import cachefiles
+
     memo = cache_dir() / "compilers"
     if tag is not None:
-        try:
-            for line in memo.read_text(encoding="utf-8").splitlines():
-                if line.startswith(tag):
-                    return line[len(tag):] or cc
-        except (OSError, UnicodeDecodeError):
-            pass
+        data, _ = cachefiles.read_bytes(memo)        # (a file only this user can write)
+        for line in (data or b"").decode("utf-8", "replace").splitlines():
+            if line.startswith(tag):
+                return line[len(tag):] or cc
     import subprocess
 
     try:
@@ -571,10 +570,11 @@ def compiler_version(cc: str) -> str:
         version = version.splitlines()[0] if version else cc
     except (OSError, subprocess.SubprocessError):
         return cc
-    if tag is not None and "\n" not in version:
+    if tag is not None and "\n" not in version and cachefiles.trusted_folder(memo.parent, create=True):
         try:
-            memo.parent.mkdir(parents=True, exist_ok=True)
-            with open(memo, "a", encoding="utf-8") as f:      # one short line: appends do not interleave
+            # one short line: appends do not interleave
+            fd = os.open(memo, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+            with os.fdopen(fd, "a", encoding="utf-8") as f:
                 f.write(tag + version + "\n")
         except OSError:
             pass
@@ -664,20 +664,29 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     flags = [cflags_for(len(code)) for code in units]
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
-    digest = hashlib.sha256(key.encode()).hexdigest()[:24]
+    full = hashlib.sha256(key.encode()).hexdigest()
+    digest = full[:24]
+    from . import cachefiles
+
     d = cache_dir()
-    lib = d / f"{digest}.so"
+    # a library runs code when loaded: only from a folder no other user owns or can write
+    # (mechdsl.eom.cachefiles); otherwise it is built for this run alone in a private folder
+    private = None if cachefiles.trusted_folder(d, create=True) else _private_folder()
+    lib = (private or d) / f"{digest}.so"
     size_kb = sum(len(c) for c in units) // 1000
-    problem = _cache_problem(lib) if lib.exists() else None
-    if lib.exists() and problem is None:
+    problem = _cache_problem(lib, full) if private is None and lib.exists() else None
+    if private is None and lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
+        cachefiles.hit("compiled-code", digest)
     else:
         import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
         import tempfile        # loads the cached library)
 
+        cachefiles.miss("compiled-code", digest, "not built yet" if private is None and problem is None
+                        else problem or "the cache folder is not used")
         try:
-            d.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
+            cachefiles.remove_stale_builds(private or d)
+            with tempfile.TemporaryDirectory(dir=private or d, prefix=f".build-{os.getpid()}-") as tmp:
                 procs, objs = [], []
                 for i, (code, fl) in enumerate(zip(units, flags)):
                     src = Path(tmp) / f"unit{i}.c"
@@ -702,17 +711,30 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                 if errors:
                     tail = " | ".join(errors[0].splitlines()[-3:])
                     return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
-                _record_digest(out, lib)  # the hash first: a library in place always has its hash
+                os.chmod(out, 0o600)
+                if private is None:
+                    _record_digest(out, lib, full)  # the hash first: a library in place always has its hash
                 os.replace(out, lib)
         except OSError as e:
-            return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
+            return None, f"cannot compile into {private or d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
                 f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
         if problem:
             note = f"the cached library {lib} {problem}: rebuilt; " + note
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
+    if private is not None:             # loaded (mapped): the files are not needed any more
+        import shutil
+
+        shutil.rmtree(private, ignore_errors=True)
+        note += " (a private folder for this run: the cache folder is not used)"
     return loaded, note, str(lib)
+
+
+def _private_folder() -> Path:
+    import tempfile
+
+    return Path(tempfile.mkdtemp(prefix="mechdsl-build-"))     # 0700
 
 
 def _digest_path(lib: Path) -> Path:
@@ -727,36 +749,40 @@ def _file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _record_digest(built: Path, lib: Path) -> None:
-    import tempfile
+def _record_digest(built: Path, lib: Path, key: str) -> None:
+    """Write the hash of the library ``built`` and its full key next to its cache place ``lib``
+    (``<name>.sha256``: "<file sha256> <key sha256>"), atomically, mode 0600."""
+    from . import cachefiles
 
-    """Write the hash of the library `built` next to its cache place `lib` (``<name>.sha256``), atomically."""
-    side = _digest_path(lib)
-    fd, tmp = tempfile.mkstemp(prefix=f".{side.name}.", suffix=".tmp", dir=str(lib.parent))
-    try:
-        with os.fdopen(fd, "w", encoding="ascii") as f:
-            f.write(_file_sha256(built) + "\n")
-        os.replace(tmp, side)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    if not cachefiles.write_bytes(_digest_path(lib), f"{_file_sha256(built)} {key}\n".encode("ascii")):
+        raise OSError(f"cannot write {_digest_path(lib)}")
 
 
-def _cache_problem(lib: Path) -> str | None:
-    """None if the cached library is the one built here, else what is wrong with it.
+def _cache_problem(lib: Path, key: str) -> str | None:
+    """None if the cached library is the one built here for ``key``, else what is wrong with it.
 
     A truncated library kills the process that loads it (SIGBUS); another library under the
-    right name gives wrong numbers.  The hash recorded at build time catches both."""
-    try:
-        recorded = _digest_path(lib).read_text(encoding="ascii").strip()
-    except (OSError, UnicodeDecodeError):
-        return "has no recorded content hash"
+    right name gives wrong numbers (or runs what it likes when loaded).  The file hash and the
+    full key recorded at build time catch both, and are checked without loading the library;
+    a file another user owns or can write is not used at all (mechdsl.eom.cachefiles)."""
+    from . import cachefiles
+
+    why = cachefiles.check_file(lib)
+    if why:
+        return why
+    data, why = cachefiles.read_bytes(_digest_path(lib))
+    if data is None:
+        return "has no recorded content hash" if why == "no entry" else f"has no usable hash record ({why})"
+    parts = data.decode("ascii", "replace").split()
+    if len(parts) != 2:
+        return "has a hash record without its key (an older format, or written by hand)"
+    if parts[1] != key:
+        return "was built for another key (swapped or copied)"
     try:
         actual = _file_sha256(lib)
     except OSError as e:
         return f"cannot be read ({e.strerror or e})"
-    if actual != recorded:
+    if actual != parts[0]:
         return "does not match its recorded content hash (truncated or replaced)"
     return None
 

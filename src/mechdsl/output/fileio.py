@@ -127,7 +127,6 @@ def remove_stale(final: Path) -> list[Path]:
     gone (killed: SIGKILL, a power cut); those of a live process are left alone.  Returns what
     was removed."""
     import re
-    import shutil
 
     pattern = re.compile(r"\." + re.escape(final.name) + r"\.(\d+)\.[0-9a-f]{8}(\.[\w.-]*)?$")
     removed = []
@@ -141,6 +140,8 @@ def remove_stale(final: Path) -> list[Path]:
             continue
         try:
             if e.is_dir(follow_symlinks=False):
+                import shutil      # (only here: a warm run does not import it)
+
                 shutil.rmtree(e.path)
             else:
                 os.unlink(e.path)
