@@ -260,10 +260,14 @@ def test_ctrl_c_on_the_process_pool_keeps_finished_runs(tmp_path):
                           "--workers", "2", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True, start_new_session=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # even if we ignore it
-    time.sleep(8)
+    from mechdsl.sweep.journal import parts_folder
+
+    t_end = time.time() + 600
+    while not list(parts_folder(out).glob("chunk-*")) and time.time() < t_end and p.poll() is None:
+        time.sleep(0.2)                        # until a chunk has finished
     os.killpg(p.pid, signal.SIGINT)            # as a terminal's Ctrl-C: the whole process group
     stdout, stderr = p.communicate(timeout=120)
-    assert p.returncode == 1, stdout + stderr
+    assert p.returncode == 130, stdout + stderr
     assert "interrupted" in stdout and "Traceback" not in stderr
     ds = xr.open_dataset(out, engine="h5netcdf")
     ok = ds["success"].values

@@ -31,8 +31,14 @@ def add_parser(sub):
                    help="Monte Carlo: NAME uniform in [LOW, HIGH) (with --samples)")
     p.add_argument("--normal", action="append", default=[], metavar="NAME=MEAN:SD",
                    help="Monte Carlo: NAME normal (with --samples)")
+    p.add_argument("--sobol", action="append", default=[], metavar="NAME=LOW:HIGH",
+                   help="quasi-random: NAME on scrambled Sobol' points in [LOW, HIGH) (with --samples; the "
+                        "--sobol names jointly; balanced for a power of two)")
+    p.add_argument("--latin-hypercube", action="append", default=[], metavar="NAME=LOW:HIGH",
+                   help="NAME on a Latin hypercube in [LOW, HIGH) (with --samples; the --latin-hypercube names "
+                        "jointly)")
     p.add_argument("--samples", type=int, metavar="N", help="Monte Carlo sample size")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="Monte Carlo seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="sampling seed (default 0)")
     p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time, else 10)")
     p.add_argument("--points", type=int, metavar="N", help="output points per run (default 501)")
     p.add_argument("--rtol", type=_number_arg, metavar="R", help="relative tolerance (default 1e-8)")
@@ -46,48 +52,39 @@ def add_parser(sub):
     p.add_argument("--plot", metavar="PNG", help="heat map of --metric over the two --grid axes")
     p.add_argument("--metric", metavar="M", help=f"per-run value to plot: {METRICS}")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the sweep -o holds (killed or interrupted): the runs it finished are kept, "
+                        "after a check that model, settings and design are the same")
     add_force_arg(p)
     return p
 
 
 def run(args) -> int:
-    import numpy as np
-
     from ..output.fileio import check_figure, check_writable
-    from ..sample import normal, uniform
     from ..sweep.spec import parse_range
 
     if args.output and not str(args.output).endswith((".nc", ".csv")):
         raise UsageError(f"-o {args.output}: the output must end in .nc or .csv")
+    if args.resume and not args.output:
+        raise UsageError("--resume continues the sweep an output file holds: give -o")
     if args.output:
-        check_writable(args.output, overwrite=args.force)
+        check_writable(args.output, overwrite=args.force or args.resume)
     if args.plot:
         check_figure(args.plot, overwrite=args.force)
         if not args.metric:
             raise UsageError(f"--plot needs --metric ({METRICS})")
     grid = dict(parse_range(g) for g in args.grid)
     params = grid or None
-    sampled = [(uniform, a) for a in args.uniform] + [(normal, a) for a in args.normal]
-    if sampled:
-        if args.samples is None:
-            raise UsageError("--uniform/--normal need --samples N")
-        sampler = None
-        for fn, text in sampled:
-            name, _, rhs = text.partition("=")
-            parts = rhs.split(":")
-            if len(parts) != 2 or not name.strip():
-                raise UsageError(f"{text!r}: expected NAME=A:B")
-            from ._common import number
-
-            s = fn({name.strip(): (number(parts[0]), number(parts[1]))}, n=args.samples, seed=args.seed)
-            sampler = s if sampler is None else sampler & s
+    sampler = _sampler(args)
+    if sampler is not None:
         if grid:
-            raise UsageError("give either --grid or --uniform/--normal, not both")
+            raise UsageError("give either --grid or the samplers (--uniform, --normal, --sobol, --latin-hypercube), "
+                             "not both")
         params = sampler
     elif args.samples is not None:
-        raise UsageError("--samples needs --uniform or --normal")
+        raise UsageError("--samples needs --uniform, --normal, --sobol or --latin-hypercube")
     if params is None:
-        raise UsageError("nothing to sweep: give --grid NAME=A:B:N (or --uniform/--normal with --samples)")
+        raise UsageError("nothing to sweep: give --grid NAME=A:B:N (or a sampler such as --uniform with --samples)")
     model, x0 = load_model(args, starts_in_model=False)
     if x0:
         raise UsageError("--set of start values is not available in a sweep: sweep them with --grid c.start=...")
@@ -95,23 +92,51 @@ def run(args) -> int:
     if t_end is None and model.scene_settings.get("stop_time") is None:
         t_end = 10.0
         print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
-    nc = args.output if args.output and args.output.endswith(".nc") else None
-    ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=nc, workers=args.workers,
-                     progress=(not args.no_progress) and sys.stderr.isatty(), overwrite=True,
+    ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=args.output, workers=args.workers,
+                     progress=(not args.no_progress) and sys.stderr.isatty(), overwrite=True, resume=args.resume,
                      rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
-    written = [nc] if nc else []
+    written = [args.output] if args.output else []
     if args.output and args.output.endswith(".csv"):
-        from ..output.fileio import write_atomic
-        from ..sweep import to_frame
+        from ..output.result import sidecar_path
 
-        write_atomic(args.output, to_frame(ds).to_csv(index=False), overwrite=True)
-        written.append(args.output)
+        written.append(sidecar_path(args.output))
     if args.plot:
         from ..sweep.plot import heat_map, metric
 
         written.append(str(heat_map(ds, metric(ds, args.metric), args.metric, args.plot)))
     print(summary(ds, written))
-    return 0 if int(ds.attrs["n_failed"]) == 0 and not int(ds.attrs["interrupted"]) else 1
+    if int(ds.attrs["interrupted"]):
+        print("mech: interrupted", file=sys.stderr)
+        return 130
+    return 0 if int(ds.attrs["n_failed"]) == 0 else 1
+
+
+SAMPLERS = (("uniform", "uniform"), ("normal", "normal"), ("sobol", "sobol"), ("latin_hypercube", "latin_hypercube"))
+
+
+def _sampler(args):
+    """The --uniform/--normal/--sobol/--latin-hypercube options as one sampler (or None)."""
+    from .. import sample
+    from ._common import number
+
+    sampler = None
+    for option, fn in SAMPLERS:
+        texts = getattr(args, option)
+        if not texts:
+            continue
+        if args.samples is None:
+            raise UsageError(f"--{option.replace('_', '-')} needs --samples N")
+        ranges = {}
+        for text in texts:
+            name, _, rhs = text.partition("=")
+            parts = rhs.split(":")
+            if len(parts) != 2 or not name.strip():
+                raise UsageError(f"{text!r}: expected NAME=A:B")
+            ranges[name.strip()] = (number(parts[0]), number(parts[1]))
+        # one call per option: the --sobol (or --latin-hypercube) names are drawn jointly
+        s = getattr(sample, fn)(ranges, n=args.samples, seed=args.seed)
+        sampler = s if sampler is None else sampler & s
+    return sampler
 
 
 def summary(ds, written=()) -> str:
@@ -135,9 +160,10 @@ def summary(ds, written=()) -> str:
                      + (f" at t = {ft:.6g}" if np.isfinite(ft) else "")
                      + (f" ({ds['detail'].values[first]})" if str(ds['detail'].values[first]) else ""))
     if int(a.get("n_warnings", 0)):
-        lines.append(f"warnings in {a['n_warnings']} runs; first: " + str(a.get("warnings", "")).splitlines()[0])
+        lines.append(f"warnings: {a['n_warnings']}; first: " + str(a.get("warnings", "")).splitlines()[0])
     if int(a.get("interrupted", 0)):
-        lines.append("interrupted: the finished runs are kept; the others are marked 'not run'")
+        lines.append("interrupted: the finished runs are kept; the others are marked 'not run' "
+                     "(--resume continues the sweep)")
     for w in written:
         lines.append(f"wrote {w}")
     return "\n".join(lines)

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..interrupts import check_interrupt, interrupt_guard  # noqa: F401  (driver.py uses the guard)
 from .options import DaeOptions
 from .system import ConstrainedSystem
 
@@ -144,46 +145,6 @@ def integrator_options(opts: DaeOptions, plugin: str) -> dict:
         o["linear_multistep_method"] = "adams" if opts.method == "adams" else "bdf"
         o["nonlinear_solver_iteration"] = "newton"
     return o
-
-
-_SIGINT = {"seen": False}     # set by interrupt_guard's handler; read after every integrator call
-
-
-@contextlib.contextmanager
-def interrupt_guard():
-    """Make Ctrl-C stop a run even when CasADi swallows it.
-
-    CasADi polls for Ctrl-C while it integrates; inside a solver callback (IDAS' residual,
-    the rootfinder in the partitioned right-hand side) the resulting KeyboardInterrupt is
-    turned into a recoverable callback failure and lost, and the run went on to the end.  For
-    the duration of the run (main thread only, when Python's default handler is in place)
-    the SIGINT handler is wrapped: it notes the signal and then does what the default does;
-    every integrator call checks the note.  The previous handler is restored on exit."""
-    import signal
-    import threading
-
-    _SIGINT["seen"] = False
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-        yield
-        return
-
-    def handler(signum, frame):
-        _SIGINT["seen"] = True
-        signal.default_int_handler(signum, frame)
-
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        _SIGINT["seen"] = False
-
-
-def check_interrupt() -> None:
-    if _SIGINT["seen"]:
-        _SIGINT["seen"] = False
-        raise KeyboardInterrupt
 
 
 def call_integrator(F, **args):

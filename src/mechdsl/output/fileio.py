@@ -101,9 +101,58 @@ def is_own_output(p: Path) -> bool:
             # a results CSV starts with "time,", a sweep's table with "run,time,"; a table
             # (mech bench) is named in its sidecar
             return head.startswith((b"time,", b"run,time,")) or f'"table": "{p.name}"'.encode() in _head(side, 65536)
+        if p.suffix == ".nc":
+            return _netcdf_by_mechdsl(p)
         return _has_marker(p)
     except OSError:
         return False
+
+
+def _netcdf_by_mechdsl(p: Path) -> bool:
+    """A netCDF (HDF5) file whose global attribute ``generator`` names mechdsl (a sweep's)."""
+    if not _head(p, 8).startswith(b"\x89HDF"):
+        return False
+    try:
+        import h5py
+    except ImportError:
+        return False
+    try:
+        with h5py.File(p, "r") as f:
+            g = f.attrs.get("generator")
+    except Exception:  # noqa: BLE001 - any file h5py cannot read is not ours
+        return False
+    g = g.decode("utf-8", "replace") if isinstance(g, bytes) else str(g)
+    return g.startswith("mechdsl")
+
+
+def pair_problem(csv_path: str | os.PathLike) -> str | None:
+    """None when a CSV mechdsl wrote and its JSON sidecar belong together, else what is wrong.
+
+    Both are renamed into place one after the other (the CSV first), so a kill between the
+    two renames can leave a new CSV beside an old sidecar; the sidecar records the CSV's
+    SHA-256, checked here (streamed: the CSV is not read whole)."""
+    import hashlib
+    import json
+
+    p = Path(csv_path)
+    side = p.with_suffix(".json")
+    try:
+        meta = json.loads(side.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return f"has no sidecar {side.name} (written by something else, or its sidecar was removed)"
+    except (OSError, ValueError) as e:
+        return f"has an unreadable sidecar {side.name} ({e})"
+    want = meta.get("csv_sha256") if isinstance(meta, dict) else None
+    if not want:
+        return f"has a sidecar {side.name} without the CSV's checksum"
+    h = hashlib.sha256()
+    with open(p, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    if h.hexdigest() != want:
+        return (f"does not match its sidecar {side.name} (a different CSV was written after it: a run killed "
+                "between writing the two, or an edited file); run again to write both")
+    return None
 
 
 def _head(p: Path, n: int) -> bytes:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..interrupts import check_interrupt
 from ..diagnostics import MechError, UsageError
 
 STATUS = ("success", "failure_time", "cause", "detail", "steps", "rhs_evals", "rejected_steps", "points",
@@ -55,6 +56,17 @@ class Chunk:
 
 
 def run_chunk(job: Job, first: int, values: dict) -> Chunk:
+    try:
+        return _run_chunk(job, first, values)
+    except Exception:
+        # a Ctrl-C inside CasADi comes out as a RuntimeError, or as a SystemError when it
+        # arrived while CasADi converted a result ("DM.__array__ returned a result with an
+        # exception set"): whatever it became, it is the interrupt
+        check_interrupt()
+        raise
+
+
+def _run_chunk(job: Job, first: int, values: dict) -> Chunk:
     k = len(next(iter(values.values())))
     nt, nx = len(job.grid), len(job.states)
     out = Chunk(first, np.full((k, nt, nx), np.nan), np.full((k, nt, len(job.variables)), np.nan),
@@ -68,11 +80,15 @@ def run_chunk(job: Job, first: int, values: dict) -> Chunk:
             todo.append(i)
         except (UsageError, MechError) as e:
             out.status[i] = _invalid(str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__)
+        # a Ctrl-C that a CasADi call swallowed (and someone handled as a plain failure) would
+        # otherwise wait for the end of the chunk
+        check_interrupt()
     if job.vectorized and todo:
         todo = _mapped(job, todo, prepared, out)
     for i in todo:
         eom, s = prepared[i]
         _store(job, out, i, _solve_one(eom, s))
+        check_interrupt()            # a Ctrl-C the run's integrator swallowed (it failed "interrupted")
     return out
 
 
@@ -98,6 +114,9 @@ def _solve_one(eom, s):
         return simulate(eom, s)
     except (UsageError, MechError) as e:
         return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    except Exception:
+        check_interrupt()            # CasADi's RuntimeError for a Ctrl-C is the interrupt
+        raise
 
 
 def _invalid(text: str) -> dict:
@@ -178,9 +197,11 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
         F = mapped_integrator(eom0, s0, job.grid, k, job.threads)
+        check_interrupt()
         with I.captured_messages():
             xf = np.asarray(F(x0=X0, p=P)["xf"], float)
     except Exception:  # noqa: BLE001 - a run failed inside the map: every run of the chunk alone
+        check_interrupt()            # ... unless it was Ctrl-C, which CasADi turns into a RuntimeError
         return todo
     cpu = (time.process_time() - cpu0) / k
     wall = (time.perf_counter() - wall0) / k

@@ -1,7 +1,7 @@
 """Execution back ends: where the chunks of a sweep run.
 
     vectorized   in this process; each chunk one mapped CasADi integrator, on threads
-    processes    a local pool of worker processes (spawned), one per core
+    processes    worker processes (spawned), one per core (pool.py: a lost worker's runs are retried)
     dask         a new distributed.LocalCluster (one worker process per core)
     tcp://...    an existing Dask cluster (its scheduler's address)
 
@@ -128,53 +128,35 @@ def _show(b: bytes) -> str:
     return repr(text) if text.isprintable() else b.hex()
 
 
+def _ignore_sigint():
+    """In a worker process of our own LocalCluster: Ctrl-C is the parent's to handle (it cancels
+    what has not finished and keeps the rest)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _sigint_blocked():
+    """A context in which this thread (and the processes and threads it starts) has SIGINT blocked."""
+    import contextlib
+    import signal
+
+    @contextlib.contextmanager
+    def blocked():
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            yield
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+    return blocked()
+
+
 def in_process(job, chunks):
     for first, values in chunks:
         yield run_chunk(job, first, values)
-
-
-class Pool:
-    """A local process pool; ``close(cancel=True)`` drops the runs not yet started."""
-
-    def __init__(self, workers: int):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        self.ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                      initializer=_ignore_sigint)
-
-    def run(self, job, chunks):
-        from concurrent.futures import as_completed
-
-        self._futures = [self.ex.submit(run_chunk, job, first, values) for first, values in chunks]
-        self._seen: set = set()
-        for f in as_completed(self._futures):
-            self._seen.add(f)
-            yield f.result()
-
-    def drain(self):
-        """After Ctrl-C: drop the chunks not started, let the running ones finish, and yield
-        every finished chunk not yet yielded."""
-        self.ex.shutdown(wait=True, cancel_futures=True)
-        yield from _finished(getattr(self, "_futures", []), getattr(self, "_seen", set()),
-                             lambda f: f.done() and not f.cancelled() and f.exception() is None)
-
-    def close(self, cancel: bool = False):
-        self.ex.shutdown(wait=True, cancel_futures=cancel)
-
-
-def _finished(futures, seen, ok):
-    for f in futures:
-        if f not in seen and ok(f):
-            yield f.result()
-
-
-def _ignore_sigint():
-    """In a worker process: Ctrl-C is the parent's to handle (it cancels the runs not yet
-    started and keeps the finished ones); the worker finishes its chunk."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class Dask:
@@ -188,9 +170,13 @@ class Dask:
         self.cluster = None
         try:
             if address == "dask":
-                self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                            dashboard_address=None)
+                # the worker processes must not get the terminal's Ctrl-C (sent to the whole process
+                # group: they died with tracebacks); they inherit SIGINT blocked, the parent stops them
+                with _sigint_blocked():
+                    self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                                dashboard_address=None)
                 self.client = Client(self.cluster)
+                self.client.run(_ignore_sigint)      # (Dask unblocks it in its workers)
             else:
                 if address.startswith("tcp://"):
                     probe(address, timeout)
