@@ -141,4 +141,7 @@ def run(args) -> int:
             written += write_chart(res, out, overwrite=args.force)
         for w in written:
             print(f"wrote {w}")
+    if res.interrupted:
+        print("mech: interrupted: the rows measured are kept (the others are 'skipped')", file=sys.stderr)
+        return 130
     return 0
