@@ -213,9 +213,31 @@ class Dask:
                 yield f.result()
 
     def close(self, cancel: bool = False):
+        """Disconnect (and stop our own LocalCluster).  After Ctrl-C (``cancel``) without waiting
+        for an orderly shutdown: the worker processes of our cluster are killed."""
         if cancel and getattr(self, "_futures", None):
             self.client.cancel(self._futures)
+        if cancel and self.cluster is not None:
+            _kill_workers(self.cluster)
         if getattr(self, "client", None) is not None:
-            self.client.close()
+            self.client.close(timeout=2 if cancel else 10)
         if self.cluster is not None:
-            self.cluster.close()
+            try:
+                self.cluster.close(timeout=2 if cancel else None)
+            except Exception:  # noqa: BLE001 - a slow shutdown after Ctrl-C: the processes are gone
+                if not cancel:
+                    raise
+
+
+def _kill_workers(cluster) -> None:
+    """SIGKILL the worker processes of our LocalCluster (their nannies then close at once)."""
+    import os
+    import signal
+
+    for nanny in list(getattr(cluster, "workers", {}).values()):
+        pid = getattr(getattr(nanny, "process", None), "pid", None)
+        if pid:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
