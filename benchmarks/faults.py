@@ -162,6 +162,12 @@ def sweep_args(out, n=600, scheduler=None, t_end="30", extra=()):
     return a + (["--scheduler", scheduler] if scheduler else [])
 
 
+def small_sweep(work, out, values="0.1,0.2", t_end="0.5", *extra) -> Run:
+    """A sweep of the double pendulum's start angle over ``values`` into ``out``."""
+    return mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", f"j1.phi.start={values}", "--t-end", t_end,
+                "--points", "5", "-o", out, "--no-progress", *extra)
+
+
 def read_nc(path):
     import xarray as xr
 
@@ -282,10 +288,8 @@ def sweep_killed_then_resumed(work):
     out = work / "s.csv"
     k = run([PY, "-c", KILL_DRIVER, str(DP), str(out)], work)
     left = sorted(p.name for p in work.iterdir() if p.name != "cache")
-    r = mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.1:3:12", "--t-end", "0.5",
-             "--points", "5", "-o", out, "--no-progress", "--resume")
-    fresh = mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.1:3:12", "--t-end", "0.5",
-                 "--points", "5", "-o", work / "fresh.csv", "--no-progress")
+    r = small_sweep(work, out, "0.1:3:12", "0.5", "--resume")
+    fresh = small_sweep(work, work / "fresh.csv", "0.1:3:12")
     import mechdsl.sweep
 
     a, b = mechdsl.sweep.read(out), mechdsl.sweep.read(work / "fresh.csv")
@@ -299,8 +303,7 @@ def sweep_killed_then_resumed(work):
 def leftovers_of_a_killed_sweep(work):
     out = work / "s.nc"
     run([PY, "-c", KILL_DRIVER, str(DP), str(out)], work)
-    r = mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.1,0.2", "--t-end", "0.5",
-             "--points", "5", "-o", out, "--no-progress")
+    r = small_sweep(work, out)
     left = sorted(p.name for p in work.iterdir() if p.name != "cache")
     ok = clean(r, 0) and left == ["s.nc"]
     return Outcome(ok, f"next run without --resume: exit {r.code}, folder holds {left}", internal=r.internal)
@@ -309,10 +312,8 @@ def leftovers_of_a_killed_sweep(work):
 @case("fault")
 def resume_with_other_settings(work):
     out = work / "s.nc"
-    mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.1,0.2", "--t-end", "0.5",
-         "--points", "5", "-o", out, "--no-progress")
-    r = mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.1,0.2", "--t-end", "0.6",
-             "--points", "5", "-o", out, "--no-progress", "--resume")
+    small_sweep(work, out)
+    r = small_sweep(work, out, "0.1,0.2", "0.6", "--resume")
     ok = clean(r, 2) and "settings" in r.err
     return Outcome(ok, f"exit {r.code}: {r.err.strip().splitlines()[-1][:110]}", internal=r.internal)
 
@@ -321,11 +322,9 @@ def resume_with_other_settings(work):
 def csv_and_sidecar_out_of_step(work):
     """A kill between the two renames: a new CSV beside an old sidecar."""
     out = work / "s.csv"
-    mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.1,0.2", "--t-end", "0.5",
-         "--points", "5", "-o", out, "--no-progress")
+    small_sweep(work, out)
     side = out.with_suffix(".json").read_text()
-    mech(work, "sweep", DP, "--model", "DoublePendulum", "--grid", "j1.phi.start=0.3,0.4", "--t-end", "0.5",
-         "--points", "5", "-o", out, "--no-progress")
+    small_sweep(work, out, "0.3,0.4")
     out.with_suffix(".json").write_text(side)          # the old sidecar back beside the new CSV
     r = run([PY, "-c", "import sys, mechdsl.sweep as s\ntry:\n    s.read(sys.argv[1])\nexcept Exception as e:\n"
                        "    print(type(e).__name__, e)", str(out)], work)
@@ -710,34 +709,49 @@ def first_integrals_entry_with_another_function(work):
                    silent=r.code == 0 and not ok)
 
 
-@case("attack")
-def port_speaking_another_protocol(work):
+def junk_server(payload: bytes):
+    """A TCP server on 127.0.0.1 answering every connection with ``payload`` (another protocol);
+    returns (socket, stop) - call stop() to end it."""
     srv = socket.socket()
     srv.bind(("127.0.0.1", 0))
     srv.listen()
-    stop = threading.Event()
+    done = threading.Event()
 
     def serve():
         srv.settimeout(0.2)
-        while not stop.is_set():
+        while not done.is_set():
             try:
                 c, _ = srv.accept()
-                c.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: 999999999999\r\n\r\n" + b"x" * 1000)
-                c.close()
+            except OSError:
+                continue
+            try:
+                c.sendall(payload)
             except OSError:
                 pass
+            finally:
+                c.close()
 
     th = threading.Thread(target=serve, daemon=True)
     th.start()
+
+    def stop():
+        done.set()
+        th.join()
+        srv.close()
+
+    return srv, stop
+
+
+@case("attack")
+def port_speaking_another_protocol(work):
+    srv, stop = junk_server(b"HTTP/1.1 200 OK\r\nContent-Length: 999999999999\r\n\r\n" + b"x" * 1000)
     try:
         code = ("import resource, sys\nfrom mechdsl.cli import main\nc = main(sys.argv[1:])\n"
                 "print(c, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
         r = run([PY, "-c", code, "sweep", str(MODELS / "pendulum.mech"), "--grid", "m=1,2", "--t-end", "0.1",
                  "--no-progress", "--scheduler", f"tcp://127.0.0.1:{srv.getsockname()[1]}"], work, timeout=120)
     finally:
-        stop.set()
-        th.join()
-        srv.close()
+        stop()
     parts_ = r.out.split()
     code_, rss = (int(parts_[0]), int(parts_[1])) if len(parts_) == 2 else (None, None)
     ok = code_ == 2 and rss is not None and rss < 1_000_000 and "not a Dask scheduler" in r.err

@@ -11,7 +11,6 @@ import os
 import socket
 import subprocess
 import sys
-import threading
 
 import numpy as np
 import pytest
@@ -19,7 +18,7 @@ import pytest
 import mechdsl
 from mechdsl.cli import main
 
-from conftest import MODELS
+from conftest import MODELS, ROOT
 
 DOOR = """
 model Door "a trapdoor (a rod) on two coaxial hinges"
@@ -163,46 +162,21 @@ def test_bad_scheduler_addresses_are_usage_errors(capsys, address, text):
     assert code == 2 and text in err and "internal error" not in err, err
 
 
-def _junk_server():
-    """A TCP server that answers every connection with bytes of another protocol."""
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen()
-    stop = threading.Event()
-
-    def serve():
-        srv.settimeout(0.2)
-        while not stop.is_set():
-            try:
-                c, _ = srv.accept()
-            except OSError:
-                continue
-            try:
-                c.sendall(b"SSH-2.0-OpenSSH_9.6 junk junk junk junk\r\n" * 4)
-            except OSError:
-                pass
-            finally:
-                c.close()
-
-    th = threading.Thread(target=serve, daemon=True)
-    th.start()
-    return srv, stop, th
-
-
 def test_a_port_that_speaks_another_protocol_is_refused_cheaply(capsys):
     """Dask read the junk's first 8 bytes as a frame length and tried to allocate 2.8 EiB."""
     import resource
 
-    srv, stop, th = _junk_server()
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from faults import junk_server
+
+    srv, stop = junk_server(b"SSH-2.0-OpenSSH_9.6 junk junk junk junk\r\n" * 4)
     try:
         before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
         code = main(["sweep", str(MODELS / "pendulum.mech"), "--grid", "m=1,2", "--t-end", "0.1", "--no-progress",
                      "--scheduler", f"tcp://127.0.0.1:{srv.getsockname()[1]}"])
         grown = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
     finally:
-        stop.set()
-        th.join()
-        srv.close()
+        stop()
     err = capsys.readouterr().err
     assert code == 2 and "not a Dask scheduler" in err and "internal error" not in err, err
     assert grown < 200_000          # kB: no huge buffer

@@ -186,17 +186,10 @@ def _fresh(dp, tmp_path, **kw):
 
 def test_resume_continues_an_interrupted_sweep(dp, tmp_path, monkeypatch):
     from mechdsl.sweep import runs, schedulers
+    from sweep_util import interrupt_at_chunk
 
     out = tmp_path / "s.nc"
-    calls = []
-
-    def interrupted(job, first, values):
-        calls.append(first)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return runs.run_chunk(job, first, values)
-
-    monkeypatch.setattr(schedulers, "run_chunk", interrupted)
+    interrupt_at_chunk(monkeypatch, 3)
     ds = dp.sweep(starts={"j1.phi": np.linspace(0.1, 3, 12)}, t_end=0.5, points=5, chunk_size=3, progress=False,
                   out=str(out))
     assert ds.attrs["interrupted"] == 1 and ds.attrs["n_finished"] == 6

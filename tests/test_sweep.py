@@ -195,17 +195,9 @@ def test_cli_csv_and_exit_codes(tmp_path):
 
 
 def test_ctrl_c_keeps_finished_runs(dp, tmp_path, monkeypatch):
-    from mechdsl.sweep import runs, schedulers
+    from sweep_util import interrupt_at_chunk
 
-    calls = []
-
-    def interrupted(job, first, values):
-        calls.append(first)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return runs.run_chunk(job, first, values)
-
-    monkeypatch.setattr(schedulers, "run_chunk", interrupted)
+    interrupt_at_chunk(monkeypatch, 3)
     out = tmp_path / "part.nc"
     ds = dp.sweep(starts={"j1.phi": [0.5, 1.0, 1.5, 2.0]}, t_end=0.2, points=3, chunk_size=1, progress=False,
                   out=str(out))
