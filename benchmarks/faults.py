@@ -651,7 +651,7 @@ __attribute__((constructor)) static void boom(void) { FILE *f = fopen(getenv("FA
 
 
 def _plant_library(work):
-    r = mech(work, "simulate", DP, "--t-end", "0.01", "--points", "3", "--no-progress", "--compiled")
+    mech(work, "simulate", DP, "--t-end", "0.01", "--points", "3", "--no-progress", "--compiled")
     libs = list((work / "cache").glob("*.so"))
     if not libs or shutil.which("cc") is None:
         return None

@@ -8,12 +8,9 @@ group, as a terminal does, at a point the child reports.
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import textwrap
-import time
 
 import pytest
 

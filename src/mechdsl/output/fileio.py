@@ -61,7 +61,7 @@ def _check_name(p: Path) -> None:
         p.exists()
     except OSError as e:            # a path too long as a whole, a loop of links, ...
         raise UsageError(f"cannot use the output name {str(p)[:60]}...: {e.strerror or e}"
-                         + (" (the path is too long)" if getattr(e, "errno", None) == 36 else "")) from None
+                         + (" (the path is too long)" if e.errno == errno.ENAMETOOLONG else "")) from None
 
 
 def check_figure(path: str | os.PathLike, overwrite: bool = False) -> Path:

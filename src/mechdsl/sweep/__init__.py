@@ -113,15 +113,17 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     warm_up(nc)              # the imports of writing the results, now: not after a Ctrl-C
     journal = None
     if out is not None:
-        from .journal import Journal
+        from .journal import Journal, finished_of
 
         journal = Journal(out, ident, d.n, resume)
         if resume and Path(out).exists() and not journal.kept.any():
-            journal.adopt(*_finished_of(out, d.n))
+            journal.adopt(*finished_of(out, d.n))
     store = Store(d.n, job.grid, states, job.variables, memory=not nc, journal=journal)
     todo = store.todo()
     size = chunk_size or _chunk_size(len(todo), scheduler, workers)
-    chunks = [(int(a), {k: v[idx] for k, v in d.values.items()}) for a, idx in _blocks(todo, size)]
+    from .journal import blocks
+
+    chunks = [(int(a), {k: v[idx] for k, v in d.values.items()}) for a, idx in blocks(todo, size)]
     bar = _bar(progress, d.n)
     if bar is not None and store.done:
         bar.update(store.done)
@@ -188,53 +190,6 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
              "states": ",".join(states)}
     ds = store.finish(coords, attrs, meta, out)
     return to_frame(ds) if frame else ds
-
-
-def _blocks(todo: np.ndarray, size: int):
-    """(first run, indices) of chunks of at most ``size`` consecutive runs of ``todo``."""
-    start = 0
-    while start < len(todo):
-        end = start + 1
-        while end < len(todo) and end - start < size and todo[end] == todo[end - 1] + 1:
-            end += 1
-        yield todo[start], todo[start:end]
-        start = end
-
-
-def _finished_of(out, n: int):
-    """(attributes, finished chunks) of an earlier output file (an interrupted sweep's)."""
-    from .runs import Chunk
-    from .store import read
-
-    ds = read(out)
-    attrs = dict(ds.attrs)
-    if int(ds.sizes.get("run", -1)) != n:
-        attrs["n_runs"] = int(ds.sizes.get("run", -1))
-
-    def chunks():
-        try:
-            cause = np.asarray(ds["cause"].values).astype(str)
-            done = np.flatnonzero(cause != "not run")
-            states = [s for s in str(attrs.get("states", "")).split(",") if s]
-            per_time = [v for v in ds.data_vars if ds[v].dims == ("run", "time")]
-            variables = [v for v in per_time if v not in states]
-            from .runs import STATUS
-
-            for first, idx in _blocks(done, 256):
-                sel = slice(int(idx[0]), int(idx[-1]) + 1)
-                X = np.stack([np.asarray(ds[s].values[sel], float) for s in states], axis=-1)
-                S = np.stack([np.asarray(ds[v].values[sel], float) for v in variables], axis=-1)
-                rows = [{k: _py(ds[k].values[i]) for k in STATUS} for i in range(sel.start, sel.stop)]
-                yield Chunk(int(first), X, S, rows)
-        finally:
-            ds.close()
-
-    return attrs, chunks()
-
-
-def _py(v):
-    v = v.item() if hasattr(v, "item") else v
-    return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
 def _states(model, d, names) -> tuple[str, ...]:

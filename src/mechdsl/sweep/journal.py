@@ -20,6 +20,7 @@ output is refused.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 from pathlib import Path
@@ -154,3 +155,50 @@ def _plain(rows):
                         int(v) if isinstance(v, (np.integer,)) else
                         bool(v) if isinstance(v, np.bool_) else v) for k, v in (r or {}).items()})
     return out
+
+
+def blocks(todo: np.ndarray, size: int):
+    """(first run, indices) of chunks of at most ``size`` consecutive runs of ``todo``."""
+    start = 0
+    while start < len(todo):
+        end = start + 1
+        while end < len(todo) and end - start < size and todo[end] == todo[end - 1] + 1:
+            end += 1
+        yield todo[start], todo[start:end]
+        start = end
+
+
+def finished_of(out, n: int):
+    """(attributes, finished chunks) of an earlier output file (an interrupted sweep's)."""
+    from .runs import Chunk
+    from .store import read
+
+    ds = read(out)
+    attrs = dict(ds.attrs)
+    if int(ds.sizes.get("run", -1)) != n:
+        attrs["n_runs"] = int(ds.sizes.get("run", -1))
+
+    def chunks():
+        try:
+            cause = np.asarray(ds["cause"].values).astype(str)
+            done = np.flatnonzero(cause != "not run")
+            states = [s for s in str(attrs.get("states", "")).split(",") if s]
+            per_time = [v for v in ds.data_vars if ds[v].dims == ("run", "time")]
+            variables = [v for v in per_time if v not in states]
+            from .runs import STATUS
+
+            for first, idx in blocks(done, 256):
+                sel = slice(int(idx[0]), int(idx[-1]) + 1)
+                X = np.stack([np.asarray(ds[s].values[sel], float) for s in states], axis=-1)
+                S = np.stack([np.asarray(ds[v].values[sel], float) for v in variables], axis=-1)
+                rows = [{k: _py(ds[k].values[i]) for k in STATUS} for i in range(sel.start, sel.stop)]
+                yield Chunk(int(first), X, S, rows)
+        finally:
+            ds.close()
+
+    return attrs, chunks()
+
+
+def _py(v):
+    v = v.item() if hasattr(v, "item") else v
+    return None if isinstance(v, float) and not math.isfinite(v) else v
