@@ -286,12 +286,16 @@ def test_pipeline_long_run(tmp_path):
     count = {"examples": 0}
     t0 = time.monotonic()
 
+    class Spent(Exception):
+        """The time budget is spent: ends the exploration (returning would make hypothesis go
+        on generating up to max_examples)."""
+
     @settings(max_examples=n, deadline=None, derandomize=False, database=None, phases=[Phase.generate],
               suppress_health_check=list(HealthCheck))
     @given(value_mutant())
     def explore(mutant):
         if time.monotonic() - t0 > budget:
-            return
+            raise Spent
         count["examples"] += 1
         name, text, done = mutant
         folder = tmp_path / f"m{count['examples']}"
@@ -299,7 +303,10 @@ def test_pipeline_long_run(tmp_path):
             found.append(dict(model=name, mutations=done, **f))
             (folder / "keep").touch()
 
-    explore()
+    try:
+        explore()
+    except Spent:
+        pass
     by_class: dict[str, int] = {}
     for f in found:
         key = f"{f['command']}: {f['failure']}"
