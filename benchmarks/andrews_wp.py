@@ -54,7 +54,7 @@ def run_raw_index3(tol):
 
     from mechdsl.dae.ggl import raw_index3_dae
     from mechdsl.dae.index import guarded_idas
-    from mechdsl.dae.system import ConstrainedSystem
+    from mechdsl.dae.constrained_system import ConstrainedSystem
 
     e = andrews_eom()
     s = ConstrainedSystem.build(e)

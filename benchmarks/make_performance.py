@@ -233,7 +233,7 @@ USAGE = """\
 mech bench FILE [--scene S | --model M] [--methods LIST] [--formulations LIST] [--tolerances SPEC]
                 [--reference auto|FILE.csv] [--reference-methods A,B] [--compare WHAT]
                 [--repeats K] [--budget S] [--t-end T] [--points N] [--set NAME=VALUE ...]
-                [--compiled] [-o DIR] [--no-chart] [--force] [--quiet]
+                [--compiled] [-o DIR] [--no-chart] [--force] [-q] [-v] [--json]
 ```
 
 - **Methods** (`--methods`, comma separated, repeatable): any method of `mech simulate`
@@ -428,7 +428,7 @@ def main(argv=None) -> int:
     figs.mkdir(parents=True, exist_ok=True)
     data = Path(tempfile.mkdtemp(prefix="mechdsl-perf-data-"))
     w0, c0 = time.perf_counter(), time.process_time()
-    from mechdsl.simulate import versions
+    from mechdsl.output.result import versions
 
     v = versions()
     ctx = {"figs": figs, "data": data,

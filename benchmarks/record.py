@@ -1,7 +1,7 @@
 """Cost of recording a trajectory: states at 501 points -> the signals of a Result.
 
 For models/double_pendulum.mech and models/nlink_pendulum.mech with N = 30 this integrates
-once, then times ``mechdsl.simulate.compute_signals`` (the recorder of an unconstrained run:
+once, then times ``mechdsl.simulation.monitors.compute_signals`` (the recorder of an unconstrained run:
 outputs, energies, invariants, first integrals, singularity monitors) on the 501 recorded
 states:
   cold   the first call on a fresh model of that structure (builds the Functions and maps)
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import mechdsl
-from mechdsl import simulate as S
+from mechdsl.simulation import monitors as S
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 CASES = {"double_pendulum": ("double_pendulum.mech", {}), "chain30": ("nlink_pendulum.mech", {"N": 30})}

@@ -62,6 +62,11 @@ def text() -> str:
     return json.dumps(grammar(), indent=2) + "\n"
 
 
+# the grammar, and its copy inside the VS Code extension (an extension is packaged from its own folder)
+TARGETS = (HERE / "mech.tmLanguage.json", HERE / "vscode" / "syntaxes" / "mech.tmLanguage.json")
+
 if __name__ == "__main__":
-    (HERE / "mech.tmLanguage.json").write_text(text())
-    print(f"wrote {HERE / 'mech.tmLanguage.json'}")
+    for target in TARGETS:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(text())
+        print(f"wrote {target}")

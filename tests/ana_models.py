@@ -162,3 +162,11 @@ def quartic(m=1.0, a=1.0):
     q, qd, t, p = _sym(1, 2)
     return E.from_lagrangian("Quartic", ["x"], ["m", "a"], [m, a], q, qd, t, p, 0.5 * p[0] * qd[0] ** 2,
                              p[1] * q[0] ** 4, q0=[0.3])
+
+
+def simulate_symplectic(eom, t_end, method="stormer-verlet", **kw):
+    """A fixed-step run in canonical variables through the one simulation layer (the settings'
+    ``fixed_step`` group: dt, newton_tol, max_newton)."""
+    from mechdsl.simulate import simulate
+
+    return simulate(eom, t_end, method=method, **kw)

@@ -9,10 +9,12 @@ from what this script generates.
 from __future__ import annotations
 
 import inspect
+import os
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+# the page lives in the source checkout (MECHDSL_CHECKOUT when the tests run from a copy elsewhere)
+ROOT = Path(os.environ.get("MECHDSL_CHECKOUT") or Path(__file__).resolve().parents[1])
 DOCS = ROOT / "docs" / "api.md"
 
 # (import path, what it is) of the classes the top-level functions hand out
@@ -21,10 +23,13 @@ CLASSES = [
     ("mechdsl.output.result.Result", "what `Model.simulate` returns"),
     ("mechdsl.output.result.Failure", "`Result.failure` of a run that stopped early"),
     ("mechdsl.animate.Animation", "what `Result.animate` returns"),
+    ("mechdsl.view.View", "what `Result.view` and `Model.view` return"),
     ("mechdsl.output.display.Equations", "what `Model.equations` returns"),
     ("mechdsl.analysis.equilibrium.Equilibrium", "what `Model.equilibria` returns (a list of them)"),
-    ("mechdsl.analysis.linearize.Linearization", "what `Model.linearize` returns"),
+    ("mechdsl.analysis.linear_model.Linearization", "what `Model.linearize` returns"),
     ("mechdsl.analysis.modes.Modes", "what `Linearization.modes()` returns"),
+    ("mechdsl.urdf.Imported", "what `mechdsl.urdf.convert` returns (`mechdsl.import_urdf` returns its text)"),
+    ("mechdsl.export.ExportInfo", "what `Model.export_fmu` returns"),
 ]
 
 
@@ -92,6 +97,12 @@ def generate() -> str:
 
             doc = _doc(obj) or _doc(getattr(mechdsl.api, name, None)) or "(no docstring)"
             lines += [f"### `mechdsl.{_sig(name, obj)}`", "", doc, ""]
+    import mechdsl.examples
+
+    lines += ["## `mechdsl.examples`", "", _doc(mechdsl.examples), ""]
+    for name in mechdsl.examples.__all__:
+        lines += [f"### `mechdsl.examples.{_sig(name, getattr(mechdsl.examples, name))}`", "",
+                  _doc(getattr(mechdsl.examples, name)) or "(no docstring)", ""]
     lines += ["## Classes returned by the API", ""]
     for path, what in CLASSES:
         cls = _obj(path)

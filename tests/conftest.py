@@ -6,9 +6,19 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-MODELS = ROOT / "models"
-REFERENCES = ROOT / "tests" / "references"   # verbatim copies of ../shared/references
+import mechdsl.examples
+
+TESTS = Path(__file__).resolve().parent
+# The shipped models as the installation has them (inside the wheel, or models/ of an editable
+# checkout): tests never find them through the source tree's layout, so they pass against the
+# installed wheel too (.ci/run runs them from a copy of tests/ outside the repository).
+MODELS = mechdsl.examples.folder()
+REFERENCES = TESTS / "references"   # verbatim copies of ../shared/references
+# The source checkout, for the tests that are about the repository itself (its docs/, README.md,
+# benchmarks/, editors/, grammar/): the folder above tests/, or MECHDSL_CHECKOUT when the tests run
+# from a copy elsewhere (.ci/run's run against the installed wheel).  Nothing the package needs
+# is read from here: the installed package's own files are found through mechdsl.__file__.
+CHECKOUT = Path(os.environ.get("MECHDSL_CHECKOUT") or TESTS.parent).resolve()
 
 # deep recursion guard for pathological inputs is part of the CLI; tests call the library directly
 sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
@@ -31,6 +41,15 @@ def _has_compiler() -> bool:
 needs_cc = pytest.mark.skipif(not _has_compiler(), reason="no C compiler: compiled code cannot be built")
 
 
+def chromium_path() -> str | None:
+    """The system's Chromium (the browser tests drive it with Playwright; nothing is downloaded)."""
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
 def pytest_unconfigure(config):
     shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
 
@@ -49,8 +68,8 @@ def run_stability_case(name: str, size: str):
     import importlib
     import sys
 
-    if str(ROOT / "benchmarks") not in sys.path:
-        sys.path.insert(0, str(ROOT / "benchmarks"))
+    if str(CHECKOUT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(CHECKOUT / "benchmarks"))
     case = importlib.import_module(f"stability.{name}").run(size)
     assert case.checks, f"{name}: no checks"
     assert case.holds, "\n" + case.report()

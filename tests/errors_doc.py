@@ -18,10 +18,12 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-CORPUS = ROOT / "tests" / "corpus"
+# the page lives in the source checkout (MECHDSL_CHECKOUT when the tests run from a copy elsewhere)
+ROOT = Path(os.environ.get("MECHDSL_CHECKOUT") or Path(__file__).resolve().parents[1])
+CORPUS = Path(__file__).resolve().parent / "corpus"
 DOCS = ROOT / "docs" / "errors.md"
 FILE = "example.mech"
+URDF = "example.urdf"
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,7 @@ class Entry:
     source: str | None = None       # or the example text itself
     shown: str | None = None        # what the page shows instead of the example (binary/huge inputs)
     command: str | None = None      # the command line shown (default: mech check example.mech)
+    urdf: str | None = None         # a file of tests/corpus/urdf/: the example of a `mech import` error
 
 
 PENDULUM = """model Pendulum
@@ -57,6 +60,15 @@ SECTIONS = [
                      "an error; literal numbers are pure numbers."),
     ("Topology (E5xx)", "The kinematic graph: every body must hang from the world through joints."),
     ("Scenes (E6xx)", "Scene settings and the model a scene names."),
+    ("URDF import (E020-E028)", "`mech import ROBOT.urdf -o ROBOT.mech` (docs/import.md) locates every problem "
+                                "at the URDF element it is about. Besides these codes it reports the file "
+                                "errors E001-E006 and, for the inertia data of a link (after fixed links are "
+                                "merged into it), E508 and E509 at the link's `<inertial>`. Its warnings: W021 "
+                                "a mesh that cannot be read (an unknown format, a damaged file), or one not found "
+                                "with `--skip-missing-meshes` (that visual is not drawn), W025 a joint that "
+                                "closes a loop (left out: URDF describes trees), W029 a mimic that names no "
+                                "movable joint (left out: the joint moves on its own), W509 an inertia that breaks "
+                                "the triangle inequality by rounding."),
 ]
 
 ENTRIES = [
@@ -244,6 +256,10 @@ ENTRIES = [
                                      "`mech check` analyzes and derives each of them.",
           "Split the file (or `--limit models=N`).", corpus="E317_too_many_models.mech",
           shown="model M1\nend M1;\n...\nmodel M501\nend M501;\n"),
+    Entry("E318", "not a rotation", "An orientation matrix `R` (of a point, joint or frame) that is not a "
+                                    "rotation: not orthonormal, or a reflection (determinant -1).",
+          "Build orientations with `rpy(r, p, y)`, `axis_angle(axis, angle)` or `rotation(axis, angle)`.",
+          corpus="E318_orientation_not_rotation.mech"),
     Entry("E401", "incompatible units", "Two quantities with different units added, subtracted, compared or "
                                         "given as the branches of an `if`.",
           "Check the formula and the parameters' units.", corpus="E401_kg_plus_m.mech"),
@@ -277,11 +293,16 @@ ENTRIES = [
                                    "in force (also after `--set` or `with_params`). The equations of motion "
                                    "would run on a negative kinetic energy without failing.",
           "Fix the sign of `m` or of the parameters it uses.", corpus="E508_negative_mass.mech"),
-    Entry("E509", "impossible inertia tensor", "An inertia tensor no rigid body can have: not symmetric, a "
-                                               "negative principal moment, or principal moments that break "
-                                               "the triangle inequality I1 + I2 >= I3.",
-          "Check the values and signs; each principal moment is at most the sum of the other two.",
-          corpus="E509_inertia_triangle_inequality.mech"),
+    Entry("E509", "impossible inertia tensor", "An inertia tensor no rigid body can have: not symmetric, not "
+                                               "positive semidefinite (a negative principal moment), or "
+                                               "principal moments that break the triangle inequality "
+                                               "I1 + I2 >= I3 by more than rounding (1e-6 of I3; less is the "
+                                               "warning W509). A body that turns about one axis of its own "
+                                               "only (a planar body on a hinge) is not judged by the triangle "
+                                               "inequality: only its moment about that axis enters.",
+          "Check the values and signs; each principal moment is at most the sum of the other two. For measured "
+          "data you stand by, add `measured_inertia = true` to the `Body` (the tensor must still be positive "
+          "semidefinite).", corpus="E509_inertia_triangle_inequality.mech"),
     Entry("E510", "value not finite", "A component value (a mass, length, inertia, spring coefficient, contact "
                                       "radius, axis) that evaluates to inf or nan with the parameter values in "
                                       "force (also after `--set` or `with_params`): a product of huge values that "
@@ -311,6 +332,36 @@ ENTRIES = [
           source=PENDULUM + "\nscene Swing\n  model Pendulum;\nend Swing;\n"),
     Entry("E603", "scene without one model", "A scene that names no model, or more than one.",
           "Add exactly one `model Name;` line.", corpus="E603_scene_without_model.mech"),
+    Entry("E020", "not XML", "The URDF file is not well-formed XML, or it declares a document type "
+                             "(`<!DOCTYPE ...>`, where entities are defined: refused rather than expanded).",
+          "Fix the XML at the place shown; remove a `<!DOCTYPE>`.", urdf="E020_not_xml.urdf"),
+    Entry("E021", "not a URDF", "The document's root element is not `<robot>`, or the robot has no `<link>`.",
+          "Import a URDF file (an SDF or a xacro file must be converted to URDF first).",
+          urdf="E021_not_a_robot.urdf"),
+    Entry("E022", "malformed element", "An element without a required attribute, a number that is not one (or "
+                                       "not finite), an unknown joint type or geometry, an `<inertial>` without "
+                                       "`<mass>` or `<inertia>`.",
+          "Give the element what URDF requires; the message says what.", urdf="E022_inertial_without_inertia.urdf"),
+    Entry("E023", "a joint that moves no mass", "A movable joint whose child link has no `<inertial>`, and no "
+                                                "link beyond it has one: its coordinate would have no inertia.",
+          "Give the link an `<inertial>`, or make the joint fixed.", urdf="E023_joint_moves_no_mass.urdf"),
+    Entry("E024", "missing link", "A joint's parent or child link does not exist.",
+          "Name a `<link>` of the robot (names are case-sensitive).", urdf="E024_missing_parent.urdf"),
+    Entry("E025", "not a tree", "The joints form a cycle (no link is the root), the robot has several roots, or "
+                                "some links are not reached from the root.",
+          "A URDF is one tree: exactly one link (the base) is no joint's child, and each other link hangs from "
+          "one joint.", urdf="E025_cycle.urdf"),
+    Entry("E026", "a name used twice", "Two links, or two joints, with the same name.",
+          "Rename one of them.", urdf="E026_link_twice.urdf"),
+    Entry("E027", "nothing moves", "The robot has no movable joint (a quadrotor's body alone, a fixed "
+                                   "assembly): the model would have no coordinates.",
+          "Import it with `--floating` to give its root link a Free joint.", urdf="E027_nothing_moves.urdf"),
+    Entry("E028", "mesh file not found", "A `<mesh filename>` names a file that is not there, or a "
+                                         "`package://` whose ROS package is not found; a package is named "
+                                         "once, at its first mesh, with the number of its meshes.",
+          "Give the package's folder with `--package-dir NAME=DIR` (`package_dirs=` in Python), or import with "
+          "`--skip-missing-meshes` (`skip_missing_meshes=True`): those visuals are then not drawn (the warning "
+          "W021), which the dynamics do not need.", urdf="E028_missing_mesh.urdf"),
     Entry("E604", "bad setting value", "A setting of the wrong kind (a string for a number, a fraction for "
                                        "`points`, a negative tolerance, an unknown name).",
           "Give a value of the kind the message names.", corpus="E604_stop_time_string.mech"),
@@ -334,12 +385,19 @@ def run(entry: Entry) -> tuple[str, str]:
     from mechdsl.diagnostics import format_diagnostics
 
     data = corpus_text(entry.corpus) if entry.corpus else (entry.source or "").encode("utf-8")
+    if entry.urdf:
+        lines = (CORPUS / "urdf" / entry.urdf).read_text(encoding="utf-8").splitlines(keepends=True)
+        data = "".join(l for l in lines if not l.startswith("<!-- expect:")).encode("utf-8")
     old = os.getcwd()
     with tempfile.TemporaryDirectory() as tmp:
         os.chdir(tmp)
         try:
-            Path(FILE).write_bytes(data)
             args = ["check", FILE]
+            if entry.urdf:
+                Path(URDF).write_bytes(data)
+                args = ["import", URDF, "-o", FILE]
+            else:
+                Path(FILE).write_bytes(data)
             if entry.code == "E001":
                 args = ["check", "missing.mech"]
             elif entry.code == "E003":
@@ -393,7 +451,8 @@ def generate() -> str:
         "The broken-input corpus in tests/corpus/ holds at least one file for every code.",
         "",
         "Warnings (`warning[W...]`) do not stop a model: W501 says a coordinate appears in no kinetic energy "
-        "and no joint; W401-W403 are the unit checks E401-E403 where a decimal literal (such as 9.81) may stand "
+        "and no joint; W509 says an inertia tensor breaks the triangle inequality by rounding (at most 1e-6 of "
+        "I3, the amount is given) and is accepted; W401-W403 are the unit checks E401-E403 where a decimal literal (such as 9.81) may stand "
         "for a quantity with a unit.",
         "",
         "Codes of later phases (deriving and simulating: E6xx from E605 on, E7xx, E8xx) are described with "
@@ -402,16 +461,16 @@ def generate() -> str:
     ]
     by_section: dict[str, list[Entry]] = {}
     for e in ENTRIES:
-        by_section.setdefault(e.code[1], []).append(e)
-    for (title, intro), digit in zip(SECTIONS, "0123456"):
+        by_section.setdefault("u" if e.urdf else e.code[1], []).append(e)
+    for (title, intro), digit in zip(SECTIONS, "0123456u"):
         out += [f"## {title}", "", intro, ""]
         for e in by_section.get(digit, []):
             shown, output = run(e)
-            cmd = e.command or f"mech check {FILE}"
+            cmd = e.command or (f"mech import {URDF} -o {FILE}" if e.urdf else f"mech check {FILE}")
             out += [f"### {e.code} {e.title}", "", e.meaning, ""]
             if e.code not in ("E001", "E003", "E005", "E006") or e.shown:
-                out += ["```mech", shown.rstrip("\n"), "```", ""]
-            where = f" (tests/corpus/{e.corpus})" if e.corpus else ""
+                out += ["```xml" if e.urdf else "```mech", shown.rstrip("\n"), "```", ""]
+            where = f" (tests/corpus/{e.corpus})" if e.corpus else (f" (tests/corpus/urdf/{e.urdf})" if e.urdf else "")
             out += [f"`{cmd}`{where}:", "", "```text", output, "```", "", f"**Fix:** {e.fix}", ""]
     return "\n".join(out).rstrip("\n") + "\n"
 

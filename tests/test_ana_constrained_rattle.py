@@ -86,7 +86,7 @@ def test_other_methods_refuse_constraints(pend):
 
 def test_rattle_without_constraints_is_stormer_verlet():
     import ana_models as am
-    from mechdsl.symplectic import simulate_symplectic
+    from ana_models import simulate_symplectic
 
     eom = am.kepler()
     a = simulate_symplectic(eom, 1.0, method="rattle", dt=0.01)

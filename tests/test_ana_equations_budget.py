@@ -7,8 +7,9 @@ import signal
 
 from mechdsl.api import load_model_ir
 from mechdsl.mechanics.printing import format_equations
+import mechdsl.examples
 
-MODELS = os.path.join(os.path.dirname(__file__), "..", "models")
+MODELS = str(mechdsl.examples.folder())
 
 
 def test_a_slow_machine_prints_the_same_equations(monkeypatch):

@@ -10,8 +10,9 @@ from mechdsl.analysis.linearize import linearize
 from mechdsl.cli import main
 
 from ana_models import pendulum
+import mechdsl.examples
 
-MODELS = os.path.join(os.path.dirname(__file__), "..", "models")
+MODELS = str(mechdsl.examples.folder())
 
 
 def test_guess_steers_the_linearization():

@@ -9,7 +9,7 @@ import pytest
 
 import mechdsl
 from mechdsl.cli import main
-from mechdsl.symplectic import simulate_symplectic
+from ana_models import simulate_symplectic
 
 from conftest import MODELS
 

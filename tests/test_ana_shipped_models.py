@@ -9,8 +9,9 @@ import re
 import pytest
 
 from mechdsl.cli import main
+import mechdsl.examples
 
-MODELS = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "models", "*.mech")))
+MODELS = sorted(str(p) for p in mechdsl.examples.files())
 COMMANDS = [["equilibrium"], ["linearize"], ["equations"], ["equations", "--latex"], ["equations", "--hamiltonian"]]
 
 

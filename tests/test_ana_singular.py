@@ -13,8 +13,9 @@ from mechdsl.analysis.equilibrium import equilibria
 from mechdsl.analysis.linearize import linearize
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError
+import mechdsl.examples
 
-MODELS = os.path.join(os.path.dirname(__file__), "..", "models")
+MODELS = str(mechdsl.examples.folder())
 
 
 def massless():

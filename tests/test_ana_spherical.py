@@ -19,8 +19,9 @@ from mechdsl.analysis.equilibrium import equilibria
 from mechdsl.analysis.linearize import linearize
 from mechdsl.api import loads
 from mechdsl.cli import main
+import mechdsl.examples
 
-MODELS = os.path.join(os.path.dirname(__file__), "..", "models")
+MODELS = str(mechdsl.examples.folder())
 G, L = 9.81, 0.8
 m_top, l_top, I1, I2, I3 = 1.0, 0.5, 0.12, 0.15, 0.2
 

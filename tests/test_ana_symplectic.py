@@ -9,7 +9,7 @@ import pytest
 
 import ana_models as am
 from mechdsl.diagnostics import MechError, UsageError
-from mechdsl.symplectic import simulate_symplectic
+from ana_models import simulate_symplectic
 
 PERIOD = 2 * math.pi          # Kepler orbit with mu = 1, a = 1
 

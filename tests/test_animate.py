@@ -14,12 +14,13 @@ from mechdsl.animate.stage import FLASH, detect_view
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 
-ROOT = Path(__file__).resolve().parents[1]
-MODELS = sorted((ROOT / "models").glob("*.mech"))
+from conftest import MODELS as MODEL_DIR
+
+MODELS = sorted(MODEL_DIR.glob("*.mech"))
 
 
 def _load(name, **kw):
-    return mechdsl.load(ROOT / "models" / f"{name}.mech", **kw)
+    return mechdsl.load(MODEL_DIR / f"{name}.mech", **kw)
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -48,7 +49,7 @@ def test_mapped_evaluation_equals_one_call_per_sample():
     Q = np.tile(m.eom.start()[0], (4, 1)) + rng.normal(0, 0.1, (4, m.eom.n))
     X = geo.positions(t, Q)
     for k in range(4):
-        one = np.array(geo.function(t[k], Q[k], geo.p))
+        one = np.array(geo.function(t[k], Q[k], geo.p)[0])
         assert X[k] == pytest.approx(one, abs=1e-14)
 
 
@@ -143,7 +144,7 @@ def test_every_shipped_model_draws_moving_frames(path, tmp_path):
     q0 = m.eom.start()[0]
     Q = q0 + np.outer([0.0, 0.05, 0.1], np.ones_like(q0))
     fake = SimpleNamespace(t=np.array([0.0, 0.05, 0.1]), q=Q, events=[], failure=None)
-    anim = animate(fake, m, fps=20, size=(160, 120))
+    anim = animate(fake, m, fps=20, speed=1.0, size=(160, 120))
     assert len(anim) == 3
     anim.save(tmp_path / "a.gif")
     assert (tmp_path / "a.gif").stat().st_size > 500
@@ -154,7 +155,8 @@ def test_every_shipped_model_draws_moving_frames(path, tmp_path):
 @pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
 def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, capsys):
     out = tmp_path / f"{path.stem}.gif"
-    assert main(["animate", str(path), "-o", str(out), "--t-end", "0.1", "--fps", "20", "--size", "160x120"]) == 0
+    assert main(["animate", str(path), "-o", str(out), "--t-end", "0.1", "--fps", "20", "--speed", "1",
+                 "--size", "160x120"]) == 0
     from PIL import Image
 
     with Image.open(out) as im:
@@ -164,8 +166,8 @@ def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, caps
 
 def test_html_page_is_self_contained_and_replaceable(tmp_path):
     out = tmp_path / "p.html"
-    args = ["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
-            "--trail", "bob"]
+    args = ["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
+            "--speed", "1", "--trail", "bob"]
     assert main(args) == 0
     text = out.read_text()
     assert text.count("iVBOR") == 3                      # three PNG frames inline
@@ -177,7 +179,7 @@ def test_html_page_is_self_contained_and_replaceable(tmp_path):
 def test_the_same_animation_twice_is_byte_identical(tmp_path):
     a, b = tmp_path / "a.gif", tmp_path / "b.gif"
     for out in (a, b):
-        assert main(["animate", str(ROOT / "models/double_pendulum.mech"), "-o", str(out), "--t-end", "0.2",
+        assert main(["animate", str(MODEL_DIR / "double_pendulum.mech"), "-o", str(out), "--t-end", "0.2",
                      "--fps", "10", "--size", "120x100"]) == 0
     assert a.read_bytes() == b.read_bytes()
 
@@ -194,30 +196,30 @@ def test_the_same_animation_twice_is_byte_identical(tmp_path):
     (["--t-end", "-1"], "must be after the start time"),
 ])
 def test_bad_options_are_usage_errors(extra, message, tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/double_pendulum.mech"), "-o", str(tmp_path / "x.gif")] + extra)
+    rc = main(["animate", str(MODEL_DIR / "double_pendulum.mech"), "-o", str(tmp_path / "x.gif")] + extra)
     err = capsys.readouterr().err
     assert rc == 2 and message in err and "Traceback" not in err
 
 
 def test_unsupported_extension_names_the_supported_ones(tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.avi")])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.avi")])
     err = capsys.readouterr().err
     assert rc == 2 and "cannot write '.avi' animations; supported: .gif" in err and ".html" in err
 
 
 def test_mp4_without_ffmpeg_says_so(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("shutil.which", lambda name: None)
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "x.mp4")])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.mp4")])
     err = capsys.readouterr().err
     assert rc == 2 and "no 'ffmpeg'" in err and ".gif" in err
 
 
 def test_missing_folder_and_foreign_file_are_refused_before_any_work(tmp_path, capsys):
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(tmp_path / "nope" / "x.gif")])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "nope" / "x.gif")])
     assert rc == 2 and "does not exist" in capsys.readouterr().err
     foreign = tmp_path / "mine.gif"
     foreign.write_bytes(b"GIF89a not ours")
-    rc = main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(foreign)])
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(foreign)])
     assert rc == 2 and "--force" in capsys.readouterr().err
     assert foreign.read_bytes() == b"GIF89a not ours"
 
@@ -239,8 +241,8 @@ def test_mp4_frames_are_piped_to_ffmpeg(tmp_path, monkeypatch, capsys):
     fake.chmod(fake.stat().st_mode | stat.S_IXUSR)
     monkeypatch.setenv("PATH", f"{fake.parent}{os.pathsep}{os.environ['PATH']}")
     out = tmp_path / "p.mp4"
-    assert main(["animate", str(ROOT / "models/pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
-                 "--size", "100x80"]) == 0
+    assert main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
+                 "--speed", "1", "--size", "100x80"]) == 0
     args, nbytes = out.read_text().split("\n")
     assert "-s 100x80" in args and "-r 10" in args and "-pix_fmt rgba" in args
     assert int(nbytes) == 3 * 100 * 80 * 4                       # three RGBA frames
@@ -267,3 +269,70 @@ def test_a_failed_run_is_animated_up_to_the_failure_and_says_so(tmp_path, capsys
 
     with Image.open(out) as im:
         assert im.n_frames == 11
+
+
+# ----------------------------------------------------------------------------- frame timing (issue 27)
+
+
+@pytest.mark.parametrize("fps", [30, 24, 25, 50, 12.5, 7])
+def test_gif_frame_delays_add_up_to_the_frame_rate(fps):
+    from mechdsl.animate.writer import gif_durations
+
+    n = 97
+    d = np.array(gif_durations(n, fps))
+    assert (d % 10 == 0).all() and d.min() >= 20                      # whole centiseconds, none a browser stretches
+    starts = np.concatenate([[0], np.cumsum(d)])
+    assert np.abs(starts - 1000 * np.arange(n + 1) / fps).max() <= 5.0   # every frame starts within half a centisecond
+
+
+def test_a_30_fps_gif_plays_at_30_fps(tmp_path):
+    from PIL import Image
+
+    m = _load("pendulum")
+    r = m.simulate(1.0, points=31)
+    out = animate(r, m, fps=30, speed=1.0, size=(100, 80)).save(tmp_path / "p.gif")
+    total = 0
+    with Image.open(out) as im:
+        for k in range(im.n_frames):
+            im.seek(k)
+            total += im.info["duration"]
+        n = im.n_frames
+    assert n == 31 and total == pytest.approx(1000 * 31 / 30, abs=5)   # before: 31 x 30 ms, 11% fast
+
+
+def test_a_gif_faster_than_50_fps_is_refused_before_any_work(tmp_path, capsys):
+    rc = main(["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(tmp_path / "x.gif"), "--fps", "60"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "a GIF cannot play 60 frames per second" in err and "--fps 50" in err
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_pick_speed_slows_short_runs_to_nice_numbers():
+    from mechdsl.animate import pick_speed
+
+    assert pick_speed(10.0) == 1.0 and pick_speed(1.0) == 1.0
+    assert pick_speed(0.03) == pytest.approx(0.01)
+    assert pick_speed(0.5) == pytest.approx(0.2)
+    assert pick_speed(0.1) == pytest.approx(0.05)
+    for d in np.geomspace(1e-6, 0.999, 40):
+        s = pick_speed(d)
+        assert 2.0 <= d / s <= 10.0 + 1e-9                            # plays 2 to 10 s
+    with pytest.raises(UsageError, match="use --speed 0.9 or less"):
+        frame_times(0.0, 0.03, 30, 1.0)
+
+
+def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
+    """`mech animate models/andrews.mech -o a.gif` (0.03 s; before: "end time 0.0 .. 0.0")."""
+    from PIL import Image
+
+    out = tmp_path / "a.gif"
+    assert main(["animate", str(MODEL_DIR / "andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
+    cap = capsys.readouterr()
+    assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
+    assert "91 frames at 30 fps at speed 0.01, 0.03 s of model time" in cap.out
+    total = 0
+    with Image.open(out) as im:                  # (Pillow merges repeated frames, adding their delays)
+        for k in range(im.n_frames):
+            im.seek(k)
+            total += im.info["duration"]
+    assert total == pytest.approx(1000 * 91 / 30, abs=5)

@@ -28,10 +28,10 @@ from mechdsl.bench import measure
 from mechdsl.cli import main
 from mechdsl.diagnostics import UsageError
 
-from conftest import MODELS, REFERENCES
+from conftest import CHECKOUT, MODELS, REFERENCES
 
 PENDULUM = MODELS / "pendulum.mech"
-STIFF = MODELS.parent / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
+STIFF = CHECKOUT / "benchmarks" / "stability" / "stiff_spring_pendulum.mech"
 T_END = 3.0
 POINTS = 31
 
@@ -209,7 +209,7 @@ def test_outputs_written_atomically_and_rerun(tmp_path, setup):
 def test_cli_bench(tmp_path, capsys):
     out = tmp_path / "o"
     args = ["bench", str(PENDULUM), "--scene", "Swing", "--t-end", "2", "--points", "21", "--methods", "erk",
-            "--methods", "cvodes-adams", "--tolerances", "1e-3,1e-6", "--repeats", "1", "-o", str(out), "--quiet"]
+            "--methods", "cvodes-adams", "--tolerances", "1e-3,1e-6", "--repeats", "1", "-o", str(out)]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "reference: auto: scipy-dop853" in text and "estimated accuracy" in text
@@ -223,7 +223,7 @@ def test_cli_bench(tmp_path, capsys):
                                    ["--reference", "/nonexistent.csv"], ["--compare", "nosuch"]])
 def test_cli_usage_errors(extra, capsys):
     args = ["bench", str(PENDULUM), "--scene", "Swing", "--t-end", "1", "--points", "11", "--methods", "erk",
-            "--tolerances", "1e-3", "--repeats", "1", "--quiet", *extra]
+            "--tolerances", "1e-3", "--repeats", "1", *extra]
     assert main(args) == 2
     assert "error" in capsys.readouterr().err
 
@@ -329,7 +329,7 @@ def test_andrews_reference_falls_back_to_a_method_that_works(capsys):
     """Before: the automatic reference (ggl+idas at 1e-13) hit IDA_CONV_FAIL at t = 0.0115 and
     the bench ended with a usage error (exit 2).  Now the next candidate replaces it."""
     args = ["bench", str(MODELS / "andrews.mech"), "--methods", "projection+auto", "--tolerances", "1e-3,1e-11",
-            "--repeats", "1", "--quiet"]
+            "--repeats", "1"]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert "reference: auto: projection+cvodes-adams at rtol = atol = 1e-1" in out
@@ -389,7 +389,7 @@ def test_reference_that_no_method_computes_is_a_located_simulation_error(tmp_pat
     """Before: a usage error (exit 2).  A failed simulation is exit 1 with a coded diagnostic."""
     f = tmp_path / "blowup.mech"
     f.write_text(BLOWUP)
-    assert main(["bench", str(f), "--t-end", "10", "--tolerances", "1e-3", "--methods", "erk", "--quiet"]) == 1
+    assert main(["bench", str(f), "--t-end", "10", "--tolerances", "1e-3", "--methods", "erk"]) == 1
     err = capsys.readouterr().err
     assert f"{f}:8:1: error[E880]: cannot compute the automatic reference" in err
     assert "scipy-dop853 at tolerance 1e-08: failed at t = 0.5707" in err and "help:" in err
@@ -397,7 +397,7 @@ def test_reference_that_no_method_computes_is_a_located_simulation_error(tmp_pat
 
 def test_cli_bench_defaults_on_a_small_model(capsys):
     """mech bench with defaults: the plan is chosen and said (cart_pole: about a second of CPU)."""
-    assert main(["bench", str(MODELS / "cart_pole.mech"), "--quiet"]) == 0
+    assert main(["bench", str(MODELS / "cart_pole.mech")]) == 0
     out = capsys.readouterr().out
     assert "plan: default plan for a model that is cheap" in out and "plan: methods: the default set" in out
     assert "reference: auto: scipy-dop853" in out and "t = 0 .. 3" in out

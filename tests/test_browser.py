@@ -8,27 +8,19 @@ with that reason (pytest reports the skip; CI installs it, so there it runs).
 """
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
+from conftest import chromium_path as _chromium
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _chromium() -> str | None:
-    for name in ("chromium", "chromium-browser", "google-chrome"):
-        path = shutil.which(name)
-        if path:
-            return path
-    return None
+from conftest import CHECKOUT, MODELS, TESTS  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def page_file(tmp_path_factory):
     import mechdsl
 
-    m = mechdsl.load(ROOT / "models" / "pendulum.mech")
+    m = mechdsl.load(MODELS / "pendulum.mech")
     r = m.simulate(1.0, points=11)
     out = tmp_path_factory.mktemp("browser") / "pendulum.html"
     r.animate(fps=10, size=(200, 160)).save(out)

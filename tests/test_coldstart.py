@@ -41,7 +41,7 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     imported(*args, env=env)                    # the first run fills the model cache
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "mechdsl.simulate" in names
+    assert "mechdsl.simulation.backends.ode" in names
     unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.output.display", "numpy.ma", "shutil"}
     assert unwanted & names - imported_by_numpy_and_casadi() == set()
 
@@ -89,7 +89,7 @@ def test_a_warm_run_creates_no_dataclass(tmp_path):
 def test_scipy_version_without_importing_scipy(monkeypatch):
     import scipy
 
-    from mechdsl.simulate import _scipy_version
+    from mechdsl.output.result import _scipy_version
 
     monkeypatch.delitem(sys.modules, "scipy")
     assert _scipy_version() == scipy.__version__

@@ -12,8 +12,8 @@ import pytest
 import mechdsl
 from mechdsl.diagnostics import UsageError
 
-ROOT = Path(__file__).resolve().parents[1]
-DOC = ROOT / "docs" / "control.md"
+from conftest import CHECKOUT, MODELS  # noqa: E402
+DOC = CHECKOUT / "docs" / "control.md"
 
 
 def _examples():
@@ -24,7 +24,7 @@ def _run(code, monkeypatch, **subs):
     for old, new in subs.items():
         assert old in code, old
         code = code.replace(old, new)
-    monkeypatch.chdir(ROOT)
+    monkeypatch.chdir(CHECKOUT)
     env: dict = {}
     exec(compile(code, str(DOC), "exec"), env)     # noqa: S102 - our own documentation
     return env
@@ -44,7 +44,7 @@ def hand_cart_pole(M=1.0, m=0.1, l=1.0, g=9.81):
 
 
 def test_cart_pole_ode_matches_hand_derivation_at_random_states():
-    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    m = mechdsl.load(str(MODELS / "cart_pole.mech"), model="CartPole")
     ode = m.casadi()["ode"]
     hand = hand_cart_pole()
     rng = np.random.default_rng(13)
@@ -59,7 +59,7 @@ def test_cart_pole_ode_matches_hand_derivation_at_random_states():
 def test_fixed_parameters_give_the_same_functions_with_fewer_instructions():
     """casadi(fixed_parameters=...): the parameters built in as numbers; the same values as the
     general Functions at random states, a leaner expression, and p keeps what is not fixed."""
-    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    m = mechdsl.load(str(MODELS / "cart_pole.mech"), model="CartPole")
     general, p = m.casadi(), m.parameter_vector()
     fixed = m.casadi(fixed_parameters=True)
     assert fixed["ode"].numel_in(3) == 0 and fixed.parameter_names == ()
@@ -164,7 +164,7 @@ def test_shooting_on_the_simulators_integrator_full(monkeypatch):
 
 
 def test_integrator_function_matches_a_simulated_interval():
-    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    m = mechdsl.load(str(MODELS / "cart_pole.mech"), model="CartPole")
     Phi = m.integrator(0.1, method="cvodes-bdf", rtol=1e-10, atol=1e-12)
     assert Phi.name_in() == ["t0", "x0", "u", "p"] and Phi.name_out() == ["xf"]
     x0 = np.array([0.1, 0.4, -0.2, 0.3])
@@ -178,7 +178,7 @@ def test_integrator_function_matches_a_simulated_interval():
     for steps in (0, 2.5):      # was CasADi's RuntimeError (an assertion in RungeKutta::init)
         with pytest.raises(UsageError, match="steps must be a whole number of at least 1"):
             m.integrator(0.1, method="rk", steps=steps)
-    bead = mechdsl.load(str(ROOT / "models" / "pendulum_cartesian.mech"))
+    bead = mechdsl.load(str(MODELS / "pendulum_cartesian.mech"))
     with pytest.raises(UsageError, match="constraints or contacts"):
         bead.integrator(0.1)
 
@@ -223,7 +223,7 @@ def test_lqr_example_stabilizes_upright(monkeypatch):
 
 
 def test_lqr_gain_satisfies_the_riccati_equation():
-    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    m = mechdsl.load(str(MODELS / "cart_pole.mech"), model="CartPole")
     lin = m.linearize(at={"x": 0, "theta": 0})
     Q, R = np.diag([1.0, 10.0, 1.0, 1.0]), np.array([[0.1]])
     reg = lin.lqr(Q, R)
@@ -239,14 +239,15 @@ def test_lqr_gain_satisfies_the_riccati_equation():
 
 @pytest.mark.slow          # compiles C (about 5 s)
 def test_compiled_functions_support_exact_hessian(tmp_path, monkeypatch):
-    """Model.casadi(compiled=True): IPOPT with the exact Hessian of the Lagrangian works and
-    takes the same iterations as the virtual machine (before: 'Derivatives cannot be calculated')."""
+    """Model.casadi(compiled=True, derivatives=2): IPOPT with the exact Hessian of the Lagrangian
+    works and takes the same iterations as the virtual machine (before: 'Derivatives cannot be
+    calculated')."""
     from mechdsl.eom.codegen import find_compiler
 
     if find_compiler() is None:
         pytest.skip("no C compiler")
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
-    m = mechdsl.load(str(ROOT / "models" / "cart_pole.mech"), model="CartPole")
+    m = mechdsl.load(str(MODELS / "cart_pole.mech"), model="CartPole")
     p = m.parameter_vector()
 
     def solve(ode):
@@ -260,7 +261,7 @@ def test_compiled_functions_support_exact_hessian(tmp_path, monkeypatch):
         sol = opti.solve()
         return sol.value(x), sol.stats()["iter_count"]
 
-    fs = m.casadi(compiled=True)
+    fs = m.casadi(compiled=True, derivatives=2)     # derivatives only when asked (issue 22)
     ode_c = fs["ode"]                      # compiles on first use
     assert fs.compiled and ode_c.class_name() == "External", fs.notes
     x_c, it_c = solve(ode_c)

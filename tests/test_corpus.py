@@ -19,11 +19,12 @@ from mechdsl.frontend import parser as P
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError
 
-from conftest import ROOT
+import mechdsl
+from conftest import CHECKOUT, MODELS, TESTS
 
-CORPUS = ROOT / "tests" / "corpus"
-SRC = ROOT / "src" / "mechdsl"
-DOCS = ROOT / "docs" / "errors.md"
+CORPUS = TESTS / "corpus"
+SRC = Path(mechdsl.__file__).resolve().parent      # the installed package's modules
+DOCS = CHECKOUT / "docs" / "errors.md"
 
 EXPECT_LINE = re.compile(r"^// expect: (E\d{3}) (\d+):(\d+)\s*$")
 HEADER = re.compile(r"^(?P<file>.*):(?P<line>\d+):(?P<col>\d+): (?P<sev>error|warning)\[(?P<code>[EW]\d{3})\]: (?P<msg>.*)$")
@@ -177,20 +178,20 @@ def test_unknown_scene_via_api():
     # Program.scene is the library entry point that reports it as a diagnostic
     from mechdsl.semantic import analyze
 
-    program = analyze(P.parse_file(ROOT / "models" / "pendulum.mech"))
+    program = analyze(P.parse_file(MODELS / "pendulum.mech"))
     with pytest.raises(MechError) as e:
         program.scene("Swnig")
     assert e.value.first.code == "E602" and e.value.first.help == "did you mean 'Swing'?"
 
 
 def test_unknown_scene_on_the_command_line(capsys):
-    assert main(["check", str(ROOT / "models" / "pendulum.mech"), "--scene", "Swnig"]) == 2
+    assert main(["check", str(MODELS / "pendulum.mech"), "--scene", "Swnig"]) == 2
     err = capsys.readouterr().err
     assert "no scene named 'Swnig'" in err and "did you mean 'Swing'?" in err
 
 
 def test_several_files_report_each(capsys):
-    good, bad = ROOT / "models" / "pendulum.mech", CORPUS / "E201_undefined_in_binding.mech"
+    good, bad = MODELS / "pendulum.mech", CORPUS / "E201_undefined_in_binding.mech"
     assert main(["check", str(bad), str(good), str(CORPUS / "E002_nul_byte.mech")]) == 1
     cap = capsys.readouterr()
     assert f"{good}: ok" in cap.out
@@ -206,7 +207,7 @@ def test_several_files_report_each(capsys):
 def test_subprocess(name):
     path = CORPUS / name
     proc = subprocess.run([sys.executable, "-m", "mechdsl", "check", str(path)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120)
+                          cwd=TESTS, timeout=120)
     assert proc.returncode == 1, proc.stderr
     assert proc.stdout == ""
     assert "Traceback" not in proc.stderr and "internal error" not in proc.stderr
@@ -220,7 +221,7 @@ def test_subprocess(name):
 def test_subprocess_missing_file(tmp_path):
     path = tmp_path / "missing.mech"
     proc = subprocess.run([sys.executable, "-m", "mechdsl", "check", str(path)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120)
+                          cwd=TESTS, timeout=120)
     assert proc.returncode == 1 and proc.stderr.startswith(f"{path}: error[E001]: ")
 
 
@@ -229,7 +230,8 @@ def test_subprocess_missing_file(tmp_path):
 
 FRONT_END = [SRC / "frontend" / "parser.py", SRC / "frontend" / "source.py", SRC / "diagnostics.py", SRC / "api.py",
              SRC / "cli.py", SRC / "model" / "units.py",
-             SRC / "commands" / "check.py", SRC / "commands" / "compile.py", *sorted((SRC / "semantic").glob("*.py"))]
+             SRC / "commands" / "check.py", SRC / "commands" / "compile.py", *sorted((SRC / "semantic").glob("*.py")),
+             SRC / "commands" / "import_urdf.py", *sorted((SRC / "urdf").glob("*.py"))]
 
 
 def codes_in_source() -> set[str]:
@@ -241,7 +243,9 @@ def codes_in_source() -> set[str]:
 
 
 def test_every_code_is_in_the_corpus():
-    covered = {c for exp in EXPECT.values() for c, _, _ in exp}
+    from test_urdf_corpus import EXPECT as URDF_EXPECT      # the importer's corpus (tests/corpus/urdf)
+
+    covered = {c for exp in [*EXPECT.values(), *URDF_EXPECT.values()] for c, _, _ in exp if c.startswith("E")}
     missing = codes_in_source() - covered - set(NOT_FROM_A_FILE)
     assert not missing, f"error codes with no corpus file: {sorted(missing)}"
     assert covered <= codes_in_source(), "the corpus expects a code the source never emits"

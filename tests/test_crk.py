@@ -1,4 +1,4 @@
-"""The compiled stepping loop (mechdsl.simulation.crk): dopri5 and dop853 in C.
+"""The compiled stepping loop (mechdsl.simulation.backends.crk): dopri5 and dop853 in C.
 
 Checked against independent references: scipy's RK45/DOP853 stepping in Python (the same
 algorithm, so the same steps), closed-form motions, CasADi's own integrators, and the
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from mechdsl import eom as E
-from mechdsl import integrators as I
 from mechdsl.eom.codegen import find_compiler
 from mechdsl.simulate import simulate
-from mechdsl.simulation import crk
+from mechdsl.simulation.backends import crk
 from sim_models import blowup, chain, pendulum
+import mechdsl.examples
 
 PAIRS = {"dopri5": "scipy-rk45", "dop853": "scipy-dop853"}
 
@@ -127,9 +127,9 @@ def test_registry_names_and_no_jacobian():
     from mechdsl.simulation.registry import check_method, methods
 
     for m in PAIRS:
-        assert m in I.NO_JACOBIAN and m in I.METHODS
-        assert "ode" in check_method(m).backends and "ode" in methods()[m].backends
-    assert "events" in methods()["dop853"].backends      # the contact back end's name is kept
+        assert not check_method(m).needs_jacobian and check_method(m).compiled_loop
+        assert "ode" in check_method(m).kinds and "ode" in methods()[m].kinds
+    assert "events" in methods()["dop853"].kinds      # the contact back end's name is kept
 
 
 # --------------------------------------------------------------------------- method auto compiles when it pays
@@ -187,7 +187,7 @@ def test_cli_no_compile_opts_out(tmp_path, monkeypatch, capsys):
 
     monkeypatch.chdir(tmp_path)
 
-    model = Path(__file__).resolve().parents[1] / "models" / "pendulum.mech"
+    model = mechdsl.examples.path("pendulum")
     out = tmp_path / "p.csv"
     assert main(["simulate", str(model), "--t-end", "150", "--points", "11", "--no-compile", "-o", str(out),
                  "--no-progress"]) == 0
@@ -226,7 +226,7 @@ def test_run_record_says_whether_compiled_code_ran():
 
 
 def test_jacobian_eigenvalues_of_the_second_order_form_equal_the_full_decomposition():
-    from mechdsl.simulate import jacobian_eigenvalues
+    from mechdsl.simulation.choose import jacobian_eigenvalues
 
     rng = np.random.default_rng(7)
     for n in (1, 3, 8):
@@ -249,7 +249,7 @@ def test_twelve_link_chain_compiled_loop_equals_scipy_dop853_on_the_virtual_mach
 
     import mechdsl
 
-    text = (Path(__file__).resolve().parents[1] / "models" / "nlink_pendulum.mech").read_text()
+    text = mechdsl.examples.path("nlink_pendulum").read_text()
     m = mechdsl.loads(re.sub(r"parameter Integer N = \d+", "parameter Integer N = 12", text))
     r = m.simulate(t_end=5, rtol=1e-8, method="dop853")
     ref = m.simulate(t_end=5, rtol=1e-8, method="scipy-dop853")

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from conftest import CHECKOUT  # noqa: E402
 
 
 @pytest.mark.slow
 def test_andrews_work_precision_quick(tmp_path):
     out = tmp_path / "wp"
-    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "andrews_wp.py"), str(out), "--quick",
+    res = subprocess.run([sys.executable, str(CHECKOUT / "benchmarks" / "andrews_wp.py"), str(out), "--quick",
                           "--repeats", "1", "--json", str(tmp_path / "wp.json")],
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stderr

@@ -6,11 +6,11 @@ import numpy as np
 import mechdsl
 from mechdsl.eom.codegen import find_compiler
 
-from conftest import ROOT
+from conftest import MODELS
 
 
 def test_projection_erk_compiled_equals_virtual_machine():
-    m = mechdsl.load(ROOT / "models" / "andrews.mech")
+    m = mechdsl.load(MODELS / "andrews.mech")
     vm = m.simulate(0.01, rtol=1e-8, atol=1e-8, method="erk", formulation="projection", points=5)
     nat = m.simulate(0.01, rtol=1e-8, atol=1e-8, method="erk", formulation="projection", points=5, compiled=True)
     if find_compiler() is None:      # no C compiler: the run says so and uses the virtual machine
@@ -23,7 +23,7 @@ def test_projection_erk_compiled_equals_virtual_machine():
 
 
 def test_ggl_says_compiled_code_is_not_used():
-    m = mechdsl.load(ROOT / "models" / "pendulum_cartesian.mech", scene="Cash")
+    m = mechdsl.load(MODELS / "pendulum_cartesian.mech", scene="Cash")
     r = m.simulate(0.1, formulation="ggl", compiled=True, points=3)
     assert r.metadata["compiled"] is False
     assert any("compiled" in n for n in r.metadata["notes"])

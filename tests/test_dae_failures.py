@@ -21,7 +21,7 @@ from dae_models import _syms
 from mechdsl.dae import simulate_dae
 from mechdsl.eom import from_lagrangian
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import MODELS  # noqa: E402
 
 
 def nan_pendulum():
@@ -53,7 +53,7 @@ def test_nonfinite_equations_fail_with_time_and_coordinate(formulation):
 
 
 def test_nonfinite_state_error_names_the_first_bad_output():
-    from mechdsl.dae.stepper import NonFiniteError
+    from mechdsl.dae.segments import NonFiniteError
 
     e = NonFiniteError(1.25, "der(y)")
     assert e.t == 1.25 and "der(y)" in str(e)
@@ -67,7 +67,7 @@ def test_four_bar_with_a_tiny_crank_ends_with_a_coded_failure():
     below (test_the_driver_loop_is_bounded)."""
     code = textwrap.dedent(f"""
         import time, mechdsl
-        m = mechdsl.load({str(ROOT / "models" / "four_bar.mech")!r}).with_params(a=1e-12)
+        m = mechdsl.load({str(MODELS / "four_bar.mech")!r}).with_params(a=1e-12)
         c = time.process_time()
         try:
             r = m.simulate(10.0, points=501)
@@ -86,7 +86,7 @@ def test_four_bar_with_a_tiny_crank_ends_with_a_coded_failure():
     assert ("steps" if code_ == "E824" else "mass matrix") in failure
 
 
-MECH = (ROOT / "models" / "pendulum_cartesian.mech").read_text()
+MECH = (MODELS / "pendulum_cartesian.mech").read_text()
 
 
 def _undefined_model(constraint):
@@ -121,7 +121,7 @@ def test_the_driver_loop_is_bounded(monkeypatch):
     """Every loop of the driver counts its integrator calls; at the bound the run fails (E824)
     with the results up to there (here the bound is lowered to 5 calls of 0.1 s)."""
     from dae_models import pendulum_eom
-    from mechdsl.dae import driver
+    from mechdsl.simulation.backends import dae as driver
 
     monkeypatch.setattr(driver, "MAX_CALLS", 5)
     r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), 2.0, points=3, max_interval=0.1)
@@ -141,8 +141,14 @@ def test_a_jacobian_that_cannot_be_evaluated_is_a_failure_not_a_crash():
     from conftest import MODELS
     from mechdsl.dae import simulate_dae
 
+    from mechdsl.diagnostics import MechError
+    from mechdsl.simulation import formulate, solve
+    from mechdsl.simulation.settings import from_kwargs
+
     m = mechdsl.load(MODELS / "andrews.mech", model="Andrews")
-    r = simulate_dae(m.eom, 0.01, points=3, p={"m3": -1e12})
+    with pytest.raises(MechError, match="E747"):        # every entry runs the start check (issue 22)
+        simulate_dae(m.eom, 0.01, points=3, p={"m3": -1e12})
+    r = solve(formulate(m.eom, from_kwargs(0.01, points=3, p={"m3": -1e12})))
     assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-12)
 
 
@@ -175,7 +181,7 @@ def test_a_ctrl_c_taken_by_casadi_in_the_jacobian_is_not_swallowed(monkeypatch):
     method choice would otherwise be lost and the run go on to the end."""
     import mechdsl
     from conftest import MODELS
-    from mechdsl.dae.system import ConstrainedSystem
+    from mechdsl.dae.constrained_system import ConstrainedSystem
 
     m = mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
     pv = np.asarray(m.eom.param_values, float)

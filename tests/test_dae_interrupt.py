@@ -100,10 +100,11 @@ def test_sigint_to_mech_simulate_writes_partial_results_and_exits_130(tmp_path):
     import sys
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    from conftest import MODELS
+
     out = tmp_path / "a01.csv"
     # A01 over 20000 s at 1e-12: ~40 s of integration after about a second of start-up
-    p = subprocess.Popen([sys.executable, "-m", "mechdsl", "simulate", str(root / "models" / "pendulum_cartesian.mech"),
+    p = subprocess.Popen([sys.executable, "-m", "mechdsl", "simulate", str(MODELS / "pendulum_cartesian.mech"),
                           "--scene", "A01", "--t-end", "20000", "--points", "20001", "--no-progress", "-o", str(out)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))

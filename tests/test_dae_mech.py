@@ -10,8 +10,9 @@ import mechdsl
 from dae_models import (ANDREWS_COORDS, REFERENCES, andrews_data, parallelogram_singular_time, pendulum_exact,
                         slider_crank_eom)
 from mechdsl.dae import simulate_dae
+import mechdsl.examples
 
-MODELS = Path(__file__).resolve().parent.parent / "models"
+MODELS = mechdsl.examples.folder()
 
 
 def test_andrews_mech_matches_reference():

@@ -74,11 +74,11 @@ def test_parameters_override():
 
 @pytest.mark.parametrize("kw, match", [
     ({"formulation": "index3"}, "unknown formulation"),
-    ({"method": "rk4"}, "does not apply"),
+    ({"method": "rk4"}, "ignores the constraints"),         # the fixed-step back end's rule, as for Model.simulate
     ({"formulation": "ggl", "method": "adams"}, "does not apply"),
-    ({"bogus": 1}, "unknown option"),
-    ({"points": 1}, "at least 2"),
-    ({"rtol": -1}, "positive"),
+    ({"bogus": 1}, "unknown simulation setting"),          # the one settings check (issue 22)
+    ({"points": 1}, "integer >= 2"),
+    ({"rtol": -1}, "tolerances must lie in"),
     ({"p": {"nope": 1}}, "not a parameter"),
 ])
 def test_usage_errors(kw, match):

@@ -10,7 +10,7 @@ import pytest
 
 from dae_models import crank_rocker_eom, slider_crank_eom
 from mechdsl.dae import simulate_dae
-from mechdsl.dae.system import ConstrainedSystem
+from mechdsl.dae.constrained_system import ConstrainedSystem
 from mechdsl.diagnostics import UsageError
 
 G = 9.81

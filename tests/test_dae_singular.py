@@ -27,9 +27,10 @@ from mechdsl.dae import simulate_dae
 from mechdsl.dae.augmented import augmented_ode, project_positions, project_velocities, PENALTY
 from mechdsl.dae.dof import dof_report
 from mechdsl.dae.projection import project
-from mechdsl.dae.system import ConstrainedSystem
+from mechdsl.dae.constrained_system import ConstrainedSystem
+import mechdsl.examples
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "nfourbar.mech"
+MODEL = mechdsl.examples.path("nfourbar")
 M_ROD, L_ROD, GRAV, V0 = 1.0, 1.0, 9.81, 1.0
 
 
@@ -250,7 +251,13 @@ def test_a_coordinate_without_inertia_held_by_a_constraint_is_fine():
 def test_a_coordinate_without_inertia_nothing_holds_is_e840():
     from mechdsl.diagnostics import MechError
 
-    with pytest.raises(MechError) as err:
+    from mechdsl.simulation import formulate, solve
+    from mechdsl.simulation.settings import from_kwargs
+
+    with pytest.raises(MechError) as start:          # the start check of every run (as Model.simulate)
         simulate_dae(_massless_z(False), 1.0, formulation="augmented", points=3)
+    assert start.value.first.code == "E743"
+    with pytest.raises(MechError) as err:            # the augmented formulation's own check, past it
+        solve(formulate(_massless_z(False), from_kwargs(1.0, formulation="augmented", points=3)))
     assert err.value.first.code == "E840" and "along z" in err.value.first.message
     assert "projection" in err.value.first.help

@@ -11,7 +11,7 @@ import pytest
 from dae_models import andrews_eom, andrews_mass_forces, pendulum_eom
 from mechdsl.dae import dae_index, guarded_idas
 from mechdsl.dae.ggl import ggl_dae, raw_index3_dae
-from mechdsl.dae.system import ConstrainedSystem
+from mechdsl.dae.constrained_system import ConstrainedSystem
 from mechdsl.diagnostics import MechError
 
 
@@ -104,7 +104,7 @@ def test_idas_refuses_the_raw_index3_form():
 def test_the_linear_algebra_routes_agree(monkeypatch):
     """n + m up to SX_KKT_MAX: symbolic solve; above: Cholesky + Schur complement in SX when M is
     positive definite, else numeric QR per call (MX). All three agree with a pivoted dense solve."""
-    import mechdsl.dae.system as S
+    import mechdsl.dae.constrained_system as S
 
     e = andrews_eom()
     q0, _ = e.start()
@@ -135,7 +135,7 @@ def test_the_linear_algebra_routes_agree(monkeypatch):
 
 def test_schur_route_is_not_used_with_a_singular_mass_matrix(monkeypatch):
     """A coordinate without mass (M singular, the KKT matrix still regular) needs the QR route."""
-    import mechdsl.dae.system as S
+    import mechdsl.dae.constrained_system as S
 
     e = andrews_eom()
     zero_mass = e.replace(M=e.M * ca.diag(ca.DM([0, 1, 1, 1, 1, 1, 1])))

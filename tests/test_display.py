@@ -14,11 +14,11 @@ import mechdsl
 from mechdsl.diagnostics import UsageError
 from mechdsl.output.result import Result
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import CHECKOUT, MODELS, TESTS  # noqa: E402
 
 
 def _load(name, **kw):
-    return mechdsl.load(ROOT / "models" / f"{name}.mech", **kw)
+    return mechdsl.load(MODELS / f"{name}.mech", **kw)
 
 
 def _by_name(expr):
@@ -176,7 +176,7 @@ def test_plot_command_still_writes_a_file(tmp_path):
     from mechdsl.cli import main
 
     out = tmp_path / "p.png"
-    assert main(["simulate", str(ROOT / "models/pendulum.mech"), "--t-end", "0.2", "--plot", str(out)]) == 0
+    assert main(["simulate", str(MODELS / "pendulum.mech"), "--t-end", "0.2", "--plot", str(out)]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -189,8 +189,8 @@ def test_progress_bar_outside_a_notebook_is_the_text_one():
 def test_api_reference_is_up_to_date():
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("api_doc", ROOT / "tests" / "api_doc.py")
+    spec = importlib.util.spec_from_file_location("api_doc", TESTS / "api_doc.py")
     api_doc = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(api_doc)
-    assert (ROOT / "docs" / "api.md").read_text(encoding="utf-8") == api_doc.generate(), \
+    assert (CHECKOUT / "docs" / "api.md").read_text(encoding="utf-8") == api_doc.generate(), \
         "docs/api.md is stale: run PYTHONPATH=src python tests/api_doc.py"

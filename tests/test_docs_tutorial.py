@@ -5,11 +5,11 @@ import shlex
 
 import numpy as np
 
-from conftest import ROOT
+from conftest import CHECKOUT
 
 
 def test_tutorial_python_snippet(tmp_path, monkeypatch):
-    text = (ROOT / "docs" / "tutorial.md").read_text()
+    text = (CHECKOUT / "docs" / "tutorial.md").read_text()
     model = re.search(r"```\n(model Pendulum \"A point mass.*?end Pendulum;)\n```", text, re.S).group(1)
     code = re.search(r"```python\n(.*?)```", text, re.S).group(1)
     monkeypatch.chdir(tmp_path)
@@ -19,6 +19,12 @@ def test_tutorial_python_snippet(tmp_path, monkeypatch):
     assert ns["r"].q.shape == (501, 1)
     assert abs(ns["lin"].modes().frequencies[0] - np.sqrt(9.81)) < 1e-9
     assert [e.stable for e in ns["eq"]] == [True, False]
+    # the reprs the text shows in comments (`name  # <...>`) are what Python shows ("..." elides)
+    shown = re.findall(r"^(\w+)(?: = [^#]*?)?\s+# (\[?<.*>\]?)$", code, flags=re.M)
+    assert {name for name, _ in shown} >= {"m", "r", "eq", "lin"}
+    for name, text in shown:
+        pattern = ".*?".join(re.escape(part) for part in text.split("..."))
+        assert re.fullmatch(pattern, repr(ns[name])), f"tutorial shows {text!r}, Python {ns[name]!r}"
 
 
 def _blocks(text):
@@ -34,7 +40,7 @@ def test_tutorial_shell_sessions_print_what_the_text_shows(tmp_path, monkeypatch
 
     monkeypatch.chdir(tmp_path)
     ran = 0
-    for block in _blocks((ROOT / "docs" / "tutorial.md").read_text()):
+    for block in _blocks((CHECKOUT / "docs" / "tutorial.md").read_text()):
         if block.startswith("model Pendulum \"A point mass"):
             (tmp_path / "pendulum.mech").write_text(block)
         elif block.startswith("model Pendulum2"):

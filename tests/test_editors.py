@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
-from conftest import MODELS, ROOT, model_files
+from conftest import MODELS, CHECKOUT, model_files
 
-sys.path.insert(0, str(ROOT / "editors"))
+sys.path.insert(0, str(CHECKOUT / "editors"))
 import make_textmate  # noqa: E402
 
 from mechdsl.frontend import lexer as L  # noqa: E402
@@ -20,7 +23,7 @@ def test_word_lists_match_the_language():
     from mechdsl.semantic.components import CLASSES
     from mechdsl.semantic.evaluate import ALL_FUNCS, BUILTIN_NAMES
 
-    lark = (ROOT / "grammar" / "mech.lark").read_text()
+    lark = (CHECKOUT / "grammar" / "mech.lark").read_text()
     keywords = set(re.findall(r'"([a-z_]+)"', lark))
     ours = set(L.KEYWORDS) | set(L.DECLARATIONS) | set(L.ENERGY_WORDS) | set(L.CONSTANTS)
     assert ours == keywords, (sorted(ours - keywords), sorted(keywords - ours))
@@ -49,7 +52,7 @@ def test_pygments_lexes_every_model_without_errors(path):
 
 
 def test_textmate_grammar_is_generated_from_the_lexer():
-    assert (ROOT / "editors" / "mech.tmLanguage.json").read_text() == make_textmate.text(), \
+    assert (CHECKOUT / "editors" / "mech.tmLanguage.json").read_text() == make_textmate.text(), \
         "stale: run python editors/make_textmate.py"
 
 
@@ -107,7 +110,7 @@ def _textmate_scopes(grammar: dict, text: str) -> list[str | None]:
 
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_textmate_grammar_covers_every_model(path):
-    grammar = json.loads((ROOT / "editors" / "mech.tmLanguage.json").read_text())
+    grammar = json.loads((CHECKOUT / "editors" / "mech.tmLanguage.json").read_text())
     text = path.read_text()
     scopes = _textmate_scopes(grammar, text)
     bare = [(i, c) for i, (c, s) in enumerate(zip(text, scopes)) if s is None and not c.isspace()]
@@ -118,7 +121,7 @@ def test_textmate_grammar_covers_every_model(path):
 
 def test_textmate_engine_sees_comments_and_strings():
     """The engine above is itself checked on a hand-made line."""
-    grammar = json.loads((ROOT / "editors" / "mech.tmLanguage.json").read_text())
+    grammar = json.loads((CHECKOUT / "editors" / "mech.tmLanguage.json").read_text())
     text = 'model A "doc // not a comment" /* c\nc */ Revolute j; // end\n'
     s = _textmate_scopes(grammar, text)
     assert s[text.index("doc")] == "string.quoted.double.mech"
@@ -126,3 +129,48 @@ def test_textmate_engine_sees_comments_and_strings():
     assert s[text.index("c\nc")] == "comment.block.mech"
     assert s[text.index("Revolute")] == "support.class.component.mech"
     assert s[text.index("// end")] == "comment.line.double-slash.mech"
+
+
+# ----------------------------------------------------------------------------- the VS Code extension
+
+VSCODE = CHECKOUT / "editors" / "vscode"
+
+
+def test_vscode_extension_contributes_files_that_exist():
+    pkg = json.loads((VSCODE / "package.json").read_text())
+    contrib = pkg["contributes"]
+    (lang,) = contrib["languages"]
+    assert lang["id"] == "mech" and lang["extensions"] == [".mech"]
+    conf = json.loads((VSCODE / lang["configuration"]).read_text())
+    assert conf["comments"] == {"lineComment": "//", "blockComment": ["/*", "*/"]}
+    assert ["(", ")"] in conf["brackets"] and ["{", "}"] in conf["brackets"]
+    for pattern in conf["indentationRules"].values():
+        re.compile(pattern)
+    (gram,) = contrib["grammars"]
+    assert gram["language"] == "mech"
+    grammar = json.loads((VSCODE / gram["path"]).read_text())
+    assert grammar["scopeName"] == gram["scopeName"] == "source.mech"
+    assert (VSCODE / pkg["main"]).is_file()
+    assert "vscode-languageclient" in pkg["dependencies"]
+    assert set(contrib["configuration"]["properties"]) >= {"mech.server.path", "mech.server.args",
+                                                            "mech.diagnostics.debounceMs"}
+
+
+def test_vscode_extension_ships_the_committed_grammar():
+    assert (VSCODE / "syntaxes" / "mech.tmLanguage.json").read_bytes() == \
+        (CHECKOUT / "editors" / "mech.tmLanguage.json").read_bytes(), "stale copy: run python editors/make_textmate.py"
+    assert [p.relative_to(CHECKOUT / "editors") for p in make_textmate.TARGETS] == \
+        [Path("mech.tmLanguage.json"), Path("vscode/syntaxes/mech.tmLanguage.json")]
+
+
+def test_vscode_client_starts_mech_lsp_with_the_settings():
+    js = (VSCODE / "extension.js").read_text()
+    assert 'require("vscode-languageclient/node")' in js
+    assert 'config.get("server.path", "mech")' in js and 'config.get("server.args", ["lsp"])' in js
+    assert "debounceMs" in js and 'language: "mech"' in js
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="node is not installed: the client's syntax is not checked")
+def test_vscode_client_is_valid_javascript():
+    p = subprocess.run(["node", "--check", str(VSCODE / "extension.js")], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr

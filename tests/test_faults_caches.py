@@ -204,7 +204,8 @@ __attribute__((constructor)) static void boom(void) {
 """
 
 COMPILE = """
-import json, sys
+import json, logging, sys
+logging.basicConfig(format="%(levelname)s: %(message)s")   # the library's warnings, as an application shows them
 sys.path.insert(0, {tests!r})
 from sim_models import pendulum
 from mechdsl.eom.codegen import _build, compile_functions

@@ -18,7 +18,7 @@ import pytest
 import mechdsl
 from mechdsl.cli import main
 
-from conftest import MODELS, ROOT
+from conftest import CHECKOUT, MODELS
 
 DOOR = """
 model Door "a trapdoor (a rod) on two coaxial hinges"
@@ -166,7 +166,7 @@ def test_a_port_that_speaks_another_protocol_is_refused_cheaply(capsys):
     """Dask read the junk's first 8 bytes as a frame length and tried to allocate 2.8 EiB."""
     import resource
 
-    sys.path.insert(0, str(ROOT / "benchmarks"))
+    sys.path.insert(0, str(CHECKOUT / "benchmarks"))
     from faults import junk_server
 
     srv, stop = junk_server(b"SSH-2.0-OpenSSH_9.6 junk junk junk junk\r\n" * 4)

@@ -23,12 +23,12 @@ from mechdsl.frontend.parser import KEYWORDS, decode_source, parse
 from mechdsl.frontend.printer import to_source
 from mechdsl.semantic import analyze
 
-from conftest import ROOT, model_files
+from conftest import TESTS, model_files
 
 FILE = "fuzz.mech"
 MODELS = [p.read_text(encoding="utf-8") for p in model_files()]
 # the broken-input corpus is a second source of seeds: small files that reach many error paths
-CORPUS = [p.read_text(encoding="utf-8") for p in sorted((ROOT / "tests" / "corpus").glob("*.mech"))
+CORPUS = [p.read_text(encoding="utf-8") for p in sorted((TESTS / "corpus").glob("*.mech"))
           if p.read_bytes().startswith(b"// expect:") and p.stat().st_size < 4000]
 
 _mode = os.environ.get("MECHDSL_FUZZ", "")

@@ -21,9 +21,9 @@ import pytest
 from mechdsl.cli import main
 from mechdsl.commands.compile import EMITS
 
-from conftest import MODELS, ROOT, model_files
+from conftest import MODELS, TESTS, model_files
 
-GOLDEN = ROOT / "tests" / "golden"
+GOLDEN = TESTS / "golden"
 FORMS = EMITS                                  # every form `mech compile --emit` offers
 UPDATE = "python -m pytest tests/test_golden.py --update-golden"
 REL, ABS = 1e-8, 1e-13

@@ -29,7 +29,7 @@ def test_bad_options():
     eom, floor = ball()
     with pytest.raises(UsageError, match="not an output"):
         simulate_with_contacts(eom, [floor], 1.0, outputs=["nope"])
-    with pytest.raises(UsageError, match="unknown option"):
+    with pytest.raises(UsageError, match="tolerances must lie in"):        # the one settings check
         simulate_with_contacts(eom, [floor], 1.0, tolerance=3)
     with pytest.raises(UsageError, match="impact order"):
         simulate_with_contacts(eom, [floor], 1.0, impact_order="random")
@@ -146,11 +146,16 @@ def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
             assert "FAILED at t = 0" in p.stdout and out.read_text().startswith("time,")
             assert "too many steps needed" in p.stdout or "non-finite right-hand side" in p.stdout
         assert "Traceback" not in p.stderr and "RuntimeWarning" not in p.stderr
-    # past the start check (as a run that overflows later meets it): the run itself fails at once
+    # past the start check (as a run that overflows later meets it): the run itself fails at once;
+    # every public entry runs the start check (issue 22), so the problem is solved directly
     import mechdsl
+    from mechdsl.simulation import formulate, solve
+    from mechdsl.simulation.settings import from_kwargs
 
     m = mechdsl.load(MODELS / "falling_rod.mech", model="FallingRod").with_params(m=1e308)
-    r = simulate_with_contacts(m.eom, None, 0.1, points=11)
+    with pytest.raises(MechError, match="E746"):
+        simulate_with_contacts(m.eom, None, 0.1, points=11)
+    r = solve(formulate(m.eom, from_kwargs(0.1, points=11)))
     assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-9)
     assert r.failure.cause == "non-finite right-hand side" and "fly.x" in r.failure.detail
 
@@ -196,14 +201,15 @@ def test_the_work_estimate_is_a_lower_bound(method, rtol):
     estimate rho T / (2 pi) * steps_per_period(method, rtol), and within a factor 4 of it."""
     import mechdsl
     from conftest import MODELS
-    from mechdsl.impacts.stepper import resolve_method, steps_per_period
+    from mechdsl.impacts.one_step import steps_per_period
+    from mechdsl.simulation.registry import events_method
 
     m = mechdsl.load(MODELS / "pendulum_wall.mech", model="PendulumWall")
     T = 0.6
     r = simulate_with_contacts(m.eom, None, T, points=3, rtol=rtol, atol=rtol, method=method)
     assert r.success and not [e for e in r.events if e.kind == "impact"]
     rho = np.sqrt(9.81 * np.cos(1.0))          # |eigenvalue| of the linearization at theta = -1, at rest
-    est = rho * T / (2 * np.pi) * steps_per_period(resolve_method(method)[0], rtol)
+    est = rho * T / (2 * np.pi) * steps_per_period(events_method(method)[0], rtol)
     assert est <= r.stats["steps"] <= 4 * est + 5
 
 
@@ -216,7 +222,7 @@ def test_accumulating_events_fail_instead_of_running_for_minutes(monkeypatch):
     the default 500 stops this run after 541 events, 2 s CPU)."""
     import mechdsl
     from conftest import MODELS
-    from mechdsl.impacts import run
+    from mechdsl.simulation.backends import event_loop as run
 
     monkeypatch.setattr(run, "ZENO_EVENTS", 100)
     m = mechdsl.load(MODELS / "falling_rod.mech", model="FallingRod").with_params(g=1e12)

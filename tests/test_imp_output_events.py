@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import mechdsl
+import mechdsl.examples
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = mechdsl.examples.folder()
 BALL = MODELS / "bouncing_ball.mech"
 
 

@@ -11,7 +11,7 @@ import mechdsl
 from conftest import simulate_with_csv_input
 from mechdsl.diagnostics import MechError, UsageError
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import CHECKOUT, MODELS, TESTS  # noqa: E402
 
 SLIDER = """
 model Slider
@@ -52,7 +52,7 @@ def test_functions_take_t_x_u_p(slider):
 
 
 def test_functions_without_inputs_have_an_empty_u():
-    m = mechdsl.load(str(ROOT / "models" / "pendulum.mech"))
+    m = mechdsl.load(str(MODELS / "pendulum.mech"))
     f = m.casadi()["ode"]
     assert f.name_in() == ["t", "x", "u", "p"] and f.numel_in(2) == 0
     assert m.inputs == ()
@@ -287,24 +287,30 @@ end Arr;
 
 
 def test_public_ode_is_sx_for_a_model_solved_numerically():
-    """models/andrews.mech was an MX Function (numeric QR solve of M qdd = bias), which broke SX
-    glue; Model.casadi() now gives SX (unrolled LDL^T), equal to the numeric solve."""
-    from mechdsl.eom.codegen import casadi_functions
+    """models/andrews.mech was an MX Function (numeric QR solve), which broke SX glue;
+    Model.casadi() now gives SX.  Andrews' squeezer is constrained: its public ode is the
+    problem's index-1 ODE (issue 22), an SX Function through the Cholesky + Schur route, equal
+    to the numeric sparse QR of the same augmented system (the route above SCHUR_MAX_N)."""
+    from mechdsl.dae.constrained_system import ConstrainedSystem
 
-    m = mechdsl.load(str(ROOT / "models" / "andrews.mech"))
-    ode = m.casadi()["ode"]
+    m = mechdsl.load(str(MODELS / "andrews.mech"))
+    fs = m.casadi()
+    ode = fs["ode"]
     assert ode.class_name() == "SXFunction"
-    numeric = casadi_functions(m.eom)["ode"]
-    assert numeric.class_name() == "MXFunction"          # what the simulator integrates
+    system = fs.system()
+    numeric = ConstrainedSystem._build(system.eom, system.p, system.active, "mx")
+    assert numeric.fn["accel"].class_name() == "MXFunction"
     rng = np.random.default_rng(7)
     p = m.parameter_vector()
+    n = m.eom.n
     for _ in range(5):
-        x = rng.uniform(-1, 1, 2 * m.eom.n)
+        x = rng.uniform(-1, 1, 2 * n)
         a = np.array(ode(0.0, x, [], p)).ravel()
-        b = np.array(numeric(0.0, x, [], p)).ravel()
-        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
-    xs = ca.SX.sym("x", 2 * m.eom.n)                       # SX glue: substitute into an SX graph
-    assert ode(0, xs, ca.SX(0, 1), ca.DM(p)).shape == (2 * m.eom.n, 1)
+        b = np.array(numeric.fn["accel"](x[:n], x[n:], 0.0, p, 0, 0)[0]).ravel()
+        np.testing.assert_allclose(a[n:], b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+        np.testing.assert_array_equal(a[:n], x[n:])
+    xs = ca.SX.sym("x", 2 * n)                             # SX glue: substitute into an SX graph
+    assert ode(0, xs, ca.SX(0, 1), ca.DM(p)).shape == (2 * n, 1)
 
 
 def test_an_output_may_use_an_input():

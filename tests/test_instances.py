@@ -178,9 +178,9 @@ def test_cli_check_and_simulate_with_instances(tmp_path, capsys):
 def test_shipped_coupled_pendulums_modes_closed_form(k, m, L):
     """models/coupled_pendulums.mech (two SwingingBob instances and a spring):
     w1^2 = g/L (in phase), w2^2 = g/L + 2k/m (in opposition)."""
-    from conftest import ROOT
+    from conftest import MODELS
 
-    model = mechdsl.load(ROOT / "models" / "coupled_pendulums.mech", model="CoupledPendulums")
+    model = mechdsl.load(MODELS / "coupled_pendulums.mech", model="CoupledPendulums")
     model = model.with_params(k=k, **{"left.m": m, "right.m": m, "left.L": L, "right.L": L})
     modes = model.linearize(at="equilibrium").modes()
     g = 9.81

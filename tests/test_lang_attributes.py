@@ -9,6 +9,7 @@ import mechdsl
 from mechdsl.diagnostics import MechError
 from reach_util import output_values
 from test_lang_units_zero import omega_body_zyx
+import mechdsl.examples
 
 G, L = 9.81, 1.3
 
@@ -91,7 +92,7 @@ def test_accelerations_in_a_closed_loop_are_the_derivatives_of_the_velocities():
     """Four-bar (a DAE: the accelerations carry the multipliers): p.a and b.alpha along a run
     equal the central differences of the recorded p.v and b.w."""
     from pathlib import Path
-    text = (Path(__file__).parents[1] / "models" / "four_bar.mech").read_text() + """
+    text = mechdsl.examples.path("four_bar").read_text() + """
 model FB2
   extends FourBar;
   output Real ab[3] = coupler.b.a;

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 import mechdsl
 from reach_util import accelerations
 
-ROOT = Path(__file__).parents[1]
+from conftest import CHECKOUT, MODELS  # noqa: E402
 MARKER = "  Body b(m = 1, I = diagonal({0.1, 0.1, 0.1}));\n  Point bx(body = b, r = {1, 0, 0});\n"
 
 
@@ -56,10 +56,10 @@ def test_joint_sign_conventions(decl, values, origin, R):
 
 
 def test_convention_figures_exist_and_are_referenced():
-    doc = (ROOT / "docs" / "language.md").read_text()
+    doc = (CHECKOUT / "docs" / "language.md").read_text()
     for kind in ("revolute", "prismatic", "cylindrical", "planar", "spherical", "free", "cart_pole_axis"):
         name = f"figures/joint_{kind}.png"
-        assert (ROOT / "docs" / name).is_file() and name in doc
+        assert (CHECKOUT / "docs" / name).is_file() and name in doc
 
 
 def test_cart_pole_with_clockwise_hinge_matches_florian():
@@ -67,7 +67,7 @@ def test_cart_pole_with_clockwise_hinge_matches_florian():
     l = half the pole length:
     theta'' = (g sin - cos (F + m l w^2 sin)/(M + m)) / (l (4/3 - m cos^2/(M + m))),
     x'' = (F + m l (w^2 sin - theta'' cos)) / (M + m)."""
-    text = (ROOT / "models" / "cart_pole.mech").read_text().replace(
+    text = (MODELS / "cart_pole.mech").read_text().replace(
         "axis = {0, 0, 1}, phi = theta", "axis = {0, 0, -1}, phi = theta")
     m = mechdsl.loads(text, model="CartPole")
     e = m.eom

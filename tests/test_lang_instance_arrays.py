@@ -13,8 +13,9 @@ import mechdsl
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError, UsageError
 from reach_util import accelerations, evaluator
+import mechdsl.examples
 
-SHIPPED = Path(__file__).parents[1] / "models" / "nlink_pendulum.mech"
+SHIPPED = mechdsl.examples.path("nlink_pendulum")
 
 CHAIN = """
 model Link "a uniform rod on its hinge, a part of a chain"

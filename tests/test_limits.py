@@ -15,9 +15,8 @@ import pytest
 from mechdsl.frontend import limits
 from mechdsl.cli import main
 
-from conftest import ROOT
+from conftest import CHECKOUT, MODELS, TESTS
 
-MODELS = ROOT / "models"
 HANG = 60  # seconds: these examples used to run for hours; they now stop in about one second
 
 
@@ -31,7 +30,7 @@ def mutant(tmp_path, model: str, old: str, new: str, name: str = "mutant.mech"):
 
 def check_cli(path, *extra: str) -> tuple[int, str]:
     p = subprocess.run([sys.executable, "-m", "mechdsl", "check", *extra, str(path)], capture_output=True,
-                       text=True, timeout=HANG, cwd=ROOT)
+                       text=True, timeout=HANG, cwd=TESTS)
     return p.returncode, p.stderr
 
 
@@ -98,7 +97,7 @@ def test_limits_can_be_lowered_and_raised_from_the_command_line(tmp_path, capsys
     assert main(["check", "--limit", "coordinates=1", str(model)]) == 1
     err = capsys.readouterr().err
     assert "error[E316]: model 'DoublePendulum' has more than 1 generalized coordinates" in err
-    big = ROOT / "tests" / "corpus" / "E315_integer_parameter_too_large.mech"
+    big = TESTS / "corpus" / "E315_integer_parameter_too_large.mech"
     assert main(["check", str(big)]) == 1
     assert main(["check", "--limit", "integers=10_000_000", str(big)]) == 0
 
@@ -130,7 +129,7 @@ def test_unknown_limit_in_the_api():
 
 
 def test_every_limit_is_documented():
-    text = (ROOT / "docs" / "language.md").read_text(encoding="utf-8")
+    text = (CHECKOUT / "docs" / "language.md").read_text(encoding="utf-8")
     for lim in limits.LIMITS.values():
         assert f"`{lim.name}`" in text and f"{lim.default:,}" in text, lim.name
 

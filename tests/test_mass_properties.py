@@ -8,7 +8,7 @@ import mechdsl
 from mechdsl.cli import main
 from mechdsl.diagnostics import MechError
 
-from conftest import ROOT
+from conftest import MODELS
 
 SHAPES = """
 model S
@@ -29,7 +29,7 @@ end S;
 
 
 def test_with_params_negative_mass_is_a_model_error():
-    m = mechdsl.load(ROOT / "models" / "pendulum.mech", model="Pendulum")
+    m = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum")
     with pytest.raises(MechError) as e:
         m.with_params(m=-1.0)
     assert [d.code for d in e.value.diagnostics] == ["E508"]
@@ -38,7 +38,7 @@ def test_with_params_negative_mass_is_a_model_error():
 
 
 def test_cli_set_negative_mass_exit_1(tmp_path, capsys):
-    rc = main(["simulate", str(ROOT / "models" / "pendulum.mech"), "--model", "Pendulum", "--set", "m=-1",
+    rc = main(["simulate", str(MODELS / "pendulum.mech"), "--model", "Pendulum", "--set", "m=-1",
                "--t-end", "0.1", "-o", str(tmp_path / "out.csv")])
     err = capsys.readouterr().err
     assert rc == 1 and "error[E508]" in err and "Traceback" not in err

@@ -18,7 +18,7 @@ import pytest
 
 from mechdsl.cli import main
 
-from conftest import MODELS, ROOT, model_files
+from conftest import MODELS, model_files
 
 MODEL_FILES = model_files()
 CHEAP = [("check",), ("compile", "--emit", "ast"), ("compile", "--emit", "source"), ("compile", "--emit", "model"),
@@ -89,4 +89,4 @@ def test_expensive_cell(path, cmd, tmp_path):
 
 
 def test_matrix_covers_every_shipped_model():
-    assert len(MODEL_FILES) >= 19 and all(p.parent == ROOT / "models" for p in MODEL_FILES)
+    assert len(MODEL_FILES) >= 19 and all(p.parent == MODELS for p in MODEL_FILES)

@@ -11,8 +11,9 @@ import pytest
 from mechdsl.cli import main
 from mechdsl.mechanics import derive
 from mechdsl.mechanics.printing import format_equations, lagrange_equations
+import mechdsl.examples
 
-MODELS = os.path.join(os.path.dirname(__file__), "..", "models")
+MODELS = str(mechdsl.examples.folder())
 
 
 def load_ir(name):

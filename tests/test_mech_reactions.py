@@ -15,6 +15,7 @@ from mechdsl.model import ir
 from mechdsl.diagnostics import MechError
 from mechdsl.model.exprs import const
 from mechdsl.mechanics import derive
+import mechdsl.examples
 
 
 def pendulum(prescribed=None, inertia=None):
@@ -195,5 +196,5 @@ def load_model(name):
 
     import mechdsl
 
-    path = os.path.join(os.path.dirname(__file__), "..", "models", f"{name}.mech")
+    path = str(mechdsl.examples.path(name))
     return mechdsl.load(path)

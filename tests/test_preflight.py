@@ -459,3 +459,25 @@ def test_a_subnormal_stop_time_is_a_run_not_an_internal_error(tmp_path, capsys):
     data = np.loadtxt(out, delimiter=",", skiprows=1, ndmin=2)
     assert np.isfinite(data).all() and data.shape[0] == 3
     assert 0.0 < data[-1, 0] <= 1.0e-319                  # the time column reaches the stop time
+
+
+def test_a_singular_mass_matrix_on_the_crba_route_is_a_coded_error(tmp_path, capsys):
+    """A coordinate that drives two joints (the crba route, M solved by QR) and moves no mass: the
+    start check reports E743 instead of failing inside CasADi (found importing romeo.urdf, whose
+    hand joints move only massless fingers)."""
+    from mechdsl.cli import main
+
+    f = tmp_path / "s.mech"
+    f.write_text("""model S
+  Gravity g;
+  Body a(m = 1, r_cm = {0.5, 0, 0}, I = diagonal({0.1, 0.1, 0.1}));
+  Body b(m = 0);
+  Body c(m = 0);
+  Revolute j1(parent = world, child = a, axis = {0, 0, 1}, phi(start = 0.1));
+  Revolute j2(parent = a, child = b, axis = {0, 1, 0}, phi(start = 0.2));
+  Revolute j3(parent = b, child = c, axis = {0, 1, 0}, phi = 2*j2.phi);
+end S;
+""")
+    assert main(["check", str(f)]) == 1
+    err = capsys.readouterr().err
+    assert "error[E743]" in err and "internal error" not in err

@@ -3,9 +3,9 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REFERENCES, ROOT
+from conftest import REFERENCES, CHECKOUT
 
-SHARED = [ROOT.parent / "shared" / "references", Path("/work/shared/references")]
+SHARED = [CHECKOUT.parent / "shared" / "references", Path("/work/shared/references")]
 FILES = ["andrews_squeezer.json", "pendulum_index3.json"]
 
 

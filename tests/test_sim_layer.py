@@ -17,8 +17,9 @@ from mechdsl.diagnostics import UsageError
 from mechdsl.simulate import simulate
 from conftest import needs_cc
 from sim_models import pendulum
+import mechdsl.examples
 
-MODELS = Path(__file__).resolve().parent.parent / "models"
+MODELS = mechdsl.examples.folder()
 SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
           "energy_drift", "energy_drift_relative", "invariant_drift", "constraint_drift")
 
@@ -256,17 +257,17 @@ def test_budget_can_be_raised():
 def test_non_finite_results_fail_with_time_and_coordinate(monkeypatch):
     """A back end that returns inf/nan without noticing: the run fails at the first such
     time, names the coordinate and keeps the results before it."""
-    import mechdsl.symplectic as symp
+    import mechdsl.simulation.backends.fixed_step as symp
     from mechdsl.output.result import Result
 
-    def broken(eom, t_end, **kw):
-        t = np.linspace(0.0, t_end, 6)
+    def broken(eom, s, progress=None, step_eom=None):
+        t = np.linspace(0.0, s.t_end, 6)
         q = np.zeros((6, eom.n))
         q[3:, 0] = np.nan
         return Result(t=t, q=q, qd=np.zeros((6, eom.n)), coordinates=tuple(eom.coords),
                       signals={"energy": np.zeros(6)}, metadata={"method": "rk4"})
 
-    monkeypatch.setattr(symp, "simulate_symplectic", broken)
+    monkeypatch.setattr(symp, "fixed_step_run", broken)
     r = simulate(pendulum(), 1.0, method="rk4", dt=0.1)
     assert not r.success and r.failure.time == pytest.approx(0.6)
     assert "theta" in r.failure.detail
@@ -357,7 +358,7 @@ def test_mech_simulate_imports_only_what_it_needs(tmp_path):
 
 
 def test_settings_refuse_bad_values_for_every_model():
-    from mechdsl.dae.options import FORMULATIONS
+    from mechdsl.dae.dae_run import FORMULATIONS
     from mechdsl.simulation.registry import FORMULATIONS as KNOWN
 
     assert tuple(FORMULATIONS) == KNOWN

@@ -10,8 +10,9 @@ import pytest
 import mechdsl
 from mechdsl.cli import main
 from test_sim_accuracy import T_REF, hermite_crossings
+import mechdsl.examples
 
-MODELS = Path(__file__).resolve().parents[1] / "models"
+MODELS = mechdsl.examples.folder()
 
 
 def test_pendulum_scene_period_from_mech_text():

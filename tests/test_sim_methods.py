@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 from mechdsl.diagnostics import UsageError
-from mechdsl.integrators import METHODS
+from mechdsl.simulation.registry import ode_methods
 from mechdsl.simulate import simulate
 from sim_models import chain, pendulum, stiff_oscillator
 
+METHODS = ode_methods()
 ALL = ["auto", *METHODS]
 
 
@@ -26,7 +27,9 @@ def test_every_method_runs_accurately_and_conserves_energy(method, reference):
     r = simulate(e, 2.0, method=method, rtol=rtol, atol=rtol * 1e-2, points=21)
     assert r.success, r.message
     assert r.t.shape == (21,) and r.q.shape == (21, 2) and r.qd.shape == (21, 2)
-    assert r.metadata["method"] == (method if method != "auto" else r.metadata["method"])
+    # auto picks from its own rules (choose.choose_method, crk.auto_choice): one of these
+    assert r.metadata["method"] == method if method != "auto" else r.metadata["method"] in ("erk", "cvodes-bdf",
+                                                                                            "dopri5", "dop853")
     assert r.metadata["method"] in METHODS and r.metadata["method_reason"]
     for key in ("steps", "wall_time"):
         assert key in r.stats
@@ -72,8 +75,10 @@ def test_unknown_method_and_options_are_usage_errors():
     e = pendulum()
     with pytest.raises(UsageError, match="did you mean 'cvodes-bdf'"):
         simulate(e, 1.0, method="cvodes-bfd")
-    with pytest.raises(UsageError, match="unknown simulation option"):
-        simulate(e, 1.0, max_step=3)
+    with pytest.raises(UsageError, match="unknown simulation setting 'max_stpe'; did you mean 'max_step'"):
+        simulate(e, 1.0, max_stpe=3)
+    # a setting of another back end (the contact loop's max_step) is noted, never dropped silently
+    assert "settings without effect on an ODE problem: max_step = 3" in simulate(e, 0.1, max_step=3).metadata["notes"]
     with pytest.raises(UsageError, match="end time"):
         simulate(e, 0.0)
     with pytest.raises(UsageError, match="points"):
@@ -117,30 +122,36 @@ def test_progress_callback_sees_time_advance():
 def test_dispatch_to_dae_and_symplectic_helpers(monkeypatch):
     """The problem's kind picks the back end: fixed-step methods the canonical integrator,
     constrained models the DAE driver (each called with the settings of the run)."""
-    import mechdsl.dae as dae
-    import mechdsl.symplectic as symp
+    import mechdsl.simulation.backends.dae as dae
+    import mechdsl.simulation.backends.fixed_step as symp
     from mechdsl.output.result import Result
 
     def fake(tag, calls):
-        def run(eom, t_end, **kw):
-            calls.append((eom, t_end, kw))
-            return Result(t=np.array([0.0, t_end]), q=np.zeros((2, eom.n)), qd=np.zeros((2, eom.n)),
+        def run(eom, s, *args, **kw):
+            calls.append((eom, s))
+            return Result(t=np.array([0.0, s.t_end]), q=np.zeros((2, eom.n)), qd=np.zeros((2, eom.n)),
                           coordinates=tuple(eom.coords), metadata={"method": tag})
         return run
 
     e = pendulum()
     calls = []
-    monkeypatch.setattr(symp, "simulate_symplectic", fake("stormer-verlet", calls))
+    monkeypatch.setattr(symp, "fixed_step_run", fake("stormer-verlet", calls))
     r = simulate(e, 3.0, method="stormer-verlet", dt=0.01)
     assert r.metadata["run"]["problem"] == "canonical"
-    assert calls[0][1] == 3.0 and calls[0][2]["method"] == "stormer-verlet" and calls[0][2]["dt"] == 0.01
+    s = calls[0][1]           # the back end reads the validated settings: dt in the fixed_step group
+    assert s.t_end == 3.0 and s.method == "stormer-verlet" and s.fixed_step.dt == 0.01
 
     import casadi as ca
 
     c = pendulum()
     c = c.replace(g=ca.SX(c.q[0] ** 2 - 1), constraint_names=("g1",))  # any constraint routes to the DAE helper
-    monkeypatch.setattr("mechdsl.eom.preflight.check_start", lambda *a, **k: None)   # (q0 is not on g = 0)
+    monkeypatch.setattr("mechdsl.simulation.template.check_start", lambda *a, **k: None)   # (q0 is not on g = 0)
     dcalls = []
-    monkeypatch.setattr(dae, "simulate_dae", fake("bdf", dcalls))
+
+    class FakeRun:
+        def __init__(self, eom, s, progress=None, compiled=False):
+            self.run = lambda: fake("bdf", dcalls)(eom, s)
+
+    monkeypatch.setattr(dae, "SegmentRun", FakeRun)
     r = simulate(c, 2.0, rtol=1e-7)
-    assert r.metadata["run"]["problem"] == "dae" and dcalls[0][1] == 2.0 and dcalls[0][2]["rtol"] == 1e-7
+    assert r.metadata["run"]["problem"] == "dae" and dcalls[0][1].t_end == 2.0 and dcalls[0][1].rtol == 1e-7

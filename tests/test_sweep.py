@@ -14,6 +14,7 @@ from mechdsl.diagnostics import UsageError
 from mechdsl.sweep import first_time, table, to_frame
 
 import xarray  # noqa: F401 - the test extra installs it
+import mechdsl.examples
 
 DP = """
 model DP
@@ -132,7 +133,7 @@ def test_bad_input_is_a_clear_error(dp, tmp_path):
 
 
 def test_integer_parameter_needs_processes():
-    m = mechdsl.load(mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/nlink_pendulum.mech")
+    m = mechdsl.load(mechdsl.examples.path("nlink_pendulum"))
     with pytest.raises(UsageError, match="Integer/Boolean parameter"):
         m.sweep(params={"N": [2, 3]}, t_end=0.1, scheduler="vectorized")
     ds = m.sweep(params={"N": [2]}, t_end=0.1, points=3, progress=False, workers=1)
@@ -166,7 +167,7 @@ def test_flip_map_example_small(tmp_path):
     from mechdsl.cli import main
 
     png, nc = tmp_path / "flip.png", tmp_path / "flip.nc"
-    path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/double_pendulum.mech"
+    path = str(mechdsl.examples.path("double_pendulum"))
     code = main(["sweep", path, "--model", "DoublePendulum", "--grid", "j1.phi.start=-3:3:4", "--grid",
                  "j2.phi.start=-3:3:3", "--t-end", "2", "--points", "41", "-o", str(nc), "--plot", str(png),
                  "--metric", "flip:j2.phi"])
@@ -184,7 +185,7 @@ def test_flip_map_example_small(tmp_path):
 def test_cli_csv_and_exit_codes(tmp_path):
     from mechdsl.cli import main
 
-    path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/double_pendulum.mech"
+    path = str(mechdsl.examples.path("double_pendulum"))
     out = tmp_path / "s.csv"
     assert main(["sweep", path, "--model", "DoublePendulum", "--grid", "m=1,2", "--t-end", "0.2",
                  "--points", "3", "-o", str(out)]) == 0
@@ -210,7 +211,7 @@ def test_ctrl_c_keeps_finished_runs(dp, tmp_path, monkeypatch):
 
 
 def test_vectorized_refused_for_a_dae_with_the_reason():
-    m = mechdsl.load(mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/four_bar.mech")
+    m = mechdsl.load(mechdsl.examples.path("four_bar"))
     with pytest.raises(UsageError, match="constraints"):
         m.sweep(params={m.parameter_names[0]: [1.0, 2.0]}, t_end=0.1, scheduler="vectorized")
 
@@ -231,7 +232,7 @@ def test_basic_cli_does_not_import_the_sweep_libraries():
     code = ("import sys; from mechdsl.cli import main\n"
             "try:\n    main(['check', sys.argv[1]])\nexcept SystemExit:\n    pass\n"
             "print(sorted(m for m in ('xarray', 'pandas', 'dask', 'distributed', 'h5netcdf') if m in sys.modules))")
-    path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/pendulum.mech"
+    path = str(mechdsl.examples.path("pendulum"))
     out = subprocess.run([sys.executable, "-c", code, path], capture_output=True, text=True, timeout=120)
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout + out.stderr
 
@@ -245,7 +246,7 @@ def test_ctrl_c_on_the_process_pool_keeps_finished_runs(tmp_path):
     import time
 
     import xarray as xr
-    path = mechdsl.__file__.rsplit("/src/", 1)[0] + "/models/double_pendulum.mech"
+    path = str(mechdsl.examples.path("double_pendulum"))
     out = tmp_path / "s.nc"
     p = subprocess.Popen([sys.executable, "-m", "mechdsl", "sweep", path, "--model", "DoublePendulum", "--grid",
                           "j1.phi.start=0.1:3:4000", "--t-end", "20", "--points", "11", "--scheduler", "processes",

@@ -15,8 +15,9 @@ from mechdsl.eom import EOM
 from mechdsl.simulation import record as R
 
 from sim_models import pendulum
+import mechdsl.examples
 
-MODELS = Path(__file__).resolve().parent.parent / "models"
+MODELS = mechdsl.examples.folder()
 
 
 def _unshared_pendulum(tag: str):

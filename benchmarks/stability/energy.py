@@ -34,7 +34,6 @@ def _stride(periods: int, per_period: int) -> int:
 
 def run(size: str = "small") -> Case:
     from mechdsl.simulate import simulate
-    from mechdsl.symplectic import simulate_symplectic
 
     check_size(size)
     periods = 1000 if size == "small" else 100_000
@@ -45,7 +44,7 @@ def run(size: str = "small") -> Case:
     for meth, spp in {**SYMPLECTIC, **OTHERS}.items():
         nsteps = periods * spp
         pts = nsteps // _stride(periods, spp) + 1
-        runs[meth] = simulate_symplectic(e, T, method=meth, dt=PERIOD / spp, points=pts)
+        runs[meth] = simulate(e, T, method=meth, dt=PERIOD / spp, points=pts)
     pts = periods * 200 // _stride(periods, 200) + 1
     runs["erk"] = simulate(e, T, rtol=ADAPTIVE_TOL, atol=ADAPTIVE_TOL, method="erk", points=pts)
     scale = 9.81          # m g L: the energy scale (E(0) = 0 from the horizontal)

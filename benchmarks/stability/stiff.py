@@ -22,7 +22,9 @@ DT = 0.01
 
 def run(size: str = "small") -> Case:
     from mechdsl.eom.codegen import casadi_functions
-    from mechdsl.simulate import parameter_vector, simulate, start_vector
+    from mechdsl.eom import parameter_vector
+    from mechdsl.simulate import simulate
+    from mechdsl.eom.start import start_vector
 
     check_size(size)
     T = 2.0 if size == "small" else 10.0

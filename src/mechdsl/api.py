@@ -8,6 +8,7 @@
     m.parameter_vector(l=0.5)                            # p with dependent parameters recomputed
     m.inputs                                             # the control inputs u: name, unit, bounds, default
     m.simulate(3.0, inputs={"F": lambda t, x: -k @ x})   # inputs: number, table, u(t), u(t, x), Function
+    m.export_fmu("model.fmu", fmi_version=2)             # an FMU (docs/export.md)
 
 Phases: parse -> analyze (here) -> derive (mechdsl.mechanics) -> generate/simulate.  Each
 Model caches its derived equations; models that differ only in parameter values share them.
@@ -15,6 +16,7 @@ Model caches its derived equations; models that differ only in parameter values 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import threading
 from typing import TYPE_CHECKING, Any
@@ -29,6 +31,8 @@ from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
 # (mechdsl.eom.modelcache) never needs it
 if TYPE_CHECKING:
     from .semantic import Program
+
+log = logging.getLogger(__name__)
 
 _EOM_CACHE: dict[Any, Any] = {}
 _EOM_CACHE_MAX = 32
@@ -52,8 +56,7 @@ def _program(path_or_text: str, is_text: bool, filename: str, units: bool = True
 
 def load(path, model: str | None = None, scene: str | None = None, units: bool = True,
          cache: bool = True) -> "Model":
-    """Load a model (or a scene of it) from a .mech file.  units=False skips dimensional analysis.
-    cache=False: neither read nor write the model cache (mechdsl.eom.modelcache)."""
+    """Load a model (or a scene of it) from a .mech file: see ``mechdsl.load``."""
     from .frontend.source import read_source
 
     filename, text = read_source(str(path))
@@ -62,7 +65,7 @@ def load(path, model: str | None = None, scene: str | None = None, units: bool =
 
 def loads(text: str, model: str | None = None, scene: str | None = None, filename: str = "<string>",
           units: bool = True, cache: bool = True) -> "Model":
-    """Load a model from .mech source text (cache: as for ``load``)."""
+    """Load a model from .mech source text: see ``mechdsl.loads``."""
     return _load_text(text, filename, model, scene, units, cache)
 
 
@@ -70,7 +73,9 @@ def _load_text(text: str, filename: str, model, scene, units: bool, cache: bool)
     info = _Cache((text, filename, bool(units)), (model, scene), ()) if cache else None
     hit = info.lookup() if info is not None else None
     if hit is not None:
+        log.debug("%s: model %s read from the model cache", filename, hit.name)
         return hit
+    log.debug("%s: parsing and analysing", filename)
     m = Model._from_program(_program(text, True, filename, units), model, scene)
     if info is not None:
         info.claim(m)
@@ -145,10 +150,13 @@ class Model:
     # ------------------------------------------------------------------ description
     @property
     def name(self) -> str:
+        """The model's name (``model NAME ... end NAME;``), also when a scene selected it."""
         return self.model.name
 
     @property
     def coordinates(self) -> tuple[str, ...]:
+        """The generalized coordinates' names, in the order of ``q`` (``Result.q`` columns, the
+        CasADi state ``x = [q; der(q)]``): a joint's own, e.g. ``("j1.phi", "j2.phi")``."""
         return self.model.coordinate_names
 
     @property
@@ -158,6 +166,7 @@ class Model:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
+        """The Real parameters' names in the order of the CasADi input "p" (``parameter_values``)."""
         return tuple(p.name for p in self.model.real_parameters)
 
     @property
@@ -189,10 +198,12 @@ class Model:
 
     @property
     def scene_settings(self) -> dict[str, Any]:
+        """The scene's settings (``stop_time``, ``rtol``, ``method``, ...) by name; {} without a scene."""
         return dict(self.scene.settings) if self.scene else {}
 
     @property
     def warnings(self) -> list[Diagnostic]:
+        """The front end's warnings about this model (Diagnostics with severity "warning")."""
         if self._warnings is not None:
             return list(self._warnings)
         return list(getattr(self.program, "last_warnings", []))
@@ -227,7 +238,8 @@ class Model:
 
     def __repr__(self) -> str:
         scene = f", scene {self.scene.name}" if self.scene else ""
-        return f"<mechdsl.Model {self.name}{scene}: {len(self.coordinates)} coordinates>"
+        n = len(self.coordinates)
+        return f"<mechdsl.Model {self.name}{scene}: {n} coordinate{'' if n == 1 else 's'}>"
 
     # ------------------------------------------------------------------ new models
     def with_params(self, **values) -> "Model":
@@ -282,9 +294,9 @@ class Model:
             env[p.name] = p.value
             params.append(p)
         model = dataclasses.replace(self.model, parameters=tuple(params))
-        from .semantic.physical import value_problems
+        from .semantic.physical import errors, value_problems
 
-        problems = value_problems(model)
+        problems = errors(value_problems(model))
         if problems:
             raise MechError(problems)
         scene = dataclasses.replace(self.scene, model=model) if self.scene else None
@@ -317,6 +329,7 @@ class Model:
             if base is None:
                 from .mechanics import derive
 
+                log.info("deriving the equations of motion of %s", self.name)
                 base = derive(self.model)
                 from .eom.modelcache import record_callables
 
@@ -341,10 +354,23 @@ class Model:
         if self._cache is not None and self._eom is not None:
             self._cache.remember(self._eom)
 
-    def casadi(self, compiled: bool = False, fixed_parameters=None) -> dict:
-        """CasADi Functions (mechdsl.eom.codegen): "ode" (t, x=[q; qd], u, p -> xdot), "ode_jacobian",
-        "mass_matrix", "energy", "outputs", "parameters" (free parameters -> p), ...  u holds
-        the inputs (``Model.inputs``; empty without), p is ``parameter_vector()``.
+    def casadi(self, compiled: bool = False, fixed_parameters=None, *, derivatives: int = 0,
+               compile_budget: int | None = None):
+        """The CasADi Functions of the problem a run solves (mechdsl.eom.codegen,
+        mechdsl.simulation.functions.problem_functions): "ode" (t, x=[q; qd], u, p -> xdot),
+        "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "parameters" (free parameters
+        -> p), ...  u holds the inputs (``Model.inputs``; empty without), p is
+        ``parameter_vector()``.  A model with constraints: "ode" is the index-1 ODE the run
+        integrates (the accelerations with the multipliers solved), "outputs" its outputs
+        (reactions included), and the DAE pieces "multipliers", "constraints" (g, gdot),
+        "constraint_jacobian", "mass_matrix", "bias" (mechdsl.dae.functions).
+
+        compiled: each Function is compiled to C when it is first asked for, and only it;
+        derivatives=1 or 2 adds its first (and second) derivatives to its library (jac_, fwd1_,
+        adj1_, ..., which casadi.external finds by name: an exact Hessian for IPOPT).  A compile
+        that cannot be done raises (E804: no compiler or a failed build; E805: more than
+        compile_budget bytes of C, default 16 MB), never returning the virtual machine's
+        Functions silently.
 
         fixed_parameters: parameters an optimizer does not vary, built into the Functions as
         numbers so that CasADi folds the arithmetic on them (a leaner expression: the
@@ -354,15 +380,18 @@ class Model:
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
         recomputed value, so it cannot go stale.  p then holds the other parameters, in
         order, named by ``.parameter_names`` of the returned mapping."""
-        from .eom.codegen import casadi_functions
+        from .simulation.functions import problem_functions
 
+        if isinstance(derivatives, bool) or derivatives not in (0, 1, 2):
+            raise UsageError(f"derivatives must be 0, 1 or 2 (got {derivatives!r})")
+        if compile_budget is not None and (isinstance(compile_budget, bool) or not isinstance(compile_budget, int)
+                                           or compile_budget < 1):
+            raise UsageError(f"compile_budget must be a number of bytes >= 1 (got {compile_budget!r})")
         fixed = self._fixed_entries(fixed_parameters)
-        # compiled: with first and second derivatives in the library, so that Jacobians and exact
-        # Hessians (IPOPT) work on the compiled Functions as on the virtual-machine ones
-        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates
-        # (SX glue works for all); the simulator keeps its numeric QR solve
-        return casadi_functions(self.eom, compiled=compiled, derivatives=2 if compiled else 0, sx=True,
-                                fixed=fixed)
+        # sx: ode is an SX Function for every model up to codegen.SX_SOLVE_MAX coordinates (SX
+        # glue works for all); the simulator keeps its numeric QR solve
+        return problem_functions(self.eom, compiled=compiled, derivatives=derivatives if compiled else 0, sx=True,
+                                 fixed=fixed, each=bool(compiled), budget=compile_budget)
 
     def integrator(self, dt: float, *, method: str | None = None, rtol: float | None = None,
                    atol: float | None = None, steps: int | None = None, fixed_parameters=None):
@@ -377,11 +406,8 @@ class Model:
         resolved at the start values as ``simulate`` does); rtol, atol: as ``simulate``;
         steps: fixed steps a call for "rk" / "collocation" (default: from rtol, as
         ``simulate``); fixed_parameters: as ``casadi()`` (p then holds the other parameters)."""
-        from .simulation.inputs import start_vector
-        from .simulate import choose_method, default_inputs, fixed_step_count, min_step
-        from . import integrators as I
-        from .eom.codegen import casadi_functions
-        import casadi as ca
+        from .simulation.functions import problem_functions
+        from .simulation.prepared import prepare
 
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
             raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
@@ -389,41 +415,14 @@ class Model:
         dt = _number("dt", dt)
         if not (math.isfinite(dt) and dt > 0):
             raise UsageError(f"dt must be a positive, finite interval (got {dt!r})")
-        s = self.settings(t_end=dt, rtol=rtol, atol=atol, method=method)
-        funcs = casadi_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
-                                 fixed=self._fixed_entries(fixed_parameters))
-        m = s.method
-        if m == "auto":
-            pv = self.parameter_values
-            m, _, _ = choose_method(self.eom, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
-                                    start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol)
-        if m not in I.METHODS or I.METHODS[m][0] != "casadi":
-            casadi_methods = [k for k, v in I.METHODS.items() if v[0] == "casadi"]
-            raise UsageError(f"method '{m}' has no CasADi integrator plug-in; choose one of {', '.join(casadi_methods)}")
         if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
             raise UsageError(f"steps must be a whole number of at least 1 (got {steps!r})")
-        if m in I.FIXED_STEP and steps is None:
-            pv = self.parameter_values
-            steps, _ = fixed_step_count(m, casadi_functions(self.eom, names=("ode", "ode_jacobian")),
-                                        start_vector(self.eom, None, pv), pv, 0.0, s.t_end, s.rtol, None,
-                                        u=default_inputs(self.eom, np.zeros(0)))
-        opts = I.casadi_options(m, s.rtol, s.atol, int(s.max_steps or 20_000), steps, dict(s.integrator_options or {}),
-                                hmin=min_step(0.0, s.t_end))
-        ode = funcs["ode"]
-        nu = ode.size1_in(2)
-        t0, x0 = ca.MX.sym("t0"), ca.MX.sym("x0", ode.size1_in(1))
-        u, p = ca.MX.sym("u", nu), ca.MX.sym("p", ode.size1_in(3))
-        if ode.is_a("SXFunction") and not ca.depends_on(ode.call(ode.sx_in())[0], ode.sx_in(0)):
-            shifted, args = ode, ca.vertcat(u, p)               # autonomous: t0 changes nothing
-        else:                                                  # the interval starts at t0: ode(t0 + s, ...)
-            ts, xs, us, ps = (ca.MX.sym(nm, ode.sparsity_in(i) if i != 2 else ca.Sparsity.dense(nu + 1, 1))
-                              for i, nm in enumerate(("t", "x", "u", "p")))
-            shifted = ca.Function("ode", [ts, xs, us, ps], [ode(ts + us[nu], xs, us[:nu], ps)],
-                                  ["t", "x", "u", "p"], ["xdot"])
-            args = ca.vertcat(u, t0, p)
-        integ = I.make_integrator("integrator", I.METHODS[m][1], I.dae_function(shifted), 0.0, s.t_end, opts)
-        xf = integ(x0=x0, p=args)["xf"]
-        return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
+        # the run's own preparation over [0, dt] (method auto resolved at the start values, as a
+        # run resolves it; never the compiled stepping loop: it has no CasADi integrator)
+        prep = prepare(self.problem(t_start=0.0, t_end=dt, rtol=rtol, atol=atol, method=method, compiled=False))
+        funcs = problem_functions(self.eom, names=("ode", "ode_jacobian"), sx=True,
+                                  fixed=self._fixed_entries(fixed_parameters))
+        return prep.interval_function(funcs, steps)
 
     def _fixed_entries(self, spec) -> tuple:
         """(index in p, value) pairs of ``casadi(fixed_parameters=spec)``."""
@@ -464,6 +463,14 @@ class Model:
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.output.display
         return r
 
+    def export_fmu(self, path, *, fmi_version: int = 2, fmi_type: str | None = None, overwrite: bool = False):
+        """Write this model as a Functional Mock-up Unit (mechdsl.export.export_fmu; docs/export.md):
+        fmi_version 2 or 3; fmi_type "me", "cs", "both" or None (every interface the model can
+        have: co-simulation only with contacts).  Returns an ExportInfo."""
+        from .export import export_fmu
+
+        return export_fmu(self, path, fmi_version=fmi_version, fmi_type=fmi_type, overwrite=overwrite)
+
     def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
         """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
         docs/sweeps.md).  params/starts: a grid (dict), mechdsl.sweep.table(...) or a DataFrame,
@@ -488,6 +495,20 @@ class Model:
         return formulate(self.eom, self.settings(**args))
 
     def equilibria(self, guesses=None, **kw):
+        """The equilibria (rest states) of the model with their stability: a list of
+        mechdsl.analysis.equilibrium.Equilibrium.
+
+        ``guesses``: starting points, a list of {coordinate: value} (coordinates not named keep
+        their start values); without them a spread over each coordinate's range is searched.
+        Other keywords (``t``, ``p``, ...): mechdsl.analysis.equilibrium.equilibria.  Each one
+        has ``values`` ({coordinate: value}), ``stability`` ("stable", "unstable" or
+        "undetermined"), ``reason`` (the Lagrange-Dirichlet or eigenvalue argument) and
+        ``hessian_eigenvalues``.  See docs/analysis.md.
+
+            >>> m = mechdsl.load(mechdsl.examples.path("pendulum"), model="PendulumLagrange")
+            >>> sorted(e.stability for e in m.equilibria())
+            ['stable', 'unstable']
+        """
         from .analysis.equilibrium import equilibria
 
         try:
@@ -496,6 +517,14 @@ class Model:
             self._remember()
 
     def linearize(self, at="equilibrium", **kw):
+        """The linear model ``M dq'' + C dq' + K dq = B du`` about a point, and its modes: a
+        mechdsl.analysis.linearize.Linearization (``M``, ``C``, ``K``, ``A``, ``B``, ``modes()``).
+
+        ``at``: "equilibrium" (the one nearest to the start values; ``guesses=`` steers the
+        search), an Equilibrium from ``equilibria()``, "t=T" (the state reached at time T),
+        "start", or {name: value} (``der(name)`` for speeds).  ``inputs=``: the parameters
+        treated as inputs u (default: the model's ``input`` parameters).  See docs/analysis.md.
+        """
         from .analysis.linearize import linearize
 
         try:
@@ -511,6 +540,10 @@ class Model:
         return steady_motions(self.eom, pins, **kw)
 
     def first_integrals(self):
+        """The conserved quantities found in the equations, each a
+        mechdsl.analysis.integrals.FirstIntegral: ``name``, ``kind`` ("energy", "jacobi",
+        "momentum" of an ignorable coordinate, "angular_momentum" of a rotational symmetry),
+        ``expression`` (text) and ``verified`` ("symbolic" or "numeric").  See docs/analysis.md."""
         from .analysis.integrals import first_integrals
 
         try:
@@ -524,6 +557,15 @@ class Model:
         from .output.display import draw_model
 
         return draw_model(self, t, q, **kw)
+
+    def view(self, t_end: float | None = None, q=None, **kw):
+        """The interactive 3-D view (mechdsl.view.View; ``.save("x.html")``, inline in Jupyter): the
+        motion of a run of t_end seconds from the start values, else the mechanism at coordinates
+        q (default: the start values) to turn around; up, trails (and fps, speed for a run) as
+        for animate (docs/animate.md)."""
+        from .output.display import view_model
+
+        return view_model(self, t_end, q, **kw)
 
     def equations(self, form: str = "lagrange"):
         """The equations of motion as sympy equations: form "lagrange" (M q'' = bias, one per

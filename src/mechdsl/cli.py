@@ -48,32 +48,38 @@ class _Parser(argparse.ArgumentParser):
         kw.setdefault("formatter_class", _Formatter)
         super().__init__(*a, **kw)
 
-    def error(self, message):  # usage errors: exit 2, no traceback
-        self.print_usage(sys.stderr)
-        print(f"mech: error: {message}", file=sys.stderr)
-        raise SystemExit(2)
+    def error(self, message):  # usage errors: exit 2, no traceback (cli.main prints them)
+        raise _BadArguments(self, message)
+
+
+class _BadArguments(Exception):
+    def __init__(self, parser, message):
+        super().__init__(message)
+        self.parser = parser
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     """The argument parser; ``only``: import and register just that command (a run of one
     command imports only what it needs: bench, plotting and analysis stay unloaded)."""
     from . import __version__
-    from .commands import COMMANDS
+    from .commands import COMMANDS, module_of
+    from .commands._common import add_common_args
 
     ap = _Parser(prog="mech", description="mechdsl: equation-based modelling of rigid-body mechanics")
     ap.add_argument("--version", action="version", version=f"mechdsl {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in ([only] if only in COMMANDS else COMMANDS):
         try:
-            mod = importlib.import_module(f".commands.{name}", __package__)
+            mod = importlib.import_module(f".commands.{module_of(name)}", __package__)
         except ModuleNotFoundError as e:
-            if e.name and e.name.endswith(f"commands.{name}"):
+            if e.name and e.name.endswith(f"commands.{module_of(name)}"):
                 continue  # command not built (yet)
             raise
         p = mod.add_parser(sub)
         p.add_argument("--limit", action="append", default=[], metavar="NAME=N", type=_limit,
                        help="raise a size budget of the front end, e.g. coordinates=5000 "
                             "(names and defaults: docs/language.md, Limits)")
+        add_common_args(p)
         p.set_defaults(_run=mod.run)
     return ap
 
@@ -88,23 +94,43 @@ def _limit(text: str) -> tuple[str, int]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run ``mech`` with these words (default: sys.argv[1:]); returns the exit code."""
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    words = sys.argv[1:] if argv is None else list(argv)
+    if words == ["--version"]:           # without building every command's parser (imports)
+        from . import __version__
+
+        print(f"mechdsl {__version__}")
+        return 0
+    from .commands import COMMANDS
+    from .commands._output import Output
+
+    # known before parsing, so that a usage error is a JSON document too
+    out = Output(words[0] if words and words[0] in COMMANDS else None, json_mode="--json" in words)
+    with out.session():
+        code = _run(words, out)
+    if out.json and not out.write_document(code):
+        _quiet_stdout()
+        return code or 1
+    return code
+
+
+def _run(words: list[str], out) -> int:
     args = None
     try:
         from .commands import COMMANDS
 
-        words = sys.argv[1:] if argv is None else list(argv)
-        if words == ["--version"]:           # without building every command's parser (imports)
-            from . import __version__
-
-            print(f"mechdsl {__version__}")
-            return 0
         ap = build_parser(words[0] if words and words[0] in COMMANDS else None)
-        args = ap.parse_args(argv)
-        _log_setup(bool(os.environ.get("MECHDSL_DEBUG")) or bool(getattr(args, "verbose", False)))
+        args = ap.parse_args(words)
         if not getattr(args, "_run", None):
             ap.print_help(sys.stderr)
+            out.fail("usage", "no command given")
             return 2
+        from .commands._common import verbosity
+
+        out.verbosity = verbosity(args)
+        out.reconfigure()
+        args.out = out
         from .frontend.limits import override
 
         with override(dict(getattr(args, "limit", None) or [])):
@@ -115,54 +141,44 @@ def main(argv: list[str] | None = None) -> int:
             e.filename = e.filename or "<standard output>"
             raise
         return code
+    except _BadArguments as e:
+        e.parser.print_usage(sys.stderr)
+        print(f"mech: error: {e}", file=sys.stderr)
+        out.fail("usage", str(e))
+        return 2
     except SystemExit as e:
         return int(e.code) if isinstance(e.code, int) else (0 if e.code is None else 2)
     except UsageError as e:
         print(f"mech: error: {e}", file=sys.stderr)
+        out.fail("usage", str(e))
         return 2
     except MechError as e:
-        from .diagnostics import print_diagnostics
-
         # diagnostics of later phases that carry no source position are located at the model
         # (or scene) the command worked on, else at the file
         path = getattr(args, "file", None) or (getattr(args, "files", None) or [None])[0]
-        print_diagnostics([_locate(d, path, getattr(args, "_where", None)) for d in e.diagnostics])
+        located = [_locate(d, path, getattr(args, "_where", None)) for d in e.diagnostics]
+        print_diagnostics(located)
+        for d in located:
+            out.diagnostic(d)
+        out.fail("model", located[0].message if located else str(e))
         return 1
     except KeyboardInterrupt:
         print("mech: interrupted", file=sys.stderr)
+        out.fail("interrupted", "interrupted")
         return 130
     except BrokenPipeError:
         _quiet_stdout()
         return 0
     except OSError as e:
         if e.errno not in _IO_ERRORS:
-            return _internal(e)
+            return _internal(e, out)
         _quiet_stdout()
         print(f"mech: error: cannot write{f' {e.filename}' if e.filename else ''}: {e.strerror or e}",
               file=sys.stderr)
+        out.fail("output", f"cannot write{f' {e.filename}' if e.filename else ''}: {e.strerror or e}")
         return 1
     except (InternalError, Exception) as e:  # a bug in mechdsl, not in the model
-        return _internal(e)
-
-
-def _log_setup(debug: bool) -> None:
-    """mechdsl's library messages (the ``mechdsl`` loggers) as ``mech: warning: ...`` lines on
-    stderr; DEBUG ones (the reason of each cache miss) with MECHDSL_DEBUG=1 or -v.  Without
-    a debug request the logging module is imported only when a message is logged."""
-    if not debug:
-        return
-    import logging
-
-    class Lines(logging.Formatter):
-        def format(self, record):
-            return f"mech: {record.levelname.lower()}: {record.getMessage()}"
-
-    h = logging.StreamHandler(sys.stderr)
-    h.setFormatter(Lines())
-    log = logging.getLogger("mechdsl")
-    log.addHandler(h)
-    log.setLevel(logging.DEBUG)
-    log.propagate = False
+        return _internal(e, out)
 
 
 # what the environment did, not a bug: a full or read-only device, a quota, permissions, an I/O
@@ -171,12 +187,13 @@ _IO_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EACCES, 
               errno.ENAMETOOLONG, errno.EFBIG, errno.EMFILE, errno.ENFILE, errno.ENOMEM}
 
 
-def _internal(e) -> int:
+def _internal(e, out) -> int:
     if os.environ.get("MECHDSL_DEBUG"):
         raise e
     print(f"mech: internal error: {type(e).__name__}: {e}\n"
           "  this is a bug in mechdsl; rerun with MECHDSL_DEBUG=1 for the traceback and report it",
           file=sys.stderr)
+    out.fail("internal", f"{type(e).__name__}: {e}")
     return 3
 
 
@@ -189,6 +206,17 @@ def _quiet_stdout() -> None:
         os.close(devnull)
     except (OSError, ValueError, AttributeError):
         pass
+
+
+def print_diagnostics(diags) -> None:
+    """The located diagnostics on stderr, and how many errors when more than one."""
+    from .diagnostics import format_diagnostics
+
+    diags = list(diags)
+    print(format_diagnostics(diags), file=sys.stderr)
+    n_err = sum(d.severity == "error" for d in diags)
+    if n_err > 1:
+        print(f"{n_err} errors", file=sys.stderr)
 
 
 def _locate(d, path, where=None):

@@ -13,8 +13,6 @@ Rendered form (``render``)::
 """
 from __future__ import annotations
 
-import sys
-
 from dataclasses import field
 from typing import Iterable, Sequence
 
@@ -167,10 +165,3 @@ def source_of(filename: str) -> str | None:
 def format_diagnostics(diags: Iterable[Diagnostic]) -> str:
     return "\n".join(render(d, source_of(d.span.file)) for d in diags)
 
-
-def print_diagnostics(diags: Iterable[Diagnostic], file=None) -> None:
-    diags = list(diags)
-    print(format_diagnostics(diags), file=file or sys.stderr)
-    n_err = sum(d.severity == "error" for d in diags)
-    if n_err > 1:
-        print(f"{n_err} errors", file=file or sys.stderr)

@@ -18,7 +18,6 @@ through ``codegen.FastFunction`` (buffer calls).
 """
 from __future__ import annotations
 
-import abc
 import contextlib
 import io
 import math
@@ -32,38 +31,8 @@ import numpy as np
 
 from .model.records import record
 
-# method name -> (backend, plugin or scipy class name, options, description)
-METHODS: dict[str, tuple[str, str, dict, str]] = {
-    "cvodes-bdf": ("casadi", "cvodes", {"linear_multistep_method": "bdf"},
-                   "CVODES variable-order BDF (stiff), Newton with a dense Jacobian"),
-    "cvodes-adams": ("casadi", "cvodes", {"linear_multistep_method": "adams",
-                                          "nonlinear_solver_iteration": "functional"},
-                     "CVODES variable-order Adams-Moulton (non-stiff, up to order 12), functional iteration"),
-    "cvodes": ("casadi", "cvodes", {"linear_multistep_method": "bdf"}, "alias of cvodes-bdf"),
-    "idas": ("casadi", "idas", {}, "IDAS variable-order BDF on the ODE as an implicit DAE"),
-    "erk": ("casadi", "erk", {}, "adaptive explicit Runge-Kutta 5(4) (Dormand-Prince type)"),
-    "rosenbrock": ("casadi", "rosenbrock", {}, "adaptive L-stable Rosenbrock-Wanner method of order 5(4)"),
-    "rk": ("casadi", "rk", {}, "fixed-step classical Runge-Kutta of order 4"),
-    "collocation": ("casadi", "collocation", {}, "fixed-step Radau IIA collocation (order 5)"),
-    "dopri5": ("crk", "dopri5", {}, "Dormand-Prince 5(4), compiled stepping loop (C, one call per run)"),
-    "dop853": ("crk", "dop853", {}, "Dormand-Prince 8(5,3), compiled stepping loop (C, one call per run)"),
-    "scipy-rk45": ("scipy", "RK45", {}, "scipy RK45 (Dormand-Prince 5(4))"),
-    "scipy-dop853": ("scipy", "DOP853", {}, "scipy DOP853 (Dormand-Prince 8(5,3))"),
-    "scipy-radau": ("scipy", "Radau", {}, "scipy Radau IIA order 5 (stiff)"),
-    "scipy-bdf": ("scipy", "BDF", {}, "scipy variable-order BDF (stiff)"),
-    "scipy-lsoda": ("scipy", "LSODA", {}, "scipy LSODA (automatic Adams/BDF switching)"),
-}
-# methods that never evaluate the Jacobian of the right-hand side (compiled code can omit it;
-# CVODES asks for derivatives when it is set up, even with functional iteration)
-NO_JACOBIAN = ("erk", "rk", "scipy-rk45", "scipy-dop853", "dopri5", "dop853")
-# the compiled stepping loop (mechdsl.simulation.crk): it compiles the model itself
-COMPILED_LOOP = ("dopri5", "dop853")
-# methods that must be able to differentiate the right-hand side but never evaluate its Jacobian
-# (CVODES-Adams with functional iteration): compiled code holds the forward derivative only
-FORWARD_ONLY = ("cvodes-adams",)
-FIXED_STEP = ("rk", "collocation")
-# order of accuracy used to pick a fixed step from the tolerance (h * omega = 0.5 * rtol^(1/order))
-FIXED_ORDER = {"rk": 4, "collocation": 5}
+# CasADi plug-ins that take a fixed number of steps (number_of_finite_elements)
+FIXED_STEP_PLUGINS = ("rk", "collocation")
 
 
 @record(frozen=False)
@@ -218,28 +187,30 @@ def dae_function(ode):
     return dae
 
 
-def casadi_options(method: str, rtol: float, atol: float, max_steps: int, fixed_steps: int | None,
+def casadi_options(plugin: str, base: dict, rtol: float, atol: float, max_steps: int, fixed_steps: int | None,
                    extra: dict, hmin: float = 0.0) -> dict:
-    """Back-end options.  hmin: smallest step before the run is declared failed (CVODES, erk,
-    rosenbrock; IDAS has no such option and relies on max_steps)."""
-    plugin = METHODS[method][1]
-    opts = dict(METHODS[method][2])
+    """The options of the CasADi integrator ``plugin``: ``base`` (the method's own, from the
+    registry), the tolerances and budgets, then ``extra`` (the user's integrator_options).
+    hmin: smallest step before the run is declared failed (CVODES, erk, rosenbrock; IDAS has no
+    such option and relies on max_steps)."""
+    opts = dict(base)
     if plugin in ("cvodes", "idas", "erk", "rosenbrock"):
         opts.update(reltol=rtol, abstol=atol, max_num_steps=int(max_steps))
     if plugin in ("cvodes", "erk", "rosenbrock") and hmin > 0:
         opts["min_step_size"] = float(hmin)
     if plugin == "cvodes":
         opts["disable_internal_warnings"] = True
-    if plugin in FIXED_STEP:
+    if plugin in FIXED_STEP_PLUGINS:
         opts["number_of_finite_elements"] = int(fixed_steps)
     opts.update(extra)
     return opts
 
 
-def run_casadi(method: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray, opts: dict,
+def run_casadi(plugin: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray, opts: dict,
                progress: Progress, u=None) -> Run:
-    """Integrate ode(t, x, u, p) over ``grid``; u: the constant input values (None: none)."""
-    integ = _integrator(method, ode, grid, opts)
+    """Integrate ode(t, x, u, p) over ``grid`` with the CasADi integrator ``plugin``; u: the
+    constant input values (None: none)."""
+    integ = cached_integrator(plugin, ode, grid, opts)
     buf, ev = integ.buffer()
     nx = x0.size
     X = np.full((len(grid), nx), np.nan)
@@ -301,11 +272,10 @@ def make_integrator(name: str, plugin: str, problem, t0: float, grid, opts: dict
     return ca.integrator(name, plugin, problem, float(t0), out, opts)
 
 
-def _integrator(method, ode, grid, opts):
-    """casadi.integrator, cached per (model Function, method, grid, options): building one
+def cached_integrator(plugin, ode, grid, opts):
+    """casadi.integrator, cached per (model Function, plug-in, grid, options): building one
     derives its Jacobians (0.35 s for a 30-link chain in the VM), which parameter sweeps and
     repeated runs need not pay again.  Integrator Functions are stateless between calls."""
-    plugin = METHODS[method][1]
     tgrid = tuple(float(v) for v in grid)
     key = (id(ode), plugin, tgrid, repr(sorted(opts.items())))
     with _CACHE_LOCK:
@@ -349,9 +319,8 @@ def _flat(d: dict) -> dict:
     return out
 
 
-def casadi_counts(method: str, raw: dict) -> dict:
+def casadi_counts(plugin: str, raw: dict) -> dict:
     """Uniform statistics from a CasADi integrator's raw stats."""
-    plugin = METHODS[method][1]
     if plugin in ("cvodes", "idas"):
         return {"steps": raw.get("nsteps"), "rhs_evals": raw.get("nfevals"),
                 "jac_evals": raw.get("n_call_jacF"), "error_test_failures": raw.get("netfails"),
@@ -370,13 +339,14 @@ def casadi_counts(method: str, raw: dict) -> dict:
 # --------------------------------------------------------------------------- scipy
 
 
-def run_scipy(method: str, rhs: Callable, jac: Callable | None, grid: np.ndarray, x0: np.ndarray,
+def run_scipy(cls_name: str, rhs: Callable, jac: Callable | None, grid: np.ndarray, x0: np.ndarray,
               rtol: float, atol: float, max_steps: int, progress: Progress, extra: dict,
               hmin: float = 0.0) -> Run:
-    """max_steps: per output interval (as for CasADi); hmin: smallest step before failing."""
+    """Step scipy's OdeSolver ``cls_name`` (RK45, DOP853, Radau, BDF, LSODA) over ``grid``.
+    max_steps: per output interval (as for CasADi); hmin: smallest step before failing."""
     import scipy.integrate as si
 
-    cls = getattr(si, METHODS[method][1])
+    cls = getattr(si, cls_name)
     kw = dict(extra)
     if cls in (si.Radau, si.BDF, si.LSODA) and jac is not None:
         kw.setdefault("jac", jac)
@@ -435,58 +405,3 @@ def run_scipy(method: str, rhs: Callable, jac: Callable | None, grid: np.ndarray
         error = f"solver stopped at t = {solver.t} ({solver.status})"
         fail_time = solver.t
     return Run(X=X, reached=k, stats=stats, error=error, fail_time=fail_time, fail_state=fail_state)
-
-
-# --------------------------------------------------------------------------- plug-ins
-
-
-class IntegratorPlugin(abc.ABC):
-    """A family of ODE integrators behind one hook: ``advance`` integrates x' = ode(t, x, p)
-    over the output grid and returns a :class:`Run`; ``counts`` maps its raw statistics to
-    the schema's names; ``zoom``: a failure can be located by re-integrating on finer grids."""
-
-    zoom = False
-
-    @abc.abstractmethod
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress,
-                hmin, u=None) -> Run:
-        """Integrate over the output grid; the Run keeps what was reached and the error."""
-
-    def counts(self, method: str, raw: dict) -> dict:
-        return dict(raw)
-
-
-class CasadiPlugin(IntegratorPlugin):
-    zoom = True
-
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
-                u=None):
-        opts = casadi_options(method, rtol, atol, max_steps, fixed_steps, extra, hmin=hmin)
-        return run_casadi(method, funcs["ode"], grid, x0, p, opts, progress, u=u)
-
-    def counts(self, method, raw):
-        return casadi_counts(method, raw)
-
-
-class ScipyPlugin(IntegratorPlugin):
-    def advance(self, method, funcs, grid, x0, p, *, rtol, atol, max_steps, fixed_steps, extra, progress, hmin,
-                u=None):
-        from .eom.codegen import FastFunction
-
-        uv = np.zeros(0) if u is None else np.ravel(u)
-        rhs = FastFunction(funcs["ode"]).bind(u=uv, p=p)
-        jac = None if method in NO_JACOBIAN else FastFunction(funcs["ode_jacobian"]).bind(u=uv, p=p)
-        return run_scipy(method, rhs, jac, grid, x0, rtol, atol, max_steps, progress, extra, hmin=hmin)
-
-
-PLUGINS: dict[str, IntegratorPlugin] = {"casadi": CasadiPlugin(), "scipy": ScipyPlugin()}
-
-
-def plugin(method: str) -> IntegratorPlugin:
-    """The plug-in that runs ``method`` (a name of METHODS)."""
-    kind = METHODS[method][0]
-    if kind == "crk" and kind not in PLUGINS:     # imported on first use (ctypes, the C source)
-        from .simulation.crk import PLUGIN
-
-        PLUGINS[kind] = PLUGIN
-    return PLUGINS[kind]

@@ -27,6 +27,11 @@ import dataclasses
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
+from ..mechanics import derive
+from ..mechanics.rotations import euler_sequence
+from ..model import ir
+from ..model.exprs import walk
+
 
 LOCK_TOL = 1e-6          # |det S| below this: gimbal lock
 
@@ -206,9 +211,6 @@ def quaternion_model(eom, joints: list[str]):
 
 
 def _quaternion_model(eom, joints: list[str]):
-    from ..model import ir
-    from ..mechanics import derive
-
     model = eom.model
     if model is None:
         raise _lock_error(joints[0], "the equations do not come from a component model")
@@ -268,9 +270,6 @@ def _quaternion_model(eom, joints: list[str]):
 
 
 def _coords_used_outside_joints(model) -> set[str]:
-    from ..model import ir
-    from ..model.exprs import walk
-
     used: set[str] = set()
 
     def scan(obj):
@@ -305,8 +304,6 @@ def _axis_rot(k: int, a: float) -> np.ndarray:
 
 def euler_to_quaternion(seq: str, phi: float, theta: float, psi: float) -> np.ndarray:
     """Unit quaternion of the intrinsic Euler rotation R_a(phi) R_b(theta) R_c(psi)."""
-    from ..mechanics.rotations import euler_sequence
-
     a, b, c = euler_sequence(seq)
     return matrix_to_quaternion(_axis_rot(a, phi) @ _axis_rot(b, theta) @ _axis_rot(c, psi))
 
@@ -338,8 +335,6 @@ def euler_blocks(eom) -> list[tuple[list[int], bool, str]]:
     """([i_phi, i_theta, i_psi], proper, joint name) of every Euler-angle joint whose three
     angles are coordinates; proper: a sequence like z-x-z (first axis = last axis)."""
     def build():
-        from ..mechanics.rotations import euler_sequence
-
         model = eom.model
         out = []
         if model is None:

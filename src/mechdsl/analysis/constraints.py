@@ -23,8 +23,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..dae.dof import dependent_columns, dof_report
+from ..dae.init import initialize
+from ..dae.constrained_system import kkt_solve, scale_jacobian
 from ..diagnostics import Diagnostic, MechError
 from .core import Probe, dense, null_space, vanishes
+
 
 COND_MAX = 100.0           # independent-coordinate basis used while cond(Z) stays below this
 
@@ -118,8 +122,6 @@ class Setup:
 def setup(eom, pv, t: float, what: str) -> Setup:
     """Check that ``what`` applies (scleronomic constraints) and choose the active constraints
     at the consistent start."""
-    from ..dae import dof_report
-
     _require_scleronomic(eom, pv, what)
     notes = []
     q0, _ = eom.start(pv)
@@ -162,8 +164,6 @@ def _require_scleronomic(eom, pv, what) -> None:
 def project(eom, q, t, pv, fixed=None) -> np.ndarray | None:
     """q moved onto g = 0 by the DAE's consistent initialization (mass metric, ``fixed``
     coordinates held; default all free); None when it cannot be done."""
-    from ..dae import initialize
-
     n = eom.n
     fixed = tuple(bool(f) for f in fixed) if fixed is not None and len(fixed) == n else (False,) * n
     try:
@@ -177,9 +177,6 @@ def project(eom, q, t, pv, fixed=None) -> np.ndarray | None:
 def independent_coordinates(eom, M, G) -> tuple[int, ...]:
     """Coordinates left free by a pivoted QR of the mass-scaled G (the best-conditioned
     dependent block goes to the others), in coordinate order."""
-    from ..dae.dof import dependent_columns
-    from ..dae.system import scale_jacobian
-
     n = G.shape[1]
     if G.shape[0] == 0:
         return tuple(range(n))
@@ -223,8 +220,6 @@ def independent_basis(eom, M, G) -> tuple[np.ndarray, tuple[int, ...]]:
 def rest_multipliers(s: Setup, q, M, bias) -> tuple[np.ndarray, np.ndarray]:
     """(acceleration, active multipliers) at rest at q: the DAE's KKT solve with
     G q'' = gamma = 0 (scleronomic constraints at zero speed)."""
-    from ..dae.system import kkt_solve
-
     G = s.G_active(q)
     a, lam = kkt_solve(M, G, bias, np.zeros(G.shape[0]))
     fs = max(float(np.max(np.abs(bias), initial=0.0)), 1e-300)

@@ -19,7 +19,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from ..eom import fold_inputs
 from ..eom import parameter_vector as param_vector  # noqa: F401  (re-exported)
+
 
 SEED = 20240605          # fixed: the analyses are deterministic
 N_PROBE = 8              # random states used by the numeric identity checks
@@ -178,8 +180,6 @@ def structure(eom, p=None) -> Structure:
     """Classify the system numerically at deterministic random states (see module doc).
 
     Cached on the EOM per parameter vector."""
-    from ..eom import fold_inputs
-
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     pv = param_vector(eom, p)
     def build():
@@ -389,3 +389,12 @@ def median(xs) -> float:
         return float("nan")
     k = a.size // 2
     return float(a[k]) if a.size % 2 else float(np.mean(a[k - 1:k + 1]))
+
+
+def named_multipliers(names, scales, values) -> dict[str, float]:
+    """Multipliers by constraint name, each times its scale (|dg/dq| of an explicit constraint
+    equation: the reaction along -grad g, eom.multiplier_scales); empty without multipliers."""
+    if values is None:
+        return {}
+    scale = np.ones(len(values)) if scales is None else scales
+    return {c: float(s * v) for c, s, v in zip(names, scale, values)}

@@ -34,14 +34,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..output import display as _display
-from ..eom import reported_multipliers
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from ..eom import fold_inputs, reported_multipliers
+from ..output import display as _display
 from . import charts
+from .charts import chart, locked_joints, quaternion_blocks, quaternion_model
+from .charts import tangent_basis as zbasis
 from .constraints import constrained, least_squares_multipliers, setup, tangent_basis
-from .core import dense, param_vector, parts, structure, wrap_angle
+from .core import dense, named_multipliers, null_space, param_vector, parts, structure, wrap_angle
 from .manifold import guesses as constrained_guesses
 from .matrices import complement, reduced_first_order, second_order, sym
+from .sampling import halton
+
 
 MAX_GUESSES = 256
 GRID_ANGLES = 8          # grid points per angle coordinate over [-pi, pi)
@@ -91,26 +95,32 @@ class Equilibrium:
     @property
     def lambdas(self) -> dict[str, float]:
         """Multipliers by constraint name (empty for unconstrained models)."""
-        if self.multipliers is None:
-            return {}
-        scale = np.ones(len(self.multipliers)) if self.multiplier_scales is None else self.multiplier_scales
-        return {c: float(s * v) for c, s, v in zip(self.constraint_names, scale, self.multipliers)}
+        return named_multipliers(self.constraint_names, self.multiplier_scales, self.multipliers)
 
     @property
     def values(self) -> dict[str, float]:
+        """The coordinates' values at the equilibrium, by name."""
         return {c: float(v) for c, v in zip(self.coords, self.q)}
 
     _repr_html_ = _display.equilibrium_html          # notebook displays (mechdsl.output.display)
     _repr_markdown_ = _display.equilibrium_markdown
 
+    def __repr__(self) -> str:
+        """One line: kind, stability and where (the HTML display and ``to_dict()`` hold the rest)."""
+        where = ", ".join(f"{c} = {v:.6g}" for c, v in list(self.values.items())[:6])
+        more = f", ... ({len(self.coords) - 6} more)" if len(self.coords) > 6 else ""
+        return f"<Equilibrium {self.kind}, {self.stability}: {where}{more}>"
+
     @property
     def stability(self) -> str:
+        """"stable", "unstable" or "undetermined" (``stable`` True, False or None; ``reason`` says why)."""
         return {True: "stable", False: "unstable", None: "undetermined"}[self.stable]
 
     def __getitem__(self, name: str) -> float:
         return self.values[name]
 
     def to_dict(self) -> dict:
+        """Plain JSON types: kind, values, stability and reason, eigenvalues, Hessian, notes, ..."""
         d = {"kind": self.kind, "values": self.values, "stable": self.stable,
              "stability": self.stability, "reason": self.reason,
              "hessian_eigenvalues": [float(v) for v in self.hessian_eigenvalues],
@@ -178,8 +188,6 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     Constrained models (scleronomic constraints g(q) = 0): see :mod:`.constraints`; each
     equilibrium carries its multipliers.
     """
-    from ..eom import fold_inputs
-
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     import casadi as ca
 
@@ -309,8 +317,6 @@ def chart_of(eom, q, t, pv):
     in the coordinates of the chart's EOM, the EOM the chart belongs to, notes) for a model with
     quaternion joints or Euler angles at gimbal lock; None for a regular point of ordinary
     coordinates."""
-    from .charts import chart, locked_joints, quaternion_blocks, quaternion_model, tangent_basis as zbasis
-
     blocks = quaternion_blocks(eom)
     locked = locked_joints(eom, q, t, pv) if not constrained(eom) else []
     if not blocks and not locked:
@@ -485,7 +491,6 @@ def _start_multipliers(eom, con, q, t, pv, lam_scale) -> np.ndarray:
     """Scaled least-squares multipliers at a guess (the LM start for mu)."""
     if con is None:
         return np.zeros(0)
-    from .core import parts
 
     _, bias = parts(eom).M_bias(q, np.zeros(eom.n), t, pv)
     lam = least_squares_multipliers(con, q, bias)
@@ -723,7 +728,6 @@ def active_basis(M, C, K):
     n = M.shape[0]
     if n == 0:
         return None
-    from .core import null_space
 
     scale = max(np.max(np.abs(M), initial=0.0), 1e-300)
     ks = max(np.max(np.abs(K), initial=0.0), np.max(np.abs(C), initial=0.0), 1e-300)
@@ -850,19 +854,35 @@ def _guesses(eom, guesses, q0, st, max_guesses, con=None):
         lo = np.array([min(a) for a in axes])
         hi = np.array([max(a) for a in axes])
         for j in range(max_guesses):
-            spread.append(lo + (hi - lo) * _halton(j + 1, n))
+            spread.append(lo + (hi - lo) * halton(j + 1, n))
     return user + [q0.copy()] + spread
 
 
-def _halton(i: int, dim: int) -> np.ndarray:
-    primes = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71]
-    out = np.zeros(dim)
-    for d in range(dim):
-        b = primes[d % len(primes)]
-        f, r, k = 1.0, 0.0, i + (d // len(primes)) * 7919
-        while k > 0:
-            f /= b
-            r += f * (k % b)
-            k //= b
-        out[d] = r
-    return out
+def nearest_equilibrium(eom, guesses, t, pv, q0, notes: list, other: str):
+    """The equilibrium nearest to the first guess (without guesses: to q0; angles compared
+    modulo 2 pi), noted when there are several; E903 saying why and with the hint `other` when
+    there is none."""
+    eqs = equilibria(eom, guesses, t=t, p=pv)
+    if not eqs:
+        why = eqs.search.why_none(eom.coords)
+        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found" + (f": {why}" if why else ""),
+                                   help=f"{other}; a steady motion (a circular orbit, a spinning top) is a "
+                                        "relative equilibrium, not a rest state: linearize about a state on "
+                                        "it with --at NAME=VALUE,der(NAME)=SPEED; or give a starting guess "
+                                        "(--guess NAME=VALUE)"))
+    periodic = structure(eom, pv).periodic
+    user = parse_guesses(eom, guesses, q0)
+    target, what = (user[0], "the guess") if user else (q0, "the start values")
+    eq = min(eqs, key=lambda e: _distance(e.q, target, periodic))
+    if len(eqs) > 1:
+        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to {what}: "
+                     + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
+    return eq
+
+
+def _distance(a, b, periodic) -> float:
+    d = 0.0
+    for x, y, per in zip(a, b, periodic):
+        z = wrap_angle(x - y) if per else x - y
+        d += z * z
+    return d

@@ -20,7 +20,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
+from ..eom import fold_inputs
+from ..model import ir
 from .core import Probe, dense, param_vector, parts, structure
+from .symbolic import _latex_name, equation_layer_only, from_model, lagrangian_of, latex
+from .symbolic import simplify_small as simplify
+from .symbolic import sx_to_sympy, text
+
 
 SYMBOLIC_MAX_N = 3            # sympy inverts M up to this size
 SYMBOLIC_MAX_OPS = 400        # ... and when its entries are this small
@@ -78,8 +84,6 @@ class Hamiltonian:
 def hamiltonian(eom, p=None) -> Hamiltonian:
     """The CasADi Hamiltonian of an EOM (for a constrained one: of its Lagrangian; the
     constraint forces -G' lambda are added by the integrator, mechdsl.rattle)."""
-    from ..eom import fold_inputs
-
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     import casadi as ca
 
@@ -160,7 +164,6 @@ def format_hamiltonian(model, latex: bool = False) -> str:
     """
     import sympy as sp
 
-    from .symbolic import simplify_small as simplify
 
     lg, eom = _lagrangian_for(model)
     n = len(lg.q)
@@ -242,7 +245,6 @@ def symbolic_hamilton(lg) -> dict:
     "H" and "pdot" = dL/dq + Q - dD/dqd at qd(q, p)."""
     import sympy as sp
 
-    from .symbolic import simplify_small as simplify
 
     n = len(lg.q)
     # a size limit, not a clock: larger models keep their entries as derived (deterministic)
@@ -279,7 +281,6 @@ def _constraint_items(eom, lg, fmt) -> list[tuple[str, str]]:
     """(name, residual) for explicit constraint equations; one line per loop-closing joint."""
     import casadi as ca
 
-    from .symbolic import sx_to_sympy
 
     explicit = {c.name for c in eom.model.constraints} if eom.model is not None else set(eom.constraint_names)
     out, joints = [], []
@@ -314,28 +315,19 @@ def _momentum_name(c: str, lg) -> str:
 
 
 def _text(e) -> str:
-    from .symbolic import text
-
     return text(e)
 
 
 def _latex(e, lg, P) -> str:
-    from .symbolic import _latex_name, latex
-
     return latex(e, lg, {Pi: "p_{" + _latex_name(c) + "}" for Pi, c in zip(P, lg.coords)})
 
 
 def _lname(c):
-    from .symbolic import _latex_name
-
     return _latex_name(c)
 
 
 def _lagrangian_for(model):
     """(SymbolicLagrangian, eom or None) for an ir.Model, an EOM or an api Model."""
-    from ..model import ir
-    from .symbolic import equation_layer_only, from_model, lagrangian_of
-
     if hasattr(model, "T") and hasattr(model, "qd"):          # an EOM
         return lagrangian_of(model), model
     if isinstance(model, ir.Model):

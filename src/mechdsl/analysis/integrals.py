@@ -21,9 +21,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .core import N_PROBE, Probe, _is_structural_zero, dense, param_vector, parts, structure, vanishes
+from ..eom import fold_inputs
+from .core import N_PROBE, Probe, _is_structural_zero, dense, null_space, param_vector, parts, structure, vanishes
 from .rotations import label as rotation_label
 from .rotations import rotation_symmetries
+from .symbolic import make_symbols, simplify_small, sx_to_sympy, text, trig_normal
+
 
 MAX_PRINT_INSTRUCTIONS = 3000      # larger expressions are not converted to text
 
@@ -71,8 +74,6 @@ class FirstIntegral:
 
 def first_integrals(eom, p=None) -> list[FirstIntegral]:
     """The conserved quantities this analysis can prove (for the given parameter values)."""
-    from ..eom import fold_inputs
-
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     import casadi as ca
 
@@ -106,7 +107,6 @@ def first_integrals(eom, p=None) -> list[FirstIntegral]:
         stack.append(r[1].reshape(1, n) / qscale)
         if eom.m:
             stack.append(r[2] / Gscale)
-    from .core import null_space
 
     N = null_space(np.vstack(stack), rel=1e-9) if n else np.zeros((0, 0))
     dLdqd = ca.gradient(eom.T, eom.qd)     # V does not depend on the speeds
@@ -173,8 +173,6 @@ def integral_signals(eom, p=None) -> dict[str, object]:
 
 def describe_integrals(eom, p=None, expressions: bool = False) -> list[str]:
     """Lines for ``mech check`` / ``mech equations``: one per first integral (name, kind, why)."""
-    from ..eom import fold_inputs
-
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
     out = []
     for fi in first_integrals(eom, p):
@@ -207,7 +205,6 @@ def _sympy_confirms(eom, dL, Qk) -> str:
     """'symbolic' when dL/dq_k and Q_k reduce to 0 as trig polynomials (sympy), else 'numeric'."""
     import casadi as ca
 
-    from .symbolic import make_symbols, sx_to_sympy, trig_normal
 
     f = ca.Function("chk", [eom.q, eom.qd, eom.t, eom.p], [dL, Qk])
     if f.n_instructions() > MAX_PRINT_INSTRUCTIONS:
@@ -235,7 +232,6 @@ class _Texts:
     def _text(self, sx) -> str:
         import casadi as ca
 
-        from .symbolic import make_symbols, simplify_small, sx_to_sympy, text
 
         eom = self.eom
         f = ca.Function("txt", [eom.q, eom.qd, eom.t, eom.p], [sx])

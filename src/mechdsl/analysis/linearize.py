@@ -6,142 +6,21 @@ computed numerically by CasADi AD of the equations of motion (see :mod:`.matrice
 """
 from __future__ import annotations
 
-import json
 import math
 import re
-from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..output import display as _display
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
-from .constraints import constrained, setup
-from .core import dense, param_vector, parts, structure, wrap_angle
+from ..eom import fold_inputs
 from .charts import chart_speeds, normalize_blocks, quaternion_blocks
-from .matrices import first_order, second_order, singular_mass_error, skew, sym
-from .modes import Modes, modes_of
-
-
-@dataclass
-class Linearization:
-    coords: tuple[str, ...]
-    M: np.ndarray
-    C: np.ndarray
-    K: np.ndarray
-    A: np.ndarray
-    B: np.ndarray                    # (2n, m) first-order input matrix
-    Bq: np.ndarray                   # (n, m): M dq'' + C dq' + K dq = Bq du
-    inputs: tuple[str, ...]
-    q: np.ndarray                    # reference state
-    qd: np.ndarray
-    t: float
-    acceleration: np.ndarray         # reference acceleration (0 at an equilibrium)
-    kind: str                        # 'equilibrium' | 'accelerated-reference' | 'state'
-    p: np.ndarray
-    equilibrium: object | None = None
-    notes: list[str] = field(default_factory=list)
-    eom: object | None = field(default=None, repr=False)
-    _modes: Modes | None = field(default=None, repr=False)
-    # constrained models (see analysis.reduced): M, C, K, A, B are those of the reduced model in
-    # the coordinates ``reduced_coords`` (dq = basis dz); multipliers at the reference state for
-    # every constraint (0 for dropped redundant ones); stiffness: the full n x n K including the
-    # geometric stiffness sum lambda_l d2g_l/dq2, before the reduction
-    basis: np.ndarray | None = None
-    reduced_coords: tuple[str, ...] = ()
-    multipliers: np.ndarray | None = None
-    constraint_names: tuple[str, ...] = ()
-    active_constraints: tuple[str, ...] = ()
-    # |dg_i/dq| of explicit constraint equations (1 for cut-joint rows): `lambdas` reports
-    # scale * multiplier, the reaction along -grad g (eom.multiplier_scales)
-    multiplier_scales: np.ndarray | None = None
-    stiffness: np.ndarray | None = None
-
-    _repr_html_ = _display.linearization_html        # notebook displays (mechdsl.output.display)
-    _repr_markdown_ = _display.linearization_markdown
-
-    @property
-    def constrained(self) -> bool:
-        return self.basis is not None
-
-    @property
-    def matrix_coords(self) -> tuple[str, ...]:
-        """Names of the rows and columns of M, C, K (the reduced coordinates when constrained)."""
-        return self.reduced_coords if self.constrained else self.coords
-
-    @property
-    def lambdas(self) -> dict[str, float]:
-        if self.multipliers is None:
-            return {}
-        scale = np.ones(len(self.multipliers)) if self.multiplier_scales is None else self.multiplier_scales
-        return {c: float(s * v) for c, s, v in zip(self.constraint_names, scale, self.multipliers)}
-
-    @property
-    def n(self) -> int:
-        return len(self.coords)
-
-    @property
-    def D(self) -> np.ndarray:
-        """Damping: the symmetric part of C."""
-        return sym(self.C)
-
-    @property
-    def G(self) -> np.ndarray:
-        """Gyroscopic matrix: the skew-symmetric part of C."""
-        return skew(self.C)
-
-    @property
-    def values(self) -> dict[str, float]:
-        return {c: float(v) for c, v in zip(self.coords, self.q)}
-
-    def modes(self) -> Modes:
-        if self._modes is None:
-            md = modes_of(self.M, self.C, self.K, self.A, self.matrix_coords)
-            self._modes = md.in_coordinates(self.basis, self.coords) if self.constrained else md
-        return self._modes
-
-    @property
-    def eigenvalues(self) -> np.ndarray:
-        return self.modes().eigenvalues
-
-    def lqr(self, Q, R):
-        """The LQR state feedback du = -K dx for this linear model (analysis.lqr)."""
-        from .lqr import lqr
-
-        return lqr(self, Q, R)
-
-    def symbolic(self, exact: bool = True):
-        """M, C, K derived by sympy from T, V, D, Q at this state (see analysis.symbolic)."""
-        from .symbolic import symbolic_linearization
-
-        if self.constrained:
-            raise MechError(Diagnostic("E901", "the symbolic linearization is available for models in "
-                                               "independent coordinates only; the numeric M, C, K of the "
-                                               "reduced model are exact to rounding"))
-
-        return symbolic_linearization(self.eom, self.q, self.qd, self.t, self.acceleration,
-                                      inputs=self.inputs, exact=exact)
-
-    def to_dict(self) -> dict:
-        md = self.modes().to_dict()
-        return {"coordinates": list(self.coords), "kind": self.kind, "t": self.t,
-                "state": {"q": self.values, "qd": {c: float(v) for c, v in zip(self.coords, self.qd)}},
-                "acceleration": {c: float(v) for c, v in zip(self.coords, self.acceleration)},
-                "inputs": list(self.inputs), "M": self.M.tolist(), "C": self.C.tolist(), "K": self.K.tolist(),
-                "A": self.A.tolist(), "B": self.B.tolist(), "modes": md["modes"],
-                "eigenvalues": md["eigenvalues"], "notes": list(self.notes),
-                "equilibrium": None if self.equilibrium is None else self.equilibrium.to_dict(),
-                **self._constrained_dict()}
-
-    def _constrained_dict(self) -> dict:
-        if not self.constrained:
-            return {}
-        return {"reduced_coordinates": list(self.reduced_coords),
-                "basis": [{c: float(v) for c, v in zip(self.coords, col)} for col in self.basis.T],
-                "multipliers": self.lambdas, "active_constraints": list(self.active_constraints),
-                "stiffness_full": self.stiffness.tolist()}
-
-    def to_json(self) -> str:
-        return json.dumps({"generator": "mechdsl", **self.to_dict()}, indent=2) + "\n"
+from .constraints import constrained, setup
+from .core import param_vector, parts, structure
+from .equilibrium import Equilibrium, active_basis, chart_of, nearest_equilibrium, singular_mass
+from .linear_model import Linearization, declared_inputs, input_columns
+from .matrices import first_order, second_order, singular_mass_error, sym
+from .reduced import linearize_constrained
+from ..model.names import split_state
 
 
 def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, guesses=None) -> Linearization:
@@ -158,15 +37,10 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     also written ``force(name)``) treated as inputs u; B = [0; M^-1 Bq], Bq = d bias/du.
     None: the parameters the model declares ``input``; () for none.
     """
-    from ..eom import fold_inputs
-
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
-    from .equilibrium import Equilibrium, active_basis, chart_of, singular_mass
 
     pv = param_vector(eom, p)
     if constrained(eom):
-        from .reduced import linearize_constrained
-
         return linearize_constrained(eom, setup(eom, pv, t, "linearization"), at, inputs, pv, t, guesses)
     n = eom.n
     q0, qd0 = eom.start(pv)
@@ -216,7 +90,7 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
                          "included in K)")
     if inputs is None:
         inputs = declared_inputs(eom)
-    names, Bq = _inputs(base, inputs, q, qd, t, pv)
+    names, Bq = input_columns(base, inputs, q, qd, t, pv)
     stiffness = K
     R = active_basis(M, C, K) if singular_mass(M) else None
     if R is not None:
@@ -263,49 +137,16 @@ def _names(coords, R) -> tuple[str, ...]:
     return tuple(out)
 
 
-def nearest_equilibrium(eom, guesses, t, pv, q0, notes: list, other: str):
-    """The equilibrium nearest to the first guess (without guesses: to q0; angles compared
-    modulo 2 pi), noted when there are several; E903 saying why and with the hint `other` when
-    there is none."""
-    from .equilibrium import equilibria, parse_guesses
-
-    eqs = equilibria(eom, guesses, t=t, p=pv)
-    if not eqs:
-        why = eqs.search.why_none(eom.coords)
-        raise MechError(Diagnostic("E903", f"no equilibrium of '{eom.name}' was found" + (f": {why}" if why else ""),
-                                   help=f"{other}; a steady motion (a circular orbit, a spinning top) is a "
-                                        "relative equilibrium, not a rest state: linearize about a state on "
-                                        "it with --at NAME=VALUE,der(NAME)=SPEED; or give a starting guess "
-                                        "(--guess NAME=VALUE)"))
-    periodic = structure(eom, pv).periodic
-    user = parse_guesses(eom, guesses, q0)
-    target, what = (user[0], "the guess") if user else (q0, "the start values")
-    eq = min(eqs, key=lambda e: _distance(e.q, target, periodic))
-    if len(eqs) > 1:
-        notes.append(f"{len(eqs)} equilibria found; linearized about the one nearest to {what}: "
-                     + ", ".join(f"{c} = {v:.6g}" for c, v in eq.values.items()))
-    return eq
-
-
-def _distance(a, b, periodic) -> float:
-    d = 0.0
-    for x, y, per in zip(a, b, periodic):
-        z = wrap_angle(x - y) if per else x - y
-        d += z * z
-    return d
-
-
 def _state(eom, at, q0, qd0, pv, t):
     n = eom.n
     if isinstance(at, dict):
         q, qd = q0.copy(), np.zeros(n)
         for name, v in at.items():
-            m = re.fullmatch(r"\s*der\((.+)\)\s*", name)
-            key = m.group(1) if m else name
+            key, speed = split_state(name)
             if key not in eom.coords:
                 hint = did_you_mean(key, eom.coords)
                 raise UsageError(f"unknown coordinate {key!r}" + (f"; {hint}" if hint else ""))
-            (qd if m else q)[eom.coords.index(key)] = float(v)
+            (qd if speed else q)[eom.coords.index(key)] = float(v)
         return q, qd, t
     if isinstance(at, str):
         s = at.strip()
@@ -347,39 +188,3 @@ def _integrate(eom, q0, qd0, pv, T):
         raise MechError(Diagnostic("E904", f"could not reach t = {T} from the start values: {sol.message}"))
     x = sol.y[:, -1]
     return x[:n], x[n:]
-
-
-def declared_inputs(eom) -> list[str]:
-    """The parameters declared `input` in the model (empty without a model)."""
-    model = getattr(eom, "model", None)
-    if model is None:
-        return []
-    return [p.name for p in model.inputs if p.name in eom.params]
-
-
-def _inputs(eom, inputs, q, qd, t, pv):
-    n = eom.n
-    if not inputs:
-        return (), np.zeros((n, 0))
-    if isinstance(inputs, str):
-        inputs = [s for s in re.split(r"[,\s]+", inputs) if s]
-    cols, names = [], []
-    dbp = None
-    for name in inputs:
-        m = re.fullmatch(r"\s*(?:force|Q)\((.+)\)\s*", name)
-        key = m.group(1) if m else name.strip()
-        if key in eom.coords and (m or key not in eom.params):
-            e = np.zeros(n)
-            e[eom.coords.index(key)] = 1.0
-            cols.append(e)
-            names.append(f"force({key})")
-        elif key in eom.params and not m:
-            if dbp is None:
-                dbp = dense(parts(eom).fn("dbias_dp")(q, qd, t, pv))
-            cols.append(dbp[:, eom.params.index(key)])
-            names.append(key)
-        else:
-            hint = did_you_mean(key, list(eom.params) + list(eom.coords))
-            raise UsageError(f"unknown input {name!r}: inputs are parameters or coordinates "
-                             "(a generalized force on them)" + (f"; {hint}" if hint else ""))
-    return tuple(names), np.array(cols).T

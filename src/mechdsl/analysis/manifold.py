@@ -26,6 +26,9 @@ import numpy as np
 
 from .constraints import Setup, independent_coordinates, project, tangent_basis
 from .core import parts
+from .matrices import sym
+from .sampling import halton
+
 
 STEP = 0.2             # tracing step: radians, or this fraction of a coordinate's size
 MAX_TRACE = 600        # projections per traced curve
@@ -121,9 +124,6 @@ def trace_brackets(s: Setup, st) -> list[np.ndarray]:
 
 def spread(s: Setup, st, axes_of, max_guesses: int) -> list[np.ndarray]:
     """Grid over the independent coordinates, dependent ones by continuation (module docstring)."""
-    from .equilibrium import _halton
-    from .matrices import sym
-
     eom, pv, t = s.eom, s.pv, s.t
     n = eom.n
     M, _ = parts(eom).M_bias(s.q_start, np.zeros(n), t, pv)
@@ -135,7 +135,7 @@ def spread(s: Setup, st, axes_of, max_guesses: int) -> list[np.ndarray]:
     else:
         lo = np.array([min(a) for a in axes])
         hi = np.array([max(a) for a in axes])
-        pts = [lo + (hi - lo) * _halton(j + 1, len(indep)) for j in range(max_guesses)]
+        pts = [lo + (hi - lo) * halton(j + 1, len(indep)) for j in range(max_guesses)]
     angles = [st.angles[i] for i in indep]
 
     def dist(a, b):

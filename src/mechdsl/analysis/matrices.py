@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..diagnostics import Diagnostic, MechError
 from .core import dense, parts
 
 
@@ -45,8 +46,6 @@ def solve_mass(eom, M, rhs) -> np.ndarray:
 
 
 def singular_mass_error(eom, v, where: str = "at this state"):
-    from ..diagnostics import Diagnostic, MechError
-
     coords = getattr(eom, "coords", ())
     dirn = ""
     if v is not None and len(coords) == len(v):

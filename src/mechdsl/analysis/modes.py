@@ -20,10 +20,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..output.fileio import write_atomic
+from ..output.plot import save_figure
 
 
 @dataclass
 class Modes:
+    """The modes of a linear model M x'' + C x' + K x = 0 (``Linearization.modes()``), slowest
+    first: ``frequencies`` [rad/s] (``hz``), ``damping_ratios``, ``shapes`` (one column per
+    mode), ``kinds`` and the eigenvalues of the first-order system."""
+
     coords: tuple[str, ...]
     frequencies: np.ndarray          # rad/s, ascending
     damping_ratios: np.ndarray
@@ -34,16 +39,19 @@ class Modes:
 
     @property
     def hz(self) -> np.ndarray:
+        """The frequencies in Hz (``frequencies`` / 2 pi)."""
         return self.frequencies / (2 * math.pi)
 
     @property
     def damped_frequencies(self) -> np.ndarray:
+        """The damped frequencies [rad/s]: the imaginary parts of the modes' eigenvalues."""
         return np.abs(self.mode_eigenvalues.imag)
 
     def __len__(self) -> int:
         return len(self.frequencies)
 
     def to_dict(self) -> dict:
+        """Plain JSON types: coordinates, one entry per mode (kind, frequency, damping, shape), eigenvalues."""
         modes = []
         for j in range(len(self)):
             s = self.shapes[:, j]
@@ -58,9 +66,11 @@ class Modes:
                 "eigenvalues": [[float(v.real), float(v.imag)] for v in self.eigenvalues]}
 
     def to_json(self) -> str:
+        """``to_dict()`` as JSON text."""
         return json.dumps({"generator": "mechdsl", **self.to_dict()}, indent=2) + "\n"
 
     def to_csv_text(self) -> str:
+        """One CSV row per mode: kind, frequency (rad/s, Hz), damping ratio, eigenvalue, shape."""
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         cplx = np.iscomplexobj(self.shapes) and np.any(np.abs(self.shapes.imag) > 1e-12)
@@ -91,14 +101,16 @@ class Modes:
                      mode_eigenvalues=self.mode_eigenvalues)
 
     def write_json(self, path, overwrite: bool = False):
+        """Write ``to_json()`` atomically (an existing file not of mechdsl's only with overwrite)."""
         return write_atomic(path, self.to_json(), overwrite=overwrite)
 
     def write_csv(self, path, overwrite: bool = False):
+        """Write ``to_csv_text()`` atomically (an existing file not of mechdsl's only with overwrite)."""
         return write_atomic(path, self.to_csv_text(), overwrite=overwrite)
 
     def plot(self, path, title: str = "", overwrite: bool = False):
         """Bar chart of each mode shape (one panel per mode), written atomically."""
-        from matplotlib.figure import Figure     # no pyplot: no global backend or figure registry
+        from matplotlib.figure import Figure  # no pyplot: no global backend or figure registry
 
         k = max(1, len(self))
         fig = Figure(figsize=(max(4.0, 0.9 * len(self.coords) + 2.5), 1.9 * k + 0.6))
@@ -121,7 +133,6 @@ class Modes:
         if title:
             fig.suptitle(title, fontsize=10)
         fig.tight_layout()
-        from ..output.plot import save_figure
 
         return save_figure(fig, path, overwrite=overwrite)
 

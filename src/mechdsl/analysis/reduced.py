@@ -28,11 +28,15 @@ import re
 
 import numpy as np
 
+from ..dae.init import initialize
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from ..eom import reported_multipliers
 from .constraints import independent_basis, project, rest_multipliers
-from .core import parts
-from .matrices import first_order, second_order
+from .core import parts, structure
+from .equilibrium import Equilibrium, nearest_equilibrium, singular_mass
+from .linear_model import Linearization, declared_inputs, input_columns
+from .matrices import first_order, second_order, singular_mass_error
+from ..model.names import split_state
 
 
 def _refuse_motion(eom, where: str):
@@ -50,12 +54,11 @@ def rest_state(eom, con, at, q0, pv, t):
         q = q0.copy()
         fixed = [False] * n
         for name, v in at.items():
-            m = re.fullmatch(r"\s*der\((.+)\)\s*", name)
-            key = m.group(1) if m else name
+            key, speed = split_state(name)
             if key not in eom.coords:
                 hint = did_you_mean(key, eom.coords)
                 raise UsageError(f"unknown coordinate {key!r}" + (f"; {hint}" if hint else ""))
-            if m:
+            if speed:
                 if float(v) != 0.0:
                     _refuse_motion(eom, f"the state given has der({key}) = {float(v):g}")
                 continue
@@ -71,8 +74,6 @@ def rest_state(eom, con, at, q0, pv, t):
     if isinstance(at, str):
         s = at.strip()
         if s == "start":
-            from ..dae import initialize
-
             rep = initialize(eom, t=t, p=pv)
             if np.max(np.abs(rep.qd), initial=0.0) > 0:
                 _refuse_motion(eom, f"'{eom.name}' is in motion at its start values")
@@ -101,9 +102,6 @@ def _continued(eom, q_from, q_to, fixed, t, pv, step: float = 0.25):
 
 def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
     """The reduced linear model (see the module docstring) as a :class:`Linearization`."""
-    from .equilibrium import Equilibrium
-    from .linearize import Linearization, _inputs, declared_inputs, nearest_equilibrium
-
     n = eom.n
     q0 = con.q_start
     notes = list(con.notes)
@@ -125,7 +123,6 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
         q, t = rest_state(eom, con, at, q0, pv, t)
         M, bias = pt.M_bias(q, np.zeros(n), t, pv)
         acc, lam = rest_multipliers(con, q, 0.5 * (M + M.T), bias)
-        from .core import structure
 
         if np.max(np.abs(M @ acc), initial=0.0) <= 1e-8 * max(structure(eom, pv).force_scale, 1e-300):
             kind, acc = "equilibrium", np.zeros(n)
@@ -146,8 +143,6 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
                      "along an orthonormal basis of the tangent space")
     Mr, Cr, Kr = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ Kfull @ Z
     k = Z.shape[1]
-    from .equilibrium import singular_mass
-    from .matrices import singular_mass_error
 
     if k and singular_mass(Mr):
         w, V = np.linalg.eigh(0.5 * (Mr + Mr.T))
@@ -156,7 +151,7 @@ def linearize_constrained(eom, con, at, inputs, pv, t, guesses):
     if inputs is None:
         inputs = declared_inputs(eom)
     _check_inputs(eom, inputs)
-    in_names, Bq = _inputs(eom, inputs, q, np.zeros(n), t, pv)
+    in_names, Bq = input_columns(eom, inputs, q, np.zeros(n), t, pv)
     Bqr = Z.T @ Bq
     B = np.vstack([np.zeros((k, Bqr.shape[1])), np.linalg.solve(Mr, Bqr)]) if k else np.zeros((0, Bqr.shape[1]))
     return Linearization(coords=tuple(eom.coords), M=Mr, C=Cr, K=Kr, A=A, B=B, Bq=Bqr, inputs=in_names,

@@ -23,6 +23,7 @@ import numpy as np
 
 from .core import N_PROBE, Probe, dense, null_space
 
+
 MAX_COORDS = 15
 REL = 1e-9          # "identically zero", relative to the size of the stacked rows (as for translations)
 

@@ -35,6 +35,9 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from .core import dense, param_vector, parts, require_ode, structure, wrap_angle
 from .equilibrium import levenberg_marquardt
+from .integrals import first_integrals
+from ..model.names import split_state
+
 
 MAX_GUESSES = 400
 LM_ITERATIONS = 60        # runs that run away (an orbit's radius to infinity) stop early
@@ -208,7 +211,6 @@ def _ignorable(eom, pv, ignorable) -> tuple[str, ...]:
                 hint = did_you_mean(c, eom.coords)
                 raise UsageError(f"'{c}' is not a coordinate of {eom.name}" + (f"; {hint}" if hint else ""))
         return names
-    from .integrals import first_integrals
 
     names = tuple(fi.coordinate for fi in first_integrals(eom, pv) if fi.kind == "momentum" and fi.coordinate)
     if not names:
@@ -230,8 +232,8 @@ def _pins(eom, pins, ign, r_idx) -> dict:
         if name not in allowed:
             hint = did_you_mean(name, allowed)
             raise UsageError(f"cannot pin '{name}': pins are {', '.join(allowed)}" + (f"; {hint}" if hint else ""))
-        if name.startswith("der("):
-            out[name] = ("speed", eom.coords.index(name[4:-1]))
+        if split_state(name)[1]:
+            out[name] = ("speed", eom.coords.index(split_state(name)[0]))
         elif name.startswith("p_") and name[2:] in ign:
             out[name] = ("momentum", eom.coords.index(name[2:]))
         else:

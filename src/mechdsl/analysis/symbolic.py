@@ -19,6 +19,9 @@ from fractions import Fraction
 
 import numpy as np
 
+from ..eom import fold_inputs
+from ..model import ir
+from ..model.exprs import to_sympy
 
 
 class Untranslatable(Exception):
@@ -179,7 +182,6 @@ def make_symbols(coords, params):
 def from_eom(eom) -> SymbolicLagrangian:
     import casadi as ca
 
-    from ..eom import fold_inputs
 
     eom = fold_inputs(eom)          # inputs appear as symbols, like parameters (F in Q of the cart-pole)
     q, qd, t, p = make_symbols(eom.coords, eom.params)
@@ -191,8 +193,6 @@ def from_eom(eom) -> SymbolicLagrangian:
 
 def equation_layer_only(model) -> bool:
     """True when the model is written with T, V, D, Q only (no bodies, joints or other forces)."""
-    from ..model import ir
-
     return (not model.bodies and not model.joints and not model.constraints
             and all(isinstance(f, ir.GeneralizedForce) for f in model.forces))
 
@@ -201,8 +201,6 @@ def from_model(model) -> SymbolicLagrangian:
     """T, V, D, Q of an equation-layer ir.Model through exprs.to_sympy (independent of CasADi)."""
     import sympy as sp
 
-    from ..model import ir
-    from ..model.exprs import to_sympy
 
     if not equation_layer_only(model):
         raise Untranslatable("the ir route covers equation-layer models (T, V, D, Q) only")

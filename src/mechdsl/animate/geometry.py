@@ -5,30 +5,39 @@ A :class:`Geometry` lists drawables (``Item``), each owning a few columns of the
 of world points the Function returns:
 
     rod       2 columns: its ends (centre -+ L/2 axis)              -> a thick bar
-    disk, cylinder, box   rim / corner samples in body axes         -> the filled outline (hull)
+    solid     outline samples in body axes (disk, cylinder, box)   -> the filled outline (hull)
+    ellipsoid 4 columns: the centre and the ends of the three semi-axes (the equivalent
+              ellipsoid of a general body's inertia)               -> its exact projected ellipse
     sphere    1 column, its centre; ``radius``                      -> a circle
-    point     1 column (a point mass, a body without a shape, a contact point with a radius)
+    point     1 column (a point mass, a body with no shape or inertia, a contact point with a radius)
+    link      2 columns: a general body's frame origin and its centre of mass
     spring, damper   2 columns: the end points                      -> zig-zag / piston
     arm       2 columns: a joint's point on a shapeless body and the body (a massless string or rod)
     pin       1 column: a hinge's point (``ground`` when on the world)
     rail      1 column: a slider's moving point; its guide is drawn along its path
+    hoop      a closed circle of samples fixed on a moving frame: the guide of a point mass
+              hinged to that frame (the bead-on-hoop's hoop)
     plane     4 columns: a square patch of a contact plane          -> a line (2D) or patch (3D)
     ring      1 column + ``radius``: a spherical contact surface    -> a circle outline
     trace     1 column: a point whose path is drawn
 
-Shapes sit at the body's centre of mass, oriented by ``ir.Body.axis`` (docs/animate.md).
+The Function's second output places every body that carries a solid or a hoop (``posed``):
+its frame origin and rotation matrix (12 rows a body), for the interactive 3-D view.  A body's
+own shape sits at its centre of mass, oriented by ``ir.Body.axis``; ``Shape`` components
+(``ir.Model.shapes``) sit where they are placed, on bodies, moving frames or the world
+(:mod:`.shapes`, docs/animate.md); ``up`` is against gravity (:mod:`.camera`).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..model import ir
 from ..diagnostics import UsageError, did_you_mean
+from .camera import gravity_up
+from .shapes import body_solids, circle_samples, circle_through, outline_samples, shape_solid
 
-RIM = 24                      # samples on a disk's rim
 PINNED = ("revolute", "spherical", "cylindrical", "universal")   # joints drawn as pins
 
 
@@ -45,9 +54,11 @@ class Item:
 @dataclass
 class Geometry:
     items: list[Item]
-    function: object               # casadi Function (t, q, p) -> X (3, K)
+    function: object               # casadi Function (t, q, p) -> X (3, K), P (12, B)
     anchors: list[int]             # columns that move with the mechanism (plane detection)
     p: np.ndarray
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    posed: list[str] = field(default_factory=list)     # bodies whose pose is the second output
 
     @property
     def empty(self) -> bool:
@@ -61,15 +72,23 @@ class Geometry:
         if n == 0:
             return np.zeros((0, 3, k))
         f = self.function.map(n)
-        X = np.array(f(t[None, :], np.asarray(Q, float).T, self.p))      # (3, K n): frame blocks side by side
+        X = np.array(f(t[None, :], np.asarray(Q, float).T, self.p)[0])   # (3, K n): frame blocks side by side
         return np.transpose(X.reshape(3, n, k), (1, 0, 2))
+
+    def poses(self, t: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Frame origins (N, B, 3) and rotation matrices (N, B, 3, 3) of the ``posed`` bodies."""
+        t = np.asarray(t, float).ravel()
+        n, b = len(t), len(self.posed)
+        if n == 0 or b == 0:
+            return np.zeros((n, b, 3)), np.zeros((n, b, 3, 3))
+        out = np.array(self.function.map(n)(t[None, :], np.asarray(Q, float).T, self.p)[1])   # (12, B n)
+        P = np.transpose(out.reshape(12, n, b), (1, 2, 0))                                # (N, B, 12)
+        return P[:, :, :3], np.transpose(P[:, :, 3:].reshape(n, b, 3, 3), (0, 1, 3, 2))     # R stored by columns
 
 
 def build(eom, p=None, traces=()) -> Geometry:
     """The drawables of ``eom.model`` and the one Function that places them."""
     import casadi as ca
-
-    from ..impacts.gaps import _env
 
     model: ir.Model = eom.model
     p = np.asarray(eom.param_values if p is None else p, float).ravel()
@@ -95,41 +114,82 @@ def build(eom, p=None, traces=()) -> Geometry:
     if not has_points:
         return Geometry([], None, [], p)
     contact_radius = _contact_radii(model, num)
-    rot = eom.body_rotation
+    up = gravity_up([[num(c) for c in f.g] for f in model.forces if isinstance(f, ir.Gravity)])
+    rot = eom.body_rotation or (lambda name: ca.SX.eye(3))
+    posed: list[str] = []
+    poses: list = []
+
+    def pose(body: str):
+        if body not in posed:
+            posed.append(body)
+            poses.append(ca.vertcat(ca.reshape(eom.point_position(body), 3, 1), ca.reshape(rot(body), 9, 1)))
+
+    shapes = tuple(getattr(model, "shapes", ()))
+
+    def add_solid(body: str, solid, world, moving: bool = True) -> None:
+        """One drawable for a solid of ``body`` (body axes -> world by ``world``)."""
+        if solid.kind == "rod":
+            h = 0.5 * solid.size[0] * solid.rot[:, 2]
+            add("rod", body, [world(solid.center - h), world(solid.center + h)], anchor=moving, body=body,
+                extra={"solid": solid})
+        elif solid.kind == "sphere":
+            add("sphere", body, [world(solid.center)], anchor=moving, radius=solid.size[0], body=body,
+                extra={"solid": solid})
+        elif solid.kind == "ellipsoid":
+            tips = [solid.center + solid.rot[:, i] * solid.size[i] for i in range(3)]
+            add("ellipsoid", body, [world(solid.center)] + [world(r) for r in tips], anchor=False, body=body,
+                extra={"solid": solid})
+            if moving:
+                anchors.append(len(cols) - 4)                    # the centre moves with the mechanism
+        else:
+            add("solid", body, [world(r) for r in outline_samples(solid)], anchor=False, body=body,
+                extra={"solid": solid})
+
     for b in model.bodies:
         if b.kind in ("world", "frame"):
             continue
         o = ca.reshape(eom.point_position(b.name), 3, 1)
-        R = rot(b.name) if rot is not None else ca.SX.eye(3)
-        com = ca.vertcat(*[env.translate(c) for c in b.com])
-        axis = np.array([num(a) for a in b.axis])
-        axis = axis / (np.linalg.norm(axis) or 1.0)
-        size = [num(s) for s in b.shape_size]
-        world = lambda r: o + ca.mtimes(R, com + ca.DM(r))  # noqa: E731
-        if b.shape == "rod" and size:
-            h = 0.5 * size[0] * axis
-            add("rod", b.name, [world(-h), world(h)], body=b.name)
-        elif b.shape in ("disk", "cylinder", "box") and size:
-            local = _samples(b.shape, size, axis)
-            add("solid", b.name, [world(r) for r in local], anchor=False, body=b.name)
-            anchors.append(len(cols))
-            add("point", b.name + ".com", [world(np.zeros(3))], body=b.name, radius=0.0,
-                extra={"hidden": True})
-        elif b.shape == "sphere" and size:
-            add("sphere", b.name, [world(np.zeros(3))], radius=size[0], body=b.name)
-        else:
+        R = rot(b.name)
+        world = lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r))  # noqa: E731   body axes -> world
+        solids = body_solids(b, shapes, num)
+        com = np.array([num(c) for c in b.com])
+        if solids:
+            pose(b.name)
+        for solid in solids:
+            add_solid(b.name, solid, world)
+        if any(s.kind in ("box", "disk", "cylinder") for s in solids):   # (an outline is not an anchor)
+            add("point", b.name + ".com", [world(com)], body=b.name, radius=0.0, extra={"hidden": True})
+        if not solids:
             r = contact_radius.get(b.name, 0.0)
-            kind = "sphere" if r > 0 else "point"
-            add(kind, b.name, [world(np.zeros(3))], radius=r, body=b.name)
-            if b.kind == "rigid" and not b.shape:          # a general body: its frame to its centre
-                add("link", b.name + ".frame", [o, world(np.zeros(3))], body=b.name)
+            add("sphere" if r > 0 else "point", b.name, [world(com)], radius=r, body=b.name)
+        drawn = b.shape or any(sh.body == b.name for sh in shapes)
+        if b.kind == "rigid" and not drawn and np.linalg.norm(com) > 0:   # a general body: its frame to its centre
+            add("link", b.name + ".frame", [o, world(com)], body=b.name)
+    frames = ["world"] + [b.name for b in model.bodies if b.kind == "frame"]
+    for name in frames:                          # shapes on the world (fixed) and on moving frames
+        placed = [s for s in (shape_solid(sh, num) for sh in shapes if sh.body == name) if s is not None]
+        if not placed:
+            continue
+        pose(name)
+        o = ca.reshape(eom.point_position(name), 3, 1)
+        R = rot(name)
+        for solid in placed:
+            add_solid(name, solid, lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r)), moving=name != "world")
     for f in model.forces:
         if isinstance(f, ir.SpringDamper):
             add("damper" if f.kind == "damper" else "spring", f.name,
                 [eom.point_position(f.a), eom.point_position(f.b)])
-    shaped = {b.name for b in model.bodies if b.shape}
+    shaped = {b.name for b in model.bodies if b.shape} | {sh.body for sh in shapes}
+    hoops = _hoops(model, eom, p)
     for j in model.joints:
-        if j.child != j.child_body and j.child_body not in shaped:     # a massless arm to the body
+        if j.name in hoops:
+            centre, normal, radius = hoops[j.name]
+            o = ca.reshape(eom.point_position(j.parent_body), 3, 1)
+            R = rot(j.parent_body)
+            pose(j.parent_body)
+            add("hoop", j.name, [o + ca.mtimes(R, ca.DM(r)) for r in circle_samples(centre, normal, radius)],
+                anchor=False, body=j.parent_body, radius=radius, extra={"center": centre, "normal": normal})
+        elif j.child != j.child_body and j.child_body not in shaped:     # a massless arm to the body
             add("arm", j.name, [eom.point_position(j.child), eom.point_position(j.child_body)])
         if j.kind in PINNED:
             add("pin", j.name, [eom.point_position(j.parent)], extra={"ground": j.parent_body == "world"})
@@ -146,10 +206,56 @@ def build(eom, p=None, traces=()) -> Geometry:
                                                           + (", ..." if len(known) > 12 else "") + ")"))
         add("trace", name, [eom.point_position(name)])
     if not cols:
-        return Geometry([], None, [], p)
+        return Geometry([], None, [], p, up)
     X = ca.horzcat(*[ca.reshape(c, 3, 1) for c in cols])
-    fn = ca.Function("draw", [eom.t, eom.q, eom.p], [X], ["t", "q", "p"], ["X"])
-    return Geometry(items, fn, anchors, p)
+    P = ca.horzcat(*poses) if poses else ca.SX.zeros(12, 0)
+    fn = ca.Function("draw", [eom.t, eom.q, eom.p], [X, P], ["t", "q", "p"], ["X", "P"])
+    return Geometry(items, fn, anchors, p, up, posed)
+
+
+def _env(eom):
+    """Translation of sizes, normals and offsets (parameters, positions of points) to CasADi.
+    (Not impacts.gaps._env: importing the impacts package costs seconds of scipy.optimize.)"""
+    from ..model import exprs as X
+
+    def query(n):
+        if isinstance(n, ir.PointPos):
+            return eom.point_position(n.point)[n.i]
+        raise ValueError(f"{X.to_text(n)} cannot size a drawing (positions only)")
+
+    return X.CasadiEnv(tuple(eom.coords), tuple(eom.params), eom.q, eom.qd, eom.t, eom.p, query)
+
+
+def _hoops(model, eom, p) -> dict[str, tuple]:
+    """Hinges that hold a point mass on a circle carried by a moving frame (a bead on a hoop):
+    joint name -> (centre, normal, radius) of the circle in the frame's axes.  Found from the
+    mass's position in the frame at three values of the hinge's coordinate, so it needs no
+    convention of the joint's axes; hinges on the world or on bodies keep their arm (a pendulum)."""
+    import casadi as ca
+
+    found: dict[str, tuple] = {}
+    kinds = {b.name: b.kind for b in model.bodies}
+    coords = list(eom.coords)
+    for j in model.joints:
+        if j.kind != "revolute" or kinds.get(j.parent_body) != "frame" or kinds.get(j.child_body) != "point":
+            continue
+        var = next((v.coordinate for v in j.variables if v.coordinate in coords), None)
+        if var is None or eom.body_rotation is None:
+            continue
+        rel = ca.mtimes(eom.body_rotation(j.parent_body).T,
+                        ca.reshape(eom.point_position(j.child_body) - eom.point_position(j.parent_body), 3, 1))
+        f = ca.Function("rel", [eom.t, eom.q, eom.p], [rel])
+        q0 = np.asarray(eom.start()[0], float)
+        i = coords.index(var)
+        pts = []
+        for k in range(3):
+            q = q0.copy()
+            q[i] += 2 * np.pi * k / 3
+            pts.append(np.array(f(0.0, q, p)).ravel())
+        circle = circle_through(*pts)
+        if circle is not None and circle[2] > 0:
+            found[j.name] = circle
+    return found
 
 
 def _contact_radii(model, num) -> dict[str, float]:
@@ -194,20 +300,3 @@ def _contact_items(c, eom, env, num, add) -> None:
         return
     center = c.get("center") or "world"
     add("ring", c.name, [eom.point_position(center)], anchor=False, radius=num(c.get("surface_radius") or 0.0))
-
-
-def _samples(shape: str, size: list[float], axis: np.ndarray) -> list[np.ndarray]:
-    """Body-axes points whose projected hull outlines the shape (centred at the centre of mass)."""
-    if shape == "box":
-        lx, ly, lz = (size + [size[-1]] * 3)[:3]
-        return [np.array([sx * lx, sy * ly, sz * lz]) / 2 for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]
-    u = np.cross(axis, [0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.cross(axis, [1.0, 0.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
-    R = size[0]
-    angles = [2 * math.pi * k / RIM for k in range(RIM)]
-    rim = [R * (math.cos(a) * u + math.sin(a) * v) for a in angles]
-    if shape == "disk":
-        return rim
-    h = 0.5 * (size[1] if len(size) > 1 else R) * axis
-    return [r - h for r in rim] + [r + h for r in rim]

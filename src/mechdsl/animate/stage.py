@@ -3,8 +3,8 @@ by :meth:`Stage.frame`.  Static parts (ground, rails, contact planes, the scale 
 once; the moving artists are blitted onto that background, so a frame costs only them.
 
 Views: ``xy``, ``xz``, ``yz`` (orthographic, 2D) and ``3d`` (an orthographic projection seen
-from azimuth 35 deg, elevation 20 deg, y up); ``auto`` picks the plane in which every moving
-point stays, else ``3d``.
+from azimuth 35 deg, elevation 20 deg about the up direction); ``auto`` picks the plane in which
+every moving point stays, else ``3d``.  Up is against gravity unless given (:mod:`.camera`).
 """
 from __future__ import annotations
 
@@ -13,26 +13,19 @@ import math
 import numpy as np
 
 from ..diagnostics import UsageError
+from .camera import DEFAULT_UP, screen_axes, up_label
 
 VIEWS = ("auto", "xy", "xz", "yz", "3d")
-_PLANES = {"xy": ((1, 0, 0), (0, 1, 0)), "xz": ((1, 0, 0), (0, 0, 1)), "yz": ((0, 1, 0), (0, 0, 1))}
-AZIMUTH, ELEVATION = math.radians(35.0), math.radians(20.0)
 INK = "#222222"
 FLASH = "#ff7f0e"                 # an impact
 TRACE = "#d62728"                 # the path of a traced point
 
 
-def projection(view: str) -> np.ndarray:
-    """(2, 3) matrix: world -> screen coordinates for a view."""
-    if view in _PLANES:
-        return np.array(_PLANES[view], float)
-    if view != "3d":
+def projection(view: str, up=DEFAULT_UP) -> np.ndarray:
+    """(2, 3) matrix: world -> screen coordinates for a view with the given up direction."""
+    if view not in VIEWS or view == "auto":
         raise UsageError(f"unknown view '{view}' (views: {', '.join(VIEWS)})")
-    d = np.array([math.sin(AZIMUTH) * math.cos(ELEVATION), math.sin(ELEVATION),
-                  math.cos(AZIMUTH) * math.cos(ELEVATION)])
-    right = np.cross([0.0, 1.0, 0.0], d)
-    right /= np.linalg.norm(right)
-    return np.array([right, np.cross(d, right)])
+    return screen_axes(view, up)[:2]
 
 
 def detect_view(X: np.ndarray, anchors: list[int]) -> str:
@@ -46,6 +39,24 @@ def detect_view(X: np.ndarray, anchors: list[int]) -> str:
         if spread[normal] <= tol:
             return view
     return "3d"
+
+
+BODY_KINDS = ("rod", "solid", "ellipsoid", "sphere", "point", "link")
+
+
+GROUND = "#b0b0b0"                # shapes fixed on the world
+
+
+def body_colours(geometry) -> dict[str, str]:
+    """One colour per drawn body (its solids, dot and frame link share it), in order of drawing;
+    shapes on the world are grey."""
+    from ..output.plot import colours
+
+    names: list[str] = []
+    for it in geometry.items:
+        if it.kind in BODY_KINDS and not it.extra.get("hidden") and it.body not in names and it.body != "world":
+            names.append(it.body)
+    return dict(zip(names, colours(len(names)))) | {"world": GROUND}
 
 
 def check_view(view: str) -> str:
@@ -88,15 +99,16 @@ class Blitted:
 class Stage(Blitted):
     """A Figure and its artists for frames k = 0..n_frames-1 of positions X (N, 3, K)."""
 
-    def __init__(self, geometry, t, X, *, view="auto", events=(), title="", size=(480, 400), dpi=80):
+    def __init__(self, geometry, t, X, *, view="auto", up=None, events=(), title="", size=(480, 400), dpi=80):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from ..output.plot import colours, new_figure
+        from ..output.plot import new_figure
 
         check_view(view)
         self.view = detect_view(X, geometry.anchors) if view == "auto" else view
         self.t = np.asarray(t, float)
         self.geometry = geometry
-        P = projection(self.view)
+        self.up = np.asarray(geometry.up if up is None else up, float)
+        self.P = P = projection(self.view, self.up)
         self.S = np.einsum("ij,njk->nik", P, X)              # (N, 2, K) screen coordinates
         self.depth = None
         if self.view == "3d":                                 # distance towards the viewer, in [0, 1]
@@ -110,19 +122,18 @@ class Stage(Blitted):
         self._limits(size)
         self.moving: list = []
         self.updaters: list = []
-        bodies = [it for it in geometry.items if it.kind in ("rod", "solid", "sphere", "point", "link")
-                  and not it.extra.get("hidden")]
-        palette = dict(zip([it.name for it in bodies], colours(len(bodies))))
-        self.swatch = list(palette.values()) + [INK, FLASH, TRACE, "#555555", "#ffffff"]
+        palette = body_colours(geometry)
+        self.swatch = list(palette.values()) + [INK, FLASH, TRACE, "#555555", "#999999", "#ffffff"]
         for it in geometry.items:
-            getattr(self, "_add_" + it.kind)(it, palette.get(it.name, INK))
+            colour = palette.get(it.body, INK) if it.kind in BODY_KINDS else INK
+            getattr(self, "_add_" + it.kind)(it, colour)
         self._impacts(events)
         self.clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", ha="left", fontsize=11,
                              family="monospace", color=INK, animated=True)
         self.moving.append(self.clock)
         if title:
             ax.text(0.5, 0.97, title, transform=ax.transAxes, va="top", ha="center", fontsize=10, color="#555555")
-        ax.text(0.98, 0.97, f"view {self.view}", transform=ax.transAxes, va="top", ha="right", fontsize=8,
+        ax.text(0.98, 0.97, f"view {self.view}, {up_label(self.up)} up", transform=ax.transAxes, va="top", ha="right", fontsize=8,
                 color="#777777")
         self._scale_bar()
         if self.view == "3d":
@@ -242,6 +253,25 @@ class Stage(Blitted):
         pts = self.S[:, :, it.cols]
         self.updaters.append(lambda k: poly.set_xy(_hull(pts[k].T)))
 
+    def _add_ellipsoid(self, it, colour):
+        from matplotlib.patches import Polygon
+
+        # translucent: it stands for the inertia, not the body's form (its frame link shows through)
+        poly = Polygon(np.zeros((3, 2)), closed=True, facecolor=colour, alpha=0.45, edgecolor=INK, lw=1, zorder=2,
+                       animated=True)
+        self.ax.add_patch(poly)
+        self.moving.append(poly)
+        self._by_depth(poly, it)
+        S = self.S[:, :, it.cols]
+        outline = ellipse_outline(S)
+        axes = self._line(color=INK, lw=0.8, zorder=2)         # its principal axes: the spin shows
+        self._by_depth(axes, it)
+        c, tips = S[:, :, :1], S[:, :, 1:]
+        nan = np.full_like(c, np.nan)
+        path = np.concatenate([np.concatenate([2 * c - tips[:, :, i:i + 1], tips[:, :, i:i + 1], nan], axis=2)
+                               for i in range(3)], axis=2)
+        self.updaters.append(lambda k: (poly.set_xy(outline[k]), axes.set_data(path[k, 0], path[k, 1])))
+
     def _add_spring(self, it, colour, damper=False):
         ln = self._line(color="#555555", lw=1.5, zorder=2)
         pts = self.S[:, :, it.cols]
@@ -273,7 +303,7 @@ class Stage(Blitted):
         self.ax.plot([lo[0] - d[0], hi[0] + d[0]], [lo[1] - d[1], hi[1] + d[1]], color="#aaaaaa", lw=3, zorder=1)
 
     def _add_plane(self, it, colour):
-        P = projection(self.view)
+        P = self.P
         n2 = P @ it.extra["normal"]
         base = P @ it.extra["base"]
         L = 2.0 * self.extent
@@ -302,6 +332,11 @@ class Stage(Blitted):
         self.moving.append(c)
         pts = self.S[:, :, it.cols.start]
         self.updaters.append(lambda k: c.set_center((pts[k, 0], pts[k, 1])))
+
+    def _add_hoop(self, it, colour):
+        ln = self._line(color="#999999", lw=2, zorder=1)
+        pts = self.S[:, :, it.cols]
+        self.updaters.append(lambda k: ln.set_data(pts[k, 0], pts[k, 1]))
 
     def _add_trace(self, it, colour):
         ln = self._line(color=TRACE, lw=1, zorder=2)
@@ -335,6 +370,23 @@ class Stage(Blitted):
                 ln.set_data([], [])
                 word.set_text("")
         self.updaters.append(update)
+
+
+def ellipse_outline(S: np.ndarray, n: int = 64) -> np.ndarray:
+    """The projected outline of an ellipsoid from its screen centre and semi-axis ends
+    (N, 2, 4): the image of the unit ball under W = [w1 w2 w3] is the ellipse c + L u, |u| = 1,
+    with L L^T = W W^T (a 2x2 Cholesky factor).  Returns (N, n, 2)."""
+    c = S[:, :, 0]
+    W = S[:, :, 1:] - c[:, :, None]
+    M = np.einsum("nik,njk->nij", W, W)
+    l11 = np.sqrt(np.maximum(M[:, 0, 0], 0.0))
+    l21 = np.divide(M[:, 1, 0], l11, out=np.zeros_like(l11), where=l11 > 0)
+    l22 = np.sqrt(np.maximum(M[:, 1, 1] - l21 ** 2, 0.0))
+    a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    u, v = np.cos(a), np.sin(a)
+    x = c[:, 0, None] + l11[:, None] * u[None, :]
+    y = c[:, 1, None] + l21[:, None] * u[None, :] + l22[:, None] * v[None, :]
+    return np.stack([x, y], axis=2)
 
 
 def _hull(p: np.ndarray) -> np.ndarray:

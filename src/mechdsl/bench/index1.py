@@ -2,7 +2,7 @@
 
     M q'' + G^T lambda = bias,   G q'' = gamma - 2 alpha gdot - beta^2 g      (x = [q; q'])
 
-built from ``mechdsl.dae.system.ConstrainedSystem`` (the same equilibrated KKT solve the
+built from ``mechdsl.dae.constrained_system.ConstrainedSystem`` (the same equilibrated KKT solve the
 ``baumgarte`` formulation integrates) and handed to ``mechdsl.simulate`` as the ``ode``
 Function of the model without constraints, so that any ODE method runs on it: scipy's
 DOP853, erk, rk, ... .  Benchmark-only (formulation ``index1-ode`` of ``mech bench``): the
@@ -26,13 +26,15 @@ def simulate_index1(eom, t_end, *, method, baumgarte=None, constraints="independ
     constraint the KKT matrix is singular)."""
     import casadi as ca
 
-    from ..simulate import parameter_vector, simulate, start_vector
+    from ..eom import parameter_vector
+    from ..simulate import simulate
+    from ..eom.start import start_vector
 
     if eom.g is None:
         raise UsageError(f"formulation {FORMULATION!r} needs a model with constraints")
     try:
         from ..dae.dof import dof_report
-        from ..dae.system import ConstrainedSystem
+        from ..dae.constrained_system import ConstrainedSystem
     except ImportError:
         raise UsageError(f"formulation {FORMULATION!r} needs mechdsl.dae, which this build lacks") from None
     if method not in _ode_methods():
@@ -89,12 +91,12 @@ def _rates(b):
 
 
 def _ode_methods():
-    from ..integrators import METHODS
+    from ..simulation.registry import ode_methods
 
-    return tuple(METHODS)
+    return ode_methods()
 
 
 def _no_jacobian():
-    from ..integrators import NO_JACOBIAN
+    from ..simulation.registry import METHODS
 
-    return NO_JACOBIAN
+    return tuple(m.name for m in METHODS.values() if not m.needs_jacobian)

@@ -159,7 +159,9 @@ def classify_setup(setup: Setup) -> str:
     if eom.n == 0:
         return "ode"
     from ..eom.codegen import casadi_functions
-    from ..simulate import choose_method, parameter_vector, start_vector
+    from ..eom import parameter_vector
+    from ..simulation.choose import choose_method
+    from ..eom.start import start_vector
 
     pv = parameter_vector(eom, setup.p)
     xs = start_vector(eom, setup.x0, pv)
@@ -174,7 +176,9 @@ def symplectic_dt(setup: Setup, method: str, tol: float, points: int) -> float:
     method's order; then shortened so that a whole number of steps falls in every output
     interval (the recorded times are then the output grid)."""
     from ..eom.codegen import casadi_functions
-    from ..simulate import fixed_step_count, parameter_vector, start_vector
+    from ..eom import parameter_vector
+    from ..simulation.choose import fixed_step_count
+    from ..eom.start import start_vector
 
     order = SYMPLECTIC_ORDER[method]
     eom = setup.eom
@@ -363,7 +367,7 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
     seconds of all runs beyond which the remaining ones are skipped (None: no limit);
     stop_after: CPU seconds after which one run is stopped where the simulator reports
     progress (its row is skipped, and so are its variant's tighter tolerances)."""
-    from ..simulate import is_conservative
+    from ..simulation.monitors import is_conservative
 
     if repeats < 1:
         raise UsageError("repeats must be at least 1")
@@ -445,7 +449,7 @@ def one_line(row: Row) -> str:
 def machine() -> dict[str, Any]:
     import os
 
-    from ..simulate import versions
+    from ..output.result import versions
 
     return {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
             "cpus": os.cpu_count(), "load_average": _load(), "versions": versions()}

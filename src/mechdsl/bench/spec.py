@@ -21,12 +21,14 @@ import re
 from dataclasses import dataclass
 
 from ..diagnostics import UsageError
+from ..simulation.registry import SPECS
 
 DEFAULT_TOLERANCES = "1e-2..1e-12"
 DEFAULT_ODE_METHODS = ("erk", "cvodes-adams", "cvodes-bdf", "scipy-dop853")
 # methods whose step is fixed: the tolerance of the sweep sets their step (see step_for)
-SYMPLECTIC_ORDER = {"stormer-verlet": 2, "implicit-midpoint": 2, "gauss-legendre": 4,
-                    "rk4": 4}   # fixed-step methods in canonical variables (rk4: not symplectic)
+# fixed-step methods in canonical variables (rk4: not symplectic; rattle: stormer-verlet of a
+# constrained model) and their orders, from the method registry
+SYMPLECTIC_ORDER = {m.name: m.order for m in SPECS if m.family == "canonical" and m.name != "rattle"}
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -47,7 +47,6 @@ def add_parser(sub):
     p.add_argument("-o", "--output", metavar="DIR", help="write bench.csv, bench.json, work_precision.png/.svg here")
     p.add_argument("--no-chart", action="store_true", help="write no chart")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return p
 
 
@@ -58,7 +57,7 @@ def default_methods(kind: str) -> list[str]:
         return ["cvodes-bdf", "rosenbrock", "scipy-radau", "erk"]
     if kind == "dae":
         try:
-            from ..dae import FORMULATIONS
+            from ..dae.dae_run import FORMULATIONS
         except ImportError:
             FORMULATIONS = ("projection", "ggl", "baumgarte", "partitioning")
         return [f"{f}+auto" for f in FORMULATIONS]
@@ -99,7 +98,7 @@ def run(args) -> int:
         from ..bench.spec import split_top
 
         ref_methods = split_top(args.reference_methods)
-    log = None if args.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
+    log = None if args.out.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
     from ..bench.runner import DEFAULT_BUDGET
 
     repeats = args.repeats or 3
@@ -135,13 +134,20 @@ def run(args) -> int:
 
     print()
     print("\n".join(fastest_lines(res)))
+    import json
+
+    from ..bench.report import to_json_text
+
+    args.out.set(target=target_line(args, model), **json.loads(to_json_text(res, None)))
     if out is not None:
         written = write_tables(res, out, overwrite=args.force)
         if not args.no_chart:
             written += write_chart(res, out, overwrite=args.force)
         for w in written:
             print(f"wrote {w}")
+        args.out.wrote(*written)
     if res.interrupted:
         print("mech: interrupted: the rows measured are kept (the others are 'skipped')", file=sys.stderr)
+        args.out.fail("interrupted", "interrupted: the rows measured are kept (the others are 'skipped')")
         return 130
     return 0

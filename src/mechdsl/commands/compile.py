@@ -43,21 +43,21 @@ def run(args) -> int:
         program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
         print(f"mech: {target_line(args, m)}", file=sys.stderr)
+        args.out.set(target=target_line(args, m), model=m.name)
         if args.emit == "model":
             text = dump_model(m.model)
         elif args.emit == "problem":
             from ..simulation import dump
 
-            t_end = args.t_end
-            if t_end is None and m.scene_settings.get("stop_time") is None:
-                t_end = 10.0
-            text = dump(m.problem(t_end=t_end))
+            text = dump(m.problem(t_end=args.t_end))      # none given: the scene's, else the default
         else:
             from ..eom.dump_eom import dump_eom
 
             text = dump_eom(m.eom)
+    args.out.set(emit=args.emit)
     if args.output:
         write_atomic(args.output, text, overwrite=args.force)
+        args.out.wrote(args.output)
     else:
-        sys.stdout.write(text)
+        args.out.product(text)
     return 0

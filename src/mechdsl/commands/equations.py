@@ -19,16 +19,18 @@ def add_parser(sub):
 def run(args) -> int:
     m = load_model(args)
     model = m.model
-    print(("% " if args.latex else "") + target_line(args, m))
+    out = args.out
+    head = ("% " if args.latex else "") + target_line(args, m) + "\n"
+    out.set(target=target_line(args, m), model=m.name, form="hamilton" if args.hamiltonian else "lagrange",
+            latex=bool(args.latex))
     if args.hamiltonian:
-        try:
-            from ..analysis.hamilton import format_hamiltonian
-        except ImportError:
-            print("note: Hamilton's equations are not available in this installation (mechdsl.analysis.hamilton)")
-            return 0
-        print(format_hamiltonian(model, latex=args.latex), end="")
-        return 0
-    from ..mechanics.printing import format_equations
+        from ..analysis.hamilton import format_hamiltonian
 
-    print(format_equations(model, latex=args.latex), end="")
+        text = format_hamiltonian(model, latex=args.latex)
+    else:
+        from ..mechanics.printing import format_equations
+
+        text = format_equations(model, latex=args.latex)
+    # the equations are the product (shown under -q too); the target line heads them
+    out.product(text if out.json else head + text)
     return 0

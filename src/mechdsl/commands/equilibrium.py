@@ -51,11 +51,14 @@ def run(args) -> int:
         return _steady(args, m, guesses)
     eqs = equilibria(m.eom, guesses or None, t=args.time)
     print(format_equilibria(m.name, m.eom.coords, eqs))
+    data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
+            "equilibria": [e.to_dict() for e in eqs]}
+    args.out.set(target=target_line(args, m), **data)
     if args.output:
-        data = {"generator": "mechdsl", "model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
-                "equilibria": [e.to_dict() for e in eqs]}
-        write_atomic(args.output, json.dumps(data, indent=2) + "\n", overwrite=args.force)
+        write_atomic(args.output, json.dumps({"generator": "mechdsl", **data}, indent=2) + "\n",
+                     overwrite=args.force)
         print(f"wrote {args.output}")
+        args.out.wrote(args.output)
     return 0
 
 
@@ -66,11 +69,13 @@ def _steady(args, m, guesses) -> int:
     pins = assignments(args.steady, "--steady")
     found = steady_motions(m.eom, pins, guesses=guesses or None, t=args.time)
     print(format_steady(m.name, pins, found))
+    data = {"model": m.name, "pins": pins, "count": len(found), "steady_motions": [s.to_dict() for s in found]}
+    args.out.set(target=target_line(args, m), **data)
     if args.output:
-        data = {"generator": "mechdsl", "model": m.name, "pins": pins, "count": len(found),
-                "steady_motions": [s.to_dict() for s in found]}
-        write_atomic(args.output, json.dumps(data, indent=2) + "\n", overwrite=args.force)
+        write_atomic(args.output, json.dumps({"generator": "mechdsl", **data}, indent=2) + "\n",
+                     overwrite=args.force)
         print(f"wrote {args.output}")
+        args.out.wrote(args.output)
     return 0
 
 

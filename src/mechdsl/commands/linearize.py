@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 
+from ..model.names import split_state
 from ._common import (
     add_cache_arg,
     add_force_arg,
@@ -61,17 +62,18 @@ def run(args) -> int:
         inputs = [s for item in args.inputs for s in item.split(",") if s.strip()]
     lin = linearize(m.eom, at=at, inputs=inputs, guesses=guesses)
     print(format_linearization(m.name, lin))
+    out = args.out
+    out.set(target=target_line(args, m), model=m.name, **lin.to_dict())
     if args.symbolic:
         print(format_symbolic(lin))
-    if args.output:
-        write_atomic(args.output, lin.to_json(), overwrite=args.force)
-        print(f"wrote {args.output}")
-    if args.csv:
-        lin.modes().write_csv(args.csv, overwrite=args.force)
-        print(f"wrote {args.csv}")
-    if args.plot:
-        lin.modes().plot(args.plot, title=f"{m.name}: mode shapes", overwrite=args.force)
-        print(f"wrote {args.plot}")
+    for path, write in ((args.output, lambda p: write_atomic(p, lin.to_json(), overwrite=args.force)),
+                        (args.csv, lambda p: lin.modes().write_csv(p, overwrite=args.force)),
+                        (args.plot, lambda p: lin.modes().plot(p, title=f"{m.name}: mode shapes",
+                                                               overwrite=args.force))):
+        if path:
+            write(path)
+            print(f"wrote {path}")
+            out.wrote(path)
     return 0
 
 
@@ -129,7 +131,7 @@ def format_symbolic(lin) -> str:
 
     s = lin.symbolic()
     out = [f"  symbolic (sympy, from T, V, D, Q via the {s.route} route), at "
-           + ", ".join(f"{k} = {text(v)}" for k, v in s.state.items() if not str(k).startswith("der(")
+           + ", ".join(f"{k} = {text(v)}" for k, v in s.state.items() if not split_state(str(k))[1]
                        and str(k) != "time")]
     for name, Mx in (("M", s.M), ("C", s.C), ("K", s.K)):
         out.append(f"    {name} = [" + "; ".join(", ".join(text(Mx[i, j]) for j in range(Mx.shape[1]))

@@ -5,6 +5,7 @@ import os
 import sys
 
 from ..diagnostics import UsageError
+from ..simulation.settings import DEFAULT_T_END
 from ._common import add_cache_arg, add_set_arg, add_target_args, load_model, number, target_line
 
 HELP = "simulate a model and write its results (CSV + JSON sidecar) and a plot"
@@ -56,15 +57,14 @@ def run(args) -> int:
         check_figure(args.plot, overwrite=args.force)
     model, x0 = load_model(args, starts_in_model=False)
     t_end = args.t_end
-    if t_end is None and model.scene_settings.get("stop_time") is None:
-        t_end = 10.0
-        print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
+    if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
+        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
     # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
     # caller (argument > scene > default), so CLI and API give the same run for the same scene
     interrupted = False
     try:
         r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
-                           progress=(not args.no_progress) and sys.stderr.isatty())
+                           progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty())
     except KeyboardInterrupt as e:
         # Ctrl-C: a back end that kept its results up to there (mechdsl.dae.RunInterrupted)
         # hands them over; they are written like a failed run's, and the exit code is 130
@@ -79,15 +79,43 @@ def run(args) -> int:
     written, lost = write_outputs(r, args.output, args.plot, args.force)
     print(summary(r, written))
     if r.events:
-        from ..impacts import print_events
+        from ..impacts import events_table
 
-        print_events(r)
+        sys.stdout.write(events_table(r.events))
+    out = args.out
+    out.set(**run_record(r))
+    out.wrote(*written)
+    for w in r.metadata.get("warnings", []):
+        out.warn(w, echo=False)                   # (the summary above shows them)
     for line in lost:
         print(f"mech: error: {line}", file=sys.stderr)
+        out.fail("output", line)
     if interrupted:
         print("mech: interrupted", file=sys.stderr)
+        out.fail("interrupted", f"interrupted at t = {r.t[-1]:.10g}" if len(r.t) else "interrupted")
         return 130
+    if r.failure is not None:
+        out.fail("simulation", str(r.failure))
     return 0 if r.success and not lost else 1
+
+
+def run_record(r) -> dict:
+    """The run for ``--json`` (docs/json.md, "simulate"): what ran, its statistics, its accuracy."""
+    m = r.metadata
+    accuracy = dict(m.get("accuracy") or {})
+    for key in ("energy_drift", "energy_drift_relative", "constraint_drift", "invariant_drift"):
+        if r.stats.get(key) is not None:
+            accuracy[key] = r.stats[key]
+    if m.get("error_estimate"):
+        accuracy["error_estimate"] = m["error_estimate"]
+    return {"target": m.get("target"), "model": m.get("model"), "scene": m.get("scene"),
+            "source": m.get("source"), "success": bool(r.success),
+            "failure": None if r.failure is None else {"time": r.failure.time, "cause": r.failure.cause,
+                                                       "detail": r.failure.detail},
+            "t_start": float(r.t[0]) if len(r.t) else None, "t_end": float(r.t[-1]) if len(r.t) else None,
+            "points": int(len(r.t)), "method": m.get("method"), "method_reason": m.get("method_reason"),
+            "run": m.get("run") or {}, "statistics": dict(r.stats), "accuracy": accuracy,
+            "notes": list(m.get("notes", [])), "columns": list(r.columns), "events": list(r.events)}
 
 
 def cli_settings(args) -> dict:

@@ -89,11 +89,13 @@ def run(args) -> int:
     if x0:
         raise UsageError("--set of start values is not available in a sweep: sweep them with --grid c.start=...")
     t_end = args.t_end
-    if t_end is None and model.scene_settings.get("stop_time") is None:
-        t_end = 10.0
-        print("mech: no --t-end and no scene stop_time: simulating 10 s", file=sys.stderr)
+    if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
+        from ..simulation.settings import DEFAULT_T_END
+
+        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
     ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=args.output, workers=args.workers,
-                     progress=(not args.no_progress) and sys.stderr.isatty(), overwrite=True, resume=args.resume,
+                     progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty(), overwrite=True,
+                     resume=args.resume,
                      rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
     written = [args.output] if args.output else []
     if args.output and args.output.endswith(".csv"):
@@ -105,10 +107,38 @@ def run(args) -> int:
 
         written.append(str(heat_map(ds, metric(ds, args.metric), args.metric, args.plot)))
     print(summary(ds, written))
+    out = args.out
+    out.wrote(*written)
+    out.set(**sweep_record(ds))
+    if int(ds.attrs.get("n_warnings", 0)):
+        out.warn(f"warnings in {ds.attrs['n_warnings']} runs; first: "
+                 + str(ds.attrs.get("warnings", "")).splitlines()[0], echo=False)
     if int(ds.attrs["interrupted"]):
         print("mech: interrupted", file=sys.stderr)
+        out.fail("interrupted", "interrupted: the finished runs are kept; the others are marked 'not run'")
         return 130
-    return 0 if int(ds.attrs["n_failed"]) == 0 else 1
+    if int(ds.attrs["n_failed"]):
+        out.fail("simulation", f"{int(ds.attrs['n_failed'])} run(s) failed")
+        return 1
+    return 0
+
+
+def sweep_record(ds) -> dict:
+    """The sweep for ``--json`` (docs/json.md, "sweep"): its settings, counts and failures by cause."""
+    import numpy as np
+
+    a = ds.attrs
+    ok = np.asarray(ds["success"].values, bool)
+    causes: dict[str, int] = {}
+    for c in np.asarray(ds["cause"].values)[~ok]:
+        causes[str(c)] = causes.get(str(c), 0) + 1
+    keep = ("model", "summary", "swept", "scheduler", "method", "method_note", "rtol", "atol", "t_start", "t_end",
+            "wall_time",
+            "n_runs", "n_failed", "n_warnings", "interrupted")
+    rec = {k: a[k] for k in keep if k in a}
+    rec.update(runs=int(ok.size), succeeded=int(ok.sum()), failed_by_cause=causes,
+               interrupted=bool(int(a.get("interrupted", 0))))
+    return rec
 
 
 SAMPLERS = (("uniform", "uniform"), ("normal", "normal"), ("sobol", "sobol"), ("latin_hypercube", "latin_hypercube"))

@@ -49,9 +49,12 @@ import math
 
 import numpy as np
 
+from ..diagnostics import Diagnostic, MechError
 from .baumgarte import _user_rates
+from .dof import short_list
 from .projection import ProjectionStepper
-from .stepper import GridIntegrators, Stepper, StepError, integrator_options, ode_plugin, scaled_dae
+from .segments import GridIntegrators, StepError, Stepper, integrator_options, ode_plugin, scaled_dae
+
 
 PENALTY = 1e8          # rho: penalty relative to the equilibrated mass matrix (cond(W) ~ rho)
 ITERATIONS = 4         # augmented Lagrangian iterations of the accelerations
@@ -220,9 +223,6 @@ CODE_LEADING = "E840"
 def check_leading(system, q, t, A) -> None:
     """E840 when M + G^T A G is singular at the start (coordinates without inertia that no
     constraint holds: the formulation would divide by zero where the KKT route does not)."""
-    from ..diagnostics import Diagnostic, MechError
-    from .dof import short_list
-
     W = system.M(q, t) + system.G(q, t).T @ (A[:, None] * system.G(q, t))
     d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(W)), 1e-300))
     w, V = np.linalg.eigh(d[:, None] * W * d[None, :])

@@ -26,18 +26,9 @@ import math
 
 import numpy as np
 
-from .stepper import (
-    GridIntegrators,
-    NonFiniteError,
-    Stepper,
-    StepError,
-    call_integrator,
-    chunk_span,
-    integrator_options,
-    ode_plugin,
-    scaled_dae,
-    state_names,
-)
+from .segments import (GridIntegrators, NonFiniteError, StepError, Stepper, call_integrator, chunk_span,
+                       integrator_options, ode_plugin, scaled_dae, state_names)
+
 
 RATE_FACTOR = 10.0
 

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..eom import EOM
-from .system import scale_jacobian
+from .constrained_system import scale_jacobian
+
 
 RANK_TOL = 1e-9   # singular values below RANK_TOL * largest count as zero (redundancy)
 

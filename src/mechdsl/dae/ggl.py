@@ -18,15 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .index import check_for_idas
-from .stepper import (
-    GridIntegrators,
-    Stepper,
-    StepError,
-    call_integrator,
-    chunk_span,
-    integrator_options,
-    scaled_dae,
-)
+from .segments import GridIntegrators, StepError, Stepper, call_integrator, chunk_span, integrator_options, scaled_dae
 
 
 def ggl_dae(system) -> dict:

@@ -14,11 +14,11 @@ index.  Rank decisions are made after Ruiz equilibration of dh/dz, so units do n
 """
 from __future__ import annotations
 
-from ..integrators import make_integrator
-
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
+from ..integrators import make_integrator
+
 
 CODE_INDEX = "E823"
 RANK_TOL = 1e-10

@@ -20,8 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..diagnostics import Diagnostic, MechError
+from ..diagnostics import Diagnostic, MechError, Span
 from ..eom import EOM
+from .dof import dof_report
+
 
 CODE_POSITION = "E821"
 CODE_VELOCITY = "E822"
@@ -99,8 +101,6 @@ def constraint_labels(eom: EOM) -> list[str]:
 
 def _span(eom: EOM, index: int):
     """Source span of constraint `index` (an explicit equation) or of its loop's joint."""
-    from ..diagnostics import Span
-
     if eom.model is None:
         return Span()
     name = eom.constraint_names[index]
@@ -268,8 +268,6 @@ def check_report(eom: EOM, p=None, t: float = 0.0) -> list[str]:
 
     Never raises for a model problem: an inconsistent start becomes an ``error:`` line.
     """
-    from .dof import dof_report
-
     try:
         init = initialize(eom, t=t, p=p)
         lines = dof_report(eom, init.q, t, p).lines()

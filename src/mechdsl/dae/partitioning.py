@@ -28,13 +28,12 @@ of G_v overshot three times the re-partition level.
 """
 from __future__ import annotations
 
-from ..integrators import make_integrator
-
 import numpy as np
 
+from ..integrators import make_integrator
+from .constrained_system import scale_jacobian
 from .dof import dependent_columns
-from .stepper import Stepper, StepError, build_timer, call_integrator, integrator_options, ode_plugin
-from .system import scale_jacobian
+from .segments import StepError, Stepper, build_timer, call_integrator, integrator_options, ode_plugin
 
 
 THETA_TARGET = 0.05   # aimed-for Newton contraction of the warm start at a sub-segment end

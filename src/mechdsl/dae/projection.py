@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from .baumgarte import BaumgarteStepper
-from .stepper import StepError
-from .system import kkt_solve
+from .constrained_system import kkt_solve
+from .segments import StepError
 
 
 def project_positions(system, q, t, tol: float, max_iter: int = 20) -> np.ndarray:

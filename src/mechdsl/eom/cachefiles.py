@@ -21,6 +21,16 @@ import stat
 import sys
 from pathlib import Path
 
+
+def cache_dir() -> Path:
+    """The cache root: $MECHDSL_CACHE, else $XDG_CACHE_HOME/mechdsl (~/.cache/mechdsl)."""
+    d = os.environ.get("MECHDSL_CACHE")
+    if d:
+        return Path(d)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "mechdsl"
+
+
 LOGGER = "mechdsl.cache"
 
 _WARNED: set = set()          # folders and entries already reported in this process
@@ -64,8 +74,6 @@ def trusted_folder(folder: Path, create: bool = False) -> bool:
 
 def folder_state(folder: Path, create: bool = False) -> str | None:
     """None when ``folder`` (and the cache root above it) may be used, else why not."""
-    from .codegen import cache_dir
-
     root = cache_dir()
     chain = [root] + ([folder] if folder != root else [])
     for d in chain:
@@ -190,22 +198,24 @@ def remove_stale_builds(folder: Path) -> None:
 
 
 def describe() -> None:
-    """DEBUG lines on the cache folders: where they are, whether they are used, and why not."""
-    from .codegen import cache_dir
+    """INFO lines (mech check -v) on the cache folders: where they are, whether they are used,
+    and why not."""
+    import logging
 
+    log = logging.getLogger(LOGGER)
     root = cache_dir()
     for d in (root, root / "models", root / "integrals"):
         try:
             st = os.lstat(d)
         except OSError:
-            _debug(f"cache folder {d}: not created yet")
+            log.info(f"cache folder {d}: not created yet")
             continue
         why = problem(st, "folder")
-        _debug(f"cache folder {d}: " + (f"not used: it {why}" if why else "used (yours, written by you alone)"))
+        log.info(f"cache folder {d}: " + (f"not used: it {why}" if why else "used (yours, written by you alone)"))
 
 
 def miss(kind: str, what: str, why: str) -> None:
-    """A cache miss and its reason (DEBUG: MECHDSL_DEBUG=1, mech check -v)."""
+    """A cache miss and its reason (DEBUG: MECHDSL_DEBUG=1 or -vv)."""
     _debug(f"{kind} cache: miss for {what}: {why}")
 
 

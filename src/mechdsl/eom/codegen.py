@@ -38,6 +38,7 @@ loop.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -45,10 +46,13 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
+from . import cachefiles
+from .cachefiles import cache_dir      # (also imported from here: mechdsl.eom.codegen.cache_dir)
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
             "start", "parameters", "singularity", "invariants")
 LINSOL = "qr"          # sparse Householder QR: backward stable, code-generatable
+log = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------- building
@@ -293,8 +297,14 @@ class FunctionSet(Mapping):
     """
 
     def __init__(self, eom, *, compiled: bool = False, names=None, outputs=None, derivatives: int = 0,
-                 sx: bool = False, fixed=(), jacobian: str = "full"):
+                 sx: bool = False, fixed=(), jacobian: str = "full", each: bool = False, budget: int | None = None):
         self.eom = eom
+        # each: compile every Function on its own when it is first asked for, and only it (its
+        # derivatives when ``derivatives`` asks), failing with a located error (E804, E805)
+        # instead of falling back; otherwise the Functions asked for are compiled together
+        # into one library on first use, and a failure falls back to the virtual machine
+        # with a note (the simulator's runs, which say so in their warnings)
+        self.each, self.budget = bool(each), budget
         self.jacobian_kind = jacobian     # compiled: "full" Jacobian, or "forward" derivative only
         self.derivatives = int(derivatives)
         self.sx = bool(sx)
@@ -319,6 +329,10 @@ class FunctionSet(Mapping):
     def __getitem__(self, name):
         if name not in self._names:
             raise KeyError(f"no Function {name!r}; available: {', '.join(self._names)}")
+        if self.want_compiled and self.each:
+            if name not in self._cache:
+                self._compile_one(name)
+            return self._cache[name]
         if self.want_compiled and not self._compiled_done:
             self._compile_all()
         if name not in self._cache:
@@ -351,6 +365,14 @@ class FunctionSet(Mapping):
     def __repr__(self):
         kind = "compiled" if self.compiled else "virtual machine"
         return f"<FunctionSet {self.eom.name!r} ({kind}): {', '.join(self._names)}>"
+
+    def _compile_one(self, name):
+        f = jacobian_of(self._make("ode")) if name == "ode_jacobian" else self._make(name, loop=True)
+        loaded, note, lib = compile_functions([f], tag=f"{self.eom.name}_{name}", jacobian=False,
+                                              derivatives=self.derivatives, budget=self.budget, strict=True)
+        self.notes.append(note)
+        self.compiled, self.library = True, lib
+        self._cache[name] = loaded[f.name()]
 
     def _compile_all(self):
         self._compiled_done = True
@@ -464,8 +486,15 @@ def drop_cancelled(f):
 
 
 def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, derivatives: int = 0,
-                     sx: bool = False, fixed=(), jacobian: str = "full") -> FunctionSet:
+                     sx: bool = False, fixed=(), jacobian: str = "full", each: bool = False,
+                     budget: int | None = None, kind=None) -> FunctionSet:
     """The CasADi Functions of ``eom`` (lazy mapping; see the module docstring).
+
+    each=True (with compiled=True): every Function is compiled on its own when first asked for
+    (``Model.casadi``: only what is used is compiled), and a compile that cannot be done
+    raises (E804; E805 over ``budget`` bytes of C) instead of falling back.
+    kind: the FunctionSet class (default FunctionSet; a constrained model's problem Functions:
+    mechdsl.dae.functions.ConstrainedFunctionSet).
 
     derivatives=2 (with compiled=True): the library also holds the first and second
     derivatives of every Function (jac_, fwd1_, adj1_ and their own jac_/fwd1_/adj1_), which
@@ -493,13 +522,13 @@ def casadi_functions(eom, compiled: bool = False, *, names=None, outputs=None, d
     objs = tuple(eom.__dict__.get(f) for f in _STRUCTURE)
     key = (tuple(map(id, objs)), bool(compiled), None if names is None else tuple(sorted(names)),
            None if outputs is None else tuple(outputs), int(derivatives), bool(sx),
-           tuple((int(i), float(v)) for i, v in fixed), jacobian)
+           tuple((int(i), float(v)) for i, v in fixed), jacobian, bool(each), budget, kind)
     hit = _SETS.get(key)
     if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
         _SETS[key] = _SETS.pop(key)            # most recently used last
         return hit[1]
-    fs = FunctionSet(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives, sx=sx,
-                     fixed=fixed, jacobian=jacobian)
+    fs = (kind or FunctionSet)(eom, compiled=compiled, names=names, outputs=outputs, derivatives=derivatives,
+                               sx=sx, fixed=fixed, jacobian=jacobian, each=each, budget=budget)
     if len(_SETS) >= _SETS_MAX:
         _SETS.pop(next(iter(_SETS)))
     _SETS[key] = (objs, fs)                    # holding the objects keeps their ids unique
@@ -511,14 +540,6 @@ _SETS_MAX = 64
 
 
 # --------------------------------------------------------------------------- C code generation
-
-
-def cache_dir() -> Path:
-    d = os.environ.get("MECHDSL_CACHE")
-    if d:
-        return Path(d)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "mechdsl"
 
 
 def _which(name: str) -> str | None:
@@ -555,8 +576,6 @@ def compiler_version(cc: str) -> str:
         tag = f"{os.path.realpath(cc)}\t{st.st_size}\t{st.st_mtime_ns}\t"
     except OSError:
         tag = None
-    from . import cachefiles
-
     memo = cache_dir() / "compilers"
     if tag is not None:
         data, _ = cachefiles.read_bytes(memo)        # (a file only this user can write)
@@ -582,6 +601,12 @@ def compiler_version(cc: str) -> str:
 
 
 JAC_MAX_CODE = 1_000_000   # above this, compile the forward derivative of ode instead of its Jacobian
+COMPILE_BUDGET = 16_000_000   # bytes of generated C one compile may hand to the compiler (compile_functions)
+
+
+def _names_of(funcs) -> str:
+    names = [f.name() for f in funcs]
+    return ("the Function " if len(names) == 1 else "the Functions ") + ", ".join(names)
 
 
 def cflags_for(code_size: int) -> list[str]:
@@ -610,7 +635,7 @@ def derivative_functions(funcs, order: int = 2) -> list:
 
 
 def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
-                      extra_units: tuple[str, ...] = ()):
+                      extra_units: tuple[str, ...] = (), budget: int | None = None, strict: bool = False):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
@@ -618,6 +643,12 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
 
     ``extra_units``: hand-written C sources linked into the same library (the compiled
     stepping loop of mechdsl.simulation.crk); they are part of the cache key.
+
+    ``budget``: most bytes of generated C to hand to the compiler (default COMPILE_BUDGET;
+    the compiler's time and memory grow faster than the code: a 7-joint arm's 40 MB took 298 s,
+    the 20-link chain's Functions with second derivatives 7 GB); more is not compiled and the
+    note says so.  ``strict``: a compile that cannot be done (no compiler, over the budget, a
+    failed build) raises MechError (E804, E805) instead of returning None with a note.
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -631,6 +662,10 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         env_cc = os.environ.get("CC")
         looked = (f"$CC = {env_cc!r} is not a program on PATH (CC names one program, without flags)" if env_cc
                   else "looked for $CC, gcc, cc, clang")
+        if strict:
+            raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)}: no C compiler found ({looked})",
+                                       help="install a C compiler (gcc, clang) or set $CC, or use the "
+                                            "virtual-machine Functions (compiled=False)"))
         return None, (f"no C compiler found ({looked}); "
                       "using the CasADi virtual machine instead of compiled code"), None
     units = []
@@ -661,13 +696,21 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
             jac_kind = "forward derivative"
         units.append(code)
     units += list(extra_units)
+    limit = COMPILE_BUDGET if budget is None else int(budget)
+    total = sum(len(code) for code in units)
+    if total > limit:
+        what = (f"{_names_of(funcs)}" + (f" with derivatives to order {derivatives}" if derivatives else "")
+                + f" are {total / 1e6:.3g} MB of C, over the compile budget of {limit / 1e6:.3g} MB")
+        if strict:
+            raise MechError(Diagnostic("E805", f"not compiled: {what}",
+                                       help="ask for fewer Functions or no derivatives, use the virtual-machine "
+                                            "Functions (compiled=False), or raise compile_budget (bytes of C)"))
+        return None, f"not compiled: {what} (compile_budget); using the CasADi virtual machine", None
     flags = [cflags_for(len(code)) for code in units]
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
     full = hashlib.sha256(key.encode()).hexdigest()
     digest = full[:24]
-    from . import cachefiles
-
     d = cache_dir()
     # a library runs code when loaded: only from a folder no other user owns or can write
     # (mechdsl.eom.cachefiles); otherwise it is built for this run alone in a private folder
@@ -679,6 +722,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         note = f"loaded compiled model from cache {lib}"
         cachefiles.hit("compiled-code", digest)
     else:
+        log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
         import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
         import tempfile        # loads the cached library)
 
@@ -710,18 +754,26 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                         errors.append((r.stderr or r.stdout).strip())
                 if errors:
                     tail = " | ".join(errors[0].splitlines()[-3:])
+                    if strict:
+                        raise MechError(Diagnostic("E804", f"C compilation of {_names_of(funcs)} failed ({cc}): "
+                                                           f"{tail}", help="use the virtual-machine Functions "
+                                                                           "(compiled=False)"))
                     return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
                 os.chmod(out, 0o600)
                 if private is None:
                     _record_digest(out, lib, full)  # the hash first: a library in place always has its hash
                 os.replace(out, lib)
         except OSError as e:
+            if strict:
+                raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)} into {private or d}: {e}",
+                                           help="check that the cache folder (MECHDSL_CACHE) is writable")) from None
             return None, f"cannot compile into {private or d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
                 f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
         if problem:
             note = f"the cached library {lib} {problem}: rebuilt; " + note
+    log.debug("%s", note)
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     if private is not None:             # loaded (mapped): the files are not needed any more
         import shutil
@@ -752,8 +804,6 @@ def _file_sha256(path: Path) -> str:
 def _record_digest(built: Path, lib: Path, key: str) -> None:
     """Write the hash of the library ``built`` and its full key next to its cache place ``lib``
     (``<name>.sha256``: "<file sha256> <key sha256>"), atomically, mode 0600."""
-    from . import cachefiles
-
     if not cachefiles.write_bytes(_digest_path(lib), f"{_file_sha256(built)} {key}\n".encode("ascii")):
         raise OSError(f"cannot write {_digest_path(lib)}")
 
@@ -765,8 +815,6 @@ def _cache_problem(lib: Path, key: str) -> str | None:
     right name gives wrong numbers (or runs what it likes when loaded).  The file hash and the
     full key recorded at build time catch both, and are checked without loading the library;
     a file another user owns or can write is not used at all (mechdsl.eom.cachefiles)."""
-    from . import cachefiles
-
     why = cachefiles.check_file(lib)
     if why:
         return why

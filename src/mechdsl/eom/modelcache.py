@@ -257,7 +257,8 @@ def _functions(eom) -> dict:
     out = dict(eom.workspace.stored_functions(eom) or {})
     objs = [_resolved(eom.__dict__.get(f), f) for f in codegen._STRUCTURE]
     for held, fs in list(codegen._SETS.values()):
-        if fs.want_compiled or fs.fixed or not all(_resolved(a, f) is b for a, b, f in zip(held, objs, codegen._STRUCTURE)):
+        # the model's own Functions only (a constrained problem's set has another "ode": dae.functions)
+        if type(fs) is not codegen.FunctionSet or fs.want_compiled or fs.fixed or not all(_resolved(a, f) is b for a, b, f in zip(held, objs, codegen._STRUCTURE)):
             continue
         for name, f in list(fs._cache.items()):
             # SX Functions only: they load in about a millisecond; an MX Function (the Jacobian

@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, Span
+from ..model.names import split_state
 
 SINGULAR_RCOND = 1e-12      # scaled mass matrix: smallest / largest eigenvalue below this is singular
 ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this is refused (|q| > 4.5e9)
@@ -79,11 +80,11 @@ def preflight(eom, p=None, x0=None, t: float = 0.0, drift_bound: float = DRIFT_B
     own = None if model is None else np.array([q.value for q in model.real_parameters], float)
     if model is not None and not (own.shape == pv.shape and np.array_equal(own, pv)):
         # the model's own values were judged when it was analyzed (or by with_params)
-        from ..semantic.physical import parameter_env, value_problems
+        from ..semantic.physical import errors, parameter_env, value_problems
 
         env = parameter_env(model)
         env.update(zip(eom.params, map(float, pv)))
-        found = value_problems(model, env)
+        found = errors(value_problems(model, env))
         if found:
             return found
     found = _negative_masses(eom, pv)
@@ -109,7 +110,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         return found
     if eom.m:
         from ..dae.init import initialize
-        from ..simulation.inputs import fixed_start
+        from .start import fixed_start
 
         q, qd, fq, fqd = fixed_start(eom, x0, pv)
         g_problem = _constraint_problem(eom, q, t, pv)
@@ -124,7 +125,7 @@ def _numbers(eom, pv, x0, t, drift_bound) -> list[Diagnostic]:
         if found:
             return found
     else:
-        from ..simulation.inputs import start_vector
+        from .start import start_vector
 
         x = start_vector(eom, x0, pv)
         q, qd = x[:eom.n], x[eom.n:]
@@ -142,7 +143,10 @@ def _dynamics_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
         G = _jacobian(eom, q, t, pv)
     else:
         M = None if eom.qdd is not None else _mass(fs, t, x, pv, eom.n)
-        rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
+        try:
+            rhs = _value(casadi_functions(eom, names=("ode", "ode_jacobian"))["ode"], t, x, _u(eom), pv)   # simulate's own
+        except RuntimeError:          # CasADi's QR refuses a singular M ("Evaluation failed"): M says why below
+            rhs = np.full(2 * eom.n, np.nan)
         G = None
     ok_rhs = bool(np.all(np.isfinite(rhs)))
     if M is None and not ok_rhs:      # the recursive route: explain it with the mass matrix
@@ -436,7 +440,7 @@ def _overridden(eom, x0) -> set[int]:
         return set(range(2 * eom.n))
     out = set()
     for k in x0:
-        name, speed = (k[4:-1], True) if k.startswith("der(") and k.endswith(")") else (k, False)
+        name, speed = split_state(k)
         if name in eom.coords:
             out.add(eom.coords.index(name) + (eom.n if speed else 0))
     return out

@@ -129,6 +129,7 @@ class Comprehension(Expr):
     expr: Expr
     var: str
     range: Range
+    var_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 # ----------------------------------------------------------------------------- declarations
@@ -142,6 +143,7 @@ class Modifier(Node):
     each: bool = False
     modification: tuple["Modifier", ...] | None = None
     value: Expr | None = None
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,12 +158,14 @@ class Declaration(Node):
     value: Expr | None = None
     doc: str | None = None
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
+    type_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Extends(Node):
     name: str
     modification: tuple[Modifier, ...] | None = None
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 # ----------------------------------------------------------------------------- equations
@@ -203,6 +207,7 @@ class ForEquation(Node):
     var: str
     range: Range
     body: tuple["EquationItem", ...] = ()
+    var_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 EquationItem = Union[SimpleEquation, EnergyEquation, ForceEquation, Connect, ForEquation]
@@ -223,12 +228,14 @@ class ModelDef(Node):
 class SceneModel(Node):
     name: str
     modification: tuple[Modifier, ...] | None = None
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Setting(Node):
     name: str
     value: Expr
+    name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -23,7 +23,7 @@ def _ast_lines(node, depth: int, out: list[str], spans: bool, label: str) -> Non
     name = type(node).__name__
     scalars, children = [], []
     for f in dataclasses.fields(node):
-        if f.name in ("span", "name_span", "filename"):
+        if f.name.endswith("span") or f.name == "filename":   # positions: shown as @line:col
             continue
         v = getattr(node, f.name)
         if isinstance(v, ast.Node):
@@ -81,13 +81,19 @@ def dump_model(model: ir.Model) -> str:
     if model.bodies:
         L.append("bodies:")
         for b in model.bodies:
-            L.append(f"  {b.name} ({b.kind}{' ' + b.shape if b.shape else ''}): m = {to_text(b.mass)}, "
+            L.append(f"  {b.name} ({b.kind}{' ' + b.shape if b.shape else ''}{', measured inertia' if b.measured else ''}): m = {to_text(b.mass)}, "
                      f"com = {_v(b.com)}, I = {_m(b.inertia)}")
     pts = [p for p in model.points if p.name != "world"]
     if pts:
         L.append("points:")
         for p in pts:
-            L.append(f"  {p.name} on {p.body} at {_v(p.r)}")
+            L.append(f"  {p.name} on {p.body} at {_v(p.r)}" + (f", axes {_m(p.R)}" if p.R is not None else ""))
+    if model.shapes:
+        L.append("shapes:")
+        for sh in model.shapes:
+            axes = f", axes {_m(sh.R)}" if sh.R is not None else ""
+            along = f", axis {_v(sh.axis)}" if sh.kind in ("rod", "disk", "cylinder") else ""
+            L.append(f"  {sh.name} on {sh.body}: {sh.kind} {_v(sh.size)} at {_v(sh.r)}{axes}{along}")
     if model.joints:
         L.append("joints:")
         for j in model.joints:
@@ -97,6 +103,8 @@ def dump_model(model: ir.Model) -> str:
             if j.kind == "frame":
                 extra = f" r = {_v(j.frame_r)}, R = {_m(j.frame_R)}"
             opts = "".join(f", {k} {v}" for k, v in j.options)
+            for what, m in (("parent axes", j.parent_R), ("child axes", j.child_R)):
+                opts += f", {what} {_m(m)}" if m is not None else ""
             cut = " [closes loop]" if j.closes_loop else ""
             L.append(f"  {j.name}: {j.kind} {j.parent} -> {j.child}, axis {_v(j.axis)}{opts}"
                      f"{'; ' + vs if vs else ''}{extra}{cut}")

@@ -19,13 +19,14 @@ TYPES = ("Real", "Integer", "Boolean", "String")
 COMPONENTS = ("Body", "Box", "Contact", "Cylinder", "Cylindrical", "Damper", "Disk", "Fixation", "Fixed", "Force",
               "Friction",
               "Frame", "Free", "GeneralizedForce", "Gravitation", "Gravity", "Planar", "Point", "PointMass",
-              "Potential", "Prismatic", "Revolute", "RigidLink", "Rod", "Sphere", "Spherical", "Spring", "SpringDamper",
+              "Potential", "Prismatic", "Revolute", "RigidLink", "Rod", "Shape", "Sphere", "Spherical", "Spring",
+              "SpringDamper",
               "Torque")
 FUNCTIONS = ("abs", "acos", "asin", "atan", "atan2", "ceil", "cos", "cosh", "cross", "der", "diagonal",
              "dissipation_function", "dot", "energy", "exp", "fill", "floor", "identity", "kinetic_energy", "log",
              "log10", "max", "min", "norm", "normalize", "ones", "position", "potential_energy",
-             "reaction_force", "reaction_torque", "rotation", "sign", "sin", "sinh", "size", "skew", "sqrt",
-             "sum", "tan", "tanh", "transpose", "velocity", "zeros")
+             "reaction_force", "reaction_torque", "rotation", "rpy", "axis_angle", "sign", "sin", "sinh", "size",
+             "skew", "sqrt", "sum", "tan", "tanh", "transpose", "velocity", "zeros")
 BUILTIN_NAMES = ("pi", "time", "world")
 
 

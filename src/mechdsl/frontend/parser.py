@@ -70,14 +70,47 @@ def parse_file(path: str | os.PathLike) -> ast.File:
 
 
 def parse(text: str, filename: str = "<input>") -> ast.File:
+    tree, diagnostics = parse_partial(text, filename)
+    if diagnostics:
+        raise MechError(diagnostics)
+    return tree
+
+
+def parse_partial(text: str, filename: str = "<input>") -> tuple[ast.File | None, list[Diagnostic]]:
+    """``parse`` for an editor's half-typed file: the diagnostics ``parse`` raises (the same list)
+    and, when there are syntax errors, the AST of the text with the broken statements blanked as
+    the error recovery blanks them (spans unchanged), or None when nothing could be recovered (a
+    model not closed yet, an unterminated string, ...)."""
     from ..diagnostics import remember_source
 
     remember_source(filename, text)
     if not text.strip() or _only_comments(text):
-        raise MechError(Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
-                                   "a file holds one or more `model Name ... end Name;` (and scenes)"))
-    _check_nesting(text, filename)
-    tree = _parse_recovering(text, filename)
+        return None, [Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
+                                 "a file holds one or more `model Name ... end Name;` (and scenes)")]
+    try:
+        _check_nesting(text, filename)
+    except MechError as e:
+        return None, e.diagnostics
+    tree, diagnostics = _parse_recovering(text, filename)
+    if diagnostics:                      # the recovered rest, for an editor (never raised)
+        try:
+            result, _ = _build(tree, filename) if tree is not None else (None, [])
+            if result is not None:
+                _check_depth(result)
+        except (MechError, InternalError):
+            result = None
+        return result, diagnostics
+    result, problems = _build(tree, filename)
+    if problems:
+        return result, problems
+    try:
+        _check_depth(result)
+    except MechError as e:
+        return None, e.diagnostics
+    return result, []
+
+
+def _build(tree, filename: str) -> tuple[ast.File, list[Diagnostic]]:
     builder = _Builder(filename)
     try:
         result = builder.transform(tree)
@@ -85,10 +118,7 @@ def parse(text: str, filename: str = "<input>") -> ast.File:
         if isinstance(e.orig_exc, MechError):
             raise e.orig_exc from None
         raise InternalError(f"AST construction failed: {e.orig_exc!r}") from e.orig_exc
-    if builder.problems:
-        raise MechError(builder.problems)
-    _check_depth(result)
-    return result
+    return result, builder.problems
 
 
 # ----------------------------------------------------------------------------- error recovery
@@ -97,8 +127,10 @@ _STRUCTURE = re.compile(r"\b(model|scene|end|equation|loop)\b")
 _HEADER = re.compile(r"\b(?:(?:model|scene)\s+[A-Za-z_]\w*|equation|loop)\b")  # on code, docs blanked
 
 
-def _parse_recovering(text: str, filename: str):
+def _parse_recovering(text: str, filename: str) -> tuple[object | None, list[Diagnostic]]:
     """Parse; on a syntax error blank the broken statement and parse again to find more errors.
+    Returns the lark tree of the text with every broken statement blanked (None when the search
+    stopped before the rest parsed) and the syntax diagnostics (none: the tree is the text's).
 
     Recovery is deliberately conservative so that no follow-on error is ever invented: the blanked
     region runs from the end of the previous statement (a ';' or a header such as `model A`,
@@ -131,10 +163,8 @@ def _parse_recovering(text: str, filename: str):
             m = re.compile(r"\S").search(code, b)
             skip_to = m.start() if m else -1
             continue
-        if diagnostics:
-            raise MechError(diagnostics)
-        return tree
-    raise MechError(diagnostics)
+        return tree, diagnostics
+    return None, diagnostics
 
 
 def _error_offset(e: UnexpectedInput) -> int | None:
@@ -442,11 +472,11 @@ class _Builder(Transformer_NonRecursive):
 
     def scene_model(self, meta, items):
         name, mod = items
-        return ast.SceneModel(name=str(name), modification=mod, span=self.S(meta))
+        return ast.SceneModel(name=str(name), modification=mod, name_span=_tok_span(self.f, name), span=self.S(meta))
 
     def setting(self, meta, items):
         name, value = items
-        return ast.Setting(name=str(name), value=value, span=self.S(meta))
+        return ast.Setting(name=str(name), value=value, name_span=_tok_span(self.f, name), span=self.S(meta))
 
     # -- declarations
     def doc(self, meta, items):
@@ -459,11 +489,12 @@ class _Builder(Transformer_NonRecursive):
         prefix, type_tok, name_tok, dims, mod, value, doc = items
         return ast.Declaration(prefix=prefix, type_name=str(type_tok), name=str(name_tok),
                                dims=tuple(dims or ()), modification=mod, value=value, doc=doc,
-                               name_span=_tok_span(self.f, name_tok), span=self.S(meta))
+                               name_span=_tok_span(self.f, name_tok), type_span=_tok_span(self.f, type_tok),
+                               span=self.S(meta))
 
     def extends_clause(self, meta, items):
         name, mod = items
-        return ast.Extends(name=str(name), modification=mod, span=self.S(meta))
+        return ast.Extends(name=str(name), modification=mod, name_span=_tok_span(self.f, name), span=self.S(meta))
 
     def dims(self, meta, items):
         return tuple(items)
@@ -474,8 +505,8 @@ class _Builder(Transformer_NonRecursive):
     def modification(self, meta, items):
         return tuple(x for x in items if x is not None)
 
-    def dotted_name(self, meta, items):
-        return ".".join(items)
+    def dotted_name(self, meta, items):   # (name, span): the span goes to Modifier.name_span
+        return ".".join(items), self.S(meta)
 
     def name_part(self, meta, items):
         name, index = items
@@ -489,11 +520,12 @@ class _Builder(Transformer_NonRecursive):
         return f"{name}[{int(text)}]"
 
     def coordinate_field(self, meta, items):
-        return "coordinate"
+        return "coordinate", self.S(meta)
 
     def argument(self, meta, items):
-        each, name, mod, value = items
-        return ast.Modifier(name=name, each=each is not None, modification=mod, value=value, span=self.S(meta))
+        each, (name, name_span), mod, value = items
+        return ast.Modifier(name=name, each=each is not None, modification=mod, value=value, name_span=name_span,
+                            span=self.S(meta))
 
     # -- equations
     def simple_equation(self, meta, items):
@@ -517,7 +549,8 @@ class _Builder(Transformer_NonRecursive):
 
     def for_equation(self, meta, items):
         var, rng, *body = items
-        return ast.ForEquation(var=str(var), range=rng, body=tuple(body), span=self.S(meta))
+        return ast.ForEquation(var=str(var), range=rng, body=tuple(body), var_span=_tok_span(self.f, var),
+                               span=self.S(meta))
 
     def range(self, meta, items):
         a, b, c = items
@@ -577,7 +610,7 @@ class _Builder(Transformer_NonRecursive):
 
     def comprehension(self, meta, items):
         expr, var, rng = items
-        return ast.Comprehension(expr=expr, var=str(var), range=rng, span=self.S(meta))
+        return ast.Comprehension(expr=expr, var=str(var), range=rng, var_span=_tok_span(self.f, var), span=self.S(meta))
 
     def component_ref(self, meta, items):
         return ast.Ref(parts=tuple(items), span=self.S(meta))

@@ -24,23 +24,29 @@ def to_source(node: ast.Node) -> str:
 
 
 def _unit(u) -> str:
+    lines = [header(u)]
     if isinstance(u, ast.ModelDef):
-        lines = [f"model {u.name}{_doc(u.doc)}"]
         lines += [INDENT + element(e) for e in u.elements]
         if u.equations:
             lines.append("equation")
             for eq in u.equations:
                 lines += equation(eq, 1)
-        lines.append(f"end {u.name};")
-        return "\n".join(lines) + "\n"
-    lines = [f"scene {u.name}{_doc(u.doc)}"]
-    for it in u.items:
-        if isinstance(it, ast.SceneModel):
-            lines.append(f"{INDENT}model {it.name}{_mods(it.modification)};")
-        else:
-            lines.append(f"{INDENT}{it.name} = {expr(it.value)};")
+    else:
+        lines += [INDENT + scene_item(it) for it in u.items]
     lines.append(f"end {u.name};")
     return "\n".join(lines) + "\n"
+
+
+def header(u) -> str:
+    """The first line of a model or scene: ``model Name "doc"``."""
+    kind = "model" if isinstance(u, ast.ModelDef) else "scene"
+    return f"{kind} {u.name}{_doc(u.doc)}"
+
+
+def scene_item(it) -> str:
+    if isinstance(it, ast.SceneModel):
+        return f"model {it.name}{_mods(it.modification)};"
+    return f"{it.name} = {expr(it.value)};"
 
 
 def _doc(doc: str | None) -> str:
@@ -91,12 +97,16 @@ def equation(eq, depth: int) -> list[str]:
     if isinstance(eq, ast.Connect):
         return [f"{ind}connect({expr(eq.a)}, {expr(eq.element)}, {expr(eq.b)}){_doc(eq.doc)};"]
     if isinstance(eq, ast.ForEquation):
-        out = [f"{ind}for {eq.var} in {_range(eq.range)} loop"]
+        out = [ind + for_header(eq)]
         for b in eq.body:
             out += equation(b, depth + 1)
         out.append(f"{ind}end for;")
         return out
     raise TypeError(type(eq).__name__)
+
+
+def for_header(eq: ast.ForEquation) -> str:
+    return f"for {eq.var} in {_range(eq.range)} loop"
 
 
 def _range(r: ast.Range) -> str:
@@ -112,7 +122,10 @@ def number(v) -> str:
         return str(v)
     if math.isinf(v):
         return "1e999"
-    r = repr(float(v))
+    r = repr(float(v))        # the shortest text that reads back as the same float
+    if "e" in r:              # 1e-09 -> 1e-9
+        mantissa, exponent = r.split("e")
+        r = f"{mantissa}e{int(exponent)}"
     return r
 
 

@@ -11,15 +11,16 @@ around it; x_P its world position from ``EOM.point_position``):
     gap                gap = the expression given (equation-layer models without points)
 
 Its Jacobian G = dgap/dq (a row) and the normal speed u = G q' + dgap/dt follow by
-automatic differentiation in :mod:`mechdsl.impacts.system`.
+automatic differentiation in :mod:`mechdsl.impacts.contact_system`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..diagnostics import Diagnostic, MechError
 from ..model import exprs as X
 from ..model import ir
-from ..diagnostics import Diagnostic, MechError
+
 
 SURFACES = ("plane", "sphere", "point", "gap")
 

@@ -2,7 +2,8 @@
 
 A loop-closing (cut) joint between parent point P (parent body) and child point C (child
 body) is replaced by the equations that its two joint frames coincide up to the joint's free
-motion.  With R_P, R_C the body rotations, d = R_P^T (r_C - r_P) and R_rel = R_P^T R_C (both
+motion.  With R_P, R_C the joint frames' rotations (body rotation times the frame's axes in
+its body, ir.Joint.parent_R / child_R), d = R_P^T (r_C - r_P) and R_rel = R_P^T R_C (both
 in the parent joint frame):
 
 - a cut joint without variables locks what its kind locks:
@@ -60,13 +61,14 @@ def basis(a: ca.SX):
 class Closure:
     """The equations of one cut joint and the directions of their multipliers."""
 
-    def __init__(self, joint: ir.Joint):
+    def __init__(self, joint: ir.Joint, P=None):
         self.joint = joint
+        self.P = P                                      # parent joint frame axes in parent body axes
         self.rows: list[tuple[int, str, ca.SX]] = []   # (row in g, 'f' | 't', unit direction in parent joint frame)
 
     def loads(self, kin, lam) -> tuple[ca.SX, ca.SX]:
         """(force, torque) on the child, world axes, as SX in lam (the parent gets the opposite)."""
-        R_P = kin.body_rot(self.joint.parent_body)
+        R_P = _axes(kin.body_rot(self.joint.parent_body), self.P)
         F, T = ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
         for row, what, e in self.rows:
             if what == "f":
@@ -90,13 +92,14 @@ def loop_closures(model: ir.Model, tree: Tree, kin, offset: int = 0) -> tuple[li
     for joint in model.joints:
         if not joint.closes_loop:
             continue
-        R_P, R_C = kin.body_rot(joint.parent_body), kin.body_rot(joint.child_body)
+        P, C = tree.joint_axes(joint)
+        R_P, R_C = _axes(kin.body_rot(joint.parent_body), P), _axes(kin.body_rot(joint.child_body), C)
         d = ca.mtimes(R_P.T, kin.point_pos(joint.child) - kin.point_pos(joint.parent))
         R_rel = ca.mtimes(R_P.T, R_C)
         child_point = joint.child_body != "world" and model.body(joint.child_body).kind == "point"
         kind = J.kind_of(joint)
         jn = joint.name
-        clo = Closure(joint)
+        clo = Closure(joint, P)
         closures.append(clo)
         xyz = [E3[:, i] for i in range(3)]
         if joint.variables or joint.kind == "frame":
@@ -125,6 +128,11 @@ def loop_closures(model: ir.Model, tree: Tree, kin, offset: int = 0) -> tuple[li
             ra = ca.mtimes(R_rel, e3)
             add(clo, [ca.dot(ra, e2), -ca.dot(ra, e1)], [f"{jn}.t{ln[0]}", f"{jn}.t{ln[1]}"], "t", [e1, e2])
     return res, names, closures
+
+
+def _axes(R, axes):
+    """World axes of a joint frame whose axes in its body are ``axes`` (None: the body's)."""
+    return R if axes is None else ca.mtimes(R, axes)
 
 
 def _joint_motion(tree: Tree, joint: ir.Joint, elements) -> tuple[ca.SX, ca.SX]:

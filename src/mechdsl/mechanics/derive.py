@@ -360,7 +360,7 @@ class _Deriver:
                 ic, rc = tree.point_in_link(j.child)
                 ip, rp = tree.point_in_link(j.parent)
                 loads += [(ic, rc, F, T), (ip, rp, -F, -T)]
-                Rc = kin.body_rot(j.child_body)
+                Rc = _frame(kin.body_rot(j.child_body), tree.joint_axes(j)[1])
                 out[j.name] = (ca.mtimes(Rc.T, T), ca.mtimes(Rc.T, F))
             for i, r, F, T in loads:
                 if i < 0:
@@ -425,6 +425,11 @@ class _Deriver:
                     + (" plus Lagrange terms of the equation layer" if not _zero(self.loads.T_terms) else "")
                     + "; M qdd = bias is solved numerically")
         return "route lagrange: M = d2T/dqd2 and the bias by automatic differentiation of T, V, D"
+
+
+def _frame(R, axes):
+    """World axes of a joint frame: its body's rotation R times the frame's axes in the body."""
+    return R if axes is None else ca.mtimes(R, axes)
 
 
 class _Lazy:

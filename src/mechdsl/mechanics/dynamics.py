@@ -169,4 +169,11 @@ def joint_reactions(tree: Tree, kin: Kinematics, fext: dict, nud) -> dict[str, t
     """Force and torque exerted by the parent on the child across every tree joint, in the
     child joint frame (about the child point): {joint name: (torque (3,), force (3,))}."""
     _, f = rnea(tree, kin, fext, nud)
-    return {lk.joint.name: f[lk.index] for lk in tree.links if lk.body is not None}
+    out = {}
+    for lk in tree.links:
+        if lk.body is not None:
+            n, fo = f[lk.index]
+            if lk.post is not None:      # body axes -> the child joint frame's axes
+                n, fo = ca.mtimes(lk.post.T, n), ca.mtimes(lk.post.T, fo)
+            out[lk.joint.name] = (n, fo)
+    return out

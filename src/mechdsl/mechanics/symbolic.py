@@ -157,6 +157,9 @@ class _Builder:
         pp, cp = self.model.point(joint.parent), self.model.point(joint.child)
         rP = self.vec(pp.r)
         R, o, w, v, ax = Rp, op + Rp * rP, wp, vp + wp.cross(rP), axp
+        if joint.parent_R is not None:          # the parent joint frame's own axes
+            P = self.mat(joint.parent_R)
+            R, w, v, ax = R * P, P.T * w, P.T * v, None
         for el in elements:
             if el.kind in ("R", "P"):
                 a = self.unit(el.axis)
@@ -193,6 +196,9 @@ class _Builder:
                 W = E.T * E.diff(t)
                 R, ax = R * E, None
                 w, v = E.T * w + sp.Matrix([W[2, 1], W[0, 2], W[1, 0]]), E.T * v
+        if joint.child_R is not None:           # child joint frame -> child body axes
+            C = self.mat(joint.child_R)
+            R, w, v, ax = R * C.T, C * w, C * v, None
         rC = self.vec(cp.r)
         self.links[body.name] = (R, o - R * rC, w, v - w.cross(rC), ax)
 

@@ -48,6 +48,8 @@ class Link:
     body: ir.Body | None = None      # set on the last link of a joint
     inertia: Inertia | None = None
     quat: list[int] | None = None    # q indices of a quaternion element bound to coordinates
+    post: ca.SX | None = None        # last link of a joint with an oriented child point: the child
+                                     # joint frame's axes in body axes (link axes are body axes)
 
     @property
     def k(self) -> int:
@@ -89,6 +91,28 @@ class Dof:
     col: int
     nu: object                       # SX expression of this speed in q, qd, t
     var: Var | None = None
+
+
+def _pre_rotate(link: Link, P, r_pre) -> None:
+    """The first element of a joint whose parent joint frame has the axes P in the parent body:
+    its link sits in the parent by (P E, r_pre + P (r - r_pre)); motion subspaces and joint
+    velocities are in the link's own axes and do not change."""
+    link.E = ca.mtimes(P, link.E)
+    link.r = r_pre + ca.mtimes(P, link.r - r_pre)
+
+
+def _post_rotate(link: Link, C) -> None:
+    """The last element of a joint whose child joint frame has the axes C in the child body: the
+    link frame becomes the body's axes at the same origin (E C^T), and what is written in link
+    coordinates turns with it (v_body = C v_joint)."""
+    link.E = ca.mtimes(link.E, C.T)
+    link.post = C
+    if link.dofs:
+        link.Sw, link.Sv = ca.mtimes(C, link.Sw), ca.mtimes(C, link.Sv)
+    for name in ("vJw", "vJv", "aJw", "aJv"):
+        v = getattr(link, name)
+        if v is not None:
+            setattr(link, name, ca.mtimes(C, v))
 
 
 def depends(x, sym) -> bool:
@@ -224,12 +248,17 @@ class Tree:
         if pp.body != joint.parent_body or cp.body != joint.child_body:
             raise MechError(Diagnostic("E712", f"joint '{joint.name}': its points are not on its bodies", joint.span))
         r_pre = self.vec(pp.r) - self.body_offset[joint.parent_body]
+        P, C = self.joint_axes(joint)
         if not elements:
-            self._new_link(parent, joint, None, ca.SX.eye(3), r_pre)
-        for el in elements:
+            self._new_link(parent, joint, None, ca.SX.eye(3) if P is None else P, r_pre)
+        for k, el in enumerate(elements):
             parent = self._add_element(parent, joint, el, r_pre)
+            if k == 0 and P is not None:
+                _pre_rotate(self.links[-1], P, r_pre)
             r_pre = z3()
         link = self.links[-1]          # the child joint frame
+        if C is not None:              # ... turned into the child body's axes
+            _post_rotate(link, C)
         link.body = body
         r_C = self.vec(cp.r)
         self.body_link[body.name] = link.index
@@ -241,6 +270,12 @@ class Tree:
             Ic = self.mat(body.inertia) if body.kind != "point" else ca.SX(3, 3)
             link.inertia = Inertia(*tpl.rigid_inertia()(m, self.vec(body.com) - r_C, Ic))
         self._euler_monitor(joint, elements)
+
+    def joint_axes(self, joint: ir.Joint) -> tuple[ca.SX | None, ca.SX | None]:
+        """(P, C): the axes of the parent and child joint frames in their bodies' axes (SX), None
+        where they are the body's own."""
+        return (None if joint.parent_R is None else self.mat(joint.parent_R),
+                None if joint.child_R is None else self.mat(joint.child_R))
 
     def _new_link(self, parent, joint, el, E, r) -> Link:
         link = Link(index=len(self.links), parent=parent, joint=joint, element=el, E=E, r=r)

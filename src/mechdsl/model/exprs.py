@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import field
-from typing import Callable, Iterator
+from typing import Callable
 
 from . import ir
 from .records import record
@@ -24,6 +24,9 @@ from .ir import (
     Speed,
     Time,
     TimeDer,
+    children,
+    depends_on_state,
+    walk,
 )
 
 UNARY_FUNCS = ("sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "exp",
@@ -32,23 +35,7 @@ BINARY_FUNCS = ("atan2", "min", "max")
 MATH_FUNCS = UNARY_FUNCS + BINARY_FUNCS
 
 # --------------------------------------------------------------------------- traversal
-
-
-def children(e: Expr) -> tuple[Expr, ...]:
-    if isinstance(e, Op):
-        return e.args
-    if isinstance(e, TimeDer):
-        return (e.expr,)
-    return ()
-
-
-def walk(e: Expr) -> Iterator[Expr]:
-    """Every node of e, pre-order (iterative: deep expressions are fine)."""
-    stack = [e]
-    while stack:
-        n = stack.pop()
-        yield n
-        stack.extend(reversed(children(n)))
+# (children, walk and depends_on_state live with the node classes in ir.py)
 
 
 def leaves_of(e: Expr, kind) -> list:
@@ -58,12 +45,6 @@ def leaves_of(e: Expr, kind) -> list:
             seen.add(n)
             out.append(n)
     return out
-
-
-def depends_on_state(e: Expr) -> bool:
-    """True when e depends on coordinates, speeds or kinematic queries (not only t, p)."""
-    return any(isinstance(n, (Coord, Speed, PointPos, PointVel, BodyRot, BodyOmega, EnergyRef,
-                              ReactionRef, TimeDer, PointAcc, BodyAlpha)) for n in walk(e))
 
 
 def depends_on_time(e: Expr) -> bool:

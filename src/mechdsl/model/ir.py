@@ -16,12 +16,14 @@ Conventions (documented in docs/language.md):
 - world frame: x right, y up, z out of the plane; gravity is whatever Gravity says.
 - every body has a body frame; ``com`` is the centre of mass in body coordinates and
   ``inertia`` the inertia tensor about the centre of mass in body axes.
-- a joint places a joint frame on the parent (at ``parent`` point, parent body axes) and one
-  on the child (at ``child`` point, child body axes).  At zero joint variables the two joint
+- a joint places a joint frame on the parent (at ``parent`` point, with the axes ``parent_R``
+  in parent body coordinates, default the body's axes) and one on the child (at ``child``
+  point, axes ``child_R`` in child body coordinates).  At zero joint variables the two joint
   frames coincide; the joint's motion is the child joint frame relative to the parent one.
   ``axis`` is a unit vector in those (coinciding) axes.
-  With (R_j, p_j) the joint's relative rotation and translation, the child body's pose is
-      R_child = R_parent R_j,   o_child = o_parent + R_parent (r_P + p_j) - R_child r_C
+  With (R_j, p_j) the joint's relative rotation and translation, P = parent_R, C = child_R
+  (identity when None), the child body's pose is
+      R_child = R_parent P R_j C^T,   o_child = o_parent + R_parent (r_P + P p_j) - R_child r_C
   where r_P is the parent point in parent body coordinates and r_C the child point in
   child body coordinates.  Per kind:
       revolute     R_j = rot(axis, phi),            p_j = 0
@@ -38,7 +40,7 @@ Conventions (documented in docs/language.md):
 from __future__ import annotations
 
 from dataclasses import field
-from typing import Union
+from typing import Iterator, Union
 
 from ..diagnostics import Span
 from .records import record
@@ -176,6 +178,32 @@ Mat3 = tuple[Vec3, Vec3, Vec3]
 ZERO = Const(0.0)
 ONE = Const(1.0)
 
+# --------------------------------------------------------------------------- traversal
+
+
+def children(e: Expr) -> tuple[Expr, ...]:
+    if isinstance(e, Op):
+        return e.args
+    if isinstance(e, TimeDer):
+        return (e.expr,)
+    return ()
+
+
+def walk(e: Expr) -> Iterator[Expr]:
+    """Every node of e, pre-order (iterative: deep expressions are fine)."""
+    stack = [e]
+    while stack:
+        n = stack.pop()
+        yield n
+        stack.extend(reversed(children(n)))
+
+
+def depends_on_state(e: Expr) -> bool:
+    """True when e depends on coordinates, speeds or kinematic queries (not only t, p)."""
+    return any(isinstance(n, (Coord, Speed, PointPos, PointVel, BodyRot, BodyOmega, EnergyRef,
+                              ReactionRef, TimeDer, PointAcc, BodyAlpha)) for n in walk(e))
+
+
 # --------------------------------------------------------------------------- declarations
 
 
@@ -217,16 +245,40 @@ class Body:
     shape_size: tuple[Expr, ...] = ()  # rod: (L,), disk: (R,), cylinder: (R, L), sphere: (R,), box: (lx, ly, lz)
     axis: Vec3 = (ONE, ZERO, ZERO)   # symmetry axis of the shape, body coordinates
     span: Span = field(default_factory=Span)
+    measured: bool = False           # `measured_inertia = true`: the triangle inequality is not judged
+
+
+@record
+class Shape:
+    """A shape drawn on a body (the component ``Shape``; drawing only, no mass).
+
+    kind: 'box' | 'cylinder' | 'sphere' | 'disk' | 'rod'; size as for ``Body.shape_size``.
+    Centred at ``r`` (body coordinates); its own axes are ``R`` in body axes (None: the body's);
+    ``axis`` is the symmetry axis of a cylinder, disk or rod in its own axes (a box's edges lie
+    along its own x, y, z)."""
+
+    name: str
+    body: str
+    kind: str
+    size: tuple[Expr, ...] = ()
+    r: Vec3 = (ZERO, ZERO, ZERO)
+    R: Mat3 | None = None
+    axis: Vec3 = (ZERO, ZERO, ONE)
+    span: Span = field(default_factory=Span)
 
 
 @record
 class Point:
-    """A point fixed on a body (or on 'world'), position r in body coordinates."""
+    """A point fixed on a body (or on 'world'), position r in body coordinates.
+
+    R (None: the body's axes) orients the point's own axes: a point with R is a frame fixed on
+    the body, R its axes in body coordinates (body <- point).  Joints at the point use them."""
 
     name: str
     body: str
     r: Vec3 = (ZERO, ZERO, ZERO)
     span: Span = field(default_factory=Span)
+    R: Mat3 | None = None
 
 
 @record
@@ -245,8 +297,6 @@ class JointVar:
 
     @property
     def prescribed(self) -> bool:
-        from .exprs import depends_on_state  # local import: exprs imports ir
-
         return self.coordinate is None and not depends_on_state(self.motion)
 
 
@@ -278,6 +328,8 @@ class Joint:
     closes_loop: bool = False        # set by topology: a cut joint; its variables are then () and its
                                      # loop-closure constraint removes only the joint's free directions
     span: Span = field(default_factory=Span)
+    parent_R: Mat3 | None = None     # axes of the parent joint frame in parent body axes (None: the same)
+    child_R: Mat3 | None = None      # axes of the child joint frame in child body axes (None: the same)
 
     def option(self, key: str, default: str = "") -> str:
         return dict(self.options).get(key, default)
@@ -429,6 +481,7 @@ class Model:
     outputs: tuple[Output, ...] = ()
     contacts: tuple[Contact, ...] = ()
     span: Span = field(default_factory=Span)
+    shapes: tuple[Shape, ...] = ()       # drawn shapes placed on bodies (the component Shape)
 
     # -- lookups -------------------------------------------------------------------
     def parameter(self, name: str) -> Parameter:

@@ -93,8 +93,11 @@ def _model_parts(m):
         except Exception:  # noqa: BLE001 - a start value that needs more than parameters
             start = "?"
         coords.append([c.name, start, c.unit or "", c.doc])
+    from ..semantic.topology import counts as _counts
+
+    n = _counts(model)
     counts = [["coordinates", len(model.coordinates)], ["parameters", len(model.parameters)],
-              ["bodies", len(model.bodies)], ["joints", len(model.joints)],
+              ["bodies", n["bodies"]], ["joints", n["joints"]],
               ["constraints", len(model.constraints) + len(model.loops)], ["contacts", len(model.contacts)],
               ["outputs", len(model.outputs)]]
     title = f"{m.name}" + (f" (scene {m.scene.name})" if m.scene is not None else "")
@@ -218,6 +221,7 @@ class Equations(list):
         self.extra = extra
 
     def latex(self) -> str:
+        """The equations (after T, V, D or H) as one LaTeX ``aligned`` environment."""
         import sympy as sp
 
         lines = [f"{k} &= {sp.latex(v)}" for k, v in self.extra.items()]
@@ -277,12 +281,42 @@ def draw_model(m, t=None, q=None, **kw):
 
 def animate_result(r, model=None, **kw):
     from ..animate import animate
+
+    return animate(r, _result_model(r, model, "animate"), **kw)
+
+
+def view_result(r, model=None, **kw):
+    from ..view import view
+
+    return view(r, _result_model(r, model, "view"), **kw)
+
+
+def view_model(m, t_end=None, q=None, **kw):
+    from ..view import still, view
+
+    if t_end is None:
+        return still(m, q, **kw)
+    if q is not None:
+        from ..diagnostics import UsageError
+
+        raise UsageError("view: give t_end (simulate from the start values) or q (a still), not both")
+    from ..animate import frame_times, pick_speed
+
+    t0 = float(m.scene_settings.get("start_time", 0.0))
+    fps = kw.setdefault("fps", 30.0)
+    speed = kw.get("speed")
+    kw["speed"] = speed = pick_speed(float(t_end) - t0) if speed is None else speed
+    times = frame_times(t0, float(t_end), fps, speed)          # simulated exactly on the frame times
+    return view(m.simulate(float(times[-1]), points=max(2, len(times))), m, **kw)
+
+
+def _result_model(r, model, verb):
     from ..diagnostics import UsageError
 
     model = model if model is not None else getattr(r, "source_model", None)
     if model is None:
-        raise UsageError("this result does not know its model: pass it, r.animate(model)")
-    return animate(r, model, **kw)
+        raise UsageError(f"this result does not know its model: pass it, r.{verb}(model)")
+    return model
 
 
 # --------------------------------------------------------------------------- tables

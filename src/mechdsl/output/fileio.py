@@ -23,16 +23,20 @@ PROTECTED_SUFFIXES = {".mech", ".py", ".md", ".toml", ".lark"}
 FIGURE_SUFFIXES = (".png", ".svg", ".pdf")
 
 
-def check_writable(path: str | os.PathLike, overwrite: bool = False) -> Path:
-    """Refuse, before any work is done, an output that cannot or must not be written."""
+def check_writable(path: str | os.PathLike, overwrite: bool = False, source: bool = False) -> Path:
+    """Refuse, before any work is done, an output that cannot or must not be written.  ``source``:
+    the output is itself a source file (``mech import`` writes a .mech): an existing file of that
+    name is replaced only when asked (``overwrite``, ``--force``), never otherwise."""
     p = Path(path)
     if not str(path):
         raise UsageError("an output file name is empty")
     _check_name(p)
-    if p.suffix in PROTECTED_SUFFIXES and p.exists():
-        raise UsageError(f"refusing to overwrite source file {p} (choose another output name)")
     if p.exists() and p.is_dir():
         raise UsageError(f"{p} is a directory, not a file")
+    if source and p.exists() and not overwrite:
+        raise UsageError(f"{p} exists (pass --force to replace it)")
+    if p.suffix in PROTECTED_SUFFIXES and p.exists() and not source:
+        raise UsageError(f"refusing to overwrite source file {p} (choose another output name)")
     if p.exists() and not overwrite and not is_own_output(p):
         raise UsageError(f"{p} exists and was not written by mechdsl (pass --force to replace it)")
     folder = p.parent
@@ -91,6 +95,8 @@ MARKER = b"mechdsl"
 def is_own_output(p: Path) -> bool:
     """True for a file mechdsl wrote (so re-running a command may replace it)."""
     try:
+        if p.suffix == ".fmu":                                  # mech export: its modelDescription says so
+            return _own_fmu(p)
         if p.suffix == ".csv":
             head = _head(p, 32)        # (never the whole file: an output may be gigabytes)
             if head.startswith(b"mode,kind,frequency_rad_s,"):    # mech linearize --csv
@@ -106,6 +112,17 @@ def is_own_output(p: Path) -> bool:
         return _has_marker(p)
     except OSError:
         return False
+
+
+def _own_fmu(p: Path) -> bool:
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(p) as zf:
+            head = zf.read("modelDescription.xml")[:4096]
+    except (zipfile.BadZipFile, KeyError, OSError, RuntimeError):
+        return False
+    return b'generationTool="mechdsl' in head
 
 
 def _netcdf_by_mechdsl(p: Path) -> bool:
@@ -230,15 +247,15 @@ def _new_temp(final: Path, suffix: str = ".tmp") -> tuple[int, Path]:
     raise OSError(f"cannot create a temporary file in {final.parent}")
 
 
-def write_atomic(path: str | os.PathLike, data: str | bytes, overwrite: bool = False) -> Path:
-    return write_atomic_group([(path, data)], overwrite)[0]
+def write_atomic(path: str | os.PathLike, data: str | bytes, overwrite: bool = False, source: bool = False) -> Path:
+    return write_atomic_group([(path, data)], overwrite, source)[0]
 
 
-def write_atomic_group(items, overwrite: bool = False) -> list[Path]:
+def write_atomic_group(items, overwrite: bool = False, source: bool = False) -> list[Path]:
     """Write several files that belong together (a CSV and its sidecar): every file is written
     and synced to a temporary name first, then all are renamed in order, so an error while
     writing (a full disk, a kill) leaves the earlier pair untouched."""
-    finals = [check_writable(path, overwrite) for path, _ in items]
+    finals = [check_writable(path, overwrite, source) for path, _ in items]
     temps: list[Path] = []
     try:
         for final, (_, data) in zip(finals, items):

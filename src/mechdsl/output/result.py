@@ -19,6 +19,7 @@ import numpy as np
 
 from .fileio import write_atomic_group
 from ..model.records import record
+from ..model.names import split_state
 
 
 @record(frozen=False)
@@ -45,6 +46,25 @@ class Result:
     events: list[dict[str, Any]] = field(default_factory=list)
     failure: Failure | None = None
 
+    def __repr__(self) -> str:
+        """One line: what ran, over which times, how it went (the arrays: ``r.t``, ``r.q``, ...;
+        in a notebook the HTML display shows a table and a plot)."""
+        m = self.metadata or {}
+        scene = m.get("scene") or getattr(getattr(getattr(self, "source_model", None), "scene", None), "name", None)
+        who = str(m.get("model", "?")) + (f", scene {scene}" if scene else "")
+        n = len(self.coordinates)
+        span = f"t = {self.t[0]:g} .. {self.t[-1]:g} s, {len(self.t)} points" if len(self.t) else "no points"
+        parts = [span, f"{n} coordinate{'' if n == 1 else 's'}"]
+        if m.get("method"):
+            parts.append(f"method {m['method']}")
+        drift = self.stats.get("energy_drift_relative") if isinstance(self.stats, dict) else None
+        if drift is not None:
+            parts.append(f"relative energy {'drift' if m.get('conservative', True) else 'change'} {drift:.2g}")
+        if self.events:
+            parts.append(f"{len(self.events)} event{'' if len(self.events) == 1 else 's'}")
+        state = "ok" if self.failure is None else f"FAILED at t = {self.failure.time:.6g}: {self.failure.cause}"
+        return f"<mechdsl.Result {who}: {', '.join(parts)}; {state}>"
+
     def _repr_html_(self):                      # notebook displays (mechdsl.output.display)
         from .display import result_html
 
@@ -58,14 +78,18 @@ class Result:
     # -- access -----------------------------------------------------------------------
     @property
     def success(self) -> bool:
+        """True when the run reached its end time (``failure`` is None)."""
         return self.failure is None
 
     @property
     def message(self) -> str:
+        """"ok", or why and where the run stopped (``str(failure)``)."""
         return "ok" if self.failure is None else str(self.failure)
 
     @property
     def columns(self) -> list[str]:
+        """The names of the recorded signals in CSV order: time, the coordinates, their speeds
+        ``der(c)``, then outputs, energies, invariants and drift measures (``r[name]``)."""
         return (["time"] + list(self.coordinates) + [f"der({c})" for c in self.coordinates]
                 + list(self.signals))
 
@@ -89,9 +113,9 @@ class Result:
         for cand in _aliases(name):
             if cand in self.coordinates:
                 return "q", self.coordinates.index(cand)
-            m = re.fullmatch(r"der\((.+)\)", cand)
-            if m:
-                for inner in _aliases(m.group(1)):
+            inner_name, speed = split_state(cand)
+            if speed:
+                for inner in _aliases(inner_name):
                     if inner in self.coordinates:
                         return "qd", self.coordinates.index(inner)
             if cand in self.signals:
@@ -112,6 +136,7 @@ class Result:
 
     # -- output -----------------------------------------------------------------------
     def table(self) -> np.ndarray:
+        """Every column (``columns``) as one (n_t, n_columns) array: what the CSV holds."""
         if not len(self.t):
             return np.zeros((0, len(self.columns)))
         cols = [self.t[:, None], self.q, self.qd] + [np.asarray(v, float).reshape(len(self.t), -1)
@@ -119,6 +144,7 @@ class Result:
         return np.hstack(cols)
 
     def to_csv_text(self) -> str:
+        """The CSV (header of ``columns``, one row per output time, full precision) as text."""
         lines = [",".join(_csv_name(c) for c in self.columns)]
         for row in self.table():
             lines.append(",".join(_fmt(v) for v in row))
@@ -141,6 +167,8 @@ class Result:
         return [str(p) for p in write_atomic_group(items, overwrite)]
 
     def summary(self) -> dict[str, Any]:
+        """What the JSON sidecar holds: metadata (model, settings, method and why, versions,
+        accuracy), stats, success, failure, columns and events."""
         return {
             "generator": "mechdsl",
             "metadata": self.metadata,
@@ -153,6 +181,7 @@ class Result:
         }
 
     def to_json_text(self, **extra) -> str:
+        """``summary()`` (and ``extra`` fields) as JSON text, keys sorted: the sidecar's text."""
         import json
 
         return json.dumps(_jsonable({**self.summary(), **extra}), indent=2, sort_keys=True) + "\n"
@@ -169,6 +198,13 @@ class Result:
         from .display import animate_result
 
         return animate_result(self, model, **kw)
+
+    def view(self, model=None, **kw):
+        """The interactive 3-D view of the motion (mechdsl.view.View: ``.save("x.html")``; inline in
+        Jupyter); fps, speed, up, trails as for animate; model defaults to the one simulated."""
+        from .display import view_result
+
+        return view_result(self, model, **kw)
 
     def to_pandas(self):
         """A pandas DataFrame indexed by time, units in ``df.attrs["units"]`` (needs the 'table' extra)."""
@@ -222,3 +258,49 @@ def _jsonable(x):
     if isinstance(x, float) and not np.isfinite(x):
         return str(x)
     return x
+
+
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a constrained run: a KeyboardInterrupt that carries the partial Result
+    (``.result``: failure "interrupted", metadata["interrupted"] = True), so a caller may
+    write what was computed before it stops."""
+
+    def __init__(self, result: Result):
+        super().__init__("interrupted")
+        self.result = result
+
+
+def versions() -> dict[str, str]:
+    """The versions a result was computed with (``metadata["versions"]``, stamped once by the
+    simulation layer's template on every Result)."""
+    import platform
+
+    import casadi
+
+    from .. import __version__
+
+    return {"mechdsl": __version__, "casadi": casadi.__version__, "numpy": np.__version__,
+            "scipy": _scipy_version(), "python": platform.python_version()}
+
+
+def _scipy_version() -> str:
+    """scipy.__version__ without importing scipy (8 ms) when the run did not: its version.py
+    is a file of plain assignments, read on its own."""
+    import sys
+
+    mod = sys.modules.get("scipy")
+    if mod is None:
+        import importlib.util
+        import os
+
+        try:
+            spec = importlib.util.find_spec("scipy")
+            where = os.path.join(os.path.dirname(spec.origin), "version.py")
+            vspec = importlib.util.spec_from_file_location("_mechdsl_scipy_version", where)
+            vmod = importlib.util.module_from_spec(vspec)
+            vspec.loader.exec_module(vmod)
+            return str(vmod.version)
+        except Exception:     # another layout: ask scipy itself
+            pass
+        import scipy as mod
+    return str(mod.__version__)

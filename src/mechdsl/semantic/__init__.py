@@ -71,6 +71,9 @@ class Program:
                         users.append(m.name)
         return out
 
+    def scene_def(self, name: str) -> ast.SceneDef | None:
+        return self._scenes.get(name)
+
     def scene_names(self) -> list[str]:
         return list(self._scenes)
 

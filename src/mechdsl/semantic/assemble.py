@@ -7,6 +7,7 @@ from __future__ import annotations
 from ..model import exprs as X
 from ..model import ir
 from . import components as K
+from . import orientation as O
 from .entries import CompInst, Failed
 from .evaluate import EvalError, fail
 from .friction import friction_force
@@ -36,7 +37,7 @@ def build_model(fl) -> ir.Model:
                     fl.diags.error(ve.code, ve.message, inst.entry.decl.span, ve.help)
                     continue
                 coords += inst.coords
-                for k in ("bodies", "points", "joints", "forces", "terms", "contacts"):
+                for k in ("bodies", "points", "joints", "forces", "terms", "contacts", "shapes"):
                     getattr(built, k).extend(getattr(b, k))
         # joints own coordinates too: the exact count, located at the declaration that passes it
         fl.charge("coordinates", 0, e.decl.span, total=len(coords))
@@ -56,7 +57,7 @@ def build_model(fl) -> ir.Model:
         bodies=tuple(built.bodies), points=(ir.Point("world", "world", span=fl.model.span),) + tuple(built.points),
         joints=tuple(built.joints), forces=tuple(forces), terms=tuple(built.terms + fl.terms),
         constraints=tuple(fl.constraints), outputs=tuple(outputs), contacts=tuple(built.contacts),
-        span=fl.model.span)
+        span=fl.model.span, shapes=tuple(built.shapes))
     from .topology import check_model
 
     return check_model(model, fl.diags)
@@ -83,14 +84,18 @@ def build_component(fl, inst: CompInst) -> K.Built:
                 out.joints.append(j)
     elif cls.category == "point":
         body = f["body"]
-        out.points.append(ir.Point(name, fl.body_of_point(body.name), K.as_vec3(f["r"], "r"), span))
+        out.points.append(ir.Point(name, fl.body_of_point(body.name), K.as_vec3(f["r"], "r"), span,
+                                   O.given_orientation(f, name)))
+    elif cls.category == "shape":
+        out.shapes.append(_build_shape(fl, inst, f, span))
     elif cls.category == "frame":
         parent = f["parent"]
         axis = K.normalized(K.as_vec3(f["axis"], "axis"), "axis")
-        if f.get("R") is not None:
+        R = O.given_orientation(f, name)
+        if R is not None:
             if inst.entry.mod.sub.get("angle") is not None:
-                fail("E211", f"give either R or axis and angle for '{name}', not both", span, "remove one of them")
-            R = K.as_mat3(f["R"], "R")
+                fail("E211", f"give either {'R' if f.get('R') is not None else 'rpy'} or axis and angle for "
+                             f"'{name}', not both", span, "remove one of them")
         else:
             R = K.rodrigues(axis, K.as_expr(f["angle"], "angle"))
         for c in [*K.as_vec3(f["r"], "r"), *(x for row in R for x in row)]:
@@ -102,7 +107,7 @@ def build_component(fl, inst: CompInst) -> K.Built:
         out.points += [ir.Point(name, name, (z, z, z), span)]
         out.joints.append(ir.Joint(f"{name}.motion", "frame", parent.name, name, fl.body_of_point(parent.name),
                                    name, (z, z, X.const(1.0)), (), None, K.as_vec3(f["r"], "r"), R, (), False,
-                                   span))
+                                   span, parent_R=point_axes(fl, parent.name)))
     elif cls.category == "joint":
         out.joints.append(_build_joint(fl, inst, f, span, out))
     elif cls.category == "force":
@@ -122,6 +127,19 @@ def build_component(fl, inst: CompInst) -> K.Built:
         out.contacts.append(ir.Contact(name, _contact_kind(fl, inst, f, span), tuple(fields), span))
     inst.built = out
     return out
+
+
+def _build_shape(fl, inst: CompInst, f, span) -> ir.Shape:
+    """A Shape: what is drawn, where on its body and turned how; all of it constant in time."""
+    name = inst.name
+    kind, size, axis = K.drawn_shape(f)
+    r = K.as_vec3(f["r"], "r")
+    R = O.given_orientation(f, name)
+    for c in [*size, *r, *axis, *(x for row in (R or ()) for x in row)]:
+        if X.depends_on_state(c) or X.depends_on_time(c):
+            fail("E306", f"the size and placement of shape '{name}' may depend on parameters only", span,
+                 "a shape is fixed on its body; it moves with the body")
+    return ir.Shape(name, fl.body_of_point(f["body"].name), kind, size, r, R, axis, span)
 
 
 def _contact_kind(fl, inst: CompInst, f, span) -> str:
@@ -150,7 +168,8 @@ def _build_joint(fl, inst: CompInst, f, span, out: K.Built) -> ir.Joint:
         out.points.append(ir.Point(end, fl.body_of_point(a.name), K.as_vec3(f["r"], "r"), span))
         z = X.const(0.0)
         return ir.Joint(name, "fixed", end, _point_name(b), fl.body_of_point(a.name), fl.body_of_point(b.name),
-                        (z, z, X.const(1.0)), (), None, None, None, (), False, span)
+                        (z, z, X.const(1.0)), (), None, None, None, (), False, span,
+                        child_R=point_axes(fl, _point_name(b)))
     parent, child = f["parent"], f["child"]
     if child is None:                   # the joint's own massless frame
         z = X.const(0.0)
@@ -176,8 +195,30 @@ def _build_joint(fl, inst: CompInst, f, span, out: K.Built) -> ir.Joint:
         except ValError as ve:
             fail(ve.code, ve.message, span, ve.help)
     jv = fl.joint_vars(inst)
+    P, C = joint_axes(fl, inst)
     return ir.Joint(name, kind, _point_name(parent), _point_name(child), pb, cb, axis, tuple(jv), plane,
-                    None, None, tuple(options), False, span)
+                    None, None, tuple(options), False, span, parent_R=P, child_R=C)
+
+
+def joint_axes(fl, inst: CompInst) -> tuple[ir.Mat3 | None, ir.Mat3 | None]:
+    """(P, C): the axes of a joint's parent joint frame in the parent body (the parent point's
+    orientation, then the joint's own rpy / R) and of its child joint frame in the child body
+    (the child point's orientation); None where they are the body's axes."""
+    parent, child = fl.field_value(inst, "parent"), fl.field_value(inst, "child")
+    own = {k: fl.field_value(inst, k) for k in ("rpy", "R")}
+    P = O.compose(point_axes(fl, _point_name(parent)), O.given_orientation(own, inst.name))
+    return P, (point_axes(fl, _point_name(child)) if child is not None else None)
+
+
+def point_axes(fl, pname: str) -> ir.Mat3 | None:
+    """The orientation of a named point in its body's axes (None: the body's own axes)."""
+    inst = fl.insts.get(pname)
+    if inst is None or inst.cls.name != "Point":
+        return None
+    try:
+        return O.given_orientation({k: fl.field_value(inst, k) for k in ("rpy", "R")}, pname)
+    except ValError:
+        raise Failed() from None       # reported where the point is built
 
 
 def _build_force(fl, inst: CompInst, f, span) -> K.Built:

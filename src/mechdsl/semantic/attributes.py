@@ -36,6 +36,8 @@ class Attributes:
             inst = self.insts.get(value.name)
             if inst is not None and name in inst.cls.points:   # rod.a is Rod's end point a, not an acceleration
                 return CompRef("point", f"{inst.name}.{name}", "Point")
+            if inst is not None and inst.cls.name == "Point" and name == "R":
+                return self._point_rotation(inst.name, span)
             kin = _kinematic_attr(value, name)
             if kin is not None:
                 return kin
@@ -59,10 +61,21 @@ class Attributes:
         roles = [jv.role for jv in self.joint_vars(inst)] if cls.category == "joint" else []
         opts = list(cls.points) + [f.name for f in cls.fields] + roles
         if cls.category in ("body", "point", "frame"):
-            opts += ["r", "v", "a", "x", "y", "z"] + (["R", "w", "w_body", "alpha"] if cls.category != "point" else [])
+            opts += ["r", "v", "a", "x", "y", "z", "R"] + (["w", "w_body", "alpha"] if cls.category != "point" else [])
         fail("E219", f"{cls.name} '{inst.name}' has no attribute '{name}'", span,
              did_you_mean(name, opts) or ("attributes: " + ", ".join(dict.fromkeys(opts)) if opts else None))
         raise AssertionError
+
+
+    def _point_rotation(self, pname: str, span: Span) -> Val:
+        """`p.R` of a named point: its axes in world axes (its body's R times its own orientation)."""
+        from .assemble import point_axes
+        from .orientation import matrix_value
+
+        body = self.body_of_point(pname)
+        base = self.attribute(CompRef("world" if body == "world" else "body", body, "Body"), "R", span)
+        axes = point_axes(self, pname)
+        return base if axes is None else V.mul(base, matrix_value(axes))
 
 
 def _kinematic_attr(ref: CompRef, name: str) -> Val | None:

@@ -65,6 +65,9 @@ def _f(*a, **k) -> Field:
 _JOINT_COMMON = (_f("parent", "point", doc="point on the parent body (or world)"),
                  _f("child", "point", None, doc="point on the child body (omitted: the joint's own massless frame, "
                                                 "named after the joint)"))
+_ORIENT_DOC = "orientation of the parent joint frame in the parent point's axes: roll, pitch, yaw (rad, URDF's rpy)"
+_JOINT_COMMON += (_f("rpy", "vec3", None, U.ONE, _ORIENT_DOC),
+                  _f("R", "mat3", None, U.ONE, "orientation of the parent joint frame as a rotation matrix (instead of rpy)"))
 _SPATIAL = (_f("sequence", "string", "zyx", doc="Euler/Cardan sequence of the three angles (intrinsic)"),
             _f("parametrization", "string", "euler", choices=("euler", "quaternion"),
                doc="'euler' (three angles, singular at gimbal lock) or 'quaternion' (singularity-free)"))
@@ -79,7 +82,14 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
         _f("I", "mat3", None, U.INERTIA, "inertia tensor about the centre of mass, body axes"),
         _f("I_11", "scalar", 0.0, U.INERTIA), _f("I_22", "scalar", 0.0, U.INERTIA),
         _f("I_33", "scalar", 0.0, U.INERTIA), _f("I_21", "scalar", 0.0, U.INERTIA),
-        _f("I_31", "scalar", 0.0, U.INERTIA), _f("I_32", "scalar", 0.0, U.INERTIA)),
+        _f("I_31", "scalar", 0.0, U.INERTIA), _f("I_32", "scalar", 0.0, U.INERTIA),
+        _f("measured_inertia", "bool", 0.0, doc="the inertia is measured data: judged only to be positive "
+                                                 "semidefinite, not by the triangle inequality"),
+        _f("shape", "string", "", choices=("", "box", "cylinder", "sphere", "rod", "disk"),
+           doc="a shape to draw the body with (drawing only: the inertia is I)"),
+        _f("size", "vector", None, U.LENGTH, "the drawn shape's size: box {lx, ly, lz}, cylinder {R, L}, "
+                                             "sphere, disk {R}, rod {L}"),
+        _f("axis", "vec3", _X, U.ONE, "the drawn shape's axis (cylinder, disk, rod), body coordinates")),
         "a rigid body with mass, centre of mass and inertia tensor", points=("com",)),
     ComponentClass("Rod", "body", (
         _f("m", "scalar", dim=U.MASS), _f("L", "scalar", dim=U.LENGTH, doc="length"),
@@ -100,13 +110,26 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    "a uniform box; frame at its centre", points=("com",)),
     # ------------------------------------------------------------------ points and frames
     ComponentClass("Point", "point", (_f("body", "body", doc="body the point is fixed on (or world)"),
-                                      _f("r", "vec3", _ZERO3, U.LENGTH, "position in body coordinates")),
-                   "a named point fixed on a body"),
+                                      _f("r", "vec3", _ZERO3, U.LENGTH, "position in body coordinates"),
+                                      _f("rpy", "vec3", None, U.ONE, "orientation of the point's axes in body "
+                                                                     "axes: roll, pitch, yaw (rad, URDF's rpy)"),
+                                      _f("R", "mat3", None, U.ONE, "orientation as a rotation matrix (instead of rpy)")),
+                   "a named point fixed on a body (with an orientation: a frame fixed on the body)"),
+    ComponentClass("Shape", "shape", (
+        _f("body", "body", doc="the body it is drawn on (or world)"),
+        _f("shape", "string", choices=("box", "cylinder", "sphere", "disk", "rod"), doc="what is drawn"),
+        _f("size", "vector", dim=U.LENGTH, doc="box {lx, ly, lz}, cylinder {R, L}, sphere, disk {R}, rod {L}"),
+        _f("r", "vec3", _ZERO3, U.LENGTH, "its centre in body coordinates"),
+        _f("rpy", "vec3", None, U.ONE, "orientation of its axes in body axes: roll, pitch, yaw (rad, URDF's rpy)"),
+        _f("R", "mat3", None, U.ONE, "orientation as a rotation matrix (instead of rpy)"),
+        _f("axis", "vec3", _Z, U.ONE, "the symmetry axis of a cylinder, disk or rod, in its own axes")),
+        "a shape drawn on a body, placed in its axes (drawing only: no mass); a body may have several"),
     ComponentClass("Frame", "frame", (
         _f("parent", "point", "world", doc="where the frame's motion is measured from"),
         _f("r", "vec3", _ZERO3, U.LENGTH, "origin relative to parent (may depend on time)"),
         _f("axis", "vec3", _Z, U.ONE, "rotation axis"), _f("angle", "scalar", 0.0, U.ONE, "rotation angle (of time)"),
-        _f("R", "mat3", None, U.ONE, "rotation matrix (instead of axis and angle)")),
+        _f("R", "mat3", None, U.ONE, "rotation matrix (instead of axis and angle)"),
+        _f("rpy", "vec3", None, U.ONE, "roll, pitch, yaw (rad, URDF's rpy; instead of axis and angle)")),
         "a reference frame moving as a prescribed function of time (massless)"),
     # ------------------------------------------------------------------ joints
     ComponentClass("Revolute", "joint", _JOINT_COMMON + (_f("axis", "vec3", _Z, U.ONE),),
@@ -120,7 +143,7 @@ CLASSES: dict[str, ComponentClass] = {c.name: c for c in [
                    roles=(("x", LEN), ("y", LEN), ("phi", ROT))),
     ComponentClass("Spherical", "joint", _JOINT_COMMON + _SPATIAL, "a ball joint (three rotations)",
                    roles=(("phi", ROT), ("theta", ROT), ("psi", ROT))),
-    ComponentClass("Free", "joint", (_f("parent", "point", "world"), _JOINT_COMMON[1]) + _SPATIAL,
+    ComponentClass("Free", "joint", (_f("parent", "point", "world"),) + _JOINT_COMMON[1:] + _SPATIAL,
                    "six degrees of freedom (three for a point mass)",
                    roles=(("x", LEN), ("y", LEN), ("z", LEN), ("phi", ROT), ("theta", ROT), ("psi", ROT))),
     ComponentClass("Fixed", "joint", _JOINT_COMMON, "a rigid connection (no freedom)"),
@@ -301,6 +324,22 @@ def check_sequence(seq: str) -> None:
 # ----------------------------------------------------------------------------- bodies
 
 
+_SHAPE_SIZES = {"box": 3, "cylinder": 2, "sphere": 1, "disk": 1, "rod": 1}
+
+
+def drawn_shape(f: dict[str, Val]) -> tuple[str, tuple[ir.Expr, ...], ir.Vec3]:
+    """A Body's or a Shape's `shape`, `size` and `axis`: what it is drawn with (a Body's inertia stays I)."""
+    shape = f["shape"].value if isinstance(f.get("shape"), Str) else ""
+    size_val = f.get("size")
+    size = tuple(as_expr(x, "size") for x in size_val.items) if isinstance(size_val, Arr) else ()
+    if shape and len(size) != _SHAPE_SIZES[shape]:
+        raise ValError("E301", f"a {shape} is drawn with {_SHAPE_SIZES[shape]} size value(s), got {len(size)}",
+                       "box: size = {lx, ly, lz}; cylinder: {R, L}; sphere, disk: {R}; rod: {L}")
+    if size and not shape:
+        raise ValError("E210", "size is given without a shape", 'add shape = "box" (or cylinder, sphere, disk, rod)')
+    return shape, size, normalized(as_vec3(f["axis"], "axis"), "axis")
+
+
 @dataclass
 class Built:
     """What one component instance contributes to the IR."""
@@ -311,6 +350,7 @@ class Built:
     forces: list = field(default_factory=list)
     terms: list = field(default_factory=list)
     contacts: list = field(default_factory=list)
+    shapes: list = field(default_factory=list)
 
 
 def build_body(cls: ComponentClass, name: str, f: dict[str, Val], span) -> Built:
@@ -334,6 +374,7 @@ def build_body(cls: ComponentClass, name: str, f: dict[str, Val], span) -> Built
             g = {k: as_expr(f[k], k) for k in ("I_11", "I_22", "I_33", "I_21", "I_31", "I_32")}
             inertia = ((g["I_11"], g["I_21"], g["I_31"]), (g["I_21"], g["I_22"], g["I_32"]),
                        (g["I_31"], g["I_32"], g["I_33"]))
+        shape, size, axis = drawn_shape(f)
     else:
         kind = "rigid"
         shape = cls.name.lower()
@@ -372,7 +413,8 @@ def build_body(cls: ComponentClass, name: str, f: dict[str, Val], span) -> Built
             size = (lx, ly, lz)
         else:  # pragma: no cover - registry and builder out of sync
             raise ValError("E203", f"no builder for {cls.name}", "this is a bug in mechdsl")
-    out.bodies.append(ir.Body(name, kind, m, com, inertia, shape, size, axis, span))
+    measured = cls.name == "Body" and bool(X.is_const(as_expr(f["measured_inertia"], "measured_inertia"), 1.0))
+    out.bodies.append(ir.Body(name, kind, m, com, inertia, shape, size, axis, span, measured))
     out.points.insert(0, ir.Point(name, name, zero3, span))
     out.points.append(ir.Point(f"{name}.com", name, com, span))
     return out

@@ -14,7 +14,7 @@ from .values import Arr, CompRef, Scalar, Str, Val, ValError
 from .vector_starts import VECTOR_STARTS
 
 FIELD_RANK = {"scalar": 0, "vec3": 1, "mat3": 2, "point": 0, "body": 0, "bodies": 1, "coordinate": 0,
-              "string": 0, "bool": 0}
+              "string": 0, "bool": 0, "vector": 1}
 
 
 class ComponentElements:
@@ -37,7 +37,7 @@ class ComponentElements:
             for inst in e.elements:
                 self.insts[inst.name] = inst
         kind = {"body": "body", "point": "point", "frame": "body", "joint": "joint", "force": "force",
-                "contact": "contact"}[e.cls.category]
+                "contact": "contact", "shape": "shape"}[e.cls.category]
         refs = [CompRef(kind, i.name, e.cls.name) for i in e.elements]
         return Arr(tuple(refs)) if dims else refs[0]
 
@@ -138,6 +138,13 @@ class ComponentElements:
                          "give one number or expression")
                 if f.dim is not None:
                     self.check_dim(val, f.dim, f"'{f.name}' of '{inst.name}'", span)
+            elif f.kind == "vector":
+                if not isinstance(val, Arr) or len(V.shape_of(val)) != 1 or not 1 <= V.shape_of(val)[0] <= 3:
+                    fail("E301", f"'{f.name}' of '{inst.name}' must be a vector of 1 to 3 numbers, "
+                                 f"got {V.describe_shape(val)}", span, "e.g. {0.1, 0.2, 0.3}")
+                if f.dim is not None:
+                    for s in V.flatten(val):
+                        self.check_dim(s, f.dim, f"'{f.name}' of '{inst.name}'", span)
             elif f.kind in ("vec3", "mat3"):
                 want = (3,) if f.kind == "vec3" else (3, 3)
                 if not isinstance(val, Arr) or V.shape_of(val) != want:

@@ -19,7 +19,7 @@ from .values import ANY, Arr, CompRef, Scalar, Str, Val, ValError
 
 BUILTIN_NAMES = {"time", "pi", "world"}
 VECTOR_FUNCS = {"cross", "dot", "norm", "transpose", "identity", "zeros", "ones", "fill", "sum", "skew",
-                "diagonal", "rotation", "size", "normalize"}
+                "diagonal", "rotation", "size", "normalize", "rpy", "axis_angle"}
 KINEMATIC_FUNCS = {"der", "position", "velocity", "kinetic_energy", "potential_energy", "energy",
                    "dissipation_function", "reaction_force", "reaction_torque"}
 ALL_FUNCS = set(X.MATH_FUNCS) | VECTOR_FUNCS | KINEMATIC_FUNCS
@@ -378,6 +378,10 @@ def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
             V.require_dimensionless(ang.dim, "a rotation angle", ang.approx)
         R = rodrigues(axis, as_expr(ang, "the rotation angle"))
         return Arr(tuple(Arr(tuple(Scalar(c, U.ONE) for c in row)) for row in R))
+    if name in ("rpy", "axis_angle"):
+        from .orientation import call_axis_angle, call_rpy
+
+        return call_rpy(args) if name == "rpy" else call_axis_angle(args)
     fail("E213", f"unknown function '{name}'", e.span, "see docs/language.md for the built-in functions")
     raise AssertionError
 

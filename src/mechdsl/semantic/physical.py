@@ -1,22 +1,22 @@
 """Physical admissibility of the component values, with the parameter values in force.
 
-``value_problems(model, env)`` is the entry: the mass properties (E508, E509) and the
+``value_problems(model, env)`` is the entry: the mass properties (E508, E509, W509: inertia.py) and the
 degenerate values (E510-E512) below, judged on the numbers of the parameter values given
 (default: the model's).  It runs when the model is analyzed, when `with_params` / `--set`
 change a parameter, and in the start check (``mechdsl.eom.preflight``) of every simulation.
 
-A negative mass or an inertia tensor no rigid body can have (not symmetric, a negative
-principal moment, principal moments that break the triangle inequality I_a + I_b >= I_c)
-makes the equations of motion meaningless without making them fail: the integrator runs
-happily on a negative kinetic energy. So they are model errors (E508, E509), found when the
+A negative mass or an inertia tensor no rigid body can have (not symmetric, not positive
+semidefinite; principal moments that break the triangle inequality beyond rounding, see
+inertia.py) makes the equations of motion meaningless without making them fail: the integrator
+runs happily on a negative kinetic energy. So they are model errors (E508, E509), found when the
 model is analyzed and again when `with_params` / `--set` change a parameter.
 
 Degenerate values make the numbers fail instead (nan at the first step, a singular matrix in
 a solver, a run that never ends), so they are named here with their component:
 
   E510  a component value that is not finite (a mass 1e308 * 10, a length 1/(r - r))
-  E511  a negative length, radius or size of a body or a contact
-  E512  a direction that is the zero vector (joint or body axis, contact normal)
+  E511  a negative length, radius or size of a body, a shape or a contact
+  E512  a direction that is the zero vector (joint, body or shape axis, contact normal)
 """
 from __future__ import annotations
 
@@ -28,28 +28,20 @@ from ..model import exprs as X
 from ..model import ir
 from ..diagnostics import Diagnostic
 
-REL_TOL = 1e-9
-
-
-def _number(e: ir.Expr, env: dict[str, float]) -> float | None:
-    """The value of a constant expression, None when it depends on the state or time."""
-    if X.depends_on_state(e) or X.depends_on_time(e):
-        return None
-    try:
-        with np.errstate(all="ignore"):
-            v = X.evaluate(e, env)
-    except Exception:  # noqa: BLE001 - an expression we cannot judge here is judged by the numerics
-        return None
-    return v if math.isfinite(v) else None
-
-
 def value_problems(model: ir.Model, env: dict[str, float] | None = None) -> list[Diagnostic]:
-    """Every problem of the component values (E508-E512), in declaration order per kind."""
+    """Every problem of the component values (E508-E512, and the warning W509), in declaration
+    order per kind; ``errors`` keeps the errors."""
+    from .inertia import mass_property_problems
+
     if env is None:
         env = parameter_env(model)
     found = degenerate_problems(model, env)
     bad = {d.span for d in found}         # a body with a non-finite mass is not judged again
     return found + [d for d in mass_property_problems(model, env) if d.span not in bad]
+
+
+def errors(found: list[Diagnostic]) -> list[Diagnostic]:
+    return [d for d in found if d.severity == "error"]
 
 
 def parameter_env(model: ir.Model) -> dict[str, float]:
@@ -124,6 +116,14 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
             return True
         return False
 
+    def negative_lengths(kind: str, sizes, owner: str, span, hint: str) -> None:
+        for name, e in zip(_LENGTHS.get(kind, ()), sizes):
+            v = _raw(e, env)
+            if v is None or not_finite(f"the {name}", owner, [v], span):
+                continue
+            if v < 0:
+                out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", span, hint))
+
     for b in model.bodies:
         if b.kind not in ("point", "rigid"):
             continue
@@ -131,17 +131,17 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
         if not_finite("the mass", owner, [_raw(b.mass, env)], b.span):
             continue
         if b.kind == "rigid":
-            for name, e in zip(_LENGTHS.get(b.shape, ()), b.shape_size):
-                v = _raw(e, env)
-                if v is None or not_finite(f"the {name}", owner, [v], b.span):
-                    continue
-                if v < 0:
-                    out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", b.span,
-                                          "lengths and radii are >= 0; reverse the body's axis instead of "
-                                          "the sign of its length"))
+            negative_lengths(b.shape, b.shape_size, owner, b.span,
+                             "lengths and radii are >= 0; reverse the body's axis instead of the sign of its length")
             if b.shape in ("rod", "disk", "cylinder") and zero_direction("the axis", owner, b.axis, b.span):
                 continue                       # (its inertia, built from the axis, says nothing more)
             not_finite("the inertia tensor", owner, [_raw(e, env) for row in b.inertia for e in row], b.span)
+    for sh in getattr(model, "shapes", ()):
+        owner = f"shape '{sh.name}'"
+        negative_lengths(sh.kind, sh.size, owner, sh.span, "lengths and radii are >= 0")
+        not_finite("the placement r", owner, [_raw(e, env) for e in sh.r], sh.span)
+        if sh.kind in ("rod", "disk", "cylinder"):
+            zero_direction("the axis", owner, sh.axis, sh.span)
     for j in model.joints:
         if j.kind in ("revolute", "prismatic", "cylindrical", "planar"):
             zero_direction("the axis", f"joint '{j.name}'", j.axis, j.span)
@@ -167,42 +167,4 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
         normal = c.get("normal")
         if c.kind == "plane" and isinstance(normal, tuple):
             zero_direction("the normal", owner, normal, c.span)
-    return out
-
-
-def mass_property_problems(model: ir.Model, env: dict[str, float] | None = None) -> list[Diagnostic]:
-    if env is None:
-        env = parameter_env(model)
-    out: list[Diagnostic] = []
-    for b in model.bodies:
-        if b.kind not in ("point", "rigid"):
-            continue
-        m = _number(b.mass, env)
-        if m is not None and m < 0:
-            out.append(Diagnostic("E508", f"body '{b.name}' has a negative mass ({m:g})", b.span,
-                                  "masses are positive; check the sign of its `m` and the parameters it uses"))
-            continue
-        if b.kind != "rigid":
-            continue
-        values = [[_number(e, env) for e in row] for row in b.inertia]
-        if any(v is None for row in values for v in row):
-            continue
-        inertia = np.array(values, dtype=float)
-        scale = max(float(np.max(np.abs(inertia))), 1e-300)
-        if np.max(np.abs(inertia - inertia.T)) > REL_TOL * scale:
-            out.append(Diagnostic("E509", f"the inertia tensor of body '{b.name}' is not symmetric", b.span,
-                                  "I must equal its transpose: give I_21, I_31, I_32 once (or a symmetric I)"))
-            continue
-        moments = np.sort(np.linalg.eigvalsh(inertia))
-        shown = ", ".join(f"{x:.6g}" for x in moments)
-        if moments[0] < -REL_TOL * scale:
-            out.append(Diagnostic("E509", f"the inertia tensor of body '{b.name}' has a negative principal moment "
-                                          f"(principal moments {shown})", b.span,
-                                  "moments of inertia are >= 0; check signs (products of inertia enter I with "
-                                  "their sign as written)"))
-        elif moments[0] + moments[1] < moments[2] - REL_TOL * scale:
-            out.append(Diagnostic("E509", f"no rigid body has the inertia tensor of '{b.name}': its principal "
-                                          f"moments ({shown}) break the triangle inequality I1 + I2 >= I3", b.span,
-                                  "for any mass distribution each principal moment is at most the sum of the "
-                                  "other two; check the values (a thin disk: I3 = I1 + I2)"))
     return out

@@ -31,12 +31,10 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
                 check(out[name].lower())
             except UsageError as e:
                 diags.error("E604", str(e), spans[name], "see docs/simulate.md for the names")
-    method = str(out.get("method", "")).lower()
-    if method in R.FIXED_METHODS and (model.loops or model.constraints):
-        from ..symplectic import CONSTRAINED
-
-        if method not in CONSTRAINED:
-            bad("method", f"= \"{method}\" ignores the constraints of {model.name}",
+    method = R.METHODS.get(str(out.get("method", "")).lower())
+    if method is not None and method.family == "canonical" and (model.loops or model.constraints):
+        if not method.constrained:
+            bad("method", f"= \"{method.name}\" ignores the constraints of {model.name}",
                 'use method = "rattle" (constrained Stormer-Verlet) or an adaptive method (docs/constraints.md)')
     if model.contacts:
         _contact_rules(out, spans, diags)
@@ -55,14 +53,14 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
 
 
 def _contact_rules(out: dict[str, object], spans: dict, diags: DiagnosticBag) -> None:
-    """The contact back end's own rules (impacts/stepper.py, impacts/options.py) for a model with
+    """The contact back end's own rules (impacts/one_step.py, impacts/contact_run.py) for a model with
     contacts: its method names (no `rk4`, no symplectic method), rest_speed and impact_order."""
     from ..diagnostics import UsageError
-    from ..impacts.options import ContactOptions
-    from ..impacts.stepper import resolve_method
+    from ..simulation.settings import ContactOptions
+    from ..simulation.registry import events_method
 
-    rules = (("method", resolve_method), ("rest_speed", lambda v: ContactOptions(rest_speed=v)),
-             ("impact_order", lambda v: ContactOptions(impact_order=v)))
+    rules = (("method", events_method), ("rest_speed", lambda v: ContactOptions(rest_speed=v).validated()),
+             ("impact_order", lambda v: ContactOptions(impact_order=v).validated()))
     for name, rule in rules:
         if out.get(name) is not None and name in spans:
             try:

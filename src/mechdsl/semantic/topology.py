@@ -116,10 +116,13 @@ def _warn_unused_coordinates(model: ir.Model, diags: DiagnosticBag) -> None:
 
 
 def counts(model: ir.Model) -> dict[str, int]:
+    """What `mech check` and the dumps count.  A constant Frame (a fixed offset and orientation:
+    no motion in time) is a placement, not a body and a joint, so it is not counted."""
     cut_eqs = sum(6 - _joint_dof(j) for j in model.joints if j.closes_loop)
+    placed = {j.child_body for j in model.joints if constant_frame(j)}
     return {
-        "bodies": len(model.bodies),
-        "joints": len(model.joints),
+        "bodies": sum(b.name not in placed for b in model.bodies),
+        "joints": sum(not constant_frame(j) for j in model.joints),
         "coordinates": len(model.coordinates),
         "constraints": len(model.constraints) + cut_eqs,
         "explicit_constraints": len(model.constraints),
@@ -130,3 +133,11 @@ def counts(model: ir.Model) -> dict[str, int]:
 def _joint_dof(j: ir.Joint) -> int:
     return {"revolute": 1, "prismatic": 1, "cylindrical": 2, "planar": 3, "spherical": 3, "free": 6,
             "fixed": 0, "frame": 0}.get(j.kind, len(j.variables))
+
+
+def constant_frame(j: ir.Joint) -> bool:
+    """A Frame's motion joint whose offset and orientation do not change in time."""
+    if j.kind != "frame":
+        return False
+    parts = [*(j.frame_r or ()), *(x for row in (j.frame_R or ()) for x in row)]
+    return not any(X.depends_on_time(e) or X.depends_on_state(e) for e in parts)

@@ -14,6 +14,10 @@ of the joint's own coordinates:
   R_c^T R_b^T e_a, R_c^T e_b, e_c, solved by Cramer's rule (a gimbal-locked start, det E = 0, is
   refused by the flattener: E222); for a quaternion
   qd = G(q)^T w_body / 2 (w_body = 2 G qd / |q|^2, G G^T = |q|^2 1).
+
+With oriented joint frames (rpy / R on the joint or its points, issue 26) the vectors are turned
+into the joint frames' axes first: r, v and omega "world" by P^T (the parent joint frame's
+axes), omega "body" by C^T (the child joint frame's axes in the child body).
 """
 from __future__ import annotations
 
@@ -141,7 +145,7 @@ class VectorStarts:
                          rm.sub[attr].span, "remove one of them")
             vec = self._start_vector(inst, key, m, (3,))
             if key != "omega":
-                new = dict(zip(targets, vec))
+                new = dict(zip(targets, self._in_joint_axes(inst, vec, "parent")))
             else:
                 frame = "body"
                 if "frame" in m.sub:
@@ -156,6 +160,7 @@ class VectorStarts:
                     fail("E221", f"omega(frame = \"world\") of '{inst.name}' needs a joint whose parent is the world",
                          m.sub["frame"].span, 'give the angular velocity relative to the parent in the child\'s axes: '
                                               'frame = "body"')
+                vec = self._in_joint_axes(inst, vec, "parent" if frame == "world" else "child")
                 starts = [inst.coords[index[own[r]]].start for r in targets]
                 if param == "euler":
                     seq = self.field_value(inst, "sequence").value  # type: ignore[union-attr]
@@ -167,6 +172,15 @@ class VectorStarts:
             for r, expr in new.items():
                 i = index[own[r]]
                 inst.coords[i] = dataclasses.replace(inst.coords[i], **{attr: expr})
+
+    def _in_joint_axes(self, inst: CompInst, vec, side: str):
+        """A vector given in the parent's (or child body's) axes, in the axes of the parent (child)
+        joint frame, when that frame is oriented (rpy / R on the joint or its points)."""
+        from .assemble import joint_axes
+        from .orientation import transpose_times
+
+        axes = joint_axes(self, inst)[0 if side == "parent" else 1]
+        return tuple(vec) if axes is None else transpose_times(axes, tuple(vec))
 
     def _check_not_gimbal_locked(self, inst: CompInst, seq: str, det: ir.Expr, span: Span) -> None:
         """omega at a gimbal-locked start orientation has no Euler rates (or huge cancelling

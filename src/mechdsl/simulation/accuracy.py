@@ -17,6 +17,7 @@ import numpy as np
 
 from ..output.result import Failure, Result
 
+
 SCHEMA = ("steps", "rhs_evals", "jac_evals", "rejected_steps", "events", "points", "cpu_time", "wall_time",
           "energy_drift", "energy_drift_relative", "invariant_drift", "constraint_drift")
 # a back end's name for a count -> the schema's name (first found wins)

@@ -29,7 +29,9 @@ from dataclasses import field
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
+from ..eom.codegen import TXUP, jacobian_of
 from ..model.records import record
+
 
 HOLDS = ("zoh", "linear")
 
@@ -147,7 +149,6 @@ class Drive:
             return funcs             # zero-order holds come in through u, piece by piece (vector(t))
         import casadi as ca
 
-        from ..eom.codegen import TXUP, jacobian_of
 
         ode = funcs["ode"]
         t = ca.MX.sym("t")

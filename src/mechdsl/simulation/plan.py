@@ -18,6 +18,9 @@ with the problem (docs/simulate.md, "What a scene computes").
 """
 from __future__ import annotations
 
+from .monitors import MAX_INTEGRAL_SEARCH
+from .record_dae import depends_on, lam_symbol, reaction_sources, select_signals
+
 
 def plan(eom, settings, kind: str, contacts: tuple[str, ...], outputs: tuple[str, ...],
          invariants: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
@@ -63,7 +66,6 @@ def _reactions(eom, settings, kind) -> tuple[tuple[str, ...], str]:
         why = {"hybrid": "contact forces come from the impact and contact laws",
                "canonical": "a fixed-step run computes no multipliers"}.get(kind, "no constraints")
         return (), f"none ({why})"
-    from ..dae.record import depends_on, lam_symbol, reaction_sources, select_signals
 
     chosen, need = select_signals(eom, settings.outputs, settings.reactions)
     lam = lam_symbol(eom)
@@ -93,8 +95,6 @@ def _invariants(eom, kind, invariants) -> str:
     if declared:
         parts.append(f"declared: {', '.join(declared)}")
     if kind == "ode" and eom.n and not getattr(getattr(eom, "model", None), "contacts", None):
-        from ..simulate import MAX_INTEGRAL_SEARCH
-
         parts.append("first integrals searched and recorded" if eom.n <= MAX_INTEGRAL_SEARCH else
                      f"first integrals not searched (more than {MAX_INTEGRAL_SEARCH} coordinates)")
     return "; ".join(parts)

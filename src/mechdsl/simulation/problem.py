@@ -12,9 +12,18 @@ from __future__ import annotations
 
 from dataclasses import field
 
-from ..model.records import record
+import casadi as ca
 
-from .settings import SimulationSettings
+from ..eom import fold_inputs, parameter_vector
+from ..eom.start import start_vector
+from ..model.records import record
+from .backends import backend
+from .drive import build_drive
+from .monitors import is_conservative
+from .plan import plan, reaction_signals
+from .registry import FIXED, check_method
+from .settings import GROUPS, SimulationSettings
+
 
 KINDS = {"ode": "ODE in minimal coordinates: M(q) q'' = bias(q, q', t, p)",
          "dae": "index-3 DAE with multipliers: M q'' + G' lambda = bias, g(q, t) = 0",
@@ -48,46 +57,37 @@ class Problem:
 
 def formulate(eom, settings: SimulationSettings) -> Problem:
     """Build the problem of a run (settings already validated)."""
-    from .registry import FIXED, check_method
-
     model = getattr(eom, "model", None)
-    contacts = tuple(c.name for c in (model.contacts if model is not None else ()) or ())
+    given = settings.contacts.contacts         # contact objects given to the run (a hand-built model)
+    contacts = tuple(c.name for c in (given if given is not None else
+                                      (model.contacts if model is not None else ()) or ()))
     constrained = eom.g is not None and getattr(eom, "m", 0) > 0
     info = check_method(settings.method)
-    if contacts:
+    if contacts or settings.contacts.fixations:
         kind, backend = "hybrid", "events"
-    elif FIXED in info.backends:
+    elif FIXED in info.kinds:
         kind, backend = "canonical", "fixed-step"
     elif constrained:
         kind, backend = "dae", "dae"
     else:
         kind, backend = "ode", "ode"
     states = tuple(eom.coords) + tuple(f"der({c})" for c in eom.coords)
-    from ..eom import parameter_vector
-
     pv = parameter_vector(eom, settings.p)
     params = tuple((n, float(v)) for n, v in zip(eom.params, pv))
     drive, run_eom, step_eom = None, eom, None
     if eom.inputs:
-        from ..eom import fold_inputs
-        from .drive import build_drive
-        from .inputs import start_vector
-
         drive = build_drive(eom, settings.inputs, settings.t_start, settings.t_end, start_vector(eom, settings.x0, pv))
         if kind != "ode":      # constant inputs: trailing parameters; signals: u = U(t, x) in the equations
             run_eom = fold_inputs(eom, drive.vector()) if drive.constant else drive.close_eom(eom)
             if backend == "fixed-step" and drive.holds and not constrained:
                 step_eom = drive.close_eom(eom, hold_time=True)
     elif settings.inputs:
-        from .drive import build_drive
-
         build_drive(eom, settings.inputs, settings.t_start, settings.t_end)     # reports the unknown name
     outputs = settings.outputs if settings.outputs is not None else tuple(getattr(eom, "outputs", {}) or ())
-    from .plan import plan, reaction_signals
 
     invariants = invariant_names(eom)
     return Problem(kind=kind, backend=backend, model=eom.name, states=states, parameters=params,
-                   settings=settings, formulation=settings.formulation if kind == "dae" else None,
+                   settings=settings, formulation=settings.dae.formulation if kind == "dae" else None,
                    invariants=invariants,
                    constraints=tuple(eom.constraint_names) if constrained else (), contacts=contacts,
                    outputs=tuple(outputs), reactions=reaction_signals(eom, settings, kind),
@@ -98,18 +98,14 @@ def formulate(eom, settings: SimulationSettings) -> Problem:
 
 def invariant_names(eom) -> tuple[str, ...]:
     """The energy when the model conserves it, and the model's declared invariants."""
-    from ..simulate import is_conservative
-
     names = []
-    if conserves_energy(eom, is_conservative):
+    if conserves_energy(eom):
         names.append("energy")
     names += list((getattr(eom, "invariants", None) or {}))
     return tuple(names)
 
 
-def conserves_energy(eom, is_conservative) -> bool:
-    import casadi as ca
-
+def conserves_energy(eom) -> bool:
     if getattr(getattr(eom, "model", None), "contacts", None):
         return False
     if not is_conservative(eom):
@@ -139,12 +135,17 @@ def dump(problem: Problem) -> str:
     lines.append("  computed, and why:")
     lines += [f"    {topic}: {text}" for topic, text in problem.plan]
     lines.append("  settings:")
+    own = backend(problem.backend).groups
     for k, v in s.as_dict().items():
+        if k in GROUPS:             # the back end's own groups in full, the others where they differ
+            default = GROUPS[k]()
+            for name, x in v.items():
+                if x not in (None, (), []) and (k in own or getattr(getattr(s, k), name) != getattr(default, name)):
+                    lines.append(f"    {k}.{name} = {x!r}")
+            continue
         if k == "compiled" and v is None:
             v = "auto"      # the ODE back end compiles when it pays
-        if v is None or v == {} or k == "extra":
+        if v is None or v == {}:
             continue
         lines.append(f"    {k} = {v!r}")
-    for k in sorted(s.extra):
-        lines.append(f"    {k} = {s.extra[k]!r}")
     return "\n".join(lines) + "\n"

@@ -28,6 +28,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..eom.codegen import singularity_monitors
+
+
 ENERGY_NAMES = ("kinetic_energy", "potential_energy", "energy")
 # the symbolic fields a column may read: the Functions are shared while these are the same objects
 MAPS_KEPT = 8           # mapped Functions kept per recorder Function (by number of points)
@@ -129,8 +132,6 @@ def invariants(eom) -> dict:
 
 
 def monitors(eom) -> dict:
-    from ..eom.codegen import singularity_monitors
-
     return {f"singularity({k})": v for k, v in singularity_monitors(eom).items()}
 
 

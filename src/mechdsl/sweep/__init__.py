@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import UsageError
+from ..model.names import split_state
 from .spec import Table, table  # noqa: F401  (public: mechdsl.sweep.table)
 from .store import read  # noqa: F401  (public: mechdsl.sweep.read)
 
@@ -67,7 +68,7 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
         raise UsageError("resume=True continues the sweep an output file holds: give out= (-o)")
     if out is not None:
         _check_out(out, overwrite or resume)
-    from ..simulate import DEFAULT_POINTS
+    from ..simulation.settings import DEFAULT_POINTS
 
     settings = model.settings(t_end=t_end, **options)
     if settings.points is None:
@@ -79,7 +80,8 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
               variables=(), grid=np.linspace(settings.t_start, settings.t_end, settings.points))
     method_note = None
     vector_why = _vectorizable(problem, names)
-    if vector_why is None and settings.method == "auto":
+    if problem.kind == "ode" and settings.method == "auto" and not names.structural:
+        # once for the sweep (the runs are prepared once and share the method, whatever the scheduler)
         settings, method_note = _resolve_auto(job, d, settings)
         job.settings = settings
         vector_why = _vectorizable(problem, names, settings.method)
@@ -216,12 +218,13 @@ def _label(name: str, starts: dict) -> str:
     key = starts.get(name)
     if key is None:
         return name
-    return f"{key[4:-1]}.speed" if key.startswith("der(") else f"{key}.start"
+    coord, speed = split_state(key)
+    return f"{coord}.speed" if speed else f"{coord}.start"
 
 
 def _vectorizable(problem, names, method: str | None = None) -> str | None:
     """None when one mapped integrator can run the sweep, else why not."""
-    from .. import integrators as I
+    from ..simulation import registry as R
 
     if names.structural:
         return (f"{', '.join(names.structural)} is an Integer/Boolean parameter: it changes the model's "
@@ -232,9 +235,9 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
         return {"dae": "the model has constraints (a DAE)", "hybrid": "the model has contacts (events)",
                 "canonical": f"method {problem.settings.method} is a fixed-step canonical method"}[problem.kind]
     m = method or problem.settings.method
-    if m != "auto" and (m not in I.METHODS or I.METHODS[m][0] != "casadi"):
+    if m != "auto" and R.spec(m).family != "casadi":
         return f"method {m} is not a CasADi integrator"
-    if problem.settings.extra.get("functions") is not None:
+    if problem.settings.ode.functions is not None:
         return "the functions option replaces the model's Functions"
     return None
 
@@ -242,15 +245,15 @@ def _vectorizable(problem, names, method: str | None = None) -> str | None:
 def _resolve_auto(job, d, settings):
     """method=auto, once for the sweep: the choice of a single run at the first run's start."""
     from ..eom.codegen import casadi_functions
-    from ..simulate import choose_method
+    from ..simulation.choose import choose_method
     from .runs import _prepare
 
     row = {k: float(v[0]) for k, v in d.values.items()}
     try:
-        eom, s = _prepare(job, row)
+        eom, s, _ = _prepare(job, row)
     except Exception:  # noqa: BLE001 - an invalid first run: decide at the model's own start
         eom, s = job.model.eom, settings.replace(p=job.model.parameter_values, x0=None)
-        from ..simulation.inputs import start_vector
+        from ..eom.start import start_vector
 
         s = s.replace(x0=start_vector(eom, None, s.p))
     funcs = casadi_functions(eom, names=("ode", "ode_jacobian"))

@@ -3,28 +3,41 @@ on a Dask worker): ``run_chunk(job, first, values) -> Chunk``.
 
 Each run goes through the one simulation layer: its settings are the sweep's resolved
 ``SimulationSettings`` with the run's parameter vector and start vector (``p``, ``x0``),
-and its statistics are the layer's schema (``accuracy.SCHEMA``).  Two ways to integrate:
+and its statistics are the layer's schema (``accuracy.SCHEMA``).  The problem is prepared
+once per chunk and model structure (``simulation.prepared.prepare``: Functions, method,
+integrator), and every run is that preparation ``at`` its values.  Two ways to integrate:
 
-    per run     ``mechdsl.simulation.simulate(eom, settings)``: any problem kind
-    vectorized  one CasADi integrator ``map``-ped over the chunk (ODE problems, CasADi
-                methods); the layer's post steps (non-finite check, statistics schema,
-                accuracy report) then run per run on its trajectory.  A run whose
-                trajectory is not finite (or a chunk the mapped call rejects) is rerun
-                per run, so its failure says when and why exactly as a single run would.
+    per run     the start check, then ``solve(prepared.at(p=..., x0=...))``: any problem kind
+    vectorized  the prepared integrator ``map``-ped over the chunk (ODE problems, CasADi
+                methods); the layer's post steps (the run's signals and metadata, non-finite
+                check, statistics schema, accuracy report) then run per run on its
+                trajectory.  A run whose trajectory is not finite (or a chunk the mapped call
+                rejects) is rerun per run, so its failure says when and why exactly as a
+                single run would.
 
-The mapped integrator is the same Function object (``integrators._integrator``, same
-options) a single run uses, so both ways give bit-identical numbers.
+The mapped integrator is the Function a single run of the prepared problem integrates with
+(``Prepared.integrator``, same options), so both ways give bit-identical numbers.
 """
 from __future__ import annotations
 
+import copy
 import os
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..interrupts import check_interrupt
+from .. import integrators as I
 from ..diagnostics import MechError, UsageError
+from ..eom.preflight import check_start
+from ..eom.start import start_vector
+from ..interrupts import check_interrupt
+from ..simulation import accuracy as A
+from ..simulation.choose import NO_U
+from ..simulation.prepared import prepare
+from ..simulation.problem import formulate
+from ..simulation.template import solve
+
 
 STATUS = ("success", "failure_time", "cause", "detail", "steps", "rhs_evals", "rejected_steps", "points",
           "cpu_time", "wall_time", "energy_drift", "energy_drift_relative")
@@ -72,46 +85,57 @@ def _run_chunk(job: Job, first: int, values: dict) -> Chunk:
     out = Chunk(first, np.full((k, nt, nx), np.nan), np.full((k, nt, len(job.variables)), np.nan),
                 [None] * k)
     todo = []
-    prepared = {}
+    runs = {}
     for i in range(k):
         row = {name: float(v[i]) for name, v in values.items()}
         try:
-            prepared[i] = _prepare(job, row)
+            runs[i] = _prepare(job, row)
             todo.append(i)
         except (UsageError, MechError) as e:
             out.status[i] = _invalid(str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__)
         # a Ctrl-C that a CasADi call swallowed (and someone handled as a plain failure) would
         # otherwise wait for the end of the chunk
         check_interrupt()
+    prepared: dict = {}             # structural values -> the problem prepared once (simulation.prepared)
     if job.vectorized and todo:
-        todo = _mapped(job, todo, prepared, out)
+        todo = _mapped(job, todo, runs, out, prepared)
     for i in todo:
-        eom, s = prepared[i]
-        _store(job, out, i, _solve_one(eom, s))
+        eom, s, key = runs[i]
+        _store(job, out, i, _solve_one(prepared, key, eom, s))
         check_interrupt()            # a Ctrl-C the run's integrator swallowed (it failed "interrupted")
     return out
 
 
 def _prepare(job: Job, row: dict):
-    """The run's EOM and settings (the one place a run's p and x0 are built)."""
-    from ..simulation.inputs import start_vector
-
+    """The run's EOM and settings (the one place a run's p and x0 are built) and the key of its
+    structure (runs with equal keys share one prepared problem)."""
     m = job.model
+    key = tuple(row[n] for n in job.structural)
     if job.structural:
         m = m.with_params(**{n: int(row[n]) if float(row[n]).is_integer() else row[n] for n in job.structural})
     if job.real:
         m = m.with_params(**{n: row[n] for n in job.real})
     eom = m.eom
     pv = np.asarray(m.parameter_values, float)
-    x0 = start_vector(eom, {key: row[name] for name, key in job.starts.items()} or None, pv)
-    return eom, job.settings.replace(p=pv, x0=x0)
+    x0 = start_vector(eom, {key_: row[name] for name, key_ in job.starts.items()} or None, pv)
+    return eom, job.settings.replace(p=pv, x0=x0), key
 
 
-def _solve_one(eom, s):
-    from ..simulation import simulate
+def _prepared(prepared: dict, key, eom, s):
+    """The problem of this structure, prepared once per chunk (its Functions, method and
+    integrator); the runs are solved ``at`` their parameters and start values."""
+    hit = prepared.get(key)
+    if hit is None:
+        hit = prepared[key] = prepare(formulate(eom, s))
+    return hit
 
+
+def _solve_one(prepared: dict, key, eom, s):
+    """One run: the start check of every run (as simulation.simulate), then the prepared problem
+    at this run's values."""
     try:
-        return simulate(eom, s)
+        check_start(eom, p=s.p, x0=s.x0, t=s.t_start, drift_bound=s.dae.bound(s.atol))
+        return solve(_prepared(prepared, key, eom, s).at(p=s.p, x0=s.x0))
     except (UsageError, MechError) as e:
         return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
     except Exception:
@@ -152,19 +176,11 @@ def _store(job: Job, out: Chunk, i: int, r) -> None:
 _MAPS: dict = {}
 
 
-def mapped_integrator(eom, s, grid, k: int, threads: int):
-    """The one place the sweep touches the model's CasADi Functions: the integrator of a
-    single run (same Function, same options as ``simulate_ode``) mapped over k runs."""
-    from .. import integrators as I
-    from ..eom.codegen import casadi_functions
-    from ..simulate import DEFAULT_POINTS, MAX_STEPS_TOTAL, min_step
-
-    npts = s.points or DEFAULT_POINTS
-    max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))      # as simulate_ode
-    opts = I.casadi_options(s.method, s.rtol, s.atol, max_steps, None, dict(s.integrator_options or {}),
-                            hmin=min_step(s.t_start, s.t_end))
-    ode = casadi_functions(eom, compiled=s.compiled, names=("ode", "ode_jacobian"))["ode"]
-    integ = I._integrator(s.method, ode, grid, opts)
+def mapped_integrator(prep, k: int, threads: int):
+    """The one place the sweep touches the model's CasADi Functions: the integrator of the
+    prepared problem (the same Function and options a single run integrates with) mapped over
+    k runs."""
+    integ = prep.integrator()
     key = (id(integ), k, threads)
     hit = _MAPS.get(key)
     if hit is None or hit[0] is not integ:
@@ -177,26 +193,19 @@ def mapped_integrator(eom, s, grid, k: int, threads: int):
 def scheme_parameter(pv) -> np.ndarray:
     """The integrator's parameter input [u; p] (integrators.dae_function); u is empty: the
     vectorized path serves models without inputs only."""
-    from ..simulate import NO_U
-
     return np.r_[NO_U, np.asarray(pv, float).ravel()]
 
 
-def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
+def _mapped(job: Job, todo: list, runs: dict, out: Chunk, prepared: dict) -> list:
     """Integrate ``todo`` runs in one mapped call; returns the runs left for the per-run path."""
-    from .. import integrators as I
-    from ..output.result import Result
-    from ..simulate import compute_signals, _check_outputs
-    from ..simulation import formulate
-    from ..simulation import accuracy as A
-
-    eom0, s0 = prepared[todo[0]]
+    eom0, s0, key0 = runs[todo[0]]
     k = len(todo)
-    X0 = np.column_stack([prepared[i][1].x0 for i in todo])
-    P = np.column_stack([scheme_parameter(prepared[i][1].p) for i in todo])
+    X0 = np.column_stack([runs[i][1].x0 for i in todo])
+    P = np.column_stack([scheme_parameter(runs[i][1].p) for i in todo])
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        F = mapped_integrator(eom0, s0, job.grid, k, job.threads)
+        prep = _prepared(prepared, key0, eom0, s0)
+        F = mapped_integrator(prep, k, job.threads)
         check_interrupt()
         with I.captured_messages():
             xf = np.asarray(F(x0=X0, p=P)["xf"], float)
@@ -207,20 +216,19 @@ def _mapped(job: Job, todo: list, prepared: dict, out: Chunk) -> list:
     wall = (time.perf_counter() - wall0) / k
     nx, nt = X0.shape[0], len(job.grid)
     traj = xf.reshape(nx, k, nt).transpose(1, 2, 0)        # (run, time, state)
-    out_names = _check_outputs(eom0, s0.outputs)
-    problem = formulate(eom0, s0)          # invariants depend on the structure only (none swept here)
+    setup, problem = prep.setup, prep.problem
     left = []
-    n = nx // 2
     for j, i in enumerate(todo):
         X = traj[j]
         if not np.isfinite(X).all():
             left.append(i)
             continue
-        eom, s = prepared[i]
+        eom, s, _ = runs[i]
         X[0] = s.x0
-        sig = compute_signals(eom, job.grid, X, s.p, out_names)
-        r = Result(t=job.grid.copy(), q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=sig,
-                   stats={}, metadata={"warnings": []})
+        # the layer's post steps on the trajectory: the run's signals and metadata (OdeSetup.record),
+        # non-finite check, statistics schema, accuracy report
+        r = setup.record(job.grid.copy(), X, s.p, s.x0, copy.deepcopy(setup.meta), I.Run(X=X, reached=nt),
+                         None, setup.loop_compiled, time.perf_counter())
         A.check_finite(r)
         A.normalize_stats(r, cpu, wall)
         A.accuracy_report(r, problem, fixed_step=False)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..diagnostics import UsageError, did_you_mean
+from ..model.names import split_state
 
 MAX_RUNS = 100_000_000
 
@@ -156,7 +157,8 @@ def classify(model, names) -> Names:
 def _start_key(name: str, coords) -> str | None:
     if name in coords:
         return name
-    if name.startswith("der(") and name.endswith(")") and name[4:-1] in coords:
+    coord, speed = split_state(name)
+    if speed and coord in coords:
         return name
     for suffix, fmt in ((".start", "{}"), (".speed", "der({})")):
         if name.endswith(suffix) and name[: -len(suffix)] in coords:
@@ -166,7 +168,7 @@ def _start_key(name: str, coords) -> str | None:
 
 def parse_range(text: str) -> tuple[str, np.ndarray]:
     """The CLI's ``--grid NAME=A:B:N`` (N values from A to B) or ``NAME=v1,v2,...``."""
-    from ..commands._common import number
+    from ..numbers import number
 
     name, sep, rhs = str(text).partition("=")
     name = name.strip()

@@ -1,0 +1,176 @@
+"""FMI export: a mechdsl model as a Functional Mock-up Unit (FMI 2.0 or 3.0).
+
+    from mechdsl.export import export_fmu
+    info = export_fmu(model, "pendulum.fmu", fmi_version=2, fmi_type="both")
+    model.export_fmu("pendulum.fmu")                       # the same, from mechdsl.Model
+    mech export models/pendulum.mech --fmu pendulum.fmu    # the same, from the shell
+
+The FMU is self-contained for the platform it is built on: modelDescription.xml, the C
+sources and the compiled binary; running it needs neither Python nor CasADi nor mechdsl.
+Model exchange exposes the formulated ODE (minimal coordinates; a constrained model's
+index-1 ODE, its drift projected away at step events) with directional derivatives from
+CasADi; co-simulation steps itself with the compiled Runge-Kutta loop of ``mech simulate``
+and handles contacts and impacts inside the step.  See docs/export.md for what is
+exported and how to load an FMU in OpenModelica, Simulink and fmpy; the design is in
+docs/internals/export.md.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+from ..diagnostics import Diagnostic, MechError, UsageError
+
+FMI_VERSIONS = (2, 3)
+FMI_TYPES = ("me", "cs", "both")
+
+
+@dataclass
+class ExportInfo:
+    """What ``export_fmu`` wrote."""
+    path: str
+    identifier: str
+    fmi_version: int
+    interfaces: tuple[str, ...]          # ("model exchange", "co-simulation")
+    size: int                            # bytes of the .fmu
+    variables: int
+    notes: list[str] = field(default_factory=list)
+
+
+def identifier_of(name: str) -> str:
+    """A C identifier for the model (the FMU's modelIdentifier and binary name)."""
+    ident = re.sub(r"[^A-Za-z0-9_]", "_", name) or "model"
+    return ident if not ident[0].isdigit() else "_" + ident
+
+
+def _interfaces(model, fmi_type: str | None) -> tuple[bool, bool, list[str]]:
+    """(model exchange, co-simulation, notes) for the requested type; a MechError (E892)
+    when the model cannot be represented as asked."""
+    notes = []
+    contacts = bool(model.model.contacts)
+    if fmi_type is not None and fmi_type not in FMI_TYPES:
+        raise UsageError(f"--fmi-type must be one of {', '.join(FMI_TYPES)} (got {fmi_type!r})")
+    want_me = fmi_type in (None, "me", "both")
+    want_cs = fmi_type in (None, "cs", "both")
+    if contacts and want_me:
+        kinds = sorted({"fixation" if c.kind == "fix" else "contact" for c in model.model.contacts})
+        what = " and ".join(f"{k}s" for k in kinds)
+        names = ", ".join(c.name for c in model.model.contacts[:4])
+        if fmi_type is None:
+            want_me = False
+            notes.append(f"model exchange left out: {model.name} has {what} ({names}), whose impacts change the "
+                         "state at events; the FMU is for co-simulation, which handles them inside its steps")
+        else:
+            raise MechError(Diagnostic(
+                "E892", f"model exchange cannot represent {model.name}: it has {what} ({names}), whose impacts "
+                        "jump the speeds at events the importer's integrator would have to apply",
+                model.model.contacts[0].span,
+                help="export for co-simulation (--fmi-type cs): the FMU then steps itself and handles "
+                     "contacts and impacts inside each step"))
+    return want_me, want_cs, notes
+
+
+def _settings(model):
+    """The run's settings as ``mech simulate`` resolves them (scene > defaults)."""
+    t_end = None if model.scene_settings.get("stop_time") is not None else 10.0
+    return model.settings(t_end=t_end)
+
+
+def _defaults(model, s, plan) -> dict:
+    """The mechdsl.* settings' start values; those of contacts only for a model with contacts
+    (the others get placeholders the runtime never reads, and no variable: ``variables.table``)."""
+    from . import formulate
+
+    contacts = bool(plan.k or plan.nfix)
+    c = formulate.contact_defaults(s) if contacts else \
+        {"rest_speed": 0.0, "impact_order": 0, "max_events": 0, "acc_tol": 0.0, "samples": 1}
+    span = float(s.t_end) - float(s.t_start)
+    method = str(s.method or "auto").lower()
+    one = method in ("dopri5", "rk45", "scipy-rk45") or (method == "auto" and s.rtol >= 1e-5)
+    return {"mechdsl.rtol": float(s.rtol), "mechdsl.atol": float(s.atol), "mechdsl.rest_speed": c["rest_speed"],
+            "mechdsl.drift_bound": 0.0,
+            "mechdsl.projection_interval": span / 60.0 if (plan.m or plan.k or plan.nfix) else 0.0,
+            "mechdsl.method": 1 if one else 2, "mechdsl.impact_order": c["impact_order"],
+            "mechdsl.max_steps": int(s.max_steps or 100_000), "mechdsl.max_events": c["max_events"],
+            "_acc_tol": c["acc_tol"], "_samples": c["samples"]}
+
+
+def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None,
+               overwrite: bool = False) -> ExportInfo:
+    """Write ``model`` (a mechdsl.Model) as an FMU to ``path``.
+
+    fmi_version: 2 or 3; fmi_type: "me" (model exchange), "cs" (co-simulation), "both", or
+    None (every interface the model can have: co-simulation only for a model with contacts).
+    overwrite: replace an existing file that mechdsl did not write.  Nothing is written
+    unless the whole FMU was built (atomic replace)."""
+    from ..output.fileio import check_writable, write_atomic
+    from . import build, functions, variables, xml
+
+    try:
+        fmi_version = int(fmi_version)
+    except (TypeError, ValueError):
+        raise UsageError(f"the FMI version must be 2 or 3 (got {fmi_version!r})") from None
+    if fmi_version not in FMI_VERSIONS:
+        raise UsageError(f"the FMI version must be 2 or 3 (got {fmi_version})")
+    if not str(path).endswith(".fmu"):
+        raise UsageError(f"an FMU's file name ends in .fmu (got {str(path)!r})")
+    check_writable(path, overwrite)
+    want_me, want_cs, notes = _interfaces(model, fmi_type)
+    folder, suffix = build.platform_folder(fmi_version)
+    s = _settings(model)
+    plan = functions.build(model, model.casadi()["ode"])
+    defaults = _defaults(model, s, plan)
+    start_calc = functions.start_depends_on_parameters(model.eom)
+    table = variables.table(model, plan, defaults, start_calc, fmi_version)
+    ident = identifier_of(model.name)
+    eom = model.eom
+    from ..eom.codegen import free_parameters
+
+    free = free_parameters(eom)
+    n = eom.n
+    meta = {
+        "model": model.name, "token": xml.TOKEN, "me": want_me, "cs": want_cs,
+        "free_index": [list(eom.params).index(f) for f in free],
+        "p_default": [float(v) for v in eom.param_values],
+        "u_default": [float(v) for v in eom.input_defaults],
+        "start_calculated": list(start_calc),
+        "fixed_q": list(eom.fixed_q) if len(eom.fixed_q) == n else [True] * n,
+        "fixed_qd": list(eom.fixed_qd) if len(eom.fixed_qd) == n else [True] * n,
+        "int_values": [v.start for v in table if v.kind == "constant"],
+        "params": list(eom.params), "coords": list(eom.coords),
+        "rows": list(eom.constraint_names) + [g.name for g in plan.gaps]
+                + [f"{f.label}.{a}" for f in plan.fixations for a in "xyz"],
+        "real_settings": [defaults[k] for k, _, _ in variables.REAL_SETTINGS],
+        "int_settings": [defaults[k] for k, _, _, _ in variables.INT_SETTINGS],
+        "acc_tol": defaults["_acc_tol"], "samples": defaults["_samples"],
+    }
+    srcs = build.sources(meta, plan, fmi_version)
+    from .. import __version__
+
+    step = (float(s.t_end) - float(s.t_start)) / ((s.points or 501) - 1)
+    info = {"identifier": ident, "model": model.name, "description": getattr(model.model, "doc", "") or "",
+            "tool": f"mechdsl {__version__}", "me": want_me, "cs": want_cs, "constrained": bool(plan.m),
+            "contacts": bool(plan.k or plan.nfix), "sources": build.c_files(srcs),
+            "experiment": {"start": float(s.t_start), "stop": float(s.t_end), "tolerance": float(s.rtol),
+                           "step": step}}
+    md = (xml.model_description_2 if fmi_version == 2 else xml.model_description_3)(info, table)
+    token = build.token_of([md, *(srcs[k] for k in sorted(srcs))])
+    md = md.replace(xml.TOKEN, token)
+    srcs["model_data.c"] = srcs["model_data.c"].replace(xml.TOKEN, token)
+    binary = build.compile_library(srcs, ident, suffix)
+    files = {"modelDescription.xml": md.encode(), f"binaries/{folder}/{ident}{suffix}": binary}
+    for name, text in srcs.items():
+        files[f"sources/{name}"] = text.encode()
+    if fmi_version == 3:
+        files["sources/buildDescription.xml"] = xml.build_description(ident, build.c_files(srcs)).encode()
+    lic = (build.HERE / "fmi" / "LICENSE.txt").read_bytes()
+    files["documentation/licenses/fmi-headers.txt"] = lic
+    files["sources/LICENSE-fmi-headers.txt"] = lic
+    data = build.zip_bytes(files)
+    write_atomic(path, data, overwrite=overwrite)
+    kinds = tuple(k for k, on in (("model exchange", want_me), ("co-simulation", want_cs)) if on)
+    return ExportInfo(path=str(path), identifier=ident, fmi_version=fmi_version, interfaces=kinds, size=len(data),
+                      variables=len(table), notes=notes)
+
+
+__all__ = ["export_fmu", "ExportInfo", "FMI_VERSIONS", "FMI_TYPES"]

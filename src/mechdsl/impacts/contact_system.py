@@ -1,0 +1,290 @@
+"""Compiled functions and the numerics of one model with contacts (dynamics, constraints, projection).
+
+Constraint rows, all functions of (q, t, p), stacked in this order:
+
+    the model's holonomic constraints g (m rows, always active)
+    one gap per contact (k rows, active while the contact is closed/persistent)
+    three position rows per fixation (active after its time, anchored where the point was)
+
+For the active rows c_S: A = dc/dq, c_t = dc/dt, cdot = A q' + c_t and
+gamma = d(cdot)/dq q' + d(cdot)/dt, so that c_S'' = A q'' + gamma.  The constrained
+accelerations solve  M q'' = bias + A^T lam,  A q'' + gamma = 0  (index 1; drift is
+removed by projection, see :meth:`ContactSystem.project`).  A contact's multiplier is its
+normal force: lam > 0 pushes the bodies apart.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from ..diagnostics import Diagnostic, MechError
+from ..eom.codegen import dense_function
+from .fastfn import FastFunction
+from .gaps import point_position
+
+
+RANK_TOL = 1e-10
+
+
+def contact_functions(eom, gaps, fixations) -> dict:
+    """The CasADi Functions of a contact system (stateless, dense outputs): built once per
+    model and set of contacts (``impacts.simulate`` keeps them in the EOM's workspace); each
+    run wraps them in its own FastFunction buffers."""
+    import casadi as ca
+
+
+    q, qd, t, P = eom.q, eom.qd, eom.t, eom.p
+    rows = []
+    if eom.m:
+        rows.append(ca.reshape(eom.g, -1, 1))
+    rows += [ca.SX(g.gap) for g in gaps]
+    rows += [ca.reshape(point_position(eom, f.point), 3, 1) for f in fixations]
+    c = ca.vertcat(*rows) if rows else ca.SX.zeros(0, 1)
+    A = ca.jacobian(c, q)
+    ct = ca.jacobian(c, t)
+    cdot = ca.mtimes(A, qd) + ct
+    gamma = ca.mtimes(ca.jacobian(cdot, q), qd) + ca.jacobian(cdot, t)
+    args, names = [t, q, qd, P], ["t", "q", "qd", "p"]
+    gapv = ca.vertcat(*[ca.SX(g.gap) for g in gaps]) if gaps else ca.SX.zeros(0, 1)
+    out = {"n_rows": int(c.numel()),
+           "dyn": ca.Function("dyn", args, [eom.M, eom.bias], names, ["M", "bias"]),
+           "qdd": ca.Function("qdd", args, [eom.qdd], names, ["qdd"]) if eom.qdd is not None else None,
+           "cons": ca.Function("cons", args, [c, A, ct, gamma], names, ["c", "A", "ct", "gamma"]),
+           "pos": ca.Function("pos", [t, q, P], [c, A, ct], ["t", "q", "p"], ["c", "A", "ct"]),
+           "gap": ca.Function("gap", [t, q, P], [gapv], ["t", "q", "p"], ["gap"]),
+           "energy": ca.Function("energy", args, [eom.T, eom.V], names, ["T", "V"]),
+           "e": ca.Function("e", [P], [ca.vertcat(*[ca.SX(g.e) for g in gaps]) if gaps else ca.SX.zeros(0, 1)]),
+           "friction": None}
+    friction = [i for i, g in enumerate(gaps) if g.friction is not None]
+    if friction:
+        cols = [ca.SX(gaps[i].friction) for i in friction]
+        out["friction"] = ca.Function("friction", args, [ca.horzcat(*cols)], names, ["W"])
+    for k in ("dyn", "qdd", "cons", "pos", "energy", "friction"):
+        if out[k] is not None:
+            out[k] = dense_function(out[k])
+    return out
+
+
+class ContactSystem:
+    def __init__(self, eom, gaps, fixations, p: np.ndarray, functions: dict | None = None):
+        self.eom, self.gaps, self.fixations = eom, list(gaps), list(fixations)
+        self.p = np.asarray(p, float)
+        self.n, self.m, self.k = eom.n, eom.m, len(self.gaps)
+        fs = functions if functions is not None else contact_functions(eom, self.gaps, self.fixations)
+        self.n_rows = fs["n_rows"]
+        self.f_dyn = FastFunction(fs["dyn"])
+        self.f_qdd = FastFunction(fs["qdd"]) if fs["qdd"] is not None else None
+        self.f_cons = FastFunction(fs["cons"])
+        self.f_pos = FastFunction(fs["pos"])
+        self._f_gap = fs["gap"]
+        self.f_gap = FastFunction(self._f_gap)
+        self.f_energy = FastFunction(fs["energy"])
+        self.e = np.array(fs["e"](self.p), float).ravel()
+        if np.any(self.e < 0) or np.any(self.e > 1):
+            bad = [g.name for g, e in zip(self.gaps, self.e) if not 0 <= e <= 1]
+            raise MechError(Diagnostic("E862", f"coefficient of restitution of '{bad[0]}' must be in [0, 1]"))
+        # sliding friction of persistent contacts: column i = generalized force per unit normal force
+        self.friction = [i for i, g in enumerate(self.gaps) if g.friction is not None]
+        self.f_fric = FastFunction(fs["friction"]) if fs["friction"] is not None else None
+        self.anchor = np.zeros(self.n_rows)
+        self._gap_maps: dict[int, object] = {}
+        self._f_jac = None
+        self._jac_unavailable = False
+        self.n_rhs = 0
+
+    # ------------------------------------------------------------------ row bookkeeping
+    def contact_row(self, i: int) -> int:
+        return self.m + i
+
+    def fix_rows(self, j: int) -> list[int]:
+        b = self.m + self.k + 3 * j
+        return [b, b + 1, b + 2]
+
+    @property
+    def model_rows(self) -> list[int]:
+        return list(range(self.m))
+
+    # ------------------------------------------------------------------ evaluations
+    def dyn(self, t, q, qd):
+        M, b = self.f_dyn(t, q, qd, self.p)
+        return M.reshape(self.n, self.n), b
+
+    def cons(self, t, q, qd):
+        c, A, ct, g = self.f_cons(t, q, qd, self.p)
+        return c - self.anchor, A.reshape(self.n_rows, self.n), ct, g
+
+    def pos(self, t, q):
+        """Raw constraint rows (without anchors), their Jacobian and time derivative."""
+        c, A, ct = self.f_pos(t, q, self.p)
+        return c, A.reshape(self.n_rows, self.n), ct
+
+    def gap(self, t, q) -> np.ndarray:
+        return self.f_gap(t, q, self.p)[0]
+
+    def gaps_at(self, ts: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """Gaps at many states: Q is (n, K); returns (k, K)."""
+        K = Q.shape[1]
+        f = self._gap_maps.get(K)
+        if f is None:
+            f = self._gap_maps[K] = FastFunction(self._f_gap.map(K))
+        return f(ts.reshape(1, -1), Q, np.repeat(self.p.reshape(-1, 1), K, 1))[0].reshape(self.k, K)
+
+    def normal_speeds(self, t, q, qd) -> np.ndarray:
+        _, A, ct, _ = self.cons(t, q, qd)
+        rows = [self.contact_row(i) for i in range(self.k)]
+        return A[rows] @ qd + ct[rows]
+
+    def kinetic(self, t, q, qd) -> float:
+        return float(self.f_energy(t, q, qd, self.p)[0][0])
+
+    # ------------------------------------------------------------------ accelerations
+    def accel(self, t, q, qd, rows) -> tuple[np.ndarray, np.ndarray]:
+        """q'' and the multipliers of the active rows."""
+        self.n_rhs += 1
+        if not rows:
+            if self.f_qdd is not None:
+                return self.f_qdd(t, q, qd, self.p)[0], np.zeros(0)
+            M, b = self.dyn(t, q, qd)
+            return _solve_spd(M, b), np.zeros(0)
+        M, b = self.dyn(t, q, qd)
+        _, A, _, gam = self.cons(t, q, qd)
+        A, gam = A[rows], gam[rows]
+        cf = _cho(M)
+        a0 = sla.cho_solve(cf, b)
+        X = sla.cho_solve(cf, A.T)
+        B = self._friction_columns(t, q, qd, rows)
+        if B is None:
+            lam = -_solve_sym(A @ X, A @ a0 + gam)
+            return a0 + X @ lam, lam
+        # M q'' = bias + (A' + B) lam: a contact's friction is proportional to its normal force
+        XB = X + sla.cho_solve(cf, B)
+        W = A @ XB
+        try:
+            lam = -np.linalg.solve(W, A @ a0 + gam)
+        except np.linalg.LinAlgError:
+            lam = -np.linalg.lstsq(W, A @ a0 + gam, rcond=1e-12)[0]
+        return a0 + XB @ lam, lam
+
+    def _friction_columns(self, t, q, qd, rows):
+        """(n, len(rows)): the friction generalized force per unit multiplier of each active row
+        (0 for rows without friction), or None when no active row has friction."""
+        if self.f_fric is None:
+            return None
+        cols = {self.contact_row(i): j for j, i in enumerate(self.friction)}
+        if not any(r in cols for r in rows):
+            return None
+        Wf = self.f_fric(t, q, qd, self.p)[0].reshape(self.n, len(self.friction), order="F")
+        B = np.zeros((self.n, len(rows)))
+        for j, r in enumerate(rows):
+            if r in cols:
+                B[:, j] = Wf[:, cols[r]]
+        return B
+
+    def rhs(self, rows):
+        n = self.n
+
+        def f(t, y):
+            qdd, _ = self.accel(t, y[:n], y[n:], rows)
+            return np.concatenate([y[n:], qdd])
+
+        return f
+
+    def jacobian(self, rows):
+        """d(rhs)/dy for implicit methods: analytic (CasADi) in free flight when the forward
+        dynamics are cheap to differentiate (explicit q'' or up to 12 coordinates), else None
+        (the solver then differences)."""
+        if rows or self._jac_unavailable:
+            return None
+        if self._f_jac is None:
+            import casadi as ca
+
+            eom = self.eom
+            if eom.qdd is None and self.n > 12:
+                self._jac_unavailable = True
+                return None
+            qdd = eom.qdd if eom.qdd is not None else ca.solve(eom.M, eom.bias)
+            y = ca.vertcat(eom.q, eom.qd)
+            J = ca.jacobian(ca.vertcat(eom.qd, qdd), y)
+            self._f_jac = FastFunction(ca.Function("rhs_jacobian", [eom.t, eom.q, eom.qd, eom.p], [J]))
+        n, f = self.n, self._f_jac
+
+        def jac(t, y):
+            return f(t, y[:n], y[n:], self.p)[0].reshape(2 * n, 2 * n)
+
+        return jac
+
+    def multipliers(self, t, q, qd, rows) -> np.ndarray:
+        return self.accel(t, q, qd, rows)[1]
+
+    # ------------------------------------------------------------------ constraint handling
+    def independent(self, t, q, rows, keep=()) -> list[int]:
+        """The rows (in the order given) whose Jacobian rows are linearly independent, greedily."""
+        if not rows:
+            return []
+        _, A, _ = self.pos(t, q)
+        M, _ = self.dyn(t, q, np.zeros(self.n))
+        L = np.linalg.cholesky(M)
+        chosen: list[int] = []
+        basis = np.zeros((0, self.n))
+        for r in rows:
+            a = np.linalg.solve(L, A[r])          # row in the kinetic metric
+            na = np.linalg.norm(a)
+            if na == 0.0:
+                continue
+            res = a - basis.T @ (basis @ a) if len(basis) else a
+            if np.linalg.norm(res) > RANK_TOL * na:
+                chosen.append(r)
+                basis = np.vstack([basis, res / np.linalg.norm(res)])
+        return chosen
+
+    def project(self, t, q, qd, rows, tol: float, one_sided=(), one_sided_tol: float = 0.0, iters: int = 8):
+        """Project (q, qd) onto the active rows (positions then velocities) in the kinetic metric.
+
+        ``one_sided`` rows (open contacts) are corrected only where they penetrate
+        (c < -one_sided_tol), and then onto c = 0.
+        """
+        q, qd = np.array(q, float), np.array(qd, float)
+        for _ in range(iters):
+            c, A, _ = self.pos(t, q)
+            c = c - self.anchor
+            use = list(rows) + [r for r in one_sided if c[r] < -one_sided_tol]
+            if not use or np.max(np.abs(c[use])) <= tol:
+                break
+            A = A[use]
+            M, _ = self.dyn(t, q, qd)
+            cf = _cho(M)
+            X = sla.cho_solve(cf, A.T)
+            q = q - X @ _solve_sym(A @ X, c[use])
+        if rows:
+            _, A, ct, _ = self.cons(t, q, qd)
+            A, ct = A[rows], ct[rows]
+            M, _ = self.dyn(t, q, qd)
+            cf = _cho(M)
+            X = sla.cho_solve(cf, A.T)
+            qd = qd - X @ _solve_sym(A @ X, A @ qd + ct)
+        return q, qd
+
+    def drift(self, t, q, qd, rows) -> tuple[float, float]:
+        if not rows:
+            return 0.0, 0.0
+        c, A, ct, _ = self.cons(t, q, qd)
+        return float(np.max(np.abs(c[rows]))), float(np.max(np.abs(A[rows] @ qd + ct[rows])))
+
+
+def _cho(M):
+    return sla.cho_factor(M, lower=True, check_finite=False)
+
+
+def _solve_spd(M, b):
+    try:
+        return sla.cho_solve(_cho(M), b, check_finite=False)
+    except np.linalg.LinAlgError:
+        return np.linalg.solve(M, b)
+
+
+def _solve_sym(W, r):
+    """Solve W x = r for a symmetric positive (semi)definite W; minimum norm when singular."""
+    try:
+        return sla.cho_solve(sla.cho_factor(W, lower=True, check_finite=False), r, check_finite=False)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(W, r, rcond=1e-12)[0]

@@ -1,0 +1,383 @@
+"""The ODE back end: minimal coordinates, CasADi integrator plug-ins, scipy or the compiled loop.
+
+``simulate_ode(eom, settings, progress, drive) -> Result`` integrates M(q) q'' = bias on the
+output grid with the plug-in of the method (plugins.py; method = auto: choose.py, and the
+compiled dop853 loop when compiling pays, crk.py), locates and classifies a failure
+(diagnose.py) and records the signals (monitors.py).  A failed run never raises: the Result
+keeps every output point reached and ``Result.failure`` says when and why.  See
+docs/simulate.md (users) and docs/internals/numerics.md (design).
+"""
+from __future__ import annotations
+
+import copy
+import time
+from typing import Any
+
+import numpy as np
+
+from ... import integrators as I
+from ...diagnostics import UsageError, did_you_mean
+from ...eom import parameter_vector
+from ...eom.codegen import casadi_functions
+from ...eom.start import start_vector
+from ...output.result import Result
+from .. import monitors as Mon
+from ..choose import NO_U, choose_method, fixed_step_count, min_step
+from ..diagnose import diagnose
+from ..drive import build_drive
+from ..record import ENERGY_NAMES
+from ..registry import ODE_FAMILIES, ode_methods, spec
+from ..settings import DEFAULT_POINTS
+from . import Backend
+from . import plugins as P
+from .crk import auto_choice, library, scipy_name
+
+
+MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
+
+
+class OdeBackend(Backend):
+    name = "ode"
+    noun = "an ODE"
+    groups = ("ode", "fixed_step")
+    accepts = {"formulation": ("ode",)}     # the unconstrained problem's own name: no note
+
+    def prepare(self, problem) -> "OdeSetup":
+        return OdeSetup.build(problem.eom, problem.settings, problem.drive)
+
+    def run(self, problem, progress, setup=None):
+        setup = setup if setup is not None else self.prepare(problem)
+        pv = parameter_vector(problem.eom, problem.settings.p)
+        return setup.run(pv, start_vector(problem.eom, problem.settings.x0, pv), progress)
+
+    def describe(self, r):
+        method = r.metadata.get("method")
+        m = spec(method) if method in ode_methods() else None
+        plugin = "none" if m is None else f"{m.family}:{m.plugin}"
+        return {"formulation": "ode", "integrator": plugin, "method": method}
+
+
+def simulate_ode(eom, s, progress=None, drive=None) -> Result:
+    """One ODE run (settings ``s`` validated by mechdsl.simulation.settings; ``drive``: the
+    inputs' signals, mechdsl.simulation.drive, built by formulate): ``OdeSetup.build`` then
+    ``OdeSetup.run`` at the settings' parameters and start values."""
+    setup = OdeSetup.build(eom, s, drive)
+    pv = parameter_vector(eom, s.p)
+    return setup.run(pv, start_vector(eom, s.x0, pv), progress)
+
+
+class OdeSetup:
+    """What an ODE run builds before it integrates, built once (``prepare`` of the simulation
+    layer): the method (``auto`` resolved at the settings' start values and parameters), the
+    Functions it integrates (virtual machine, compiled, or the compiled stepping loop), the
+    output grid, the step budget and the integrator's options.  ``run(pv, xs)`` integrates
+    from any start and parameter values with them: nothing is built again (CasADi plug-ins:
+    ``integrator()`` is the integrator a run uses, cached with its Functions)."""
+
+    def __init__(self, eom, s, drive, grid, method, reason, funcs, post, meta, loop_compiled, out_names):
+        self.eom, self.settings, self.drive, self.grid = eom, s, drive, grid
+        self.method, self.reason, self.funcs, self.post = method, reason, funcs, post
+        self.meta, self.loop_compiled, self.out_names = meta, loop_compiled, out_names
+        npts = len(grid)
+        self.max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
+        self.extra = dict(s.integrator_options or {})
+
+    @classmethod
+    def build(cls, eom, s, drive=None) -> "OdeSetup":
+        functions = s.ode.functions
+        method = s.method
+        if method != "auto" and spec(method).family not in ODE_FAMILIES:
+            raise UsageError(f"method '{method}' does not apply to an ODE model (methods: "
+                             f"{', '.join(['auto', *ode_methods()])}, or a fixed-step method)")
+        t0, t1, rtol, npts = s.t_start, s.t_end, s.rtol, s.points or DEFAULT_POINTS
+        pv = parameter_vector(eom, s.p)
+        xs = start_vector(eom, s.x0, pv)
+        out_names = _check_outputs(eom, s.outputs)
+        compiled = s.compiled
+        if drive is None:
+            drive = build_drive(eom, s.inputs, t0, t1, xs)
+        uv = drive.vector(t0)
+        vm = drive.closed(casadi_functions(eom, names=("ode", "ode_jacobian")))
+        post = casadi_functions(eom, names=("mass_matrix",))     # the failure diagnosis reads M
+        grid = np.linspace(t0, t1, npts)
+        meta: dict[str, Any] = {"model": eom.name, "route": eom.route, "coordinates": list(eom.coords),
+                                "warnings": [], "notes": []}
+        if eom.inputs:
+            meta["inputs"] = drive.describe()
+        if eom.n == 0:   # nothing to integrate (everything prescribed): outputs on the grid
+            return cls(eom, s, drive, grid, None, None, vm, post, meta, None, out_names)
+        auto_compiled = None
+        if method == "auto":
+            method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
+            meta["auto"] = info
+            if method == "erk" and compiled is None and functions is None:
+                method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)
+        else:
+            reason = "requested"
+        if spec(method).compiled_loop and compiled is False:     # compiled = false wins: never compile
+            method, reason = scipy_name(method), (f"{method} requested with compiled = false: its loop would "
+                                                  f"compile; {scipy_name(method)} is the same method stepped in Python")
+        if "compiled" not in meta:
+            meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
+        meta.update(method=method, method_reason=reason, integrator=spec(method).description)
+        loop_compiled = None
+        if functions is not None:
+            funcs = functions
+        elif spec(method).compiled_loop:     # the loop compiles the model's C together with its own
+            funcs = vm
+            loop_compiled = _compile_loop(eom, funcs, meta, fallback="erk" if auto_compiled else None)
+            if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
+                method, loop_compiled = "erk", None
+                meta.update(method=method, integrator=spec(method).description,
+                            method_reason=reason.split(";")[0] + "; the compiled stepping loop it would pick "
+                                                                 "could not be built (see the warning): erk in "
+                                                                 "the virtual machine")
+                meta["compiled"] = "no: auto (the compiled loop could not be built)"
+        elif compiled:
+            funcs = casadi_functions(eom, compiled=True,
+                                     names=("ode", "ode_jacobian") if spec(method).needs_jacobian else ("ode",),
+                                     jacobian="forward" if spec(method).forward_only else "full")
+            funcs["ode"]  # compile now (notes below)
+            funcs = drive.closed(funcs)
+        else:
+            funcs = vm
+        unavailable = compiled and loop_compiled is None and not getattr(funcs, "compiled", False)
+        if unavailable:     # said once, as a warning (not also as a note)
+            meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
+        else:
+            meta["notes"] += list(getattr(funcs, "notes", []))
+        return cls(eom, s, drive, grid, method, meta["method_reason"], funcs, post, meta, loop_compiled, out_names)
+
+    def options(self, fixed_steps: int | None = None, hmin: float | None = None) -> dict:
+        """The CasADi integrator options a run of this setup uses (CasADi plug-ins)."""
+        s, m = self.settings, spec(self.method)
+        return I.casadi_options(m.plugin, m.options, s.rtol, s.atol, self.max_steps, fixed_steps, self.extra,
+                                hmin=min_step(s.t_start, s.t_end) if hmin is None else hmin)
+
+    def integrator(self, ode=None):
+        """The casadi.integrator a run of this setup integrates with over its output grid (a
+        CasADi plug-in without fixed steps): the same cached Function a run builds."""
+        m = spec(self.method)
+        if m.family != "casadi" or m.fixed_step:
+            raise ValueError(f"{self.method} has no CasADi integrator over a grid")
+        return I.cached_integrator(m.plugin, self.funcs["ode"] if ode is None else ode, self.grid, self.options())
+
+    def run(self, pv, xs, progress=None) -> Result:
+        """Integrate from the start ``xs`` at the parameters ``pv`` (nothing is built again)."""
+        eom, s, drive, grid = self.eom, self.settings, self.drive, self.grid
+        wall0 = time.perf_counter()
+        meta = copy.deepcopy(self.meta)
+        out_names = self.out_names
+        if self.method is None:
+            return _no_state_result(eom, grid, pv, out_names, meta, wall0, drive)
+        method, funcs, max_steps, extra = self.method, self.funcs, self.max_steps, self.extra
+        t0, t1, rtol, atol = s.t_start, s.t_end, s.rtol, s.atol
+        uv = drive.vector(t0)
+        loop_compiled = self.loop_compiled
+        bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
+        breaks = drive.breakpoints(t0, t1)
+        try:
+            if breaks.size:
+                run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra,
+                                         bar, eom, t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
+            else:
+                run, fixed = _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra, bar,
+                                  eom, t0, t1, meta["notes"], 10 * s.budget, u=uv)
+        finally:
+            bar.close()
+        if fixed is not None:
+            meta["fixed_steps"] = fixed
+        failure = None
+        if run.error is not None or run.reached < len(grid):
+            u_fail = drive.vector(float(grid[max(run.reached - 1, 0)]))
+            failure = diagnose(eom, funcs, self.post, method, run, grid, xs, pv, rtol, atol, max_steps, extra,
+                               u=u_fail)
+        n_ok = max(run.reached, 1)
+        X = run.X[:n_ok].copy()
+        X[0] = xs
+        t = grid[:n_ok].copy()
+        return self.record(t, X, pv, xs, meta, run, failure, loop_compiled, wall0)
+
+    def record(self, t, X, pv, xs, meta, run, failure, loop_compiled, wall0) -> Result:
+        """The Result of a trajectory X on the times t: signals, statistics, metadata."""
+        eom, s, drive, funcs = self.eom, self.settings, self.drive, self.funcs
+        method, max_steps, extra, out_names = self.method, self.max_steps, self.extra, self.out_names
+        U = drive.values(t, X)
+        signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
+        record_inputs(drive, U, signals, meta)
+        Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
+        stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
+                 "points": int(len(t)), "wall_time": time.perf_counter() - wall0}
+        stats.update(Mon.energy_drift_stats(signals))
+        stats.update(Mon.integral_drift(signals, eom))
+        stats["raw"] = run.stats
+        if run.messages.strip():
+            meta["integrator_messages"] = _dedup(run.messages)
+        meta["conservative"] = Mon.is_conservative(eom)
+        meta["options"] = {"t_start": s.t_start, "t_end": s.t_end, "rtol": s.rtol, "atol": s.atol,
+                           "points": len(self.grid), "method": method,
+                           "compiled": (bool(getattr(funcs, "compiled", False)) if loop_compiled is None
+                                        else loop_compiled),
+                           "max_steps": max_steps, "outputs": list(out_names),
+                           "parameters": dict(zip(eom.params, map(float, pv))),
+                           "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
+                                     **{f"der({c})": float(v) for c, v in zip(eom.coords, xs[eom.n:])}},
+                           **({"integrator_options": extra} if extra else {})}
+        n = eom.n
+        return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
+                      stats=stats, metadata=meta, failure=failure)
+
+
+def _compile_loop(eom, funcs, meta, fallback=None) -> bool:
+    """Build (or load from the cache) the compiled stepping loop of a dopri5/dop853 run; a
+    fallback to scipy's stepping in Python (or to ``fallback``) is a warning of the run."""
+    fn, note = library(funcs["ode"], tag=eom.name)
+    if fn is None:
+        instead = (f"{fallback} runs instead" if fallback else
+                   f"{meta['method']} runs as scipy's same method stepped in Python")
+        meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {instead}")
+        return False
+    if note:
+        meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
+    return True
+
+
+def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):
+    """method = auto on a non-stiff model: erk in the virtual machine, or the compiled dop853
+    loop when compiling pays (simulation.crk.auto_choice); ``meta['compiled']`` says why."""
+    pick, why, info = auto_choice(eom, vm, xs, pv, t0, t1, rtol, uv, rho=meta["auto"].get("spectral_radius"))
+    meta["auto"]["compile"] = info
+    if pick is None:
+        meta["compiled"] = f"no: auto ({why})"
+        return "erk", reason, None
+    meta["compiled"] = f"auto ({why})"
+    return pick, (reason.split(";")[0] + f"; compiled stepping loop {pick} (Dormand-Prince, C): {why}"), True
+
+
+def record_inputs(drive, U, signals, meta) -> None:
+    """The inputs as signals (named as declared); bound violations of run-time signals warn."""
+    for j, name in enumerate(drive.names):
+        signals[name] = U[:, j].copy()
+    meta.setdefault("warnings", []).extend(drive.check_bounds(U))
+
+
+def _no_state_result(eom, grid, pv, out_names, meta, wall0, drive) -> Result:
+    X = np.zeros((len(grid), 0))
+    U = drive.values(grid, X)
+    signals = Mon.compute_signals(eom, grid, X, pv, out_names, U=U)
+    record_inputs(drive, U, signals, meta)
+    meta.update(method="none", method_reason="the model has no coordinates: nothing to integrate",
+                options={"t_start": float(grid[0]), "t_end": float(grid[-1]),
+                                              "points": len(grid), "outputs": list(out_names),
+                                              "parameters": dict(zip(eom.params, map(float, pv)))})
+    stats = {"steps": 0, "points": len(grid), "wall_time": time.perf_counter() - wall0}
+    return Result(t=grid.copy(), q=X, qd=X.copy(), coordinates=(), signals=signals, stats=stats, metadata=meta)
+
+
+# --------------------------------------------------------------------------- dispatch and inputs
+
+
+def _check_outputs(eom, outputs) -> tuple[str, ...]:
+    if outputs is None:
+        return tuple(eom.outputs)
+    if isinstance(outputs, str):
+        outputs = [outputs]
+    names = []
+    coordish = set(eom.coords) | {f"der({c})" for c in eom.coords} | set(ENERGY_NAMES)
+    for o in outputs:
+        if o in eom.outputs:
+            if o not in names:
+                names.append(o)
+        elif o not in coordish:
+            hint = did_you_mean(o, list(eom.outputs) + sorted(coordish))
+            raise UsageError(f"'{o}' is not an output of {eom.name}" + (f"; {hint}" if hint else ""))
+    return tuple(names)
+
+
+# --------------------------------------------------------------------------- method choice
+
+
+def _run(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, meta_notes, budget,
+         u=NO_U):
+    """One run of the integrator plug-in of ``method`` over the output grid."""
+    fixed, steps = None, None
+    if spec(method).fixed_step:
+        steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")),
+                                      xs, pv, t0, t1, rtol, dt, budget, u=u)
+        fixed = {"target_steps": steps, "why": why}
+    elif dt is not None:
+        fixed = [m for m in ode_methods() if spec(m).fixed_step]
+        meta_notes.append(f"dt = {dt} ignored: {method} chooses its own steps (dt applies to {', '.join(fixed)})")
+    try:
+        run = P.plugin(method).advance(method, funcs, grid, xs, pv, rtol=rtol, atol=atol, max_steps=max_steps,
+                                       fixed_steps=steps, extra=extra, progress=bar, hmin=min_step(t0, t1),
+                                       u=u)
+    except RuntimeError as e:  # bad integrator options
+        raise UsageError(f"integrator {method} rejected its options: {str(e).strip().splitlines()[-1]}") from None
+    return run, fixed
+
+
+MAX_PIECES = 100_000      # input-table breakpoints a run restarts at (one integrator call each)
+
+
+def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, bar, eom, t0, t1, notes, budget,
+                drive, breaks):
+    """``_run`` piece by piece between the input tables' breakpoints, each piece from the state
+    where the last ended, the zero-order holds' values as the constant u of the piece: no step
+    crosses a jump (or a kink of a linear table).  Returns one Run over ``grid``."""
+    if breaks.size > MAX_PIECES:
+        raise UsageError(f"the input tables have {breaks.size} samples inside the run; at most {MAX_PIECES} "
+                         "(each is a restart of the integrator): resample the table")
+    edges = np.r_[t0, breaks, t1]
+    if spec(method).fixed_step and dt is None:    # the step of the whole run, not of each piece's span
+        steps, why = fixed_step_count(method, casadi_functions(eom, names=("ode", "ode_jacobian")), xs, pv, t0, t1,
+                                      rtol, None, budget, u=drive.vector(t0))
+        dt = (t1 - t0) / steps
+    else:
+        why = None
+    full = np.union1d(grid, edges)
+    on_grid = np.isin(full, grid)
+    Xf = np.full((full.size, xs.size), np.nan)
+    Xf[0] = xs
+    stats: dict = {}
+    messages, fixed, x = [], None, xs
+    error = fail_time = fail_state = None
+    for a, b in zip(edges[:-1], edges[1:]):
+        idx = np.flatnonzero((full >= a) & (full <= b))
+        run, fx = _run(method, funcs, full[idx], x, pv, rtol, atol, max_steps, dt, extra, bar, eom, a, b,
+                       notes if fixed is None else [], budget, u=drive.vector(a))
+        fixed = fixed or fx
+        Xf[idx[1:run.reached]] = run.X[1:run.reached]
+        for k, v in (run.stats or {}).items():
+            stats[k] = stats.get(k, 0) + v if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+        messages.append(run.messages)
+        if run.error is not None or run.reached < idx.size:
+            error, fail_time, fail_state = run.error or "integration stopped", run.fail_time, run.fail_state
+            break
+        x = run.X[-1]
+    X = Xf[on_grid]
+    reached = I._count_filled(X, 0)
+    if fixed is not None:
+        fixed = {**fixed, "pieces": int(edges.size - 1), **({"why": why} if why else {})}
+    notes.append(f"integrated in {edges.size - 1} pieces, restarting at the input tables' samples inside the run "
+                 "(no step crosses a jump of a zero-order hold)")
+    return I.Run(X=X, reached=reached, stats=stats, error=error, messages="".join(messages),
+                 fail_time=fail_time, fail_state=fail_state), fixed
+
+
+def _counts(method, raw):
+    return P.plugin(method).counts(method, raw)
+
+
+def _dedup(text: str) -> list[str]:
+    seen, out = set(), []
+    for ln in text.splitlines():
+        ln = ln.strip()
+        if ln and ln not in seen:
+            seen.add(ln)
+            out.append(ln)
+        if len(out) >= 20:
+            break
+    return out
+
+
