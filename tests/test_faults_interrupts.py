@@ -110,22 +110,23 @@ def test_bench_keeps_the_rows_measured(tmp_path):
 # ------------------------------------------------------------------ simulate, every back end
 
 BACK_ENDS = [
-    # (name, model file, extra args, fixed in this branch)
+    # (name, model file, extra args, keeps partial results)
     ("dae-projection", "four_bar.mech", ["--t-end", "1e4"], True),
     ("dae-ggl", "four_bar.mech", ["--t-end", "1e4", "--formulation", "ggl"], False),
-    ("ode-erk", "double_pendulum.mech", ["--t-end", "1e4", "--method", "erk"], False),
-    ("ode-cvodes", "double_pendulum.mech", ["--t-end", "1e4", "--method", "cvodes-bdf"], False),
-    ("ode-scipy", "double_pendulum.mech", ["--t-end", "1e4", "--method", "scipy-dop853"], False),
-    ("ode-compiled-loop", "double_pendulum.mech", ["--t-end", "1e4", "--method", "dop853"], False),
-    ("fixed-step", "double_pendulum.mech", ["--t-end", "1e4", "--method", "stormer-verlet", "--dt", "1e-4"], False),
-    ("rattle", "pendulum_cartesian.mech", ["--t-end", "1e4", "--method", "rattle", "--dt", "1e-4"], False),
-    ("contacts", "bouncing_ball.mech", ["--t-end", "1e4"], False),
+    ("ode-erk", "double_pendulum.mech", ["--t-end", "1e4", "--method", "erk"], True),
+    ("ode-cvodes", "double_pendulum.mech", ["--t-end", "1e4", "--method", "cvodes-bdf"], True),
+    ("ode-scipy", "double_pendulum.mech", ["--t-end", "1e4", "--method", "scipy-dop853"], True),
+    # (the compiled loop does 1e4 s in under a second: a run long enough to be stopped)
+    ("ode-compiled-loop", "double_pendulum.mech", ["--t-end", "1e6", "--method", "dop853"], True),
+    ("fixed-step", "double_pendulum.mech", ["--t-end", "1e4", "--method", "stormer-verlet", "--dt", "1e-4"], True),
+    ("rattle", "pendulum_cartesian.mech", ["--t-end", "1e4", "--method", "rattle", "--dt", "1e-4"], True),
+    ("contacts", "bouncing_ball.mech", ["--t-end", "1e4"], True),
 ]
 
-PENDING = ("simulate keeps partial results on Ctrl-C only on the DAE path today (and there only the results of "
-           "whole integrator calls: the GGL path's first IDAS call outlasts 5 s of CPU, so nothing past t = 0 is "
-           "kept); the back ends are being moved into simulation/backends/ (issue 22, branch onepath) and get "
-           "the fix there")
+PENDING = ("the DAE path keeps the results of whole integrator calls (segments); a GGL segment spans whole "
+           "monitoring intervals (1/60 of the run: 167 s of a 1e4 s run, 8 of them in the first call), so the "
+           "first call outlasts 5 s of CPU and nothing past t = 0 is kept; keeping the columns an interrupted "
+           "IDAS call wrote needs a buffer-based call in dae/segments.call_integrator (docs/internals.md, debts)")
 
 
 @pytest.mark.slow
@@ -140,7 +141,7 @@ def test_simulate_keeps_partial_results_on_every_back_end(tmp_path, name, model,
     subprocess.run([sys.executable, "-m", "mechdsl", "simulate", str(MODELS / model), *short, "--no-progress"],
                    capture_output=True, timeout=900)     # the caches warm: the run itself starts at once
     r, stdout, stderr = run_child(tmp_path, "cpu:5", "simulate", MODELS / model, *extra, "--no-progress",
-                                  "--points", "1000001", "--budget", "100000000", "-o", out)
+                                  "--points", "100001", "--budget", "100000000", "-o", out)
     assert r["code"] == 130, stdout + stderr
     assert r["latency"] is not None and r["latency"] < 5, r
     assert "Traceback" not in stderr

@@ -41,6 +41,19 @@ def interrupt_guard():
 
 def check_interrupt() -> None:
     """Raise the KeyboardInterrupt of a Ctrl-C that arrived (and was swallowed) since the last check."""
-    if _SIGINT["seen"]:
-        _SIGINT["seen"] = False
+    if noted():
         raise KeyboardInterrupt
+
+
+def noted() -> bool:
+    """True (once: the note is cleared) when a Ctrl-C arrived since the last check: a failure
+    CasADi reported after it is the interrupt, not a numerical failure."""
+    seen, _SIGINT["seen"] = _SIGINT["seen"], False
+    return seen
+
+
+def in_main_thread() -> bool:
+    """Ctrl-C arrives in the main thread only: code that can stop on it runs its work there."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()

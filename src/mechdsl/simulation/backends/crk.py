@@ -26,6 +26,7 @@ import numpy as np
 
 from ... import integrators as I
 from ...eom.codegen import compile_functions, find_compiler
+from ...interrupts import in_main_thread
 from ..choose import time_scale
 
 
@@ -40,6 +41,8 @@ STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)
           6: "out of memory in the compiled stepping loop",
           7: "the right-hand side returned an error (non-finite or failed evaluation, NaN)",
           8: "unknown method"}
+
+CANCELLED = 5        # ctl[1] set: the loop stopped at its next step (Ctrl-C)
 
 _LIBS: dict = {}
 _LOCK = threading.Lock()
@@ -103,11 +106,12 @@ def _ptr(a):
     return a.ctypes.data_as(_DP)
 
 
-def call_in_thread(call, ctl, tick):
+def call_in_thread(call, ctl, tick=None):
     """``call()`` (a ctypes call of the loop, which releases the GIL) in a worker thread; the main
     thread calls ``tick(rows written)`` every 0.1 s from the progress word ctl[0] and, on Ctrl-C,
-    sets ctl[1] (the loop stops at its next step) and lets the interrupt through.  The status, or
-    7 when the call raised.  ``call`` keeps the buffers it passes alive while the worker runs."""
+    sets ctl[1]: the loop stops at its next step, and once it has (the rows written so far, its
+    statistics and state are then complete) the interrupt goes on.  The status, or 7 when the
+    call raised.  ``call`` keeps the buffers it passes alive while the worker runs."""
     box = {}
 
     def work():
@@ -118,12 +122,25 @@ def call_in_thread(call, ctl, tick):
     try:
         while th.is_alive():
             th.join(0.1)
-            if ctl[0]:
+            if ctl[0] and tick is not None:
                 tick(int(ctl[0]))
     except BaseException:
         ctl[1] = 1          # ask the loop to stop at its next step, then let the interrupt through
+        while th.is_alive():
+            try:
+                th.join()
+            except KeyboardInterrupt:     # a second Ctrl-C while the loop finishes its step
+                pass
         raise
     return box.get("status", 7)
+
+
+def call_here_or_in_thread(call, ctl, tick=None):
+    """``call()`` directly when nothing needs the main thread meanwhile (no progress to show, not
+    the main thread: no Ctrl-C arrives), else through ``call_in_thread``."""
+    if tick is None and not in_main_thread():
+        return call()
+    return call_in_thread(call, ctl, tick)
 
 
 def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress) -> I.Run:
@@ -143,12 +160,18 @@ def run_compiled(fn, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progre
                   float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats),
                   ctl.ctypes.data_as(_I64P), _ptr(xfail))
 
-    status = call_in_thread(call, ctl, lambda rows: progress.update(float(grid[rows - 1])))
+    interrupted = False
+    try:
+        status = call_in_thread(call, ctl, lambda rows: progress.update(float(grid[rows - 1])))
+    except KeyboardInterrupt:            # the loop stopped at its next step: its rows are kept
+        status, interrupted = CANCELLED, True
     reached = int(ctl[0])
     progress.update(float(grid[max(reached, 1) - 1]))
     raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status)}
-    run = I.Run(X=X, reached=reached, stats=raw)
-    if status != 0 or reached < len(grid):
+    run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
+    if interrupted:
+        run.error = "interrupted (Ctrl-C)"
+    elif status != 0 or reached < len(grid):
         t_end = float(stats[3])
         run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
         run.fail_time, run.fail_state = t_end, xfail.copy()

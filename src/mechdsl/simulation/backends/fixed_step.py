@@ -37,7 +37,8 @@ from ...dae.init import initialize
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
 from ...eom.start import fixed_start, start_vector
-from ...output.result import Failure, Result
+from ...interrupts import noted
+from ...output.result import INTERRUPTED, Failure, Result
 from .. import record as R
 from ..monitors import compute_signals, energy_drift_stats
 from ..record_dae import constrained_signals as record_signals
@@ -47,7 +48,9 @@ from . import Backend
 from .schemes import rattle_step, step_function
 
 
-CHUNK = 2000                  # steps a mapaccum call
+CHUNK = 2000                  # steps a mapaccum call (at most)
+FIRST_CHUNK = 16              # the first call's steps, doubled call by call up to CHUNK: a short run
+                              # builds small maps, and Ctrl-C is seen between calls
 MAX_POINTS = 20001            # recorded points unless ``points`` asks otherwise
 
 
@@ -137,16 +140,27 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     x = state0.copy()
     cache = {}
     res_tol = 1e-8
+    interrupted = False
+    chunk = FIRST_CHUNK
     while done < nsteps:
-        k = min(CHUNK, nsteps - done)
+        k = min(chunk, nsteps - done)
+        chunk = min(CHUNK, 2 * chunk)
         F = cache.get(k)
         if F is None:
             F = step.mapaccum("steps", k)
             cache[k] = F
         try:
             X, R = F(x, h, pstep)
+        except KeyboardInterrupt:       # Ctrl-C: the steps recorded so far are kept
+            interrupted = True
         except RuntimeError as e:  # pragma: no cover - CasADi evaluation error
-            failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
+            interrupted = noted()       # (or the Ctrl-C a CasADi rootfinder turned into one)
+            if not interrupted:
+                failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
+                break
+        if interrupted or noted():
+            interrupted = True
+            failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
             break
         X = np.array(X, float)
         R = np.array(R, float).ravel()
@@ -175,7 +189,12 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
         x = X[:, -1]
         done += k
         if callable(progress):
-            progress(t0 + done * h, t_end)
+            try:
+                progress(t0 + done * h, t_end)
+            except KeyboardInterrupt:
+                interrupted = True
+                failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
+                break
 
     S = np.array(rec_states).T                     # (2n + extra, npts)
     t = t0 + np.array(rec_idx, float) * h
@@ -212,6 +231,8 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
                         "parameters": dict(zip(eom.params, map(float, pv))),
                         "start": {**dict(zip(eom.coords, map(float, qs))),
                                   **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}, **extra_meta}
+    if interrupted:
+        meta["interrupted"] = True
     return Result(t=t, q=q, qd=qd, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=meta, failure=failure)
 
