@@ -14,7 +14,7 @@ import textwrap
 
 import pytest
 
-from conftest import MODELS
+from conftest import MODELS, needs_cc
 
 # the child: ``mech ARGS`` with a hook that sends Ctrl-C to the process group when HOOK fires;
 # prints the exit code and the seconds from the signal to the end on its last line
@@ -110,30 +110,24 @@ def test_bench_keeps_the_rows_measured(tmp_path):
 # ------------------------------------------------------------------ simulate, every back end
 
 BACK_ENDS = [
-    # (name, model file, extra args, keeps partial results)
-    ("dae-projection", "four_bar.mech", ["--t-end", "1e4"], True),
-    ("dae-ggl", "four_bar.mech", ["--t-end", "1e4", "--formulation", "ggl"], False),
-    ("ode-erk", "double_pendulum.mech", ["--t-end", "1e4", "--method", "erk"], True),
-    ("ode-cvodes", "double_pendulum.mech", ["--t-end", "1e4", "--method", "cvodes-bdf"], True),
-    ("ode-scipy", "double_pendulum.mech", ["--t-end", "1e4", "--method", "scipy-dop853"], True),
+    # (name, model file, extra args; a GGL segment spans 8 of 60 monitoring
+    # intervals, 1333 s of this run: the columns its interrupted IDAS call wrote are kept)
+    ("dae-projection", "four_bar.mech", ["--t-end", "1e4"]),
+    ("dae-ggl", "four_bar.mech", ["--t-end", "1e4", "--formulation", "ggl"]),
+    ("ode-erk", "double_pendulum.mech", ["--t-end", "1e4", "--method", "erk"]),
+    ("ode-cvodes", "double_pendulum.mech", ["--t-end", "1e4", "--method", "cvodes-bdf"]),
+    ("ode-scipy", "double_pendulum.mech", ["--t-end", "1e4", "--method", "scipy-dop853"]),
     # (the compiled loop does 1e4 s in under a second: a run long enough to be stopped)
-    ("ode-compiled-loop", "double_pendulum.mech", ["--t-end", "1e6", "--method", "dop853"], True),
-    ("fixed-step", "double_pendulum.mech", ["--t-end", "1e4", "--method", "stormer-verlet", "--dt", "1e-4"], True),
-    ("rattle", "pendulum_cartesian.mech", ["--t-end", "1e4", "--method", "rattle", "--dt", "1e-4"], True),
-    ("contacts", "bouncing_ball.mech", ["--t-end", "1e4"], True),
+    ("ode-compiled-loop", "double_pendulum.mech", ["--t-end", "1e6", "--method", "dop853"]),
+    ("fixed-step", "double_pendulum.mech", ["--t-end", "1e4", "--method", "stormer-verlet", "--dt", "1e-4"]),
+    ("rattle", "pendulum_cartesian.mech", ["--t-end", "1e4", "--method", "rattle", "--dt", "1e-4"]),
+    ("contacts", "bouncing_ball.mech", ["--t-end", "1e4"]),
 ]
-
-PENDING = ("the DAE path keeps the results of whole integrator calls (segments); a GGL segment spans whole "
-           "monitoring intervals (1/60 of the run: 167 s of a 1e4 s run, 8 of them in the first call), so the "
-           "first call outlasts 5 s of CPU and nothing past t = 0 is kept; keeping the columns an interrupted "
-           "IDAS call wrote needs a buffer-based call in dae/segments.call_integrator (docs/internals.md, debts)")
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, model, extra, fixed", [
-    pytest.param(*case, marks=() if case[3] else pytest.mark.xfail(reason=PENDING, strict=True), id=case[0])
-    for case in BACK_ENDS])
-def test_simulate_keeps_partial_results_on_every_back_end(tmp_path, name, model, extra, fixed):
+@pytest.mark.parametrize("name, model, extra", BACK_ENDS, ids=[case[0] for case in BACK_ENDS])
+def test_simulate_keeps_partial_results_on_every_back_end(tmp_path, name, model, extra):
     """Ctrl-C once the run has used 5 s of CPU: exit 130 within seconds, the results up to
     there written with a failure 'interrupted' in the sidecar."""
     out = tmp_path / "r.csv"
@@ -149,3 +143,84 @@ def test_simulate_keeps_partial_results_on_every_back_end(tmp_path, name, model,
     assert len(lines) > 2                                  # the rows up to the interruption
     side = json.loads(out.with_suffix(".json").read_text())
     assert "interrupted" in json.dumps(side.get("failure")), side.get("failure")
+
+
+# ------------------------------------------------------------------ the same through the Python API (fast)
+
+API_CASES = [
+    # (method, extra settings, how long the run would take: long enough to be stopped after 0.3 s)
+    ("erk", {}, 1e5),
+    ("cvodes-bdf", {}, 1e5),
+    ("scipy-dop853", {}, 1e5),
+    pytest.param("dop853", {}, 1e8, marks=needs_cc),
+    ("stormer-verlet", {"dt": 1e-3}, 1e5),
+]
+
+
+@pytest.mark.parametrize("method, extra, t_end", API_CASES)
+def test_ctrl_c_through_the_api_keeps_the_solution_up_to_there(method, extra, t_end):
+    """Model.simulate / mechdsl.simulate: Ctrl-C (here interrupt_main, as a terminal's SIGINT)
+    raises RunInterrupted carrying the rows reached, failure 'interrupted'; those rows are the
+    solution: the same as an uninterrupted run over the same output times, and energy-conserving."""
+    import _thread
+    import signal
+    import threading
+
+    import numpy as np
+
+    from mechdsl.output.result import RunInterrupted
+    from mechdsl.simulate import simulate
+    from sim_models import pendulum
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:       # (a background test run ignores SIGINT)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    eom = pendulum()
+    opts = dict(method=method, rtol=1e-10, atol=1e-10, points=int(min(t_end, 1e6)) + 1, budget=10**9, **extra)
+    simulate(eom, 0.1, **{**opts, "points": 11})                 # build (and compile) first
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt) as info:
+            simulate(eom, t_end, **opts)
+    finally:
+        timer.cancel()
+    assert isinstance(info.value, RunInterrupted), type(info.value)
+    r = info.value.result
+    assert r.failure.cause == "interrupted" and r.metadata["interrupted"]
+    k = len(r.t)
+    assert 2 < k and r.t[-1] < t_end
+    again = simulate(eom, float(r.t[-1]), **{**opts, "points": k})
+    assert again.success
+    assert np.allclose(again.t, r.t, rtol=1e-12, atol=1e-9)
+    assert np.allclose(again.q, r.q, rtol=1e-6, atol=1e-6)
+    E = r.signals["energy"]
+    assert np.max(np.abs(E - E[0])) < 1e-3 * 9.81            # (m g L: the energy's scale; E(0) = 0)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_ctrl_c_in_a_contact_run_through_the_api():
+    """The contact back end (free flight in the compiled loop or stepped in Python): the rows and
+    events up to the interruption are kept."""
+    import _thread
+    import signal
+    import threading
+
+    import mechdsl
+    from mechdsl.output.result import RunInterrupted
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    m = mechdsl.load(MODELS / "bouncing_ball.mech")
+    m.simulate(0.1, points=11)
+    timer = threading.Timer(1.0, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt) as info:
+            m.simulate(1e4, points=10**5 + 1, budget=10**9)
+    finally:
+        timer.cancel()
+    assert isinstance(info.value, RunInterrupted), type(info.value)
+    r = info.value.result
+    assert r.failure.cause == "interrupted" and len(r.t) > 2 and r.t[-1] < 1e4
+    gaps = [v for name, v in r.signals.items() if name.endswith(".gap")]
+    assert gaps and all((g > -1e-6).all() for g in gaps)          # the ball never went through the floor

@@ -57,3 +57,11 @@ def in_main_thread() -> bool:
     import threading
 
     return threading.current_thread() is threading.main_thread()
+
+
+def was_interrupt(e: BaseException) -> bool:
+    """Whether the exception ``e`` is a Ctrl-C in disguise: CasADi's RuntimeError for one it
+    swallowed (noted by the guard), or a SystemError raised while a KeyboardInterrupt was
+    pending in a conversion of CasADi's (``np.array(DM)``)."""
+    return (isinstance(e, KeyboardInterrupt) or noted() or isinstance(e.__cause__, KeyboardInterrupt)
+            or isinstance(e.__context__, KeyboardInterrupt))

@@ -24,7 +24,7 @@ from ..diagnostics import MechError, UsageError
 from ..eom import parameter_vector
 from ..eom.preflight import check_start
 from ..model.friction import friction_notes
-from ..interrupts import interrupt_guard
+from ..interrupts import interrupt_guard, was_interrupt
 from ..output.result import Result, RunInterrupted, versions
 from . import accuracy as A
 from .backends import backend, ignored_settings
@@ -60,7 +60,12 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         # reached with failure "interrupted" (metadata["interrupted"]); the guard notes a Ctrl-C
         # that CasADi turns into a failure (mechdsl.interrupts)
         with interrupt_guard():
-            r = back.run(problem, callback) if setup is None else back.run(problem, callback, setup=setup)
+            try:
+                r = back.run(problem, callback) if setup is None else back.run(problem, callback, setup=setup)
+            except (RuntimeError, SystemError) as e:
+                if was_interrupt(e):      # a Ctrl-C CasADi turned into an error outside a back end's loop
+                    raise KeyboardInterrupt from None
+                raise
     except MechError:
         _blame_signals(problem)
         raise

@@ -39,7 +39,7 @@ from ...dae.ggl import GGLStepper
 from ...dae.init import initialize
 from ...dae.partitioning import PartitioningStepper
 from ...dae.projection import ProjectionStepper
-from ...dae.segments import NonFiniteError, StepError, locate_nonfinite
+from ...dae.segments import NonFiniteError, SegmentInterrupted, StepError, locate_nonfinite
 from ...diagnostics import UsageError
 from ...eom import parameter_vector
 from ...eom.start import fixed_start
@@ -360,10 +360,19 @@ class SegmentRun:
                         # approaching a singular configuration: rewind to here, continue in short segments
                         stepper.reset(t_now, q_now, qd_now)
                         break
-        except KeyboardInterrupt:      # Ctrl-C: stop now, keep what was recorded, raise it below
+        except KeyboardInterrupt as stop:     # Ctrl-C: stop now, keep what was recorded (the template raises it)
             interrupted = True
             n_rec = min(map(len, (T, Qs, QDs, D, VD)))      # a record() cut short in the middle
             del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
+            if isinstance(stop, SegmentInterrupted):        # the output times the interrupted segment reached
+                try:
+                    for t_now, q_now, qd_now in zip(stop.times, stop.Q, stop.QD):
+                        if j_out < len(out_t) and abs(float(t_now) - out_t[j_out]) <= tiny and t_now > T[-1]:
+                            record(float(t_now), np.asarray(q_now, float), np.asarray(qd_now, float))
+                            j_out += 1
+                except KeyboardInterrupt:                   # (a second Ctrl-C: what is recorded stays)
+                    n_rec = min(map(len, (T, Qs, QDs, D, VD)))
+                    del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
             failure = Failure(T[-1], "interrupted", INTERRUPTED)
         self.T, self.Qs, self.QDs, self.D, self.VD = T, Qs, QDs, D, VD      # the recorded states and drift
         self.events, self.failure, self.failure_code, self.interrupted = events, failure, failure_code, interrupted

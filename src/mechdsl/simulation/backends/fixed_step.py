@@ -37,7 +37,7 @@ from ...dae.init import initialize
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
 from ...eom.start import fixed_start, start_vector
-from ...interrupts import noted
+from ...interrupts import noted, was_interrupt
 from ...output.result import INTERRUPTED, Failure, Result
 from .. import record as R
 from ..monitors import compute_signals, energy_drift_stats
@@ -151,10 +151,12 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
             cache[k] = F
         try:
             X, R = F(x, h, pstep)
+            X = np.array(X, float)
+            R = np.array(R, float).ravel()
         except KeyboardInterrupt:       # Ctrl-C: the steps recorded so far are kept
             interrupted = True
-        except RuntimeError as e:  # pragma: no cover - CasADi evaluation error
-            interrupted = noted()       # (or the Ctrl-C a CasADi rootfinder turned into one)
+        except (RuntimeError, SystemError) as e:  # CasADi evaluation error, or Ctrl-C in disguise
+            interrupted = was_interrupt(e)
             if not interrupted:
                 failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
                 break
@@ -162,8 +164,6 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
             interrupted = True
             failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
             break
-        X = np.array(X, float)
-        R = np.array(R, float).ravel()
         scale = 1.0 + np.max(np.abs(X[: 2 * n]), axis=0)
         bad = np.flatnonzero(~np.isfinite(R) | (R > res_tol * scale) | ~np.all(np.isfinite(X), axis=0))
         good = k if bad.size == 0 else int(bad[0])
