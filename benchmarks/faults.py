@@ -389,7 +389,7 @@ def _ctrl_c_simulate(work, model, *extra):
             t0[0] = time.time()
         return time.time() - t0[0] > 12
     r, latency = interrupted(work, [PY, "-m", "mechdsl", "simulate", str(model), *map(str, extra), "--no-progress",
-                                    "--points", "1000001", "--budget", "100000000", "-o", str(out)], ready)
+                                    "--points", "100001", "--budget", "100000000", "-o", str(out)], ready)
     rows = len(out.read_text().splitlines()) - 1 if out.exists() else 0
     ok = latency is not None and clean(r, 130) and rows > 1 and latency < 5
     return Outcome(ok, f"exit {r.code}" + (f" {latency:.1f} s after Ctrl-C" if latency else " (no stop)")
@@ -401,15 +401,43 @@ def ctrl_c_simulate_dae(work):
     return _ctrl_c_simulate(work, MODELS / "four_bar.mech", "--t-end", "1e4")
 
 
-PENDING = "back ends being moved (issue 22): partial results on Ctrl-C not kept yet"
+@case("fault")
+def ctrl_c_simulate_dae_ggl(work):
+    return _ctrl_c_simulate(work, MODELS / "four_bar.mech", "--t-end", "1e4", "--formulation", "ggl")
 
 
-@case("fault", pending=PENDING)
+@case("fault")
 def ctrl_c_simulate_ode(work):
     return _ctrl_c_simulate(work, DP, "--t-end", "1e4", "--method", "erk")
 
 
-@case("fault", pending=PENDING)
+@case("fault")
+def ctrl_c_simulate_ode_cvodes(work):
+    return _ctrl_c_simulate(work, DP, "--t-end", "1e4", "--method", "cvodes-bdf")
+
+
+@case("fault")
+def ctrl_c_simulate_ode_scipy(work):
+    return _ctrl_c_simulate(work, DP, "--t-end", "1e4", "--method", "scipy-dop853")
+
+
+@case("fault")
+def ctrl_c_simulate_compiled_loop(work):
+    return _ctrl_c_simulate(work, DP, "--t-end", "1e7", "--method", "dop853")
+
+
+@case("fault")
+def ctrl_c_simulate_fixed_step(work):
+    return _ctrl_c_simulate(work, DP, "--t-end", "1e4", "--method", "stormer-verlet", "--dt", "1e-4")
+
+
+@case("fault")
+def ctrl_c_simulate_rattle(work):
+    return _ctrl_c_simulate(work, MODELS / "pendulum_cartesian.mech", "--t-end", "1e4", "--method", "rattle",
+                            "--dt", "1e-4")
+
+
+@case("fault")
 def ctrl_c_simulate_contacts(work):
     return _ctrl_c_simulate(work, MODELS / "bouncing_ball.mech", "--t-end", "1e4")
 

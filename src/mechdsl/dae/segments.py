@@ -207,6 +207,8 @@ def _buffered(F, args: dict):
         if noted():
             raise PartialCall(out, _complete_columns(out.get("xf"))) from None
         raise
+    if fb.ret() != 0:           # a failure the buffer reports only by its status: the ordinary
+        return None             # call gives it with the solver's message (StepError)
     _LAST_STATS[id(F)] = (F, _stats(fb))
     return out
 
