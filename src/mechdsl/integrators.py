@@ -418,44 +418,44 @@ def run_scipy(cls_name: str, rhs: Callable, jac: Callable | None, grid: np.ndarr
     except Exception as e:  # noqa: BLE001
         return Run(X=X, reached=1, error=f"{type(e).__name__}: {e}", fail_time=float(grid[0]), fail_state=x0)
     interrupted = False
-    while solver.status == "running" and k < len(grid):
-        t_prev = solver.t
-        try:
-            with np.errstate(all="ignore"):
-                msg = solver.step()
-        except KeyboardInterrupt:            # Ctrl-C: the rows reached are kept
-            error, interrupted = "interrupted (Ctrl-C)", True
-            break
-        except Exception as e:  # noqa: BLE001
-            error, fail_time, fail_state = f"{type(e).__name__}: {e}", t_prev, np.array(solver.y)
-            break
-        steps += 1
-        steps_here += 1
-        if solver.status == "failed":
-            error, fail_time, fail_state = msg or "step failed", solver.t, np.array(solver.y)
-            break
-        if not np.isfinite(solver.y).all():
-            error, fail_time, fail_state = "non-finite state", solver.t, np.array(solver.y)
-            break
-        if k < len(grid) and grid[k] <= solver.t:
-            dense = solver.dense_output()
-            while k < len(grid) and grid[k] <= solver.t:
-                X[k] = solver.y if grid[k] == solver.t else dense(grid[k])
-                k += 1
-            steps_here = 0
-        if steps_here >= max_steps:
-            error = f"more than {max_steps} steps in one output interval (max_num_steps)"
-            fail_time, fail_state = solver.t, np.array(solver.y)
-            break
-        h = getattr(solver, "step_size", None)
-        if hmin > 0 and h is not None and 0 < h < hmin and solver.t < grid[-1]:
-            error = f"step size {h:.3g} below the minimum {hmin:.3g} (min_step_size)"
-            fail_time, fail_state = solver.t, np.array(solver.y)
-            break
-        now = time.perf_counter()
-        if now - last_tick > 0.1:
-            progress.update(solver.t)
-            last_tick = now
+    try:                                     # Ctrl-C anywhere in the loop: the rows reached are kept
+        while solver.status == "running" and k < len(grid):
+            t_prev = solver.t
+            try:
+                with np.errstate(all="ignore"):
+                    msg = solver.step()
+            except Exception as e:  # noqa: BLE001
+                error, fail_time, fail_state = f"{type(e).__name__}: {e}", t_prev, np.array(solver.y)
+                break
+            steps += 1
+            steps_here += 1
+            if solver.status == "failed":
+                error, fail_time, fail_state = msg or "step failed", solver.t, np.array(solver.y)
+                break
+            if not np.isfinite(solver.y).all():
+                error, fail_time, fail_state = "non-finite state", solver.t, np.array(solver.y)
+                break
+            if k < len(grid) and grid[k] <= solver.t:
+                dense = solver.dense_output()
+                while k < len(grid) and grid[k] <= solver.t:
+                    X[k] = solver.y if grid[k] == solver.t else dense(grid[k])
+                    k += 1
+                steps_here = 0
+            if steps_here >= max_steps:
+                error = f"more than {max_steps} steps in one output interval (max_num_steps)"
+                fail_time, fail_state = solver.t, np.array(solver.y)
+                break
+            h = getattr(solver, "step_size", None)
+            if hmin > 0 and h is not None and 0 < h < hmin and solver.t < grid[-1]:
+                error = f"step size {h:.3g} below the minimum {hmin:.3g} (min_step_size)"
+                fail_time, fail_state = solver.t, np.array(solver.y)
+                break
+            now = time.perf_counter()
+            if now - last_tick > 0.1:
+                progress.update(solver.t)
+                last_tick = now
+    except KeyboardInterrupt:
+        error, interrupted = "interrupted (Ctrl-C)", True
     progress.update(float(grid[k - 1]))
     stats = {"steps": steps, "rhs_evals": int(solver.nfev), "jac_evals": int(getattr(solver, "njev", 0)),
              "lu_decompositions": int(getattr(solver, "nlu", 0))}

@@ -142,60 +142,57 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     res_tol = 1e-8
     interrupted = False
     chunk = FIRST_CHUNK
-    while done < nsteps:
-        k = min(chunk, nsteps - done)
-        chunk = min(CHUNK, 2 * chunk)
-        F = cache.get(k)
-        if F is None:
-            F = step.mapaccum("steps", k)
-            cache[k] = F
-        try:
-            X, R = F(x, h, pstep)
-            X = np.array(X, float)
-            R = np.array(R, float).ravel()
-        except KeyboardInterrupt:       # Ctrl-C: the steps recorded so far are kept
-            interrupted = True
-        except (RuntimeError, SystemError) as e:  # CasADi evaluation error, or Ctrl-C in disguise
-            interrupted = was_interrupt(e)
-            if not interrupted:
-                failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
-                break
-        if interrupted or noted():
-            interrupted = True
-            failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
-            break
-        scale = 1.0 + np.max(np.abs(X[: 2 * n]), axis=0)
-        bad = np.flatnonzero(~np.isfinite(R) | (R > res_tol * scale) | ~np.all(np.isfinite(X), axis=0))
-        good = k if bad.size == 0 else int(bad[0])
-        for j in range(good):
-            idx = done + j + 1
-            if idx % stride == 0 or idx == nsteps:
-                rec_idx.append(idx)
-                rec_states.append(X[:, j].copy())
-        if bad.size:
-            j = int(bad[0])
-            tf = t0 + (done + j + 1) * h
-            if not np.all(np.isfinite(X[:, j])):
-                failure = Failure(tf, "the state became non-finite",
-                                  f"{method} step of size {h:.6g} from t = {tf - h:.6g}")
-            else:
-                failure = Failure(tf, "Newton iteration of the implicit step did not converge",
-                                  f"residual {R[j]:.3g} after {max_newton} iterations; try a smaller dt")
-            if good and (done + good) not in rec_idx:
-                rec_idx.append(done + good)
-                rec_states.append(X[:, good - 1].copy())
-            done += good
-            break
-        x = X[:, -1]
-        done += k
-        if callable(progress):
+    try:                       # Ctrl-C anywhere in the loop: the steps recorded so far are kept
+        while done < nsteps:
+            k = min(chunk, nsteps - done)
+            chunk = min(CHUNK, 2 * chunk)
+            F = cache.get(k)
+            if F is None:
+                F = step.mapaccum("steps", k)
+                cache[k] = F
             try:
-                progress(t0 + done * h, t_end)
-            except KeyboardInterrupt:
+                X, R = F(x, h, pstep)
+                X = np.array(X, float)
+                R = np.array(R, float).ravel()
+            except (RuntimeError, SystemError) as e:  # CasADi evaluation error, or Ctrl-C in disguise
+                interrupted = was_interrupt(e)
+                if not interrupted:
+                    failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
+                    break
+            if interrupted or noted():
                 interrupted = True
                 failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
                 break
-
+            scale = 1.0 + np.max(np.abs(X[: 2 * n]), axis=0)
+            bad = np.flatnonzero(~np.isfinite(R) | (R > res_tol * scale) | ~np.all(np.isfinite(X), axis=0))
+            good = k if bad.size == 0 else int(bad[0])
+            for j in range(good):
+                idx = done + j + 1
+                if idx % stride == 0 or idx == nsteps:
+                    rec_idx.append(idx)
+                    rec_states.append(X[:, j].copy())
+            if bad.size:
+                j = int(bad[0])
+                tf = t0 + (done + j + 1) * h
+                if not np.all(np.isfinite(X[:, j])):
+                    failure = Failure(tf, "the state became non-finite",
+                                      f"{method} step of size {h:.6g} from t = {tf - h:.6g}")
+                else:
+                    failure = Failure(tf, "Newton iteration of the implicit step did not converge",
+                                      f"residual {R[j]:.3g} after {max_newton} iterations; try a smaller dt")
+                if good and (done + good) not in rec_idx:
+                    rec_idx.append(done + good)
+                    rec_states.append(X[:, good - 1].copy())
+                done += good
+                break
+            x = X[:, -1]
+            done += k
+            if callable(progress):
+                progress(t0 + done * h, t_end)
+    except KeyboardInterrupt:
+        interrupted = True
+        del rec_idx[len(rec_states):], rec_states[len(rec_idx):]     # (an append cut short in between)
+        failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
     S = np.array(rec_states).T                     # (2n + extra, npts)
     t = t0 + np.array(rec_idx, float) * h
     t[-1] = t_end if (failure is None and rec_idx[-1] == nsteps) else t[-1]
