@@ -336,6 +336,12 @@ ENTRIES = [
                                     "vector with the parameter values in force.",
           "Give a direction with a nonzero component (it is normalized for you).",
           corpus="E512_zero_normal.mech"),
+    Entry("E513", "direction components far apart", "A joint axis, a body axis or a contact plane's normal whose "
+                                                     "nonzero components are more than 1e8 times apart (such as "
+                                                     "{1e32, 0, 1}): the small ones are below what double "
+                                                     "precision resolves against the large ones.",
+          "Set the tiny components to 0, or give the direction in numbers of comparable size.",
+          corpus="E513_axis_components_far_apart.mech"),
     # ------------------------------------------------------------------ E6xx
     Entry("E601", "unknown scene setting", "A setting that scenes do not have.",
           "Fix the spelling; the hint suggests the setting.", corpus="E601_unknown_setting.mech"),

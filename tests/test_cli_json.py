@@ -123,7 +123,7 @@ def test_sweep(capsys, tmp_path):
                           "-o", str(out), "--no-progress")
     res = doc["result"]
     assert rc == 0 and res["runs"] == 2 and res["succeeded"] == 2 and res["failed_by_cause"] == {}
-    assert doc["files_written"] == [str(out)]
+    assert doc["files_written"] == [str(out), str(out.with_suffix(".json"))]     # the CSV and its sidecar
 
 
 def test_bench(capsys):

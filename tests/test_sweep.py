@@ -196,17 +196,9 @@ def test_cli_csv_and_exit_codes(tmp_path):
 
 
 def test_ctrl_c_keeps_finished_runs(dp, tmp_path, monkeypatch):
-    from mechdsl.sweep import runs, schedulers
+    from sweep_util import interrupt_at_chunk
 
-    calls = []
-
-    def interrupted(job, first, values):
-        calls.append(first)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return runs.run_chunk(job, first, values)
-
-    monkeypatch.setattr(schedulers, "run_chunk", interrupted)
+    interrupt_at_chunk(monkeypatch, 3)
     out = tmp_path / "part.nc"
     ds = dp.sweep(starts={"j1.phi": [0.5, 1.0, 1.5, 2.0]}, t_end=0.2, points=3, chunk_size=1, progress=False,
                   out=str(out))
@@ -261,10 +253,14 @@ def test_ctrl_c_on_the_process_pool_keeps_finished_runs(tmp_path):
                           "--workers", "2", "-o", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                          text=True, start_new_session=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))   # even if we ignore it
-    time.sleep(8)
+    from mechdsl.sweep.journal import parts_folder
+
+    t_end = time.time() + 600
+    while not list(parts_folder(out).glob("chunk-*")) and time.time() < t_end and p.poll() is None:
+        time.sleep(0.2)                        # until a chunk has finished
     os.killpg(p.pid, signal.SIGINT)            # as a terminal's Ctrl-C: the whole process group
     stdout, stderr = p.communicate(timeout=120)
-    assert p.returncode == 1, stdout + stderr
+    assert p.returncode == 130, stdout + stderr
     assert "interrupted" in stdout and "Traceback" not in stderr
     ds = xr.open_dataset(out, engine="h5netcdf")
     ok = ds["success"].values

@@ -551,10 +551,11 @@ class Model:
     def sweep(self, params=None, starts=None, t_end: float | None = None, **kw):
         """A parameter sweep or Monte Carlo ensemble -> xarray.Dataset (mechdsl.sweep.sweep;
         docs/sweeps.md).  params/starts: a grid (dict), mechdsl.sweep.table(...) or a DataFrame,
-        or a sampler (mechdsl.sample.uniform/normal); scheduler: vectorized | processes | dask |
-        tcp://host:port; out: a .nc file streamed chunk by chunk; other keywords: settings.
-        A sweep's runs carry no error estimate unless asked (error_estimate="on") and keep their
-        warnings in the status table instead of issuing MechWarnings."""
+        or a sampler (mechdsl.sample.uniform/normal/sobol/latin_hypercube); scheduler:
+        vectorized | processes | dask | tcp://host:port; out: a .nc file (streamed) or a .csv
+        table with its sidecar; resume=True continues the sweep out holds; other keywords:
+        settings.  A sweep's runs carry no error estimate unless asked (error_estimate="on") and
+        keep their warnings in the status table instead of issuing MechWarnings."""
         from .sweep import sweep
 
         kw.setdefault("error_estimate", "off")

@@ -7,6 +7,7 @@ MECHDSL_DEBUG=1).
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import sys
@@ -108,8 +109,9 @@ def main(argv: list[str] | None = None) -> int:
     out = Output(words[0] if words and words[0] in COMMANDS else None, json_mode="--json" in words)
     with out.session():
         code = _run(words, out)
-    if out.json:
-        out.write_document(code)
+    if out.json and not out.write_document(code):
+        _quiet_stdout()
+        return code or 1
     return code
 
 
@@ -132,7 +134,13 @@ def _run(words: list[str], out) -> int:
         from .frontend.limits import override
 
         with override(dict(getattr(args, "limit", None) or [])):
-            return int(args._run(args) or 0)
+            code = int(args._run(args) or 0)
+        try:
+            sys.stdout.flush()      # here, not at exit: a full device is an error we can report
+        except OSError as e:
+            e.filename = e.filename or "<standard output>"
+            raise
+        return code
     except _BadArguments as e:
         e.parser.print_usage(sys.stderr)
         print(f"mech: error: {e}", file=sys.stderr)
@@ -159,15 +167,45 @@ def _run(words: list[str], out) -> int:
         out.fail("interrupted", "interrupted")
         return 130
     except BrokenPipeError:
+        _quiet_stdout()
         return 0
-    except (InternalError, Exception) as e:  # a bug in mechdsl, not in the model
-        if os.environ.get("MECHDSL_DEBUG"):
-            raise
-        print(f"mech: internal error: {type(e).__name__}: {e}\n"
-              "  this is a bug in mechdsl; rerun with MECHDSL_DEBUG=1 for the traceback and report it",
+    except OSError as e:
+        if e.errno not in _IO_ERRORS:
+            return _internal(e, out)
+        _quiet_stdout()
+        print(f"mech: error: cannot write{f' {e.filename}' if e.filename else ''}: {e.strerror or e}",
               file=sys.stderr)
-        out.fail("internal", f"{type(e).__name__}: {e}")
-        return 3
+        out.fail("output", f"cannot write{f' {e.filename}' if e.filename else ''}: {e.strerror or e}")
+        return 1
+    except (InternalError, Exception) as e:  # a bug in mechdsl, not in the model
+        return _internal(e, out)
+
+
+# what the environment did, not a bug: a full or read-only device, a quota, permissions, an I/O
+# error, a name too long (exit 1 with the system's message)
+_IO_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EACCES, errno.EPERM,
+              errno.ENAMETOOLONG, errno.EFBIG, errno.EMFILE, errno.ENFILE, errno.ENOMEM}
+
+
+def _internal(e, out) -> int:
+    if os.environ.get("MECHDSL_DEBUG"):
+        raise e
+    print(f"mech: internal error: {type(e).__name__}: {e}\n"
+          "  this is a bug in mechdsl; rerun with MECHDSL_DEBUG=1 for the traceback and report it",
+          file=sys.stderr)
+    out.fail("internal", f"{type(e).__name__}: {e}")
+    return 3
+
+
+def _quiet_stdout() -> None:
+    """Point standard output at /dev/null: what is left in its buffer cannot be written, and
+    Python's flush at exit would report the same error again as an ignored exception."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
 
 
 def print_diagnostics(diags) -> None:

@@ -29,6 +29,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .interrupts import in_main_thread, interrupt_guard, noted
 from .model.records import record
 
 # CasADi plug-ins that take a fixed number of steps (number_of_finite_elements)
@@ -44,6 +45,7 @@ class Run:
     messages: str = ""                    # captured back-end messages
     fail_time: float | None = None        # when the back end says it failed (if it says)
     fail_state: np.ndarray | None = None  # state at fail_time when known (scipy)
+    interrupted: bool = False             # stopped by Ctrl-C: the rows reached are kept
 
 
 # --------------------------------------------------------------------------- progress
@@ -222,9 +224,77 @@ def run_casadi(plugin: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
     buf.set_arg(2, memoryview(pin))
     buf.set_res(0, memoryview(X))
     box: dict[str, Any] = {}
-
     keep = (buf, X, xin, pin, integ)  # alive while the worker runs, even if the caller is interrupted
+    interrupted = _eval_here(ev, X, grid, progress, box) if in_main_thread() else _eval_in_worker(ev, X, grid,
+                                                                                                  progress, box, keep)
+    seen = _count_filled(X, 0)
+    progress.update(float(grid[seen - 1]) if seen else float(grid[0]))
+    try:
+        stats = dict(buf.stats())
+    except Exception:  # noqa: BLE001 - stats unavailable after some failures
+        stats = {}
+    error = box.get("error")
+    if error is None and seen < len(grid):
+        bad = X[seen]
+        if np.isnan(bad).any() and not np.isinf(bad).any() and np.isnan(bad).all():
+            error = f"integrator stopped early (status {buf.ret()})"
+        else:
+            error = "non-finite state"
+    if interrupted:
+        error = "interrupted (Ctrl-C)"
+    run = Run(X=X, reached=seen, stats=_flat(stats), error=error, messages=box.get("messages", ""),
+              interrupted=interrupted)
+    if error is not None and not interrupted:
+        run.fail_time = _parse_fail_time(run.messages + "\n" + error)
+    return run
 
+
+def _eval_here(ev, X, grid, progress: Progress, box: dict) -> bool:
+    """Run the integrator ``ev`` in this thread, the main one: CasADi polls for Ctrl-C there (an
+    integrator in another thread cannot be stopped, and went on after the caller gave up).
+    The progress is shown from a watcher thread reading the rows written.  True when Ctrl-C
+    stopped it (the rows written so far are kept in X)."""
+    stop = threading.Event()
+    watcher = None
+    if progress.bar is not None or progress.callback is not None:
+        def watch():
+            seen = 0
+            while not stop.wait(0.1):
+                seen = _count_filled(X, seen)
+                if seen:
+                    try:
+                        progress.update(float(grid[seen - 1]))
+                    except Exception as e:  # noqa: BLE001 - raised in the caller's thread below
+                        box["progress_error"] = e
+                        return
+
+        watcher = threading.Thread(target=watch, name="mechdsl-progress", daemon=True)
+        watcher.start()
+    interrupted = False
+    try:
+        with interrupt_guard():
+            try:
+                with captured_messages() as captured:
+                    try:
+                        ev()
+                    except Exception as e:  # noqa: BLE001 - reported as a failure (or the interrupt), never raised
+                        box["error"] = str(e)
+                box["messages"] = captured.getvalue()
+                interrupted = noted()          # CasADi turned the KeyboardInterrupt into a failure
+            except KeyboardInterrupt:
+                interrupted = True
+    finally:
+        stop.set()
+        if watcher is not None:
+            watcher.join()
+    if "progress_error" in box:
+        raise box.pop("progress_error")
+    return interrupted
+
+
+def _eval_in_worker(ev, X, grid, progress: Progress, box: dict, keep) -> bool:
+    """Run the integrator ``ev`` in a worker thread (the caller is not the main thread: a sweep's
+    thread, which no Ctrl-C reaches); progress from the rows written."""
     def work():
         with captured_messages() as captured:   # what CasADi prints from this worker thread only
             try:
@@ -242,23 +312,7 @@ def run_casadi(plugin: str, ode, grid: np.ndarray, x0: np.ndarray, p: np.ndarray
         seen = _count_filled(X, seen)
         if seen:
             progress.update(float(grid[seen - 1]))
-    seen = _count_filled(X, 0)
-    progress.update(float(grid[seen - 1]) if seen else float(grid[0]))
-    try:
-        stats = dict(buf.stats())
-    except Exception:  # noqa: BLE001 - stats unavailable after some failures
-        stats = {}
-    error = box.get("error")
-    if error is None and seen < len(grid):
-        bad = X[seen]
-        if np.isnan(bad).any() and not np.isinf(bad).any() and np.isnan(bad).all():
-            error = f"integrator stopped early (status {buf.ret()})"
-        else:
-            error = "non-finite state"
-    run = Run(X=X, reached=seen, stats=_flat(stats), error=error, messages=box.get("messages", ""))
-    if error is not None:
-        run.fail_time = _parse_fail_time(run.messages + "\n" + error)
-    return run
+    return False
 
 
 _INTEGRATOR_CACHE: dict = {}
@@ -365,45 +419,50 @@ def run_scipy(cls_name: str, rhs: Callable, jac: Callable | None, grid: np.ndarr
         solver = cls(rhs, float(grid[0]), np.array(x0, float), float(grid[-1]), rtol=rtol, atol=atol, **kw)
     except Exception as e:  # noqa: BLE001
         return Run(X=X, reached=1, error=f"{type(e).__name__}: {e}", fail_time=float(grid[0]), fail_state=x0)
-    while solver.status == "running" and k < len(grid):
-        t_prev = solver.t
-        try:
-            with np.errstate(all="ignore"):
-                msg = solver.step()
-        except Exception as e:  # noqa: BLE001
-            error, fail_time, fail_state = f"{type(e).__name__}: {e}", t_prev, np.array(solver.y)
-            break
-        steps += 1
-        steps_here += 1
-        if solver.status == "failed":
-            error, fail_time, fail_state = msg or "step failed", solver.t, np.array(solver.y)
-            break
-        if not np.isfinite(solver.y).all():
-            error, fail_time, fail_state = "non-finite state", solver.t, np.array(solver.y)
-            break
-        if k < len(grid) and grid[k] <= solver.t:
-            dense = solver.dense_output()
-            while k < len(grid) and grid[k] <= solver.t:
-                X[k] = solver.y if grid[k] == solver.t else dense(grid[k])
-                k += 1
-            steps_here = 0
-        if steps_here >= max_steps:
-            error = f"more than {max_steps} steps in one output interval (max_num_steps)"
-            fail_time, fail_state = solver.t, np.array(solver.y)
-            break
-        h = getattr(solver, "step_size", None)
-        if hmin > 0 and h is not None and 0 < h < hmin and solver.t < grid[-1]:
-            error = f"step size {h:.3g} below the minimum {hmin:.3g} (min_step_size)"
-            fail_time, fail_state = solver.t, np.array(solver.y)
-            break
-        now = time.perf_counter()
-        if now - last_tick > 0.1:
-            progress.update(solver.t)
-            last_tick = now
+    interrupted = False
+    try:                                     # Ctrl-C anywhere in the loop: the rows reached are kept
+        while solver.status == "running" and k < len(grid):
+            t_prev = solver.t
+            try:
+                with np.errstate(all="ignore"):
+                    msg = solver.step()
+            except Exception as e:  # noqa: BLE001
+                error, fail_time, fail_state = f"{type(e).__name__}: {e}", t_prev, np.array(solver.y)
+                break
+            steps += 1
+            steps_here += 1
+            if solver.status == "failed":
+                error, fail_time, fail_state = msg or "step failed", solver.t, np.array(solver.y)
+                break
+            if not np.isfinite(solver.y).all():
+                error, fail_time, fail_state = "non-finite state", solver.t, np.array(solver.y)
+                break
+            if k < len(grid) and grid[k] <= solver.t:
+                dense = solver.dense_output()
+                while k < len(grid) and grid[k] <= solver.t:
+                    X[k] = solver.y if grid[k] == solver.t else dense(grid[k])
+                    k += 1
+                steps_here = 0
+            if steps_here >= max_steps:
+                error = f"more than {max_steps} steps in one output interval (max_num_steps)"
+                fail_time, fail_state = solver.t, np.array(solver.y)
+                break
+            h = getattr(solver, "step_size", None)
+            if hmin > 0 and h is not None and 0 < h < hmin and solver.t < grid[-1]:
+                error = f"step size {h:.3g} below the minimum {hmin:.3g} (min_step_size)"
+                fail_time, fail_state = solver.t, np.array(solver.y)
+                break
+            now = time.perf_counter()
+            if now - last_tick > 0.1:
+                progress.update(solver.t)
+                last_tick = now
+    except KeyboardInterrupt:
+        error, interrupted = "interrupted (Ctrl-C)", True
     progress.update(float(grid[k - 1]))
     stats = {"steps": steps, "rhs_evals": int(solver.nfev), "jac_evals": int(getattr(solver, "njev", 0)),
              "lu_decompositions": int(getattr(solver, "nlu", 0))}
     if error is None and k < len(grid):
         error = f"solver stopped at t = {solver.t} ({solver.status})"
         fail_time = solver.t
-    return Run(X=X, reached=k, stats=stats, error=error, fail_time=fail_time, fail_state=fail_state)
+    return Run(X=X, reached=k, stats=stats, error=error, fail_time=fail_time, fail_state=fail_state,
+               interrupted=interrupted)

@@ -40,7 +40,23 @@ def check_output(path, overwrite: bool = False, fps: float | None = None) -> Pat
     return check_writable(path, overwrite)
 
 
+class AnimationInterrupted(KeyboardInterrupt):
+    """Ctrl-C while the frames were drawn: the frames drawn so far were written (``path``,
+    ``frames`` of ``total``), and the interrupt goes on."""
+
+    def __init__(self, path: Path, frames: int, total: int):
+        super().__init__("interrupted")
+        self.path, self.frames, self.total = path, frames, total
+
+
+class _Partial(Exception):
+    def __init__(self, frames: int):
+        self.frames = frames
+
+
 def save(stage, path, fps: float, overwrite: bool = False) -> Path:
+    """Write the animation atomically.  Ctrl-C while drawing: the frames drawn so far are
+    written as a shorter animation and AnimationInterrupted (a KeyboardInterrupt) is raised."""
     final = check_output(path, overwrite, fps)
     suffix = final.suffix.lower()
     tmp, final = atomic_target(final, overwrite=overwrite)
@@ -48,13 +64,30 @@ def save(stage, path, fps: float, overwrite: bool = False) -> Path:
         if suffix == ".gif":
             _gif(stage, tmp, fps)
         elif suffix == ".html":
-            tmp.write_text(html_page(stage, fps, title=Path(final).stem), encoding="utf-8")
+            frames = frames_png(stage, partial=True)
+            tmp.write_text(html_page(stage, fps, title=Path(final).stem, frames=frames), encoding="utf-8")
+            if len(frames) < stage.n_frames:
+                raise _Partial(len(frames))
         else:
             _mp4(stage, tmp, fps)
+    except _Partial as p:
+        raise AnimationInterrupted(commit(tmp, final), p.frames, stage.n_frames) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return commit(tmp, final)
+
+
+def _drawn(images, first: int = 1) -> list:
+    """The frames of ``images`` up to a Ctrl-C (at least ``first``, else the interrupt goes on)."""
+    out = []
+    try:
+        for im in images:
+            out.append(im)
+    except KeyboardInterrupt:
+        if len(out) < first:
+            raise
+    return out
 
 
 def _images(stage):
@@ -94,12 +127,14 @@ def gif_durations(n: int, fps: float) -> list[int]:
 
 
 def _gif(stage, path: Path, fps: float) -> None:
-    frames = list(_images(stage))
+    frames = _drawn(_images(stage))
     durations = gif_durations(len(frames), fps)
     with open(path, "wb") as f:
         frames[0].save(f, format="GIF", save_all=True, append_images=frames[1:],
                        duration=durations if len(frames) > 1 else durations[0], loop=0,
                        optimize=False, disposal=1, comment=OWN_MARK.encode())
+    if len(frames) < stage.n_frames:
+        raise _Partial(len(frames))
 
 
 def _mp4(stage, path: Path, fps: float) -> None:
@@ -109,9 +144,21 @@ def _mp4(stage, path: Path, fps: float) -> None:
            "-pix_fmt", "yuv420p", "-metadata", f"comment={OWN_MARK}", "-movflags", "+faststart",
            "-f", "mp4", str(path)]
     proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
+    k = 0
     try:
-        for k in range(stage.n_frames):
-            proc.stdin.write(np.ascontiguousarray(stage.frame(k)).tobytes())
+        try:
+            for k in range(stage.n_frames):
+                proc.stdin.write(np.ascontiguousarray(stage.frame(k)).tobytes())
+        except (KeyboardInterrupt, BrokenPipeError):
+            # Ctrl-C (ffmpeg, in the same process group, got it too and ends the file itself)
+            try:
+                proc.stdin.close()
+            except OSError:
+                pass
+            proc.wait(30)
+            if k < 1 or not path.exists() or path.stat().st_size == 0:
+                raise KeyboardInterrupt from None
+            raise _Partial(k) from None
         proc.stdin.close()
         err = proc.stderr.read().decode(errors="replace")
         if proc.wait() != 0:
@@ -122,19 +169,21 @@ def _mp4(stage, path: Path, fps: float) -> None:
             proc.wait()
 
 
-def frames_png(stage) -> list[str]:
-    out = []
-    for im in _images(stage):
-        buf = io.BytesIO()
-        im.save(buf, format="PNG", optimize=False)
-        out.append(base64.b64encode(buf.getvalue()).decode("ascii"))
-    return out
+def frames_png(stage, partial: bool = False) -> list[str]:
+    """The frames as base64 PNG; ``partial``: up to a Ctrl-C (fewer than stage.n_frames)."""
+    def pngs():
+        for im in _images(stage):
+            buf = io.BytesIO()
+            im.save(buf, format="PNG", optimize=False)
+            yield base64.b64encode(buf.getvalue()).decode("ascii")
+
+    return _drawn(pngs()) if partial else list(pngs())
 
 
-def html_fragment(stage, fps: float) -> str:
+def html_fragment(stage, fps: float, frames: list[str] | None = None) -> str:
     """The player as an HTML fragment (a div and a script): for notebooks and the page."""
-    frames = frames_png(stage)
-    times = [round(float(t), 6) for t in stage.t]
+    frames = frames_png(stage) if frames is None else frames
+    times = [round(float(t), 6) for t in stage.t][:len(frames)]
     uid = "mechdsl-" + hashlib.sha256("".join(frames[:1] + frames[-1:]).encode()).hexdigest()[:10]
     h, w = np.asarray(stage.frame(0)).shape[:2]
     data = json.dumps({"frames": frames, "times": times, "interval": 1000.0 / fps})
@@ -174,8 +223,8 @@ def html_fragment(stage, fps: float) -> str:
 </script>"""
 
 
-def html_page(stage, fps: float, title: str = "mechdsl animation") -> str:
+def html_page(stage, fps: float, title: str = "mechdsl animation", frames: list[str] | None = None) -> str:
     import html
 
     return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n<title>{html.escape(title)}</title>\n'
-            f'<meta name="generator" content="mechdsl">\n<!-- {OWN_MARK} -->\n</head>\n<body>\n{html_fragment(stage, fps)}\n</body>\n</html>\n')
+            f'<meta name="generator" content="mechdsl">\n<!-- {OWN_MARK} -->\n</head>\n<body>\n{html_fragment(stage, fps, frames)}\n</body>\n</html>\n')

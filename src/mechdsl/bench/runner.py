@@ -108,6 +108,7 @@ class BenchResult:
     kind: str                          # ode | stiff | dae
     timer: str = TIMER
     machine: dict[str, Any] = field(default_factory=dict)
+    interrupted: bool = False          # Ctrl-C: the rows not measured are 'skipped'
 
     def variants(self) -> list[str]:
         seen: list[str] = []
@@ -375,8 +376,6 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
     kind = classify_setup(setup)
     ref, points, idx = make_reference(setup, reference, columns, tolerances, kind, reference_methods, log)
     conservative = is_conservative(setup.eom)
-    import time
-
     sweeps = {v.label: ([None] if v.fixed_dt is not None else list(tolerances)) for v in variants}
     done: dict[str, list[Row]] = {v.label: [] for v in variants}
     over: dict[str, Row] = {}              # variant -> its run that exceeded the per-run budget
@@ -384,34 +383,59 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
     spent = 0.0
     # tolerance by tolerance across the variants, so that a sweep budget cuts the tightest
     # tolerances of every variant rather than whole variants
-    for i in range(max(len(sw) for sw in sweeps.values())):
-        for v in variants:
-            sw = sweeps[v.label]
-            if i >= len(sw) or v.label in finished:
-                continue
-            tol = sw[i]
-            if v.label in over:
-                o = over[v.label]
-                row = Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
-                          message=f"the run at tolerance {o.tolerance:g} took {o.cpu:.3g} s of CPU "
-                                  f"(budget {budget:g} s)")
-            elif sweep_budget is not None and spent > sweep_budget:
-                row = Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
-                          message=f"the sweep used its budget of {sweep_budget:g} s of CPU")
-            else:
-                c0 = time.process_time()
-                row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative, stop_after)
-                spent += time.process_time() - c0
-                if log:
+    from ..interrupts import check_interrupt, interrupt_guard
+
+    interrupted = False
+    with interrupt_guard():              # a Ctrl-C CasADi swallows inside a run still stops the bench
+        for i in range(max(len(sw) for sw in sweeps.values())):
+            for v in variants:
+                sw = sweeps[v.label]
+                if i >= len(sw) or v.label in finished:
+                    continue
+                tol = sw[i]
+                if interrupted:
+                    done[v.label].append(Row(label=v.label, method=v.method, formulation=v.formulation,
+                                             tolerance=tol, status="skipped", message="interrupted (Ctrl-C)"))
+                    continue
+                try:
+                    row, cpu, measured = _next_row(setup, v, tol, over, budget, sweep_budget, spent, points, idx,
+                                                   ref, columns, repeats, conservative, stop_after)
+                    check_interrupt()
+                except KeyboardInterrupt:
+                    interrupted = True
+                    done[v.label].append(Row(label=v.label, method=v.method, formulation=v.formulation,
+                                             tolerance=tol, status="skipped", message="interrupted (Ctrl-C)"))
+                    continue
+                spent += cpu
+                if log and measured:
                     log(one_line(row))
-                if row.cpu is not None and row.cpu > budget:
+                if measured and row.cpu is not None and row.cpu > budget:
                     over[v.label] = row
                 if row.status == "n/a":        # the combination does not exist: one row says so
                     finished.add(v.label)
-            done[v.label].append(row)
+                done[v.label].append(row)
     rows = [r for v in variants for r in done[v.label]]
     return BenchResult(setup=setup, columns=columns, reference=ref, rows=rows, tolerances=tolerances,
-                       repeats=repeats, kind=kind, machine=machine())
+                       repeats=repeats, kind=kind, machine=machine(), interrupted=interrupted)
+
+
+def _next_row(setup, v, tol, over, budget, sweep_budget, spent, points, idx, ref, columns, repeats,
+              conservative, stop_after) -> tuple[Row, float, bool]:
+    """(row, CPU seconds spent, measured) of variant ``v`` at tolerance ``tol``: skipped for a
+    budget, or measured."""
+    import time
+
+    if v.label in over:
+        o = over[v.label]
+        return Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
+                   message=f"the run at tolerance {o.tolerance:g} took {o.cpu:.3g} s of CPU "
+                           f"(budget {budget:g} s)"), 0.0, False
+    if sweep_budget is not None and spent > sweep_budget:
+        return Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
+                   message=f"the sweep used its budget of {sweep_budget:g} s of CPU"), 0.0, False
+    c0 = time.process_time()
+    row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative, stop_after)
+    return row, time.process_time() - c0, True
 
 
 def one_line(row: Row) -> str:

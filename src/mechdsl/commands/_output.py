@@ -90,13 +90,18 @@ class Output:
                 "result": jsonable(self.result), "files_written": list(self.files),
                 "warnings": list(self.warnings), "diagnostics": list(self.diagnostics)}
 
-    def write_document(self, exit_code: int) -> None:
+    def write_document(self, exit_code: int) -> bool:
+        """Print the document; False when standard output cannot take it (a full device)."""
         text = json.dumps(self.document(exit_code), indent=2, allow_nan=False) + "\n"
         try:
             sys.stdout.write(text)
             sys.stdout.flush()
         except BrokenPipeError:
             pass
+        except OSError as e:
+            print(f"mech: error: cannot write <standard output>: {e.strerror or e}", file=sys.stderr)
+            return False
+        return True
 
     @contextlib.contextmanager
     def session(self):

@@ -85,9 +85,24 @@ def run(args) -> int:
     from ..animate.geometry import build
 
     build(m.eom, traces=tuple(args.trail))            # bad --trail names fail before the run
-    r = m.simulate(float(times[-1]), points=len(times))
+    try:
+        r = m.simulate(float(times[-1]), points=len(times))
+    except KeyboardInterrupt:
+        print("mech: interrupted during the simulation: nothing drawn, nothing written", file=sys.stderr)
+        args.out.fail("interrupted", "interrupted during the simulation: nothing drawn, nothing written")
+        return 130
     anim = animate(r, m, fps=args.fps, speed=speed, view=args.view, up=up, trails=args.trail, size=size)
-    path = anim.save(args.output, overwrite=args.force)
+    from ..animate.writer import AnimationInterrupted
+
+    try:
+        path = anim.save(args.output, overwrite=args.force)
+    except AnimationInterrupted as e:
+        print(f"wrote {e.path}: the first {e.frames} of {e.total} frames (interrupted)")
+        print("mech: interrupted", file=sys.stderr)
+        args.out.wrote(e.path)
+        args.out.set(target=target_line(args, m), model=m.name, frames=e.frames, fps=args.fps, speed=speed)
+        args.out.fail("interrupted", f"interrupted: the first {e.frames} of {e.total} frames written")
+        return 130
     what = "bars of the coordinates (no bodies to draw)" if anim.view == "bars" else f"view {anim.view}"
     pace = "" if speed == 1.0 else f" at speed {speed:g}"
     print(f"wrote {path}: {len(anim)} frames at {args.fps:g} fps{pace}, {anim.times[-1] - anim.times[0]:g} s of model "

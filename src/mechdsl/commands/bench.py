@@ -146,4 +146,8 @@ def run(args) -> int:
         for w in written:
             print(f"wrote {w}")
         args.out.wrote(*written)
+    if res.interrupted:
+        print("mech: interrupted: the rows measured are kept (the others are 'skipped')", file=sys.stderr)
+        args.out.fail("interrupted", "interrupted: the rows measured are kept (the others are 'skipped')")
+        return 130
     return 0

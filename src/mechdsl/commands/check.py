@@ -27,6 +27,10 @@ def run(args) -> int:
     status = 0
     out = args.out
     files = []
+    if out.verbosity >= 1:          # -v: the cache folders, used or not and why (issue 25)
+        from ..eom.cachefiles import describe
+
+        describe()
     for path in args.files:
         record = {"file": str(path), "ok": False, "targets": []}
         files.append(record)

@@ -31,8 +31,14 @@ def add_parser(sub):
                    help="Monte Carlo: NAME uniform in [LOW, HIGH) (with --samples)")
     p.add_argument("--normal", action="append", default=[], metavar="NAME=MEAN:SD",
                    help="Monte Carlo: NAME normal (with --samples)")
+    p.add_argument("--sobol", action="append", default=[], metavar="NAME=LOW:HIGH",
+                   help="quasi-random: NAME on scrambled Sobol' points in [LOW, HIGH) (with --samples; the "
+                        "--sobol names jointly; balanced for a power of two)")
+    p.add_argument("--latin-hypercube", action="append", default=[], metavar="NAME=LOW:HIGH",
+                   help="NAME on a Latin hypercube in [LOW, HIGH) (with --samples; the --latin-hypercube names "
+                        "jointly)")
     p.add_argument("--samples", type=int, metavar="N", help="Monte Carlo sample size")
-    p.add_argument("--seed", type=int, default=0, metavar="S", help="Monte Carlo seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="sampling seed (default 0)")
     p.add_argument("--t-end", type=_number_arg, metavar="T", help="end time [s] (default: scene stop_time, else 10)")
     p.add_argument("--points", type=int, metavar="N", help="output points per run (default 501)")
     p.add_argument("--rtol", type=_number_arg, metavar="R", help="relative tolerance (default 1e-8)")
@@ -49,21 +55,23 @@ def add_parser(sub):
                    help="on: every run carries the error estimate of mech simulate (a companion run each; "
                         "the status column error_estimate); default off")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the sweep -o holds (killed or interrupted): the runs it finished are kept, "
+                        "after a check that model, settings and design are the same")
     add_force_arg(p)
     return p
 
 
 def run(args) -> int:
-    import numpy as np
-
     from ..output.fileio import check_figure, check_writable
-    from ..sample import normal, uniform
     from ..sweep.spec import parse_range
 
     if args.output and not str(args.output).endswith((".nc", ".csv")):
         raise UsageError(f"-o {args.output}: the output must end in .nc or .csv")
+    if args.resume and not args.output:
+        raise UsageError("--resume continues the sweep an output file holds: give -o")
     if args.output:
-        check_writable(args.output, overwrite=args.force)
+        check_writable(args.output, overwrite=args.force or args.resume)
     if args.plot:
         check_figure(args.plot, overwrite=args.force)
         if not args.metric:
@@ -72,29 +80,16 @@ def run(args) -> int:
     unit_of = declared_units(model)
     grid = dict(parse_range(g, unit_of) for g in args.grid)
     params = grid or None
-    sampled = [(uniform, a) for a in args.uniform] + [(normal, a) for a in args.normal]
-    if sampled:
-        if args.samples is None:
-            raise UsageError("--uniform/--normal need --samples N")
-        sampler = None
-        for fn, text in sampled:
-            name, _, rhs = text.partition("=")
-            parts = rhs.split(":")
-            if len(parts) != 2 or not name.strip():
-                raise UsageError(f"{text!r}: expected NAME=A:B")
-            from ..numbers import in_declared_unit
-
-            unit = unit_of(name.strip())
-            s = fn({name.strip(): tuple(in_declared_unit(v.strip(), unit, f"{text}") for v in parts)},
-                   n=args.samples, seed=args.seed)
-            sampler = s if sampler is None else sampler & s
+    sampler = _sampler(args, unit_of)
+    if sampler is not None:
         if grid:
-            raise UsageError("give either --grid or --uniform/--normal, not both")
+            raise UsageError("give either --grid or the samplers (--uniform, --normal, --sobol, --latin-hypercube), "
+                             "not both")
         params = sampler
     elif args.samples is not None:
-        raise UsageError("--samples needs --uniform or --normal")
+        raise UsageError("--samples needs --uniform, --normal, --sobol or --latin-hypercube")
     if params is None:
-        raise UsageError("nothing to sweep: give --grid NAME=A:B:N (or --uniform/--normal with --samples)")
+        raise UsageError("nothing to sweep: give --grid NAME=A:B:N (or a sampler such as --uniform with --samples)")
     if x0:
         raise UsageError("--set of start values is not available in a sweep: sweep them with --grid c.start=...")
     t_end = args.t_end
@@ -102,18 +97,15 @@ def run(args) -> int:
         from ..simulation.settings import DEFAULT_T_END
 
         print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
-    nc = args.output if args.output and args.output.endswith(".nc") else None
-    ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=nc, workers=args.workers,
+    ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=args.output, workers=args.workers,
                      progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty(), overwrite=True,
-                     rtol=args.rtol, atol=args.atol, method=args.method, points=args.points,
-                     error_estimate=args.error_estimate)
-    written = [nc] if nc else []
+                     resume=args.resume, error_estimate=args.error_estimate,
+                     rtol=args.rtol, atol=args.atol, method=args.method, points=args.points)
+    written = [args.output] if args.output else []
     if args.output and args.output.endswith(".csv"):
-        from ..output.fileio import write_atomic
-        from ..sweep import to_frame
+        from ..output.result import sidecar_path
 
-        write_atomic(args.output, to_frame(ds).to_csv(index=False), overwrite=True)
-        written.append(args.output)
+        written.append(sidecar_path(args.output))
     if args.plot:
         from ..sweep.plot import heat_map, metric
 
@@ -126,10 +118,13 @@ def run(args) -> int:
         out.warn(f"warnings in {ds.attrs['n_warnings']} runs; first: "
                  + str(ds.attrs.get("warnings", "")).splitlines()[0], echo=False)
     if int(ds.attrs["interrupted"]):
+        print("mech: interrupted", file=sys.stderr)
         out.fail("interrupted", "interrupted: the finished runs are kept; the others are marked 'not run'")
-    elif int(ds.attrs["n_failed"]):
+        return 130
+    if int(ds.attrs["n_failed"]):
         out.fail("simulation", f"{int(ds.attrs['n_failed'])} run(s) failed")
-    return 0 if int(ds.attrs["n_failed"]) == 0 and not int(ds.attrs["interrupted"]) else 1
+        return 1
+    return 0
 
 
 def sweep_record(ds) -> dict:
@@ -148,6 +143,35 @@ def sweep_record(ds) -> dict:
     rec.update(runs=int(ok.size), succeeded=int(ok.sum()), failed_by_cause=causes,
                interrupted=bool(int(a.get("interrupted", 0))))
     return rec
+
+
+SAMPLERS = (("uniform", "uniform"), ("normal", "normal"), ("sobol", "sobol"), ("latin_hypercube", "latin_hypercube"))
+
+
+def _sampler(args, unit_of):
+    """The --uniform/--normal/--sobol/--latin-hypercube options as one sampler (or None)."""
+    from .. import sample
+    from ..numbers import in_declared_unit
+
+    sampler = None
+    for option, fn in SAMPLERS:
+        texts = getattr(args, option)
+        if not texts:
+            continue
+        if args.samples is None:
+            raise UsageError(f"--{option.replace('_', '-')} needs --samples N")
+        ranges = {}
+        for text in texts:
+            name, _, rhs = text.partition("=")
+            parts = rhs.split(":")
+            if len(parts) != 2 or not name.strip():
+                raise UsageError(f"{text!r}: expected NAME=A:B")
+            name = name.strip()     # a bare number means the parameter's declared unit (issue 23)
+            ranges[name] = tuple(in_declared_unit(v.strip(), unit_of(name), text) for v in parts)
+        # one call per option: the --sobol (or --latin-hypercube) names are drawn jointly
+        s = getattr(sample, fn)(ranges, n=args.samples, seed=args.seed)
+        sampler = s if sampler is None else sampler & s
+    return sampler
 
 
 def summary(ds, written=()) -> str:
@@ -176,9 +200,10 @@ def summary(ds, written=()) -> str:
         lines.append(f"error estimate: largest {est[worst]:.2g} (run {worst}: {_values(ds, worst)}), in the "
                      "coordinates' units (the status column error_estimate)")
     if int(a.get("n_warnings", 0)):
-        lines.append(f"warnings in {a['n_warnings']} runs; first: " + str(a.get("warnings", "")).splitlines()[0])
+        lines.append(f"warnings: {a['n_warnings']}; first: " + str(a.get("warnings", "")).splitlines()[0])
     if int(a.get("interrupted", 0)):
-        lines.append("interrupted: the finished runs are kept; the others are marked 'not run'")
+        lines.append("interrupted: the finished runs are kept; the others are marked 'not run' "
+                     "(--resume continues the sweep)")
     for w in written:
         lines.append(f"wrote {w}")
     return "\n".join(lines)

@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from .segments import (GridIntegrators, NonFiniteError, StepError, Stepper, call_integrator, chunk_span,
-                       integrator_options, ode_plugin, scaled_dae, state_names)
+from .segments import (GridIntegrators, NonFiniteError, PartialCall, SegmentInterrupted, StepError, Stepper,
+                       call_integrator, chunk_span, integrator_options, ode_plugin, scaled_dae, state_names)
 
 
 RATE_FACTOR = 10.0
@@ -83,7 +83,12 @@ class BaumgarteStepper(Stepper):
         alpha, beta = self.rates
         p = np.concatenate([self.system.p, [alpha, beta, self.t, h]])
         F = self.F.get(grid, self.step_budget)
-        r = call_integrator(F, x0=np.concatenate([self.q, self.qd]), p=p)
+        try:
+            r = call_integrator(F, x0=np.concatenate([self.q, self.qd]), p=p)
+        except PartialCall as stop:     # Ctrl-C: the output times the call reached
+            m, n = stop.columns, self.system.n
+            x = np.asarray(stop.out["xf"], float).reshape(2 * n, K)[:, :m]
+            raise SegmentInterrupted(np.atleast_1d(times)[:m], x[:n].T, x[n:].T) from None
         self._count(F)
         x = np.array(r["xf"], float).reshape(2 * self.system.n, K)
         if not np.all(np.isfinite(x)):

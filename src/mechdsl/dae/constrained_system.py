@@ -90,7 +90,7 @@ def schur_kkt_solve(M, G, rhs_q, rhs_c):
     mu = _backward(R, _forward(R, [dot(cols[r], z) - b[n + r] for r in range(m)]))
     w = [z[i] - sum((cols[r][i] * mu[r] for r in range(m)), ca.SX(0)) for i in range(n)]
     y = _backward(L, w)
-    return d * ca.vertcat(*y), s * ca.vertcat(*mu)
+    return d * ca.vertcat(*y), s * (ca.vertcat(*mu) if mu else ca.SX(0, 1))
 
 
 def _kkt_route(eom: EOM, pv: np.ndarray, m: int) -> str:
@@ -134,7 +134,7 @@ def equilibrated_kkt_solve(M, G, rhs_q, rhs_c):
     n = M.shape[0]
     K, b, d, s = equilibrated_kkt(M, G, rhs_q, rhs_c)
     x = ca.solve(K, b)
-    return d * x[:n], s * x[n:]
+    return d * x[:n, 0], s * x[n:, 0]          # 2-d slices: x[n:] of a column is 1x0 when m = 0
 
 
 SYSTEM_FIELDS = ("q", "qd", "t", "p", "M", "bias", "g")     # what ConstrainedSystem._build reads
@@ -201,7 +201,7 @@ class ConstrainedSystem:
                                   (("q", q), ("qd", qd), ("t", t), ("p", pp), ("alpha", alpha), ("beta", beta)))
             K, b, d, sc = parts(Q, QD, TT, P, A, B)
             x = ca.solve(K, b, "qr")
-            accel = ca.Function("accel", [Q, QD, TT, P, A, B], [d * x[:n], sc * x[n:]])
+            accel = ca.Function("accel", [Q, QD, TT, P, A, B], [d * x[:n, 0], sc * x[n:, 0]])
             qdd = lam = None
         sym = dict(q=q, qd=qd, t=t, p=pp, g=g, G=G, gt=gt, gdot=gdot, gamma=gamma, M=M, bias=bias,
                    alpha=alpha, beta=beta, qdd=qdd, lam=lam, g_all=g_all, G_all=G_all, gdot_all=gdot_all)

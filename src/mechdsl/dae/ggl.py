@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from .index import check_for_idas
-from .segments import GridIntegrators, StepError, Stepper, call_integrator, chunk_span, integrator_options, scaled_dae
+from .segments import (GridIntegrators, PartialCall, SegmentInterrupted, StepError, Stepper, call_integrator, chunk_span,
+                       integrator_options, scaled_dae)
 
 
 def ggl_dae(system) -> dict:
@@ -124,11 +125,17 @@ class GGLStepper(Stepper):
         n = self.system.n
         p = self._p(self.t, h, self.q, self.qd)
         F = self.F.get(grid, self.step_budget)
-        r = call_integrator(F, x0=np.zeros(2 * n), z0=self._z0(self.t, self.q, self.qd), p=p)
-        self._count(F)
-        e = np.array(r["xf"], float).reshape(2 * n, K)
         x0, xd0, w = p[-6 * n:-4 * n], p[-4 * n:-2 * n], p[-2 * n:]
         s = np.linspace(0.0, 1.0, K + 1)[1:] if isinstance(grid, int) else np.array(grid)
+        try:
+            r = call_integrator(F, x0=np.zeros(2 * n), z0=self._z0(self.t, self.q, self.qd), p=p)
+        except PartialCall as stop:     # Ctrl-C: the output times the call reached
+            m = stop.columns
+            e = np.asarray(stop.out["xf"], float).reshape(2 * n, K)[:, :m]
+            X = x0[:, None] + xd0[:, None] * s[None, :m] + w[:, None] * e
+            raise SegmentInterrupted(times[:m], X[:n].T, X[n:].T) from None
+        self._count(F)
+        e = np.array(r["xf"], float).reshape(2 * n, K)
         X = x0[:, None] + xd0[:, None] * s[None, :] + w[:, None] * e
         if not np.all(np.isfinite(X)):
             raise StepError("the state became non-finite")

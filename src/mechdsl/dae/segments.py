@@ -20,6 +20,7 @@ import numpy as np
 
 from ..eom.codegen import compile_functions
 from ..integrators import captured_messages, dae_function, make_integrator
+from ..interrupts import check_interrupt
 from .constrained_system import ConstrainedSystem
 from .dae_run import DaeRun
 
@@ -95,7 +96,7 @@ class Stepper(abc.ABC):
 
     # -- helpers ---------------------------------------------------------------------------
     def _count(self, integrator) -> None:
-        self.count_stats(integrator.stats())
+        self.count_stats(call_stats(integrator))
 
     def count_stats(self, st: dict) -> None:
         """Add an integrator call's statistics (CVODES/IDAS or erk names) to self.stats."""
@@ -146,44 +147,86 @@ def integrator_options(opts: DaeRun, plugin: str) -> dict:
     return o
 
 
-_SIGINT = {"seen": False}     # set by interrupt_guard's handler; read after every integrator call
+class PartialCall(KeyboardInterrupt):
+    """Ctrl-C inside an integrator call: ``out`` holds the outputs with the columns (output
+    times) written before it, ``columns`` how many of ``xf``'s are complete."""
+
+    def __init__(self, out: dict, columns: int):
+        super().__init__("interrupted")
+        self.out, self.columns = out, columns
 
 
-@contextlib.contextmanager
-def interrupt_guard():
-    """Make Ctrl-C stop a run even when CasADi swallows it.
+class SegmentInterrupted(KeyboardInterrupt):
+    """Ctrl-C inside a segment: the states the formulation reached at its first output times
+    (``times``, ``Q``, ``QD``: rows per time), for the driver to record before it stops."""
 
-    CasADi polls for Ctrl-C while it integrates; inside a solver callback (IDAS' residual,
-    the rootfinder in the partitioned right-hand side) the resulting KeyboardInterrupt is
-    turned into a recoverable callback failure and lost, and the run went on to the end.  For
-    the duration of the run (main thread only, when Python's default handler is in place)
-    the SIGINT handler is wrapped: it notes the signal and then does what the default does;
-    every integrator call checks the note.  The previous handler is restored on exit."""
-    import signal
-    import threading
+    def __init__(self, times, Q, QD):
+        super().__init__("interrupted")
+        self.times, self.Q, self.QD = times, Q, QD
 
-    _SIGINT["seen"] = False
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-        yield
-        return
 
-    def handler(signum, frame):
-        _SIGINT["seen"] = True
-        signal.default_int_handler(signum, frame)
+_LAST_STATS: dict = {}        # id(F) -> (F, statistics of its last call through a buffer)
 
-    signal.signal(signal.SIGINT, handler)
+
+def call_stats(F) -> dict:
+    """The statistics of the last call of the integrator ``F`` through call_integrator."""
+    hit = _LAST_STATS.get(id(F))
+    return dict(hit[1]) if hit is not None and hit[0] is F else dict(F.stats())
+
+
+def _buffered(F, args: dict):
+    """``F(**args)`` through a FunctionBuffer whose outputs are numpy arrays: the columns an
+    integrator writes as it reaches each output time stay there when Ctrl-C stops it (then
+    PartialCall).  None when the call does not fit (another thread, sparse outputs)."""
+    from ..interrupts import in_main_thread, noted
+
+    if not in_main_thread():
+        return None
+    ins = []
+    for name, value in args.items():
+        i = F.index_in(name)
+        a = np.asarray(value, float).ravel(order="F")
+        if a.size != F.numel_in(i):
+            return None
+        ins.append((i, np.ascontiguousarray(a)))
+    if not all(F.sparsity_out(i).is_dense() for i in range(F.n_out())):
+        return None
+    outs = {F.name_out(i): np.full(F.size_out(i)[::-1], np.nan) for i in range(F.n_out())}  # column-major
+    fb, ev = F.buffer()
+    for i, a in ins:
+        fb.set_arg(i, memoryview(a))
+    for name, a in outs.items():
+        fb.set_res(F.index_out(name), memoryview(a))
+    out = {name: a.T for name, a in outs.items()}
     try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        _SIGINT["seen"] = False
+        ev()
+    except KeyboardInterrupt:
+        raise PartialCall(out, _complete_columns(out.get("xf"))) from None
+    except RuntimeError:
+        _LAST_STATS[id(F)] = (F, _stats(fb))
+        if noted():
+            raise PartialCall(out, _complete_columns(out.get("xf"))) from None
+        raise
+    if fb.ret() != 0:           # a failure the buffer reports only by its status: the ordinary
+        return None             # call gives it with the solver's message (StepError)
+    _LAST_STATS[id(F)] = (F, _stats(fb))
+    return out
 
 
-def check_interrupt() -> None:
-    if _SIGINT["seen"]:
-        _SIGINT["seen"] = False
-        raise KeyboardInterrupt
+def _stats(fb) -> dict:
+    if len(_LAST_STATS) > 64:        # (integrators of runs gone: kept only while in use)
+        _LAST_STATS.clear()
+    try:
+        return dict(fb.stats())
+    except Exception:  # noqa: BLE001 - no statistics after some failures
+        return {}
+
+
+def _complete_columns(xf) -> int:
+    if xf is None:
+        return 0
+    ok = np.all(np.isfinite(xf), axis=0)
+    return int(np.argmin(ok)) if not ok.all() else int(ok.size)
 
 
 def call_integrator(F, **args):
@@ -191,10 +234,14 @@ def call_integrator(F, **args):
 
     CasADi and SUNDIALS print to Python's stdout/stderr while they retry (e.g. a Newton
     solve inside a right-hand side that did not converge); that is captured here and only
-    its last line is kept, as the detail of a failure."""
+    its last line is kept, as the detail of a failure.  In the main thread the call goes
+    through a buffer: Ctrl-C then raises PartialCall with the output times reached."""
     try:
         with captured_messages() as buf:    # this thread's output only (no global swap)
-            out = F(**args)
+            out = _buffered(F, args)
+            if out is None:
+                out = F(**args)
+                _LAST_STATS.pop(id(F), None)
         check_interrupt()
         return out
     except RuntimeError as e:
@@ -212,7 +259,7 @@ def call_integrator(F, **args):
         text = f"{text}; {_work_done(F)}" if _work_done(F) else text
         err = StepError(text[:400])
         try:
-            err.stats = dict(F.stats())       # the work of the failed call (counted by the driver)
+            err.stats = call_stats(F)         # the work of the failed call (counted by the driver)
         except Exception:  # noqa: BLE001
             pass
         raise err from None
@@ -221,7 +268,7 @@ def call_integrator(F, **args):
 def _work_done(F) -> str:
     """'N steps accepted, R rejected' of a failed call (the erk plugin's only explanation)."""
     try:
-        st = F.stats()
+        st = call_stats(F)
     except Exception:  # noqa: BLE001 -- no statistics after this failure
         return ""
     n = st.get("nsteps", st.get("n_steps"))

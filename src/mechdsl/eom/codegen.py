@@ -37,7 +37,6 @@ loop.
 """
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import logging
 import os
@@ -47,6 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError
+from . import cachefiles
+from .cachefiles import cache_dir      # (also imported from here: mechdsl.eom.codegen.cache_dir)
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
             "start", "parameters", "singularity", "invariants")
@@ -553,9 +554,6 @@ _SETS_MAX = 64
 # --------------------------------------------------------------------------- C code generation
 
 
-from .cachedir import cache_dir  # noqa: E402,F401  (codegen.cache_dir: where libraries and entries go)
-
-
 def _which(name: str) -> str | None:
     """shutil.which on POSIX (importing shutil costs a warm run 2 ms: it imports lzma and bz2)."""
     if os.name != "posix":
@@ -592,12 +590,10 @@ def compiler_version(cc: str) -> str:
         tag = None
     memo = cache_dir() / "compilers"
     if tag is not None:
-        try:
-            for line in memo.read_text(encoding="utf-8").splitlines():
-                if line.startswith(tag):
-                    return line[len(tag):] or cc
-        except (OSError, UnicodeDecodeError):
-            pass
+        data, _ = cachefiles.read_bytes(memo)        # (a file only this user can write)
+        for line in (data or b"").decode("utf-8", "replace").splitlines():
+            if line.startswith(tag):
+                return line[len(tag):] or cc
     import subprocess
 
     try:
@@ -605,10 +601,11 @@ def compiler_version(cc: str) -> str:
         version = version.splitlines()[0] if version else cc
     except (OSError, subprocess.SubprocessError):
         return cc
-    if tag is not None and "\n" not in version:
+    if tag is not None and "\n" not in version and cachefiles.trusted_folder(memo.parent, create=True):
         try:
-            memo.parent.mkdir(parents=True, exist_ok=True)
-            with open(memo, "a", encoding="utf-8") as f:      # one short line: appends do not interleave
+            # one short line: appends do not interleave
+            fd = os.open(memo, os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o600)
+            with os.fdopen(fd, "a", encoding="utf-8") as f:
                 f.write(tag + version + "\n")
         except OSError:
             pass
@@ -739,21 +736,28 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         return None, f"not compiled: {what} (compile_budget); using the CasADi virtual machine", None
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
-    digest = hashlib.sha256(key.encode()).hexdigest()[:24]
+    full = hashlib.sha256(key.encode()).hexdigest()
+    digest = full[:24]
     d = cache_dir()
-    lib = d / f"{digest}.so"
+    # a library runs code when loaded: only from a folder no other user owns or can write
+    # (mechdsl.eom.cachefiles); otherwise it is built for this run alone in a private folder
+    private = None if cachefiles.trusted_folder(d, create=True) else _private_folder()
+    lib = (private or d) / f"{digest}.so"
     size_kb = sum(len(c) for c in units) // 1000
-    problem = _cache_problem(lib) if lib.exists() else None
-    if lib.exists() and problem is None:
+    problem = _cache_problem(lib, full) if private is None and lib.exists() else None
+    if private is None and lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
+        cachefiles.hit("compiled-code", digest)
     else:
         log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
         import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
         import tempfile        # loads the cached library)
 
+        cachefiles.miss("compiled-code", digest, "not built yet" if private is None and problem is None
+                        else problem or "the cache folder is not used")
         try:
-            d.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
+            cachefiles.remove_stale_builds(private or d)
+            with tempfile.TemporaryDirectory(dir=private or d, prefix=f".build-{os.getpid()}-") as tmp:
                 procs, objs = [], []
                 for i, (code, fl) in enumerate(zip(units, flags)):
                     src = Path(tmp) / f"unit{i}.c"
@@ -782,13 +786,15 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                                                            f"{tail}", help="use the virtual-machine Functions "
                                                                            "(compiled=False)"))
                     return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
-                _record_digest(out, lib)  # the hash first: a library in place always has its hash
+                os.chmod(out, 0o600)
+                if private is None:
+                    _record_digest(out, lib, full)  # the hash first: a library in place always has its hash
                 os.replace(out, lib)
         except OSError as e:
             if strict:
-                raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)} into {d}: {e}",
+                raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)} into {private or d}: {e}",
                                            help="check that the cache folder (MECHDSL_CACHE) is writable")) from None
-            return None, f"cannot compile into {d}: {e}; using the CasADi virtual machine", None
+            return None, f"cannot compile into {private or d}: {e}; using the CasADi virtual machine", None
         note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
                 f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
                 + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
@@ -796,7 +802,18 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
             note = f"the cached library {lib} {problem}: rebuilt; " + note
     log.debug("%s", note)
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
+    if private is not None:             # loaded (mapped): the files are not needed any more
+        import shutil
+
+        shutil.rmtree(private, ignore_errors=True)
+        note += " (a private folder for this run: the cache folder is not used)"
     return loaded, note, str(lib)
+
+
+def _private_folder() -> Path:
+    import tempfile
+
+    return Path(tempfile.mkdtemp(prefix="mechdsl-build-"))     # 0700
 
 
 def _digest_path(lib: Path) -> Path:
@@ -811,36 +828,36 @@ def _file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _record_digest(built: Path, lib: Path) -> None:
-    import tempfile
-
-    """Write the hash of the library `built` next to its cache place `lib` (``<name>.sha256``), atomically."""
-    side = _digest_path(lib)
-    fd, tmp = tempfile.mkstemp(prefix=f".{side.name}.", suffix=".tmp", dir=str(lib.parent))
-    try:
-        with os.fdopen(fd, "w", encoding="ascii") as f:
-            f.write(_file_sha256(built) + "\n")
-        os.replace(tmp, side)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+def _record_digest(built: Path, lib: Path, key: str) -> None:
+    """Write the hash of the library ``built`` and its full key next to its cache place ``lib``
+    (``<name>.sha256``: "<file sha256> <key sha256>"), atomically, mode 0600."""
+    if not cachefiles.write_bytes(_digest_path(lib), f"{_file_sha256(built)} {key}\n".encode("ascii")):
+        raise OSError(f"cannot write {_digest_path(lib)}")
 
 
-def _cache_problem(lib: Path) -> str | None:
-    """None if the cached library is the one built here, else what is wrong with it.
+def _cache_problem(lib: Path, key: str) -> str | None:
+    """None if the cached library is the one built here for ``key``, else what is wrong with it.
 
     A truncated library kills the process that loads it (SIGBUS); another library under the
-    right name gives wrong numbers.  The hash recorded at build time catches both."""
-    try:
-        recorded = _digest_path(lib).read_text(encoding="ascii").strip()
-    except (OSError, UnicodeDecodeError):
-        return "has no recorded content hash"
+    right name gives wrong numbers (or runs what it likes when loaded).  The file hash and the
+    full key recorded at build time catch both, and are checked without loading the library;
+    a file another user owns or can write is not used at all (mechdsl.eom.cachefiles)."""
+    why = cachefiles.check_file(lib)
+    if why:
+        return why
+    data, why = cachefiles.read_bytes(_digest_path(lib))
+    if data is None:
+        return "has no recorded content hash" if why == "no entry" else f"has no usable hash record ({why})"
+    parts = data.decode("ascii", "replace").split()
+    if len(parts) != 2:
+        return "has a hash record without its key (an older format, or written by hand)"
+    if parts[1] != key:
+        return "was built for another key (swapped or copied)"
     try:
         actual = _file_sha256(lib)
     except OSError as e:
         return f"cannot be read ({e.strerror or e})"
-    if actual != recorded:
+    if actual != parts[0]:
         return "does not match its recorded content hash (truncated or replaced)"
     return None
 

@@ -11,10 +11,12 @@ it imports neither lark nor the front end nor the mechanics (issue 12's cold sta
 
 The file is ``<cache_dir()>/models/<key>.pkl`` (``cache_dir`` of mechdsl.eom.codegen:
 MECHDSL_CACHE, else XDG_CACHE_HOME/mechdsl, else ~/.cache/mechdsl): a header line with the
-format and the SHA-256 of the payload, then the payload (a pickle of plain data: the
-ir.Model, the ir.Scene, the front end's warnings and the packed equations).  The hash is
-checked before the payload is unpickled, so a truncated, replaced or foreign file is
-rebuilt, never trusted; any failure to read is a miss.
+format, the full key and the SHA-256 of the payload, then the payload (a pickle of plain
+data: the ir.Model, the ir.Scene, the front end's warnings and the packed equations).  The
+key and the hash are checked before the payload is unpickled, so a truncated, replaced,
+swapped (another model's) or foreign file is rebuilt, never trusted; any failure to read is
+a miss, with its reason at DEBUG.  A pickle runs code when loaded: entries are read only
+from a folder and file that no other user owns or can write (mechdsl.eom.cachefiles).
 
 SX expressions are serialized together in one ``casadi.StringSerializer`` stream, which keeps
 the symbols shared between them (q in T is the q of the EOM).  Fields the derivation had
@@ -33,7 +35,7 @@ from pathlib import Path
 
 from ..model.records import record
 
-FORMAT = "mechdsl-model-cache 4"
+FORMAT = "mechdsl-model-cache 5"     # 5: the full key in the header
 MAX_ENTRIES = 1000          # more: the entries written longest ago are removed
 _CALLABLES = ("point_position", "point_velocity", "body_rotation")
 _PER_MODEL = ("model", "param_values", "input_defaults")     # set again from the Model on load
@@ -100,52 +102,59 @@ def path_of(k: str) -> Path:
     return directory() / f"{k}.pkl"
 
 
+def header(k: str, payload: bytes) -> bytes:
+    """The entry's first line: the format, the full key and the SHA-256 of the payload."""
+    return f"{FORMAT} {k} {hashlib.sha256(payload).hexdigest()}\n".encode("ascii")
+
+
 def read(k: str) -> Entry | None:
-    """The entry under key ``k``, or None (missing, unreadable, corrupt, foreign: rebuilt)."""
-    try:
-        with open(path_of(k), "rb") as f:
-            data = f.read()
-    except OSError:
+    """The entry under key ``k``, or None (missing, unreadable, corrupt, another key's, not
+    trusted: rebuilt).  The key and the hash are checked before the payload is unpickled, and
+    only from a folder and file no other user can write (mechdsl.eom.cachefiles)."""
+    from . import cachefiles
+
+    data, why = cachefiles.read_bytes(path_of(k))
+    if data is None:
+        cachefiles.miss("model", k[:16], why)
         return None
     head, sep, payload = data.partition(b"\n")
-    parts = head.decode("ascii", "replace").rsplit(" ", 1)
-    if not sep or len(parts) != 2 or parts[0] != FORMAT or hashlib.sha256(payload).hexdigest() != parts[1]:
+    parts = head.decode("ascii", "replace").rsplit(" ", 2)
+    if not sep or len(parts) != 3 or parts[0] != FORMAT:
+        cachefiles.miss("model", k[:16], "an entry of another format or version")
+        return None
+    if parts[1] != k:
+        cachefiles.miss("model", k[:16], f"the entry holds another key ({parts[1][:16]}...): swapped or copied")
+        return None
+    if hashlib.sha256(payload).hexdigest() != parts[2]:
+        cachefiles.miss("model", k[:16], "the payload does not match its hash (truncated or changed)")
         return None
     try:
         entry = pickle.loads(payload)
-    except Exception:                   # a file written by another version of a dependency
+    except Exception as e:              # a file written by another version of a dependency
+        cachefiles.miss("model", k[:16], f"the payload does not load ({type(e).__name__})")
         return None
-    return entry if isinstance(entry, Entry) else None
+    if not isinstance(entry, Entry):
+        cachefiles.miss("model", k[:16], "the payload is not a model-cache entry")
+        return None
+    cachefiles.hit("model", k[:16])
+    return entry
 
 
 def write(k: str, entry: Entry) -> bool:
     """Store ``entry`` atomically; False (and nothing left behind) if the cache is not writable."""
-    from ..output.fileio import _new_temp
+    from . import cachefiles
 
     try:
         payload = pickle.dumps(entry, protocol=pickle.HIGHEST_PROTOCOL)
     except Exception:                   # something in the model that does not pickle: no entry
         return False
     final = path_of(k)
-    tmp = None
-    try:
-        final.parent.mkdir(parents=True, exist_ok=True)
-        new = not final.exists()
-        fd, tmp = _new_temp(final)
-        with os.fdopen(fd, "wb") as f:
-            f.write(f"{FORMAT} {hashlib.sha256(payload).hexdigest()}\n".encode("ascii"))
-            f.write(payload)
-        os.replace(tmp, final)
-        if new:
-            trim(final.parent)
-        return True
-    except OSError:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    new = not final.exists()
+    if not cachefiles.write_bytes(final, [header(k, payload), payload]):
         return False
+    if new:
+        trim(final.parent)
+    return True
 
 
 def trim(folder: Path, keep: int | None = None) -> None:

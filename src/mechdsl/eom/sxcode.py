@@ -155,7 +155,7 @@ def _kept(f, kind: str, build, pack, unpack, extra: str = ""):
         return mem[1]
     value, path = None, None
     try:
-        from .cachedir import cache_dir
+        from .cachefiles import cache_dir
 
         path = cache_dir() / "sxcode" / f"{_key(f, extra)}.{kind}"
         value = unpack(path.read_bytes()) if path.is_file() else None

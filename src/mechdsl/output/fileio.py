@@ -13,6 +13,7 @@ never created silently.
 """
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -29,6 +30,7 @@ def check_writable(path: str | os.PathLike, overwrite: bool = False, source: boo
     p = Path(path)
     if not str(path):
         raise UsageError("an output file name is empty")
+    _check_name(p)
     if p.exists() and p.is_dir():
         raise UsageError(f"{p} is a directory, not a file")
     if source and p.exists() and not overwrite:
@@ -43,6 +45,27 @@ def check_writable(path: str | os.PathLike, overwrite: bool = False, source: boo
     if not os.access(folder, os.W_OK | os.X_OK):
         raise UsageError(f"cannot write {p}: the folder {folder} is not writable")
     return p
+
+
+TEMP_ROOM = 32      # characters a temporary name adds to a file name: ".NAME.PID.XXXXXXXX.SUFFIX"
+
+
+def _check_name(p: Path) -> None:
+    """A name the file system takes, with room for the temporary name it is written under."""
+    folder = p.parent
+    try:
+        most = os.pathconf(folder if folder.is_dir() else ".", "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):
+        most = 255
+    if len(os.fsencode(p.name)) + TEMP_ROOM > most:
+        raise UsageError(f"the file name {p.name[:40]}... is too long ({len(os.fsencode(p.name))} bytes; at most "
+                         f"{most - TEMP_ROOM} here: the file system takes {most}, and mechdsl writes under a "
+                         "temporary name first)")
+    try:
+        p.exists()
+    except OSError as e:            # a path too long as a whole, a loop of links, ...
+        raise UsageError(f"cannot use the output name {str(p)[:60]}...: {e.strerror or e}"
+                         + (" (the path is too long)" if e.errno == errno.ENAMETOOLONG else "")) from None
 
 
 def check_figure(path: str | os.PathLike, overwrite: bool = False) -> Path:
@@ -75,13 +98,17 @@ def is_own_output(p: Path) -> bool:
         if p.suffix == ".fmu":                                  # mech export: its modelDescription says so
             return _own_fmu(p)
         if p.suffix == ".csv":
-            if p.read_bytes()[:32].startswith(b"mode,kind,frequency_rad_s,"):    # mech linearize --csv
+            head = _head(p, 32)        # (never the whole file: an output may be gigabytes)
+            if head.startswith(b"mode,kind,frequency_rad_s,"):    # mech linearize --csv
                 return True
             side = p.with_suffix(".json")
             if not (side.is_file() and _has_marker(side)):
                 return False
-            # a results CSV starts with "time,"; a table (mech bench) is named in its sidecar
-            return p.read_bytes()[:5] == b"time," or f'"table": "{p.name}"'.encode() in side.read_bytes()[:65536]
+            # a results CSV starts with "time,", a sweep's table with "run,time,"; a table
+            # (mech bench) is named in its sidecar
+            return head.startswith((b"time,", b"run,time,")) or f'"table": "{p.name}"'.encode() in _head(side, 65536)
+        if p.suffix == ".nc":
+            return _netcdf_by_mechdsl(p)
         return _has_marker(p)
     except OSError:
         return False
@@ -98,16 +125,116 @@ def _own_fmu(p: Path) -> bool:
     return b'generationTool="mechdsl' in head
 
 
-def _has_marker(p: Path) -> bool:
+def _netcdf_by_mechdsl(p: Path) -> bool:
+    """A netCDF (HDF5) file whose global attribute ``generator`` names mechdsl (a sweep's)."""
+    if not _head(p, 8).startswith(b"\x89HDF"):
+        return False
+    try:
+        import h5py
+    except ImportError:
+        return False
+    try:
+        with h5py.File(p, "r") as f:
+            g = f.attrs.get("generator")
+    except Exception:  # noqa: BLE001 - any file h5py cannot read is not ours
+        return False
+    g = g.decode("utf-8", "replace") if isinstance(g, bytes) else str(g)
+    return g.startswith("mechdsl")
+
+
+def pair_problem(csv_path: str | os.PathLike) -> str | None:
+    """None when a CSV mechdsl wrote and its JSON sidecar belong together, else what is wrong.
+
+    Both are renamed into place one after the other (the CSV first), so a kill between the
+    two renames can leave a new CSV beside an old sidecar; the sidecar records the CSV's
+    SHA-256, checked here (streamed: the CSV is not read whole)."""
+    import hashlib
+    import json
+
+    p = Path(csv_path)
+    side = p.with_suffix(".json")
+    try:
+        meta = json.loads(side.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return f"has no sidecar {side.name} (written by something else, or its sidecar was removed)"
+    except (OSError, ValueError) as e:
+        return f"has an unreadable sidecar {side.name} ({e})"
+    want = meta.get("csv_sha256") if isinstance(meta, dict) else None
+    if not want:
+        return f"has a sidecar {side.name} without the CSV's checksum"
+    h = hashlib.sha256()
     with open(p, "rb") as f:
-        head = f.read(65536)
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    if h.hexdigest() != want:
+        return (f"does not match its sidecar {side.name} (a different CSV was written after it: a run killed "
+                "between writing the two, or an edited file); run again to write both")
+    return None
+
+
+def _head(p: Path, n: int) -> bytes:
+    with open(p, "rb") as f:
+        return f.read(n)
+
+
+def _has_marker(p: Path) -> bool:
+    head = _head(p, 65536)
     return b'"generator": "mechdsl' in head or (p.suffix in FIGURE_SUFFIXES and MARKER in head)
 
 
+def temp_name(final: Path, suffix: str = ".tmp") -> Path:
+    """``.NAME.PID.XXXXXXXX.SUFFIX`` beside ``final``: the writer's process id lets a later run
+    tell the leftovers of a killed write (``remove_stale``) from a write still going on."""
+    return final.parent / f".{final.name}.{os.getpid()}.{os.urandom(4).hex()}{suffix}"   # (secrets: 15 ms import)
+
+
+def remove_stale(final: Path) -> list[Path]:
+    """Remove the temporary files (and folders) of earlier writes of ``final`` whose writer is
+    gone (killed: SIGKILL, a power cut); those of a live process are left alone.  Returns what
+    was removed."""
+    import re
+
+    pattern = re.compile(r"\." + re.escape(final.name) + r"\.(\d+)\.[0-9a-f]{8}(\.[\w.-]*)?$")
+    removed = []
+    try:
+        entries = [e for e in os.scandir(final.parent) if e.name.startswith(f".{final.name}.")]
+    except OSError:
+        return removed
+    for e in entries:
+        m = pattern.match(e.name)
+        if m is None or _alive(int(m.group(1))):
+            continue
+        try:
+            if e.is_dir(follow_symlinks=False):
+                import shutil      # (only here: a warm run does not import it)
+
+                shutil.rmtree(e.path)
+            else:
+                os.unlink(e.path)
+            removed.append(Path(e.path))
+        except OSError:
+            pass
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True              # another user's process (or an absurd number): not ours to judge
+    return True
+
+
 def _new_temp(final: Path, suffix: str = ".tmp") -> tuple[int, Path]:
-    """A fresh temporary file beside ``final``: mode 0666 & ~umask, or final's mode if it exists."""
+    """A fresh temporary file beside ``final``: mode 0666 & ~umask, or final's mode if it exists.
+    The leftovers of killed writes of ``final`` are removed first."""
+    remove_stale(final)
     for _ in range(100):
-        tmp = final.parent / f".{final.name}.{os.urandom(4).hex()}{suffix}"   # (secrets costs 15 ms to import)
+        tmp = temp_name(final, suffix)
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:

@@ -289,10 +289,13 @@ class SimulationFailed(RuntimeError):
         self.result = result
 
 
+INTERRUPTED = "the run was interrupted (Ctrl-C); results up to here are kept"
+
+
 class RunInterrupted(KeyboardInterrupt):
-    """Ctrl-C during a constrained run: a KeyboardInterrupt that carries the partial Result
-    (``.result``: failure "interrupted", metadata["interrupted"] = True), so a caller may
-    write what was computed before it stops."""
+    """Ctrl-C during a run (every back end): a KeyboardInterrupt that carries the partial Result
+    (``.result``: failure "interrupted", metadata["interrupted"] = True, the rows reached), so
+    a caller may write what was computed before it stops."""
 
     def __init__(self, result: Result):
         super().__init__("interrupted")

@@ -71,6 +71,8 @@ def _numerator(e: ir.Expr) -> ir.Expr:
     return e
 
 
+DIRECTION_SPAN = 1e-8      # least ratio of a direction's nonzero components: ~ sqrt(machine epsilon)
+
 _LENGTHS = {"rod": ("length L",), "disk": ("radius R",), "cylinder": ("radius R", "length L"),
             "sphere": ("radius R",), "box": ("size[1]", "size[2]", "size[3]")}
 
@@ -99,6 +101,18 @@ def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnost
             out.append(Diagnostic("E512", f"{what} of {owner} is the zero vector", span,
                                   "a direction needs a nonzero component, e.g. {0, 1, 0}; check the parameters "
                                   "it is built from"))
+            return True
+        sizes = [abs(v) for v in vals if v != 0]
+        if min(sizes) < DIRECTION_SPAN * max(sizes):
+            # {1e32, 0, 1}: the small component's square is below the rounding of the large one's,
+            # so the direction is the large one to double precision while its tiny tilt still
+            # makes a near-singular inertia (the falling rod's Planar joint ran for hours)
+            out.append(Diagnostic("E513", f"the components of {what} of {owner} are more than "
+                                          f"{1 / DIRECTION_SPAN:g} times apart (largest/smallest nonzero = "
+                                          f"{max(sizes) / min(sizes):.3g}): the small ones are below what double "
+                                          "precision resolves against the large ones", span,
+                                  "set the tiny components to 0, or give the direction in numbers of comparable "
+                                  "size"))
             return True
         return False
 

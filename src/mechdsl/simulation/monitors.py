@@ -10,9 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import analysis  # its face: the first-integral search is imported when a run first searches
-from ..eom import fold_inputs
-from ..eom.codegen import cache_dir
-from ..output.fileio import write_atomic
+from ..eom import fold_inputs, integralcache
 from . import record as R
 from .accuracy import energy_drift
 
@@ -83,48 +81,22 @@ def _integral_search(eom, pv, u=None):
     return eom.workspace.first_integrals(search if searchable else lambda: None), False
 
 
-INTEGRAL_CACHE_VERSION = "2"          # 2: rotation symmetries (angular momenta, issue 17)
-
-
 def _integral_function(eom, pv):
-    """The first integrals as one Function (t, x, p), or None.  The search (0.05-0.2 s) is
-    cached on disk under the hash of the serialized T, V, D, Q, g and the parameter values,
-    so a repeated ``mech simulate`` of the same model skips it."""
-    import hashlib
-
+    """The first integrals as one Function (t, x, p), or None: searched once, then kept on disk
+    (mechdsl.eom.integralcache: an entry is checked against its full key and signature)."""
     import casadi as ca
 
-
-    path = None
-    try:
-        x = ca.vertcat(eom.q, eom.qd)
-        parts = [ca.SX(eom.T), ca.SX(eom.V), ca.SX(eom.D), ca.SX(eom.Q),
-                 ca.SX(eom.g) if eom.g is not None else ca.SX(0, 1)]
-        key_f = ca.Function("key", [eom.t, x, eom.p], parts)
-        h = hashlib.sha256()
-        for piece in (INTEGRAL_CACHE_VERSION, __import__("mechdsl").__version__, ca.__version__,
-                      ",".join(eom.coords), key_f.serialize(), np.asarray(pv, float).tobytes().hex()):
-            h.update(str(piece).encode())
-        path = cache_dir() / "integrals" / (h.hexdigest()[:32] + ".txt")
-        if path.is_file():
-            text = path.read_text()
-            return None if text == "none" else ca.Function.deserialize(text)
-    except Exception:  # noqa: BLE001 - no cache: search
-        path = None
+    found, f = integralcache.lookup(eom, pv)
+    if found:
+        return f
     try:
         sig = analysis.integral_signals(eom, pv)
     except Exception:  # noqa: BLE001 - a failed search only means nothing extra is recorded
         sig = {}
-    f = None
     if sig:
         x = ca.vertcat(eom.q, eom.qd)
         f = ca.Function("first_integrals", [eom.t, x, eom.p], list(sig.values()), ["t", "x", "p"], list(sig))
-    if path is not None:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            write_atomic(path, "none" if f is None else f.serialize(), overwrite=True)
-        except Exception:  # noqa: BLE001 - a cache that cannot be written is only slower
-            pass
+    integralcache.store(eom, pv, f)
     return f
 
 

@@ -369,6 +369,11 @@ def validate(s: SimulationSettings) -> SimulationSettings:
     """The checks every run passes (one rule for every back end); returns the normalized copy."""
     t0, t1 = _number("the start time", s.t_start), _number("the end time", s.t_end)
     rtol, atol = _number("rtol", s.rtol), _number("atol", s.atol)
+    if not (math.isfinite(t0) and abs(t0) <= MAX_TIME):
+        # the start on its own first: an end time defaulted from it (start + 10 s) would
+        # otherwise be blamed for the start's value (and lose the scene's location)
+        raise SettingError("t_start", f"times must lie within +-{MAX_TIME:g} s (got the start time {t0:g}): "
+                           "beyond that double precision cannot resolve a time step")
     if not (math.isfinite(t0) and math.isfinite(t1)) or t1 <= t0:
         raise SettingError("t_end", f"the end time must be a finite number after the start time (got {t0} .. {t1})")
     if max(abs(t0), abs(t1)) > MAX_TIME:

@@ -5,6 +5,7 @@
       -> solve(problem) -> Result                    -- the template below:
            progress -> backend.run -> non-finite check -> statistics schema
            -> accuracy report -> metadata (what ran) -> [error estimate]
+           (Ctrl-C: the back end returns what it reached; RunInterrupted carries that Result)
 
 Every caller goes through here: ``mechdsl.simulate.simulate``, ``Model.simulate`` (and so
 ``mech simulate``), the shims ``mechdsl.dae.simulate_dae`` and
@@ -23,7 +24,8 @@ from ..diagnostics import MechError, UsageError
 from ..eom import parameter_vector
 from ..eom.preflight import check_start
 from ..model.friction import friction_notes
-from ..output.result import Result, versions
+from ..interrupts import interrupt_guard, was_interrupt
+from ..output.result import Result, RunInterrupted, versions
 from . import accuracy as A
 from .backends import backend, ignored_settings
 from .backends.ode import record_inputs
@@ -86,7 +88,16 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         callback = lambda t, t1: bar.update(float(t))   # noqa: E731
     wall0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        r = back.run(problem, callback) if setup is None else back.run(problem, callback, setup=setup)
+        # Ctrl-C: every back end stops within a step (or an integrator call) and returns what it
+        # reached with failure "interrupted" (metadata["interrupted"]); the guard notes a Ctrl-C
+        # that CasADi turns into a failure (mechdsl.interrupts)
+        with interrupt_guard():
+            try:
+                r = back.run(problem, callback) if setup is None else back.run(problem, callback, setup=setup)
+            except (RuntimeError, SystemError) as e:
+                if was_interrupt(e):      # a Ctrl-C CasADi turned into an error outside a back end's loop
+                    raise KeyboardInterrupt from None
+                raise
     except MechError:
         _blame_signals(problem)
         raise
@@ -129,6 +140,8 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         if units:
             meta.setdefault("units", {}).update(units)
     meta["versions"] = versions()        # provenance belongs to the Result, stamped here once
+    if meta.get("interrupted"):
+        raise RunInterrupted(r)           # a KeyboardInterrupt carrying the results up to there
     thorough = _estimate_error(r, problem) if s.estimate_error else None
     _default_estimate(r, problem, thorough)
     A.accuracy_warning(r, problem)

@@ -6,7 +6,10 @@
     spec.py        grids, tables, samplers -> the design (one row per run); names classified
     runs.py        run_chunk: the runs of one chunk through the simulation layer (per run or mapped)
     schedulers.py  where chunks run: vectorized (in-process), processes, dask, tcp://...
-    store.py       finished chunks -> memory or a netCDF file (streamed); the status table
+    pool.py        the processes scheduler: workers that may die (retries, failed rows)
+    journal.py     finished chunks on disk while a sweep runs: survives a kill; resume
+    store.py       finished chunks -> memory, .nc or .csv + sidecar; the status table; read
+    provenance.py  units, long names, the model/settings/design hashes
 
 The sweep resolves its settings once (``Model.settings``: argument > scene > default);
 ``method="auto"`` of an ODE is resolved once, from the first run's start, so every back
@@ -18,14 +21,16 @@ from __future__ import annotations
 import math
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from ..diagnostics import UsageError
-from .spec import Table, table  # noqa: F401  (public: mechdsl.sweep.table)
 from ..model.names import split_state
+from .spec import Table, table  # noqa: F401  (public: mechdsl.sweep.table)
+from .store import read  # noqa: F401  (public: mechdsl.sweep.read)
 
-__all__ = ["sweep", "table", "to_frame", "first_time"]
+__all__ = ["sweep", "read", "table", "to_frame", "first_time"]
 
 MEMORY_LIMIT = 2e9      # bytes of results a sweep may hold in memory; beyond, stream with out="x.nc"
 
@@ -33,13 +38,18 @@ MEMORY_LIMIT = 2e9      # bytes of results a sweep may hold in memory; beyond, s
 def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None = None, out: str | None = None,
           progress=None, workers: int | None = None, chunk_size: int | None = None, frame: bool = False,
           overwrite: bool = False, connect_timeout: float = 10.0, memory_limit: float = MEMORY_LIMIT,
-          **options):
+          resume: bool = False, **options):
     """Run the model over a grid, a table or a sample; returns an ``xarray.Dataset``
-    (dimensions run, time; swept values as coordinates on run; per-run status variables)
-    or, with ``frame=True``, a long pandas DataFrame.  See docs/sweeps.md."""
+    (dimensions run, time; swept values as coordinates on run; per-run status variables;
+    units and long names on every variable, provenance in the attributes) or, with
+    ``frame=True``, a long pandas DataFrame.  ``out``: a .nc file (streamed) or a .csv
+    table with its JSON sidecar.  ``resume=True``: continue the sweep ``out`` holds (killed
+    or interrupted), after checking that model, settings and design are the same.  Ctrl-C
+    stops it and returns (and writes) what finished.  See docs/sweeps.md."""
     _need("xarray")
     from . import schedulers as S
-    from .runs import Job, default_threads, run_chunk
+    from .provenance import identity, variable_meta
+    from .runs import Job, default_threads
     from .spec import classify, design
     from ..simulation import formulate
 
@@ -54,8 +64,10 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
         raise UsageError(f"workers must be an integer >= 1 (got {workers!r})")
     if chunk_size is not None and (isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1):
         raise UsageError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
+    if resume and out is None:
+        raise UsageError("resume=True continues the sweep an output file holds: give out= (-o)")
     if out is not None:
-        _check_out(out, overwrite)
+        _check_out(out, overwrite or resume)
     from ..simulation.settings import DEFAULT_POINTS
 
     settings = model.settings(t_end=t_end, **options)
@@ -66,7 +78,6 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     problem = formulate(model.eom, settings)
     job = Job(model=model, settings=settings, real=names.real, structural=names.structural, starts=names.starts,
               variables=(), grid=np.linspace(settings.t_start, settings.t_end, settings.points))
-    first = run_chunk  # noqa: F841  (keeps the import visible to pickling tools)
     method_note = None
     vector_why = _vectorizable(problem, names)
     if problem.kind == "ode" and settings.method == "auto" and not names.structural:
@@ -88,39 +99,65 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
     job.variables = _variables(model, problem)
     states = _states(model, d, names)
     job.states = states
-    size = chunk_size or _chunk_size(d.n, scheduler, workers)
-    chunks = [(a, {k: v[a:a + size] for k, v in d.values.items()}) for a in range(0, d.n, size)]
+    labels = {n: _label(n, names.starts) for n in d.names}
+    coords = {labels[n]: v for n, v in d.values.items()}
+    ident = identity(model, settings, [labels[n] for n in d.names], coords)
+    meta = variable_meta(model, states, job.variables, labels, names.starts)
 
+    nc = out is not None and str(out).endswith(".nc")
     need = d.n * len(job.grid) * (len(states) + len(job.variables)) * 8
-    if out is None and need > memory_limit:
+    if not nc and need > memory_limit:
         raise UsageError(f"the sweep's results would take {need / 1e9:.3g} GB in memory (limit {memory_limit / 1e9:.3g} "
                          "GB): pass out='sweep.nc' (-o sweep.nc) to stream them to disk, fewer points, or a "
                          "larger memory_limit")
-    from .store import Store
+    from .store import Store, warm_up
 
-    store = Store(d.n, job.grid, states, job.variables, out, overwrite)
+    warm_up(nc)              # the imports of writing the results, now: not after a Ctrl-C
+    journal = None
+    if out is not None:
+        from .journal import Journal, finished_of
+
+        journal = Journal(out, ident, d.n, resume)
+        if resume and Path(out).exists() and not journal.kept.any():
+            journal.adopt(*finished_of(out, d.n))
+    store = Store(d.n, job.grid, states, job.variables, memory=not nc, journal=journal)
+    todo = store.todo()
+    size = chunk_size or _chunk_size(len(todo), scheduler, workers)
+    from .journal import blocks
+
+    chunks = [(int(a), {k: v[idx] for k, v in d.values.items()}) for a, idx in blocks(todo, size)]
     bar = _bar(progress, d.n)
+    if bar is not None and store.done:
+        bar.update(store.done)
     engine = None
     interrupted = False
     wall0 = time.perf_counter()
+    from ..interrupts import check_interrupt, interrupt_guard
+
     try:
-        if scheduler == "vectorized":
-            it = S.in_process(job, chunks)
-        elif scheduler == "processes":
-            engine = S.Pool(workers)
-            it = engine.run(job, chunks)
-        else:
-            engine = S.Dask(scheduler, workers, connect_timeout)
-            it = engine.run(job, chunks)
-        try:
-            for chunk in it:
-                store.put(chunk)
-                if bar is not None:
-                    bar.update(len(chunk.status))
-        except KeyboardInterrupt:
-            interrupted = True
-            for chunk in (engine.drain() if engine is not None else ()):     # the runs finished meanwhile
-                store.put(chunk)
+        with interrupt_guard():          # CasADi swallows Ctrl-C into a RuntimeError: noted here
+            try:
+                if not chunks:
+                    it = iter(())
+                elif scheduler == "vectorized":
+                    it = S.in_process(job, chunks)
+                elif scheduler == "processes":
+                    from .pool import Pool
+
+                    engine = Pool(workers)
+                    it = engine.run(job, chunks)
+                else:
+                    engine = S.Dask(scheduler, workers, connect_timeout)
+                    it = engine.run(job, chunks)
+                for chunk in it:
+                    store.put(chunk)
+                    if bar is not None:
+                        bar.update(len(chunk.status))
+                    check_interrupt()
+            except KeyboardInterrupt:
+                interrupted = True
+                for chunk in (engine.drain() if engine is not None else ()):     # the runs finished meanwhile
+                    store.put(chunk)
     except BaseException:
         if engine is not None:
             engine.close(cancel=True)
@@ -138,19 +175,22 @@ def sweep(model, params=None, starts=None, t_end=None, *, scheduler: str | None 
 
             store.status[i] = dict(_invalid("the sweep was interrupted before this run"), cause="not run")
     failed = sum(1 for r in store.status if not r["success"])
-    summary = (f"{d.n} runs, {d.n - failed} succeeded, {failed} failed"
-               + (f" ({store.done} finished before the interruption)" if interrupted else ""))
-    attrs = {"model": model.name, "scheduler": scheduler, "method": settings.method,
+    not_run = sum(1 for r in store.status if r["cause"] == "not run")
+    summary = (f"{d.n} runs, {d.n - failed} succeeded, {failed - not_run} failed"
+               + (f", {not_run} not run (interrupted)" if not_run else "")
+               + (f"; {store.resumed} kept from before (resumed)" if store.resumed else ""))
+    notes = (journal.notes if journal is not None else []) + list(getattr(engine, "notes", []))
+    warnings = [f"sweep: {n}" for n in notes] + [f"run {i}: {w}" for i, w in store.warnings[:20]]
+    attrs = {**ident, "scheduler": scheduler, "method": settings.method,
              "method_note": method_note, "rtol": settings.rtol, "atol": settings.atol,
              "t_start": settings.t_start, "t_end": settings.t_end, "n_runs": d.n, "n_failed": failed,
-             "n_finished": store.done, "interrupted": int(interrupted), "summary": summary,
-             "wall_time": wall, "workers": workers if scheduler != "vectorized" else 1,
-             "threads": job.threads, "n_warnings": len(store.warnings),
-             "warnings": "\n".join(f"run {i}: {w}" for i, w in store.warnings[:20]) or None}
-    labels = {n: _label(n, names.starts) for n in d.names}
-    attrs["swept"] = ",".join(labels[n] for n in d.names)
-    attrs["grid_axes"] = ",".join(labels[n] for n, _ in d.axes)
-    ds = store.finish({labels[n]: v for n, v in d.values.items()}, attrs)
+             "n_finished": store.done, "n_resumed": store.resumed, "interrupted": int(interrupted),
+             "summary": summary, "wall_time": wall, "workers": workers if scheduler != "vectorized" else 1,
+             "threads": job.threads, "n_warnings": len(store.warnings) + len(notes),
+             "warnings": "\n".join(warnings) or None,
+             "swept": ",".join(labels[n] for n in d.names), "grid_axes": ",".join(labels[n] for n, _ in d.axes),
+             "states": ",".join(states)}
+    ds = store.finish(coords, attrs, meta, out)
     return to_frame(ds) if frame else ds
 
 
@@ -255,10 +295,12 @@ def _bar(progress, n):
 def _check_out(out: str, overwrite: bool) -> None:
     from ..output.fileio import check_writable
 
-    if not str(out).endswith(".nc"):
-        raise UsageError(f"sweep out= must be a .nc file (got {out!r}); write CSV from the Dataset with to_frame")
+    if not str(out).endswith((".nc", ".csv")):
+        raise UsageError(f"sweep out= must be a .nc (netCDF, streamed) or .csv file (got {out!r})")
     check_writable(out, overwrite)
-    _need("h5netcdf")
+    if str(out).endswith(".csv"):
+        check_writable(str(out)[:-4] + ".json", overwrite)
+    _need("h5netcdf" if str(out).endswith(".nc") else "pandas")
 
 
 def _need(module: str) -> None:

@@ -50,11 +50,31 @@ def _sum(ds, expr: str) -> np.ndarray:
     return total
 
 
-def heat_map(ds, values: np.ndarray, label: str, path, overwrite: bool = True):
-    """A heat map of ``values`` over the sweep's two grid axes (a line over one axis)."""
-    from matplotlib.figure import Figure
+def metric_unit(ds, spec: str) -> str:
+    """The unit of a --metric: flip -> s, final/max -> the variable's, a status column -> its own."""
+    kind, sep, expr = str(spec).partition(":")
+    if not sep:
+        return _unit(ds, spec)
+    if kind == "flip":
+        return "s"
+    units = {_unit(ds, n.strip()) for n in expr.split("+")}
+    return units.pop() if len(units) == 1 else ""
 
-    from ..output.plot import save_figure
+
+def _unit(ds, name: str) -> str:
+    try:
+        return str(ds[name].attrs.get("units", ""))
+    except KeyError:
+        return ""
+
+
+def _labelled(name: str, unit: str) -> str:
+    return f"{name} [{unit}]" if unit else name
+
+
+def heat_map_figure(ds, values: np.ndarray, label: str):
+    """The Figure of ``heat_map``: axes and colour bar labelled with their units."""
+    from matplotlib.figure import Figure
 
     axes = [a for a in str(ds.attrs.get("grid_axes", "")).split(",") if a]
     if len(axes) not in (1, 2):
@@ -63,15 +83,23 @@ def heat_map(ds, values: np.ndarray, label: str, path, overwrite: bool = True):
     fig = Figure(figsize=(6.4, 5.0))
     ax = fig.add_subplot()
     cols = [np.unique(np.asarray(ds[a].values, float)) for a in axes]
+    value_label = _labelled(label, metric_unit(ds, label))
     if len(axes) == 1:
         ax.plot(np.asarray(ds[axes[0]].values, float), values, ".-")
-        ax.set_xlabel(axes[0])
-        ax.set_ylabel(label)
+        ax.set_xlabel(_labelled(axes[0], _unit(ds, axes[0])))
+        ax.set_ylabel(value_label)
     else:
         Z = np.asarray(values, float).reshape(len(cols[0]), len(cols[1]))    # grid order: last axis fastest
         im = ax.pcolormesh(cols[1], cols[0], np.ma.masked_invalid(Z), shading="nearest", cmap="viridis")
-        fig.colorbar(im, ax=ax, label=label + " (white: never / failed)")
-        ax.set_xlabel(axes[1])
-        ax.set_ylabel(axes[0])
+        fig.colorbar(im, ax=ax, label=value_label + " (white: never / failed)")
+        ax.set_xlabel(_labelled(axes[1], _unit(ds, axes[1])))
+        ax.set_ylabel(_labelled(axes[0], _unit(ds, axes[0])))
     ax.set_title(f"{ds.attrs.get('model', '')}: {ds.attrs.get('summary', '')}", fontsize=9)
-    return save_figure(fig, path, overwrite=overwrite)
+    return fig
+
+
+def heat_map(ds, values: np.ndarray, label: str, path, overwrite: bool = True):
+    """A heat map of ``values`` over the sweep's two grid axes (a line over one axis), saved."""
+    from ..output.plot import save_figure
+
+    return save_figure(heat_map_figure(ds, values, label), path, overwrite=overwrite)

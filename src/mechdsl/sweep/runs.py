@@ -33,6 +33,7 @@ from .. import integrators as I
 from ..diagnostics import MechError, UsageError
 from ..eom.preflight import check_start
 from ..eom.start import start_vector
+from ..interrupts import check_interrupt
 from ..simulation import accuracy as A
 from ..simulation.choose import NO_U
 from ..simulation.prepared import prepare
@@ -70,6 +71,17 @@ class Chunk:
 
 
 def run_chunk(job: Job, first: int, values: dict) -> Chunk:
+    try:
+        return _run_chunk(job, first, values)
+    except Exception:
+        # a Ctrl-C inside CasADi comes out as a RuntimeError, or as a SystemError when it
+        # arrived while CasADi converted a result ("DM.__array__ returned a result with an
+        # exception set"): whatever it became, it is the interrupt
+        check_interrupt()
+        raise
+
+
+def _run_chunk(job: Job, first: int, values: dict) -> Chunk:
     k = len(next(iter(values.values())))
     nt, nx = len(job.grid), len(job.states)
     out = Chunk(first, np.full((k, nt, nx), np.nan), np.full((k, nt, len(job.variables)), np.nan),
@@ -83,12 +95,16 @@ def run_chunk(job: Job, first: int, values: dict) -> Chunk:
             todo.append(i)
         except (UsageError, MechError) as e:
             out.status[i] = _invalid(str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__)
+        # a Ctrl-C that a CasADi call swallowed (and someone handled as a plain failure) would
+        # otherwise wait for the end of the chunk
+        check_interrupt()
     prepared: dict = {}             # structural values -> the problem prepared once (simulation.prepared)
     if job.vectorized and todo:
         todo = _mapped(job, todo, runs, out, prepared)
     for i in todo:
         eom, s, key = runs[i]
         _store(job, out, i, _solve_one(prepared, key, eom, s))
+        check_interrupt()            # a Ctrl-C the run's integrator swallowed (it failed "interrupted")
     return out
 
 
@@ -126,6 +142,9 @@ def _solve_one(prepared: dict, key, eom, s):
         return solve(_prepared(prepared, key, eom, s).at(p=s.p, x0=s.x0))
     except (UsageError, MechError) as e:
         return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    except Exception:
+        check_interrupt()            # CasADi's RuntimeError for a Ctrl-C is the interrupt
+        raise
 
 
 def _invalid(text: str) -> dict:
@@ -224,10 +243,12 @@ def _mapped(job: Job, todo: list, runs: dict, out: Chunk, prepared: dict) -> lis
             X0 = np.column_stack([runs[i][1].x0 for i in todo])
             P = np.column_stack([scheme_parameter(runs[i][1].p) for i in todo])
             F = mapped_integrator(prep, k, job.threads)
+            check_interrupt()
             with I.captured_messages():
                 xf = np.asarray(F(x0=X0, p=P)["xf"], float)
             traj = xf.reshape(X0.shape[0], k, len(job.grid)).transpose(1, 2, 0)        # (run, time, state)
     except Exception:  # noqa: BLE001 - a run failed inside the map: every run of the chunk alone
+        check_interrupt()            # ... unless it was Ctrl-C, which CasADi turns into a RuntimeError
         return todo
     cpu = (time.process_time() - cpu0) / k
     wall = (time.perf_counter() - wall0) / k

@@ -74,7 +74,7 @@ def _one(spec, what) -> Design | None:
     if isinstance(spec, dict):
         return _grid(spec, what)
     raise UsageError(f"{what} must be a dict (a grid), mechdsl.sweep.table(...), a pandas DataFrame or a "
-                     f"sampler (mechdsl.sample.uniform/normal); got {type(spec).__name__}")
+                     f"sampler (mechdsl.sample.uniform/normal/sobol/latin_hypercube); got {type(spec).__name__}")
 
 
 def _array(name, v, what) -> np.ndarray:

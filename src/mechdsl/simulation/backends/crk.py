@@ -35,6 +35,7 @@ import numpy as np
 from ... import integrators as I
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
+from ...interrupts import in_main_thread
 
 
 # method -> (id in crk.c, scipy class of the same algorithm)
@@ -52,6 +53,8 @@ RUNTIME_FLAGS = (["-O1"], ["-O2"])   # crk.c, vm.c: the loop is as fast at -O1 (
                                     # cache), the interpreter 1.4x faster at -O2
 MODEL_FLAGS = ["-O1"]       # sxcode's chunks: within a few % of -O2 at 3/4 of its compile time
 COMPILE_OPS = 12_000        # models up to this many operations are compiled (about a second of gcc)
+
+CANCELLED = 5        # ctl[1] set: the loop stopped at its next step (Ctrl-C)
 
 _LIBS: dict = {}
 _LOCK = threading.Lock()
@@ -290,11 +293,12 @@ def _ptr(a):
     return a.ctypes.data_as(_DP)
 
 
-def call_in_thread(call, ctl, tick):
+def call_in_thread(call, ctl, tick=None):
     """``call()`` (a ctypes call of the loop, which releases the GIL) in a worker thread; the main
     thread calls ``tick(rows written)`` every 0.1 s from the progress word ctl[0] and, on Ctrl-C,
-    sets ctl[1] (the loop stops at its next step) and lets the interrupt through.  The status, or
-    7 when the call raised.  ``call`` keeps the buffers it passes alive while the worker runs."""
+    sets ctl[1]: the loop stops at its next step, and once it has (the rows written so far, its
+    statistics and state are then complete) the interrupt goes on.  The status, or 7 when the
+    call raised.  ``call`` keeps the buffers it passes alive while the worker runs."""
     box = {}
 
     def work():
@@ -305,12 +309,25 @@ def call_in_thread(call, ctl, tick):
     try:
         while th.is_alive():
             th.join(0.1)
-            if ctl[0]:
+            if ctl[0] and tick is not None:
                 tick(int(ctl[0]))
     except BaseException:
         ctl[1] = 1          # ask the loop to stop at its next step, then let the interrupt through
+        while th.is_alive():
+            try:
+                th.join()
+            except KeyboardInterrupt:     # a second Ctrl-C while the loop finishes its step
+                pass
         raise
     return box.get("status", 7)
+
+
+def call_here_or_in_thread(call, ctl, tick=None):
+    """``call()`` directly when nothing needs the main thread meanwhile (no progress to show, not
+    the main thread: no Ctrl-C arrives), else through ``call_in_thread``."""
+    if tick is None and not in_main_thread():
+        return call()
+    return call_in_thread(call, ctl, tick)
 
 
 class Resume(ctypes.Structure):
@@ -384,17 +401,23 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
     args = (loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
             float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats), ctl.ctypes.data_as(_I64P),
             _ptr(xfail), ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
-    while True:
-        status = loop.run(*args)
-        if status != YIELD:
-            break
-        progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
+    interrupted = False
+    try:
+        while True:
+            status = loop.run(*args)
+            if status != YIELD:
+                break
+            progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
+    except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
+        status, interrupted = CANCELLED, True
     reached = int(ctl[0])
     progress.update(float(grid[max(reached, 1) - 1]))
     raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
            "engine": loop.engine}
-    run = I.Run(X=X, reached=reached, stats=raw)
-    if status != 0 or reached < len(grid):
+    run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
+    if interrupted:
+        run.error = "interrupted (Ctrl-C)"
+    elif status != 0 or reached < len(grid):
         t_end = float(stats[3])
         run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
         run.fail_time, run.fail_state = t_end, xfail.copy()
@@ -415,10 +438,14 @@ def run_batch(loop, method, grid, X0, P, u, rtol, atol, max_steps, hmin):
     status = np.zeros(m, dtype=np.int64)
     reached = np.zeros(m, dtype=np.int64)
     ctl = np.zeros(2, dtype=np.int64)
-    loop.rt.crk_run_batch(loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), m, _ptr(X0),
-                          _ptr(uc), _ptr(P), P.shape[1], float(rtol), float(atol), float(hmin), int(max_steps),
-                          _ptr(X), _ptr(stats), status.ctypes.data_as(_I64P), reached.ctypes.data_as(_I64P),
-                          ctl.ctypes.data_as(_I64P))
+
+    def call():
+        return loop.rt.crk_run_batch(loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), m,
+                                     _ptr(X0), _ptr(uc), _ptr(P), P.shape[1], float(rtol), float(atol), float(hmin),
+                                     int(max_steps), _ptr(X), _ptr(stats), status.ctypes.data_as(_I64P),
+                                     reached.ctypes.data_as(_I64P), ctl.ctypes.data_as(_I64P))
+
+    call_here_or_in_thread(call, ctl)     # Ctrl-C stops the ensemble before its next run, then goes on
     return X, stats, status, reached
 
 

@@ -39,11 +39,11 @@ from ...dae.ggl import GGLStepper
 from ...dae.init import initialize, start_jacobian
 from ...dae.partitioning import PartitioningStepper
 from ...dae.projection import ProjectionStepper
-from ...dae.segments import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
+from ...dae.segments import NonFiniteError, SegmentInterrupted, StepError, locate_nonfinite
 from ...diagnostics import UsageError
 from ...eom import parameter_vector
 from ...eom.start import fixed_start
-from ...output.result import Failure, Result, RunInterrupted
+from ...output.result import INTERRUPTED, Failure, Result
 from ..accuracy import DRIFT_CAP, DRIFT_FACTOR, drift_limit
 from ..choose import choose_method
 from ..functions import problem_functions
@@ -263,9 +263,7 @@ class SegmentRun:
         tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
         tiny = 1e-13 * max(abs(t_end), span)
         interrupted = False
-        guard = interrupt_guard()
-        guard.__enter__()
-        try:
+        try:           # (Ctrl-C: the template's interrupt_guard notes what CasADi swallows; segments.call_integrator)
             calls = 0
             while k < len(grid) and failure is None:
                 calls += 1
@@ -388,20 +386,27 @@ class SegmentRun:
                         # approaching a singular configuration: rewind to here, continue in short segments
                         stepper.reset(t_now, q_now, qd_now)
                         break
-        except KeyboardInterrupt:      # Ctrl-C: stop now, keep what was recorded, raise it below
+        except KeyboardInterrupt as stop:     # Ctrl-C: stop now, keep what was recorded (the template raises it)
             interrupted = True
             n_rec = min(map(len, (T, Qs, QDs, D, VD)))      # a record() cut short in the middle
             del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
-            failure = Failure(T[-1], "interrupted", "the run was interrupted (Ctrl-C); results up to here are kept")
-        finally:
-            guard.__exit__(None, None, None)
+            if isinstance(stop, SegmentInterrupted):        # the output times the interrupted segment reached
+                try:
+                    for t_now, q_now, qd_now in zip(stop.times, stop.Q, stop.QD):
+                        if j_out < len(out_t) and abs(float(t_now) - out_t[j_out]) <= tiny and t_now > T[-1]:
+                            record(float(t_now), np.asarray(q_now, float), np.asarray(qd_now, float))
+                            j_out += 1
+                except KeyboardInterrupt:                   # (a second Ctrl-C: what is recorded stays)
+                    n_rec = min(map(len, (T, Qs, QDs, D, VD)))
+                    del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
+            failure = Failure(T[-1], "interrupted", INTERRUPTED)
         self.T, self.Qs, self.QDs, self.D, self.VD = T, Qs, QDs, D, VD      # the recorded states and drift
         self.events, self.failure, self.failure_code, self.interrupted = events, failure, failure_code, interrupted
         self.min_ratio, self.seen_d, self.seen_v = min_ratio, seen_d, seen_v
 
     def finish(self) -> Result:
         """Outputs, multipliers and reactions at the output times, drift and energy checks,
-        statistics and metadata: the Result (RunInterrupted after Ctrl-C, carrying it)."""
+        statistics and metadata: the Result (after Ctrl-C the rows recorded, metadata["interrupted"])."""
         eom, s, opts = self.eom, self.settings, self.opts
         wall0, setup_wall, cpu0, pv, points = self.wall0, self.setup_wall, self.cpu0, self.pv, self.points
         t0, t_end, chosen, need_lam, init, dof = self.t0, self.t_end, self.chosen, self.need_lam, self.init, self.dof
@@ -463,8 +468,7 @@ class SegmentRun:
         result = Result(t=t, q=Q, qd=QD, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                         metadata=metadata, events=events, failure=failure)
         if interrupted:
-            metadata["interrupted"] = True
-            raise RunInterrupted(result)
+            metadata["interrupted"] = True      # (the template raises RunInterrupted with it)
         return result
 
 

@@ -30,6 +30,7 @@ from . import crk
 # scipy class (impacts.one_step) -> method of the compiled loop
 COMPILED_CLASSES = {"DOP853": "dop853", "RK45": "dopri5"}
 OK, EVENT = 0, 9
+CANCELLED = crk.CANCELLED
 
 
 class CompiledFlight:
@@ -43,7 +44,8 @@ class CompiledFlight:
     def segment(self, method: str, grid, y0, p, rtol, atol, max_steps, k, offset, samples, tick=None,
                 impacts=None):
         """One C call from grid[0] to grid[-1]: (status, time reached, state there, rows written,
-        stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; others: failed.
+        stats dict).  status OK: reached grid[-1]; EVENT: stopped at an event; CANCELLED: stopped
+        by Ctrl-C (the rows and impacts up to there are returned); others: failed.
         ``impacts`` (restitution (k,), rest_speed, v_eps, touch, rest band, capacity) lets the loop apply
         the simple impacts itself (``impact_in_c`` in crk.c); their records are in
         stats["impacts"], an (m, 5 + 2 nx) array of rows (time, contact, impulse, speed before,
@@ -76,7 +78,11 @@ class CompiledFlight:
                                    ctl.ctypes.data_as(crk._I64P), _P(xend), loop.fun("contact_gap"), int(k),
                                    float(offset), int(samples), _P(pc), imp, _P(rest), _P(limits), _P(buf), cap)
 
-        status = call() if tick is None else crk.call_in_thread(call, ctl, lambda r: tick(float(grid[r - 1])))
+        try:
+            status = crk.call_here_or_in_thread(call, ctl, None if tick is None else
+                                                lambda r: tick(float(grid[r - 1])))
+        except KeyboardInterrupt:       # Ctrl-C: the loop stopped at its next step; what it did is kept
+            status = CANCELLED
         st = {"steps": int(stats[0]), "rhs": int(stats[1]), "rejected": int(stats[2]), "root": int(stats[4]),
               "impacts": buf[:int(stats[5])]}
         return int(status), float(stats[3]), xend, X[:int(ctl[0])], st

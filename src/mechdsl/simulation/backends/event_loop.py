@@ -25,7 +25,7 @@ import numpy as np
 from ...impacts.impact_map import ImpactError, ImpactSolution, solve_impact
 from ...impacts.one_step import IMPLICIT, make_solver, steps_per_period
 from ...impacts.rootfind import bracket_root
-from .event_flight import COMPILED_CLASSES, EVENT, OK
+from .event_flight import CANCELLED, COMPILED_CLASSES, EVENT, OK
 
 
 ZENO_EVENTS = 500           # this many events ...
@@ -462,7 +462,7 @@ class Run:
         status, t_r, y_r, X, st = self.flight.segment(
             COMPILED_CLASSES[self.method_cls], np.concatenate([[t], pts, [t_stop]]), y, s.p, o.rtol, o.atol,
             o.step_limit - self.stats["steps"], s.k, o.offset, o.samples, tick, self._impacts_in_c())
-        if status not in (OK, EVENT):
+        if status not in (OK, EVENT, CANCELLED):
             return None
         rows = min(len(X) - 1, len(pts))
         self.out_y[self.gi:self.gi + rows] = X[1:1 + rows]
@@ -476,6 +476,8 @@ class Run:
         s.n_rhs += st["rhs"]
         self._decode_impacts(st["impacts"], tick)
         self.t_now = t_r
+        if status == CANCELLED:          # Ctrl-C: the rows and impacts up to here are kept
+            raise KeyboardInterrupt
         if tick is not None:
             tick(t_r)
         return (t_r, y_r.copy(), True) if status == EVENT else (t_stop, y_r.copy(), False)

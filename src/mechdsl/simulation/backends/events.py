@@ -20,6 +20,7 @@ from ...impacts.contact_run import ContactRun
 from ...impacts.contact_system import ContactSystem, contact_functions
 from ...impacts.gaps import contact_gaps
 from ...output import result as R
+from ...output.result import INTERRUPTED
 from .. import record as Rec
 from ..monitors import is_conservative
 from ..record import ENERGY_NAMES
@@ -92,9 +93,14 @@ def contact_run(eom, s, progress=None) -> R.Result:
               output_events=bool(output_events), flight=fl)
     wall = _time.perf_counter()
     failure = None
+    interrupted = False
     try:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # non-finite values fail the run
             run.run(t_start, t_end, qs, qds)
+    except KeyboardInterrupt:       # Ctrl-C: the output rows stored so far are kept
+        interrupted = True
+        failure = R.Failure(time=float(run.grid[run.gi - 1]) if run.gi else float(t_start), cause="interrupted",
+                            detail=INTERRUPTED)
     except RunFailure as f:
         failure = R.Failure(time=float(f.time), cause=f.cause, detail=f.detail)
     except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as ex:
@@ -130,6 +136,8 @@ def contact_run(eom, s, progress=None) -> R.Result:
                                 "start": {**dict(zip(eom.coords, map(float, qs))),
                                           **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}},
                     "contacts": [g.name for g in gaps], "fixations": [f.label for f in fixes]}
+    if interrupted:
+        res.metadata["interrupted"] = True
     return res
 
 

@@ -37,7 +37,8 @@ from ...dae.init import initialize
 from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
 from ...eom.start import fixed_start, start_vector
-from ...output.result import Failure, Result
+from ...interrupts import noted, was_interrupt
+from ...output.result import INTERRUPTED, Failure, Result
 from .. import record as R
 from ..monitors import compute_signals, energy_drift_stats
 from ..record_dae import constrained_signals as record_signals
@@ -47,7 +48,9 @@ from . import Backend
 from .schemes import rattle_step, step_function
 
 
-CHUNK = 2000                  # steps a mapaccum call
+CHUNK = 2000                  # steps a mapaccum call (at most)
+FIRST_CHUNK = 16              # the first call's steps, doubled call by call up to CHUNK: a short run
+                              # builds small maps, and Ctrl-C is seen between calls
 MAX_POINTS = 20001            # recorded points unless ``points`` asks otherwise
 
 
@@ -137,46 +140,59 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     x = state0.copy()
     cache = {}
     res_tol = 1e-8
-    while done < nsteps:
-        k = min(CHUNK, nsteps - done)
-        F = cache.get(k)
-        if F is None:
-            F = step.mapaccum("steps", k)
-            cache[k] = F
-        try:
-            X, R = F(x, h, pstep)
-        except RuntimeError as e:  # pragma: no cover - CasADi evaluation error
-            failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
-            break
-        X = np.array(X, float)
-        R = np.array(R, float).ravel()
-        scale = 1.0 + np.max(np.abs(X[: 2 * n]), axis=0)
-        bad = np.flatnonzero(~np.isfinite(R) | (R > res_tol * scale) | ~np.all(np.isfinite(X), axis=0))
-        good = k if bad.size == 0 else int(bad[0])
-        for j in range(good):
-            idx = done + j + 1
-            if idx % stride == 0 or idx == nsteps:
-                rec_idx.append(idx)
-                rec_states.append(X[:, j].copy())
-        if bad.size:
-            j = int(bad[0])
-            tf = t0 + (done + j + 1) * h
-            if not np.all(np.isfinite(X[:, j])):
-                failure = Failure(tf, "the state became non-finite",
-                                  f"{method} step of size {h:.6g} from t = {tf - h:.6g}")
-            else:
-                failure = Failure(tf, "Newton iteration of the implicit step did not converge",
-                                  f"residual {R[j]:.3g} after {max_newton} iterations; try a smaller dt")
-            if good and (done + good) not in rec_idx:
-                rec_idx.append(done + good)
-                rec_states.append(X[:, good - 1].copy())
-            done += good
-            break
-        x = X[:, -1]
-        done += k
-        if callable(progress):
-            progress(t0 + done * h, t_end)
-
+    interrupted = False
+    chunk = FIRST_CHUNK
+    try:                       # Ctrl-C anywhere in the loop: the steps recorded so far are kept
+        while done < nsteps:
+            k = min(chunk, nsteps - done)
+            chunk = min(CHUNK, 2 * chunk)
+            F = cache.get(k)
+            if F is None:
+                F = step.mapaccum("steps", k)
+                cache[k] = F
+            try:
+                X, R = F(x, h, pstep)
+                X = np.array(X, float)
+                R = np.array(R, float).ravel()
+            except (RuntimeError, SystemError) as e:  # CasADi evaluation error, or Ctrl-C in disguise
+                interrupted = was_interrupt(e)
+                if not interrupted:
+                    failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
+                    break
+            if interrupted or noted():
+                interrupted = True
+                failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
+                break
+            scale = 1.0 + np.max(np.abs(X[: 2 * n]), axis=0)
+            bad = np.flatnonzero(~np.isfinite(R) | (R > res_tol * scale) | ~np.all(np.isfinite(X), axis=0))
+            good = k if bad.size == 0 else int(bad[0])
+            for j in range(good):
+                idx = done + j + 1
+                if idx % stride == 0 or idx == nsteps:
+                    rec_idx.append(idx)
+                    rec_states.append(X[:, j].copy())
+            if bad.size:
+                j = int(bad[0])
+                tf = t0 + (done + j + 1) * h
+                if not np.all(np.isfinite(X[:, j])):
+                    failure = Failure(tf, "the state became non-finite",
+                                      f"{method} step of size {h:.6g} from t = {tf - h:.6g}")
+                else:
+                    failure = Failure(tf, "Newton iteration of the implicit step did not converge",
+                                      f"residual {R[j]:.3g} after {max_newton} iterations; try a smaller dt")
+                if good and (done + good) not in rec_idx:
+                    rec_idx.append(done + good)
+                    rec_states.append(X[:, good - 1].copy())
+                done += good
+                break
+            x = X[:, -1]
+            done += k
+            if callable(progress):
+                progress(t0 + done * h, t_end)
+    except KeyboardInterrupt:
+        interrupted = True
+        del rec_idx[len(rec_states):], rec_states[len(rec_idx):]     # (an append cut short in between)
+        failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
     S = np.array(rec_states).T                     # (2n + extra, npts)
     t = t0 + np.array(rec_idx, float) * h
     t[-1] = t_end if (failure is None and rec_idx[-1] == nsteps) else t[-1]
@@ -212,6 +228,8 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
                         "parameters": dict(zip(eom.params, map(float, pv))),
                         "start": {**dict(zip(eom.coords, map(float, qs))),
                                   **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}, **extra_meta}
+    if interrupted:
+        meta["interrupted"] = True
     return Result(t=t, q=q, qd=qd, coordinates=tuple(eom.coords), signals=signals, stats=stats,
                   metadata=meta, failure=failure)
 

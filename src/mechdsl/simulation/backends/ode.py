@@ -20,7 +20,7 @@ from ...diagnostics import UsageError, did_you_mean
 from ...eom import parameter_vector
 from ...eom.codegen import casadi_functions
 from ...eom.start import start_vector
-from ...output.result import Result
+from ...output.result import INTERRUPTED, Failure, Result
 from .. import monitors as Mon
 from ..choose import NO_U, choose_method, fixed_step_count, min_step
 from ..diagnose import diagnose
@@ -199,7 +199,10 @@ class OdeSetup:
         if fixed is not None:
             meta["fixed_steps"] = fixed
         failure = None
-        if run.error is not None or run.reached < len(grid):
+        if run.interrupted:             # Ctrl-C: the rows reached are kept, nothing to diagnose
+            failure = Failure(float(grid[max(run.reached, 1) - 1]), "interrupted", INTERRUPTED)
+            meta["interrupted"] = True
+        elif run.error is not None or run.reached < len(grid):
             u_fail = drive.vector(float(grid[max(run.reached - 1, 0)]))
             failure = diagnose(eom, funcs, self.post, method, run, grid, xs, pv, rtol, atol, max_steps, extra,
                                u=u_fail)
@@ -362,6 +365,7 @@ def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, b
     stats: dict = {}
     messages, fixed, x = [], None, xs
     error = fail_time = fail_state = None
+    interrupted = False
     for a, b in zip(edges[:-1], edges[1:]):
         idx = np.flatnonzero((full >= a) & (full <= b))
         run, fx = _run(method, funcs, full[idx], x, pv, rtol, atol, max_steps, dt, extra, bar, eom, a, b,
@@ -373,6 +377,7 @@ def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, b
         messages.append(run.messages)
         if run.error is not None or run.reached < idx.size:
             error, fail_time, fail_state = run.error or "integration stopped", run.fail_time, run.fail_state
+            interrupted = run.interrupted
             break
         x = run.X[-1]
     X = Xf[on_grid]
@@ -382,7 +387,7 @@ def _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, dt, extra, b
     notes.append(f"integrated in {edges.size - 1} pieces, restarting at the input tables' samples inside the run "
                  "(no step crosses a jump of a zero-order hold)")
     return I.Run(X=X, reached=reached, stats=stats, error=error, messages="".join(messages),
-                 fail_time=fail_time, fail_state=fail_state), fixed
+                 fail_time=fail_time, fail_state=fail_state, interrupted=interrupted), fixed
 
 
 def _counts(method, raw):
