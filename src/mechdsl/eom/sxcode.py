@@ -155,26 +155,17 @@ def _kept(f, kind: str, build, pack, unpack, extra: str = ""):
         return mem[1]
     value, path = None, None
     try:
-        from .cachefiles import cache_dir
+        from . import cachefiles
 
-        path = cache_dir() / "sxcode" / f"{_key(f, extra)}.{kind}"
-        value = unpack(path.read_bytes()) if path.is_file() else None
+        path = cachefiles.cache_dir() / "sxcode" / f"{_key(f, extra)}.{kind}"
+        data, _why = cachefiles.read_bytes(path)        # the cache's trust rule (issue 25)
+        value = unpack(data) if data is not None else None
     except Exception:  # noqa: BLE001 - an unreadable entry is rebuilt
         value = None
     if value is None:
         value = build()
         if path is not None:
-            try:
-                import os
-                import tempfile
-
-                path.parent.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
-                with os.fdopen(fd, "wb") as fh:
-                    fh.write(pack(value))
-                os.replace(tmp, path)
-            except OSError:     # a cache that cannot be written is only slower
-                pass
+            cachefiles.write_bytes(path, pack(value))   # atomic, 0600 in a 0700 folder; False: only slower
     if len(_MEMO) >= _MEMO_MAX:
         _MEMO.pop(next(iter(_MEMO)), None)
     _MEMO[(id(f), kind, extra)] = (f, value)      # the Function kept: its id stays unique
