@@ -238,7 +238,7 @@ class Trajectory:
         pv = np.asarray(pv, float)
         xs = start_vector(eom, x0, pv)
         dstart = self._start_jacobian(pv)
-        dstart[_overridden(eom, x0), :] = 0.0
+        dstart[overridden(eom, x0), :] = 0.0
         x, Jx, Jp = self.backend.start(self.problem, xs, pv, x0)
         if not self.constrained:        # the start as given (Jx = I, Jp = 0): no product of n x n matrices
             return x, dstart + Jp, Jx
@@ -314,7 +314,7 @@ def _split(A: np.ndarray, k: int) -> np.ndarray:
     return np.stack([A[:, j * cols:(j + 1) * cols] for j in range(k)])
 
 
-def _overridden(eom, x0) -> list[int]:
+def overridden(eom, x0) -> list[int]:
     if x0 is None:
         return []
     if isinstance(x0, dict):
