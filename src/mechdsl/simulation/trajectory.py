@@ -100,6 +100,7 @@ class Trajectory:
         self.function = self._build()
         self._fwd: dict[int, ca.Function] = {}
         self._rev: dict[int, ca.Function] = {}
+        self._rev_once: dict[int, ca.Function] = {}
 
     # ------------------------------------------------------------------ what runs
     def _method(self, setup, pv, xs):
@@ -204,14 +205,18 @@ class Trajectory:
             raise AssertionError(f"trajectory: {X.size2()} columns for {full.size} times")   # pragma: no cover
         sel = [int(i) for i in np.flatnonzero(on)]
         X = X[:, sel]
-        N = len(self.times)
-        U = np.array([self._u(float(t) + 1e-12 * max(1.0, abs(float(t)))) for t in self.times]).reshape(N, -1).T
-        Y = self.signal.map(N)(ca.DM(self.times).T, X, ca.DM(U), ca.repmat(p, 1, N))
+        Y = self._record(X, p)
         outs, names = [Y], ["y"]
         if quad is not None:
             outs.append(ca.horzcat(*cols_q)[:, sel])
             names.append("q")
         return ca.Function("trajectory", [x0, p], outs, ["x0", "p"], names)
+
+    def _record(self, X, p):
+        """The recorded signals at the times from the states X (columns) and the parameters p."""
+        N = len(self.times)
+        U = np.array([self._u(float(t) + 1e-12 * max(1.0, abs(float(t)))) for t in self.times]).reshape(N, -1).T
+        return self.signal.map(N)(ca.DM(self.times).T, X, ca.DM(U), ca.repmat(p, 1, N))
 
     def _quadrature(self):
         """The DAE scheme of the run's ode with the integrals' integrands as quadratures."""
@@ -284,10 +289,12 @@ class Trajectory:
     def reverse(self, x0, p, seed_y, seed_q=None, nominal=None):
         """Adjoint: seeds (m, n_signals, n_times) on Y and (m, n_integrals, n_times) on Q ->
         (d/dx0 (m, nx), d/dp (m, np)), one row per seed, and the nominal (Y, Q) (``nominal``:
-        already evaluated at x0, p; else one run more)."""
-        Y, Q = self.evaluate(x0, p) if nominal is None else nominal
+        already evaluated at x0, p; else one run more, or none: see ``_reverse_once``)."""
         seed_y = np.asarray(seed_y, float)
         m = seed_y.shape[0]
+        if nominal is None and self._once(seed_y):
+            return self._reverse_once(x0, p, seed_y, seed_q)
+        Y, Q = self.evaluate(x0, p) if nominal is None else nominal
         f = self._rev.get(m)
         if f is None:
             f = self._rev[m] = self.function.reverse(m)
@@ -299,6 +306,42 @@ class Trajectory:
         ax, ap = f(x0, p, *nominal, *seeds)
         return (np.array(ax, float).reshape(-1, m, order="F").T, np.array(ap, float).reshape(-1, m, order="F").T,
                 Y, Q)
+
+    def _once(self, seed_y) -> bool:
+        """Whether the adjoint can be one integrator call: one piece (no input table's
+        breakpoints) starting at the first time, and seeds only on the state's rows (the
+        signals' first 2n rows are the state itself) and on the integrals, i.e. seeds that do
+        not depend on the trajectory."""
+        return (self._pieces().size == 2 and float(self.times[0]) == float(self.settings.t_start)
+                and not np.any(seed_y[:, 2 * self.eom.n:, :]))
+
+    def _reverse_once(self, x0, p, seed_y, seed_q):
+        """The adjoint as one call of the run's integrator with ``nadj`` adjoint directions
+        (CVODES / IDAS integrate forward with checkpoints, then backward): the values come
+        out of the same forward pass, where ``function.reverse(m)`` integrates forward once
+        more besides the run that gives the values."""
+        m, nx, N = seed_y.shape[0], 2 * self.eom.n, self.times.size
+        f = self._rev_once.get(m)
+        if f is None:
+            quad = self._quadrature() if self.integrals else None
+            dae = I.dae_function(self.funcs["ode"]) if quad is None else quad
+            a, b = self._pieces()
+            f = self._rev_once[m] = I.make_integrator("trajectory_adjoint", spec(self.method).plugin, dae,
+                                                      float(self.times[0]), self.times,
+                                                      {**self._options(a, b), "nadj": m})
+        u = self._u(self.settings.t_start)
+        args = {"x0": x0, "p": np.r_[u, np.asarray(p, float)],     # seeds: column (time j, seed i) at j * m + i
+                "adj_xf": seed_y[:, :nx, :].transpose(1, 2, 0).reshape(nx, N * m)}
+        if self.integrals:
+            sq = np.zeros((m, len(self.integrals), N)) if seed_q is None else np.asarray(seed_q, float)
+            args["adj_qf"] = sq.transpose(1, 2, 0).reshape(len(self.integrals), N * m)
+        res = f(**args)
+        X = res["xf"]
+        Y = np.array(self._record(X, ca.DM(p)), float)
+        Q = np.array(res["qf"], float) if self.integrals else None
+        ax = np.array(res["adj_x0"], float).reshape(nx, m).T
+        ap = np.array(res["adj_p"], float).reshape(-1, m)[u.size:].T
+        return ax, ap, Y, Q
 
     def describe(self) -> dict:
         m = spec(self.method)
