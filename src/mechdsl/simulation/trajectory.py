@@ -210,6 +210,7 @@ class Trajectory:
         if quad is not None:
             outs.append(ca.horzcat(*cols_q)[:, sel])
             names.append("q")
+        self._graph = (x0, p, outs)
         return ca.Function("trajectory", [x0, p], outs, ["x0", "p"], names)
 
     def _record(self, X, p):
@@ -273,18 +274,29 @@ class Trajectory:
         (nx, k) and DP (np, k)); dY has shape (k, n_signals, n_times)."""
         DX, DP = np.atleast_2d(DX), np.atleast_2d(DP)
         k = DX.shape[1]
-        Y, Q = self.evaluate(x0, p)
         if k == 0:
+            Y, Q = self.evaluate(x0, p)
             return Y, Q, np.zeros((0,) + Y.shape), None if Q is None else np.zeros((0,) + Q.shape)
         f = self._fwd.get(k)
         if f is None:
-            f = self._fwd[k] = self.function.forward(k)
-        nominal = [Y] + ([Q] if Q is not None else [])
-        res = f(x0, p, *nominal, DX, DP)
-        res = res if isinstance(res, (list, tuple)) else [res]
-        dY = _split(np.array(res[0], float), k)
-        dQ = _split(np.array(res[1], float), k) if Q is not None else None
+            f = self._fwd[k] = self._forward_function(k)
+        res = [np.array(v, float) for v in f(x0, p, DX, DP)]
+        n = len(res) // 2
+        Y, Q = res[0], (res[1] if n > 1 else None)
+        dY = _split(res[n], k)
+        dQ = _split(res[n + 1], k) if n > 1 else None
         return Y, Q, dY, dQ
+
+    def _forward_function(self, k) -> ca.Function:
+        """(x0, p, DX, DP) -> (Y, [Q,] dY, [dQ]): the values and k directional derivatives from
+        one graph, so the run that gives the values is the one the derivatives linearize
+        around (``function.forward(k)`` takes the values as inputs and integrates the run
+        again inside: one plain run more)."""
+        x0, p, outs = self._graph
+        DX, DP = ca.MX.sym("DX", x0.numel(), k), ca.MX.sym("DP", p.numel(), k)
+        d = ca.forward(outs, [x0, p], [[DX[:, j], DP[:, j]] for j in range(k)])
+        dirs = [ca.horzcat(*[d[j][i] for j in range(k)]) for i in range(len(outs))]
+        return ca.Function("trajectory_forward", [x0, p, DX, DP], list(outs) + dirs)
 
     def reverse(self, x0, p, seed_y, seed_q=None, nominal=None):
         """Adjoint: seeds (m, n_signals, n_times) on Y and (m, n_integrals, n_times) on Q ->
