@@ -175,7 +175,7 @@ def fit(model, data, params=(), starts=(), weights=None, bounds=None, experiment
     if method == "ipopt":
         from .ipopt import ipopt
 
-        sol = ipopt(runs, theta0, lo, hi, log_scale(theta0, kinds), int(max_iterations))
+        sol = Solution(*ipopt(runs, theta0, lo, hi, log_scale(theta0, kinds), int(max_iterations)))
     else:
         sol = levenberg_marquardt(evaluate, theta0, lo, hi, log_scale(theta0, kinds), rank_tol, int(max_iterations))
     r, J = evaluate(sol.theta, True)

@@ -25,9 +25,8 @@ from ..simulation.trajectory import overridden
 
 
 def ipopt(runs, theta0, lo, hi, scale, max_iterations, tol=1e-9):
-    """Minimize 0.5 |r(theta)|^2 over the bounds with IPOPT; a ``fit.Solution``."""
-    from .fit import Solution
-
+    """Minimize 0.5 |r(theta)|^2 over the bounds with IPOPT: (theta, success, message,
+    iterations, evaluations, gradients), the fields of ``fit.Solution``."""
     for r in runs:
         if r.tr.constrained:
             raise UsageError(f"method='ipopt': {r.tr.eom.name} is constrained, and its consistent start is "
@@ -53,8 +52,8 @@ def ipopt(runs, theta0, lo, hi, scale, max_iterations, tol=1e-9):
     status = str(st.get("return_status", "unknown"))
     ok = bool(st.get("success", False))
     message = ("converged (IPOPT: " + status + ")") if ok else f"IPOPT: {status}"
-    return Solution(np.clip(z_opt * scale, lo, hi), ok, message, int(st.get("iter_count", 0)),
-                    int(st.get("n_call_nlp_f", 0)), int(st.get("n_call_nlp_grad_f", 0)))
+    return (np.clip(z_opt * scale, lo, hi), ok, message, int(st.get("iter_count", 0)),
+            int(st.get("n_call_nlp_f", 0)), int(st.get("n_call_nlp_grad_f", 0)))
 
 
 def _residual(run, theta) -> ca.MX:
