@@ -113,6 +113,32 @@ def test_adjoint_of_an_integral_objective(double):
     assert A[J, "g"] == pytest.approx((jp - jm) / (2 * h), rel=1e-6)
 
 
+def test_the_one_call_adjoint_equals_the_function_reverse(double):
+    """Seeds on the state and the integrals take one integrator call with adjoint directions
+    (Trajectory._reverse_once); it equals the adjoint of the trajectory Function (CasADi's
+    reverse of the whole graph, after a separate run for the values), and a seed on an
+    output (which needs the values first) takes the latter."""
+    from mechdsl.eom import parameter_vector
+    from mechdsl.simulation.prepared import prepare
+
+    problem = double.problem(t_end=1.0, points=11, compiled=False, **TIGHT)
+    tr = prepare(problem).trajectory(integrals=("potential_energy",))
+    pv = parameter_vector(problem.eom, problem.settings.p)
+    x = tr.start(pv)[0]
+    N, k = tr.times.size, len(tr.names)
+    sy, sq = np.zeros((2, k, N)), np.zeros((2, 1, N))
+    sy[0, tr.names.index("j2.phi"), -1] = 1.0
+    sy[0, tr.names.index("der(j1.phi)"), 4] = 0.5
+    sq[1, 0, -1] = 1.0
+    assert tr._once(sy)
+    once = tr.reverse(x, pv, sy, sq)
+    graph = tr.reverse(x, pv, sy, sq, nominal=tr.evaluate(x, pv))
+    for a, b in zip(once, graph):
+        assert np.abs(a - b).max() <= 1e-9 * np.abs(b).max()
+    sy[0, tr.names.index("x2"), -1] = 1.0
+    assert not tr._once(sy)
+
+
 def test_linear_pendulum_against_its_closed_form():
     """theta(t) = theta0 cos(w t) + v0/w sin(w t), w = sqrt(g/L): d theta/d theta0 = cos(w t),
     d theta/d v0 = sin(w t)/w, d theta/dL = t sin(w t) w theta0/(2L) + v0 (sin(w t) - w t cos(w t))/(2 w L);

@@ -524,7 +524,8 @@ class Model:
         outputs, energies), or a list of them (one per experiment).  experiments: one dict per
         table of that experiment's settings (``x0``, ``inputs``, ``p``).  weights: {column:
         weight} (default 1); bounds: {name: (lo, hi)} (default the parameters' min / max).
-        method: "lm" (Gauss-Newton / Levenberg-Marquardt with exact sensitivities);
+        method: "lm" (Gauss-Newton / Levenberg-Marquardt with exact sensitivities) or "ipopt"
+        (IPOPT over the run's CasADi graph, exact derivatives, Gauss-Newton Hessian; ODE models);
         max_iterations; rank_tol: singular values of the (log-scaled) sensitivity matrix below
         this fraction of the largest count as directions the data cannot determine (default
         1e-6); t_end: end of the runs (default: each experiment's last sample).  Other

@@ -43,7 +43,10 @@ def add_parser(sub):
     p.add_argument("--integrator", default=None, metavar="METHOD",
                    help="integration method (a CasADi one: cvodes-bdf, cvodes-adams, idas, erk, rosenbrock, "
                         "rk, collocation; default auto)")
-    p.add_argument("--max-iterations", type=int, default=100, metavar="N", help="Levenberg-Marquardt iterations")
+    p.add_argument("--method", choices=("lm", "ipopt"), default="lm",
+                   help="the minimizer: lm (Gauss-Newton / Levenberg-Marquardt, default) or ipopt (IPOPT on the "
+                        "run's CasADi graph, Gauss-Newton Hessian; not for constrained models)")
+    p.add_argument("--max-iterations", type=int, default=100, metavar="N", help="iterations of the minimizer")
     p.add_argument("-o", "--output", metavar="OUT.json", help="write the fit (estimates, errors, correlations, ...)")
     p.add_argument("--plot", nargs="?", const="", metavar="OUT.png",
                    help="draw the data and the fitted model (.png, .svg or .pdf; bare --plot: next to -o OUT.json "
@@ -78,7 +81,7 @@ def run(args) -> int:
                 if v is not None}
     experiments = [{"x0": x0}] * len(args.data) if x0 else None
     r = m.fit(args.data if len(args.data) > 1 else args.data[0], params=params, starts=starts, weights=weights,
-              experiments=experiments, max_iterations=args.max_iterations, t_end=args.t_end, **settings)
+              experiments=experiments, method=args.method, max_iterations=args.max_iterations, t_end=args.t_end, **settings)
     print(r.table())
     out = args.out
     out.set(target=target_line(args, m), **r.to_dict())

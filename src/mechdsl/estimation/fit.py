@@ -10,7 +10,8 @@ recorded signal at the sample times from one run of the experiment's prepared pr
 (``Prepared.trajectory(times=data times)``).  The minimizer (``levenberg_marquardt``) takes
 Gauss-Newton steps damped by Levenberg-Marquardt, clipped to the bounds, its Jacobian the
 forward sensitivities of the run (one integration with k directions per iteration, CasADi's),
-in log-parameter space; each step is the minimum-norm one over the directions the data
+in log-parameter space (``method="ipopt"``: IPOPT on the same residuals as one CasADi graph,
+ipopt.py); each step is the minimum-norm one over the directions the data
 resolve, so a combination the data cannot determine keeps its start value instead of
 wandering; a trial step whose run fails counts as a rejected step.  At the estimate: the noise variance s^2 = |r|^2 / (N - rank), the covariance
 s^2 (J' J)^+ (the Fisher information's inverse on the directions the data determine), standard
@@ -32,7 +33,7 @@ from .identify import RANK_TOL, determined, identifiability, log_scale
 from .sensitivity import check_kind, signal_units
 from .unknowns import unknowns
 
-SOLVERS = ("lm",)            # Levenberg-Marquardt with exact sensitivities
+SOLVERS = ("lm", "ipopt")    # Levenberg-Marquardt with exact sensitivities; IPOPT on the CasADi graph (ipopt.py)
 
 
 @record(frozen=False)
@@ -171,7 +172,12 @@ def fit(model, data, params=(), starts=(), weights=None, bounds=None, experiment
         raise UsageError(f"the run at the fit's start values fails: {str(e).strip().splitlines()[-1]}") from None
     if not np.isfinite(r0).all():
         raise UsageError("the run at the fit's start values is not finite: start from other values (--start)")
-    sol = levenberg_marquardt(evaluate, theta0, lo, hi, log_scale(theta0, kinds), rank_tol, int(max_iterations))
+    if method == "ipopt":
+        from .ipopt import ipopt
+
+        sol = Solution(*ipopt(runs, theta0, lo, hi, log_scale(theta0, kinds), int(max_iterations)))
+    else:
+        sol = levenberg_marquardt(evaluate, theta0, lo, hi, log_scale(theta0, kinds), rank_tol, int(max_iterations))
     r, J = evaluate(sol.theta, True)
     return _result(model, exps, runs, names, kinds, sol.theta, theta0, factors, units, r, J, sol, rank_tol, cpu0)
 

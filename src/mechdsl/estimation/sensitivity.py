@@ -186,14 +186,14 @@ def sensitivities(model, t_end=None, params=(), starts=(), outputs=None, method=
         t = tr.times[cols]
         pairs = [(o, c) for o in names if not o.startswith("integral(") for c in cols]
         ints = [o for o in names if o.startswith("integral(")]
-        Y, Q = tr.evaluate(x, pv)
-        sy = np.zeros((len(pairs) + len(ints),) + Y.shape)
-        sq = None if Q is None else np.zeros((len(pairs) + len(ints),) + Q.shape)
+        N = tr.times.size
+        sy = np.zeros((len(pairs) + len(ints), len(tr.names), N))
+        sq = np.zeros((len(pairs) + len(ints), len(tr.integrals), N)) if tr.integrals else None
         for r, (o, c) in enumerate(pairs):
             sy[r, tr.names.index(o), c] = 1.0
         for r, o in enumerate(ints, start=len(pairs)):
             sq[r, tr.integrals.index(o[len("integral("):-1]), -1] = 1.0
-        ax, ap, Y, Q = tr.reverse(x, pv, sy, sq, nominal=(Y, Q))
+        ax, ap, Y, Q = tr.reverse(x, pv, sy, sq)      # the values from the adjoint's own forward pass
         G = (ax @ DX + ap @ DP) * f[None, :]
         for o in names:
             if o.startswith("integral("):

@@ -100,6 +100,7 @@ class Trajectory:
         self.function = self._build()
         self._fwd: dict[int, ca.Function] = {}
         self._rev: dict[int, ca.Function] = {}
+        self._rev_once: dict[int, ca.Function] = {}
 
     # ------------------------------------------------------------------ what runs
     def _method(self, setup, pv, xs):
@@ -204,14 +205,19 @@ class Trajectory:
             raise AssertionError(f"trajectory: {X.size2()} columns for {full.size} times")   # pragma: no cover
         sel = [int(i) for i in np.flatnonzero(on)]
         X = X[:, sel]
-        N = len(self.times)
-        U = np.array([self._u(float(t) + 1e-12 * max(1.0, abs(float(t)))) for t in self.times]).reshape(N, -1).T
-        Y = self.signal.map(N)(ca.DM(self.times).T, X, ca.DM(U), ca.repmat(p, 1, N))
+        Y = self._record(X, p)
         outs, names = [Y], ["y"]
         if quad is not None:
             outs.append(ca.horzcat(*cols_q)[:, sel])
             names.append("q")
+        self._graph = (x0, p, outs)
         return ca.Function("trajectory", [x0, p], outs, ["x0", "p"], names)
+
+    def _record(self, X, p):
+        """The recorded signals at the times from the states X (columns) and the parameters p."""
+        N = len(self.times)
+        U = np.array([self._u(float(t) + 1e-12 * max(1.0, abs(float(t)))) for t in self.times]).reshape(N, -1).T
+        return self.signal.map(N)(ca.DM(self.times).T, X, ca.DM(U), ca.repmat(p, 1, N))
 
     def _quadrature(self):
         """The DAE scheme of the run's ode with the integrals' integrands as quadratures."""
@@ -238,7 +244,7 @@ class Trajectory:
         pv = np.asarray(pv, float)
         xs = start_vector(eom, x0, pv)
         dstart = self._start_jacobian(pv)
-        dstart[_overridden(eom, x0), :] = 0.0
+        dstart[overridden(eom, x0), :] = 0.0
         x, Jx, Jp = self.backend.start(self.problem, xs, pv, x0)
         if not self.constrained:        # the start as given (Jx = I, Jp = 0): no product of n x n matrices
             return x, dstart + Jp, Jx
@@ -268,26 +274,39 @@ class Trajectory:
         (nx, k) and DP (np, k)); dY has shape (k, n_signals, n_times)."""
         DX, DP = np.atleast_2d(DX), np.atleast_2d(DP)
         k = DX.shape[1]
-        Y, Q = self.evaluate(x0, p)
         if k == 0:
+            Y, Q = self.evaluate(x0, p)
             return Y, Q, np.zeros((0,) + Y.shape), None if Q is None else np.zeros((0,) + Q.shape)
         f = self._fwd.get(k)
         if f is None:
-            f = self._fwd[k] = self.function.forward(k)
-        nominal = [Y] + ([Q] if Q is not None else [])
-        res = f(x0, p, *nominal, DX, DP)
-        res = res if isinstance(res, (list, tuple)) else [res]
-        dY = _split(np.array(res[0], float), k)
-        dQ = _split(np.array(res[1], float), k) if Q is not None else None
+            f = self._fwd[k] = self._forward_function(k)
+        res = [np.array(v, float) for v in f(x0, p, DX, DP)]
+        n = len(res) // 2
+        Y, Q = res[0], (res[1] if n > 1 else None)
+        dY = _split(res[n], k)
+        dQ = _split(res[n + 1], k) if n > 1 else None
         return Y, Q, dY, dQ
+
+    def _forward_function(self, k) -> ca.Function:
+        """(x0, p, DX, DP) -> (Y, [Q,] dY, [dQ]): the values and k directional derivatives from
+        one graph, so the run that gives the values is the one the derivatives linearize
+        around (``function.forward(k)`` takes the values as inputs and integrates the run
+        again inside: one plain run more)."""
+        x0, p, outs = self._graph
+        DX, DP = ca.MX.sym("DX", x0.numel(), k), ca.MX.sym("DP", p.numel(), k)
+        d = ca.forward(outs, [x0, p], [[DX[:, j], DP[:, j]] for j in range(k)])
+        dirs = [ca.horzcat(*[d[j][i] for j in range(k)]) for i in range(len(outs))]
+        return ca.Function("trajectory_forward", [x0, p, DX, DP], list(outs) + dirs)
 
     def reverse(self, x0, p, seed_y, seed_q=None, nominal=None):
         """Adjoint: seeds (m, n_signals, n_times) on Y and (m, n_integrals, n_times) on Q ->
         (d/dx0 (m, nx), d/dp (m, np)), one row per seed, and the nominal (Y, Q) (``nominal``:
-        already evaluated at x0, p; else one run more)."""
-        Y, Q = self.evaluate(x0, p) if nominal is None else nominal
+        already evaluated at x0, p; else one run more, or none: see ``_reverse_once``)."""
         seed_y = np.asarray(seed_y, float)
         m = seed_y.shape[0]
+        if nominal is None and self._once(seed_y):
+            return self._reverse_once(x0, p, seed_y, seed_q)
+        Y, Q = self.evaluate(x0, p) if nominal is None else nominal
         f = self._rev.get(m)
         if f is None:
             f = self._rev[m] = self.function.reverse(m)
@@ -299,6 +318,42 @@ class Trajectory:
         ax, ap = f(x0, p, *nominal, *seeds)
         return (np.array(ax, float).reshape(-1, m, order="F").T, np.array(ap, float).reshape(-1, m, order="F").T,
                 Y, Q)
+
+    def _once(self, seed_y) -> bool:
+        """Whether the adjoint can be one integrator call: one piece (no input table's
+        breakpoints) starting at the first time, and seeds only on the state's rows (the
+        signals' first 2n rows are the state itself) and on the integrals, i.e. seeds that do
+        not depend on the trajectory."""
+        return (self._pieces().size == 2 and float(self.times[0]) == float(self.settings.t_start)
+                and not np.any(seed_y[:, 2 * self.eom.n:, :]))
+
+    def _reverse_once(self, x0, p, seed_y, seed_q):
+        """The adjoint as one call of the run's integrator with ``nadj`` adjoint directions
+        (CVODES / IDAS integrate forward with checkpoints, then backward): the values come
+        out of the same forward pass, where ``function.reverse(m)`` integrates forward once
+        more besides the run that gives the values."""
+        m, nx, N = seed_y.shape[0], 2 * self.eom.n, self.times.size
+        f = self._rev_once.get(m)
+        if f is None:
+            quad = self._quadrature() if self.integrals else None
+            dae = I.dae_function(self.funcs["ode"]) if quad is None else quad
+            a, b = self._pieces()
+            f = self._rev_once[m] = I.make_integrator("trajectory_adjoint", spec(self.method).plugin, dae,
+                                                      float(self.times[0]), self.times,
+                                                      {**self._options(a, b), "nadj": m})
+        u = self._u(self.settings.t_start)
+        args = {"x0": x0, "p": np.r_[u, np.asarray(p, float)],     # seeds: column (time j, seed i) at j * m + i
+                "adj_xf": seed_y[:, :nx, :].transpose(1, 2, 0).reshape(nx, N * m)}
+        if self.integrals:
+            sq = np.zeros((m, len(self.integrals), N)) if seed_q is None else np.asarray(seed_q, float)
+            args["adj_qf"] = sq.transpose(1, 2, 0).reshape(len(self.integrals), N * m)
+        res = f(**args)
+        X = res["xf"]
+        Y = np.array(self._record(X, ca.DM(p)), float)
+        Q = np.array(res["qf"], float) if self.integrals else None
+        ax = np.array(res["adj_x0"], float).reshape(nx, m).T
+        ap = np.array(res["adj_p"], float).reshape(-1, m)[u.size:].T
+        return ax, ap, Y, Q
 
     def describe(self) -> dict:
         m = spec(self.method)
@@ -314,7 +369,7 @@ def _split(A: np.ndarray, k: int) -> np.ndarray:
     return np.stack([A[:, j * cols:(j + 1) * cols] for j in range(k)])
 
 
-def _overridden(eom, x0) -> list[int]:
+def overridden(eom, x0) -> list[int]:
     if x0 is None:
         return []
     if isinstance(x0, dict):
