@@ -703,6 +703,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
             code = jg.dump()
             jac_kind = "forward derivative"
         units.append(code)
+    n_generated = len(units)
     units += list(extra_units)
     limit = COMPILE_BUDGET if budget is None else int(budget)
     total = sum(len(code) for code in units)
@@ -732,12 +733,19 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         try:
             d.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=d, prefix=".build-") as tmp:
-                procs, objs = [], []
+                procs, objs, fresh = [], [], []
                 for i, (code, fl) in enumerate(zip(units, flags)):
                     src = Path(tmp) / f"unit{i}.c"
-                    src.write_text(code)
                     obj = Path(tmp) / f"unit{i}.o"
                     objs.append(obj)
+                    # a hand-written unit (the compiled stepping loop) is the same for every
+                    # model: its object is compiled once and kept (_unit_object)
+                    kept = _unit_object(d, code, fl, version, i) if i >= n_generated else None
+                    if kept is not None and _copy_object(kept, obj):
+                        continue
+                    if i >= n_generated and kept is not None:
+                        fresh.append((obj, kept))
+                    src.write_text(code)
                     # relative names in the build folder: the library does not embed the folder's
                     # random name, so concurrent builds of one model give the same bytes (and hash)
                     procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", src.name, "-o", obj.name], cwd=tmp,
@@ -747,6 +755,9 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
                     out, err = pr.communicate()
                     if pr.returncode != 0:
                         errors.append((err or out).strip())
+                if not errors:
+                    for obj, kept in fresh:
+                        _keep_object(obj, kept)
                 out = Path(tmp) / "lib.so"
                 if not errors:
                     r = subprocess.run([cc, "-shared", *(o.name for o in objs), "-o", out.name, "-lm"],
@@ -775,6 +786,41 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     log.debug("%s", note)
     loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
     return loaded, note, str(lib)
+
+
+def _unit_object(d: Path, code: str, flags: list[str], version: str, index: int) -> Path:
+    """Where the object of a hand-written C unit is kept: by the SHA-256 of its code, its flags,
+    the compiler and its place in the build (the object names its source, ``unit<index>.c``, so a
+    library linked from a kept object has the same bytes as one compiled from scratch)."""
+    key = "\n".join([code, repr(flags), version, f"unit{index}.c"])
+    return d / "objects" / (hashlib.sha256(key.encode()).hexdigest()[:24] + ".o")
+
+
+def _copy_object(kept: Path, obj: Path) -> bool:
+    """Copy a kept object (with its recorded hash checked) into the build folder; False if there is
+    none or it is not the one recorded (then the unit is compiled again and kept anew)."""
+    try:
+        data = kept.read_bytes()
+        if hashlib.sha256(data).hexdigest() != _digest_path(kept).read_text(encoding="ascii").strip():
+            return False
+        obj.write_bytes(data)
+        return True
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def _keep_object(obj: Path, kept: Path) -> None:
+    """Keep a freshly compiled object of a hand-written unit (hash first, then the object, each
+    renamed into place: safe under concurrency).  A cache that cannot be written only costs time."""
+    try:
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        data = obj.read_bytes()
+        for path, content in ((_digest_path(kept), hashlib.sha256(data).hexdigest().encode()), (kept, data)):
+            part = path.with_name(f".{path.name}.{os.getpid()}")
+            part.write_bytes(content)
+            os.replace(part, path)
+    except OSError:
+        pass
 
 
 def _digest_path(lib: Path) -> Path:
