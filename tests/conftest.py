@@ -115,10 +115,13 @@ def golden_changes(request) -> list:
     return request.config.stash.setdefault(GOLDEN_CHANGES, [])
 
 
-def _cpu_seconds() -> float:
-    """CPU time (user + system) of this process and of its waited-for children, in s."""
-    import resource
-
+def _cpu_seconds() -> float | None:
+    """CPU time (user + system) of this process and of its waited-for children, in s (None
+    where the resource module is missing: not POSIX)."""
+    try:
+        import resource
+    except ImportError:
+        return None
     own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
@@ -131,12 +134,13 @@ CPU_BUDGET = 120.0
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
     cpu = _cpu_seconds()
-    whole_default_run = (getattr(getattr(config, "args_source", None), "name", "") == "TESTPATHS"
-                         and config.option.markexpr == "not slow")
-    over = ("  (over the default run's budget: make tests cheaper or mark slow work @pytest.mark.slow)"
-            if whole_default_run and cpu > CPU_BUDGET else "")
-    terminalreporter.write_line(f"CPU: {cpu:.0f} s (this process and its children, user + system; "
-                                f"budget about {CPU_BUDGET:.0f} s for the default run){over}")
+    if cpu is not None:
+        whole_default_run = (getattr(getattr(config, "args_source", None), "name", "") == "TESTPATHS"
+                             and config.option.markexpr == "not slow")
+        over = ("  (over the default run's budget: make tests cheaper or mark slow work @pytest.mark.slow)"
+                if whole_default_run and cpu > CPU_BUDGET else "")
+        terminalreporter.write_line(f"CPU: {cpu:.0f} s (this process and its children, user + system; "
+                                    f"budget about {CPU_BUDGET:.0f} s for the default run){over}")
     if not config.getoption("--update-golden"):
         return
     changes = config.stash.get(GOLDEN_CHANGES, [])
