@@ -115,7 +115,32 @@ def golden_changes(request) -> list:
     return request.config.stash.setdefault(GOLDEN_CHANGES, [])
 
 
+def _cpu_seconds() -> float | None:
+    """CPU time (user + system) of this process and of its waited-for children, in s (None
+    where the resource module is missing: not POSIX)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+# The test budget (docs/internals.md, "Testing"): the default run stays under about 2 minutes of
+# CPU on 2 cores.  The session's CPU is printed at the end so a change that breaks it is seen; it
+# is a number to read, never a test that fails on a slow machine.
+CPU_BUDGET = 120.0
+
+
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    cpu = _cpu_seconds()
+    if cpu is not None:
+        whole_default_run = (getattr(getattr(config, "args_source", None), "name", "") == "TESTPATHS"
+                             and config.option.markexpr == "not slow")
+        over = ("  (over the default run's budget: make tests cheaper or mark slow work @pytest.mark.slow)"
+                if whole_default_run and cpu > CPU_BUDGET else "")
+        terminalreporter.write_line(f"CPU: {cpu:.0f} s (this process and its children, user + system; "
+                                    f"budget about {CPU_BUDGET:.0f} s for the default run){over}")
     if not config.getoption("--update-golden"):
         return
     changes = config.stash.get(GOLDEN_CHANGES, [])

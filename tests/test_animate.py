@@ -135,7 +135,15 @@ def test_model_without_bodies_is_drawn_as_bars(tmp_path):
 # ----------------------------------------------------------------------------- every model, files
 
 
-@pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
+# the four most expensive to draw (0.3 .. 1.3 s each) run in the slow set; by default the others
+# cover the same kinds (a constrained linkage: four_bar, slider_crank; a chain: double_pendulum;
+# 3-D bodies: heavy_top; contacts: bouncing_ball, newtons_cradle), and the slow
+# test_every_shipped_model_animates_from_the_command_line animates every model
+_DRAWN_SLOWLY = {"nfourbar", "andrews", "nlink_pendulum", "arm7"}
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in _DRAWN_SLOWLY else p
+                                  for p in MODELS], ids=[p.stem for p in MODELS])
 def test_every_shipped_model_draws_moving_frames(path, tmp_path):
     """Three frames of each model from its start state nudged (no simulation: rendering only)."""
     from types import SimpleNamespace
