@@ -50,7 +50,7 @@ def add_playback_args(p) -> None:
 
 def plan_frames(args, m, what: str = "animating"):
     """(frame times, speed) of a run of the loaded model: --t-end or the scene's stop time (else
-    10 s), the start time, and the speed (--speed, else picked: notes on stderr)."""
+    10 s), the start time, and the speed (--speed, else picked: said in a note)."""
     from ..animate import frame_times, pick_speed
     from ..diagnostics import UsageError
 
@@ -59,7 +59,7 @@ def plan_frames(args, m, what: str = "animating"):
         from ..simulation.settings import DEFAULT_T_END      # the one default end of a run
 
         t_end = DEFAULT_T_END
-        print(f"mech: no --t-end and no scene stop_time: {what} {t_end:g} s", file=sys.stderr)
+        args.out.note(f"no --t-end and no scene stop_time: {what} {t_end:g} s")
     t0 = float(m.scene_settings.get("start_time", 0.0))
     if not t_end > t0:
         raise UsageError(f"--t-end {t_end:g} must be after the start time {t0:g}")
@@ -67,8 +67,8 @@ def plan_frames(args, m, what: str = "animating"):
     if speed is None:
         speed = pick_speed(float(t_end) - t0)
         if speed != 1.0:
-            print(f"mech: the run lasts {float(t_end) - t0:g} s: {what} it at --speed {speed:g} (slow motion, "
-                  f"{(float(t_end) - t0) / speed:g} s of playback)", file=sys.stderr)
+            args.out.note(f"the run lasts {float(t_end) - t0:g} s: {what} it at --speed {speed:g} (slow motion, "
+                          f"{(float(t_end) - t0) / speed:g} s of playback)")
     return frame_times(t0, float(t_end), args.fps, speed), speed
 
 

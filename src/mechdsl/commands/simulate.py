@@ -58,7 +58,7 @@ def run(args) -> int:
     model, x0 = load_model(args, starts_in_model=False)
     t_end = args.t_end
     if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
-        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
+        args.out.note(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
     # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
     # caller (argument > scene > default), so CLI and API give the same run for the same scene
     interrupted = False

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import logging
 import os
 import platform
 import sys
@@ -20,6 +21,7 @@ from pathlib import Path
 
 from ..diagnostics import Diagnostic, MechError
 
+log = logging.getLogger(__name__)
 HERE = Path(__file__).with_name("c")
 RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_hybrid.c", "mech_linalg.c")
 HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
@@ -180,6 +182,8 @@ def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
                 continue
             procs.append((subprocess.Popen([cc, *flags, "-I.", "-c", name, "-o", obj.name], cwd=tmp,
                                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True), obj, cached, name))
+        log.info("compiling %d of the FMU's %d C files with %s%s", len(procs), len(objs), Path(cc).name,
+                 f" ({', '.join(name for *_, name in procs)})" if procs else ": all from the object cache")
         errors = []
         for pr, obj, cached, name in procs:
             out, err = pr.communicate()
