@@ -37,6 +37,7 @@ def test_every_shipped_model_is_an_example_with_its_description():
         p = ex.path(name)
         assert p.is_file() and p.suffix == ".mech" and p.stem == name
         assert ex.description(name) == _declared_description(p) != ""
+        assert ex.description(name)[0].isupper(), f"{name}: a description reads as a sentence in `mech examples`"
     assert ex.path("pendulum.mech") == ex.path("pendulum")
     assert dict(ex.catalog())["double_pendulum"] == "Two uniform rods hinged in series"
 
