@@ -4,6 +4,7 @@ errors as the document too with the exit code unchanged; the library's messages 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -46,8 +47,12 @@ def test_simulate(capsys, tmp_path):
     assert r["statistics"]["steps"] > 0 and r["statistics"]["cpu_time"] >= 0
     assert r["accuracy"]["rtol"] > 0 and r["accuracy"]["energy_drift"] >= 0
     assert r["columns"][:3] == ["time", "theta", "der(theta)"]
+    assert r["units"] == {**{c: r["units"][c] for c in r["columns"]}, "time": "s", "theta": "rad",
+                          "der(theta)": "rad/s", "x": "m", "energy": "J"}
+    assert json.loads((tmp_path / "p.json").read_text())["units"] == r["units"]     # the sidecar's
     assert doc["files_written"] == [str(out), str(tmp_path / "p.json")]
     assert "model Pendulum: t = 0 .. 1 (11 points)" in err and "wrote" in err
+    assert " s CPU, " in err and " s wall" in err and re.search(r"max \|E - E\(0\)\| = \S+ J ", err)
 
 
 def test_a_failed_run_is_exit_1_with_its_result(capsys, tmp_path):

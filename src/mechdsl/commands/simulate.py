@@ -115,7 +115,8 @@ def run_record(r) -> dict:
             "t_start": float(r.t[0]) if len(r.t) else None, "t_end": float(r.t[-1]) if len(r.t) else None,
             "points": int(len(r.t)), "method": m.get("method"), "method_reason": m.get("method_reason"),
             "run": m.get("run") or {}, "statistics": dict(r.stats), "accuracy": accuracy,
-            "notes": list(m.get("notes", [])), "columns": list(r.columns), "events": list(r.events)}
+            "notes": list(m.get("notes", [])), "columns": list(r.columns), "units": r.column_units(),
+            "events": list(r.events)}
 
 
 def cli_settings(args) -> dict:
@@ -217,13 +218,14 @@ def summary(r, written=()) -> str:
     if s.get("cpu_time") is not None:
         parts.append(f"{s['cpu_time']:.3g} s CPU")
     if s.get("wall_time") is not None:
-        parts.append(f"{s['wall_time']:.3g} s")
+        parts.append(f"{s['wall_time']:.3g} s wall")
     if parts:
         lines.append("statistics: " + ", ".join(parts))
     if s.get("energy_drift") is not None:
         cons = m.get("conservative")
         kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
-        lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
+        unit = r.column_units().get("energy", "")
+        lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g}{' ' + unit if unit else ''} "
                      f"(relative {s['energy_drift_relative']:.3g})")
     inv = {k: v for k, v in (s.get("invariant_drift") or {}).items() if k != "energy"}
     if inv:
