@@ -50,7 +50,7 @@ def run(args) -> int:
     if args.steady:
         return _steady(args, m, guesses)
     eqs = equilibria(m.eom, guesses or None, t=args.time)
-    print(format_equilibria(m.name, m.eom.coords, eqs))
+    print(format_equilibria(m.name, m.eom.coords, eqs, units=_units(m)))
     data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
             "equilibria": [e.to_dict() for e in eqs]}
     args.out.set(target=target_line(args, m), **data)
@@ -97,7 +97,12 @@ def format_steady(name: str, pins: dict, found) -> str:
     return "\n".join(lines)
 
 
-def format_equilibria(name: str, coords, eqs) -> str:
+def _units(m) -> dict[str, str]:
+    """The declared unit of each coordinate (for the table's headers)."""
+    return {c.name: c.unit for c in m.model.coordinates if c.unit}
+
+
+def format_equilibria(name: str, coords, eqs, units=None) -> str:
     from ..analysis.tables import num, table
 
     if not eqs:
@@ -115,7 +120,9 @@ def format_equilibria(name: str, coords, eqs) -> str:
         rows.append([str(i)] + [num(v) for v in e.q] + lam + [e.kind, e.stability,
                                                               "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
     head = "Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues"
-    lines.append(table(["#"] + list(coords) + [f"lambda[{c}]" for c in lam_names] + ["kind", "stability", head],
+    units = units or {}
+    heads = [f"{c} [{units[c]}]" if units.get(c) else c for c in coords]
+    lines.append(table(["#"] + heads + [f"lambda[{c}]" for c in lam_names] + ["kind", "stability", head],
                        rows))
     common = [n for n in eqs[0].notes if all(n in e.notes for e in eqs[1:])] if len(eqs) > 1 else []
     for i, e in enumerate(eqs, 1):
