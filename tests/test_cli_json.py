@@ -51,7 +51,7 @@ def test_simulate(capsys, tmp_path):
                           "der(theta)": "rad/s", "x": "m", "energy": "J"}
     assert json.loads((tmp_path / "p.json").read_text())["units"] == r["units"]     # the sidecar's
     assert doc["files_written"] == [str(out), str(tmp_path / "p.json")]
-    assert "model Pendulum: t = 0 .. 1 (11 points)" in err and "wrote" in err
+    assert "model Pendulum: t = 0 .. 1 s (11 points)" in err and "wrote" in err
     assert " s CPU, " in err and " s wall" in err and re.search(r"max \|E - E\(0\)\| = \S+ J ", err)
 
 

@@ -201,9 +201,9 @@ def summary(r, written=()) -> str:
     lines = [m["target"]] if m.get("target") else []
     if r.failure is not None and len(r.t) <= 1:
         t0 = r.t[0] if len(r.t) else m.get("options", {}).get("t_start", r.failure.time)
-        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {t0:g} was reached")
+        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {t0:g} s was reached")
     else:
-        lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)")
+        lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} s ({len(r.t)} point{'s' * (len(r.t) != 1)})")
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
     ran = m.get("run") or {}
     if ran:
