@@ -1,0 +1,58 @@
+"""Values are held in SI, so every place that labels them says the SI unit: a coordinate
+declared in "deg" is reported in rad, "cm" in m (the CSV's sidecar, --json, tables, the model)."""
+import json
+import math
+
+import pytest
+
+import mechdsl
+from mechdsl.cli import main
+from mechdsl.model.units import parse_unit, si_unit
+
+MODEL = """model P
+  parameter Real m(unit = "g") = 1000;
+  parameter Real L(unit = "m") = 1;
+  parameter Real g(unit = "m/s2") = 9.81;
+  parameter Real k(unit = "N/m") = 100;
+  coordinate Real theta(start = 30, speed = 0, unit = "deg");
+  coordinate Real x(start = 0.1, speed = 0, unit = "cm");
+  output Real v(unit = "km/h") = der(x);
+equation
+  kinetic = 1/2*m*L^2*der(theta)^2 + 1/2*m*der(x)^2;
+  potential = -m*g*L*cos(theta) + 1/2*k*x^2;
+end P;
+"""
+
+
+@pytest.mark.parametrize("unit, si", [
+    ("deg", "rad"), ("deg/s", "rad/s"), ("deg/s2", "rad/s2"), ("cm", "m"), ("mm2", "m2"), ("g", "kg"),
+    ("g.cm2", "kg.m2"), ("km/h", "m/s"), ("cm/min", "m/s"), ("kN.m", "N.m"), ("rpm", "rad/s"),
+    ("turn", "rad"), ("ft", "m"),
+    # SI already: as written
+    ("rad", "rad"), ("kg", "kg"), ("N.m/rad", "N.m/rad"), ("m/s2", "m/s2"), ("", ""), (None, ""),
+])
+def test_si_unit(unit, si):
+    assert si_unit(unit) == si
+    if unit:   # the same dimension, factor 1
+        f, d = parse_unit(si)
+        assert f == pytest.approx(1.0, rel=1e-12) and d == parse_unit(unit)[1]
+
+
+def test_a_model_declared_in_deg_and_cm_reports_rad_and_m(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "p.mech").write_text(MODEL)
+    m = mechdsl.load("p.mech")
+    assert {c.name: c.unit for c in m.model.coordinates} == {"theta": "rad", "x": "m"}
+    assert {p.name: p.unit for p in m.model.parameters}["m"] == "kg"
+    assert main(["simulate", "p.mech", "--t-end", "0.1", "--points", "3", "-o", "p.csv"]) == 0
+    side = json.loads((tmp_path / "p.json").read_text())
+    assert side["units"]["theta"] == "rad" and side["units"]["x"] == "m"
+    assert side["units"]["der(theta)"] == "rad/s" and side["units"]["v"] == "m/s"
+    row = (tmp_path / "p.csv").read_text().splitlines()[1].split(",")
+    first = dict(zip(side["columns"], map(float, row)))
+    assert first["theta"] == pytest.approx(math.pi / 6, rel=1e-12)      # 30 deg in rad
+    assert first["x"] == pytest.approx(1e-3, rel=1e-12)                 # 0.1 cm in m
+    capsys.readouterr()
+    assert main(["equilibrium", "p.mech"]) == 0
+    out = capsys.readouterr().out
+    assert "theta [rad]" in out and "x [m]" in out and "[deg]" not in out and "[cm]" not in out
