@@ -56,3 +56,35 @@ def test_a_model_declared_in_deg_and_cm_reports_rad_and_m(tmp_path, monkeypatch,
     assert main(["equilibrium", "p.mech"]) == 0
     out = capsys.readouterr().out
     assert "theta [rad]" in out and "x [m]" in out and "[deg]" not in out and "[cm]" not in out
+
+
+def test_linear_model_and_equilibria_say_their_units(capsys):
+    """The cart-pole mixes m and rad: M, C, K have no single unit (said once), the modes' eigenvalues
+    are in 1/s; the pendulum (all rad) has M in kg.m2, K and the Hessian of V in N.m/rad, and its
+    K is m g L = 9.81 N.m/rad (the model's m = 1 kg, L = 1 m)."""
+    from mechdsl.examples import path
+
+    assert main(["linearize", str(path("cart_pole"))]) == 0
+    out = capsys.readouterr().out
+    assert "x = 0 m, theta = 0 rad" in out and "eigenvalue (1/s)" in out
+    assert "the coordinates' units differ" in out and "K (stiffness):" in out
+    assert "linearization has eigenvalue 3.97388 1/s with positive real part" in out
+    assert main(["linearize", str(path("pendulum")), "--model", "Pendulum"]) == 0
+    out = capsys.readouterr().out
+    assert "M (mass) [kg.m2]:" in out and "C (damping + gyroscopic) [N.m.s/rad]:" in out
+    k_line = out.split("K (stiffness) [N.m/rad]:")[1].splitlines()[2].split()
+    assert k_line[0] == "theta" and float(k_line[1]) == pytest.approx(9.81, rel=1e-9)
+    assert main(["equilibrium", str(path("pendulum")), "--model", "Pendulum"]) == 0
+    out = capsys.readouterr().out
+    assert "Hessian eigenvalues [N.m/rad]" in out and "(eigenvalues [9.81] N.m/rad)" in out
+
+
+@pytest.mark.parametrize("units, expected", [
+    (["rad", "deg"], {"M": "kg.m2", "C": "N.m.s/rad", "K": "N.m/rad"}),
+    (["m", "cm"], {"M": "kg", "C": "N.s/m", "K": "N/m"}),
+    (["m", "rad"], {}), (["m", ""], {}), ([], {}),
+])
+def test_matrix_units(units, expected):
+    from mechdsl.model.units import matrix_units
+
+    assert matrix_units(units) == expected

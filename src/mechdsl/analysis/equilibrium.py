@@ -36,6 +36,7 @@ import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from ..eom import fold_inputs, reported_multipliers
+from ..model.units import coordinate_units, matrix_units
 from ..output import display as _display
 from . import charts
 from .charts import chart, locked_joints, quaternion_blocks, quaternion_model
@@ -651,6 +652,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     Csym = sym(Ct)
     gyro = np.max(np.abs(Ct - Ct.T), initial=0.0) > 1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
     damping_ok = np.min(np.linalg.eigvalsh(Csym), initial=0.0) >= -1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
+    # the Hessian's eigenvalues have K's unit when every coordinate has the same unit
+    hu = _unit_suffix(matrix_units(coordinate_units(eom)).get("K", ""))
     potential = "V - T0" if st.has_T0 else "V"
     if con is not None:
         potential += " + lambda'g on the constraint manifold"
@@ -670,20 +673,20 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     elif growth > 1e-6 * lscale:
         i = int(np.argmax(ev.real))
         neg = heig[heig < -etol]
-        why = (f"Hessian of {potential} has negative eigenvalue(s) {_fmt_list(neg)}; " if neg.size else "")
-        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(ev[i])} with positive "
+        why = (f"Hessian of {potential} has negative eigenvalue(s) {_fmt_list(neg)}{hu}; " if neg.size else "")
+        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(ev[i])} 1/s with positive "
                                        "real part (Lyapunov's indirect method)")
     elif circulatory:
         stable, reason = None, ("non-conservative positional (circulatory) forces: the stiffness is not "
                                 "symmetric, Lagrange-Dirichlet does not apply; linear model has no growing mode")
     elif heig.size and heig[0] > etol and damping_ok:
         stable, reason = True, (f"Lagrange-Dirichlet: Hessian of {potential} positive definite "
-                                f"(eigenvalues {_fmt_list(heig)})")
+                                f"(eigenvalues {_fmt_list(heig)}{hu})")
         if k:
             reason += "; neutral along the symmetry directions"
     elif heig.size and heig[0] < -etol:
         stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
-                                f"{_fmt_list(heig[heig < -etol])} but gyroscopic terms keep the linear "
+                                f"{_fmt_list(heig[heig < -etol])}{hu} but gyroscopic terms keep the linear "
                                 "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
     elif heig.size == 0 and con is not None and Z.shape[1] == 0:
         stable, reason = None, "no degree of freedom: the constraints fix the configuration"
@@ -691,7 +694,7 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
     else:
         stable, reason = None, (f"zero eigenvalue(s) of the Hessian of {potential} "
-                                f"({_fmt_list(heig[np.abs(heig) <= etol])}): higher-order terms decide")
+                                f"({_fmt_list(heig[np.abs(heig) <= etol])}{hu}): higher-order terms decide")
     if gyro and stable is not None:
         notes = notes + ["gyroscopic terms present (T1 != 0)"]
     if accel:
@@ -748,6 +751,10 @@ def singular_mass(M) -> str:
     if w[0] > 1e-12 * max(abs(w[-1]), 1e-300):
         return ""
     return f"smallest eigenvalue {w[0]:.3g} of {w[-1]:.3g}"
+
+
+def _unit_suffix(unit: str) -> str:
+    return f" {unit}" if unit else ""
 
 
 def _fmt_list(v) -> str:

@@ -104,6 +104,7 @@ def _units(m) -> dict[str, str]:
 
 def format_equilibria(name: str, coords, eqs, units=None) -> str:
     from ..analysis.tables import num, table
+    from ..model.units import matrix_units
 
     if not eqs:
         why = eqs.search.why_none(coords) if hasattr(eqs, "search") else ""
@@ -119,8 +120,9 @@ def format_equilibria(name: str, coords, eqs, units=None) -> str:
         lam = [num(e.lambdas[c]) for c in lam_names]
         rows.append([str(i)] + [num(v) for v in e.q] + lam + [e.kind, e.stability,
                                                               "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
-    head = "Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues"
     units = units or {}
+    ku = matrix_units([units.get(c, "") for c in coords]).get("K")
+    head = ("Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues") + (f" [{ku}]" if ku else "")
     heads = [f"{c} [{units[c]}]" if units.get(c) else c for c in coords]
     lines.append(table(["#"] + heads + [f"lambda[{c}]" for c in lam_names] + ["kind", "stability", head],
                        rows))

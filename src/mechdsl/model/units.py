@@ -230,3 +230,32 @@ def _join(terms) -> str:
     if den:
         s += "/" + (".".join(den) if len(den) == 1 else "(" + ".".join(den) + ")")
     return s
+
+
+_MATRIX_UNITS = {"rad": {"M": "kg.m2", "C": "N.m.s/rad", "K": "N.m/rad"},
+                 "m": {"M": "kg", "C": "N.s/m", "K": "N/m"}}
+
+
+def matrix_units(coordinate_units) -> dict[str, str]:
+    """The units of the linear model's M, C and K (and of the Hessian of V, K's unit) when every
+    coordinate has the same unit u: M in J.s2/u2, C in J.s/u2, K in J/u2 (rad: kg.m2, N.m.s/rad,
+    N.m/rad; m: kg, N.s/m, N/m).  {} when the units differ or one is unknown: then each entry has
+    its own unit (J/(unit_i unit_j) for K) and the eigenvalues of the matrix have none."""
+    units = {si_unit(u) for u in coordinate_units}
+    if len(units) != 1 or "" in units:
+        return {}
+    u = units.pop()
+    if u in _MATRIX_UNITS:
+        return dict(_MATRIX_UNITS[u])
+    try:
+        d = parse_unit(u)[1]
+    except ValueError:
+        return {}
+    return {"M": str(ENERGY * TIME ** 2 / d ** 2), "C": str(ENERGY * TIME / d ** 2), "K": str(ENERGY / d ** 2)}
+
+
+def coordinate_units(eom) -> list[str]:
+    """The SI unit of each of ``eom``'s coordinates ('' when not declared or not known)."""
+    model = getattr(eom, "model", None)
+    by_name = {c.name: c.unit or "" for c in getattr(model, "coordinates", ())}
+    return [by_name.get(c, "") for c in eom.coords]

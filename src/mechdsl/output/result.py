@@ -167,8 +167,9 @@ class Result:
         return [str(p) for p in write_atomic_group(items, overwrite)]
 
     def column_units(self) -> dict[str, str]:
-        """The unit of every column ('' when the model gives none): coordinates and outputs as
-        declared, their rates per second, energies in J, time in s."""
+        """The unit of every column ('' when the model gives none): coordinates and outputs in the SI
+        unit of their declaration (the values are SI: "deg" is reported as rad), their rates per
+        second, energies in J, time in s."""
         from .plot import signal_units
 
         units = signal_units(self)
