@@ -88,3 +88,12 @@ def test_matrix_units(units, expected):
     from mechdsl.model.units import matrix_units
 
     assert matrix_units(units) == expected
+
+
+def test_accelerated_reference_motion_says_its_unit(capsys):
+    """The dropped ball: no rest state, a uniformly accelerated reference motion at -g in m/s2."""
+    from mechdsl.examples import path
+
+    assert main(["equilibrium", str(path("bouncing_ball"))]) == 0
+    out = capsys.readouterr().out
+    assert "with acceleration a = drop.s: -9.81 m/s2" in out

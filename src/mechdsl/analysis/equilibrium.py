@@ -699,7 +699,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         notes = notes + ["gyroscopic terms present (T1 != 0)"]
     if accel:
         notes = notes + ["uniformly accelerated reference motion q(t) = q* + a t^2/2 with acceleration a = "
-                         + ", ".join(f"{c}: {v:.6g}" for c, v in zip(eom.coords, acc) if abs(v) > 0)]
+                         + ", ".join(f"{c}: {v:.6g}" + _unit_suffix(u and u + "/s2")
+                                     for c, v, u in zip(eom.coords, acc, coordinate_units(eom)) if abs(v) > 0)]
     extra = {}
     if con is not None:
         extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
