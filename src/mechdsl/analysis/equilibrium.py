@@ -249,7 +249,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
     search = Search()
     # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
-    families = con is None and bool(blocks or charts.euler_blocks(eom))
+    families = con is None
     for g in _guesses(eom, guesses, q0, st, max_guesses, con):
         if blocks:
             g = charts.normalize_blocks(g, blocks, fallback=q0)
@@ -417,9 +417,10 @@ def _family_directions(ch, st, pv, t, alpha, q=None) -> np.ndarray:
     n = ch.n
     q = np.zeros(n) if q is None else np.asarray(q, float)
     N = st.symmetry
-    if N.size and np.any(alpha):
-        return np.zeros((n, 0))
     M, C, K, _, _ = second_order(ch, q, np.zeros(n), t, pv, acc=np.zeros(n))
+    # an accelerated reference motion (round-off in alpha is not one: as _classify decides)
+    if N.size and np.linalg.norm(M @ (N @ np.asarray(alpha, float))) > 1e-8 * max(st.force_scale, 1e-300):
+        return np.zeros((n, 0))
     P = complement(N)
     Kr = sym(P.T @ K @ P)
     if not Kr.size:
