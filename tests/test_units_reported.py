@@ -97,3 +97,14 @@ def test_accelerated_reference_motion_says_its_unit(capsys):
     assert main(["equilibrium", str(path("bouncing_ball"))]) == 0
     out = capsys.readouterr().out
     assert "with acceleration a = drop.s: -9.81 m/s2" in out
+
+
+def test_a_fixed_step_run_says_its_step_not_tolerances(tmp_path, monkeypatch, capsys):
+    """Stormer-Verlet takes no rtol/atol: the summary says the step it took, in s."""
+    from mechdsl.examples import path
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", str(path("pendulum")), "--method", "stormer-verlet", "--dt", "0.01",
+                 "--t-end", "0.5"]) == 0
+    ran = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("ran: ")]
+    assert len(ran) == 1 and ran[0].endswith("step dt 0.01 s") and "rtol" not in ran[0]

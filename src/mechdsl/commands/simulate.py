@@ -207,9 +207,12 @@ def summary(r, written=()) -> str:
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
     ran = m.get("run") or {}
     if ran:
+        dt = ((ran.get("settings") or {}).get("fixed_step") or {}).get("dt")
+        # a fixed-step method takes no tolerances: its step is what sets the accuracy
+        accuracy = (f"step dt {dt:g} s" if ran.get("backend") == "fixed-step" and dt is not None
+                    else f"rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}")
         lines.append(f"ran: {ran.get('problem')} problem, formulation {ran.get('formulation')}, integrator "
-                     f"{ran.get('integrator')}, rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}"
-                     + (", compiled" if ran.get("compiled") else ""))
+                     f"{ran.get('integrator')}, {accuracy}" + (", compiled" if ran.get("compiled") else ""))
     parts = []
     for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians"),
                        ("rejected_steps", "rejected steps"), ("events", "events")):
