@@ -40,7 +40,8 @@ def add_playback_args(p) -> None:
     """--speed, --trail, --up, --t-end: shared with `mech view`."""
     p.add_argument("--speed", type=_num("--speed"), default=None, metavar="X",
                    help="model seconds per second of playback (default 1: real time; a run shorter than a "
-                        "second is slowed down to play for at least 2 s)")
+                        "second is slowed down to play for at least 2 s, one longer than a minute sped up to "
+                        "play for at most 60 s)")
     p.add_argument("--trail", action="append", default=[], metavar="POINT",
                    help="draw the path of a point (e.g. rod2.b); repeat for several")
     p.add_argument("--up", default=None, metavar="DIR",
@@ -67,8 +68,9 @@ def plan_frames(args, m, what: str = "animating"):
     if speed is None:
         speed = pick_speed(float(t_end) - t0)
         if speed != 1.0:
-            args.out.note(f"the run lasts {float(t_end) - t0:g} s: {what} it at --speed {speed:g} (slow motion, "
-                          f"{(float(t_end) - t0) / speed:g} s of playback)")
+            pace = "slow motion" if speed < 1.0 else "fast motion"
+            args.out.note(f"the run lasts {float(t_end) - t0:g} s: {what} it at --speed {speed:g} ({pace}, "
+                          f"{(float(t_end) - t0) / speed:g} s of playback; --speed sets another)")
     return frame_times(t0, float(t_end), args.fps, speed), speed
 
 
