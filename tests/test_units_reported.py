@@ -108,3 +108,22 @@ def test_a_fixed_step_run_says_its_step_not_tolerances(tmp_path, monkeypatch, ca
                  "--t-end", "0.5"]) == 0
     ran = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("ran: ")]
     assert len(ran) == 1 and ran[0].endswith("step dt 0.01 s") and "rtol" not in ran[0]
+
+
+def test_json_of_equilibrium_and_linearize_carries_units(tmp_path, capsys):
+    """--json and -o OUT.json: each coordinate's unit, and the unit of the Hessian / M, C, K."""
+    from cli_json import validate
+    from mechdsl.examples import path
+
+    pend = str(path("pendulum"))
+    assert main(["equilibrium", pend, "--model", "Pendulum", "--json", "-o", str(tmp_path / "e.json")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    validate(doc)
+    assert doc["result"]["units"] == {"theta": "rad"} and doc["result"]["hessian_unit"] == "N.m/rad"
+    assert json.loads((tmp_path / "e.json").read_text())["units"] == {"theta": "rad"}
+    assert main(["linearize", str(path("cart_pole")), "--json", "-o", str(tmp_path / "l.json")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    validate(doc)
+    assert doc["result"]["units"] == {"x": "m", "theta": "rad"} and doc["result"]["matrix_units"] == {}
+    saved = json.loads((tmp_path / "l.json").read_text())
+    assert saved["units"] == {"x": "m", "theta": "rad"}

@@ -40,6 +40,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..analysis.equilibrium import equilibria
+    from ..model.units import matrix_units
     from ..output.fileio import check_writable, write_atomic
 
     if args.output:
@@ -51,7 +52,10 @@ def run(args) -> int:
         return _steady(args, m, guesses)
     eqs = equilibria(m.eom, guesses or None, t=args.time)
     print(format_equilibria(m.name, m.eom.coords, eqs, units=_units(m)))
+    units = _units(m)
     data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
+            "units": {c: units.get(c, "") for c in m.eom.coords},
+            "hessian_unit": matrix_units([units.get(c, "") for c in m.eom.coords]).get("K", ""),
             "equilibria": [e.to_dict() for e in eqs]}
     args.out.set(target=target_line(args, m), **data)
     if args.output:
