@@ -324,7 +324,7 @@ def _result_model(r, model, verb):
 
 
 def _columns(r):
-    from .plot import signal_units
+    from .units import signal_units
 
     units = signal_units(r)
     names = [c for c in r.columns if c != "time"]

@@ -170,7 +170,7 @@ class Result:
         """The unit of every column ('' when the model gives none): coordinates and outputs in the SI
         unit of their declaration (the values are SI: "deg" is reported as rad), their rates per
         second, energies in J, time in s."""
-        from .plot import signal_units
+        from .units import signal_units
 
         units = signal_units(self)
         return {c: units.get(c, "") for c in self.columns}
