@@ -201,6 +201,20 @@ CONTACTS_TEXT = ("`benchmarks/impacts_compiled.py` (issue 16): models with conta
                  "of its free flight at equal step counts.")
 
 
+def export_table(quick):
+    """benchmarks/export_fmu.py: export time, the FMU's co-simulation against mech simulate, FMU size."""
+    return script_table("export_fmu.py", "2,4,8" if quick else "2,4,8,16,32", ["--repeat", "1" if quick else "3"])
+
+
+EXPORT_TEXT = ("`benchmarks/export_fmu.py` (issue 29): `mech export` of the double pendulum in a fresh process "
+               "(import, load, derive, generate, compile, zip) with an empty cache and with the runtime's "
+               "compiled objects cached; the FMU's co-simulation of the Chaos scene against `mech simulate`'s "
+               "compiled loop, side by side in one run (CPU time, minimum of repeats), the FMU driven from "
+               "Python (fmpy) and from a C driver; the size of the N-link chain's FMU against N. Goals: export "
+               "under 5 s, the FMU's co-simulation at least as fast as mech simulate's compiled loop, the "
+               "size linear in the model.")
+
+
 def simulation_scaling(quick):
     """CPU time of simulating the N-link chain for 5 s at rtol = atol = 1e-8 (erk and
     cvodes-adams, virtual machine), min of 3 after a warm-up."""
@@ -382,6 +396,8 @@ def page(ctx) -> str:
               "### Chains as loops over per-link kernels", "", CHAIN_TEXT, "", ctx["chain"], ""]
     if ctx.get("contacts"):
         parts += ["## Contacts in the compiled loop", "", CONTACTS_TEXT, "", ctx["contacts"], ""]
+    if ctx.get("export"):
+        parts += ["## FMI export", "", EXPORT_TEXT, "", ctx["export"], ""]
     if ctx.get("coldstart"):
         parts += ["## Cold start", "", COLDSTART_TEXT, "", ctx["coldstart"], ""]
     if ctx.get("control"):
@@ -452,6 +468,7 @@ def main(argv=None) -> int:
     ctx["simscale"] = simulation_scaling(a.quick)
     ctx["nlinkrun"] = nlink_run_table(a.quick)
     ctx["contacts"] = contacts_table(a.quick)
+    ctx["export"] = export_table(a.quick)
     log("== cold start")
     from coldstart import section as coldstart_section
 

@@ -24,6 +24,8 @@ CORPUS = Path(__file__).resolve().parent / "corpus"
 DOCS = ROOT / "docs" / "errors.md"
 FILE = "example.mech"
 URDF = "example.urdf"
+DATA = "data.csv"
+FIT = f"mech fit {FILE} --data {DATA} --fit L"
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,7 @@ class Entry:
     shown: str | None = None        # what the page shows instead of the example (binary/huge inputs)
     command: str | None = None      # the command line shown (default: mech check example.mech)
     urdf: str | None = None         # a file of tests/corpus/urdf/: the example of a `mech import` error
+    data: str | None = None         # a file of tests/corpus/fit/: the example of a `mech fit` data error
 
 
 PENDULUM = """model Pendulum
@@ -69,6 +72,11 @@ SECTIONS = [
                                 "closes a loop (left out: URDF describes trees), W029 a mimic that names no "
                                 "movable joint (left out: the joint moves on its own), W509 an inertia that breaks "
                                 "the triangle inequality by rounding."),
+    ("Data for a fit (E771-E773)", "`mech fit MODEL --data DATA.csv --fit NAME` and `Model.fit` ([fitting.md](fitting.md)) "
+                                   "check the measured data before any run and locate every problem in the data file "
+                                   "(its line and column; a table in memory names the column and sample). The "
+                                   "examples fit the pendulum above (`example.mech`) to `data.csv`; the corpus "
+                                   "is tests/corpus/fit/."),
 ]
 
 ENTRIES = [
@@ -356,6 +364,19 @@ ENTRIES = [
           "Give the package's folder with `--package-dir NAME=DIR` (`package_dirs=` in Python), or import with "
           "`--skip-missing-meshes` (`skip_missing_meshes=True`): those visuals are then not drawn (the warning "
           "W021), which the dynamics do not need.", urdf="E028_missing_mesh.urdf"),
+    # ------------------------------------------------------------------ E77x: data for a fit
+    Entry("E771", "column names no signal", "A measured column is not a recorded signal of the model (the "
+                                            "signals: coordinates, their speeds `der(q)`, outputs, energies), a "
+                                            "column appears twice, or there is no column besides the time.",
+          "Name the column like the signal (the hint lists them), or leave it out of the file.",
+          data="E771_unknown_column.csv"),
+    Entry("E772", "bad times", "No time column (`time` or `t`, in seconds), no samples, times not increasing, or "
+                               "a time outside the run (before the scene's start; after `--t-end` when given).",
+          "Sort the samples by time, one per time, inside the run.", data="E772_not_increasing.csv"),
+    Entry("E773", "not a finite number", "A value is not a number, is `nan` or infinite, or a line has fewer or "
+                                         "more values than the header names.",
+          "Give every sample a finite value; drop a sample that was not measured (its row) or the column.",
+          data="E773_not_a_number.csv"),
     Entry("E604", "bad setting value", "A setting of the wrong kind (a string for a number, a fraction for "
                                        "`points`, a negative tolerance, an unknown name).",
           "Give a value of the kind the message names.", corpus="E604_stop_time_string.mech"),
@@ -382,6 +403,8 @@ def run(entry: Entry) -> tuple[str, str]:
     if entry.urdf:
         lines = (CORPUS / "urdf" / entry.urdf).read_text(encoding="utf-8").splitlines(keepends=True)
         data = "".join(l for l in lines if not l.startswith("<!-- expect:")).encode("utf-8")
+    if entry.data:
+        data = (CORPUS / "fit" / entry.data).read_bytes()
     old = os.getcwd()
     with tempfile.TemporaryDirectory() as tmp:
         os.chdir(tmp)
@@ -390,6 +413,10 @@ def run(entry: Entry) -> tuple[str, str]:
             if entry.urdf:
                 Path(URDF).write_bytes(data)
                 args = ["import", URDF, "-o", FILE]
+            elif entry.data:
+                Path(FILE).write_text(PENDULUM, encoding="utf-8")
+                Path(DATA).write_bytes(data)
+                args = FIT.split()[1:]
             else:
                 Path(FILE).write_bytes(data)
             if entry.code == "E001":
@@ -450,21 +477,22 @@ def generate() -> str:
         "for a quantity with a unit.",
         "",
         "Codes of later phases (deriving and simulating: E6xx from E605 on, E7xx, E8xx) are described with "
-        "those commands.",
+        "those commands, except the data errors of `mech fit` (E771-E773), which are listed here.",
         "",
     ]
     by_section: dict[str, list[Entry]] = {}
     for e in ENTRIES:
-        by_section.setdefault("u" if e.urdf else e.code[1], []).append(e)
-    for (title, intro), digit in zip(SECTIONS, "0123456u"):
+        by_section.setdefault("u" if e.urdf else "f" if e.data else e.code[1], []).append(e)
+    for (title, intro), digit in zip(SECTIONS, "0123456uf"):
         out += [f"## {title}", "", intro, ""]
         for e in by_section.get(digit, []):
             shown, output = run(e)
-            cmd = e.command or (f"mech import {URDF} -o {FILE}" if e.urdf else f"mech check {FILE}")
+            cmd = e.command or (f"mech import {URDF} -o {FILE}" if e.urdf else FIT if e.data else f"mech check {FILE}")
             out += [f"### {e.code} {e.title}", "", e.meaning, ""]
             if e.code not in ("E001", "E003", "E005", "E006") or e.shown:
-                out += ["```xml" if e.urdf else "```mech", shown.rstrip("\n"), "```", ""]
-            where = f" (tests/corpus/{e.corpus})" if e.corpus else (f" (tests/corpus/urdf/{e.urdf})" if e.urdf else "")
+                out += ["```xml" if e.urdf else "```text" if e.data else "```mech", shown.rstrip("\n"), "```", ""]
+            where = f" (tests/corpus/{e.corpus})" if e.corpus else (f" (tests/corpus/urdf/{e.urdf})" if e.urdf else
+                                                                     f" (tests/corpus/fit/{e.data})" if e.data else "")
             out += [f"`{cmd}`{where}:", "", "```text", output, "```", "", f"**Fix:** {e.fix}", ""]
     return "\n".join(out).rstrip("\n") + "\n"
 

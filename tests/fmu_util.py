@@ -25,12 +25,13 @@ def reference(model, t_end: float, dt: float, **kw) -> np.ndarray:
     return np.c_[r.q, r.qd]
 
 
-def run_fmu(path, model, fmi_type: str, t_end: float, dt: float, **kw):
-    """fmpy's run of the FMU: (states (points, 2n), the result array)."""
+def run_fmu(path, model, fmi_type: str, t_end: float, dt: float, tol: float | None = None, **kw):
+    """fmpy's run of the FMU at the relative tolerance ``tol`` (default CS_TOL or ME_TOL): (states
+    (points, 2n), the result array)."""
     import fmpy
 
     names = state_names(model)
-    tol = CS_TOL if fmi_type == "CoSimulation" else ME_TOL
+    tol = tol or (CS_TOL if fmi_type == "CoSimulation" else ME_TOL)
     out = list(kw.pop("output", [])) + names
     res = fmpy.simulate_fmu(str(path), fmi_type=fmi_type, stop_time=t_end, output_interval=dt,
                             relative_tolerance=tol, output=out, record_events=False, **kw)

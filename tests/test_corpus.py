@@ -231,7 +231,8 @@ def test_subprocess_missing_file(tmp_path):
 FRONT_END = [SRC / "frontend" / "parser.py", SRC / "frontend" / "source.py", SRC / "diagnostics.py", SRC / "api.py",
              SRC / "cli.py", SRC / "model" / "units.py",
              SRC / "commands" / "check.py", SRC / "commands" / "compile.py", *sorted((SRC / "semantic").glob("*.py")),
-             SRC / "commands" / "import_urdf.py", *sorted((SRC / "urdf").glob("*.py"))]
+             SRC / "commands" / "import_urdf.py", *sorted((SRC / "urdf").glob("*.py")),
+             SRC / "estimation" / "data.py"]
 
 
 def codes_in_source() -> set[str]:
@@ -243,9 +244,11 @@ def codes_in_source() -> set[str]:
 
 
 def test_every_code_is_in_the_corpus():
+    from test_fit_corpus import EXPECT as FIT_EXPECT        # mech fit's data files (tests/corpus/fit)
     from test_urdf_corpus import EXPECT as URDF_EXPECT      # the importer's corpus (tests/corpus/urdf)
 
     covered = {c for exp in [*EXPECT.values(), *URDF_EXPECT.values()] for c, _, _ in exp if c.startswith("E")}
+    covered |= {code for code, *_ in FIT_EXPECT.values()}
     missing = codes_in_source() - covered - set(NOT_FROM_A_FILE)
     assert not missing, f"error codes with no corpus file: {sorted(missing)}"
     assert covered <= codes_in_source(), "the corpus expects a code the source never emits"

@@ -71,6 +71,31 @@ def test_constrained_model_index1_ode_with_projection(fmus):
         assert np.all(np.isfinite(res["F_close[1]"]))
 
 
+def test_constrained_drift_stays_bounded_at_loose_tolerances(fmus):
+    """The four-bar over 20 s at loose tolerances: the FMU projects when the drift passes half
+    of mechdsl.drift_bound, so the constraints stay at the level of one step's error; with the
+    projection switched off (a bound no drift reaches) the same run drifts off by far more."""
+    import casadi as ca
+
+    m, path = fmus("four_bar", "four_bar.mech")
+    eom = m.eom
+    g = ca.Function("g", [eom.q, eom.p], [eom.g])
+    for kind, tol in (("ModelExchange", 1e-6), ("CoSimulation", 1e-5)):
+        drift, projections = {}, {}
+        for bound in (0.0, 1e3):                  # 0: the default rule; 1e3: never projects
+            import fmpy
+
+            res = fmpy.simulate_fmu(str(path), fmi_type=kind, stop_time=20.0, output_interval=0.01,
+                                    relative_tolerance=tol, start_values={"mechdsl.drift_bound": bound},
+                                    output=state_names(m) + ["mechdsl.projections"])
+            X = np.array([[row[s] for s in state_names(m)] for row in res])
+            drift[bound] = max(float(np.max(np.abs(np.array(g(x[:eom.n], m.parameter_values))))) for x in X)
+            projections[bound] = res["mechdsl.projections"][-1]
+        assert projections[0.0] > 0 and projections[1e3] == 0, (kind, projections)
+        assert drift[0.0] < 3 * tol, f"{kind}: drift {drift[0.0]:.3g} at tolerance {tol:g}"
+        assert drift[1e3] > 50 * drift[0.0], (kind, drift)
+
+
 def test_contacts_in_co_simulation_bounce_to_rest(fmus):
     """The bouncing ball: impacts in the FMU's step until the contact becomes persistent."""
     m, path = fmus("bouncing_ball", "bouncing_ball.mech")
@@ -152,6 +177,83 @@ def _co_simulate(path, m, t_end, dt, u):
     fmu.terminate()
     fmu.freeInstance()
     return np.array(rows)
+
+
+def _slave(path, name="cs"):
+    """(FMU2Slave instantiated and initialized at t = 0 with tolerance 1e-11, value references by name)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(path))
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+    fmu.instantiate()
+    fmu.setupExperiment(tolerance=1e-11, startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    return fmu, {v.name: v.valueReference for v in md.modelVariables}
+
+
+def test_input_derivatives_drive_a_ramp_between_communication_points(fmus):
+    """FMI 2 co-simulation (canInterpolateInputs): the master gives F and dF/dt at each
+    communication point; the FMU follows the ramp F = 1 + 2 t inside the step, as mech simulate
+    does with inputs={"F": u(t)}.  Held constant instead (no derivative), it does not."""
+    m, path = fmus("cart_pole", "cart_pole.mech")
+    ref = reference(m, 1.0, 0.05, inputs={"F": lambda t: 1.0 + 2.0 * t})
+    for with_derivative in (True, False):
+        fmu, by = _slave(path, f"ramp{with_derivative}")
+        states = [by[s] for s in state_names(m)]
+        rows = [fmu.getReal(states)]
+        for k in range(20):
+            t = 0.05 * k
+            fmu.setReal([by["F"]], [1.0 + 2.0 * t])
+            if with_derivative:
+                fmu.setRealInputDerivatives([by["F"]], [1], [2.0])
+            fmu.doStep(currentCommunicationPoint=t, communicationStepSize=0.05)
+            rows.append(fmu.getReal(states))
+        fmu.terminate()
+        fmu.freeInstance()
+        if with_derivative:
+            assert_agree(np.array(rows), ref, "cart_pole with F = 1 + 2 t through input derivatives")
+        else:
+            assert np.max(np.abs(np.array(rows) - ref)) > 1e-4       # the ramp held: a different run
+
+
+@pytest.mark.parametrize("name,file", [("four_bar", "four_bar.mech"), ("bouncing_ball", "bouncing_ball.mech")])
+def test_fmu_state_get_set_and_serialize(fmus, name, file):
+    """Co-simulation from a saved state repeats the run: the state taken at t = 0.5 (kept, and
+    serialized into bytes restored in a second instance) gives the same states to t = 1.5 as
+    the run that went on, which matches mech simulate (the four-bar's constraints, the ball's
+    impacts: the dense step kept ahead and the contact modes are part of the state)."""
+    m, path = fmus(name, file)
+    ref = reference(m, 1.5, 0.01)
+    fmu, by = _slave(path)
+    states = [by[s] for s in state_names(m)] + [by["mechdsl.steps"]]
+
+    def run(f, k0, k1):
+        rows = []
+        for k in range(k0, k1):
+            f.doStep(currentCommunicationPoint=0.01 * k, communicationStepSize=0.01)
+            rows.append(f.getReal(states))
+        return np.array(rows)
+
+    first = run(fmu, 0, 50)
+    saved = fmu.getFMUstate()
+    data = fmu.serializeFMUstate(saved)
+    on = run(fmu, 50, 150)
+    assert_agree(np.r_[first, on][:, :-1], ref[1:], f"{name}: the run that went on")
+    fmu.setFMUstate(saved)
+    again = run(fmu, 50, 150)
+    fmu.freeFMUstate(saved)
+    other, _ = _slave(path, "restored")
+    other.setFMUstate(other.deSerializeFMUstate(data))
+    restored = run(other, 50, 150)
+    for rows, what in ((again, "set back"), (restored, "deserialized in another instance")):
+        assert np.max(np.abs(rows[:, :-1] - on[:, :-1])) <= 1e-12, f"{name}: {what}"
+        assert rows[-1, -1] - rows[0, -1] == on[-1, -1] - on[0, -1], f"{name}: {what}: the same steps"
+    for f in (fmu, other):
+        f.terminate()
+        f.freeInstance()
 
 
 def _directional(path, m, x, u=None):
@@ -291,6 +393,36 @@ def test_export_is_deterministic(tmp_path):
     for name, unit in (("j1.phi", "rad"), ("der(j1.phi)", "rad/s"), ("der(der(j1.phi))", "rad/s2"), ("m", "kg")):
         assert f'name="{name}"' in md and f'unit="{unit}"' in md
     assert 'causality="parameter" variability="tunable"' in md and 'description="mass of each rod"' in md
+
+
+BOUNDED = """model Bounded "a mass on a spring, pushed"
+  parameter Real m(unit = "kg", min = 0.1, max = 10) = 1 "mass";
+  parameter Real k(unit = "N/m", min = 0) = 4 "stiffness";
+  input Real F(unit = "N", min = -5, max = 5) = 0 "push";
+  coordinate Real x(start = 0.2, unit = "m");
+equation
+  kinetic = 1/2*m*der(x)^2;
+  potential = 1/2*k*x^2;
+  force(x) = F;
+end Bounded;
+"""
+
+
+def test_parameters_and_inputs_carry_unit_bounds_and_description(tmp_path):
+    from fmpy import read_model_description
+
+    m = mechdsl.loads(BOUNDED, filename="bounded.mech")
+    path = tmp_path / "bounded.fmu"
+    m.export_fmu(path, fmi_type="cs")
+    by = {v.name: v for v in read_model_description(str(path)).modelVariables}
+    for name, causality, unit, lo, hi, start, doc in (("m", "parameter", "kg", 0.1, 10, 1, "mass"),
+                                                      ("k", "parameter", "N/m", 0, None, 4, "stiffness"),
+                                                      ("F", "input", "N", -5, 5, 0, "push")):
+        v = by[name]
+        assert (v.causality, v.unit, v.description) == (causality, unit, doc), name
+        for got, want in ((v.min, lo), (v.max, hi), (v.start, start)):
+            assert (got is None) == (want is None) and (want is None or float(got) == pytest.approx(want)), name
+    assert by["m"].variability == "tunable"
 
 
 def test_bad_input_is_refused_and_nothing_is_written(tmp_path, monkeypatch):

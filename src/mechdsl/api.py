@@ -463,6 +463,59 @@ class Model:
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.output.display
         return r
 
+    def sensitivities(self, t_end: float | None = None, params=(), starts=(), outputs=None,
+                      method: str = "forward", points: int | None = None, *, times=None, integral=None,
+                      **settings):
+        """Derivatives of the recorded motion with respect to parameters and start values
+        (mechdsl.estimation.sensitivity; docs/fitting.md): a Sensitivities object, ``S[output,
+        name]`` the derivative over ``S.t`` in the output's unit per the name's declared unit,
+        ``S.to_xarray()`` a Dataset with units.
+
+        params: Real parameters (not dependent ones); starts: start values ``c`` / ``c.start``
+        and speeds ``der(c)`` / ``c.speed``.  outputs: the recorded signals (coordinates,
+        speeds, outputs, energies; default all).  method "forward": every point of the output
+        grid (``points``), one integration with len(params + starts) directions; "adjoint": the
+        outputs at ``times`` (default t_end), and d/dname of ``integral`` (names of signals
+        whose integral over the run is the objective), one backward integration per output
+        and time.  Other keywords: the run's settings (rtol, atol, method of integration as
+        ``integrator``... see ``simulate``).  ODE, constrained and input-driven runs; a model
+        with contacts is refused (E770)."""
+        from .estimation.sensitivity import sensitivities
+
+        if "integrator" in settings:          # the run's method (``method`` names the derivatives')
+            settings["method"] = settings.pop("integrator")
+        try:
+            return sensitivities(self, t_end, params, starts, outputs, method, points, times, integral, settings)
+        finally:
+            self._remember()
+
+    def fit(self, data, params=(), starts=(), weights=None, bounds=None, experiments=None, *, method: str = "lm",
+            max_iterations: int = 100, rank_tol: float | None = None, t_end: float | None = None, **settings):
+        """Least-squares estimates of parameters and start values from measured motion
+        (mechdsl.estimation.fit; docs/fitting.md): a FitResult with estimates, standard errors,
+        correlations, residuals and the combinations the data cannot determine.
+
+        data: a table (pandas DataFrame, dict of arrays, CSV path) with a time column
+        (``time`` or ``t``) and columns named like recorded signals (coordinates, der(c),
+        outputs, energies), or a list of them (one per experiment).  experiments: one dict per
+        table of that experiment's settings (``x0``, ``inputs``, ``p``).  weights: {column:
+        weight} (default 1); bounds: {name: (lo, hi)} (default the parameters' min / max).
+        method: "lm" (Gauss-Newton / Levenberg-Marquardt with exact sensitivities);
+        max_iterations; rank_tol: singular values of the (log-scaled) sensitivity matrix below
+        this fraction of the largest count as directions the data cannot determine (default
+        1e-6); t_end: end of the runs (default: each experiment's last sample).  Other
+        keywords: the runs' settings (rtol, atol, ``integrator`` = the integration method, ...)."""
+        from .estimation.fit import RANK_TOL, fit
+
+        if "integrator" in settings:
+            settings["method"] = settings.pop("integrator")
+        try:
+            return fit(self, data, params, starts, weights, bounds, experiments, method=method,
+                       max_iterations=max_iterations, rank_tol=RANK_TOL if rank_tol is None else rank_tol,
+                       t_end=t_end, settings=settings)
+        finally:
+            self._remember()
+
     def export_fmu(self, path, *, fmi_version: int = 2, fmi_type: str | None = None, overwrite: bool = False):
         """Write this model as a Functional Mock-up Unit (mechdsl.export.export_fmu; docs/export.md):
         fmi_version 2 or 3; fmi_type "me", "cs", "both" or None (every interface the model can

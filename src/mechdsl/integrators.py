@@ -179,7 +179,9 @@ def dae_function(ode):
     nu = ode.size1_in(2)
     p = ca.MX.sym("p", nu + ode.size1_in(3))
     e = ca.MX(0, 1)
-    dae = ca.Function("dae", [t, x, e, p, e], [ode(t, x, p[:nu], p[nu:]), e, e, e], ca.dyn_in(), ca.dyn_out())
+    # dense: a structurally zero component (a free coordinate: q'' = 0) makes CasADi refuse the integrator
+    dae = ca.Function("dae", [t, x, e, p, e], [ca.densify(ode(t, x, p[:nu], p[nu:])), e, e, e], ca.dyn_in(),
+                      ca.dyn_out())
     with _CACHE_LOCK:                # runs in several threads share the caches
         if len(_DAE_CACHE) > 64:
             _DAE_CACHE.clear()

@@ -279,3 +279,63 @@ def check_report(eom: EOM, p=None, t: float = 0.0) -> list[str]:
             lines = []
         lines += [f"error[{d.code}]: {d.message}" + (f" (help: {d.help})" if d.help else "") for d in e.diagnostics]
     return lines
+
+
+def start_jacobian(eom: EOM, q, qd, qd_given, t: float, p, fixed_q, fixed_qd) -> tuple[np.ndarray, np.ndarray]:
+    """The linearization of ``initialize`` at its result (q, qd): (Jx, Jp), the change of the
+    consistent start [q; qd] per change of the start values given [q_in; qd_in] (2n x 2n) and of
+    the parameters (2n x n_p).  Used by sensitivities with respect to start values and
+    parameters of a constrained model (mechdsl.simulation.trajectory).
+
+    Positions: the free coordinates move along the minimum-norm direction in the mass metric,
+    dq_F = dq_in_F - D A^+ (G dq_in + g_p dp), A = G_F D, over the independent constraints
+    (exact when the start given was consistent or its free coordinates are determined by the
+    fixed ones; otherwise to first order of the correction).  Speeds: the one least-squares
+    solve qd_F = qd_in_F - D A^+ (G qd_in + g_t), differentiated exactly (CasADi, at q, qd_in)."""
+    n = eom.n
+    pv = np.asarray(p, float)
+    fixed_q, fixed_qd = _flags(fixed_q, n), _flags(fixed_qd, n)
+    free = [i for i in range(n) if not fixed_q[i]]
+    freev = [i for i in range(n) if not fixed_qd[i]]
+    keep = tuple(dof_report(eom, q, t, pv).independent)
+    f = eom.workspace.memo(("start_jacobian", tuple(free), tuple(freev), keep),
+                           lambda: _start_jacobian_functions(eom, free, freev, keep))
+    Jq, Jqp, Vq, Vqd, Vp = (np.array(v, float) for v in f(q, qd_given, t, pv))
+    Jq, Jqp = Jq.reshape(n, n), Jqp.reshape(n, -1)
+    Vq, Vqd, Vp = Vq.reshape(n, n), Vqd.reshape(n, n), Vp.reshape(n, -1)
+    Jx = np.block([[Jq, np.zeros((n, n))], [Vq @ Jq, Vqd]])
+    Jp = np.vstack([Jqp, Vq @ Jqp + Vp])
+    return Jx, Jp
+
+
+def _start_jacobian_functions(eom: EOM, free, freev, keep):
+    """Function (q, qd_in, t, p) -> (dq/dq_in, dq/dp, dqd/dq, dqd/dqd_in, dqd/dp) of the
+    consistent initialization (``start_jacobian``)."""
+    import casadi as ca
+
+    n = eom.n
+    q, t, p = eom.q, eom.t, eom.p
+    qd_in = ca.SX.sym("qd_in", n)
+    g = ca.SX(eom.g)[list(keep)] if keep else ca.SX(0, 1)
+    G = ca.jacobian(g, q)
+    d = 1.0 / ca.sqrt(ca.fmax(ca.fabs(ca.diag(ca.SX(eom.M))), 1e-300))
+
+    def embed(rows, v):
+        out = ca.SX.zeros(n, v.size2())
+        for k, i in enumerate(rows):
+            out[i, :] = v[k, :]
+        return out
+
+    def correction(rows, rhs):
+        """-D A^+ rhs on the rows, A = G_rows D_rows (A^+ = A' (A A')^-1: full row rank)."""
+        if not rows or g.numel() == 0:
+            return ca.SX.zeros(n, rhs.size2())
+        D = ca.diag(d[rows])
+        A = ca.mtimes(G[:, rows], D)
+        return embed(rows, -ca.mtimes(D, ca.mtimes(A.T, ca.solve(ca.mtimes(A, A.T), rhs))))
+
+    Jq = ca.SX.eye(n) + correction(free, G)
+    Jqp = correction(free, ca.jacobian(g, p))
+    qd = qd_in + correction(freev, ca.mtimes(G, qd_in) + ca.jacobian(g, t))
+    return ca.Function("start_jacobian", [q, qd_in, t, p],
+                       [Jq, Jqp, ca.jacobian(qd, q), ca.jacobian(qd, qd_in), ca.jacobian(qd, p)])

@@ -70,29 +70,25 @@ def _interfaces(model, fmi_type: str | None) -> tuple[bool, bool, list[str]]:
     return want_me, want_cs, notes
 
 
-def _settings(model):
-    """The run's settings as ``mech simulate`` resolves them (scene > defaults)."""
-    t_end = None if model.scene_settings.get("stop_time") is not None else 10.0
-    return model.settings(t_end=t_end)
-
-
-def _defaults(model, s, plan) -> dict:
-    """The mechdsl.* settings' start values; those of contacts only for a model with contacts
-    (the others get placeholders the runtime never reads, and no variable: ``variables.table``)."""
-    from . import formulate
+def _defaults(model, s, plan, kind: str) -> dict:
+    """The mechdsl.* settings' start values, from the run's settings and the simulation layer's
+    own rules (export/problem.py); those of contacts only for a model with contacts (the others
+    get placeholders the runtime never reads, and no variable: ``variables.table``)."""
+    from ..simulation.settings import DEFAULT_POINTS
+    from . import problem
 
     contacts = bool(plan.k or plan.nfix)
-    c = formulate.contact_defaults(s) if contacts else \
+    c = problem.contact_defaults(s) if contacts else \
         {"rest_speed": 0.0, "impact_order": 0, "max_events": 0, "acc_tol": 0.0, "samples": 1}
     span = float(s.t_end) - float(s.t_start)
-    method = str(s.method or "auto").lower()
-    one = method in ("dopri5", "rk45", "scipy-rk45") or (method == "auto" and s.rtol >= 1e-5)
+    points = int(s.points or DEFAULT_POINTS)
     return {"mechdsl.rtol": float(s.rtol), "mechdsl.atol": float(s.atol), "mechdsl.rest_speed": c["rest_speed"],
             "mechdsl.drift_bound": 0.0,
             "mechdsl.projection_interval": span / 60.0 if (plan.m or plan.k or plan.nfix) else 0.0,
-            "mechdsl.method": 1 if one else 2, "mechdsl.impact_order": c["impact_order"],
-            "mechdsl.max_steps": int(s.max_steps or 100_000), "mechdsl.max_events": c["max_events"],
-            "_acc_tol": c["acc_tol"], "_samples": c["samples"]}
+            "mechdsl.method": 1 if problem.stepper(model, s, kind) == "dopri5" else 2,
+            "mechdsl.impact_order": c["impact_order"],
+            "mechdsl.max_steps": problem.max_steps(s, points), "mechdsl.max_events": c["max_events"],
+            "_acc_tol": c["acc_tol"], "_samples": c["samples"], "_points": points}
 
 
 def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None,
@@ -104,7 +100,7 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
     overwrite: replace an existing file that mechdsl did not write.  Nothing is written
     unless the whole FMU was built (atomic replace)."""
     from ..output.fileio import check_writable, write_atomic
-    from . import build, functions, variables, xml
+    from . import build, functions, problem, variables, xml
 
     try:
         fmi_version = int(fmi_version)
@@ -117,10 +113,11 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
     check_writable(path, overwrite)
     want_me, want_cs, notes = _interfaces(model, fmi_type)
     folder, suffix = build.platform_folder(fmi_version)
-    s = _settings(model)
-    plan = functions.build(model, model.casadi()["ode"])
-    defaults = _defaults(model, s, plan)
-    start_calc = functions.start_depends_on_parameters(model.eom)
+    s = problem.run_settings(model)
+    plan = functions.build(model, problem.functions(model))
+    kind = "hybrid" if plan.k or plan.nfix else ("dae" if plan.m else "ode")
+    defaults = _defaults(model, s, plan, kind)
+    start_calc = problem.start_depends_on_parameters(model.eom)
     table = variables.table(model, plan, defaults, start_calc, fmi_version)
     ident = identifier_of(model.name)
     eom = model.eom
@@ -143,11 +140,12 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
         "real_settings": [defaults[k] for k, _, _ in variables.REAL_SETTINGS],
         "int_settings": [defaults[k] for k, _, _, _ in variables.INT_SETTINGS],
         "acc_tol": defaults["_acc_tol"], "samples": defaults["_samples"],
+        "rules": problem.rules(s, bool(plan.m), bool(plan.k or plan.nfix)),
     }
     srcs = build.sources(meta, plan, fmi_version)
     from .. import __version__
 
-    step = (float(s.t_end) - float(s.t_start)) / ((s.points or 501) - 1)
+    step = (float(s.t_end) - float(s.t_start)) / (defaults["_points"] - 1)
     info = {"identifier": ident, "model": model.name, "description": getattr(model.model, "doc", "") or "",
             "tool": f"mechdsl {__version__}", "me": want_me, "cs": want_cs, "constrained": bool(plan.m),
             "contacts": bool(plan.k or plan.nfix), "sources": build.c_files(srcs),

@@ -1,9 +1,10 @@
 """Sources, compilation and the zip of an FMU.
 
 The FMU's sources are the CasADi-generated C of the model (model.c), its table
-(model_data.c), the runtime (mech_*.c, the same for every model), the compiled stepping
-loop of ``mech simulate`` (crk.c, copied unchanged from mechdsl/simulation/backends), one FMI
-interface (fmi2.c or fmi3.c) and the official FMI headers.  They are compiled into one
+(model_data.c), the runtime units the model needs (mech_*.c, the same for every model: the
+constraint and contact units only for models with constraints or contacts), the compiled
+stepping loop of ``mech simulate`` (crk.c, copied unchanged from mechdsl/simulation/backends),
+one FMI interface (fmi2.c or fmi3.c) and the official FMI headers.  They are compiled into one
 shared library with the system C compiler (symbols hidden but the FMI functions); object
 files are cached under the model cache by the hash of their text, flags and compiler, so an
 export compiles only the model's own code.  The zip is deterministic (sorted entries, fixed
@@ -23,13 +24,16 @@ from ..diagnostics import Diagnostic, MechError
 
 log = logging.getLogger(__name__)
 HERE = Path(__file__).with_name("c")
-RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_hybrid.c", "mech_linalg.c")
+RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_cosim.c", "mech_state.c")     # every FMU
+CONSTRAINT_UNITS = ("mech_constraints.c", "mech_linalg.c")      # constraint rows: constraints, contacts, fixations
+CONTACT_UNITS = ("mech_hybrid.c",)                               # contacts, fixations
 HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
            3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
 CFLAGS = ["-O2", "-fPIC", "-fvisibility=hidden", "-std=gnu11"]
 # units off the stepping loop's hot path compile at -O1 (half gcc's time there; mech_hybrid's
 # constrained accelerations run in the loop only while contacts are closed or points fixed)
-LIGHT = ("mech_runtime.c", "mech_hybrid.c", "fmi2.c", "fmi3.c", "model_data.c")
+LIGHT = ("mech_runtime.c", "mech_cosim.c", "mech_state.c", "mech_constraints.c", "mech_hybrid.c", "fmi2.c", "fmi3.c",
+         "model_data.c")
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 
 
@@ -85,7 +89,7 @@ def model_data(meta: dict, plan, fn_counts: dict) -> str:
     lines.append(_array("char *const", "COORDS", meta["coords"], _c_string))
     lines.append(_array("char *const", "ROWS", meta["rows"], _c_string))
     lines.append(_array("int", "FRIC_COL", plan.fric_col, str))
-    rs, is_ = meta["real_settings"], meta["int_settings"]
+    rs, is_, ru = meta["real_settings"], meta["int_settings"], meta["rules"]
 
     def fn(key):
         name = f"mech_{key}"
@@ -104,7 +108,12 @@ def model_data(meta: dict, plan, fn_counts: dict) -> str:
               "  {" + ", ".join(str(int(v)) for v in is_) + "},",
               f"  {_real(meta['acc_tol'])}, {int(meta['samples'])},",
               "  PARAM_NAMES, COORDS, ROWS, FRIC_COL,",
-              "  " + ", ".join(fn(k) for k in ("ode", "out", "jvp", "start", "params", "dyn", "cons", "gap", "e", "fric")),
+              "  " + ", ".join(fn(k) for k in ("ode", "out", "jvp", "start", "params", "dyn", "cons", "gap", "e", "fric")) + ",",
+              "  /* the tolerance rules (mechdsl/export/problem.py rules) */",
+              "  {" + ", ".join(_real(v) for v in (*ru["drift"], ru["offset"][0], *ru["touch"], ru["v_eps"],
+                                                   ru["init_tol"], ru["rank_tol"])) + f", {int(ru['zeno_events'])}, "
+              + _real(ru["zeno_span"]) + "},",
+              "  " + ("&mech_constraint_ops" if plan.nrows else "0") + ", " + ("&mech_contact_ops" if plan.k or plan.nfix else "0"),
               "};", ""]
     return "\n".join(lines)
 
@@ -123,7 +132,8 @@ def sources(meta: dict, plan, fmi_version: int) -> dict[str, str]:
     out = {"model.c": casadi_source(plan.functions)}
     counts = {f.name(): (f.n_in(), f.n_out()) for f in plan.functions}
     out["model_data.c"] = model_data(meta, plan, counts)
-    for name in RUNTIME:
+    units = RUNTIME + (CONSTRAINT_UNITS if plan.nrows else ()) + (CONTACT_UNITS if plan.k or plan.nfix else ())
+    for name in units:
         out[name] = (HERE / name).read_text()
     out["crk.c"] = (HERE.parent.parent / "simulation" / "backends" / "crk.c").read_text()
     out[f"fmi{fmi_version}.c"] = (HERE / f"fmi{fmi_version}.c").read_text()
@@ -133,7 +143,8 @@ def sources(meta: dict, plan, fmi_version: int) -> dict[str, str]:
 
 
 def c_files(srcs: dict) -> list[str]:
-    order = ["model.c", "model_data.c", "mech_runtime.c", "mech_hybrid.c", "mech_linalg.c", "crk.c", "fmi2.c", "fmi3.c"]
+    order = ["model.c", "model_data.c", "mech_runtime.c", "mech_cosim.c", "mech_state.c", "mech_constraints.c",
+             "mech_hybrid.c", "mech_linalg.c", "crk.c", "fmi2.c", "fmi3.c"]
     return [f for f in order if f in srcs]
 
 

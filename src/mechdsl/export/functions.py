@@ -26,8 +26,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from ..diagnostics import Diagnostic, MechError
 
 
@@ -66,24 +64,20 @@ def _dense(f, name, names_in, names_out):
     return ca.Function(name, ins, outs, list(names_in), list(names_out))
 
 
-def build(model, plain_ode) -> Plan:
-    """The Functions of ``model`` (an api.Model).  ``plain_ode``: the minimal-coordinate ODE
-    Function (t, x, u, p) -> xdot of an unconstrained model (``Model.casadi()["ode"]``)."""
+def build(model, funcs) -> Plan:
+    """The Functions of ``model`` (an api.Model) from ``funcs``, the problem's Functions
+    (``Model.casadi()``, export/problem.py): ``mech_ode`` is its ``ode`` with its
+    ``multipliers``, ``mech_dyn`` its ``mass_matrix`` and ``bias``, ``mech_start`` and
+    ``mech_params`` its ``start`` and ``parameters``; the outputs are the model's output
+    expressions reading the multipliers as an input (the problem's ``outputs`` solve them again
+    inside; the runtime has them from ``mech_ode``, or from the contact accelerations)."""
     import casadi as ca
 
-    from ..eom.codegen import casadi_functions
-    from . import formulate
+    from . import problem
 
     eom = model.eom
     n, nu, npar, m = eom.n, eom.nu, int(eom.p.numel()), eom.m
-    base_rows: tuple = ()
-    if m:
-        ode, base_rows = formulate.index1_ode(eom, model.parameter_values)
-    else:
-        Sym = _sx_or_mx(plain_ode)
-        ins = [Sym.sym(plain_ode.name_in(i), plain_ode.sparsity_in(i)) for i in range(4)]
-        ode = ca.Function("mech_ode", ins, [ca.densify(plain_ode.call(ins)[0]), Sym(0, 1)],
-                          ["t", "x", "u", "p"], ["xdot", "lam"])
+    ode, base_rows = problem.ode(model, funcs)
     q, qd, t, p, u = eom.q, eom.qd, eom.t, eom.p, eom.u_sym
     x = ca.vertcat(q, qd)
     lam = eom.lam if eom.lam is not None else ca.SX(0, 1)
@@ -99,17 +93,16 @@ def build(model, plain_ode) -> Plan:
                                    help="an output must depend only on coordinates, speeds, time, "
                                         "inputs, parameters and constraint multipliers")) from None
     jvp = _jvp(ode, out, n, nu, npar, m)
-    fs = casadi_functions(eom, names=("start", "parameters"))
-    start = _dense(fs["start"], "mech_start", ["p"], ["q0", "qd0"])
-    params = _dense(fs["parameters"], "mech_params", ["free"], ["p"])
-    funcs = [ode, out, jvp, start, params]
-    gaps, fixes = formulate.contacts(eom) if model.model.contacts else ([], [])
+    start = _dense(funcs["start"], "mech_start", ["p"], ["q0", "qd0"])
+    params = _dense(funcs["parameters"], "mech_params", ["free"], ["p"])
+    gaps, fixes = problem.contacts(eom) if model.model.contacts else ([], [])
+    fns = [ode, out, jvp, start, params]
     k, nfix = len(gaps), len(fixes)
     rows = []
     if m:
         rows.append(ca.reshape(ca.SX(eom.g), -1, 1))
     rows += [ca.SX(g.gap) for g in gaps]
-    rows += [ca.reshape(formulate.point_position(eom, f.point), 3, 1) for f in fixes]
+    rows += [ca.reshape(problem.point_position(eom, f.point), 3, 1) for f in fixes]
     nrows = m + k + 3 * nfix
     if nrows:
         c = ca.vertcat(*rows)
@@ -117,9 +110,8 @@ def build(model, plain_ode) -> Plan:
         ct = ca.jacobian(c, t)
         cdot = ca.mtimes(A, qd) + ct
         gamma = ca.mtimes(ca.jacobian(cdot, q), qd) + ca.jacobian(cdot, t)
-        funcs.append(ca.Function("mech_dyn", [t, q, qd, u, p], [ca.densify(ca.SX(eom.M)), ca.densify(ca.SX(eom.bias))],
-                                 ["t", "q", "qd", "u", "p"], ["M", "bias"]))
-        funcs.append(ca.Function("mech_cons", [t, q, qd, p], [ca.densify(c), ca.densify(A), ca.densify(ct),
+        fns.append(problem.dynamics(model, funcs))
+        fns.append(ca.Function("mech_cons", [t, q, qd, p], [ca.densify(c), ca.densify(A), ca.densify(ct),
                                                                ca.densify(gamma)],
                                  ["t", "q", "qd", "p"], ["c", "A", "ct", "gamma"]))
     fric_col = [-1] * k
@@ -128,13 +120,13 @@ def build(model, plain_ode) -> Plan:
         for j, i in enumerate(fric):
             fric_col[i] = j
         W = ca.horzcat(*[ca.reshape(ca.SX(gaps[i].friction), n, 1) for i in fric])
-        funcs.append(ca.Function("mech_fric", [t, q, qd, p], [ca.densify(W)], ["t", "q", "qd", "p"], ["W"]))
+        fns.append(ca.Function("mech_fric", [t, q, qd, p], [ca.densify(W)], ["t", "q", "qd", "p"], ["W"]))
     if k:
         g = ca.vertcat(*[ca.SX(gi.gap) for gi in gaps])
         e = ca.vertcat(*[ca.SX(gi.e) for gi in gaps])
-        funcs.append(ca.Function("mech_gap", [t, q, p], [ca.densify(g)], ["t", "q", "p"], ["g"]))
-        funcs.append(ca.Function("mech_e", [p], [ca.densify(e)], ["p"], ["e"]))
-    return Plan(functions=funcs, n=n, nu=nu, np=npar, m=m, k=k, nfix=nfix, nrows=nrows, nout=len(names),
+        fns.append(ca.Function("mech_gap", [t, q, p], [ca.densify(g)], ["t", "q", "p"], ["g"]))
+        fns.append(ca.Function("mech_e", [p], [ca.densify(e)], ["p"], ["e"]))
+    return Plan(functions=fns, n=n, nu=nu, np=npar, m=m, k=k, nfix=nfix, nrows=nrows, nout=len(names),
                 base_rows=tuple(base_rows), fix_times=tuple(float(f.time) for f in fixes), gaps=gaps,
                 fixations=fixes, fric_col=tuple(fric_col))
 
@@ -159,13 +151,3 @@ def _jvp(ode, out, n, nu, npar, m):
     res = fwd(t, x, u, p, xdot, y, 0, dx, du, Sym.zeros(npar, 1))
     return ca.Function("mech_jvp", [t, x, u, p, dx, du], [ca.densify(res[0]), ca.densify(res[1])],
                        ["t", "x", "u", "p", "dx", "du"], ["dxdot", "dy"])
-
-
-def start_depends_on_parameters(eom) -> np.ndarray:
-    """(2n,) bool: which start values are expressions in the parameters (FMI initial="calculated")."""
-    import casadi as ca
-
-    q0 = ca.SX(eom.q0) if eom.q0 is not None else ca.SX.zeros(eom.n)
-    qd0 = ca.SX(eom.qd0) if eom.qd0 is not None else ca.SX.zeros(eom.n)
-    x0 = ca.vertcat(q0, qd0)
-    return np.array([bool(ca.depends_on(x0[i], eom.p)) for i in range(2 * eom.n)], bool)

@@ -7,6 +7,8 @@
     prep.integrator()                the CasADi integrator a run integrates with (sweeps map it)
     prep.interval_function(funcs)    one interval of that integrator as (t0, x0, u, p) -> xf
                                      (Model.integrator: multiple shooting)
+    prep.trajectory(times, integrals)  the run as one differentiable Function (x0, p) -> the
+                                     recorded signals (trajectory.py): sensitivities, fits
 
 Every run goes through it: ``solve(problem)`` prepares inside the timed run, sweeps prepare
 once per model and solve each run ``at`` its values (the vectorized scheduler maps
@@ -32,6 +34,7 @@ from .backends import backend
 from .choose import default_inputs, fixed_step_count, min_step
 from .problem import Problem
 from .registry import METHODS, spec
+from .trajectory import cached_trajectory
 
 
 @record
@@ -94,6 +97,18 @@ class Prepared:
         integ = I.make_integrator("integrator", m.plugin, I.dae_function(shifted), 0.0, span, opts)
         xf = integ(x0=x0, p=args)["xf"]
         return ca.Function("integrator", [t0, x0, u, p], [xf], ["t0", "x0", "u", "p"], ["xf"])
+
+
+    def trajectory(self, times=None, integrals=()):
+        """The run as one differentiable CasADi Function of the start and the parameters, with
+        what it records (coordinates, speeds, outputs, energies) on its output grid or on
+        ``times``, and the running integrals of the signals named in ``integrals``
+        (simulation.trajectory.Trajectory: its forward and adjoint derivatives are CasADi's
+        sensitivities of this preparation's integrator).  ODE and constrained problems."""
+        if self.problem.kind not in ("ode", "dae"):
+            raise UsageError(f"a {self.problem.kind} problem has no differentiable trajectory Function "
+                             f"({'contacts make the motion jump at impacts' if self.problem.kind == 'hybrid' else 'the fixed-step canonical methods are not CasADi integrators'})")
+        return cached_trajectory(self.problem, self.setup, times, tuple(integrals))
 
 
 def prepare(problem: Problem) -> Prepared:

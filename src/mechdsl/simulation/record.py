@@ -85,6 +85,14 @@ def lam_symbol(eom):
     return eom.workspace.memo("lam", lambda: ca.SX.sym("lam", eom.m) if eom.m else ca.SX(0, 1))
 
 
+def function(eom, columns: dict):
+    """(column names, Function (t, q, qd, u, p, lam) -> the columns stacked): the recorder's own
+    Function of these columns, kept as ``record`` keeps it (the trajectory Function of
+    simulation/trajectory.py maps it inside its graph, so its derivatives are CasADi's)."""
+    names, f, _ = _function(eom, columns, ())
+    return names, f
+
+
 def _function(eom, columns: dict, using: tuple, keep: bool = True):
     """(column names, Function (t, q, qd, u, p, lam) -> all columns stacked, its maps by
     number of points), built once."""

@@ -1,7 +1,7 @@
 /* fmi2.c: the FMI 2.0 interface (model exchange and co-simulation) of an FMU exported by
    mechdsl, on the runtime of mech_fmu.h.  Every function of the standard is defined; those of
-   capabilities the modelDescription.xml does not claim (FMU state, input interpolation,
-   output derivatives, asynchronous steps) return fmi2Error. */
+   capabilities the modelDescription.xml does not claim (output derivatives, asynchronous
+   steps) return fmi2Error. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -166,20 +166,31 @@ static fmi2Status unsupported(fmi2Component c, const char *what) {
   return fmi2Error;
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)s; return unsupported(c, "fmi2GetFMUstate"); }
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { (void)s; return unsupported(c, "fmi2SetFMUstate"); }
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { (void)s; return unsupported(c, "fmi2FreeFMUstate"); }
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) {
+  CHECK(INST->mode != MODE_ERROR && s, "fmi2GetFMUstate");
+  return mech_state_get(INST, s) ? fmi2Error : fmi2OK;
+}
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) {
+  CHECK(INST->mode != MODE_ERROR, "fmi2SetFMUstate");
+  return mech_state_set(INST, s) ? fmi2Error : fmi2OK;
+}
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) {
+  if (!c) return fmi2Error;
+  mech_state_free(s);
+  return fmi2OK;
+}
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size) {
-  (void)s; (void)size;
-  return unsupported(c, "fmi2SerializedFMUstateSize");
+  CHECK(s && size, "fmi2SerializedFMUstateSize");
+  *size = mech_state_size(s);
+  return fmi2OK;
 }
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte b[], size_t size) {
-  (void)s; (void)b; (void)size;
-  return unsupported(c, "fmi2SerializeFMUstate");
+  CHECK(s && b, "fmi2SerializeFMUstate");
+  return mech_state_serialize(INST, s, b, size) ? fmi2Error : fmi2OK;
 }
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size, fmi2FMUstate *s) {
-  (void)s; (void)b; (void)size;
-  return unsupported(c, "fmi2DeSerializeFMUstate");
+  CHECK(s && b, "fmi2DeSerializeFMUstate");
+  return mech_state_deserialize(INST, b, size, s) ? fmi2Error : fmi2OK;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
@@ -273,9 +284,10 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {
-  (void)vr; (void)order; (void)value;
-  if (!c) return fmi2Error;
-  return nvr ? unsupported(c, "fmi2SetRealInputDerivatives (canInterpolateInputs is false)") : fmi2OK;
+  CHECK(INST->kind == KIND_CS && (INST->mode == MODE_INIT || INST->mode == MODE_STEP), "fmi2SetRealInputDerivatives");
+  for (size_t i = 0; i < nvr; i++)
+    if (mech_set_input_derivative(INST, vr[i], order[i], value[i])) return fmi2Error;
+  return fmi2OK;
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,

@@ -1,8 +1,7 @@
 /* fmi3.c: the FMI 3.0 interface (model exchange and co-simulation) of an FMU exported by
    mechdsl, on the runtime of mech_fmu.h.  Every function of the standard is defined; those of
    capabilities the modelDescription.xml does not claim (other variable types, clocks,
-   FMU state, scheduled execution, adjoint derivatives, event mode in co-simulation) return
-   fmi3Error.  Variables are scalars (nValues == nValueReferences); the independent variable
+   scheduled execution, adjoint derivatives, event mode in co-simulation) return fmi3Error.  Variables are scalars (nValues == nValueReferences); the independent variable
    `time` has the value reference VR_END. */
 #include <stdlib.h>
 #include <string.h>
@@ -250,29 +249,31 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
 }
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-  (void)FMUState;
-  return unsupported(instance, "fmi3GetFMUState");
+  CHECK(INST->mode != MODE_ERROR && FMUState, "fmi3GetFMUState");
+  return mech_state_get(INST, FMUState) ? fmi3Error : fmi3OK;
 }
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-  (void)FMUState;
-  return unsupported(instance, "fmi3SetFMUState");
+  CHECK(INST->mode != MODE_ERROR, "fmi3SetFMUState");
+  return mech_state_set(INST, FMUState) ? fmi3Error : fmi3OK;
 }
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-  (void)FMUState;
-  return unsupported(instance, "fmi3FreeFMUState");
+  if (!instance) return fmi3Error;
+  mech_state_free(FMUState);
+  return fmi3OK;
 }
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
-  (void)FMUState; (void)size;
-  return unsupported(instance, "fmi3SerializedFMUStateSize");
+  CHECK(FMUState && size, "fmi3SerializedFMUStateSize");
+  *size = mech_state_size(FMUState);
+  return fmi3OK;
 }
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
-  (void)FMUState; (void)serializedState; (void)size;
-  return unsupported(instance, "fmi3SerializeFMUState");
+  CHECK(FMUState && serializedState, "fmi3SerializeFMUState");
+  return mech_state_serialize(INST, FMUState, serializedState, size) ? fmi3Error : fmi3OK;
 }
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState *FMUState) {
-  (void)FMUState; (void)serializedState; (void)size;
-  return unsupported(instance, "fmi3DeserializeFMUState");
+  CHECK(FMUState && serializedState, "fmi3DeserializeFMUState");
+  return mech_state_deserialize(INST, serializedState, size, FMUState) ? fmi3Error : fmi3OK;
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[], size_t nUnknowns,

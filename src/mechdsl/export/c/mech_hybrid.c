@@ -1,11 +1,10 @@
-/* mech_hybrid.c: co-simulation stepping of an exported mechdsl model.
+/* mech_hybrid.c: contacts and fixations in co-simulation (MechContactOps).
 
    The FMU steps itself with the compiled Runge-Kutta loop of mechdsl (crk.c, dopri5 or
    dop853 with scipy's step control), carrying the step size from one communication step to
-   the next (crk_run_h).  crk.c calls the model through the CasADi signature `ode`; here
-   `ode` is a dispatcher: the generated mech_ode (the minimal-coordinate ODE, or the
-   index-1 ODE of the model's constraints) while only the model's constraints are active,
-   else the constrained accelerations of the active rows solved here:
+   the next (crk_run_events_h).  crk.c calls the model through `ode` (mech_cosim.c): the
+   generated mech_ode while only the model's constraints are active, else the constrained
+   accelerations of the active rows solved here:
 
        M q'' = bias + A' lam,   A q'' + gamma = 0      (lam > 0: a contact pushes)
 
@@ -26,23 +25,10 @@
 
 #include "mech_fmu.h"
 
-int crk_run_h(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
-              const double *p, double rtol, double atol, double hmin, cint max_steps,
-              double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io);
-int crk_run_events_h(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
-                     const double *p, double rtol, double atol, double hmin, cint max_steps,
-                     double *X, double *stats, volatile cint *ctl, double *xfail,
-                     void *gap, void *gap_work, cint k, double offset, int samples, const double *gp,
-                     void *imp, void *imp_work, const double *rest, const double *limits, double *buf, cint cap,
-                     double *h_io);
-
-enum { CRK_OK = 0, CRK_EVENT = 9, CRK_EVENT_AT_START = 10 };
-#define RANK_TOL 1e-10          /* impacts.system.RANK_TOL */
 #define AT(A, lda, i, j) ((A)[(size_t)(j) * (size_t)(lda) + (size_t)(i)])
 #define ARGS(...) ((const double *[16]){__VA_ARGS__})
 #define RES(...) ((double *[16]){__VA_ARGS__})
 
-static _Thread_local Instance *current;     /* the instance crk.c is stepping (see `ode`) */
 
 /* ------------------------------------------------------------------ options of the contacts */
 
@@ -51,63 +37,11 @@ typedef struct { double rtol, atol, offset, touch, v_eps, rest_speed; } Opts;
 static Opts options(Instance *I) {
   Opts o;
   mech_rtol_atol(I, &o.rtol, &o.atol);
-  o.offset = o.atol;                                         /* ContactOptions.offset */
-  o.touch = fmax(1e-9, fmax(100 * o.atol, 2 * o.offset));     /* ContactOptions.touch */
+  o.offset = MECH.rules.offset_factor * o.atol;                                  /* ContactRun.offset */
+  o.touch = fmax(MECH.rules.touch_factor * o.atol, MECH.rules.touch_floor);        /* ContactRun.touch */
   o.rest_speed = I->real_settings[SET_REST_SPEED];
-  o.v_eps = 1e-6 * o.rest_speed;                             /* ContactOptions.v_eps */
+  o.v_eps = MECH.rules.v_eps_factor * o.rest_speed;                              /* ContactRun.v_eps */
   return o;
-}
-
-/* ------------------------------------------------------------------ evaluations */
-
-typedef struct { double *M, *bias, *L, *c, *A, *ct, *gam, *zero; } Eval;
-
-static void eval_free(Eval *E) { free(E->M); memset(E, 0, sizeof *E); }
-
-static int eval_new(Eval *E) {
-  const int n = MECH.n, nr = MECH.nrows;
-  memset(E, 0, sizeof *E);
-  E->M = (double *)calloc((size_t)(3 * n * n + 2 * n + 3 * nr + nr * n + 8), sizeof(double));
-  if (!E->M) return 1;
-  E->L = E->M + (size_t)n * n; E->bias = E->L + (size_t)n * n; E->c = E->bias + n; E->A = E->c + nr;
-  E->ct = E->A + (size_t)nr * n; E->gam = E->ct + nr; E->zero = E->gam + nr;
-  return 0;
-}
-
-/* dyn (and its Cholesky factor) and cons at (t, q, qd); the anchors of fixed points subtracted */
-static int eval_at(Instance *I, double t, const double *q, const double *qd, Eval *E, int dyn, int cons) {
-  const int nr = MECH.nrows;
-  if (!qd) qd = E->zero;
-  if (dyn) {
-    if (mech_call(I, &MECH.dyn, ARGS(&t, q, qd, I->u, I->p), RES(E->M, E->bias))) return 1;
-    if (la_cholesky(MECH.n, E->M, E->L)) return 2;
-  }
-  if (cons && nr) {
-    if (mech_call(I, &MECH.cons, ARGS(&t, q, qd, I->p), RES(E->c, E->A, E->ct, E->gam))) return 1;
-    for (int r = MECH.m + MECH.k; r < nr; r++) E->c[r] -= I->anchor[r];
-  }
-  return 0;
-}
-
-static double row_dot(const double *A, int nr, int n, int r, const double *v) {
-  double s = 0.0;
-  for (int j = 0; j < n; j++) s += AT(A, nr, r, j) * v[j];
-  return s;
-}
-
-/* x = W^-1 b for the (symmetric positive semidefinite) Schur complement W (nr x nr):
-   Cholesky, else elimination with pivoting, else the minimum-norm solution */
-static int solve_sym(int nr, const double *W, double *Wc, double *b, int *piv) {
-  if (!la_cholesky(nr, W, Wc)) { la_chol_solve(nr, Wc, b); return 0; }
-  double *bb = (double *)malloc(sizeof(double) * (size_t)(2 * nr + 1));
-  if (!bb) return 1;
-  memcpy(Wc, W, sizeof(double) * (size_t)nr * nr);
-  memcpy(bb, b, sizeof(double) * (size_t)nr);
-  int st = la_lu_solve(nr, Wc, bb, piv);
-  if (st) st = la_min_norm(nr, nr, W, nr, b, bb, NULL);
-  if (!st) memcpy(b, bb, sizeof(double) * (size_t)nr);
-  free(bb);
-  return st;
 }
 
 /* q'' and the multipliers lam of the rows `rows` at the state x (ContactSystem.accel) */
@@ -117,7 +51,7 @@ int mech_accel_rows(Instance *I, double t, const double *x, const int *rows, int
   double *M = I->work, *L = M + (size_t)n * n, *bias = L + (size_t)n * n, *c = bias + n, *A = c + NR;
   double *ct = A + (size_t)NR * n, *gam = ct + NR, *X = gam + NR, *W = X + (size_t)n * NR, *a0 = W + (size_t)NR * NR;
   double *rr = a0 + n, *Wc = rr + NR;
-  if (mech_call(I, &MECH.dyn, ARGS(&t, q, qd, I->u, I->p), RES(M, bias))) return 1;
+  if (mech_call(I, &MECH.dyn, ARGS(&t, q, qd, mech_inputs_at(I, t), I->p), RES(M, bias))) return 1;
   if (la_cholesky(n, M, L)) return 2;
   memcpy(a0, bias, sizeof(double) * (size_t)n);
   la_chol_solve(n, L, a0);
@@ -139,8 +73,8 @@ int mech_accel_rows(Instance *I, double t, const double *x, const int *rows, int
     la_chol_solve(n, L, col);
   }
   for (int i = 0; i < nr_; i++) {
-    for (int j = 0; j < nr_; j++) AT(W, nr_, i, j) = row_dot(A, NR, n, rows[i], X + (size_t)j * n);
-    rr[i] = -(row_dot(A, NR, n, rows[i], a0) + gam[rows[i]]);
+    for (int j = 0; j < nr_; j++) AT(W, nr_, i, j) = mech_row_dot(A, NR, n, rows[i], X + (size_t)j * n);
+    rr[i] = -(mech_row_dot(A, NR, n, rows[i], a0) + gam[rows[i]]);
   }
   if (friction) {
     double *b = (double *)malloc(sizeof(double) * (size_t)(nr_ + 1));
@@ -152,7 +86,7 @@ int mech_accel_rows(Instance *I, double t, const double *x, const int *rows, int
     if (!st) memcpy(rr, b, sizeof(double) * (size_t)nr_);
     free(b);
     if (st) return 3;
-  } else if (solve_sym(nr_, W, Wc, rr, I->ipiv)) return 3;
+  } else if (mech_correction_solve(nr_, W, Wc, rr, I->ipiv)) return 3;
   for (int i = 0; i < n; i++) {
     double v = a0[i];
     for (int j = 0; j < nr_; j++) v += X[(size_t)j * n + i] * rr[j];
@@ -162,40 +96,25 @@ int mech_accel_rows(Instance *I, double t, const double *x, const int *rows, int
   return 0;
 }
 
-void mech_lambda_model(Instance *I, const double *lamr) {
-  for (int i = 0; i < MECH.m; i++) I->lam[i] = 0.0;
-  for (int j = 0; j < I->nactive; j++)
-    if (I->active[j] < MECH.m) I->lam[I->active[j]] = -lamr[j];   /* EOM convention: M q'' = bias - G' lam */
-}
-
-/* ------------------------------------------------------------------ crk.c's right-hand side */
-
-int ode(const double **arg, double **res, cint *iw, double *w, int mem) {
-  Instance *I = current;
-  if (!I || I->use_base) {
-    res[1] = NULL;
-    return MECH.ode.f(arg, res, iw, w, mem);
+/* MechContactOps.accel: q'' with the active rows and the model's multipliers (EOM convention
+   M q'' = bias - G' lam: the active model rows' multipliers with the sign turned, 0 for others) */
+static int accel(Instance *I, double t, const double *x, double *qdd, double *lam) {
+  double *lamr = (double *)calloc((size_t)MECH.nrows + 1, sizeof(double));
+  if (!lamr) return 1;
+  int st = mech_accel_rows(I, t, x, I->active, I->nactive, qdd, lamr);
+  if (!st && lam) {
+    for (int i = 0; i < MECH.m; i++) lam[i] = 0.0;
+    for (int j = 0; j < I->nactive; j++)
+      if (I->active[j] < MECH.m) lam[I->active[j]] = -lamr[j];
   }
-  const int n = MECH.n;
-  memcpy(res[0], arg[1] + n, sizeof(double) * (size_t)n);
-  return mech_accel_rows(I, *arg[0], arg[1], I->active, I->nactive, res[0] + n, NULL);
+  free(lamr);
+  return st;
 }
-
-int ode_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w) {
-  MECH.ode.work(sz_arg, sz_res, sz_iw, sz_w);
-  if (*sz_arg < 4) *sz_arg = 4;
-  if (*sz_res < 2) *sz_res = 2;
-  return 0;
-}
-int ode_checkout(void) { return 0; }
-void ode_release(int mem) { (void)mem; }
-void ode_incref(void) {}
-void ode_decref(void) {}
 
 /* crk.c's event function: per contact the gap (open) or the normal force (closed) */
 static int events(const double **arg, double **res, cint *iw, double *w, int mem) {
   (void)iw; (void)w; (void)mem;
-  Instance *I = current;
+  Instance *I = mech_current;
   const int n = MECH.n, k = MECH.k;
   double t = *arg[0], *e = res[0];
   const double *x = arg[1];
@@ -228,13 +147,13 @@ static int events_work(cint *sz_arg, cint *sz_res, cint *sz_iw, cint *sz_w) {
 
 /* the rows of `cand` (in order) whose Jacobian rows are independent in the kinetic metric,
    greedily (ContactSystem.independent); their count, or -1 when the model cannot be evaluated */
-int mech_independent(Instance *I, double t, const double *q, const int *cand, int nc, int *out) {
+static int independent(Instance *I, double t, const double *q, const int *cand, int nc, int *out) {
   const int n = MECH.n, NR = MECH.nrows;
   if (nc == 0) return 0;
   Eval E;
-  if (eval_new(&E)) return -1;
+  if (mech_eval_new(&E)) return -1;
   double *basis = (double *)malloc(sizeof(double) * (size_t)(n * nc + 2 * n + 1));
-  if (!basis || eval_at(I, t, q, NULL, &E, 1, 1)) { free(basis); eval_free(&E); return -1; }
+  if (!basis || mech_eval_at(I, t, q, NULL, &E, 1, 1)) { free(basis); mech_eval_free(&E); return -1; }
   double *a = basis + (size_t)n * nc, *r = a + n;
   int nb = 0, count = 0;
   for (int s = 0; s < nc; s++) {
@@ -253,74 +172,14 @@ int mech_independent(Instance *I, double t, const double *q, const int *cand, in
     double nr = 0.0;
     for (int j = 0; j < n; j++) nr += r[j] * r[j];
     nr = sqrt(nr);
-    if (nr > RANK_TOL * na) {
+    if (nr > MECH.rules.rank_tol * na) {
       out[count++] = cand[s];
       for (int j = 0; j < n; j++) basis[(size_t)nb * n + j] = r[j] / nr;
       nb++;
     }
   }
-  free(basis); eval_free(&E);
+  free(basis); mech_eval_free(&E);
   return count;
-}
-
-/* dq = M^-1 A_R' (A_R M^-1 A_R')^-1 b for the rows R (the M-orthogonal correction) */
-static int correction(Instance *I, const Eval *E, const int *R, int nr_, const double *b, double *dq) {
-  const int n = MECH.n, NR = MECH.nrows;
-  double *X = (double *)malloc(sizeof(double) * (size_t)(n * nr_ + 2 * nr_ * nr_ + nr_ + 1));
-  if (!X) return 1;
-  double *W = X + (size_t)n * nr_, *Wc = W + (size_t)nr_ * nr_, *z = Wc + (size_t)nr_ * nr_;
-  for (int j = 0; j < nr_; j++) {
-    for (int i = 0; i < n; i++) X[(size_t)j * n + i] = AT(E->A, NR, R[j], i);
-    la_chol_solve(n, E->L, X + (size_t)j * n);
-  }
-  for (int i = 0; i < nr_; i++) {
-    for (int j = 0; j < nr_; j++) AT(W, nr_, i, j) = row_dot(E->A, NR, n, R[i], X + (size_t)j * n);
-    z[i] = b[i];
-  }
-  int st = solve_sym(nr_, W, Wc, z, I->ipiv);
-  for (int i = 0; !st && i < n; i++) {
-    double v = 0.0;
-    for (int j = 0; j < nr_; j++) v += X[(size_t)j * n + i] * z[j];
-    dq[i] = v;
-  }
-  free(X);
-  return st;
-}
-
-/* ContactSystem.project: positions onto the rows (Newton steps in the kinetic metric), the
-   one-sided rows only where they penetrate below -one_sided_tol, then the speeds */
-int mech_project(Instance *I, double t, double *q, double *qd, const int *rows, int nr_, double tol,
-                 const int *one_sided, int no, double one_sided_tol) {
-  const int n = MECH.n;
-  Eval E;
-  if (eval_new(&E)) return 1;
-  int *use = (int *)malloc(sizeof(int) * (size_t)(nr_ + no + 1));
-  double *b = (double *)malloc(sizeof(double) * (size_t)(nr_ + no + n + 1));
-  int st = !use || !b;
-  double *dq = b ? b + nr_ + no : NULL;
-  for (int it = 0; !st && it < 8; it++) {
-    if ((st = eval_at(I, t, q, qd, &E, 0, 1))) break;
-    int nu = 0;
-    double worst = 0.0;
-    for (int j = 0; j < nr_; j++) use[nu++] = rows[j];
-    for (int j = 0; j < no; j++) if (E.c[one_sided[j]] < -one_sided_tol) use[nu++] = one_sided[j];
-    for (int j = 0; j < nu; j++) worst = fmax(worst, fabs(E.c[use[j]]));
-    if (nu == 0 || worst <= tol) break;
-    if (!isfinite(worst)) { st = 2; break; }
-    if ((st = eval_at(I, t, q, qd, &E, 1, 0))) break;
-    for (int j = 0; j < nu; j++) b[j] = E.c[use[j]];
-    if ((st = correction(I, &E, use, nu, b, dq))) break;
-    for (int i = 0; i < n; i++) q[i] -= dq[i];
-  }
-  if (!st && nr_) {
-    st = eval_at(I, t, q, qd, &E, 1, 1);
-    for (int j = 0; !st && j < nr_; j++) b[j] = row_dot(E.A, MECH.nrows, n, rows[j], qd) + E.ct[rows[j]];
-    if (!st) st = correction(I, &E, rows, nr_, b, dq);
-    for (int i = 0; !st && i < n; i++) qd[i] -= dq[i];
-  }
-  free(use); free(b); eval_free(&E);
-  I->valid = 0;
-  return st;
 }
 
 /* ------------------------------------------------------------------ impacts (impact_map.py) */
@@ -390,10 +249,10 @@ static int solve_impact(const Eval *E, const double *v, int kc, const double *G,
        (the last n - nb columns of the Q of Bt' = Q R: Bt has independent rows) */
     double *rB = (double *)malloc(sizeof(double) * (size_t)(nb + 1));
     if (!rB) { st = 2; goto done; }
-    for (int i = 0; i < nb; i++) rB[i] = -bt[i] - row_dot(B, nb, n, i, v);
+    for (int i = 0; i < nb; i++) rB[i] = -bt[i] - mech_row_dot(B, nb, n, i, v);
     if (la_min_norm(nb, n, Bt, nb, rB, w0, NULL)) { free(rB); st = 2; goto done; }
     double res = 0.0, rn = 0.0;
-    for (int i = 0; i < nb; i++) { double r = row_dot(Bt, nb, n, i, w0) - rB[i]; res += r * r; rn += rB[i] * rB[i]; }
+    for (int i = 0; i < nb; i++) { double r = mech_row_dot(Bt, nb, n, i, w0) - rB[i]; res += r * r; rn += rB[i] * rB[i]; }
     if (sqrt(res) > 1e-9 * fmax(1.0, sqrt(rn))) { free(rB); st = 1; goto done; }
     /* null space by Gram-Schmidt of the unit vectors against the rows of Bt */
     double *basis = (double *)malloc(sizeof(double) * (size_t)(n * n + 1));
@@ -419,7 +278,7 @@ static int solve_impact(const Eval *E, const double *v, int kc, const double *G,
   int feasible0 = 1;
   double scale = 1.0;
   for (int i = 0; i < kc; i++) {
-    f[i] = h[i] - um[i] - row_dot(Gt, kc, n, i, w0);
+    f[i] = h[i] - um[i] - mech_row_dot(Gt, kc, n, i, w0);
     if (f[i] > 0.0) feasible0 = 0;
     scale = fmax(scale, fabs(f[i]));
   }
@@ -493,12 +352,13 @@ static int zeno(Instance *I, double t) {
     return 1;
   }
   I->recent[I->irecent] = t;
-  I->irecent = (I->irecent + 1) % ZENO_EVENTS;
-  if (I->nrecent < ZENO_EVENTS) I->nrecent++;
+  const int zn = MECH.rules.zeno_events;
+  I->irecent = (I->irecent + 1) % zn;
+  if (I->nrecent < zn) I->nrecent++;
   double span = I->stop_defined ? I->t_stop - I->t_start : 0.0;
-  if (I->nrecent == ZENO_EVENTS && span > 0 && t - I->recent[I->irecent] < ZENO_SPAN * span) {
+  if (I->nrecent == zn && span > 0 && t - I->recent[I->irecent] < MECH.rules.zeno_span * span) {
     mech_log(I, LOG_ERROR, "events accumulate (Zeno behaviour): the last %d events fell within %.3g s; raise "
-             "mechdsl.rest_speed for the scale of this model's speeds", ZENO_EVENTS, t - I->recent[I->irecent]);
+             "mechdsl.rest_speed for the scale of this model's speeds", zn, t - I->recent[I->irecent]);
     return 1;
   }
   return 0;
@@ -513,7 +373,7 @@ static int select_rows(Instance *I, double t, const double *q) {
   int *sel = cand + NR;
   int nc = bilateral(I, cand);
   for (int i = 0; i < MECH.k; i++) if (I->closed[i]) cand[nc++] = contact_row(i);
-  int ns = mech_independent(I, t, q, cand, nc, sel);
+  int ns = independent(I, t, q, cand, nc, sel);
   if (ns < 0) { free(cand); return 1; }
   for (int i = 0; i < MECH.k; i++) {
     if (!I->closed[i]) continue;
@@ -548,16 +408,16 @@ static void take_rows(const Eval *E, const int *R, int nr_, double *G, double *g
 static int impact(Instance *I, double t, const double *q, double *qd, const int *cands, int kc, const Opts *o) {
   const int n = MECH.n, NR = MECH.nrows;
   Eval E;
-  if (eval_new(&E)) return 2;
+  if (mech_eval_new(&E)) return 2;
   size_t need = (size_t)(2 * NR * n + 4 * NR + 2 * n + 8);
   double *buf = (double *)calloc(need, sizeof(double));
   int *ib = (int *)calloc((size_t)(3 * NR + 1), sizeof(int));
-  int st = !buf || !ib ? 2 : eval_at(I, t, q, qd, &E, 1, 1);
-  if (st) { free(buf); free(ib); eval_free(&E); return 2; }
+  int st = !buf || !ib ? 2 : mech_eval_at(I, t, q, qd, &E, 1, 1);
+  if (st) { free(buf); free(ib); mech_eval_free(&E); return 2; }
   double *G = buf, *gt = G + (size_t)NR * n, *ee = gt + NR, *B = ee + NR, *bt = B + (size_t)NR * n, *v = bt + NR;
   int *brows = ib, *sel = ib + NR, *rows = sel + NR;
   int nbc = bilateral(I, brows);
-  int nb = mech_independent(I, t, q, brows, nbc, sel);
+  int nb = independent(I, t, q, brows, nbc, sel);
   if (nb < 0) { st = 2; goto done; }
   take_rows(&E, sel, nb, B, bt);
   for (int j = 0; j < kc; j++) rows[j] = contact_row(cands[j]);
@@ -567,7 +427,7 @@ static int impact(Instance *I, double t, const double *q, double *qd, const int 
       int jmin = -1;
       double umin = 0.0;
       for (int j = 0; j < kc; j++) {
-        double uj = row_dot(E.A, NR, n, rows[j], qd) + E.ct[rows[j]];
+        double uj = mech_row_dot(E.A, NR, n, rows[j], qd) + E.ct[rows[j]];
         if (jmin < 0 || uj < umin) { jmin = j; umin = uj; }
       }
       if (umin >= -o->v_eps) goto done;
@@ -580,12 +440,12 @@ static int impact(Instance *I, double t, const double *q, double *qd, const int 
   }
   /* simultaneous (also when pairwise impacts did not settle) */
   take_rows(&E, rows, kc, G, gt);
-  for (int j = 0; j < kc; j++) ee[j] = e_eff(I, cands[j], row_dot(G, kc, n, j, qd) + gt[j], o);
+  for (int j = 0; j < kc; j++) ee[j] = e_eff(I, cands[j], mech_row_dot(G, kc, n, j, qd) + gt[j], o);
   memcpy(v, qd, sizeof(double) * (size_t)n);
   st = solve_impact(&E, v, kc, G, gt, ee, nb, B, bt, qd);
   if (!st) count_event(I);
 done:
-  free(buf); free(ib); eval_free(&E);
+  free(buf); free(ib); mech_eval_free(&E);
   I->valid = 0;
   return st;
 }
@@ -595,13 +455,13 @@ done:
 static int settle(Instance *I, double t, const double *q, const double *qd, const Opts *o) {
   const int n = MECH.n, k = MECH.k, NR = MECH.nrows;
   Eval E;
-  if (eval_new(&E)) return 1;
+  if (mech_eval_new(&E)) return 1;
   double *buf = (double *)calloc((size_t)(3 * k + 4 * n + NR + 8), sizeof(double));
   int *before = (int *)calloc((size_t)(k + 1), sizeof(int));
-  if (!buf || !before) { free(buf); free(before); eval_free(&E); return 1; }
+  if (!buf || !before) { free(buf); free(before); mech_eval_free(&E); return 1; }
   double *gap = buf, *u = gap + k, *a0 = u + k, *lr = a0 + n, *x = lr + NR, *qdd = x + 2 * n;
-  int st = (k && mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap))) || eval_at(I, t, q, qd, &E, 1, 1);
-  for (int i = 0; !st && i < k; i++) u[i] = row_dot(E.A, NR, n, contact_row(i), qd) + E.ct[contact_row(i)];
+  int st = (k && mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap))) || mech_eval_at(I, t, q, qd, &E, 1, 1);
+  for (int i = 0; !st && i < k; i++) u[i] = mech_row_dot(E.A, NR, n, contact_row(i), qd) + E.ct[contact_row(i)];
   memcpy(before, I->closed, sizeof(int) * (size_t)k);
   for (int i = 0; !st && i < k; i++) {
     if (!I->closed[i] && gap[i] <= o->touch && fabs(u[i]) <= o->v_eps) I->closed[i] = 1;
@@ -628,7 +488,7 @@ static int settle(Instance *I, double t, const double *q, const double *qd, cons
       if (!col) { st = 1; break; }
       for (int j = 0; j < n; j++) col[j] = AT(E.A, NR, r, j);
       la_chol_solve(n, E.L, col);
-      double W = row_dot(E.A, NR, n, r, col), afree = row_dot(E.A, NR, n, r, a0) + E.gam[r];
+      double W = mech_row_dot(E.A, NR, n, r, col), afree = mech_row_dot(E.A, NR, n, r, a0) + E.gam[r];
       free(col);
       double a = lam * W - MECH.acc_tol * fmax(1.0, fabs(afree));
       if (worst < 0 || a < wacc) { worst = i; wacc = a; }
@@ -638,7 +498,7 @@ static int settle(Instance *I, double t, const double *q, const double *qd, cons
   }
   if (!st) st = select_rows(I, t, q);
   for (int i = 0; !st && i < k; i++) if (I->closed[i] != before[i]) count_event(I);
-  free(buf); free(before); eval_free(&E);
+  free(buf); free(before); mech_eval_free(&E);
   return st;
 }
 
@@ -647,16 +507,16 @@ static int handle(Instance *I, double t, double *q, double *qd) {
   const int n = MECH.n, k = MECH.k, NR = MECH.nrows;
   Opts o = options(I);
   Eval E;
-  if (eval_new(&E)) return 1;
+  if (mech_eval_new(&E)) return 1;
   double *gap = (double *)calloc((size_t)(2 * k + 1), sizeof(double));
   int *cands = (int *)calloc((size_t)(2 * k + 1), sizeof(int));
   int st = !gap || !cands;
-  if (!st && k) st = mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap)) || eval_at(I, t, q, qd, &E, 0, 1);
+  if (!st && k) st = mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap)) || mech_eval_at(I, t, q, qd, &E, 0, 1);
   int kc = 0, approach = 0;
   for (int i = 0; !st && i < k; i++) {
     if (I->closed[i] || gap[i] <= o.touch) {
       cands[kc++] = i;
-      double u = row_dot(E.A, NR, n, contact_row(i), qd) + E.ct[contact_row(i)];
+      double u = mech_row_dot(E.A, NR, n, contact_row(i), qd) + E.ct[contact_row(i)];
       approach |= u < -o.v_eps;
     }
   }
@@ -672,7 +532,7 @@ static int handle(Instance *I, double t, double *q, double *qd) {
     st = mech_project(I, t, q, qd, I->active, I->nactive, 1e-3 * o.offset, cands, no, 0.5 * o.offset);
     I->stats[STAT_PROJECTIONS] += 1;
   }
-  free(gap); free(cands); eval_free(&E);
+  free(gap); free(cands); mech_eval_free(&E);
   I->valid = 0;
   return st;
 }
@@ -683,11 +543,11 @@ static int fixate(Instance *I, double t, double *q, double *qd, int j) {
   Opts o = options(I);
   int r0 = MECH.m + k + 3 * j;
   Eval E;
-  if (eval_new(&E)) return 1;
+  if (mech_eval_new(&E)) return 1;
   int *ib = (int *)calloc((size_t)(4 * NR + k + 1), sizeof(int));
   double *buf = (double *)calloc((size_t)(2 * NR * n + 3 * NR + n + k + 8), sizeof(double));
   int st = !ib || !buf;
-  if (!st) st = eval_at(I, t, q, qd, &E, 0, 1);
+  if (!st) st = mech_eval_at(I, t, q, qd, &E, 0, 1);
   if (!st) for (int r = r0; r < r0 + 3; r++) I->anchor[r] = E.c[r] + I->anchor[r];   /* raw position */
   int *base = ib, *sel = base + NR, *brows = sel + NR, *cands = brows + NR;
   double *B = buf, *bt = B + (size_t)NR * n, *G = bt + NR, *gt = G + (size_t)NR * n, *ee = gt + NR, *v = ee + NR;
@@ -696,26 +556,26 @@ static int fixate(Instance *I, double t, double *q, double *qd, int j) {
   if (!st) {
     nbase = bilateral(I, base);
     for (int r = r0; r < r0 + 3; r++) base[nbase++] = r;
-    ns = mech_independent(I, t, q, base, nbase, sel);
+    ns = independent(I, t, q, base, nbase, sel);
     if (ns < 0) st = 1;
   }
   if (!st) {
     for (int s = 0; s < ns; s++) if (sel[s] >= r0 && sel[s] < r0 + 3) I->fix_sel[sel[s]] = 1;
     I->fix_done[j] = 1;
     for (int s = 0; s < ns; s++) brows[nb++] = sel[s];
-    st = eval_at(I, t, q, qd, &E, 1, 1) || (k && mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap)));
+    st = mech_eval_at(I, t, q, qd, &E, 1, 1) || (k && mech_call(I, &MECH.gap, ARGS(&t, q, I->p), RES(gap)));
   }
   if (!st) {
     take_rows(&E, brows, nb, B, bt);
     for (int i = 0; i < k; i++) if (I->closed[i] || gap[i] <= o.touch) cands[kc++] = contact_row(i);
     take_rows(&E, cands, kc, G, gt);
-    for (int i = 0; i < kc; i++) ee[i] = e_eff(I, cands[i] - MECH.m, row_dot(G, kc, n, i, qd) + gt[i], &o);
+    for (int i = 0; i < kc; i++) ee[i] = e_eff(I, cands[i] - MECH.m, mech_row_dot(G, kc, n, i, qd) + gt[i], &o);
     memcpy(v, qd, sizeof(double) * (size_t)n);
     st = solve_impact(&E, v, kc, G, gt, ee, nb, B, bt, qd);
     if (st) mech_log(I, LOG_ERROR, "the fixation '%s' could not be applied at t = %.12g", MECH.rows[r0], t);
     else count_event(I);
   }
-  free(ib); free(buf); eval_free(&E);
+  free(ib); free(buf); mech_eval_free(&E);
   I->valid = 0;
   if (st) return st;
   return handle(I, t, q, qd);
@@ -723,11 +583,11 @@ static int fixate(Instance *I, double t, double *q, double *qd, int j) {
 
 /* ------------------------------------------------------------------ co-simulation */
 
-int mech_hybrid_start(Instance *I) {
+/* MechContactOps.start: fixations due, then impacts and contacts at the start state */
+static int start(Instance *I) {
   const int n = MECH.n;
   double t = I->t, *q = I->x, *qd = I->x + n;
   Opts o = options(I);
-  current = I;
   int st = 0;
   for (int j = 0; !st && j < MECH.nfix; j++)
     if (MECH.fix_time[j] <= t) st = fixate(I, t, q, qd, j);
@@ -744,86 +604,39 @@ int mech_hybrid_start(Instance *I) {
   } else if (!st && MECH.nrows) {
     st = select_rows(I, t, q);
   }
-  I->next_projection = t + I->real_settings[SET_PROJECTION_INTERVAL];
-  I->h_next = 0.0;
-  I->valid = 0;
-  current = NULL;
   if (st && !I->msg[0]) mech_log(I, LOG_ERROR, "the start state could not be prepared (contacts, fixations)");
   return st;
 }
 
-static const char *crk_message(int status) {
-  switch (status) {
-    case 1: return "more than mechdsl.max_steps steps in one communication step";
-    case 2: return "error control needs a step below the minimum step";
-    case 3: return "the required step size is less than the spacing between numbers";
-    case 4: return "non-finite state";
-    case 6: return "out of memory in the stepping loop";
-    case 7: return "the right-hand side returned an error (non-finite or failed evaluation)";
-    case 8: return "unknown method";
-    default: return "the stepping loop failed";
-  }
-}
-
-static int check_drift(Instance *I) {
-  const int n = MECH.n;
-  if (I->nactive == 0) return 0;
-  Eval E;
-  if (eval_new(&E)) return 1;
-  int st = eval_at(I, I->t, I->x, I->x + n, &E, 0, 1);
-  double worst = 0.0, bound = mech_drift_bound(I);
-  for (int j = 0; !st && j < I->nactive; j++) {
-    int r = I->active[j];
-    worst = fmax(worst, fabs(E.c[r]));
-    worst = fmax(worst, fabs(row_dot(E.A, MECH.nrows, n, r, I->x + n) + E.ct[r]));
-  }
-  eval_free(&E);
-  if (!st && !(worst <= 0.5 * bound)) {
-    int *open = (int *)calloc((size_t)MECH.k + 1, sizeof(int)), no = 0;
-    if (!open) return 1;
-    for (int i = 0; i < MECH.k; i++) if (!I->closed[i]) open[no++] = contact_row(i);
-    st = mech_project(I, I->t, I->x, I->x + n, I->active, I->nactive, 1e-3 * bound, open, no, 0.5 * options(I).offset);
-    free(open);
-    I->stats[STAT_PROJECTIONS] += 1;
-    if (st) mech_log(I, LOG_ERROR, "projection onto the constraints failed at t = %.12g", I->t);
-  }
-  return st;
-}
-
-int mech_do_step(Instance *I, double t_end) {
+/* MechContactOps.step: advance to t_end, each stretch between events one call of crk.c
+   (contacts: with event location), events handled as mechdsl.impacts does; the steps end at
+   the communication points (an event may lie past one) */
+static int step(Instance *I, double t_end) {
   const int n = MECH.n, nx = 2 * n;
-  double rtol, atol;
-  mech_rtol_atol(I, &rtol, &atol);
-  const int method = I->int_settings[SET_METHOD] == 1 ? 0 : 1;
-  const cint max_steps = I->int_settings[SET_MAX_STEPS] > 0 ? I->int_settings[SET_MAX_STEPS] : 100000;
-  const double interval = I->real_settings[SET_PROJECTION_INTERVAL];
-  double *X = (double *)malloc(sizeof(double) * (size_t)(3 * nx + 1));
-  if (!X) { mech_log(I, LOG_ERROR, "out of memory"); return LOG_ERROR; }
-  double *xfail = X + 2 * nx, grid[2], stats[8];
-  cint ctl[2];
+  MechStepper S;
+  if (mech_stepper_begin(I, t_end, &S)) return LOG_ERROR;
+  const double tiny = S.tiny, interval = S.interval, rtol = S.rtol, atol = S.atol;
+  const int method = S.method;
+  const cint max_steps = S.max_steps;
+  double *X = S.X, *xfail = S.xfail, *grid = S.grid, *stats = S.stats;
+  cint *ctl = S.ctl;
   int result = LOG_OK, at_start = 0;
-  const double tiny = 4 * DBL_EPSILON * fmax(1.0, fabs(t_end));
-  current = I;
   while (I->t < t_end - tiny) {
     double t_stop = t_end;
     for (int j = 0; j < MECH.nfix; j++)
       if (!I->fix_done[j] && MECH.fix_time[j] > I->t && MECH.fix_time[j] < t_stop) t_stop = MECH.fix_time[j];
     if (I->nactive > 0 && interval > 0 && I->next_projection > I->t + tiny && I->next_projection < t_stop)
       t_stop = I->next_projection;
-    grid[0] = I->t; grid[1] = t_stop;
-    ctl[0] = ctl[1] = 0;
-    memset(stats, 0, sizeof stats);
+    mech_stepper_call(&S, I->t, t_stop);
     int st;
     if (MECH.k)
       st = crk_run_events_h(method, nx, grid, 2, I->x, I->u, I->p, rtol, atol, 0.0, max_steps, X, stats, ctl, xfail,
                             (void *)events, (void *)events_work, MECH.k, options(I).offset, MECH.samples, I->p,
                             NULL, NULL, NULL, NULL, NULL, 0, &I->h_next);
     else
-      st = crk_run_h(method, nx, grid, 2, I->x, I->u, I->p, rtol, atol, 0.0, max_steps, X, stats, ctl, xfail,
-                     &I->h_next);
-    I->stats[STAT_STEPS] += stats[0];
-    I->stats[STAT_RHS] += stats[1];
-    I->stats[STAT_REJECTED] += stats[2];
+      st = crk_run_dense(method, nx, grid, 2, I->x, I->u, I->p, rtol, atol, 0.0, max_steps, X, stats, ctl, xfail,
+                         &I->h_next, 0.0, NULL, NULL);
+    mech_stepper_count(I, &S);
     I->valid = 0;
     if (st == CRK_OK) {
       I->t = t_stop;
@@ -846,7 +659,7 @@ int mech_do_step(Instance *I, double t_end) {
       continue;
     } else {
       mech_log(I, LOG_DISCARD, "the step from t = %.12g to %.12g failed: %s (rtol %g, atol %g)", I->t, t_end,
-               crk_message(st), rtol, atol);
+               mech_crk_message(st), rtol, atol);
       result = LOG_DISCARD; break;
     }
     for (int j = 0; j < MECH.nfix; j++)
@@ -856,13 +669,14 @@ int mech_do_step(Instance *I, double t_end) {
       }
     if (result != LOG_OK) break;
     if (I->nactive > 0 && (I->t >= I->next_projection - tiny || I->t >= t_end - tiny)) {
-      if (check_drift(I)) { result = LOG_ERROR; break; }
+      int projected = 0;
+      if (MECH.constraints->check_drift(I, I->t, I->x, &projected)) { result = LOG_ERROR; break; }
       if (interval > 0) while (I->next_projection <= I->t + tiny) I->next_projection += interval;
     }
   }
-  current = NULL;
-  free(X);
+  mech_stepper_end(&S);
   I->valid = 0;
-  if (result == LOG_OK) I->last_ok_time = I->t;
   return result;
 }
+
+const MechContactOps mech_contact_ops = {start, step, accel};

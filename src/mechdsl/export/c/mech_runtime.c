@@ -1,9 +1,7 @@
-/* mech_runtime.c: one FMU instance of a mechdsl model -- its values, the evaluation of the
-   formulated ODE and the outputs (model exchange), directional derivatives, the start
-   values (expressions in the parameters) and the consistent start of a constrained model
-   (the algorithm of mechdsl.dae.init: Gauss-Newton with minimum-norm steps in the mass
-   metric on the coordinates whose start values are not fixed, then one least-squares
-   solve for the speeds), and the drift measure and projection of model exchange. */
+/* mech_runtime.c: one FMU instance of a mechdsl model -- its values and inputs (with their
+   derivatives in co-simulation), the evaluation of the formulated ODE and the outputs (model
+   exchange), directional derivatives, the start values (expressions in the parameters), and
+   the calls into the optional units (constraints, contacts: MECH.constraints, MECH.contacts). */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -11,8 +9,6 @@
 #include <string.h>
 
 #include "mech_fmu.h"
-
-#define INIT_TOL 1e-10            /* dae.init: feasibility tolerance of consistent initialization */
 
 static void *zalloc(size_t n, size_t size) { return calloc(n ? n : 1, size); }
 
@@ -67,13 +63,19 @@ Instance *mech_new(const char *name, int kind, void *env, mech_logger log, int l
   I->anchor = (double *)zalloc((size_t)nr, sizeof(double));
   I->e = (double *)zalloc((size_t)k, sizeof(double));
   I->ipiv = (int *)zalloc((size_t)(nr + n), sizeof(int));
-  I->recent = (double *)zalloc(ZENO_EVENTS, sizeof(double));
+  I->recent = (double *)zalloc((size_t)(MECH.rules.zeno_events > 0 ? MECH.rules.zeno_events : 1), sizeof(double));
+  I->u_t0 = (double *)zalloc((size_t)MECH.nu, sizeof(double));
+  I->u_der = (double *)zalloc((size_t)(MAX_INPUT_ORDER * MECH.nu), sizeof(double));
+  I->u_now = (double *)zalloc((size_t)MECH.nu, sizeof(double));
+  I->xi = (double *)zalloc((size_t)(2 * n), sizeof(double));
+  I->dense = (double *)zalloc((size_t)crk_dense_size(2 * n), sizeof(double));
   /* the hot scratch of mech_accel_rows and the event function (mech_hybrid.c) */
   I->nwork = (size_t)(4 * n * n + 5 * nr * n + 3 * nr * nr + 8 * (n + nr) + 2 * k + 64);
   I->work = (double *)zalloc(I->nwork, sizeof(double));
   if (!I->name || !I->arg || !I->res || !I->iw || !I->w || !I->p || !I->free || !I->x || !I->xdot || !I->u
       || !I->y || !I->lam || !I->x_set || !I->closed || !I->fix_done || !I->active || !I->fix_sel
-      || !I->anchor || !I->e || !I->work || !I->ipiv || !I->recent) {
+      || !I->anchor || !I->e || !I->work || !I->ipiv || !I->recent || !I->u_t0 || !I->u_der || !I->u_now
+      || !I->xi || !I->dense) {
     mech_free(I);
     return NULL;
   }
@@ -86,7 +88,7 @@ void mech_free(Instance *I) {
   free(I->name); free((void *)I->arg); free(I->res); free(I->iw); free(I->w); free(I->p); free(I->free);
   free(I->x); free(I->xdot); free(I->u); free(I->y); free(I->lam); free(I->x_set); free(I->closed);
   free(I->fix_done); free(I->active); free(I->fix_sel); free(I->anchor); free(I->e); free(I->work);
-  free(I->ipiv); free(I->recent);
+  free(I->ipiv); free(I->recent); free(I->u_t0); free(I->u_der); free(I->u_now); free(I->xi); free(I->dense);
   free(I);
 }
 
@@ -128,6 +130,10 @@ void mech_reset(Instance *I) {
   memcpy(I->p, MECH.p_default, sizeof(double) * (size_t)MECH.np);
   for (int j = 0; j < MECH.nfree; j++) I->free[j] = MECH.p_default[MECH.free_index[j]];
   memcpy(I->u, MECH.u_default, sizeof(double) * (size_t)MECH.nu);
+  memset(I->u_t0, 0, sizeof(double) * (size_t)MECH.nu);
+  memset(I->u_der, 0, sizeof(double) * (size_t)(MAX_INPUT_ORDER * MECH.nu));
+  I->u_moving = 0;
+  I->ti = 0.0; I->ahead = I->fi_ok = 0;
   memset(I->x_set, 0, sizeof(int) * (size_t)(2 * MECH.n));
   memcpy(I->real_settings, MECH.real_settings, sizeof I->real_settings);
   memcpy(I->int_settings, MECH.int_settings, sizeof I->int_settings);
@@ -146,6 +152,68 @@ void mech_reset(Instance *I) {
   refresh_start(I);
 }
 
+/* ------------------------------------------------------------------ inputs */
+
+const double *mech_inputs_at(Instance *I, double t) {
+  if (!I->u_moving) return I->u;
+  const int nu = MECH.nu;
+  for (int i = 0; i < nu; i++) {
+    double v = I->u[i], dt = t - I->u_t0[i], term = 1.0;
+    for (int k = 0; k < MAX_INPUT_ORDER; k++) {
+      term *= dt / (double)(k + 1);
+      v += I->u_der[k * nu + i] * term;
+    }
+    I->u_now[i] = v;
+  }
+  return I->u_now;
+}
+
+static void refresh_moving(Instance *I) {
+  I->u_moving = 0;
+  for (int j = 0; j < MAX_INPUT_ORDER * MECH.nu; j++) I->u_moving |= I->u_der[j] != 0.0;
+}
+
+/* input i restarts at the current time with value v and no derivatives */
+static void set_input(Instance *I, int i, double v) {
+  int moving = 0;
+  for (int k = 0; k < MAX_INPUT_ORDER; k++) { moving |= I->u_der[k * MECH.nu + i] != 0.0; I->u_der[k * MECH.nu + i] = 0.0; }
+  if (v == I->u[i] && !moving) return;
+  I->u[i] = v; I->u_t0[i] = I->t;
+  refresh_moving(I);
+  I->valid = 0;
+  mech_rewind(I);
+}
+
+/* co-simulation (FMI 2 fmi2SetRealInputDerivatives): the order-th derivative of input vr at
+   the current time; the input's polynomial is re-based at the current time first */
+int mech_set_input_derivative(Instance *I, unsigned vr, int order, double v) {
+  const int nu = MECH.nu;
+  if (!(vr >= VR_U && vr < VR_Y)) { mech_log(I, LOG_ERROR, "value reference %u is not an input", vr); return 1; }
+  if (order < 1 || order > MAX_INPUT_ORDER) {
+    mech_log(I, LOG_ERROR, "input derivatives of order %d are not supported (1 to %d)", order, MAX_INPUT_ORDER);
+    return 1;
+  }
+  if (!isfinite(v)) { mech_log(I, LOG_ERROR, "an input derivative must be finite (got %g)", v); return 1; }
+  int i = (int)(vr - VR_U);
+  if (I->u_t0[i] != I->t) {        /* re-base: the value now, the derivatives of the old polynomial dropped */
+    I->u[i] = mech_inputs_at(I, I->t)[i];
+    for (int k = 0; k < MAX_INPUT_ORDER; k++) I->u_der[k * nu + i] = 0.0;
+    I->u_t0[i] = I->t;
+  }
+  I->u_der[(order - 1) * nu + i] = v;
+  refresh_moving(I);
+  I->valid = 0;
+  mech_rewind(I);
+  return 0;
+}
+
+void mech_rewind(Instance *I) {
+  if (I->kind != KIND_CS || !I->started) return;
+  I->ti = I->t;
+  memcpy(I->xi, I->x, sizeof(double) * (size_t)(2 * MECH.n));
+  I->ahead = I->fi_ok = 0;
+}
+
 static int free_slot(unsigned i) {
   for (int j = 0; j < MECH.nfree; j++) if (MECH.free_index[j] == (int)i) return j;
   return -1;
@@ -160,9 +228,11 @@ int mech_set_real(Instance *I, unsigned vr, double v) {
       mech_log(I, LOG_ERROR, "%s is a calculated parameter: set the parameters it is computed from", MECH.param_names[vr - VR_P]);
       return 1;
     }
+    if (!before_init && I->free[j] == v) return 0;
     I->free[j] = v;
     if (recompute_parameters(I)) return 1;
     if (before_init) return refresh_start(I);
+    mech_rewind(I);
     return 0;
   }
   if (vr < VR_QDD) {
@@ -178,7 +248,7 @@ int mech_set_real(Instance *I, unsigned vr, double v) {
     return 0;
   }
   if (vr < VR_U) { mech_log(I, LOG_ERROR, "a state derivative cannot be set"); return 1; }
-  if (vr < VR_Y) { I->u[vr - VR_U] = v; I->valid = 0; return 0; }
+  if (vr < VR_Y) { set_input(I, (int)(vr - VR_U), v); return 0; }
   if (vr < VR_RSET) { mech_log(I, LOG_ERROR, "an output cannot be set"); return 1; }
   if (vr < VR_STAT) {
     if (!before_init) { mech_log(I, LOG_ERROR, "solver settings are fixed parameters: set them before initialization ends"); return 1; }
@@ -203,7 +273,7 @@ int mech_get_real(Instance *I, unsigned vr, double *v) {
     *v = I->xdot[n + (int)(vr - VR_QDD)];
     return 0;
   }
-  if (vr < VR_Y) { *v = I->u[vr - VR_U]; return 0; }
+  if (vr < VR_Y) { *v = mech_inputs_at(I, I->t)[vr - VR_U]; return 0; }
   if (vr < VR_RSET) {
     if (mech_outputs(I)) return 1;
     *v = I->y[vr - VR_Y];
@@ -256,7 +326,7 @@ double mech_drift_bound(Instance *I) {
   double rtol, atol;
   mech_rtol_atol(I, &rtol, &atol);
   if (I->kind == KIND_ME) atol = I->tolerance_defined && I->tolerance > 0 ? I->tolerance : atol;
-  return fmax(10.0 * atol, 1e-10);       /* dae.options: max(10 atol, 1e-10) */
+  return fmax(MECH.rules.drift_factor * atol, MECH.rules.drift_floor);      /* DaeOptions.bound */
 }
 
 int mech_enter_init(Instance *I) {
@@ -275,11 +345,11 @@ int mech_exit_init(Instance *I) {
       mech_log(I, LOG_ERROR, "coefficient of restitution of '%s' must be in [0, 1] (got %g)", MECH.rows[MECH.m + i], I->e[i]);
       return 1;
     }
-  if (MECH.m && mech_consistent_start(I)) return 1;
+  if (MECH.m && MECH.constraints->consistent_start(I)) return 1;
   I->started = 1;
   I->valid = 0;
   I->last_ok_time = I->t;
-  if (I->kind == KIND_CS && mech_hybrid_start(I)) return 1;
+  if (I->kind == KIND_CS && mech_cs_start(I)) return 1;
   return 0;
 }
 
@@ -290,13 +360,10 @@ int mech_evaluate(Instance *I) {
   int st;
   if (I->kind == KIND_CS && !I->use_base) {
     memcpy(I->xdot, I->x + n, sizeof(double) * (size_t)n);
-    double *lamr = (double *)zalloc((size_t)MECH.nrows, sizeof(double));
-    st = lamr ? mech_accel_rows(I, I->t, I->x, I->active, I->nactive, I->xdot + n, lamr) : 1;
-    if (!st) mech_lambda_model(I, lamr);
-    free(lamr);
+    st = MECH.contacts->accel(I, I->t, I->x, I->xdot + n, I->lam);
   } else {
     double tt = I->t;
-    st = mech_call(I, &MECH.ode, ARGS(&tt, I->x, I->u, I->p), RES(I->xdot, I->lam));
+    st = mech_call(I, &MECH.ode, ARGS(&tt, I->x, mech_inputs_at(I, tt), I->p), RES(I->xdot, I->lam));
   }
   for (int i = 0; !st && i < 2 * n; i++) if (!isfinite(I->xdot[i])) st = 2;
   if (st) {
@@ -312,7 +379,7 @@ int mech_outputs(Instance *I) {
   if (MECH.nout == 0) return 0;
   if (mech_evaluate(I)) return 1;
   double tt = I->t;
-  return mech_call(I, &MECH.out, ARGS(&tt, I->x, I->u, I->p, I->lam), RES(I->y));
+  return mech_call(I, &MECH.out, ARGS(&tt, I->x, mech_inputs_at(I, tt), I->p, I->lam), RES(I->y));
 }
 
 int mech_directional(Instance *I, const unsigned *unknowns, size_t nun, const unsigned *knowns, size_t nk,
@@ -331,7 +398,7 @@ int mech_directional(Instance *I, const unsigned *unknowns, size_t nun, const un
   if (!st && !I->started) st = refresh_start(I);
   if (!st) {
     double tt = I->t;
-    st = mech_call(I, &MECH.jvp, ARGS(&tt, I->x, I->u, I->p, dx, du), RES(dxdot, dy));
+    st = mech_call(I, &MECH.jvp, ARGS(&tt, I->x, mech_inputs_at(I, tt), I->p, dx, du), RES(dxdot, dy));
   }
   for (size_t i = 0; i < nun && !st; i++) {
     unsigned vr = unknowns[i];
@@ -344,178 +411,15 @@ int mech_directional(Instance *I, const unsigned *unknowns, size_t nun, const un
   return st;
 }
 
-/* ----------------------------------------------------------------- constraints (model exchange) */
-
-/* (max |g|, max |G q' + g_t|) over every model constraint at the current state */
-int mech_drift(Instance *I, double *dq, double *dv) {
-  const int n = MECH.n, nr = MECH.nrows, m = MECH.m;
-  *dq = *dv = 0.0;
-  if (!m) return 0;
-  double *c = (double *)malloc(sizeof(double) * (size_t)(3 * nr + nr * n + 1));
-  if (!c) return 1;
-  double *A = c + nr, *ct = A + (size_t)nr * n, *gam = ct + nr;
-  double tt = I->t;
-  int st = mech_call(I, &MECH.cons, ARGS(&tt, I->x, I->x + n, I->p), RES(c, A, ct, gam));
-  for (int i = 0; !st && i < m; i++) {
-    double v = ct[i];
-    for (int j = 0; j < n; j++) v += A[(size_t)j * nr + i] * I->x[n + j];
-    *dq = fmax(*dq, fabs(c[i]));
-    *dv = fmax(*dv, fabs(v));
-    if (!isfinite(c[i]) || !isfinite(v)) st = 2;
-  }
-  free(c);
-  return st;
-}
-
-int mech_project_model(Instance *I, double tol) {
-  const int n = MECH.n;
-  int st = mech_project(I, I->t, I->x, I->x + n, MECH.base_rows, MECH.nbase, tol, NULL, 0, 0.0);
-  I->valid = 0;
-  if (st) mech_log(I, LOG_ERROR, "projection onto the constraints failed at t = %.17g", I->t);
-  else I->stats[STAT_PROJECTIONS] += 1;
-  return st;
-}
-
-static double row_distance(const double *A, int nr, int n, int i, double r) {
-  double s = 0.0;
-  for (int j = 0; j < n; j++) s += A[(size_t)j * nr + i] * A[(size_t)j * nr + i];
-  return s > 0 ? fabs(r) / sqrt(s) : fabs(r);
-}
-
-/* dae.init._initialize, in C: positions by Gauss-Newton with minimum-norm steps in the mass
-   metric and backtracking, then the speeds by one minimum-norm solve; start values the
-   importer set count as fixed (as --set start values do in mech simulate) */
-int mech_consistent_start(Instance *I) {
-  const int n = MECH.n, nr = MECH.nrows, m = MECH.m;
-  const size_t need = (size_t)(6 * nr + 3 * nr * n + 2 * n * n + 8 * n + 16);
-  double *buf = (double *)zalloc(need, sizeof(double));
-  int *freeq = (int *)zalloc((size_t)(2 * n), sizeof(int));
-  if (!buf || !freeq) { free(buf); free(freeq); return 1; }
-  double *c = buf, *A = c + nr, *ct = A + (size_t)nr * n, *gam = ct + nr, *M = gam + nr, *bias = M + (size_t)n * n;
-  double *d = bias + n, *trial = d + n, *step = trial + n, *y = step + n, *rhs = y + n, *Af = rhs + nr;
-  double *c2 = Af + (size_t)nr * n, *A2 = c2 + nr;
-  int *freev = freeq + n, nf = 0, nv = 0, st = 0;
-  double t = I->t, *q = I->x, *qd = I->x + n;
-  for (int i = 0; i < n; i++) {
-    if (!MECH.fixed_q[i] && !I->x_set[i]) freeq[nf++] = i;
-    if (!MECH.fixed_qd[i] && !I->x_set[n + i]) freev[nv++] = i;
-  }
-#define CONS(qq, cc, AA) mech_call(I, &MECH.cons, ARGS(&t, qq, qd, I->p), RES(cc, AA, ct, gam))
-  if ((st = CONS(q, c, A))) goto fail;
-  double scale = 1.0, gnorm;
-  for (int i = 0; i < n; i++) scale = fmax(scale, 1.0 + fabs(q[i]));
-  if (nf) {
-    if ((st = mech_call(I, &MECH.dyn, ARGS(&t, q, qd, I->u, I->p), RES(M, bias)))) goto fail;
-    for (int i = 0; i < n; i++) d[i] = 1.0 / sqrt(fmax(fabs(M[(size_t)i * n + i]), 1e-300));
-    for (int it = 1; it <= 50; it++) {
-      double worst = 0.0;
-      for (int i = 0; i < m; i++) worst = fmax(worst, row_distance(A, nr, n, i, c[i]));
-      if (worst <= 1e-3 * INIT_TOL * scale) break;
-      for (int j = 0; j < nf; j++)
-        for (int i = 0; i < m; i++) Af[(size_t)j * m + i] = A[(size_t)freeq[j] * nr + i] * d[freeq[j]];
-      for (int i = 0; i < m; i++) rhs[i] = -c[i];
-      if ((st = la_min_norm(m, nf, Af, m, rhs, y, NULL))) goto fail;
-      gnorm = 0.0;
-      for (int i = 0; i < m; i++) gnorm += c[i] * c[i];
-      double lam = 1.0, tn = 0.0;
-      int ok = 0;
-      for (;;) {
-        memcpy(trial, q, sizeof(double) * (size_t)n);
-        for (int j = 0; j < nf; j++) trial[freeq[j]] += lam * d[freeq[j]] * y[j];
-        ok = !CONS(trial, c2, A2);
-        tn = 0.0;
-        for (int i = 0; ok && i < m; i++) { tn += c2[i] * c2[i]; if (!isfinite(c2[i])) ok = 0; }
-        for (size_t i = 0; ok && i < (size_t)nr * n; i++) if (!isfinite(A2[i])) ok = 0;
-        if ((ok && tn < gnorm) || lam < 1e-4) break;
-        lam *= 0.5;
-      }
-      if (!ok) break;
-      double moved = 0.0;
-      for (int j = 0; j < nf; j++) moved = fmax(moved, fabs(lam * d[freeq[j]] * y[j]));
-      memcpy(q, trial, sizeof(double) * (size_t)n);
-      memcpy(c, c2, sizeof(double) * (size_t)nr);
-      memcpy(A, A2, sizeof(double) * (size_t)nr * n);
-      if (moved <= 1e-15 * scale) break;
-    }
-  }
-  if ((st = CONS(q, c, A))) goto fail;
-  for (int i = 0; i < m; i++)
-    if (row_distance(A, nr, n, i, c[i]) > INIT_TOL * scale) {
-      mech_log(I, LOG_ERROR, "the start values cannot satisfy the constraint '%s' (residual %.3g)%s", MECH.rows[i], c[i],
-               nf ? "" : ": every coordinate in it has a fixed start value");
-      st = 3;
-      goto fail;
-    }
-  if (nv) {
-    if ((st = mech_call(I, &MECH.dyn, ARGS(&t, q, qd, I->u, I->p), RES(M, bias)))) goto fail;
-    for (int i = 0; i < n; i++) d[i] = 1.0 / sqrt(fmax(fabs(M[(size_t)i * n + i]), 1e-300));
-    for (int i = 0; i < m; i++) {
-      double r = ct[i];
-      for (int j = 0; j < n; j++) r += A[(size_t)j * nr + i] * qd[j];
-      rhs[i] = -r;
-    }
-    for (int j = 0; j < nv; j++)
-      for (int i = 0; i < m; i++) Af[(size_t)j * m + i] = A[(size_t)freev[j] * nr + i] * d[freev[j]];
-    if ((st = la_min_norm(m, nv, Af, m, rhs, y, NULL))) goto fail;
-    for (int j = 0; j < nv; j++) qd[freev[j]] += d[freev[j]] * y[j];
-  }
-  {
-    double vscale = 1.0;
-    for (int i = 0; i < n; i++) vscale = fmax(vscale, 1.0 + fabs(qd[i]));
-    for (int i = 0; i < m; i++) {
-      double r = ct[i];
-      for (int j = 0; j < n; j++) r += A[(size_t)j * nr + i] * qd[j];
-      if (row_distance(A, nr, n, i, r) > INIT_TOL * vscale * 1e2) {
-        mech_log(I, LOG_ERROR, "the start speeds violate the velocity form of the constraint '%s' (G q' + g_t = %.3g)",
-                 MECH.rows[i], r);
-        st = 3;
-        goto fail;
-      }
-    }
-  }
-#undef CONS
-  free(buf); free(freeq);
-  I->valid = 0;
-  return 0;
-fail:
-  if (st != 3) mech_log(I, LOG_ERROR, "consistent initialization failed (the constraints cannot be evaluated)");
-  free(buf); free(freeq);
-  return 1;
-}
-
-/* ----------------------------------------------------------------- the interfaces' common steps */
+/* ----------------------------------------------------------------- model exchange of constrained models */
 
 int mech_me_step_done(Instance *I, int *enter_event) {
   *enter_event = 0;
   I->stats[STAT_STEPS] += 1;
-  if (!MECH.m) return 0;
-  double dq, dv, bound = mech_drift_bound(I);
-  if (mech_drift(I, &dq, &dv)) return 1;
-  *enter_event = dq > 0.5 * bound || dv > 0.5 * bound;
-  return 0;
+  return MECH.m ? MECH.constraints->me_step_done(I, enter_event) : 0;
 }
 
 int mech_me_event_update(Instance *I, int *states_changed) {
   *states_changed = 0;
-  if (!MECH.m) return 0;
-  double dq, dv, bound = mech_drift_bound(I);
-  if (mech_drift(I, &dq, &dv)) return 1;
-  if (dq > 0.5 * bound || dv > 0.5 * bound) {      /* positions, then speeds, back onto the constraints */
-    if (mech_project_model(I, 1e-3 * bound)) return 1;
-    *states_changed = 1;
-  }
-  return 0;
-}
-
-int mech_cs_step(Instance *I, double t, double h) {
-  if (!(h >= 0.0)) {
-    mech_log(I, LOG_ERROR, "the communication step size must be >= 0 (got %g)", h);
-    return LOG_ERROR;
-  }
-  if (t > I->t + 1e-9 * (1.0 + fabs(I->t)) || t < I->t - 1e-9 * (1.0 + fabs(I->t))) {
-    mech_log(I, LOG_ERROR, "a step from t = %.17g, but the FMU is at t = %.17g", t, I->t);
-    return LOG_ERROR;
-  }
-  I->msg[0] = 0;
-  return mech_do_step(I, t + h);
+  return MECH.m ? MECH.constraints->me_event_update(I, states_changed) : 0;
 }

@@ -24,6 +24,9 @@ from __future__ import annotations
 import abc
 import dataclasses
 
+import numpy as np
+
+from ...diagnostics import UsageError
 from ...output.result import Result
 from ..settings import GROUPS
 
@@ -52,6 +55,17 @@ class Backend(abc.ABC):
 
     def describe(self, result: Result) -> dict:
         return {}
+
+    def integration(self, problem, setup, pv, xs):
+        """(method, Functions, why): the ODE a run of ``problem`` integrates and the ODE method
+        it integrates it with, for its differentiable trajectory (simulation/trajectory.py)."""
+        raise UsageError(f"{self.noun} problem has no differentiable trajectory")
+
+    def start(self, problem, xs, pv, x0):
+        """(x, dx/dx_given, dx/dp): the start a run of ``problem`` begins from, given the start
+        values ``xs`` (overrides ``x0`` applied) at the parameters ``pv``, and its
+        linearization; without constraints the start values as given."""
+        return xs, np.eye(xs.size), np.zeros((xs.size, np.size(pv)))
 
 
 def backend(name: str) -> Backend:

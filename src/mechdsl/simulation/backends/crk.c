@@ -505,9 +505,24 @@ static int initial_step(Rhs *r, const Tableau *tab, double t, double tb, const d
   return 0;
 }
 
+/* The last step's continuous extension, kept for a caller that interpolates after the call
+   (crk_run_dense): method, t_old, h, t_new, then y_old, y_new and f(t_new, y_new) (n each),
+   then the interpolant's coefficients (7 x n: the stages K of dopri5, F of dop853). */
+#define CRK_DENSE_SIZE(nx) (4 + 10 * (nx))
+
+static void dense_keep(double *out, const Dense *d, const double *y, const double *f) {
+  const cint n = d->n;
+  out[0] = (double)d->method; out[1] = d->t_old; out[2] = d->h; out[3] = d->t_old + d->h;
+  memcpy(out + 4, d->yold, (size_t)n * sizeof(double));
+  memcpy(out + 4 + n, y, (size_t)n * sizeof(double));
+  memcpy(out + 4 + 2 * n, f, (size_t)n * sizeof(double));
+  memcpy(out + 4 + 3 * n, d->method == 0 ? d->K : d->F, (size_t)(7 * n) * sizeof(double));
+}
+
 static int crk_core(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
-            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, double *h_io) {
+            double *X, double *stats, volatile cint *ctl, double *xfail, Events *ev, double *h_io,
+            double t_limit, const double *f0, double *dense) {
   int *flags = NULL;
   Tableau tab;
   if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
@@ -527,7 +542,7 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
   double *mem = (double *)calloc((size_t)(n * (tab.extended + 6 + 7) + 1), sizeof(double));
   int status = CRK_OK;
   cint steps = 0, rejected = 0, k = 1, steps_here = 0;
-  double t = grid[0];
+  double t = grid[0], h_keep = 0.0;     /* h_keep: the step proposed for a next call (h_io) */
   if (!r.arg || !r.res || !r.iw || !r.w || !mem) {
     free(r.arg); free(r.res); free(r.iw); free(r.w); free(mem);
     return CRK_NOMEM;
@@ -540,11 +555,13 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
   double *scale = yold + n, *tmp = scale + n, *F = tmp + n;   /* F: 7 x n for DOP853 dense output */
   (void)F;
   const double tb = grid[ngrid - 1];
+  const double tlim = t_limit > tb ? t_limit : tb;   /* steps end at or before this (past tb: dense) */
   const double expo = -1.0 / (tab.err_order + 1.0);
   memcpy(y, x0, (size_t)n * sizeof(double));
   memcpy(X, x0, (size_t)n * sizeof(double));
   ctl[0] = 1;
-  if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
+  if (f0) memcpy(f, f0, (size_t)n * sizeof(double));         /* f(t0, x0) from the caller's last step */
+  else if (rhs(&r, t, y, f)) { status = CRK_RHS_ERROR; goto done; }
   double e_start = INFINITY;      /* the event function at the current step's start */
   if (ev) {
     flags = (int *)calloc((size_t)(ev->k > 0 ? ev->k : 1), sizeof(int));
@@ -554,9 +571,9 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
     if (!(e_start > 0)) { status = CRK_EVENT_AT_START; goto done; }
   }
   double h_abs;
-  if (h_io && *h_io > 0) h_abs = fmin(*h_io, fabs(tb - t));   /* a step proposed by the caller's last call */
-  else if (initial_step(&r, &tab, t, tb, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
-  double h_keep = h_abs;        /* the step proposed for a next call (h_io) */
+  if (h_io && *h_io > 0) h_abs = fmin(*h_io, fabs(tlim - t));   /* a step proposed by the caller's last call */
+  else if (initial_step(&r, &tab, t, tlim, y, f, scale, tmp, ynew, rtol, atol, n, &h_abs)) { status = CRK_RHS_ERROR; goto done; }
+  h_keep = h_abs;
   while (k < ngrid) {
     if (ctl[1]) { status = CRK_CANCELLED; break; }
     double min_step = 10 * fabs(nextafter(t, INFINITY) - t);
@@ -574,8 +591,8 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
       h = h_abs;
       h_want = h_abs;
       t_new = t + h;
-      clipped = t_new > tb;
-      if (clipped) t_new = tb;
+      clipped = t_new > tlim;
+      if (clipped) t_new = tlim;
       h = t_new - t;
       h_abs = fabs(h);
       memcpy(K, f, (size_t)n * sizeof(double));
@@ -591,7 +608,7 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
         double factor = en == 0.0 ? MAX_FACTOR : fmin(MAX_FACTOR, SAFETY * pow(en, expo));
         if (was_rejected && factor > 1.0) factor = 1.0;
         h_abs *= factor;
-        /* a step shortened to end at tb says little about the next one: keep the step the
+        /* a step shortened to end at tlim says little about the next one: keep the step the
            control wanted unless the short step's error already asks for less */
         h_keep = (clipped && factor >= 1.0) ? fmax(h_abs, h_want) : h_abs;
         accepted = 1;
@@ -636,6 +653,7 @@ static int crk_core(int method, cint nx, const double *grid, cint ngrid, const d
         ctl[0] = k;
       }
       if (!ev) steps_here = 0;     /* with events max_steps bounds the whole call */
+      if (dense && k == ngrid) dense_keep(dense, &dn, y, K + (cint)S * n);
     }
     if (event) {
       memcpy(y, ev->x, (size_t)n * sizeof(double));
@@ -670,7 +688,8 @@ done:
 int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
             const double *p, double rtol, double atol, double hmin, cint max_steps,
             double *X, double *stats, volatile cint *ctl, double *xfail) {
-  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, NULL);
+  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, NULL,
+                  0.0, NULL, NULL);
 }
 
 /* crk_run with the first step taken from *h_io when it is positive (else the initial-step
@@ -680,7 +699,37 @@ int crk_run(int method, cint nx, const double *grid, cint ngrid, const double *x
 int crk_run_h(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
               const double *p, double rtol, double atol, double hmin, cint max_steps,
               double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io) {
-  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, h_io);
+  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, h_io,
+                  0.0, NULL, NULL);
+}
+
+/* crk_run_h whose steps are not shortened to end at the last output time: the last step may
+   end past it, up to t_limit (an event time, an input change, the end of the run; t_limit <=
+   the last output time: shortened as crk_run_h), the output rows interpolated on the continuous
+   extension.  f0 (when not NULL): f(grid[0], x0), carried from the caller's last call (one
+   evaluation fewer).  On success `dense` (crk_dense_size(nx) doubles) holds the last step:
+   its end t_new = dense[3] and state (crk_dense_state), f there (crk_dense_rhs), and its
+   interpolant (crk_dense_eval) for output times up to t_new without another call.  A caller
+   that advances in short calls (an FMU's co-simulation steps, mechdsl.export) so takes the
+   steps one long call takes. */
+int crk_run_dense(int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                  const double *p, double rtol, double atol, double hmin, cint max_steps,
+                  double *X, double *stats, volatile cint *ctl, double *xfail, double *h_io,
+                  double t_limit, const double *f0, double *dense) {
+  return crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, h_io,
+                  t_limit, f0, dense);
+}
+
+cint crk_dense_size(cint nx) { return CRK_DENSE_SIZE(nx); }
+const double *crk_dense_state(const double *dense, cint nx) { return dense + 4 + nx; }
+const double *crk_dense_rhs(const double *dense, cint nx) { return dense + 4 + 2 * nx; }
+
+/* the state at tt (t_old <= tt <= t_new) on the step kept by crk_run_dense */
+void crk_dense_eval(const double *dense, cint nx, double tt, double *out) {
+  const double *coef = dense + 4 + 3 * nx;
+  Dense d = {(int)dense[0], coef, coef, dense + 4, dense[2], dense[1], nx};
+  if (tt == dense[3]) memcpy(out, dense + 4 + nx, (size_t)nx * sizeof(double));
+  else dense_eval(&d, tt, out);
 }
 
 /* crk_run watching the gaps `gap` (k outputs, CasADi signature, work sizes from `work`):
@@ -745,7 +794,8 @@ int crk_run_events_h(int method, cint nx, const double *grid, cint ngrid, const 
   }
   int status = CRK_NOMEM;
   if (ok)
-    status = crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e, h_io);
+    status = crk_core(method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, &e, h_io,
+                      0.0, NULL, NULL);
   stats[4] = (double)e.nev;
   stats[5] = (double)e.count;
   free(e.arg); free(e.res); free(e.iw); free(e.w); free(e.g); free(e.x);

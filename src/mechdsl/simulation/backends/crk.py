@@ -217,8 +217,15 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
                f"compiling ~{gcc:.2g} s once, cached on disk")
     if (vm - comp) * PAYBACK_RUNS < gcc:
         return None, numbers + f": does not pay back within {PAYBACK_RUNS} runs", info
-    method = "dopri5" if rtol >= 1e-5 else "dop853"
+    method = loop_method(rtol)
     return method, numbers + f": pays back within {PAYBACK_RUNS} runs", info
+
+
+def loop_method(rtol: float) -> str:
+    """The compiled loop's method when the choice is automatic: dopri5 at rtol >= 1e-5 (its
+    lower order pays at loose tolerances), else dop853 (auto_choice; the FMU's co-simulation
+    stepper, mechdsl.export)."""
+    return "dopri5" if rtol >= 1e-5 else "dop853"
 
 
 def scipy_name(method: str) -> str:

@@ -36,7 +36,7 @@ from ...dae.constrained_system import ConstrainedSystem
 from ...dae.dae_run import FORMULATIONS, DaeRun, resolve_formulation
 from ...dae.dof import dof_report, short_list, singular_ratio, singular_ratios
 from ...dae.ggl import GGLStepper
-from ...dae.init import initialize
+from ...dae.init import initialize, start_jacobian
 from ...dae.partitioning import PartitioningStepper
 from ...dae.projection import ProjectionStepper
 from ...dae.segments import NonFiniteError, StepError, interrupt_guard, locate_nonfinite
@@ -44,6 +44,8 @@ from ...diagnostics import UsageError
 from ...eom import parameter_vector
 from ...eom.start import fixed_start
 from ...output.result import Failure, Result, RunInterrupted
+from ..choose import choose_method
+from ..functions import problem_functions
 from ..monitors import energy_drift_stats, is_conservative
 from ..record_dae import constrained_signals, multipliers, select_signals
 from ..registry import dae_method
@@ -125,6 +127,29 @@ class DaeBackend(Backend):
         if note:
             r.metadata.setdefault("notes", []).append(note)
         return r
+
+    def integration(self, problem, setup, pv, xs):
+        """The formulated problem's index-1 ODE (the multipliers solved: mechdsl.dae.functions)
+        with the CasADi method the formulation's integrator runs the method as (auto: chosen from
+        that ODE's Jacobian at the start, as for an ODE run)."""
+        s, eom = problem.settings, problem.eom
+        formulation = resolve_formulation(s.dae.formulation)
+        funcs = problem_functions(eom, names=("ode", "ode_jacobian", "multipliers"))
+        m = dae_method(s.method, formulation)
+        if m == "auto":
+            m, why, _ = choose_method(eom, funcs, xs, pv, s.t_start, s.t_end, s.rtol)
+        else:
+            m, why = DAE_AS_ODE[m], "requested"
+        return m, funcs, f"the {formulation} formulation's index-1 ODE (multipliers solved), {m}: {why}"
+
+    def start(self, problem, xs, pv, x0):
+        """The consistent start (mechdsl.dae.init) and its linearization (``start_jacobian``)."""
+        eom, t0 = problem.eom, problem.settings.t_start
+        n = eom.n
+        _, _, fq, fqd = fixed_start(eom, x0, pv)
+        init = initialize(eom, xs[:n], xs[n:], t0, pv, fixed_q=fq, fixed_qd=fqd)
+        Jx, Jp = start_jacobian(eom, init.q, init.qd, xs[n:], t0, pv, fq, fqd)
+        return np.r_[init.q, init.qd], Jx, Jp
 
     def describe(self, r):
         f = r.metadata.get("formulation")
@@ -517,6 +542,8 @@ def common_stats(st: dict, energy: dict) -> dict:
     return out
 
 
+# the ODE method a constrained run's method name runs as (registry.dae_method's names)
+DAE_AS_ODE = {"bdf": "cvodes-bdf", "adams": "cvodes-adams", "erk": "erk", "idas": "idas"}
 STIFF = 1e4   # an overdamped mode decaying this many times within the run makes 'auto' pick BDF
 
 

@@ -36,6 +36,13 @@ from .crk import auto_choice, library, scipy_name
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 
 
+def default_max_steps(s, points: int) -> int:
+    """Integrator steps per output interval of a run on ``points`` output times: the setting
+    ``max_steps``, else max(20000, MAX_STEPS_TOTAL / intervals) (also the FMU's steps per
+    communication step, mechdsl.export)."""
+    return int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (points - 1)))
+
+
 class OdeBackend(Backend):
     name = "ode"
     noun = "an ODE"
@@ -49,6 +56,11 @@ class OdeBackend(Backend):
         setup = setup if setup is not None else self.prepare(problem)
         pv = parameter_vector(problem.eom, problem.settings.p)
         return setup.run(pv, start_vector(problem.eom, problem.settings.x0, pv), progress)
+
+    def integration(self, problem, setup, pv, xs):
+        if setup.method is None:
+            raise UsageError(f"{problem.model} has no coordinates: nothing is integrated")
+        return setup.method, setup.funcs, setup.reason
 
     def describe(self, r):
         method = r.metadata.get("method")
@@ -78,8 +90,7 @@ class OdeSetup:
         self.eom, self.settings, self.drive, self.grid = eom, s, drive, grid
         self.method, self.reason, self.funcs, self.post = method, reason, funcs, post
         self.meta, self.loop_compiled, self.out_names = meta, loop_compiled, out_names
-        npts = len(grid)
-        self.max_steps = int(s.max_steps or max(20_000, MAX_STEPS_TOTAL // (npts - 1)))
+        self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
 
     @classmethod
