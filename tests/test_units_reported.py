@@ -42,8 +42,17 @@ def test_a_model_declared_in_deg_and_cm_reports_rad_and_m(tmp_path, monkeypatch,
     monkeypatch.chdir(tmp_path)
     (tmp_path / "p.mech").write_text(MODEL)
     m = mechdsl.load("p.mech")
-    assert {c.name: c.unit for c in m.model.coordinates} == {"theta": "rad", "x": "m"}
-    assert {p.name: p.unit for p in m.model.parameters}["m"] == "kg"
+    # the model keeps the declared units (fit and sensitivities convert to them); what shows SI
+    # values says the SI unit
+    assert {c.name: c.unit for c in m.model.coordinates} == {"theta": "deg", "x": "cm"}
+    assert m.model.parameters[0].value == pytest.approx(1.0) and m.model.parameters[0].unit == "g"
+    from mechdsl.output.display import _model_parts
+
+    params = _model_parts(m)[3]
+    assert params[0][:3] == ["m", pytest.approx(1.0), "kg"]                   # 1 kg, not "1 g"
+    from mechdsl.export.variables import unit_definition
+
+    assert unit_definition(si_unit("deg"))[1] == 1.0
     assert main(["simulate", "p.mech", "--t-end", "0.1", "--points", "3", "-o", "p.csv"]) == 0
     side = json.loads((tmp_path / "p.json").read_text())
     assert side["units"]["theta"] == "rad" and side["units"]["x"] == "m"

@@ -102,8 +102,10 @@ def format_steady(name: str, pins: dict, found) -> str:
 
 
 def _units(m) -> dict[str, str]:
-    """The declared unit of each coordinate (for the table's headers)."""
-    return {c.name: c.unit for c in m.model.coordinates if c.unit}
+    """The SI unit of each coordinate (the values are SI; for the table's headers)."""
+    from ..model.units import si_unit
+
+    return {c.name: si_unit(c.unit) for c in m.model.coordinates if c.unit}
 
 
 def format_equilibria(name: str, coords, eqs, units=None) -> str:

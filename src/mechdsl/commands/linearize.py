@@ -44,6 +44,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..analysis.linearize import linearize
+    from ..model.units import si_unit
     from ..output.fileio import check_figure, check_writable, write_atomic
 
     for out in (args.output, args.csv):
@@ -61,7 +62,7 @@ def run(args) -> int:
     if args.inputs:
         inputs = [s for item in args.inputs for s in item.split(",") if s.strip()]
     lin = linearize(m.eom, at=at, inputs=inputs, guesses=guesses)
-    print(format_linearization(m.name, lin, units={c.name: c.unit for c in m.model.coordinates if c.unit}))
+    print(format_linearization(m.name, lin, units={c.name: si_unit(c.unit) for c in m.model.coordinates if c.unit}))
     out = args.out
     out.set(target=target_line(args, m), model=m.name, **lin.to_dict())
     if args.symbolic:

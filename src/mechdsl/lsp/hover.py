@@ -9,6 +9,7 @@ import math
 from ..frontend import ast
 from ..frontend import printer as P
 from ..model.exprs import evaluate, fmt_num
+from ..model.units import si_unit
 from ..semantic import catalog as C
 from ..semantic import components as K
 
@@ -141,19 +142,19 @@ def value_lines(analysis, sym, occ) -> list[str]:
     out = []
     for p in m.parameters:
         if p.name == path or p.name.startswith(path + "["):
-            out.append(f"{p.name} = {fmt_num(p.value)}" + (f" {p.unit}" if p.unit else "")
+            out.append(f"{p.name} = {fmt_num(p.value)}" + (f" {si_unit(p.unit)}" if p.unit else "")
                        + (" (input default)" if p.input else ""))
     for c in m.coordinates:
         if c.name == path or c.name.startswith(path + "[") or c.name.startswith(path + "."):
             try:
                 start, speed = (evaluate(e, values) for e in (c.start, c.speed))
-                unit = f" {c.unit}" if c.unit else ""
+                unit = f" {si_unit(c.unit)}" if c.unit else ""
                 out.append(f"{c.name}: start {_num(start)}{unit}, speed {_num(speed)}" + ("" if c.fixed else " (guess)"))
             except (ArithmeticError, KeyError, ValueError, TypeError):
                 out.append(f"{c.name}: coordinate")
     for o in m.outputs:
         if o.name == path or o.name.startswith(path + "["):
-            out.append(f"{o.name}: output" + (f" [{o.unit}]" if o.unit else ""))
+            out.append(f"{o.name}: output" + (f" [{si_unit(o.unit)}]" if o.unit else ""))
     return out[:12] + ([f"... {len(out) - 12} more"] if len(out) > 12 else [])
 
 

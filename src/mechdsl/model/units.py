@@ -257,5 +257,5 @@ def matrix_units(coordinate_units) -> dict[str, str]:
 def coordinate_units(eom) -> list[str]:
     """The SI unit of each of ``eom``'s coordinates ('' when not declared or not known)."""
     model = getattr(eom, "model", None)
-    by_name = {c.name: c.unit or "" for c in getattr(model, "coordinates", ())}
+    by_name = {c.name: si_unit(c.unit) for c in getattr(model, "coordinates", ())}
     return [by_name.get(c, "") for c in eom.coords]

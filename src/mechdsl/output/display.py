@@ -85,14 +85,16 @@ def _model_parts(m):
 
     model = m.model
     env = {p.name: p.value for p in model.parameters}
-    params = [[p.name, p.value, p.unit or "", p.doc] for p in model.parameters]
+    from ..model.units import si_unit
+
+    params = [[p.name, p.value, si_unit(p.unit), p.doc] for p in model.parameters]     # values in SI
     coords = []
     for c in model.coordinates:
         try:
             start = evaluate(c.start, env)
         except Exception:  # noqa: BLE001 - a start value that needs more than parameters
             start = "?"
-        coords.append([c.name, start, c.unit or "", c.doc])
+        coords.append([c.name, start, si_unit(c.unit), c.doc])
     from ..semantic.topology import counts as _counts
 
     n = _counts(model)

@@ -37,9 +37,7 @@ class ScalarDeclarations:
             factor, dim = U.parse_unit(v.value)
         except ValueError:
             fail("E404", f"unknown unit '{v.value}'", u.value.span, 'units look like "kg", "m/s2", "N.m", "rad"')
-        # values are held in SI (a start of 30 "deg" is 0.5236 rad), so the model says the SI unit:
-        # results, tables, plots and FMUs label those values (docs/language.md, Units)
-        return factor, dim, U.si_unit(v.value)
+        return factor, dim, v.value
 
     def _check_attrs(self, mod: Mod, allowed: set[str]) -> None:
         for k, m in mod.sub.items():
