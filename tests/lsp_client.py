@@ -16,10 +16,11 @@ from pathlib import Path
 
 
 class LspClient:
-    def __init__(self, init_options: dict | None = None, env: dict | None = None):
-        self.proc = subprocess.Popen([sys.executable, "-m", "mechdsl", "lsp"], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     env={**os.environ, **(env or {})})
+    def __init__(self, init_options: dict | None = None, env: dict | None = None, command=None, cwd=None):
+        """``command``: how the server is started (default ``python -m mechdsl lsp``)."""
+        self.proc = subprocess.Popen(list(command or [sys.executable, "-m", "mechdsl", "lsp"]),
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     env={**os.environ, **(env or {})}, cwd=cwd)
         self._id = 0
         self._answers: dict[int, queue.Queue] = {}
         self.notifications: list[dict] = []

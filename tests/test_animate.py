@@ -329,6 +329,29 @@ def test_pick_speed_slows_short_runs_to_nice_numbers():
         frame_times(0.0, 0.03, 30, 1.0)
 
 
+def test_pick_speed_speeds_long_runs_up_to_play_at_most_a_minute():
+    """A hundred Kepler orbits (628 s) would be 18850 GIF frames in real time (minutes and GBs to
+    write); without --speed a run longer than a minute plays for 24 to 60 s."""
+    from mechdsl.animate import pick_speed
+
+    assert pick_speed(60.0) == 1.0 and pick_speed(628.3) == pytest.approx(20.0)
+    for d in np.geomspace(60.001, 1e7, 40):
+        s = pick_speed(d)
+        assert 24.0 - 1e-9 <= d / s <= 60.0 + 1e-9                           # (5 / 2 apart)
+        mantissa = s / 10.0 ** np.floor(np.log10(s) + 1e-12)
+        assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-9                 # a nice number
+    assert len(frame_times(0.0, 628.3, 30)) == 943
+
+
+def test_a_long_run_animates_in_fast_motion(tmp_path, capsys):
+    out = tmp_path / "p.html"
+    assert main(["animate", str(MODEL_DIR / "pendulum.mech"), "--model", "Pendulum", "--t-end", "120", "--fps", "2",
+                 "--size", "80x60", "-o", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "the run lasts 120 s: animating it at --speed 2 (fast motion, 60 s of playback" in cap.err
+    assert "121 frames at 2 fps at speed 2, 120 s of model time" in cap.out
+
+
 def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
     """`mech animate models/andrews.mech -o a.gif` (0.03 s; before: "end time 0.0 .. 0.0")."""
     from PIL import Image
@@ -336,7 +359,7 @@ def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
     out = tmp_path / "a.gif"
     assert main(["animate", str(MODEL_DIR / "andrews.mech"), "-o", str(out), "--size", "160x120"]) == 0
     cap = capsys.readouterr()
-    assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
+    assert "--speed 0.01 (slow motion, 3 s of playback; --speed sets another)" in cap.err
     assert "91 frames at 30 fps at speed 0.01, 0.03 s of model time" in cap.out
     total = 0
     with Image.open(out) as im:                  # (Pillow merges repeated frames, adding their delays)

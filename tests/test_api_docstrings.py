@@ -64,3 +64,9 @@ def test_a_result_is_one_line():
     failed = mechdsl.loads("model Blow\n  coordinate Real x(start = 1, speed = 0);\nequation\n"
                            "  kinetic = 1/2*der(x)^2;\n  potential = -x^4;\nend Blow;\n").simulate(10.0)
     assert not failed.success and f"FAILED at t = {failed.failure.time:.6g}" in repr(failed)
+
+
+def test_equations_say_their_count_and_form():
+    p = mechdsl.load(mechdsl.examples.path("pendulum"))
+    assert repr(p.equations()).startswith("<1 Lagrange equation: Eq(")
+    assert repr(p.equations(form="hamilton")).startswith("<2 Hamilton equations: Eq(")

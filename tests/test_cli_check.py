@@ -21,6 +21,9 @@ def test_check_reports_formulation(capsys):
     assert main(["check", str(MODELS / "double_pendulum.mech")]) == 0
     out = capsys.readouterr().out
     assert "DoublePendulum: 2 bodies, 2 joints, 2 coordinates, tree -> ODE in minimal coordinates" in out
+    assert main(["check", str(MODELS / "pendulum_cartesian.mech")]) == 0
+    out = capsys.readouterr().out
+    assert "1 explicit constraint, 1 constraint equation -> DAE with multipliers" in out     # (one, not "equations")
 
 
 @pytest.mark.parametrize("emit", ["ast", "model", "source"])

@@ -4,6 +4,7 @@ errors as the document too with the exit code unchanged; the library's messages 
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 
@@ -46,8 +47,12 @@ def test_simulate(capsys, tmp_path):
     assert r["statistics"]["steps"] > 0 and r["statistics"]["cpu_time"] >= 0
     assert r["accuracy"]["rtol"] > 0 and r["accuracy"]["energy_drift"] >= 0
     assert r["columns"][:3] == ["time", "theta", "der(theta)"]
+    assert r["units"] == {**{c: r["units"][c] for c in r["columns"]}, "time": "s", "theta": "rad",
+                          "der(theta)": "rad/s", "x": "m", "energy": "J"}
+    assert json.loads((tmp_path / "p.json").read_text())["units"] == r["units"]     # the sidecar's
     assert doc["files_written"] == [str(out), str(tmp_path / "p.json")]
-    assert "model Pendulum: t = 0 .. 1 (11 points)" in err and "wrote" in err
+    assert "model Pendulum: t = 0 .. 1 s (11 points)" in err and "wrote" in err
+    assert " s CPU, " in err and " s wall" in err and re.search(r"max \|E - E\(0\)\| = \S+ J ", err)
 
 
 def test_a_failed_run_is_exit_1_with_its_result(capsys, tmp_path):
@@ -117,6 +122,82 @@ def test_animate(capsys, tmp_path):
     assert doc["result"]["frames"] == 3 and doc["result"]["fps"] == 10
 
 
+def test_view(capsys, tmp_path):
+    out = tmp_path / "p.html"
+    rc, doc, err = run_json(capsys, "view", PENDULUM, "-o", str(out), "--t-end", "0.2", "--fps", "10", "--speed", "1")
+    res = doc["result"]
+    assert rc == 0 and doc["files_written"] == [str(out)] and out.is_file()
+    assert res["model"] == "Pendulum" and res["mode"] == "3d" and not res["still"] and res["success"]
+    assert res["frames"] == 3 and res["fps"] == 10 and res["speed"] == 1
+    assert res["t_start"] == 0 and res["t_end"] == pytest.approx(0.2)
+    assert "wrote" in err                                     # the human text went to stderr
+    rc, doc, _ = run_json(capsys, "view", PENDULUM, "-o", str(out), "--still")
+    assert rc == 0 and doc["result"]["still"] and doc["result"]["frames"] == 1 and doc["result"]["fps"] is None
+
+
+def test_a_failed_view_is_exit_1_with_its_result(capsys, tmp_path):
+    f = tmp_path / "blowup.mech"
+    f.write_text("model Blow\n  coordinate Real x(start = 1, speed = 0);\n"
+                 "equation\n  kinetic = 1/2*der(x)^2;\n  potential = -x^4;\nend Blow;\n")
+    rc, doc, _ = run_json(capsys, "view", str(f), "-o", str(tmp_path / "b.html"), "--t-end", "10", "--fps", "5",
+                          "--speed", "1")
+    assert rc == 1 and doc["error"]["kind"] == "simulation" and "viewed up to" in doc["error"]["message"]
+    assert doc["result"]["success"] is False and doc["result"]["t_end"] < 10
+    assert doc["files_written"] == [str(tmp_path / "b.html")]
+
+
+def test_export(capsys, tmp_path):
+    out = tmp_path / "p.fmu"
+    rc, doc, err = run_json(capsys, "export", PENDULUM, "--fmu", str(out), "--fmi-type", "cs")
+    res = doc["result"]
+    assert rc == 0 and doc["files_written"] == [str(out)] and out.stat().st_size == res["size"]
+    assert res["model"] == "Pendulum" and res["fmi_version"] == "2.0" and res["interfaces"] == ["co-simulation"]
+    assert res["identifier"] == "Pendulum" and res["variables"] > 0
+    import zipfile
+
+    xml = zipfile.ZipFile(out).read("modelDescription.xml").decode()
+    assert 'modelIdentifier="Pendulum"' in xml and "<ModelExchange" not in xml
+    assert "wrote" in err
+
+
+def test_import(capsys, tmp_path):
+    src = TESTS / "corpus" / "urdf" / "W025_loop_left_out.urdf"
+    out = tmp_path / "loop.mech"
+    rc, doc, err = run_json(capsys, "import", str(src), "-o", str(out))
+    res = doc["result"]
+    assert rc == 0 and doc["files_written"] == [str(out)] and res["output"] == str(out)
+    assert f"end {res['model']};\n" in out.read_text() and res["root"] == "base" and res["floating"] is False
+    assert set(res["joints"]) == {"j1", "j2"} and res["left_out"] == ["j3"]
+    assert res["kinds"] == {"j1": "revolute", "j2": "revolute"} and len(res["coordinates"]) == 2
+    (d,) = doc["diagnostics"]                                  # the loop's warning, located in the URDF
+    assert (d["code"], d["severity"], d["file"], d["line"], d["column"]) == ("W025", "warning", str(src), 9, 3)
+    assert "warning[W025]" in err and "text" not in res
+    # without -o the model is the product: result.text under --json, stdout without it
+    rc, doc, _ = run_json(capsys, "import", str(src))
+    assert rc == 0 and doc["files_written"] == [] and doc["result"]["output"] is None
+    assert doc["result"]["text"] == out.read_text()
+    assert main(["import", str(src), "-q"]) == 0
+    cap = capsys.readouterr()
+    assert cap.out == out.read_text() and "-> standard output" not in cap.err and "warning[W025]" in cap.err
+
+
+def test_lsp_with_json_is_a_usage_error(capsys):
+    """stdout is the protocol's: --json cannot apply, and says so (as a document, like every usage error)."""
+    rc, doc, err = run_json(capsys, "lsp", "--json")
+    assert rc == 2 and doc["error"]["kind"] == "usage" and "Language Server Protocol" in doc["error"]["message"]
+    assert "--json does not apply" in err
+
+
+def test_the_schema_knows_the_result_of_every_command():
+    from cli_json import schema
+
+    s = schema()
+    clauses = {c["if"]["properties"]["command"]["const"] for c in s["allOf"][1:]}
+    assert clauses == set(COMMANDS) - {"lsp"}                  # lsp prints no document of its own
+    for name in clauses:
+        assert f"result_{name}" in s["$defs"], name
+
+
 def test_sweep(capsys, tmp_path):
     out = tmp_path / "s.csv"
     rc, doc, _ = run_json(capsys, "sweep", PENDULUM, "--grid", "L=1:2:2", "--t-end", "0.2", "--points", "5",
@@ -150,6 +231,38 @@ def test_quiet_prints_only_errors(capsys, tmp_path):
     # a command whose product is text still prints it (-q silences the talk, not the answer)
     assert main(["compile", PENDULUM, "--emit", "source", "-q"]) == 0
     assert "model Pendulum" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", [
+    ["animate", PENDULUM, "-o", "{tmp}/a.gif", "--t-end", "0.2", "--fps", "5", "--size", "64x64"],  # picks a speed
+    ["view", PENDULUM, "-o", "{tmp}/v.html", "--t-end", "0.2", "--fps", "5"],
+    ["view", PENDULUM, "-o", "{tmp}/v.html", "--still"],
+    ["export", PENDULUM, "--fmu", "{tmp}/p.fmu", "--fmi-type", "cs"],
+    ["import", "{tmp}/arm.urdf", "-o", "{tmp}/arm.mech", "--force"],
+    ["compile", PENDULUM, "--emit", "model", "-o", "{tmp}/m.txt", "--force"],
+    ["simulate", PENDULUM, "-o", "{tmp}/p.csv", "--model", "Pendulum", "--no-progress"],   # no stop time: 10 s
+], ids=lambda c: "-".join(w for w in c[:4] if not w.startswith(("/", "{"))))
+def test_quiet_is_silent_on_every_command(capsys, tmp_path, command):
+    """-q: no results text and no notes (the picked speed, the default end time, the target line),
+    on stdout or stderr; the files are written all the same."""
+    words = [w.replace("{tmp}", str(tmp_path)) for w in command]
+    (tmp_path / "arm.urdf").write_text(ARM_URDF)
+    assert main([*words, "-q"]) == 0
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == ""
+    assert len(list(tmp_path.iterdir())) > 1
+    assert main(words) == 0                                   # and without -q they do speak
+    cap = capsys.readouterr()
+    assert "Pendulum" in cap.out + cap.err or "->" in cap.out
+
+
+ARM_URDF = """<robot name="arm">
+  <link name="base"/>
+  <link name="rod"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
+    <inertia ixx="0.0833" iyy="0.0833" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="shoulder" type="continuous"><parent link="base"/><child link="rod"/><axis xyz="0 1 0"/></joint>
+</robot>
+"""
 
 
 def _fresh_model(tmp_path, k: int):
@@ -199,6 +312,9 @@ def test_completion_scripts_know_every_command(capsys, tmp_path, shell):
         assert name in script, name
     assert "json" in script and "t-end" in script
     if shell == "bash":                     # generated, so at least it parses
+        assert f"_shtab_mech_subparsers=({' '.join(COMMANDS)})" in script
+        assert "_shtab_mech_export___fmu_COMPGEN=_shtab_compgen_files" in script
+        assert "_shtab_mech_import_pos_0_COMPGEN=_shtab_compgen_files" in script
         f = tmp_path / "mech.bash"
         f.write_text(script)
         r = subprocess.run(["bash", "-n", str(f)], capture_output=True, text=True)

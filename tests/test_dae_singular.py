@@ -209,7 +209,7 @@ def test_cli_honours_the_scene_formulation(tmp_path, capsys):
     code = main(["simulate", str(src), "-o", str(tmp_path / "out.csv")])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert "t = 0 .. 5 (51 points)" in out and "FAILED" not in out
+    assert "t = 0 .. 5 s (51 points)" in out and "FAILED" not in out
 
 
 @pytest.mark.slow

@@ -60,3 +60,22 @@ def test_tutorial_shell_sessions_print_what_the_text_shows(tmp_path, monkeypatch
                         assert " ".join(line.split()) in printed, f"{command}: the text shows {line!r}"
                 ran += 1
     assert ran >= 5
+
+
+def test_tutorial_says_what_animate_draws(tmp_path, monkeypatch, capsys):
+    """The T-and-V pendulum has no bodies (bars of the coordinates), the component one has (a
+    drawing of the mechanism): the tutorial says which, and the command agrees."""
+    from mechdsl.cli import main
+
+    text = (CHECKOUT / "docs" / "tutorial.md").read_text()
+    assert "no bodies to draw" in text and "`mech animate pendulum2.mech -o swing.gif`" in text
+    monkeypatch.chdir(tmp_path)
+    blocks = _blocks(text)
+    (tmp_path / "pendulum.mech").write_text(next(b for b in blocks if b.startswith("model Pendulum \"A point")))
+    (tmp_path / "pendulum2.mech").write_text(next(b for b in blocks if b.startswith("model Pendulum2")))
+    args = ["--t-end", "0.2", "--fps", "10", "--size", "80x60", "--speed", "0.1"]
+    assert main(["animate", "pendulum.mech", "-o", "a.gif", *args]) == 0
+    assert "bars of the coordinates (no bodies to draw)" in capsys.readouterr().out
+    assert main(["animate", "pendulum2.mech", "-o", "b.gif", *args]) == 0
+    out = capsys.readouterr().out
+    assert "wrote b.gif" in out and "no bodies" not in out

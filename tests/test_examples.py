@@ -3,6 +3,7 @@ the first steps of a new user in an empty folder after ``pip install`` (CI runs 
 installed wheel, from a copy of tests/ outside the repository: .ci/run)."""
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import re
@@ -37,6 +38,7 @@ def test_every_shipped_model_is_an_example_with_its_description():
         p = ex.path(name)
         assert p.is_file() and p.suffix == ".mech" and p.stem == name
         assert ex.description(name) == _declared_description(p) != ""
+        assert ex.description(name)[0].isupper(), f"{name}: a description reads as a sentence in `mech examples`"
     assert ex.path("pendulum.mech") == ex.path("pendulum")
     assert dict(ex.catalog())["double_pendulum"] == "Two uniform rods hinged in series"
 
@@ -138,3 +140,72 @@ def test_the_readme_shows_the_installed_form_and_it_works(tmp_path):
         r = _mech(*words[1:], cwd=tmp_path)
         assert r.returncode == 0, f"{command}: {r.stderr}"
     assert (tmp_path / "double_pendulum.csv").is_file() and (tmp_path / "double_pendulum.png").is_file()
+
+
+# --------------------------------------------------------------------------- the rest of issue 27's 'done'
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    """`mech examples --copy ex` and `mech sweep ex/pendulum.mech ... -o s.nc` with the installed
+    `mech`, in an empty folder; the netCDF file opened with xarray."""
+    import xarray as xr
+
+    folder = tmp_path_factory.mktemp("sweep")
+    assert _mech("examples", "--copy", "ex", "pendulum", cwd=folder).returncode == 0
+    r = _mech("sweep", "ex/pendulum.mech", "--grid", "L=1:2:3", "--t-end", "1", "--points", "11", "-o", "s.nc",
+              "--no-progress", cwd=folder)
+    assert r.returncode == 0, r.stderr
+    with xr.open_dataset(folder / "s.nc") as ds:
+        yield ds.load(), r
+
+
+def test_a_sweep_to_netcdf_from_an_empty_folder(swept):
+    ds, r = swept
+    assert "3 runs, 3 succeeded" in r.stdout
+    assert ds.sizes == {"run": 3, "time": 11} and list(ds["L"].values) == [1.0, 1.5, 2.0]
+    assert ds.attrs["model"] == "Pendulum" and bool(ds["success"].all())
+    # a longer rod swings slower: at t = 1 s the bob dropped from theta = pi/2 the least for L = 2
+    assert float(ds["theta"].isel(time=-1, run=2)) > float(ds["theta"].isel(time=-1, run=0))
+
+
+# issue 27: sweep files carry no units nor mechdsl's version on main yet; the faults branch adds them
+# (mechdsl/sweep/provenance.py).  The mark lifts itself when that module is there (and can then be
+# deleted); until then strict: a pass without it would be a surprise to look at.
+@pytest.mark.xfail(importlib.util.find_spec("mechdsl.sweep.provenance") is None, strict=True,
+                   reason="sweep files carry no units nor provenance before mechdsl/sweep/provenance.py lands")
+def test_the_sweep_file_carries_units_and_provenance(swept):
+    ds, _ = swept
+    units = {name: ds[name].attrs.get("units") for name in ("time", "theta", "der(theta)", "x", "E", "L")}
+    assert units == {"time": "s", "theta": "rad", "der(theta)": "rad/s", "x": "m", "E": "J", "L": "m"}
+    assert ds["theta"].attrs.get("long_name") and ds["L"].attrs.get("long_name")
+    assert ds.attrs.get("mechdsl_version") == mechdsl.__version__
+    assert ds.attrs.get("model_hash")
+
+
+def test_mech_lsp_answers_an_editor(tmp_path):
+    """The installed `mech lsp` (the console script), started in an empty folder as an editor starts
+    it: initialize, a copied example opened (its diagnostics: none), a hover, shutdown and exit."""
+    from lsp_client import LspClient
+
+    script = Path(sys.executable).with_name("mech")
+    assert script.exists(), "the mech console script is not installed"
+    path = ex.copy(tmp_path / "ex", only=["pendulum"])[0]
+    text = path.read_text()
+    c = LspClient({"debounceMs": 0}, command=[str(script), "lsp"], cwd=tmp_path)
+    try:
+        info = c.init_result["result"]
+        assert info["serverInfo"]["name"] == "mechdsl" and info["serverInfo"]["version"] == mechdsl.__version__
+        assert info["capabilities"]["hoverProvider"]
+        uri = path.as_uri()
+        c.open(uri, text)
+        assert c.diagnostics(uri, 1)["diagnostics"] == []
+        line = next(i for i, ln in enumerate(text.splitlines()) if "parameter Real L(" in ln)
+        col = text.splitlines()[line].index("L(")
+        hover = c.result("textDocument/hover", {"textDocument": {"uri": uri},
+                                                "position": {"line": line, "character": col}})
+        assert "length of the rod" in hover["contents"]["value"] and "m" in hover["contents"]["value"]
+        assert c.internal_errors() == []
+    finally:
+        code = c.close()
+    assert code == 0 and c.raw_out == []

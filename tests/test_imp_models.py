@@ -1,5 +1,7 @@
 """The shipped contact models (models/*.mech), from .mech text through mechdsl.load to events,
 each against its closed form."""
+import re
+
 import numpy as np
 import pytest
 from scipy.special import ellipk
@@ -147,6 +149,9 @@ def test_cli_prints_events(capsys, tmp_path):
     text = capsys.readouterr().out
     assert rc == 0
     assert "events: 3 (3 impact floor); total energy change" in text
+    # every number says its unit: the total in J, the columns in s, N.s, J and m/s
+    assert re.search(r"total energy change -?[0-9.e+-]+ J\n", text)
+    assert re.search(r"time \[s\] +event +contact +impulse \[N\.s\] +energy change \[J\] +normal speed -/\+ \[m/s\]", text)
     assert "0.451523641  impact  floor" in text
     import json
 

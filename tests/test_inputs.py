@@ -126,7 +126,7 @@ def test_state_feedback_gives_the_harmonic_oscillator(slider):
 
 @pytest.mark.parametrize("inputs, match", [
     ({"H": 1.0}, "not an input of Slider.*did you mean"),
-    ({"F": mechdsl.table([0.0, 1.0], [0.0, 1.0])}, "covers t = 0 .. 1, not the run's 0 .. 2"),
+    ({"F": mechdsl.table([0.0, 1.0], [0.0, 1.0])}, "covers t = 0 .. 1 s, not the run's 0 .. 2 s"),
     ({"F": lambda t: [1.0, 2.0]}, "one number per call"),
     ({"F": lambda t: "a"}, "one number per call"),
     ({"F": lambda t: 1 / 0}, "ZeroDivisionError"),

@@ -156,7 +156,7 @@ def _model(which, slider, rod, ball):
 @pytest.mark.parametrize("kind, which, kw", BACKENDS)
 @pytest.mark.parametrize("inputs, match", [
     ({"Fx": 1.0}, "'Fx' is not an input of .*did you mean 'F'"),
-    ({"F": mechdsl.table([0.0, 0.5], [0.0, 1.0])}, "covers t = 0 .. 0.5, not the run's 0 .. 1"),
+    ({"F": mechdsl.table([0.0, 0.5], [0.0, 1.0])}, "covers t = 0 .. 0.5 s, not the run's 0 .. 1 s"),
     ({"F": lambda t: [1.0, 2.0]}, "one number per call"),
     ({"F": 6.0}, "outside its declared bounds"),
     ({"F": [[0.0, 0.0], [1.0, -7.0]]}, "outside its declared bounds"),
@@ -226,7 +226,7 @@ def test_cli_drives_a_constrained_model_from_a_csv(tmp_path, capsys):
     capsys.readouterr()
     src, csv_in = tmp_path / "model.mech", tmp_path / "f.csv"
     assert main(["simulate", str(src), "--t-end", "2", "--input", f"F={csv_in}", "--no-progress"]) == 2
-    assert "covers t = 0 .. 1, not the run's 0 .. 2" in capsys.readouterr().err
+    assert "covers t = 0 .. 1 s, not the run's 0 .. 2 s" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("signal", [1.0, lambda t: math.sin(t)])

@@ -65,6 +65,14 @@ def test_the_scan_finds_a_print():
     assert sorted(line for _, line in _speaking_calls(tree)) == [2, 3, 4]
 
 
+def test_the_scan_reads_every_package():
+    """Every subpackage of the installed package is scanned, the recently added ones by name."""
+    scanned = {rel.split("/")[0] for rel, _ in _library_modules() if "/" in rel}
+    packages = {p.parent.relative_to(PACKAGE).parts[0] for p in PACKAGE.rglob("__init__.py") if p.parent != PACKAGE}
+    assert scanned == packages - {"commands"}
+    assert {"urdf", "export", "view", "lsp", "sweep", "simulation", "animate"} <= scanned
+
+
 def test_no_prints_in_library_code():
     found = []
     for rel, tree in _library_modules():

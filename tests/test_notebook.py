@@ -41,7 +41,8 @@ def test_tour_notebook_executes_and_displays(tmp_path):
     assert "mechdsl-animation" in outputs["anim"]["text/html"]
     assert outputs['r.view(trails=["rod2.b"])']["text/html"].startswith("<iframe srcdoc=")
     assert "modes" in outputs["lin"]["text/html"]
-    sweep = outputs["pd.DataFrame(rows)"]["text/plain"].splitlines()[1:]
+    head, *sweep = outputs["pd.DataFrame(rows)"]["text/plain"].splitlines()
+    assert head.split("  ")[-1].strip() == "small angle [s]" and "period [s]" in head    # numbers in units
     for line in sweep:
         _, L, period, exact, small = line.split()[:5]
         assert float(period) == pytest.approx(float(exact), rel=1e-4)

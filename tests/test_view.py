@@ -334,7 +334,7 @@ def test_mech_view_writes_the_page_and_replaces_its_own(tmp_path, capsys):
 def test_mech_view_picks_the_speed_of_a_short_run_and_says_so(tmp_path, capsys):
     assert main(["view", str(MODEL_DIR / "andrews.mech"), "-o", str(tmp_path / "a.html")]) == 0
     cap = capsys.readouterr()
-    assert "--speed 0.01 (slow motion, 3 s of playback)" in cap.err
+    assert "--speed 0.01 (slow motion, 3 s of playback; --speed sets another)" in cap.err
     assert "91 frames" in cap.out and "bars of the coordinates" in cap.out
 
 

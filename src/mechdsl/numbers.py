@@ -221,19 +221,11 @@ def show(si_value: float, unit: str | None, digits: int = 6) -> str:
 
 def si_unit(unit: str | None) -> str | None:
     """The unit the values of a quantity declared in ``unit`` are held in (results, the parameter
-    vector, equilibria are SI): "rad" for deg, "rad/s" for rpm, "m" for mm; None when unknown."""
-    if not unit:
-        return None
-    try:
-        factor, dim = _unit(unit, "unit")
-    except UsageError:
-        return None
-    if factor == 1.0:
-        return unit
-    text = str(dim)
-    if re.search(r"deg|rev|rpm|turn|grad|arcmin|arcsec", unit):        # an angle in another unit
-        return "rad" if text == "1" else "rad" + text[1:] if text.startswith("1/") else None
-    return None if text == "1" else text
+    vector, equilibria are SI): "rad" for deg, "rad/s" for rpm, "m" for mm; None when unknown
+    (model.units.si_unit, with None for no unit)."""
+    from .model.units import si_unit as si
+
+    return si(unit) or None
 
 
 def _unit(unit: str, what: str):

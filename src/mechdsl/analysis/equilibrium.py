@@ -36,6 +36,7 @@ import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from ..eom import fold_inputs, multiplier_units
+from ..model.units import coordinate_units, matrix_units
 from ..output import display as _display
 from . import charts
 from .charts import chart, locked_joints, quaternion_blocks, quaternion_model
@@ -260,7 +261,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     found: list[tuple[np.ndarray, np.ndarray, float]] = []
     search = Search()
     # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
-    families = con is None and bool(blocks or charts.euler_blocks(eom))
+    families = con is None
     for g in _guesses(eom, guesses, q0, st, max_guesses, con):
         if blocks:
             g = charts.normalize_blocks(g, blocks, fallback=q0)
@@ -428,9 +429,10 @@ def _family_directions(ch, st, pv, t, alpha, q=None) -> np.ndarray:
     n = ch.n
     q = np.zeros(n) if q is None else np.asarray(q, float)
     N = st.symmetry
-    if N.size and np.any(alpha):
-        return np.zeros((n, 0))
     M, C, K, _, _ = second_order(ch, q, np.zeros(n), t, pv, acc=np.zeros(n))
+    # an accelerated reference motion (round-off in alpha is not one: as _classify decides)
+    if N.size and np.linalg.norm(M @ (N @ np.asarray(alpha, float))) > 1e-8 * max(st.force_scale, 1e-300):
+        return np.zeros((n, 0))
     P = complement(N)
     Kr = sym(P.T @ K @ P)
     if not Kr.size:
@@ -673,6 +675,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     Csym = sym(Ct)
     gyro = np.max(np.abs(Ct - Ct.T), initial=0.0) > 1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
     damping_ok = np.min(np.linalg.eigvalsh(Csym), initial=0.0) >= -1e-9 * max(np.max(np.abs(Ct), initial=0.0), 1e-300)
+    # the Hessian's eigenvalues have K's unit when every coordinate has the same unit
+    hu = _unit_suffix(matrix_units(coordinate_units(eom)).get("K", ""))
     potential = "V - T0" if st.has_T0 else "V"
     if con is not None:
         potential += " + lambda'g on the constraint manifold"
@@ -692,20 +696,20 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
     elif growth > 1e-6 * lscale:
         i = int(np.argmax(ev.real))
         neg = heig[heig < -etol]
-        why = (f"Hessian of {potential} has negative eigenvalue(s) {_fmt_list(neg)}; " if neg.size else "")
-        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(ev[i])} with positive "
+        why = (f"Hessian of {potential} has negative eigenvalue(s) {_fmt_list(neg)}{hu}; " if neg.size else "")
+        stable, reason = False, (why + f"linearization has eigenvalue {_fmt_c(ev[i])} 1/s with positive "
                                        "real part (Lyapunov's indirect method)")
     elif circulatory:
         stable, reason = None, ("non-conservative positional (circulatory) forces: the stiffness is not "
                                 "symmetric, Lagrange-Dirichlet does not apply; linear model has no growing mode")
     elif heig.size and np.all(heig > etol) and damping_ok:
         stable, reason = True, (f"Lagrange-Dirichlet: Hessian of {potential} positive definite "
-                                f"(eigenvalues {_fmt_list(heig)})")
+                                f"(eigenvalues {_fmt_list(heig)}{hu})")
         if k:
             reason += "; neutral along the symmetry directions"
     elif heig.size and np.any(heig < -etol):
         stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
-                                f"{_fmt_list(heig[heig < -etol])} but gyroscopic terms keep the linear "
+                                f"{_fmt_list(heig[heig < -etol])}{hu} but gyroscopic terms keep the linear "
                                 "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
     elif heig.size == 0 and con is not None and Z.shape[1] == 0:
         stable, reason = None, "no degree of freedom: the constraints fix the configuration"
@@ -713,7 +717,7 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
     elif np.any(np.abs(heig) <= etol):
         stable, reason = None, (f"zero eigenvalue(s) of the Hessian of {potential} "
-                                f"({_fmt_list(heig[np.abs(heig) <= etol])}): higher-order terms decide")
+                                f"({_fmt_list(heig[np.abs(heig) <= etol])}{hu}): higher-order terms decide")
     else:
         stable, reason = None, (f"Hessian of {potential} positive definite (eigenvalues {_fmt_list(heig)}) but "
                                 "the damping matrix is not positive semidefinite (a force that feeds energy in "
@@ -723,7 +727,8 @@ def _classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equ
         notes = notes + ["gyroscopic terms present (T1 != 0)"]
     if accel:
         notes = notes + ["uniformly accelerated reference motion q(t) = q* + a t^2/2 with acceleration a = "
-                         + ", ".join(f"{c}: {v:.6g}" for c, v in zip(eom.coords, acc) if abs(v) > 0)]
+                         + ", ".join(f"{c}: {v:.6g}" + _unit_suffix(u and u + "/s2")
+                                     for c, v, u in zip(eom.coords, acc, coordinate_units(eom)) if abs(v) > 0)]
     extra = {}
     if con is not None:
         extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
@@ -775,6 +780,10 @@ def singular_mass(M) -> str:
     if w[0] > 1e-12 * max(abs(w[-1]), 1e-300):
         return ""
     return f"smallest eigenvalue {w[0]:.3g} of {w[-1]:.3g}"
+
+
+def _unit_suffix(unit: str) -> str:
+    return f" {unit}" if unit else ""
 
 
 def _fmt_list(v) -> str:

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
+from ..model.units import coordinate_units, matrix_units
 from ..output import display as _display
 from .core import dense, named_multipliers, parts
 from .lqr import lqr
@@ -144,7 +145,14 @@ class Linearization:
                 "A": self.A.tolist(), "B": self.B.tolist(), "modes": md["modes"],
                 "eigenvalues": md["eigenvalues"], "notes": list(self.notes),
                 "equilibrium": None if self.equilibrium is None else self.equilibrium.to_dict(),
-                **self._constrained_dict()}
+                **self._units_dict(), **self._constrained_dict()}
+
+    def _units_dict(self) -> dict:
+        """``units``: each coordinate's SI unit ('' unknown); ``matrix_units``: those of M, C, K
+        when the matrices' coordinates share one unit ({} otherwise: each entry has its own)."""
+        units = dict(zip(self.eom.coords, coordinate_units(self.eom))) if self.eom is not None else {}
+        return {"units": {c: units.get(c, "") for c in self.coords},
+                "matrix_units": matrix_units([units.get(c, "") for c in self.matrix_coords])}
 
     def _constrained_dict(self) -> dict:
         if not self.constrained:

@@ -318,7 +318,7 @@ def _classify(eom, pt, pv, t, x, r_idx, s_idx, ign, q0, resid) -> SteadyMotion:
                      "to tolerance: forces other than the potential act?)")
     if lam.size and np.max(lam.real) > 1e-6 * lscale:
         stable, reason = False, (f"unstable: the reduced linear system at fixed momenta has an eigenvalue with "
-                                 f"positive real part ({np.max(lam.real):.6g})")
+                                 f"positive real part ({np.max(lam.real):.6g} 1/s)")
     elif nr == 0:
         stable, reason = None, "no non-ignorable coordinate: nothing to decide"
     elif np.all(heig > 1e-9 * hscale):

@@ -103,7 +103,7 @@ def draw(res, title: str | None = None):
     axes[0].legend(fontsize="x-small", loc="best")
     s = res.setup
     fig.suptitle(title or f"{s.name or s.eom.name}" + (f" (scene {s.scene})" if s.scene else "")
-                 + f": t = {s.t_start:g} .. {s.t_end:g}, compared {_cols(res.columns)}; "
+                 + f": t = {s.t_start:g} .. {s.t_end:g} s, compared {_cols(res.columns)}; "
                    f"x at the top = failed run", fontsize="medium")
     bottom = 0.0
     if notes:

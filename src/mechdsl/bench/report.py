@@ -105,7 +105,7 @@ def header_lines(res) -> list[str]:
     s = res.setup
     ref = res.reference
     where = f" (scene {s.scene})" if s.scene else ""
-    lines = [f"{s.name or s.eom.name}{where}: {res.kind} model, t = {s.t_start:g} .. {s.t_end:g}, "
+    lines = [f"{s.name or s.eom.name}{where}: {res.kind} model, t = {s.t_start:g} .. {s.t_end:g} s, "
              f"compared: {', '.join(res.columns)} (relative error per component)"]
     cpu = "".join(f"; {k} {v:.3g} s" for k, v in ref.cpu.items()) if ref.cpu else ""
     lines.append(f"reference: {ref.source}{cpu}")

@@ -6,6 +6,8 @@ One pattern for every command (docs/internals.md, "How to add a command"):
 - it hands its machine-readable result to ``args.out`` (an :class:`Output`):
   ``args.out.set(key=value, ...)``, the files it wrote with ``args.out.wrote(path)``, warnings
   with ``args.out.warn(text)`` (or through ``logging``: the CLI's handler records them too),
+  remarks on what it chose (a default, a picked speed) with ``args.out.note(text)`` (stderr,
+  silent under ``-q``),
   diagnostics with ``args.out.diagnostic(d)``;
 - a command whose product *is* text (``compile``, ``equations``, ``completion``) hands it to
   ``args.out.product(text)``: stdout in human mode (even under ``-q``), the ``text`` field with
@@ -66,6 +68,12 @@ class Output:
         self.warnings.append(str(text))
         if echo:
             print(f"mech: warning: {text}", file=sys.stderr)
+
+    def note(self, text: str) -> None:
+        """A remark on what the command chose for the user (a default end time, a picked speed):
+        ``mech: text`` on stderr, so it never mixes with a product on stdout; nothing under -q."""
+        if not self.quiet:
+            print(f"mech: {text}", file=sys.stderr)
 
     def diagnostic(self, d) -> None:
         """A Diagnostic (error, warning or note) for ``diagnostics`` (printing it stays the caller's)."""

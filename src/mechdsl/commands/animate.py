@@ -40,7 +40,8 @@ def add_playback_args(p) -> None:
     """--speed, --trail, --up, --t-end: shared with `mech view`."""
     p.add_argument("--speed", type=_num("--speed"), default=None, metavar="X",
                    help="model seconds per second of playback (default 1: real time; a run shorter than a "
-                        "second is slowed down to play for at least 2 s)")
+                        "second is slowed down to play for at least 2 s, one longer than a minute sped up to "
+                        "play for at most 60 s)")
     p.add_argument("--trail", action="append", default=[], metavar="POINT",
                    help="draw the path of a point (e.g. rod2.b); repeat for several")
     p.add_argument("--up", default=None, metavar="DIR",
@@ -50,7 +51,7 @@ def add_playback_args(p) -> None:
 
 def plan_frames(args, m, what: str = "animating"):
     """(frame times, speed) of a run of the loaded model: --t-end or the scene's stop time (else
-    10 s), the start time, and the speed (--speed, else picked: notes on stderr)."""
+    10 s), the start time, and the speed (--speed, else picked: said in a note)."""
     from ..animate import frame_times, pick_speed
     from ..diagnostics import UsageError
 
@@ -59,7 +60,7 @@ def plan_frames(args, m, what: str = "animating"):
         from ..simulation.settings import DEFAULT_T_END      # the one default end of a run
 
         t_end = DEFAULT_T_END
-        print(f"mech: no --t-end and no scene stop_time: {what} {t_end:g} s", file=sys.stderr)
+        args.out.note(f"no --t-end and no scene stop_time: {what} {t_end:g} s")
     t0 = float(m.scene_settings.get("start_time", 0.0))
     if not t_end > t0:
         raise UsageError(f"--t-end {t_end:g} must be after the start time {t0:g}")
@@ -67,8 +68,9 @@ def plan_frames(args, m, what: str = "animating"):
     if speed is None:
         speed = pick_speed(float(t_end) - t0)
         if speed != 1.0:
-            print(f"mech: the run lasts {float(t_end) - t0:g} s: {what} it at --speed {speed:g} (slow motion, "
-                  f"{(float(t_end) - t0) / speed:g} s of playback)", file=sys.stderr)
+            pace = "slow motion" if speed < 1.0 else "fast motion"
+            args.out.note(f"the run lasts {float(t_end) - t0:g} s: {what} it at --speed {speed:g} ({pace}, "
+                          f"{(float(t_end) - t0) / speed:g} s of playback; --speed sets another)")
     return frame_times(t0, float(t_end), args.fps, speed), speed
 
 

@@ -1,8 +1,6 @@
 """``mech compile FILE --emit ast|source|model|eom|problem``: dump a named intermediate form (deterministic)."""
 from __future__ import annotations
 
-import sys
-
 from ..output.fileio import check_writable, write_atomic
 from ._common import add_force_arg, target_line
 
@@ -42,7 +40,7 @@ def run(args) -> int:
     else:
         program = analyze(tree, units=not args.no_units)
         m = Model._from_program(program, args.model, args.scene)
-        print(f"mech: {target_line(args, m)}", file=sys.stderr)
+        args.out.note(target_line(args, m))
         args.out.set(target=target_line(args, m), model=m.name)
         if args.emit == "model":
             text = dump_model(m.model)

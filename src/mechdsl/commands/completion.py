@@ -12,7 +12,7 @@ from ..diagnostics import UsageError
 SHELLS = ("bash", "zsh", "tcsh")
 HELP = "print a shell completion script (bash, zsh or tcsh; needs the 'completion' extra: shtab)"
 # options naming files or folders complete as paths
-FILE_DESTS = {"file", "files", "output", "plot", "csv", "reference"}
+FILE_DESTS = {"file", "files", "output", "plot", "csv", "reference", "fmu"}
 DIR_DESTS = {"copy"}
 
 

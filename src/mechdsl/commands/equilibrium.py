@@ -40,6 +40,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..analysis.equilibrium import equilibria
+    from ..model.units import matrix_units
     from ..output.fileio import check_writable, write_atomic
 
     if args.output:
@@ -50,8 +51,11 @@ def run(args) -> int:
     if args.steady:
         return _steady(args, m, guesses)
     eqs = equilibria(m.eom, guesses or None, t=args.time)
-    print(format_equilibria(m.name, m.eom.coords, eqs, _si_units(m)))
+    units = _si_units(m)
+    print(format_equilibria(m.name, m.eom.coords, eqs, units))
     data = {"model": m.name, "coordinates": list(m.eom.coords), "count": len(eqs),
+            "units": {c: units.get(c, "") for c in m.eom.coords},
+            "hessian_unit": matrix_units([units.get(c, "") for c in m.eom.coords]).get("K", ""),
             "equilibria": [e.to_dict() for e in eqs]}
     args.out.set(target=target_line(args, m), **data)
     if args.output:
@@ -101,12 +105,13 @@ def _si_units(m) -> dict:
     """coordinate -> the unit its values are in (SI; rad for an angle declared in deg)."""
     from ..numbers import si_unit
 
-    return {c.name: si_unit(c.unit) for c in m.model.coordinates}
+    return {c.name: u for c in m.model.coordinates if (u := si_unit(c.unit))}
 
 
 def format_equilibria(name: str, coords, eqs, units: dict | None = None) -> str:
     """The table of equilibria; ``units``: each coordinate's unit (SI), said in its column's head."""
     from ..analysis.tables import num, table
+    from ..model.units import matrix_units
 
     search_notes = [f"  note: {n}" for n in getattr(eqs, "notes", None) or ()]
     if not eqs:
@@ -125,6 +130,8 @@ def format_equilibria(name: str, coords, eqs, units: dict | None = None) -> str:
                                                               "[" + ", ".join(num(v) for v in e.hessian_eigenvalues) + "]"])
     head = "Hessian eigenvalues" if not lam_names else "reduced Hessian eigenvalues"
     units, lam_units = units or {}, eqs[0].lambda_units if lam_names else {}
+    ku = matrix_units([units.get(c, "") for c in coords]).get("K")
+    head += f" [{ku}]" if ku else ""
     heads = [c + (f" [{units[c]}]" if units.get(c) else "") for c in coords]
     lines.append(table(["#"] + heads + [f"lambda[{c}]" + (f" [{lam_units[c]}]" if lam_units.get(c) else "")
                                        for c in lam_names] + ["kind", "stability", head], rows))

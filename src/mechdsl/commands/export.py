@@ -1,8 +1,6 @@
 """``mech export FILE --fmu OUT.fmu``: a model as a Functional Mock-up Unit (FMI 2.0 or 3.0)."""
 from __future__ import annotations
 
-import sys
-
 from ._common import add_cache_arg, add_force_arg, add_set_arg, add_target_args, load_model, target_line
 
 HELP = "export a model as an FMU (FMI 2.0 or 3.0; model exchange and/or co-simulation)"
@@ -28,9 +26,14 @@ def run(args) -> int:
 
     check_writable(args.fmu, args.force)            # before any work is done
     model = load_model(args)
-    print(f"mech: {target_line(args, model)}", file=sys.stderr)
+    target = target_line(args, model)
+    print(target)
     info = export_fmu(model, args.fmu, fmi_version=int(args.fmi_version), fmi_type=args.fmi_type,
                       overwrite=args.force)
+    args.out.wrote(info.path)
+    args.out.set(target=target, model=model.name, fmi_version=f"{info.fmi_version}.0",
+                 interfaces=list(info.interfaces), identifier=info.identifier, variables=info.variables,
+                 size=info.size, notes=list(info.notes))
     for note in info.notes:
         print(f"note: {note}")
     print(f"wrote {info.path} (FMI {info.fmi_version}.0: {', '.join(info.interfaces)}; modelIdentifier "

@@ -34,6 +34,7 @@ def run(args) -> int:
     from ..output.fileio import check_writable, write_atomic
     from ..urdf import convert
 
+    out = args.out
     dirs = {}
     for item in args.package_dir:
         name, eq, folder = item.partition("=")
@@ -49,16 +50,30 @@ def run(args) -> int:
     imp = convert(args.file, floating=args.floating, measured_inertia=args.measured_inertia, package_dirs=dirs,
                   mech_name=Path(args.output).name if args.output else None,
                   skip_missing_meshes=args.skip_missing_meshes)
-    if imp.diagnostics:
+    if imp.diagnostics:                       # warnings (a skipped mesh): shown even under -q
         print(format_diagnostics(imp.diagnostics), file=sys.stderr)
-    report = sys.stdout if args.output else sys.stderr
+        for d in imp.diagnostics:
+            out.diagnostic(d)
+    out.set(**result(args.file, args.output, imp, args.floating))
+    lines = summary(args.file, args.output, imp, args.floating)
     if args.output:
         write_atomic(args.output, imp.text, overwrite=args.force, source=True)
+        out.wrote(args.output)
+        print("\n".join(lines))
     else:
-        sys.stdout.write(imp.text)
-    for line in summary(args.file, args.output, imp, args.floating):
-        print(line, file=report)
+        out.product(imp.text)                 # the model is the product: stdout (or result.text)
+        if not out.quiet:                     # the summary beside it, on stderr
+            print("\n".join(lines), file=sys.stderr)
     return 0
+
+
+def result(source: str, output: str | None, imp, floating: bool) -> dict:
+    """The --json result: the model and how the URDF's names map onto it."""
+    return {"source": str(source), "output": output, "model": imp.model, "root": imp.root, "floating": floating,
+            "bodies": dict(imp.bodies), "joints": dict(imp.joints),
+            "coordinates": {j: list(c) for j, c in imp.coordinates.items()}, "kinds": dict(imp.kinds),
+            "mimics": {j: {"follows": t, "multiplier": k, "offset": c} for j, (t, k, c) in imp.mimics.items()},
+            "left_out": list(imp.left_out), "measured_inertia": list(imp.measured), "shapes": len(imp.shapes)}
 
 
 def summary(source: str, output: str | None, imp, floating: bool) -> list[str]:

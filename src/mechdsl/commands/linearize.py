@@ -44,6 +44,7 @@ def add_parser(sub):
 
 def run(args) -> int:
     from ..analysis.linearize import linearize
+    from ..model.units import si_unit
     from ..output.fileio import check_figure, check_writable, write_atomic
 
     for out in (args.output, args.csv):
@@ -61,7 +62,7 @@ def run(args) -> int:
     if args.inputs:
         inputs = [s for item in args.inputs for s in item.split(",") if s.strip()]
     lin = linearize(m.eom, at=at, inputs=inputs, guesses=guesses)
-    print(format_linearization(m.name, lin))
+    print(format_linearization(m.name, lin, units={c.name: si_unit(c.unit) for c in m.model.coordinates if c.unit}))
     out = args.out
     out.set(target=target_line(args, m), model=m.name, **lin.to_dict())
     if args.symbolic:
@@ -81,16 +82,26 @@ def _state(text: str) -> dict:
     return assignments([text], "--at")
 
 
-def format_linearization(name: str, lin) -> str:
+def format_linearization(name: str, lin, units=None) -> str:
+    """The text of `mech linearize`; ``units``: each coordinate's unit (values, matrices)."""
     from ..analysis.tables import matrix, num, table
+    from ..model.units import matrix_units
+
+    units = units or {}
+
+    def val(k, v, per_s=""):
+        u = units.get(k, "")
+        return f"{num(v)} {u}{per_s}" if u else num(v)
 
     c = list(lin.matrix_coords)
+    mu = matrix_units([units.get(k, "") for k in c])
     where = {"equilibrium": "about the equilibrium", "accelerated-reference":
              "about the relative equilibrium of the accelerated reference motion",
-             "state": f"about the state at t = {num(lin.t)}"}[lin.kind]
+             "state": f"about the state at t = {num(lin.t)} s"}[lin.kind]
     lines = [f"{name}: linear model {where}",
-             "  " + ", ".join(f"{k} = {num(v)}" for k, v in lin.values.items())
-             + ("" if not any(lin.qd) else "; " + ", ".join(f"der({k}) = {num(v)}" for k, v in zip(c, lin.qd)))]
+             "  " + ", ".join(f"{k} = {val(k, v)}" for k, v in lin.values.items())
+             + ("" if not any(lin.qd) else "; " + ", ".join(f"der({k}) = {val(k, v, '/s')}"
+                                                            for k, v in zip(c, lin.qd)))]
     if lin.multipliers is not None:
         units = lin.lambda_units
         lines.append("  constraint multipliers: " + ", ".join(
@@ -107,9 +118,12 @@ def format_linearization(name: str, lin) -> str:
     for note in lin.notes:
         lines.append(f"  note: {note}")
     lines.append("  M dq'' + C dq' + K dq = B du")
-    lines.append(matrix("M (mass)", lin.M, c, c))
-    lines.append(matrix("C (damping + gyroscopic)", lin.C, c, c))
-    lines.append(matrix("K (stiffness)", lin.K, c, c))
+    if units and not mu:
+        lines.append("  units: the coordinates' units differ, so each entry has its own: M[i,j] in "
+                     "J.s2/(unit_i.unit_j), C[i,j] in J.s/(unit_i.unit_j), K[i,j] in J/(unit_i.unit_j)")
+    lines.append(matrix("M (mass)" + (f" [{mu['M']}]" if mu else ""), lin.M, c, c))
+    lines.append(matrix("C (damping + gyroscopic)" + (f" [{mu['C']}]" if mu else ""), lin.C, c, c))
+    lines.append(matrix("K (stiffness)" + (f" [{mu['K']}]" if mu else ""), lin.K, c, c))
     if lin.inputs:
         lines.append(matrix("B (second order, per input)", lin.Bq, c, lin.inputs))
     x = c + [f"der({k})" for k in c]
@@ -124,7 +138,7 @@ def format_linearization(name: str, lin) -> str:
         rows.append([str(j + 1), md.kinds[j], num(md.frequencies[j]), num(md.hz[j]), num(md.damping_ratios[j]),
                      num(md.mode_eigenvalues[j])] + [num(v) for v in s])
     lines.append("  modes:" + (" (shapes in the original coordinates)" if lin.constrained else ""))
-    lines.append(table(["mode", "kind", "w (rad/s)", "f (Hz)", "zeta", "eigenvalue"] + list(md.coords), rows, "    "))
+    lines.append(table(["mode", "kind", "w (rad/s)", "f (Hz)", "zeta", "eigenvalue (1/s)"] + list(md.coords), rows, "    "))
     return "\n".join(lines)
 
 

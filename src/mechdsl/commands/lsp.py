@@ -17,6 +17,11 @@ def add_parser(sub):
 
 
 def run(args) -> int:
+    if args.out.json:
+        # stdout carries the protocol's messages, so it cannot also hold a JSON document; -q and -v
+        # apply as everywhere (mechdsl's log messages on stderr, which editors show in their log)
+        raise UsageError("mech lsp speaks the Language Server Protocol on stdout: --json does not apply "
+                         "(for diagnostics as JSON use mech check --json FILE)")
     try:
         import pygls.lsp.server  # noqa: F401  (pygls 2.0 and newer)
     except ImportError:

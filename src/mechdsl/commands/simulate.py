@@ -61,7 +61,7 @@ def run(args) -> int:
     model, x0 = load_model(args, starts_in_model=False)
     t_end = args.t_end
     if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
-        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
+        args.out.note(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
     # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
     # caller (argument > scene > default), so CLI and API give the same run for the same scene
     interrupted = False
@@ -118,7 +118,8 @@ def run_record(r) -> dict:
             "t_start": float(r.t[0]) if len(r.t) else None, "t_end": float(r.t[-1]) if len(r.t) else None,
             "points": int(len(r.t)), "method": m.get("method"), "method_reason": m.get("method_reason"),
             "run": m.get("run") or {}, "statistics": dict(r.stats), "accuracy": accuracy,
-            "notes": list(m.get("notes", [])), "columns": list(r.columns), "events": list(r.events)}
+            "notes": list(m.get("notes", [])), "columns": list(r.columns), "units": r.column_units(),
+            "events": list(r.events)}
 
 
 def cli_settings(args) -> dict:
@@ -205,15 +206,18 @@ def summary(r, written=()) -> str:
     lines = [m["target"]] if m.get("target") else []
     if r.failure is not None and len(r.t) <= 1:
         t0 = r.t[0] if len(r.t) else m.get("options", {}).get("t_start", r.failure.time)
-        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {t0:g} was reached")
+        lines.append(f"model {m.get('model', '?')}: no output point after the start t = {t0:g} s was reached")
     else:
-        lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} ({len(r.t)} points)")
+        lines.append(f"model {m.get('model', '?')}: t = {r.t[0]:g} .. {r.t[-1]:g} s ({len(r.t)} point{'s' * (len(r.t) != 1)})")
     lines.append(f"method: {m.get('method', '?')} ({m.get('method_reason', '')})")
     ran = m.get("run") or {}
     if ran:
+        dt = ((ran.get("settings") or {}).get("fixed_step") or {}).get("dt")
+        # a fixed-step method takes no tolerances: its step is what sets the accuracy
+        accuracy = (f"step dt {dt:g} s" if ran.get("backend") == "fixed-step" and dt is not None
+                    else f"rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}")
         lines.append(f"ran: {ran.get('problem')} problem, formulation {ran.get('formulation')}, integrator "
-                     f"{ran.get('integrator')}, rtol {ran.get('rtol'):g}, atol {ran.get('atol'):g}"
-                     + (", compiled" if ran.get("compiled") else ""))
+                     f"{ran.get('integrator')}, {accuracy}" + (", compiled" if ran.get("compiled") else ""))
     parts = []
     for key, label in (("steps", "steps"), ("rhs_evals", "RHS evaluations"), ("jac_evals", "Jacobians"),
                        ("rejected_steps", "rejected steps"), ("events", "events")):
@@ -222,13 +226,14 @@ def summary(r, written=()) -> str:
     if s.get("cpu_time") is not None:
         parts.append(f"{s['cpu_time']:.3g} s CPU")
     if s.get("wall_time") is not None:
-        parts.append(f"{s['wall_time']:.3g} s")
+        parts.append(f"{s['wall_time']:.3g} s wall")
     if parts:
         lines.append("statistics: " + ", ".join(parts))
     if s.get("energy_drift") is not None:
         cons = m.get("conservative")
         kind = {True: "drift", False: "change (the model is not conservative)"}.get(cons, "change")
-        lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g} "
+        unit = r.column_units().get("energy", "")
+        lines.append(f"energy {kind}: max |E - E(0)| = {s['energy_drift']:.3g}{' ' + unit if unit else ''} "
                      f"(relative {s['energy_drift_relative']:.3g})")
     inv = {k: v for k, v in (s.get("invariant_drift") or {}).items() if k != "energy"}
     if inv:

@@ -96,7 +96,7 @@ def run(args) -> int:
     if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
         from ..simulation.settings import DEFAULT_T_END
 
-        print(f"mech: no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s", file=sys.stderr)
+        args.out.note(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
     ds = model.sweep(params=params, t_end=t_end, scheduler=args.scheduler, out=args.output, workers=args.workers,
                      progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty(), overwrite=True,
                      resume=args.resume, error_estimate=args.error_estimate,

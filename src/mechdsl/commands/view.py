@@ -30,27 +30,42 @@ def run(args) -> int:
     from ..animate.geometry import build
     from ..view import check_output, still, view
 
+    out = args.out
     check_output(args.output, args.force)             # name and place, before any work
     up = up_vector(args.up)
     m = load_model(args)
-    print(target_line(args, m))
+    target = target_line(args, m)
+    print(target)
     build(m.eom, traces=tuple(args.trail))             # bad --trail names fail before the run
     if args.still:
         v = still(m, up=up, trails=args.trail)
         path = v.save(args.output, overwrite=args.force)
+        out.wrote(path)
+        out.set(**_result(target, m, v, still=True, fps=None, speed=None, success=True))
         print(f"wrote {path}: {m.name} at its start values, {_what(v)}")
         return 0
     times, speed = plan_frames(args, m, what="viewing")
     r = m.simulate(float(times[-1]), points=len(times))
     v = view(r, m, fps=args.fps, speed=speed, up=up, trails=args.trail)
     path = v.save(args.output, overwrite=args.force)
+    out.wrote(path)
+    out.set(**_result(target, m, v, still=False, fps=args.fps, speed=speed, success=r.failure is None))
     pace = "" if speed == 1.0 else f" at speed {speed:g}"
     print(f"wrote {path}: {len(v)} frames for {args.fps:g} fps{pace}, {v.times[-1] - v.times[0]:g} s of model time, "
           f"{_what(v)}")
     if r.failure is not None:
         print(f"mech: error: {r.failure}; viewed up to t = {r.t[-1]:.6g}", file=sys.stderr)
+        out.fail("simulation", f"{r.failure}; viewed up to t = {r.t[-1]:.6g}")
         return 1
     return 0
+
+
+def _result(target: str, m, v, *, still: bool, fps, speed, success: bool) -> dict:
+    """The --json result of a page: what it shows and over which model times [s]."""
+    times = v.times
+    return {"target": target, "model": m.name, "still": still, "mode": v.mode,
+            "up": v.data.get("up_label") if v.mode == "3d" else None, "frames": len(v), "fps": fps,
+            "speed": speed, "t_start": float(times[0]), "t_end": float(times[-1]), "success": success}
 
 
 def _what(v) -> str:

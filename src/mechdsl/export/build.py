@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import logging
 import os
 import platform
 import sys
@@ -21,6 +22,7 @@ from pathlib import Path
 
 from ..diagnostics import Diagnostic, MechError
 
+log = logging.getLogger(__name__)
 HERE = Path(__file__).with_name("c")
 RUNTIME = ("mech_fmu.h", "mech_runtime.c", "mech_cosim.c", "mech_state.c", "mech_crk.c")     # every FMU
 CONSTRAINT_UNITS = ("mech_constraints.c", "mech_linalg.c")      # constraint rows: constraints, contacts, fixations
@@ -191,6 +193,8 @@ def compile_library(srcs: dict, identifier: str, suffix: str) -> bytes:
                 continue
             procs.append((subprocess.Popen([cc, *flags, "-I.", "-c", name, "-o", obj.name], cwd=tmp,
                                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True), obj, cached, name))
+        log.info("compiling %d of the FMU's %d C files with %s%s", len(procs), len(objs), Path(cc).name,
+                 f" ({', '.join(name for *_, name in procs)})" if procs else ": all from the object cache")
         errors = []
         for pr, obj, cached, name in procs:
             out, err = pr.communicate()

@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..model.units import si_unit
+
 REAL_SETTINGS = (
     ("mechdsl.rtol", "relative tolerance of the co-simulation stepper (the importer's tolerance replaces it, "
                      "atol then scales in proportion)", None),
@@ -78,7 +80,7 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
     vr = 0
     for name, value in zip(eom.params, eom.param_values):
         p = by_name.get(name)
-        doc, unit = (p.doc, p.unit) if p is not None else ("", None)
+        doc, unit = (p.doc, si_unit(p.unit) or None) if p is not None else ("", None)
         lo, hi = (p.min, p.max) if p is not None else (None, None)
         if name in free:
             out.append(Variable(name, vr, "Real", "parameter", "tunable", "exact", float(value), unit, lo, hi, doc,
@@ -96,7 +98,7 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
     for part, names in ((0, eom.coords), (1, [f"der({c})" for c in eom.coords])):
         for i, c in enumerate(eom.coords):
             info = coords.get(c)
-            unit = info.unit if info is not None else None
+            unit = (si_unit(info.unit) or None) if info is not None else None
             j = part * n + i
             fixed = (fixed_q if part == 0 else fixed_qd)[i]
             if start_calculated[j]:
@@ -113,11 +115,11 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
     for i, c in enumerate(eom.coords):
         info = coords.get(c)
         out.append(Variable(f"der(der({c}))", vr, "Real", "local", "continuous", "calculated", None,
-                            _per_second(info.unit if info is not None else None, 2), None, None,
+                            _per_second((si_unit(info.unit) or None) if info is not None else None, 2), None, None,
                             f"acceleration of {c}", derivative_of=x_vr + n + i, kind="derivative"))
         vr += 1
     for inp in model.inputs:
-        out.append(Variable(inp.name, vr, "Real", "input", "continuous", None, float(inp.default), inp.unit,
+        out.append(Variable(inp.name, vr, "Real", "input", "continuous", None, float(inp.default), si_unit(inp.unit) or None,
                             inp.min, inp.max, inp.doc, kind="input"))
         vr += 1
     outs = {o.name: o for o in model.model.outputs}
@@ -125,7 +127,7 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
         base = name.split("[")[0]
         o = outs.get(base)
         out.append(Variable(name, vr, "Real", "output", "continuous", "calculated", None,
-                            o.unit if o is not None else None, None, None, o.doc if o is not None else "",
+                            (si_unit(o.unit) or None) if o is not None else None, None, None, o.doc if o is not None else "",
                             kind="output"))
         vr += 1
     used = _settings_used(plan)

@@ -30,8 +30,9 @@ def events_table(events: list[dict], max_rows: int = 20) -> str:
         counts[key] = counts.get(key, 0) + 1
     dE = sum(float(e.get("energy_change", 0.0)) for e in events)
     lines = [f"events: {len(events)} (" + ", ".join(f"{n} {k} {c}" for (k, c), n in counts.items())
-             + f"); total energy change {dE:.6g}"]
-    head = ["time", "event", "contact", "impulse", "energy change", "normal speed -/+", "speeds changed (before -> after)"]
+             + f"); total energy change {dE:.6g} J"]
+    head = ["time [s]", "event", "contact", "impulse [N.s]", "energy change [J]", "normal speed -/+ [m/s]",
+            "speeds changed (before -> after)"]
     rows = []
     half = max_rows // 2
     shown = events if len(events) <= max_rows else events[:half] + [None] + events[-(max_rows - half):]

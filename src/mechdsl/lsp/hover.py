@@ -9,6 +9,7 @@ import math
 from ..frontend import ast
 from ..frontend import printer as P
 from ..model.exprs import evaluate, fmt_num
+from ..model.units import si_unit
 from ..numbers import in_unit
 from ..semantic import catalog as C
 from ..semantic import components as K
@@ -154,7 +155,7 @@ def value_lines(analysis, sym, occ) -> list[str]:
                 out.append(f"{c.name}: coordinate")
     for o in m.outputs:
         if o.name == path or o.name.startswith(path + "["):
-            out.append(f"{o.name}: output" + (f" [{o.unit}]" if o.unit else ""))
+            out.append(f"{o.name}: output" + (f" [{si_unit(o.unit)}]" if o.unit else ""))
     return out[:12] + ([f"... {len(out) - 12} more"] if len(out) > 12 else [])
 
 

@@ -66,5 +66,5 @@ def _describe(model: ir.Model, route: str | None) -> str:
                    f"(closed by {', '.join(lp.joint for lp in model.loops)})")
     if model.constraints:
         why.append(f"{len(model.constraints)} explicit constraint{'s' * (len(model.constraints) != 1)}")
-    return (f"{model.name}: {', '.join(parts)}, {' and '.join(why)}, {c['constraints']} constraint equations "
+    return (f"{model.name}: {', '.join(parts)}, {' and '.join(why)}, {c['constraints']} constraint equation{'s' * (c['constraints'] != 1)} "
             f"-> DAE with multipliers (index reduced; default formulation: {DEFAULT_DAE_FORMULATION})")

@@ -180,3 +180,103 @@ def multiplier_unit(residual: "Dim | None") -> str | None:
     if residual is None:
         return None
     return force_unit_text(ENERGY / residual)
+
+
+# -- the unit values are held in -------------------------------------------------------------
+_SI_BASE = {"g": "kg", "min": "s", "h": "s", "deg": "rad"}
+_PINT_SI = {"meter": "m", "kilogram": "kg", "second": "s", "ampere": "A", "kelvin": "K", "mole": "mol",
+            "candela": "cd", "radian": "rad", "steradian": "sr"}
+
+
+@lru_cache(maxsize=None)
+def si_unit(unit: str | None) -> str:
+    """The unit a quantity declared in ``unit`` is held and reported in.  Everything computes in
+    SI (a value given in "deg" is stored in rad), so a results column, a table header or an FMU
+    variable must say the SI unit: "deg" -> "rad", "cm" -> "m", "deg/s" -> "rad/s", "km/h" ->
+    "m/s", "g" -> "kg".  A unit with factor 1 ("rad", "N.m", "kg.m2", "N.m/rad") comes back as
+    written, and so does a string that is not a unit; None and "" give ""."""
+    if not unit:
+        return ""
+    try:
+        factor, d = parse_unit(unit)
+    except ValueError:
+        return unit
+    if abs(factor - 1.0) <= 1e-12:
+        return unit
+    fast = _si_terms(unit)
+    if fast is not None:
+        return fast
+    try:
+        items = list(_pint_registry().Quantity(1, re.sub(r"([A-Za-z])(-?\d+)", r"\1**\2", unit)
+                                               .replace(".", "*")).to_base_units().unit_items())
+    except Exception:  # pint raises many kinds; parse_unit read it, so this is not expected
+        return str(d)
+    if any(name not in _PINT_SI for name, _ in items):
+        return str(d)
+    return _join([(_PINT_SI[name], Fraction(e).limit_denominator(1000)) for name, e in items]) or "1"
+
+
+def _si_terms(unit: str) -> str | None:
+    """si_unit by the fast path's grammar (``a.b2/c``), term by term; None when it does not read it."""
+    num, _, den = unit.strip().partition("/")
+    if "/" in den or any(c in unit for c in "()*^"):
+        return None
+    terms = []
+    for part, sign in ((num, 1), (den, -1)):
+        for term in (part.split(".") if part else []):
+            if term == "1":
+                continue
+            m = _TERM.match(term)
+            if not m or _fast_symbol(m.group(1)) is None:
+                return None
+            sym, k = m.group(1), int(m.group(2) or 1) * sign
+            if _fast_symbol(sym)[0] != 1.0:
+                base = next((sym[len(p):] for p in sorted(_PREFIX, key=len, reverse=True)
+                             if sym.startswith(p) and sym[len(p):] in _SYMBOLS), sym)
+                sym = _SI_BASE.get(base, base)
+                if sym not in _SI_BASE.values() and _SYMBOLS.get(sym, (0.0,))[0] != 1.0:
+                    return None
+            terms.append((sym, Fraction(k)))
+    return _join(terms) or "1"
+
+
+def _join(terms) -> str:
+    """'m2.kg/s2' from [(symbol, exponent)] (a symbol given twice adds its exponents; order kept)."""
+    total: dict[str, Fraction] = {}
+    for sym, k in terms:
+        total[sym] = total.get(sym, Fraction(0)) + k
+    num = [_term(s, k) for s, k in total.items() if k > 0]
+    den = [_term(s, -k) for s, k in total.items() if k < 0]
+    s = ".".join(num) if num else ("1" if den else "")
+    if den:
+        s += "/" + (".".join(den) if len(den) == 1 else "(" + ".".join(den) + ")")
+    return s
+
+
+_MATRIX_UNITS = {"rad": {"M": "kg.m2", "C": "N.m.s/rad", "K": "N.m/rad"},
+                 "m": {"M": "kg", "C": "N.s/m", "K": "N/m"}}
+
+
+def matrix_units(coordinate_units) -> dict[str, str]:
+    """The units of the linear model's M, C and K (and of the Hessian of V, K's unit) when every
+    coordinate has the same unit u: M in J.s2/u2, C in J.s/u2, K in J/u2 (rad: kg.m2, N.m.s/rad,
+    N.m/rad; m: kg, N.s/m, N/m).  {} when the units differ or one is unknown: then each entry has
+    its own unit (J/(unit_i unit_j) for K) and the eigenvalues of the matrix have none."""
+    units = {si_unit(u) for u in coordinate_units}
+    if len(units) != 1 or "" in units:
+        return {}
+    u = units.pop()
+    if u in _MATRIX_UNITS:
+        return dict(_MATRIX_UNITS[u])
+    try:
+        d = parse_unit(u)[1]
+    except ValueError:
+        return {}
+    return {"M": str(ENERGY * TIME ** 2 / d ** 2), "C": str(ENERGY * TIME / d ** 2), "K": str(ENERGY / d ** 2)}
+
+
+def coordinate_units(eom) -> list[str]:
+    """The SI unit of each of ``eom``'s coordinates ('' when not declared or not known)."""
+    model = getattr(eom, "model", None)
+    by_name = {c.name: si_unit(c.unit) for c in getattr(model, "coordinates", ())}
+    return [by_name.get(c, "") for c in eom.coords]

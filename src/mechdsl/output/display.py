@@ -246,8 +246,9 @@ class Equations(list):
         return "$$" + self.latex() + "$$"
 
     def __repr__(self) -> str:
-        return f"<{len(self)} {self.form} equations: " + "; ".join(str(e) for e in self[:3]) + (
-            "; ..." if len(self) > 3 else "") + ">"
+        n = len(self)
+        shown = "; ".join(str(e) for e in self[:3]) + ("; ..." if n > 3 else "")
+        return f"<{n} {self.form.capitalize()} equation{'s' * (n != 1)}: {shown}>"
 
 
 def equations(m, form: str = "lagrange") -> Equations:
@@ -338,7 +339,7 @@ def _result_model(r, model, verb):
 
 
 def _columns(r):
-    from .plot import signal_units
+    from .units import signal_units
 
     units = signal_units(r)
     names = [c for c in r.columns if c != "time"]

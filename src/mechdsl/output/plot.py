@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .fileio import atomic_target, check_figure, commit
+from .units import signal_units
 
 MAX_LEGEND = 12
 _BASE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
@@ -55,27 +56,6 @@ def colours(n: int) -> list[str]:
 
 QUANTITY = {"rad": "angle", "deg": "angle", "m": "length", "m/s": "speed", "rad/s": "angular speed",
             "J": "energy", "N": "force", "N.m": "torque", "N*m": "torque", "kg": "mass", "s": "time"}
-
-
-def signal_units(result, model=None) -> dict[str, str]:
-    """The unit of every column of a result ('' when unknown): coordinates and outputs from the
-    model (``model`` or the Model that ran it), their rates per second, energies in J."""
-    model = model if model is not None else getattr(result, "source_model", None)
-    ir_model = getattr(model, "model", model)
-    units: dict[str, str] = {"time": "s"}
-    coords = {c.name: c.unit or "" for c in getattr(ir_model, "coordinates", ())}
-    outputs = {o.name: o.unit or "" for o in getattr(ir_model, "outputs", ())}
-    for c in result.coordinates:
-        u = coords.get(c, "")
-        units[c] = u
-        units[f"der({c})"] = f"{u}/s" if u else ""
-    recorded = (getattr(result, "metadata", None) or {}).get("units") or {}    # multipliers (issue 23)
-    for name in result.signals:
-        if name in ("energy", "kinetic_energy", "potential_energy") or name.endswith("_energy"):
-            units[name] = "J"
-        else:
-            units[name] = outputs.get(name, "") or recorded.get(name, "")
-    return units
 
 
 def _axis_label(unit: str, names) -> str:

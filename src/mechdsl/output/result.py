@@ -184,9 +184,18 @@ class Result:
             items.append((sidecar_path(path), summary))
         return [str(p) for p in write_atomic_group(items, overwrite)]
 
+    def column_units(self) -> dict[str, str]:
+        """The unit of every column ('' when the model gives none): coordinates and outputs in the SI
+        unit of their declaration (the values are SI: "deg" is reported as rad), their rates per
+        second, energies in J, time in s."""
+        from .units import signal_units
+
+        units = signal_units(self)
+        return {c: units.get(c, "") for c in self.columns}
+
     def summary(self) -> dict[str, Any]:
         """What the JSON sidecar holds: metadata (model, settings, method and why, versions,
-        accuracy), stats, success, failure, columns and events."""
+        accuracy), stats, success, failure, columns, each column's unit and events."""
         return {
             "generator": "mechdsl",
             "metadata": self.metadata,
@@ -195,6 +204,7 @@ class Result:
             "failure": None if self.failure is None else {"time": self.failure.time, "cause": self.failure.cause,
                                                           "detail": self.failure.detail},
             "columns": self.columns,
+            "units": self.column_units(),
             "events": self.events,
         }
 

@@ -398,8 +398,8 @@ def _signal(name, v, t0, t1, x0, nx) -> Signal:
     span = (v.times[0], v.times[-1])
     tol = 1e-12 * max(1.0, abs(t0), abs(t1))
     if span[0] > t0 + tol or span[1] < t1 - tol:
-        raise UsageError(f"the table of input '{name}' covers t = {span[0]:g} .. {span[1]:g}, not the run's "
-                         f"{t0:g} .. {t1:g}; add samples at both ends")
+        raise UsageError(f"the table of input '{name}' covers t = {span[0]:g} .. {span[1]:g} s, not the run's "
+                         f"{t0:g} .. {t1:g} s; add samples at both ends")
     return Signal(name, "table", table=v)
 
 
