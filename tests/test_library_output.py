@@ -16,12 +16,16 @@ CLI = {"cli.py", "__main__.py"}
 ON_REQUEST = {("impacts/table.py", "print_events")}
 
 
-def _library_modules():
+def _candidates():
+    """(path relative to the package, text) of every library module (the CLI's left out)."""
     for p in sorted(PACKAGE.rglob("*.py")):
         rel = p.relative_to(PACKAGE).as_posix()
-        if rel in CLI or rel.startswith("commands/"):
-            continue
-        text = p.read_text(encoding="utf-8")
+        if not (rel in CLI or rel.startswith("commands/")):
+            yield rel, p.read_text(encoding="utf-8")
+
+
+def _library_modules():
+    for rel, text in _candidates():
         # _speaking_calls finds only the name print and the attributes sys.stdout / sys.stderr:
         # a module whose text has none of these words cannot have one (and is not parsed)
         if any(word in text for word in ("print", "stdout", "stderr")):
@@ -67,7 +71,7 @@ def test_the_scan_finds_a_print():
 
 def test_the_scan_reads_every_package():
     """Every subpackage of the installed package is scanned, the recently added ones by name."""
-    scanned = {rel.split("/")[0] for rel, _ in _library_modules() if "/" in rel}
+    scanned = {rel.split("/")[0] for rel, _ in _candidates() if "/" in rel}
     packages = {p.parent.relative_to(PACKAGE).parts[0] for p in PACKAGE.rglob("__init__.py") if p.parent != PACKAGE}
     assert scanned == packages - {"commands"}
     assert {"urdf", "export", "view", "lsp", "sweep", "simulation", "animate"} <= scanned

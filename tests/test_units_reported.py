@@ -49,7 +49,8 @@ def test_a_model_declared_in_deg_and_cm_reports_rad_and_m(tmp_path, monkeypatch,
     from mechdsl.output.display import _model_parts
 
     params = _model_parts(m)[3]
-    assert params[0][:3] == ["m", pytest.approx(1.0), "kg"]                   # 1 kg, not "1 g"
+    # the model's own table shows each value in its declared unit, with that unit (issue 23)
+    assert params[0][:3] == ["m", pytest.approx(1000.0), "g"]
     from mechdsl.export.variables import unit_definition
 
     assert unit_definition(si_unit("deg"))[1] == 1.0
