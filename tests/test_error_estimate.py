@@ -184,3 +184,30 @@ def test_a_fixed_step_the_user_chose_warns_when_the_error_is_a_large_part_of_the
         warnings.simplefilter("error", MechWarning)
         short = m.simulate(2 * math.pi, points=51, dt=dt / 4)
     assert short.ok and short.metadata["accuracy"]["error_estimate_relative"] < STEP_LIMIT
+
+
+def test_a_method_stepped_in_python_is_estimated_by_the_default_path_at_the_tighter_tolerance(pendulum):
+    """scipy-* runs take auto as their companion (scipy's Radau at 1e-12 cost 100x its run); the
+    estimate still is the run's error: A01 against its closed form (elliptic functions)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MechWarning)
+        r = pendulum.simulate(20.0, points=201, method="scipy-rk45", rtol=1e-6, atol=1e-8)
+    acc = r.metadata["accuracy"]
+    assert "method auto" in acc["error_estimate_method"]
+    true = float(np.abs(r["theta"] - a01_theta(r.t)).max())
+    assert 0.1 <= acc["error_estimate"] / true <= 10
+
+
+def test_a_contact_run_with_many_impacts_says_why_it_has_no_estimate():
+    """A companion would not follow the same impacts (and cost several runs): no estimate, said."""
+    from mechdsl.simulation.estimate import MAX_EVENTS
+
+    ball = mechdsl.load(MODELS / "bouncing_ball.mech")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MechWarning)
+        r = ball.simulate(30.0, points=31)
+    acc = r.metadata["accuracy"]
+    assert len(r.events) > MAX_EVENTS                    # 39 bounces in 30 s
+    assert acc["error_estimate"] is None and "events" in acc["error_estimate_unavailable"]
+    few = ball.simulate(0.5, points=11)
+    assert len(few.events) <= MAX_EVENTS and few.metadata["accuracy"]["error_estimate"] is not None
