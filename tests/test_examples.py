@@ -3,7 +3,6 @@ the first steps of a new user in an empty folder after ``pip install`` (CI runs 
 installed wheel, from a copy of tests/ outside the repository: .ci/run)."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -169,11 +168,7 @@ def test_a_sweep_to_netcdf_from_an_empty_folder(swept):
     assert float(ds["theta"].isel(time=-1, run=2)) > float(ds["theta"].isel(time=-1, run=0))
 
 
-# issue 27: sweep files carry no units nor mechdsl's version on main yet; the faults branch adds them
-# (mechdsl/sweep/provenance.py).  The mark lifts itself when that module is there (and can then be
-# deleted); until then strict: a pass without it would be a surprise to look at.
-@pytest.mark.xfail(importlib.util.find_spec("mechdsl.sweep.provenance") is None, strict=True,
-                   reason="sweep files carry no units nor provenance before mechdsl/sweep/provenance.py lands")
+# issue 27: a sweep file from the installed package carries units, long names and provenance
 def test_the_sweep_file_carries_units_and_provenance(swept):
     ds, _ = swept
     units = {name: ds[name].attrs.get("units") for name in ("time", "theta", "der(theta)", "x", "E", "L")}
