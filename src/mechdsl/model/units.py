@@ -213,7 +213,11 @@ def si_unit(unit: str | None) -> str:
         return str(d)
     if any(name not in _PINT_SI for name, _ in items):
         return str(d)
-    return _join([(_PINT_SI[name], Fraction(e).limit_denominator(1000)) for name, e in items]) or "1"
+    text = _join([(_PINT_SI[name], Fraction(e).limit_denominator(1000)) for name, e in items]) or "1"
+    if "rad" not in text and re.search(r"deg|rev|rpm|turn|grad|arcmin|arcsec|cycle", unit):
+        # an angle in another unit: older pint (0.22) reduces revolutions to 1, newer ones to rad
+        text = "rad" if text == "1" else ("rad" + text[1:] if text.startswith("1/") else "rad." + text)
+    return text
 
 
 def _si_terms(unit: str) -> str | None:

@@ -281,7 +281,8 @@ def read(path):
         raise UsageError(f"{p} is not a sweep's table (its sidecar says {side.get('kind', 'nothing')!r})")
     import pandas as pd
 
-    df = pd.read_csv(p, keep_default_na=False, na_values=["NaN"])
+    # round_trip: the exact doubles written (pandas < 2 parses with its fast, not exact, reader)
+    df = pd.read_csv(p, keep_default_na=False, na_values=["NaN"], float_precision="round_trip")
     return _from_table(df, side)
 
 
