@@ -207,13 +207,16 @@ def si_unit(unit: str | None) -> str:
     if fast is not None:
         return fast
     try:
-        items = list(_pint_registry().Quantity(1, re.sub(r"([A-Za-z])(-?\d+)", r"\1**\2", unit)
-                                               .replace(".", "*")).to_base_units().unit_items())
+        q = _pint_registry().Quantity(1, re.sub(r"([A-Za-z])(-?\d+)", r"\1**\2", unit).replace(".", "*"))
+        base = q.to_base_units()
+        # unit_items() since pint 0.23; the units' own mapping before
+        items = list(base.unit_items()) if hasattr(type(base), "unit_items") else list(base._units.items())
     except Exception:  # pint raises many kinds; parse_unit read it, so this is not expected
-        return str(d)
-    if any(name not in _PINT_SI for name, _ in items):
-        return str(d)
-    text = _join([(_PINT_SI[name], Fraction(e).limit_denominator(1000)) for name, e in items]) or "1"
+        items = None
+    if items is None or any(name not in _PINT_SI for name, _ in items):
+        text = str(d)
+    else:
+        text = _join([(_PINT_SI[name], Fraction(e).limit_denominator(1000)) for name, e in items]) or "1"
     if "rad" not in text and re.search(r"deg|rev|rpm|turn|grad|arcmin|arcsec|cycle", unit):
         # an angle in another unit: older pint (0.22) reduces revolutions to 1, newer ones to rad
         text = "rad" if text == "1" else ("rad" + text[1:] if text.startswith("1/") else "rad." + text)
