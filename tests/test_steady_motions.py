@@ -95,6 +95,22 @@ def test_circular_orbit_kepler_is_stable_with_the_orbital_frequency():
     assert np.max(np.abs(s.linear_eigenvalues.imag)) == pytest.approx(h / (m * r**2), rel=1e-8)
 
 
+def test_steady_table_units_of_a_length_and_an_angle():
+    """r in m, ph in deg: der(ph) in rad/s, p_ph = m r^2 ph' in kg.m2/s, V_R'' (r alone) in N/m."""
+    from mechdsl.commands.equilibrium import format_steady, steady_units
+    from mechdsl.model.units import motion_units
+
+    assert motion_units("deg") == ("rad/s", "kg.m2/s") and motion_units("mm") == ("m/s", "kg.m/s")
+    assert motion_units("") == ("", "")
+    model = _central("-k/r")
+    (s,) = steady_motions(model.eom, {"p_ph": 1.7}, max_guesses=30)
+    units = {"r": "m", "ph": "rad"}
+    assert steady_units([s], units) == ({"r": "m", "der(ph)": "rad/s", "p_ph": "kg.m2/s"}, "N/m")
+    text = format_steady("Central", {"p_ph": 1.7}, [s], units)
+    assert "r [m]" in text and "der(ph) [rad/s]" in text and "Hessian of V_R [N/m]" in text
+    assert steady_units([s], {}) == ({"r": "", "der(ph)": "", "p_ph": ""}, "")
+
+
 def test_circular_orbit_in_an_inverse_cube_field_is_unstable():
     """V = -k/(2 r^2) ... falls as fast as the centrifugal term: take V = -k/r^3, unstable for any h."""
     m, k, h = 1.5, 2.0, 1.7
@@ -131,9 +147,15 @@ def test_cli_steady(capsys, tmp_path):
                  "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "2 steady motions" in text and "1.36942" in text and "11.7293" in text and "stable" in text
+    # every column says its unit: angles rad, speeds rad/s, momenta kg.m2/s, V_R'' N.m/rad
+    for head in ("tip.theta [rad]", "der(tip.phi) [rad/s]", "p_tip.psi [kg.m2/s]", "Hessian of V_R [N.m/rad]"):
+        assert head in text
     import json
 
     data = json.loads(out.read_text())
+    assert data["units"] == {"tip.theta": "rad", "der(tip.phi)": "rad/s", "der(tip.psi)": "rad/s",
+                             "p_tip.phi": "kg.m2/s", "p_tip.psi": "kg.m2/s"}
+    assert data["hessian_unit"] == "N.m/rad"
     assert data["count"] == 2 and data["steady_motions"][0]["speeds"]["der(tip.phi)"] == pytest.approx(1.3694173, 1e-6)
     assert main(["equilibrium", top, "--model", "HeavyTop", "--steady", "tip.phi=1,p_tip.psi=4"]) == 2
     assert "ignorable" in capsys.readouterr().err

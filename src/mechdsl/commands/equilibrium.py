@@ -72,8 +72,11 @@ def _steady(args, m, guesses) -> int:
 
     pins = assignments(args.steady, "--steady")
     found = steady_motions(m.eom, pins, guesses=guesses or None, t=args.time)
-    print(format_steady(m.name, pins, found))
-    data = {"model": m.name, "pins": pins, "count": len(found), "steady_motions": [s.to_dict() for s in found]}
+    units = _si_units(m)
+    print(format_steady(m.name, pins, found, units))
+    cols, ku = steady_units(found, units)
+    data = {"model": m.name, "pins": pins, "count": len(found), "steady_motions": [s.to_dict() for s in found],
+            "units": cols, "hessian_unit": ku}
     args.out.set(target=target_line(args, m), **data)
     if args.output:
         write_atomic(args.output, json.dumps({"generator": "mechdsl", **data}, indent=2) + "\n",
@@ -83,20 +86,35 @@ def _steady(args, m, guesses) -> int:
     return 0
 
 
-def format_steady(name: str, pins: dict, found) -> str:
+def steady_units(found, units: dict) -> tuple[dict, str]:
+    """({column: unit} for the steady-motion columns, the Hessian of V_R's unit): coordinates in
+    their SI unit, speeds der(s) in unit/s, momenta p_s (dT/ds') in J.s/unit, V_R'' in J/unit^2."""
+    from ..model.units import matrix_units, motion_units
+
+    if not found:
+        return {}, ""
+    s0 = found[0]
+    cols = {c: units.get(c, "") for c in s0.values}
+    cols.update({c: motion_units(units.get(c[4:-1], ""))[0] for c in s0.speeds})
+    cols.update({c: motion_units(units.get(c[2:], ""))[1] for c in s0.momenta})
+    return cols, matrix_units([units.get(c, "") for c in s0.reduced_coords or s0.values]).get("K", "")
+
+
+def format_steady(name: str, pins: dict, found, units: dict | None = None) -> str:
+    """The table of steady motions; ``units``: each coordinate's SI unit, said in the column heads."""
     from ..analysis.tables import num, table
 
     said = ", ".join(f"{k} = {num(v)}" for k, v in pins.items())
     if not found:
         return f"{name}: no steady motion found with {said}\n  hint: give a guess with --guess NAME=VALUE"
-    s0 = found[0]
-    cols = list(s0.values) + list(s0.speeds) + list(s0.momenta)
+    cols, ku = steady_units(found, units or {})
     rows = [[str(i)] + [num(v) for v in (*s.values.values(), *s.speeds.values(), *s.momenta.values())]
             + [{True: "stable", False: "unstable", None: "undetermined"}[s.stable],
                ", ".join(num(x) for x in s.hessian_eigenvalues)] for i, s in enumerate(found, 1)]
     lines = [f"{name}: {len(found)} steady motion{'' if len(found) == 1 else 's'} with {said} "
-             f"(ignorable: {', '.join(s0.ignorable)})",
-             table(["#"] + cols + ["stability", "Hessian of V_R"], rows)]
+             f"(ignorable: {', '.join(found[0].ignorable)})",
+             table(["#"] + [c + (f" [{u}]" if u else "") for c, u in cols.items()]
+                   + ["stability", "Hessian of V_R" + (f" [{ku}]" if ku else "")], rows)]
     lines += [f"  {i}: {s.reason}" for i, s in enumerate(found, 1)]
     return "\n".join(lines)
 

@@ -282,6 +282,24 @@ def matrix_units(coordinate_units) -> dict[str, str]:
     return {"M": str(ENERGY * TIME ** 2 / d ** 2), "C": str(ENERGY * TIME / d ** 2), "K": str(ENERGY / d ** 2)}
 
 
+_MOTION_UNITS = {"rad": ("rad/s", "kg.m2/s"), "m": ("m/s", "kg.m/s")}
+
+
+def motion_units(unit: str) -> tuple[str, str]:
+    """(speed unit, generalized momentum unit) of a coordinate whose SI unit is ``unit``: u/s and
+    dT/dq' in J.s/u (rad: rad/s and kg.m2/s; m: m/s and kg.m/s); ("", "") when unknown."""
+    u = si_unit(unit) if unit else ""
+    if not u:
+        return "", ""
+    if u in _MOTION_UNITS:
+        return _MOTION_UNITS[u]
+    try:
+        d = parse_unit(u)[1]
+    except ValueError:
+        return "", ""
+    return str(d / TIME), str(ENERGY * TIME / d)
+
+
 def coordinate_units(eom) -> list[str]:
     """The SI unit of each of ``eom``'s coordinates ('' when not declared or not known)."""
     model = getattr(eom, "model", None)
