@@ -55,6 +55,39 @@ def test_joint_sign_conventions(decl, values, origin, R):
     assert Rb == pytest.approx(R, abs=1e-12)
 
 
+@pytest.mark.parametrize("normal", [(0, 0, 1), (1, 0, 0), (0, 1, 0), (0, 0, -1), (-1, 0, 0), (0, -1, 0)])
+def test_planar_axes_of_the_coordinate_normals(normal):
+    """The documented basis: e1 = the lowest-numbered other axis, e1 x e2 = the normal."""
+    from mechdsl.model.ir import plane_basis
+
+    e1, e2 = (np.array(e) for e in plane_basis(normal))
+    k = int(np.argmax(np.abs(normal)))
+    assert e1 == pytest.approx(np.eye(3)[1 if k == 0 else 0], abs=0)
+    assert np.cross(e1, e2) == pytest.approx(normal, abs=1e-15)
+
+
+def test_planar_axes_move_continuously_with_the_normal():
+    """A slightly tilted normal moves the in-plane axes slightly (the old rule turned them by 90
+    degrees for {1e-3, 0, 1}: the child jumped by the offsets' length); orthonormal, right-handed."""
+    from mechdsl.model.ir import plane_basis
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        e1, e2 = (np.array(e) for e in plane_basis(n))
+        assert np.array([e1 @ e1, e2 @ e2, e1 @ e2, e1 @ n, e2 @ n]) == pytest.approx([1, 1, 0, 0, 0], abs=1e-14)
+        assert np.cross(e1, e2) == pytest.approx(n, abs=1e-14)
+        if np.max(np.abs(n)) > 0.6:          # away from where the nearest coordinate axis changes
+            m = n + 1e-6 * rng.normal(size=3)
+            f1, f2 = (np.array(e) for e in plane_basis(m / np.linalg.norm(m)))
+            assert np.linalg.norm(f1 - e1) + np.linalg.norm(f2 - e2) < 1e-4
+    values = {"j.x": 0.3, "j.y": -0.2}
+    o_z, _ = pose("Planar j(parent = world, child = b, axis = {0, 0, 1});", values)
+    o_t, _ = pose("Planar j(parent = world, child = b, axis = {1e-3, 0, 1});", values)
+    assert np.linalg.norm(o_t - o_z) < 1e-3
+
+
 def test_convention_figures_exist_and_are_referenced():
     doc = (CHECKOUT / "docs" / "language.md").read_text()
     for kind in ("revolute", "prismatic", "cylindrical", "planar", "spherical", "free", "cart_pole_axis"):

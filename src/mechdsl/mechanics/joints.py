@@ -127,30 +127,13 @@ class Planar(JointKind):
 def plane_axes(joint: ir.Joint) -> tuple[ir.Vec3, ir.Vec3]:
     if joint.plane_axes is not None:
         return joint.plane_axes
-    k = _const_axis(joint.axis)
-    if k is not None:
-        return UNIT[(k + 1) % 3], UNIT[(k + 2) % 3]
     if not all(isinstance(c, ir.Const) for c in joint.axis):
         raise _err(joint, "E702", f"planar joint '{joint.name}' with a parametric normal needs plane axes")
     import numpy as np
 
     a = np.array([c.value for c in joint.axis], float)
-    a /= np.linalg.norm(a)
-    j = int(np.argmin(np.abs(a)))
-    e1 = np.eye(3)[j] - a[j] * a
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(a, e1)
-    return tuple(ir.Const(float(x)) for x in e1), tuple(ir.Const(float(x)) for x in e2)
-
-
-def _const_axis(a: ir.Vec3) -> int | None:
-    if not all(isinstance(c, ir.Const) for c in a):
-        return None
-    vals = [c.value for c in a]
-    for k in range(3):
-        if vals[k] == 1.0 and all(vals[j] == 0.0 for j in range(3) if j != k):
-            return k
-    return None
+    e1, e2 = ir.plane_basis(a / np.linalg.norm(a))
+    return tuple(ir.Const(x) for x in e1), tuple(ir.Const(x) for x in e2)
 
 
 class _Rotational(JointKind):

@@ -314,6 +314,34 @@ class JointVar:
         return self.coordinate is None and not depends_on_state(self.motion)
 
 
+def plane_basis(normal) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The in-plane axes (e1, e2) of a planar joint with the unit ``normal`` (numbers), e1 x e2 =
+    normal.  For a coordinate axis +-e_k: e1 = the lowest-numbered other axis (normal z: x, y;
+    normal x: y, z; normal y: x, -z).  Any other normal takes the basis of its nearest coordinate
+    axis (largest |n_k|) turned by the smallest rotation that carries that axis onto it, so the
+    basis moves continuously as the normal tilts (a normal {1e-3, 0, 1} keeps e1 ~ x, e2 ~ y)."""
+    n = [float(x) for x in normal]
+    k = max(range(3), key=lambda i: (abs(n[i]), -i))
+    s = 1.0 if n[k] > 0 else -1.0
+    n0 = [s if i == k else 0.0 for i in range(3)]
+    b = [1.0 if i == (1 if k == 0 else 0) else 0.0 for i in range(3)]
+
+    def cross(a, c):
+        return [a[1] * c[2] - a[2] * c[1], a[2] * c[0] - a[0] * c[2], a[0] * c[1] - a[1] * c[0]]
+
+    # R b with R = I + [v]x + [v]x^2 / (1 + c), v = n0 x n, c = n0 . n (> 0: n0 is the nearest axis)
+    v, c = cross(n0, n), sum(x * y for x, y in zip(n0, n))
+    vb = cross(v, b)
+    e1 = [b[i] + vb[i] + cross(v, vb)[i] / (1.0 + c) for i in range(3)]
+    d = sum(x * y for x, y in zip(e1, n))                 # remove round-off off the plane, unit length
+    e1 = [x - d * y for x, y in zip(e1, n)]
+    r = sum(x * x for x in e1) ** 0.5
+    e1 = [x / r for x in e1]
+    e2 = cross(n, e1)
+    clean = lambda w: tuple(0.0 if abs(x) < 1e-15 else x for x in w)  # noqa: E731
+    return clean(e1), clean(e2)  # type: ignore[return-value]
+
+
 @record
 class Joint:
     """kind: revolute prismatic cylindrical spherical planar free fixed frame.

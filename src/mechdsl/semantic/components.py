@@ -303,16 +303,8 @@ def plane_axes(normal: ir.Vec3) -> tuple[ir.Vec3, ir.Vec3]:
     if not all(isinstance(c, ir.Const) for c in normal):
         raise ValError("E311", "the normal of a planar joint must be a constant vector",
                        "write it with numbers, e.g. axis = {0, 0, 1}")
-    n = [c.value for c in normal]  # type: ignore[union-attr]
-    ref = min(range(3), key=lambda i: (abs(n[i]), i))
-    r = [1.0 if i == ref else 0.0 for i in range(3)]
-    d = sum(a * b for a, b in zip(r, n))
-    e1 = [a - d * b for a, b in zip(r, n)]
-    k = math.sqrt(sum(a * a for a in e1))
-    e1 = [a / k for a in e1]
-    e2 = [n[1] * e1[2] - n[2] * e1[1], n[2] * e1[0] - n[0] * e1[2], n[0] * e1[1] - n[1] * e1[0]]
-    clean = lambda v: tuple(C(0.0 if abs(x) < 1e-15 else x) for x in v)  # noqa: E731
-    return clean(e1), clean(e2)  # type: ignore[return-value]
+    e1, e2 = ir.plane_basis([c.value for c in normal])  # type: ignore[union-attr]
+    return tuple(C(x) for x in e1), tuple(C(x) for x in e2)  # type: ignore[return-value]
 
 
 def check_sequence(seq: str) -> None:
