@@ -224,3 +224,68 @@ def test_ctrl_c_in_a_contact_run_through_the_api():
     assert r.failure.cause == "interrupted" and len(r.t) > 2 and r.t[-1] < 1e4
     gaps = [v for name, v in r.signals.items() if name.endswith(".gap")]
     assert gaps and all((g > -1e-6).all() for g in gaps)          # the ball never went through the floor
+
+
+def test_ctrl_c_during_the_error_estimate_keeps_the_run_not_the_companion(monkeypatch):
+    """A Ctrl-C that lands in the default error estimate's companion run (after the run itself
+    ended): RunInterrupted carries the complete run (every output time, no failure), never the
+    companion's partial rows on its coarser grid; the estimate is absent and says why."""
+    import _thread
+    import signal
+
+    import mechdsl
+    from mechdsl.output.result import RunInterrupted
+    from mechdsl.simulation import estimate as E
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    m = mechdsl.load(MODELS / "double_pendulum.mech")
+    real = E.estimate
+
+    def estimate_with_ctrl_c(r, problem, solve, given=None):
+        def solve_interrupted(p, progress=None):
+            _thread.interrupt_main()               # the Ctrl-C arrives as the companion starts
+            return solve(p, progress)
+        return real(r, problem, solve_interrupted, given)
+
+    monkeypatch.setattr("mechdsl.simulation.template.estimate", estimate_with_ctrl_c)
+    with pytest.raises(KeyboardInterrupt) as info:
+        m.simulate(2.0, points=201)
+    assert isinstance(info.value, RunInterrupted), type(info.value)
+    r = info.value.result
+    assert len(r.t) == 201 and r.t[-1] == pytest.approx(2.0, abs=1e-12) and r.failure is None
+    assert r.metadata["interrupted"] and "error estimate" in r.metadata["interrupted_during"]
+    acc = r.metadata["accuracy"]
+    assert acc["error_estimate"] is None and "interrupted" in acc["error_estimate_unavailable"]
+    monkeypatch.undo()
+    again = m.simulate(2.0, points=201)              # the same run, uninterrupted
+    assert again.q == pytest.approx(r.q, abs=1e-12)
+
+
+def test_ctrl_c_while_mech_simulate_writes_finishes_the_files(monkeypatch, tmp_path, capsys):
+    """A Ctrl-C that lands while `mech simulate` writes its CSV is held until the files are
+    written: the CSV and its sidecar are complete, exit 130, and the run says so."""
+    import _thread
+    import signal
+
+    import pandas as pd
+
+    from mechdsl.cli import main
+    from mechdsl.commands import simulate as S
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    real = S.write_outputs
+
+    def write_with_ctrl_c(*a, **k):
+        _thread.interrupt_main()                   # arrives as the writing starts
+        import time
+        time.sleep(0.05)                           # (delivered at the next bytecode)
+        return real(*a, **k)
+
+    monkeypatch.setattr(S, "write_outputs", write_with_ctrl_c)
+    out = tmp_path / "run.csv"
+    code = main(["simulate", str(MODELS / "pendulum.mech"), "--t-end", "1", "--points", "101", "-o", str(out)])
+    assert code == 130
+    assert len(pd.read_csv(out)) == 101 and (tmp_path / "run.json").is_file()
+    assert "interrupted" in capsys.readouterr().err

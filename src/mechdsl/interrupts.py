@@ -39,6 +39,34 @@ def interrupt_guard():
         _SIGINT["seen"] = False
 
 
+class Held:
+    seen = False
+
+
+@contextlib.contextmanager
+def held_interrupt():
+    """For commands (the application, main thread): a Ctrl-C inside the block is held until the
+    block ends (a file write of bounded length finishes instead of losing the results);
+    ``.seen`` says whether one came.  Elsewhere (another thread, another handler) it holds nothing."""
+    import signal
+    import threading
+
+    held = Held()
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield held
+        return
+
+    def handler(signum, frame):
+        held.seen = True
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield held
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def check_interrupt() -> None:
     """Raise the KeyboardInterrupt of a Ctrl-C that arrived (and was swallowed) since the last check."""
     if noted():

@@ -50,6 +50,7 @@ def add_parser(sub):
 
 
 def run(args) -> int:
+    from ..interrupts import held_interrupt
     from ..output.fileio import check_figure, check_writable
     from ..output.result import sidecar_path
 
@@ -79,7 +80,11 @@ def run(args) -> int:
     r.metadata["target"] = target_line(args, model)
     if model.scene is not None:
         r.metadata["scene"] = model.scene.name
-    written, lost = write_outputs(r, args.output, args.plot, args.force)
+    with held_interrupt() as held:          # a Ctrl-C now waits for the files to be written
+        written, lost = write_outputs(r, args.output, args.plot, args.force)
+    if held.seen and not interrupted:
+        r.metadata["interrupted_during"] = "the writing of the results (all written)"
+        interrupted = True
     print(summary(r, written))
     if r.events:
         from ..impacts import events_table
@@ -95,7 +100,9 @@ def run(args) -> int:
         out.fail("output", line)
     if interrupted:
         print("mech: interrupted", file=sys.stderr)
-        out.fail("interrupted", f"interrupted at t = {r.t[-1]:.10g}" if len(r.t) else "interrupted")
+        during = r.metadata.get("interrupted_during")
+        out.fail("interrupted", f"interrupted during {during}" if during else
+                 f"interrupted at t = {r.t[-1]:.10g}" if len(r.t) else "interrupted")
         return 130
     if r.failure is not None:
         out.fail("simulation", str(r.failure))

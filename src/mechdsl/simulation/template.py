@@ -142,8 +142,18 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
     meta["versions"] = versions()        # provenance belongs to the Result, stamped here once
     if meta.get("interrupted"):
         raise RunInterrupted(r)           # a KeyboardInterrupt carrying the results up to there
-    thorough = _estimate_error(r, problem) if s.estimate_error else None
-    _default_estimate(r, problem, thorough)
+    try:
+        thorough = _estimate_error(r, problem) if s.estimate_error else None
+        _default_estimate(r, problem, thorough)
+    except KeyboardInterrupt:
+        # Ctrl-C during the companion run(s): the run itself is complete and is what RunInterrupted
+        # carries (never the companion's partial rows); it has no estimate, and says why
+        acc = meta.setdefault("accuracy", {})
+        acc.update(error_estimate=None, error_estimate_unavailable="interrupted (Ctrl-C) during the companion run")
+        meta["interrupted"] = True
+        meta["interrupted_during"] = "the error estimate (the run itself reached its end time)"
+        A.accuracy_warning(r, problem)
+        raise RunInterrupted(r) from None
     A.accuracy_warning(r, problem)
     return r
 
