@@ -1,15 +1,17 @@
 """Speed without cliffs (issue 24): every figure of docs/performance.md's section of that name
 from one run of this script.
 
-    PYTHONPATH=src python benchmarks/speed.py [--docs DIR] [--quick] [--items 1,2,...]
+    PYTHONPATH=src python benchmarks/speed.py [--docs DIR] [--quick] [--items 1,2,... [--update]]
 
 Runs the benchmark of each item of the issue one after the other, each as a fresh process
 (``python benchmarks/NAME.py ...``), prints what each prints, and writes the section into
 docs/performance.md between the markers ``<!-- speed.py: begin -->`` and ``<!-- speed.py:
 end -->`` (the rest of the page is left as it is; benchmarks/make_performance.py keeps the
 section when it regenerates the page).  Every script measures CPU time (the minimum of
-repeats) and puts the ratios it states side by side in its own run.  --quick and --items are
-smoke tests: they print and write nothing into the docs.
+repeats) and puts the ratios it states side by side in its own run; each item's block says
+when, where and at what load its script ran.  --quick, and --items without --update, are smoke
+tests: they print and write nothing into the docs; ``--items 1,7 --update`` reruns those items
+and replaces only their blocks (between ``<!-- speed.py item N -->`` markers).
 """
 from __future__ import annotations
 
@@ -70,14 +72,40 @@ def run_item(script: str, args: list[str]) -> tuple[str, float, float]:
     return out, time.perf_counter() - t0, cpu
 
 
-def section(results, head: str) -> str:
-    lines = [BEGIN, "", "## Speed without cliffs (issue 24)", "", head, ""]
-    for (item, title, goal, script, args, _), (out, wall, cpu) in results:
-        cmd = " ".join(["python", f"benchmarks/{script}", *args])
-        lines += [f"### Item {item}: {title}", "", f"Goal: {goal}.  `{cmd}` ({wall:.0f} s wall, {cpu:.0f} s CPU):",
-                  "", "```", out, "```", ""]
-    lines += [END]
-    return "\n".join(lines)
+HEAD = ("Every block below is the output of its item's script, run as a fresh process by `python "
+        "benchmarks/speed.py`; the line above each block says when, on what machine and at what load it "
+        "ran (the machine is shared: absolute times are inflated and noisy; each script states CPU times, "
+        "the minimum of repeats, and its ratios from runs side by side in that script's run).")
+
+
+def item_marker(item: str) -> str:
+    return f"<!-- speed.py item {item} -->"
+
+
+def block(it, res, where: str) -> str:
+    item, title, goal, script, args, _ = it
+    out, wall, cpu = res
+    cmd = " ".join(["python", f"benchmarks/{script}", *args])
+    return "\n".join([item_marker(item), f"### Item {item}: {title}", "",
+                      f"Goal: {goal}.  `{cmd}` ({wall:.0f} s wall, {cpu:.0f} s CPU; {where}):",
+                      "", "```", out, "```", ""])
+
+
+def section(blocks: list[str]) -> str:
+    return "\n".join([BEGIN, "", "## Speed without cliffs (issue 24)", "", HEAD, "", *blocks, END])
+
+
+def blocks_of(text: str) -> dict[str, str]:
+    """item -> its block, from the section as it stands in the docs."""
+    body = text[text.index(BEGIN):text.index(END)]
+    out = {}
+    for it in ITEMS:
+        m = item_marker(it[0])
+        if m in body:
+            start = body.index(m)
+            nxt = [body.index(item_marker(o[0]), start + 1) for o in ITEMS if item_marker(o[0]) in body[start + 1:]]
+            out[it[0]] = body[start:min(nxt) if nxt else len(body)].rstrip() + "\n"
+    return out
 
 
 def write(docs: Path, text: str) -> None:
@@ -97,33 +125,36 @@ def main(argv=None) -> int:
     ap.add_argument("--docs", default=str(ROOT / "docs"))
     ap.add_argument("--quick", action="store_true", help="short runs, docs untouched (a smoke test)")
     ap.add_argument("--items", default=None, help="only these items (comma separated), docs untouched")
+    ap.add_argument("--update", action="store_true", help="with --items: replace those items' blocks in the docs")
     a = ap.parse_args(argv)
     wanted = None if a.items is None else set(a.items.split(","))
-    load0 = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    w0 = time.perf_counter()
-    results = []
+    from mechdsl.output.result import versions
+
+    v = ", ".join(f"{k} {val}" for k, val in versions().items())
+    done = {}
     for it in ITEMS:
         if wanted is not None and not wanted & set(it[0].replace(" ", "").split(",")):
             continue
         args = it[5] if a.quick else it[4]
         print(f"== item {it[0]}: benchmarks/{it[3]} {' '.join(args)}", flush=True)
+        load0 = ", ".join(f"{x:.2f}" for x in os.getloadavg())
         res = run_item(it[3], args)
+        load1 = ", ".join(f"{x:.2f}" for x in os.getloadavg())
         print(res[0], flush=True)
-        results.append(((*it[:4], args, it[5]), res))
-    load1 = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    from mechdsl.output.result import versions
-
-    v = ", ".join(f"{k} {val}" for k, val in versions().items())
-    head = (f"Every figure below is from one run of `python benchmarks/speed.py` ({time.perf_counter() - w0:.0f} s "
-            f"wall), which ran each item's script as a fresh process one after the other, on "
-            f"{platform.platform(terse=True)}, {os.cpu_count()} cores shared with other jobs (load average "
-            f"{load0} at the start, {load1} at the end: absolute times are inflated and noisy; each script "
-            f"states CPU times, the minimum of repeats, and its ratios from runs side by side in that "
-            f"script's run).  Versions: {v}.  Each block is the script's output as printed.")
-    if a.quick or wanted is not None:
+        where = (f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, {platform.platform(terse=True)}, "
+                 f"{os.cpu_count()} cores, load average {load0} at the start and {load1} at the end; {v}")
+        done[it[0]] = block((*it[:4], args, it[5]), res, where)
+    if a.quick or (wanted is not None and not a.update):
         return 0
-    write(Path(a.docs), section(results, head))
-    print(f"wrote {Path(a.docs) / 'performance.md'}", file=sys.stderr)
+    page = Path(a.docs) / "performance.md"
+    old = page.read_text()
+    kept = blocks_of(old) if BEGIN in old and END in old else {}
+    missing = [it[0] for it in ITEMS if it[0] not in done and it[0] not in kept]
+    if missing:
+        print(f"speed.py: items {', '.join(missing)} have no block yet: run them too", file=sys.stderr)
+        return 1
+    write(Path(a.docs), section([done.get(it[0]) or kept[it[0]] for it in ITEMS]))
+    print(f"wrote {page}", file=sys.stderr)
     return 0
 
 
