@@ -2,7 +2,8 @@
 
 The default run: the pendulum (FMI 2 and 3, model exchange with fmpy's CVode and
 co-simulation), a constrained model (the four-bar: the index-1 ODE, drift projected), a
-contact model (the bouncing ball, to rest), parameters set through the FMU (as --set),
+contact model (the bouncing ball to rest, in co-simulation and as model exchange with event
+indicators; the falling rod, a fixation), parameters set through the FMU (as --set),
 inputs driven through it (as --input), directional derivatives against finite
 differences, the binary run from C without Python, determinism and bad input.  Every
 shipped model, both versions: tests/test_export_matrix.py (slow)."""
@@ -96,16 +97,30 @@ def test_constrained_drift_stays_bounded_at_loose_tolerances(fmus):
         assert drift[1e3] > 50 * drift[0.0], (kind, drift)
 
 
-def test_contacts_in_co_simulation_bounce_to_rest(fmus):
-    """The bouncing ball: impacts in the FMU's step until the contact becomes persistent."""
+@pytest.mark.parametrize("fmi_type", ["CoSimulation", "ModelExchange"])
+def test_contacts_bounce_to_rest(fmus, fmi_type):
+    """The bouncing ball: impacts in the FMU's step (co-simulation), or at the events of fmpy's
+    CVode on the FMU's event indicators (FMI 2 model exchange), until the contact becomes
+    persistent; both as mech simulate, every impact and the close at rest counted."""
     m, path = fmus("bouncing_ball", "bouncing_ball.mech")
     md = zipfile.ZipFile(path).read("modelDescription.xml").decode()
-    assert "<CoSimulation" in md and "<ModelExchange" not in md
+    assert "<CoSimulation" in md and "<ModelExchange" in md and 'numberOfEventIndicators="1"' in md
     r = m.simulate(5.0, points=501, rtol=1e-11, atol=1e-12)
-    X, res = run_fmu(path, m, "CoSimulation", 5.0, 0.01, output=["mechdsl.events"])
-    assert_agree(X, np.c_[r.q, r.qd], "bouncing ball")
+    X, res = run_fmu(path, m, fmi_type, 5.0, 0.01, output=["mechdsl.events"])
+    assert_agree(X, np.c_[r.q, r.qd], f"bouncing ball, {fmi_type}")
     assert res["mechdsl.events"][-1] == len(r.events)        # every impact, and the close at rest
     assert abs(X[-1, 1]) < 1e-9 and X[-1, 0] == pytest.approx(0.1, abs=1e-8)      # at rest on the floor
+
+
+def test_model_exchange_with_a_fixation_and_a_rod_landing_on_either_end(fmus):
+    """FMI 2 model exchange of contacts: the rod that bounces on either end and settles flat
+    (two contacts, simultaneous impacts), and the rod caught by a fixation at its time (a time
+    event the FMU announces); both as mech simulate."""
+    for name, model, t_end in (("falling_rod", None, 3.0), ("caught_rod", "CaughtRod", 1.0)):
+        m, path = fmus(name, "falling_rod.mech", model=model)
+        ref = reference(m, t_end, 0.01)
+        X, _ = run_fmu(path, m, "ModelExchange", t_end, 0.01)
+        assert_agree(X, ref, f"{name} model exchange")
 
 
 def test_parameters_set_through_the_fmu_change_the_run_as_set_does(fmus):
@@ -429,11 +444,8 @@ def test_bad_input_is_refused_and_nothing_is_written(tmp_path, monkeypatch):
     ball = mechdsl.load(MODELS / "bouncing_ball.mech")
     with pytest.raises(UsageError, match="does not exist"):
         ball.export_fmu(tmp_path / "missing" / "ball.fmu")
-    with pytest.raises(MechError) as e:
-        ball.export_fmu(tmp_path / "ball.fmu", fmi_type="me")
-    d = e.value.diagnostics[0]
-    assert d.code == "E892" and "contacts (floor)" in d.message and "--fmi-type cs" in d.help
-    assert d.span.line == 30                                   # the Contact declaration
+    with pytest.raises(UsageError, match="--fmi-type"):
+        ball.export_fmu(tmp_path / "ball.fmu", fmi_type="model-exchange")
     with pytest.raises(UsageError, match=r"\.fmu"):
         ball.export_fmu(tmp_path / "ball.zip")
     with pytest.raises(UsageError, match="FMI version"):
@@ -456,10 +468,10 @@ def test_command_line(tmp_path, capsys):
     out = tmp_path / "ball.fmu"
     assert main(["export", str(MODELS / "bouncing_ball.mech"), "--fmu", str(out), "--fmi-version", "3"]) == 0
     text = capsys.readouterr().out
-    assert "model exchange left out" in text and f"wrote {out} (FMI 3.0: co-simulation" in text
+    assert f"wrote {out} (FMI 3.0: model exchange, co-simulation" in text
     assert validate_fmu(str(out)) == []
-    assert main(["export", str(MODELS / "bouncing_ball.mech"), "--fmu", str(out), "--fmi-type", "both"]) == 1
-    assert "error[E892]" in capsys.readouterr().err
+    md = zipfile.ZipFile(out).read("modelDescription.xml").decode()
+    assert '<EventIndicator valueReference=' in md and 'mechdsl.event_indicator[floor]' in md
     assert main(["export", str(MODELS / "pendulum.mech"), "--fmu", str(tmp_path / "no" / "p.fmu")]) == 2
     assert main(["export", str(MODELS / "pendulum.mech"), "--fmu", str(out), "--set", "L=2"]) == 0   # its own: replaced
     assert 'name="L"' in zipfile.ZipFile(out).read("modelDescription.xml").decode()

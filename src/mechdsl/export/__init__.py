@@ -19,7 +19,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from ..diagnostics import Diagnostic, MechError, UsageError
+from ..diagnostics import UsageError
 
 FMI_VERSIONS = (2, 3)
 FMI_TYPES = ("me", "cs", "both")
@@ -43,31 +43,13 @@ def identifier_of(name: str) -> str:
     return ident if not ident[0].isdigit() else "_" + ident
 
 
-def _interfaces(model, fmi_type: str | None) -> tuple[bool, bool, list[str]]:
-    """(model exchange, co-simulation, notes) for the requested type; a MechError (E892)
-    when the model cannot be represented as asked."""
-    notes = []
-    contacts = bool(model.model.contacts)
+def _interfaces(fmi_type: str | None) -> tuple[bool, bool, list[str]]:
+    """(model exchange, co-simulation, notes) for the requested type.  Every model has both:
+    contacts and fixations are event indicators and time events in model exchange, their
+    impacts applied by the FMU's own impact map at the importer's events (docs/export.md)."""
     if fmi_type is not None and fmi_type not in FMI_TYPES:
         raise UsageError(f"--fmi-type must be one of {', '.join(FMI_TYPES)} (got {fmi_type!r})")
-    want_me = fmi_type in (None, "me", "both")
-    want_cs = fmi_type in (None, "cs", "both")
-    if contacts and want_me:
-        kinds = sorted({"fixation" if c.kind == "fix" else "contact" for c in model.model.contacts})
-        what = " and ".join(f"{k}s" for k in kinds)
-        names = ", ".join(c.name for c in model.model.contacts[:4])
-        if fmi_type is None:
-            want_me = False
-            notes.append(f"model exchange left out: {model.name} has {what} ({names}), whose impacts change the "
-                         "state at events; the FMU is for co-simulation, which handles them inside its steps")
-        else:
-            raise MechError(Diagnostic(
-                "E892", f"model exchange cannot represent {model.name}: it has {what} ({names}), whose impacts "
-                        "jump the speeds at events the importer's integrator would have to apply",
-                model.model.contacts[0].span,
-                help="export for co-simulation (--fmi-type cs): the FMU then steps itself and handles "
-                     "contacts and impacts inside each step"))
-    return want_me, want_cs, notes
+    return fmi_type in (None, "me", "both"), fmi_type in (None, "cs", "both"), []
 
 
 def _defaults(model, s, plan, kind: str) -> dict:
@@ -96,7 +78,7 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
     """Write ``model`` (a mechdsl.Model) as an FMU to ``path``.
 
     fmi_version: 2 or 3; fmi_type: "me" (model exchange), "cs" (co-simulation), "both", or
-    None (every interface the model can have: co-simulation only for a model with contacts).
+    None (both).
     overwrite: replace an existing file that mechdsl did not write.  Nothing is written
     unless the whole FMU was built (atomic replace)."""
     from ..output.fileio import check_writable, write_atomic
@@ -111,14 +93,15 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
     if not str(path).endswith(".fmu"):
         raise UsageError(f"an FMU's file name ends in .fmu (got {str(path)!r})")
     check_writable(path, overwrite)
-    want_me, want_cs, notes = _interfaces(model, fmi_type)
+    want_me, want_cs, notes = _interfaces(fmi_type)
     folder, suffix = build.platform_folder(fmi_version)
     s = problem.run_settings(model)
     plan = functions.build(model, problem.functions(model))
     kind = "hybrid" if plan.k or plan.nfix else ("dae" if plan.m else "ode")
     defaults = _defaults(model, s, plan, kind)
     start_calc = problem.start_depends_on_parameters(model.eom)
-    table = variables.table(model, plan, defaults, start_calc, fmi_version)
+    indicators = plan.k if want_me and (plan.k or plan.nfix) else 0
+    table = variables.table(model, plan, defaults, start_calc, fmi_version, indicators)
     ident = identifier_of(model.name)
     eom = model.eom
     from ..eom.codegen import free_parameters
@@ -149,6 +132,7 @@ def export_fmu(model, path, *, fmi_version: int = 2, fmi_type: str | None = None
     info = {"identifier": ident, "model": model.name, "description": getattr(model.model, "doc", "") or "",
             "tool": f"mechdsl {__version__}", "me": want_me, "cs": want_cs, "constrained": bool(plan.m),
             "contacts": bool(plan.k or plan.nfix), "sources": build.c_files(srcs),
+            "event_indicators": indicators,
             "experiment": {"start": float(s.t_start), "stop": float(s.t_end), "tolerance": float(s.rtol),
                            "step": step}}
     md = (xml.model_description_2 if fmi_version == 2 else xml.model_description_3)(info, table)

@@ -11,6 +11,7 @@ Value references are contiguous ranges, in the order the C runtime expects
     mechdsl.*       co-simulation settings (Real), statistics (Real), settings (Integer)
     Integer parameters (structural: constants of the FMU)
     time            (FMI 3.0: the independent variable)
+    event indicators (FMI 3.0 model exchange of contacts: one per contact, its gap or force)
 """
 from __future__ import annotations
 
@@ -68,9 +69,9 @@ def _per_second(unit: str | None, power: int) -> str | None:
     return f"{unit}/s" if power == 1 else f"{unit}/s2"
 
 
-def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Variable]:
+def table(model, plan, settings, start_calculated, fmi_version: int, event_indicators: int = 0) -> list[Variable]:
     """Every variable of the FMU (see the module docstring).  ``settings``: defaults of the
-    mechdsl.* settings ({name: value})."""
+    mechdsl.* settings ({name: value}); ``event_indicators``: how many (FMI 3.0 names them)."""
     from ..eom.codegen import free_parameters
 
     eom = model.eom
@@ -154,6 +155,13 @@ def table(model, plan, settings, start_calculated, fmi_version: int) -> list[Var
     if fmi_version == 3:
         out.append(Variable("time", vr, "Real", "independent", "continuous", None, None, "s", None, None,
                             "simulation time", kind="time"))
+        for g in plan.gaps[:event_indicators]:
+            vr += 1
+            out.append(Variable(f"mechdsl.event_indicator[{g.name}]", vr, "Real", "local", "continuous",
+                                "calculated", None, None, None, None,
+                                f"contact {g.name}: its gap while open (+ the event offset while it opens), its "
+                                "normal force (+ the offset) while closed; an event where it crosses zero",
+                                kind="event_indicator"))
     names = [v.name for v in out]
     clash = sorted({x for x in names if names.count(x) > 1})
     if clash:

@@ -73,13 +73,14 @@ def model_description_2(meta: dict, variables: list[Variable]) -> str:
     ident = meta["identifier"]
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<fmiModelDescription fmiVersion="2.0"{_attrs(modelName=meta["model"], guid=TOKEN, description=meta["description"] or None, generationTool=meta["tool"])}'
-             ' variableNamingConvention="flat" numberOfEventIndicators="0">']
+             f' variableNamingConvention="flat" numberOfEventIndicators="{meta.get("event_indicators", 0)}">']
     sources = "".join(f'\n      <File name="{f}"/>' for f in meta["sources"])
     if meta["me"]:
         lines.append(f'  <ModelExchange{_attrs(modelIdentifier=ident)} needsExecutionTool="false"'
-                     f' completedIntegratorStepNotNeeded="{"false" if meta["constrained"] else "true"}"'
+                     f' completedIntegratorStepNotNeeded="{"false" if meta["constrained"] or meta["contacts"] else "true"}"'
                      ' canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true"'
-                     ' canGetAndSetFMUstate="true" canSerializeFMUstate="true" providesDirectionalDerivative="true">'
+                     ' canGetAndSetFMUstate="true" canSerializeFMUstate="true"'
+                     f' providesDirectionalDerivative="{"false" if meta["contacts"] else "true"}">'
                      f'\n    <SourceFiles>{sources}\n    </SourceFiles>\n  </ModelExchange>')
     if meta["cs"]:
         lines.append(f'  <CoSimulation{_attrs(modelIdentifier=ident)} needsExecutionTool="false"'
@@ -126,9 +127,10 @@ def model_description_3(meta: dict, variables: list[Variable]) -> str:
              ' variableNamingConvention="flat">']
     if meta["me"]:
         lines.append(f'  <ModelExchange{_attrs(modelIdentifier=ident)} needsExecutionTool="false"'
-                     f' needsCompletedIntegratorStep="{"true" if meta["constrained"] else "false"}"'
+                     f' needsCompletedIntegratorStep="{"true" if meta["constrained"] or meta["contacts"] else "false"}"'
                      ' canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="true"'
-                     ' canSerializeFMUState="true" providesDirectionalDerivatives="true"/>')
+                     ' canSerializeFMUState="true"'
+                     f' providesDirectionalDerivatives="{"false" if meta["contacts"] else "true"}"/>')
     if meta["cs"]:
         lines.append(f'  <CoSimulation{_attrs(modelIdentifier=ident)} needsExecutionTool="false"'
                      ' canBeInstantiatedOnlyOncePerProcess="false" canGetAndSetFMUState="true"'
@@ -151,6 +153,7 @@ def model_description_3(meta: dict, variables: list[Variable]) -> str:
     lines += [f'    <Output valueReference="{v.vr}"/>' for v in variables if v.causality == "output"]
     lines += [f'    <ContinuousStateDerivative valueReference="{v.vr}"/>' for v in _derivatives(variables)]
     lines += [f'    <InitialUnknown valueReference="{v.vr}"/>' for v in _initial_unknowns(variables)]
+    lines += [f'    <EventIndicator valueReference="{v.vr}"/>' for v in variables if v.kind == "event_indicator"]
     lines.append("  </ModelStructure>")
     lines.append("</fmiModelDescription>")
     return "\n".join(lines) + "\n"

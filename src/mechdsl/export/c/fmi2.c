@@ -197,7 +197,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
   CHECK(INST->mode != MODE_ERROR && INST->mode != MODE_INSTANTIATED, "fmi2GetDirectionalDerivative");
-  if (INST->kind == KIND_CS && (MECH.k || MECH.nfix)) return unsupported(c, "directional derivatives of a model with contacts");
+  if (MECH.k || MECH.nfix) return unsupported(c, "directional derivatives of a model with contacts");
   return mech_directional(INST, vUnknown_ref, nUnknown, vKnown_ref, nKnown, dvKnown, dvUnknown) ? fmi2Error : fmi2OK;
 }
 
@@ -217,9 +217,12 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
   info->valuesOfContinuousStatesChanged = fmi2False;
   info->nextEventTimeDefined = fmi2False;
   info->nextEventTime = 0.0;
-  int changed = 0;
-  if (mech_me_event_update(INST, &changed)) return fail(INST);
+  int changed = 0, next_defined = 0;
+  double next_time = 0.0;
+  if (mech_me_event_update(INST, &changed, &next_defined, &next_time)) return fail(INST);
   info->valuesOfContinuousStatesChanged = changed ? fmi2True : fmi2False;
+  info->nextEventTimeDefined = next_defined ? fmi2True : fmi2False;
+  info->nextEventTime = next_time;
   return fmi2OK;
 }
 
@@ -263,9 +266,8 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
-  (void)eventIndicators;
-  CHECK(ni == 0, "fmi2GetEventIndicators (this FMU has none)");
-  return fmi2OK;
+  CHECK(INST->kind == KIND_ME && ni == (size_t)(MECH.contacts ? MECH.k : 0), "fmi2GetEventIndicators");
+  return mech_me_indicators(INST, eventIndicators, ni) ? fail(INST) : fmi2OK;
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {

@@ -143,8 +143,17 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                           fmi3Float64 values[], size_t nValues) {
   CHECK(INST->mode != MODE_ERROR && nValues == nValueReferences, "fmi3GetFloat64");
   for (size_t i = 0; i < nValueReferences; i++) {
-    if (valueReferences[i] == VR_END) { values[i] = INST->t; continue; }
-    if (mech_get_real(INST, valueReferences[i], &values[i])) return fmi3Error;
+    fmi3ValueReference vr = valueReferences[i];
+    if (vr == VR_END) { values[i] = INST->t; continue; }
+    if (vr > VR_END && vr <= VR_END + (unsigned)MECH.k && INST->kind == KIND_ME && MECH.contacts) {
+      double *e = (double *)calloc((size_t)MECH.k, sizeof(double));     /* mechdsl.event_indicator[...] */
+      int st = !e || mech_me_indicators(INST, e, (size_t)MECH.k);
+      if (!st) values[i] = e[vr - VR_END - 1];
+      free(e);
+      if (st) return fail(INST);
+      continue;
+    }
+    if (mech_get_real(INST, vr, &values[i])) return fmi3Error;
   }
   return fmi3OK;
 }
@@ -281,7 +290,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity) {
   CHECK(INST->mode != MODE_ERROR && INST->mode != MODE_INSTANTIATED && nSeed == nKnowns && nSensitivity == nUnknowns,
         "fmi3GetDirectionalDerivative");
-  if (INST->kind == KIND_CS && (MECH.k || MECH.nfix)) return unsupported(instance, "directional derivatives of a model with contacts");
+  if (MECH.k || MECH.nfix) return unsupported(instance, "directional derivatives of a model with contacts");
   return mech_directional(INST, unknowns, nUnknowns, knowns, nKnowns, seed, sensitivity) ? fmi3Error : fmi3OK;
 }
 
@@ -354,9 +363,12 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discrete
   *valuesOfContinuousStatesChanged = fmi3False;
   *nextEventTimeDefined = fmi3False;
   *nextEventTime = 0.0;
-  int changed = 0;
-  if (mech_me_event_update(INST, &changed)) return fail(INST);
+  int changed = 0, next_defined = 0;
+  double next_time = 0.0;
+  if (mech_me_event_update(INST, &changed, &next_defined, &next_time)) return fail(INST);
   *valuesOfContinuousStatesChanged = changed ? fmi3True : fmi3False;
+  *nextEventTimeDefined = next_defined ? fmi3True : fmi3False;
+  *nextEventTime = next_time;
   return fmi3OK;
 }
 
@@ -401,10 +413,11 @@ fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 
   return fmi3OK;
 }
 
+static size_t event_indicators(Instance *I) { return I->kind == KIND_ME && MECH.contacts ? (size_t)MECH.k : 0; }
+
 fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
-  (void)eventIndicators;
-  CHECK(nEventIndicators == 0, "fmi3GetEventIndicators (this FMU has none)");
-  return fmi3OK;
+  CHECK(nEventIndicators == event_indicators(INST), "fmi3GetEventIndicators");
+  return mech_me_indicators(INST, eventIndicators, nEventIndicators) ? fail(INST) : fmi3OK;
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates) {
@@ -421,7 +434,7 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
   if (!instance) return fmi3Error;
-  *nEventIndicators = 0;
+  *nEventIndicators = event_indicators(INST);
   return fmi3OK;
 }
 

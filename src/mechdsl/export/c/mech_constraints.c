@@ -182,21 +182,29 @@ static int me_event_update(Instance *I, int *states_changed) {
 
 /* co-simulation: the drift of the active rows at (t, x); past half the bound x is projected
    back (open contacts only where they penetrate) and *projected says so */
-static int check_drift(Instance *I, double t, double *x, int *projected) {
+int mech_active_drift(Instance *I, double t, const double *x, double *worst) {
   const int n = MECH.n;
-  *projected = 0;
+  *worst = 0.0;
   if (I->nactive == 0) return 0;
   Eval E;
   if (mech_eval_new(&E)) return 1;
   int st = mech_eval_at(I, t, x, x + n, &E, 0, 1);
-  double worst = 0.0, bound = mech_drift_bound(I), rtol, atol;
-  mech_rtol_atol(I, &rtol, &atol);
   for (int j = 0; !st && j < I->nactive; j++) {
     int r = I->active[j];
-    worst = fmax(worst, fabs(E.c[r]));
-    worst = fmax(worst, fabs(mech_row_dot(E.A, MECH.nrows, n, r, x + n) + E.ct[r]));
+    *worst = fmax(*worst, fabs(E.c[r]));
+    *worst = fmax(*worst, fabs(mech_row_dot(E.A, MECH.nrows, n, r, x + n) + E.ct[r]));
   }
   mech_eval_free(&E);
+  return st;
+}
+
+static int check_drift(Instance *I, double t, double *x, int *projected) {
+  const int n = MECH.n;
+  *projected = 0;
+  if (I->nactive == 0) return 0;
+  double worst = 0.0, bound = mech_drift_bound(I), rtol, atol;
+  mech_rtol_atol(I, &rtol, &atol);
+  int st = mech_active_drift(I, t, x, &worst);
   if (!st && !(worst <= 0.5 * bound)) {
     int *open = (int *)calloc((size_t)MECH.k + 1, sizeof(int)), no = 0;
     if (!open) return 1;

@@ -56,6 +56,10 @@ typedef struct {
   int (*start)(struct Instance *I);                            /* fixations due, impacts, contacts at the start */
   int (*step)(struct Instance *I, double t_end);               /* advance to t_end, events inside */
   int (*accel)(struct Instance *I, double t, const double *x, double *qdd, double *lam);   /* with the active rows */
+  /* model exchange: per contact the gap (open) or the normal force (closed), plus the event offset */
+  int (*indicators)(struct Instance *I, double t, const double *x, double *e);
+  int (*me_step_done)(struct Instance *I, int *enter_event);   /* drift of the active rows */
+  int (*me_event)(struct Instance *I, int *changed, int *next_defined, double *next_time);  /* impacts, fixations */
 } MechContactOps;
 
 typedef struct {
@@ -183,7 +187,9 @@ int mech_directional(Instance *I, const unsigned *unknowns, size_t nu, const uns
 void mech_rtol_atol(Instance *I, double *rtol, double *atol);
 double mech_drift_bound(Instance *I);
 int mech_me_step_done(Instance *I, int *enter_event);     /* model exchange: a completed step (drift check) */
-int mech_me_event_update(Instance *I, int *states_changed);   /* model exchange: project when drifted */
+int mech_me_event_update(Instance *I, int *states_changed, int *next_defined, double *next_time);  /* model exchange: events, projection */
+int mech_me_indicators(Instance *I, double *e, size_t ni);   /* model exchange: the event indicators (MECH.k) */
+int mech_active_drift(Instance *I, double t, const double *x, double *worst);   /* max residual of the active rows */
 
 /* mech_cosim.c */
 typedef struct {                 /* one co-simulation step's stepper settings and crk.c buffers */

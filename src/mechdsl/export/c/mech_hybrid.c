@@ -679,4 +679,89 @@ static int step(Instance *I, double t_end) {
   return result;
 }
 
-const MechContactOps mech_contact_ops = {start, step, accel};
+/* ------------------------------------------------------------------ model exchange */
+
+/* MechContactOps.indicators: per contact, crk.c's event function: a closed contact's normal
+   force plus the offset (zero where it ceases to push); an open contact's gap while it closes
+   (zero where it touches: the importer's integrator locates the impact itself, as crk.c
+   refines its root to the gap's), plus the offset while it opens, so that a contact left a
+   hair inside by the impact's projection does not cross zero again on its way out (the jump
+   of the offset happens where the gap's rate changes sign, away from zero when it flies) */
+static int me_indicators(Instance *I, double t, const double *x, double *e) {
+  const int n = MECH.n, k = MECH.k;
+  Instance *prev = mech_current;
+  mech_current = I;
+  const double *arg[3] = {&t, x, I->p};
+  double *res[1] = {e};
+  int st = events(arg, res, NULL, NULL, 0);
+  mech_current = prev;
+  double off = options(I).offset;
+  Eval E;
+  int open = 0;
+  for (int i = 0; i < k; i++) open |= !I->closed[i];
+  if (st || !open) {
+    for (int i = 0; !st && i < k; i++) e[i] += off;
+    return st;
+  }
+  if (mech_eval_new(&E)) return 1;
+  st = mech_eval_at(I, t, x, x + n, &E, 0, 1);
+  for (int i = 0; !st && i < k; i++) {
+    double u = mech_row_dot(E.A, MECH.nrows, n, contact_row(i), x + n) + E.ct[contact_row(i)];
+    if (I->closed[i] || u >= 0.0) e[i] += off;
+  }
+  mech_eval_free(&E);
+  return st;
+}
+
+/* MechContactOps.me_step_done: an event when the active rows drifted past half the bound */
+static int me_step_done(Instance *I, int *enter_event) {
+  double worst = 0.0;
+  *enter_event = 0;
+  if (mech_active_drift(I, I->t, I->x, &worst)) return 1;
+  *enter_event = !(worst <= 0.5 * mech_drift_bound(I));
+  return 0;
+}
+
+/* MechContactOps.me_event: at an event of the importer (a crossed indicator, a fixation's
+   time, a drift past the bound), what `step` does at crk.c's events: fixations due, then
+   impacts, closing and releasing (handle), then the projection of the active rows */
+static int me_event(Instance *I, int *changed, int *next_defined, double *next_time) {
+  const int n = MECH.n, k = MECH.k;
+  double t = I->t, *q = I->x, *qd = I->x + n;
+  const double tiny = 1e-12 * fmax(1.0, fabs(t));
+  int st = 0;
+  mech_current = I;
+  for (int j = 0; !st && j < MECH.nfix; j++)
+    if (!I->fix_done[j] && MECH.fix_time[j] <= t + tiny) {
+      st = zeno(I, t) || fixate(I, t, q, qd, j);
+      *changed = 1;
+    }
+  if (!st && k) {
+    double *e = (double *)calloc((size_t)k, sizeof(double));
+    st = !e || me_indicators(I, t, I->x, e);
+    int due = 0;
+    for (int i = 0; !st && i < k; i++) due |= !(e[i] > 0.0);
+    free(e);
+    if (!st && due) {
+      st = zeno(I, t) || handle(I, t, q, qd);
+      *changed = 1;
+    }
+  }
+  if (!st && I->nactive > 0) {
+    int projected = 0;
+    st = MECH.constraints->check_drift(I, t, I->x, &projected);
+    *changed |= projected;
+  }
+  mech_current = NULL;
+  if (st && !I->msg[0]) mech_log(I, LOG_ERROR, "the event at t = %.12g could not be handled", t);
+  *next_defined = 0;
+  for (int j = 0; j < MECH.nfix; j++)
+    if (!I->fix_done[j] && MECH.fix_time[j] > t + tiny && (!*next_defined || MECH.fix_time[j] < *next_time)) {
+      *next_time = MECH.fix_time[j];
+      *next_defined = 1;
+    }
+  I->valid = 0;
+  return st;
+}
+
+const MechContactOps mech_contact_ops = {start, step, accel, me_indicators, me_step_done, me_event};

@@ -350,6 +350,13 @@ int mech_exit_init(Instance *I) {
   I->valid = 0;
   I->last_ok_time = I->t;
   if (I->kind == KIND_CS && mech_cs_start(I)) return 1;
+  if (I->kind == KIND_ME && MECH.contacts) {       /* impacts, contacts and fixations at the start */
+    mech_current = I;
+    int st = MECH.contacts->start(I);
+    mech_current = NULL;
+    I->valid = 0;
+    if (st) return 1;
+  }
   return 0;
 }
 
@@ -358,7 +365,7 @@ int mech_evaluate(Instance *I) {
   if (!I->started && refresh_start(I)) return 1;
   const int n = MECH.n;
   int st;
-  if (I->kind == KIND_CS && !I->use_base) {
+  if ((I->kind == KIND_CS || MECH.contacts) && !I->use_base) {
     memcpy(I->xdot, I->x + n, sizeof(double) * (size_t)n);
     st = MECH.contacts->accel(I, I->t, I->x, I->xdot + n, I->lam);
   } else {
@@ -416,10 +423,19 @@ int mech_directional(Instance *I, const unsigned *unknowns, size_t nun, const un
 int mech_me_step_done(Instance *I, int *enter_event) {
   *enter_event = 0;
   I->stats[STAT_STEPS] += 1;
+  if (MECH.contacts) return MECH.contacts->me_step_done(I, enter_event);
   return MECH.m ? MECH.constraints->me_step_done(I, enter_event) : 0;
 }
 
-int mech_me_event_update(Instance *I, int *states_changed) {
-  *states_changed = 0;
+int mech_me_event_update(Instance *I, int *states_changed, int *next_defined, double *next_time) {
+  *states_changed = *next_defined = 0;
+  *next_time = 0.0;
+  if (MECH.contacts) return MECH.contacts->me_event(I, states_changed, next_defined, next_time);
   return MECH.m ? MECH.constraints->me_event_update(I, states_changed) : 0;
+}
+
+int mech_me_indicators(Instance *I, double *e, size_t ni) {
+  if (ni == 0) return 0;
+  if (mech_evaluate(I)) return 1;                 /* started, and the equations can be evaluated */
+  return MECH.contacts->indicators(I, I->t, I->x, e);
 }
