@@ -126,16 +126,16 @@ def estimate(r, problem, solve, given=None) -> None:
         cpu0 = time.process_time()
         r.stats["error_estimate_cpu_time"] = None
         try:
-            tp = formulate(problem.eom, tight.validated())
-            if problem.step_eom is not None:
-                tp = dataclasses.replace(tp, step_eom=problem.step_eom)
-            other = solve(prepare(tp))
+            other = _companion_run(problem, tight, solve)
         except Exception as e:  # noqa: BLE001 - the run itself is fine; say why there is no estimate
             why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
             acc.update(error_estimate=None, error_estimate_unavailable=f"the companion run could not run: {why}")
             return
         finally:
             r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0      # besides the run's own cpu_time
+        # the companion's work, besides the run's own steps and rhs_evals (benchmarks count both)
+        r.stats["error_estimate_steps"] = (other.stats or {}).get("steps")
+        r.stats["error_estimate_rhs_evals"] = (other.stats or {}).get("rhs_evals")
     idx, jdx = _common_times(r.t, other.t, s.t_end - s.t_start)
     if idx.size == 0:
         why = (f"the companion run failed at its start ({other.failure})" if other.failure is not None
@@ -164,6 +164,24 @@ def estimate(r, problem, solve, given=None) -> None:
     if other.failure is not None:
         acc["error_estimate_note"] = (f"the companion run stopped at t = {other.failure.time:.6g} "
                                       f"({other.failure.cause}): the estimate covers the times before")
+
+
+def _companion_run(problem, tight, solve):
+    """The companion run of ``problem`` with the settings ``tight``: an ODE problem's as its
+    trajectory alone (OdeSetup.states: no signals recorded, no Result built; its setup kept
+    for the next run of the same settings, backends/ode.kept_setup), others through ``solve``."""
+    if problem.kind == "ode" and problem.drive is None and problem.step_eom is None:
+        from .backends.ode import kept_setup
+
+        setup = kept_setup(problem.eom, tight, lambda: prepare(formulate(problem.eom, tight.validated())).setup)
+        other = setup.states(*setup.start_of(tight))
+        if other.failure is not None and other.failure.cause == "interrupted":
+            raise KeyboardInterrupt           # as solve raises RunInterrupted for a run Ctrl-C stopped
+        return other
+    tp = formulate(problem.eom, tight.validated())
+    if problem.step_eom is not None:
+        tp = dataclasses.replace(tp, step_eom=problem.step_eom)
+    return solve(prepare(tp))
 
 
 def _unit(eom, coordinate: str) -> str | None:
