@@ -143,9 +143,10 @@ def estimate(r, problem, solve, given=None) -> None:
         acc.update(error_estimate=None, error_estimate_unavailable=why)
         return
     diff = np.abs(r.q[idx] - other.q[jdx]) / factor          # (times, coordinates)
-    diff = np.where(np.isfinite(diff), diff, np.inf)
+    diff[~np.isfinite(diff)] = np.inf
     per = diff.max(axis=0) if diff.size else np.zeros(len(r.coordinates))
-    tol = tolerance_class(r.q, s.rtol, s.atol)
+    qmax = np.nanmax(np.abs(r.q), axis=0) if r.q.size else np.zeros(r.q.shape[1] if r.q.ndim == 2 else 0)
+    tol = s.rtol * qmax + s.atol if r.q.size else qmax        # tolerance_class(r.q, rtol, atol)
     if not len(per):
         acc.update(error_estimate=0.0, error_estimate_ratio=0.0)
         return
@@ -154,7 +155,7 @@ def estimate(r, problem, solve, given=None) -> None:
     acc.update(error_estimate=float(per[k]), error_estimate_coordinate=r.coordinates[k],
                error_estimate_unit=_unit(problem.eom, r.coordinates[k]),
                error_estimate_time=float(r.t[idx[it]]), error_estimate_ratio=float((per / tol).max()))
-    size = np.nanmax(np.abs(r.q), axis=0) + s.atol            # each coordinate's largest magnitude
+    size = qmax + s.atol                                      # each coordinate's largest magnitude
     rel = per / size
     kr = int(np.argmax(rel))
     acc.update(error_estimate_relative=float(rel[kr]), error_estimate_relative_coordinate=r.coordinates[kr])
@@ -198,6 +199,12 @@ def _common_times(t: np.ndarray, u: np.ndarray, span: float) -> tuple[np.ndarray
     in the last bit); rows of events (repeated times) are skipped."""
     if not len(t) or not len(u):
         return np.zeros(0, int), np.zeros(0, int)
+    if len(u) >= 2 and (len(t) - 1) % (len(u) - 1) == 0:       # the companion's grid: every k-th time
+        k = (len(t) - 1) // (len(u) - 1)
+        tk = t[::k]
+        if np.abs(tk - u).max() <= 1e-12 * max(span, 1e-300) and (np.diff(tk) > 0).all() and (
+                k == 1 or (np.diff(t) > 0).all()):
+            return np.arange(0, len(t), k), np.arange(len(u))
     j = np.clip(np.searchsorted(u, t), 0, len(u) - 1)
     jm = np.clip(j - 1, 0, len(u) - 1)
     j = np.where(np.abs(u[jm] - t) < np.abs(u[j] - t), jm, j)
