@@ -167,7 +167,13 @@ class OdeSetup:
 
     def start_of(self, s):
         """(parameter vector, start vector) of the settings ``s`` (copies: kept for a warm run)."""
-        if s is self.settings or s == self.settings:
+        same = s is self.settings
+        if not same:
+            try:
+                same = bool(s == self.settings)
+            except (ValueError, TypeError):       # arrays among the values: compared as keys
+                same = _frozen(s) == _frozen(self.settings)
+        if same:
             return self._start[0].copy(), self._start[1].copy()
         pv = parameter_vector(self.eom, s.p)
         return pv, start_vector(self.eom, s.x0, pv)
@@ -286,7 +292,7 @@ def kept_setup(eom, s, build) -> "OdeSetup":
     Functions given by hand) are built every time.  The most recently used SETUPS_KEPT are
     kept; holding the EOM keeps its id unique while its entry lives."""
     try:
-        key = (id(eom), s, _environment())
+        key = (id(eom), _frozen(s), _environment())
         hash(key)
     except TypeError:
         return build()
@@ -301,6 +307,23 @@ def kept_setup(eom, s, build) -> "OdeSetup":
             _SETUPS.pop(next(iter(_SETUPS)))
         _SETUPS[key] = (eom, setup)
     return setup
+
+
+def _frozen(s):
+    """``s`` with array or list start and parameter values as hashable values of their own (a
+    benchmark passes the parameter vector as an array): a key for kept_setup."""
+    def freeze(v):
+        if isinstance(v, np.ndarray):
+            return ("array", v.dtype.str, v.shape, v.tobytes())
+        if isinstance(v, list):
+            return ("list", tuple(freeze(x) for x in v))
+        if isinstance(v, dict):
+            return ("dict", tuple(sorted((k, freeze(x)) for k, x in v.items())))
+        return v
+
+    if isinstance(s.p, (np.ndarray, list, dict)) or isinstance(s.x0, (np.ndarray, list, dict)):
+        return s.replace(p=freeze(s.p), x0=freeze(s.x0))
+    return s
 
 
 def _environment() -> tuple:
