@@ -96,6 +96,7 @@ class OdeSetup:
         self._start = (pv, start_vector(eom, s.x0, pv))      # of the settings it was built for
         self.method, self.reason, self.funcs, self.post = method, reason, funcs, post
         self.meta, self.loop_compiled, self.out_names = meta, loop_compiled, out_names
+        self._named, self._recorders = None, {}
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
 
@@ -195,7 +196,7 @@ class OdeSetup:
     def run(self, pv, xs, progress=None) -> Result:
         """Integrate from the start ``xs`` at the parameters ``pv`` (nothing is built again)."""
         wall0 = time.perf_counter()
-        meta = copy.deepcopy(self.meta)
+        meta = plain_copy(self.meta)
         if self.method is None:
             return _no_state_result(self.eom, self.grid, pv, self.out_names, meta, wall0, self.drive)
         t, X, run, failure = self.integrate(pv, xs, meta, progress)
@@ -253,8 +254,17 @@ class OdeSetup:
         """The Result of a trajectory X on the times t: signals, statistics, metadata."""
         eom, s, drive, funcs = self.eom, self.settings, self.drive, self.funcs
         method, max_steps, extra, out_names = self.method, self.max_steps, self.extra, self.out_names
+        names = self._names()
         U = drive.values(t, X)
-        signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
+        if eom.inputs:
+            signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
+        else:                         # no inputs: the recorder of these parameter values, kept
+            rec = self._recorders.get(pv.tobytes())
+            if rec is None:
+                if len(self._recorders) >= 4:
+                    self._recorders.clear()
+                rec = self._recorders[pv.tobytes()] = Mon.signal_recorder(eom, pv, out_names)
+            signals = rec(t, X)
         record_inputs(drive, U, signals, meta)
         Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
         stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
@@ -264,19 +274,40 @@ class OdeSetup:
         stats["raw"] = run.stats
         if run.messages.strip():
             meta["integrator_messages"] = _dedup(run.messages)
-        meta["conservative"] = Mon.is_conservative(eom)
+        meta["conservative"] = names["conservative"]
+        n, coords = names["n"], names["coords"]
         meta["options"] = {"t_start": s.t_start, "t_end": s.t_end, "rtol": s.rtol, "atol": s.atol,
                            "points": len(self.grid), "method": method,
                            "compiled": (bool(getattr(funcs, "compiled", False)) if loop_compiled is None
                                         else bool(loop_compiled) and meta.get("loop_engine") == "compiled"),
                            "max_steps": max_steps, "outputs": list(out_names),
-                           "parameters": dict(zip(eom.params, map(float, pv))),
-                           "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
-                                     **{f"der({c})": float(v) for c, v in zip(eom.coords, xs[eom.n:])}},
+                           "parameters": dict(zip(names["params"], pv.tolist())),
+                           "start": {**dict(zip(coords, xs[:n].tolist())), **dict(zip(names["speeds"], xs[n:].tolist()))},
                            **({"integrator_options": extra} if extra else {})}
-        n = eom.n
-        return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
+        return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=coords, signals=signals,
                       stats=stats, metadata=meta, failure=failure)
+
+    def _names(self) -> dict:
+        """What every run's record reads of the equations, read once (their fields are lazy)."""
+        if self._named is None:
+            eom = self.eom
+            coords = tuple(eom.coords)
+            self._named = {"n": eom.n, "coords": coords, "params": tuple(eom.params),
+                           "speeds": tuple(f"der({c})" for c in coords), "conservative": Mon.is_conservative(eom)}
+        return self._named
+
+
+def plain_copy(v):
+    """A deep copy of plain data (dicts, lists, strings, numbers; anything else deep-copied):
+    a setup's metadata for one run, at a third of copy.deepcopy's cost."""
+    if isinstance(v, dict):
+        return {k: plain_copy(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [plain_copy(x) for x in v]
+    if v is None or isinstance(v, (str, int, float, bool, tuple)) and (type(v) is not tuple or
+                                                                        all(isinstance(x, (str, int, float)) for x in v)):
+        return v
+    return copy.deepcopy(v)
 
 
 SETUPS_KEPT = 16          # OdeSetups kept for repeated runs (a warm Model, the error estimate's companion)
