@@ -37,11 +37,11 @@ from .problem import Problem, formulate
 from .settings import MIN_RTOL, SimulationSettings
 
 
-def simulate(eom, settings: SimulationSettings, progress=None, problem: Problem | None = None) -> Result:
+def simulate(eom, settings: SimulationSettings, progress=None, problem: Problem | Prepared | None = None) -> Result:
     """Formulate and solve one run, after the start check (mechdsl.eom.preflight: what
     `mech check` accepts can start here; `p`, `x0` and `--set` values are judged too).  What the
     run warns about is also a MechWarning (settings.warn; sweeps collect them instead).
-    ``problem``: ``formulate(eom, settings)`` made before (a warm Model keeps it)."""
+    ``problem``: ``formulate(eom, settings)`` (or its ``prepare``) made before (a warm Model keeps it)."""
     check_start(eom, p=settings.p, x0=settings.x0, t=settings.t_start, drift_bound=settings.dae.bound(settings.atol))
     r = solve(problem if problem is not None else formulate(eom, settings), progress=progress)
     if settings.warn:
