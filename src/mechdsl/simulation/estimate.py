@@ -29,6 +29,7 @@ import numpy as np
 
 from ..numbers import si_unit
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
+from .backends.ode import kept_setup
 from .prepared import prepare
 from .problem import formulate
 from .registry import spec
@@ -179,8 +180,6 @@ def _companion_run(problem, tight, solve):
     trajectory alone (OdeSetup.states: no signals recorded, no Result built; its setup kept
     for the next run of the same settings, backends/ode.kept_setup), others through ``solve``."""
     if problem.kind == "ode" and problem.drive is None and problem.step_eom is None:
-        from .backends.ode import kept_setup
-
         setup = kept_setup(problem.eom, tight, lambda: prepare(formulate(problem.eom, tight.validated())).setup)
         other = setup.states(*setup.start_of(tight))
         if other.failure is not None and other.failure.cause == "interrupted":

@@ -31,6 +31,7 @@ from ..eom import parameter_vector
 from ..eom.start import start_vector
 from ..model.records import record
 from .backends import backend
+from .backends.ode import _environment as setup_environment
 from .choose import default_inputs, fixed_step_count, min_step
 from .problem import Problem
 from .registry import METHODS, spec
@@ -125,8 +126,4 @@ def unchanged(prepared: Prepared) -> bool:
 
 
 def _environment(problem: Problem):
-    if problem.backend != "ode":
-        return None
-    from .backends.ode import _environment as env
-
-    return env()
+    return setup_environment() if problem.backend == "ode" else None
