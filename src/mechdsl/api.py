@@ -477,15 +477,60 @@ class Model:
         Settings resolve once, argument > scene > default (mechdsl.simulation.settings):
         t_end, rtol, atol, method, points and every other field of SimulationSettings
         (t_start, formulation, outputs, dt, reactions, compiled, budget, estimate_error, ...)."""
-        from .simulation import simulate
+        from .simulation import formulate, simulate
+        from .simulation.prepared import prepare, unchanged
 
+        args = dict(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points, **kw)
+        eom = self.eom
+        kept = self._kept_run(args)          # a warm run of the same arguments: settings and problem kept
+        if kept is not None and (kept[0] is not eom or not unchanged(kept[1])):
+            kept = None
         try:
-            r = simulate(self.eom, self.settings(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points,
-                                                 **kw), progress=progress)
+            # a first run prepares inside the timed run (its statistics count the set-up)
+            problem = kept[1] if kept is not None else formulate(eom, self.settings(**args))
+            r = simulate(eom, problem.problem.settings if kept is not None else problem.settings,
+                         progress=progress, problem=problem)
         finally:
-            self._remember()                         # with what the run derived on the way (lazy M, bias)
+            if kept is None:                 # a repeated run derives nothing new
+                self._remember()             # with what the run derived on the way (lazy M, bias)
+        if kept is None and problem.drive is None and self._keeps(args):
+            self._keep_run(args, (eom, prepare(problem)))     # the setup the run built, kept (ode.kept_setup)
         r.source_model = self                    # for r.animate() / r.plot(); see mechdsl.output.display
         return r
+
+    RUNS_KEPT = 8       # argument sets whose settings and problem a Model keeps (Model.simulate)
+
+    def _kept_run(self, args: dict):
+        """(EOM, Prepared problem) kept for a run with these arguments, or None (also when they
+        cannot be a key: a list of start values, a table of inputs)."""
+        runs = self.__dict__.get("_runs")
+        if not runs:
+            return None
+        try:
+            return runs.get(_args_key(args))
+        except TypeError:
+            return None
+
+    @staticmethod
+    def _keeps(args: dict) -> bool:
+        try:
+            _args_key(args)
+        except TypeError:
+            return False
+        return True
+
+    def _keep_run(self, args: dict, value) -> None:
+        """Keep the settings, problem and back-end setup of a run by its arguments: the next run
+        with the same arguments resolves, validates, formulates and prepares nothing again (the
+        scene's settings and the equations are the Model's own, fixed once it is loaded)."""
+        try:
+            key = _args_key(args)
+        except TypeError:
+            return
+        runs = self.__dict__.setdefault("_runs", {})
+        if len(runs) >= self.RUNS_KEPT:
+            runs.pop(next(iter(runs)))
+        runs[key] = value
 
     def sensitivities(self, t_end: float | None = None, params=(), starts=(), outputs=None,
                       method: str = "forward", points: int | None = None, *, times=None, integral=None,
@@ -891,6 +936,14 @@ class _Cache:
             model, scene, target, warnings = self.owner
             modelcache.write(self.key, modelcache.Entry(model, scene, target, list(warnings), data))
         self.stored = now               # (nothing storable: not tried again)
+
+
+def _args_key(args: dict) -> tuple:
+    """A hashable key of Model.simulate's arguments (TypeError when one cannot be hashed); the
+    type is part of it (1 and 1.0 and True are the same key to a dict)."""
+    key = tuple(sorted((k, type(v).__name__, v) for k, v in args.items() if v is not None))
+    hash(key)
+    return key
 
 
 def _merge_overrides(a: dict, b: dict) -> dict:

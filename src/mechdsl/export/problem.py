@@ -75,7 +75,7 @@ def stepper(model, s, kind: str) -> str:
     method as it is; otherwise the compiled loop running the same one-step class the back end of
     ``kind`` runs the method as (registry: a scipy method's class, the contact back end's
     ``events`` class); ``auto`` and methods without one (BDF, ...) as the compiled loop's own
-    choice (``crk.loop_method``: dopri5 at rtol >= 1e-5, else dop853)."""
+    choice (``crk.loop_method``: dopri5 at rtol >= crk.DOPRI5_RTOL, else dop853)."""
     from ..simulation.backends.crk import CRK_METHODS, loop_method
     from ..simulation.registry import spec
 

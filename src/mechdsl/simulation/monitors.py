@@ -35,6 +35,26 @@ def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
     return R.record(eom, cols, t, X[:, :n], X[:, n:], pv, UT.T, using=(f,))
 
 
+def signal_recorder(eom, pv, out_names):
+    """``compute_signals`` of a model without inputs at the parameters ``pv`` as a function
+    (t, X) -> signals, its first integrals and columns looked up once (a setup keeps it for its
+    runs: the same numbers)."""
+    pv = np.array(pv, float)
+    f, folded = _integral_search(eom, pv, np.zeros(0))
+    cols = eom.workspace.memo(("model_columns", tuple(out_names), id(f), folded),
+                              lambda: (f, R.model_columns(eom, out_names, f, folded)))[1]
+    n = eom.n
+    evaluate = R.recorder(eom, cols, using=(f,))
+
+    def rec(t, X):
+        t = np.asarray(t, float).reshape(-1)
+        if not len(t):
+            return {}
+        X = np.asarray(X, float).reshape(len(t), 2 * n)
+        return evaluate(t, X[:, :n], X[:, n:], pv, np.zeros((len(t), 0)))
+    return rec
+
+
 def singularity_report(eom, signals, t, meta, threshold):
     mons = getattr(eom, "singularity_monitors", None) or {}
     if not mons or len(t) == 0:

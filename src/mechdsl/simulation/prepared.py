@@ -31,6 +31,7 @@ from ..eom import parameter_vector
 from ..eom.start import start_vector
 from ..model.records import record
 from .backends import backend
+from .backends.ode import _environment as setup_environment
 from .choose import default_inputs, fixed_step_count, min_step
 from .problem import Problem
 from .registry import METHODS, spec
@@ -41,6 +42,7 @@ from .trajectory import cached_trajectory
 class Prepared:
     problem: Problem
     setup: object = None               # the back end's (OdeSetup for ODE problems; None: nothing kept)
+    environment: object = dataclasses.field(default=None, compare=False)    # what the setup was built with (unchanged)
 
     @property
     def method(self) -> str:
@@ -56,7 +58,7 @@ class Prepared:
         pv = parameter_vector(self.problem.eom, s.p)
         problem = dataclasses.replace(self.problem, settings=s,
                                       parameters=tuple((n, float(v)) for n, v in zip(self.problem.eom.params, pv)))
-        return Prepared(problem, self.setup)
+        return Prepared(problem, self.setup, self.environment)
 
     def integrator(self):
         """The casadi.integrator over the output grid that runs of this preparation use."""
@@ -113,4 +115,15 @@ class Prepared:
 
 def prepare(problem: Problem) -> Prepared:
     """Build what runs of ``problem`` need once (see the module docstring)."""
-    return Prepared(problem, backend(problem.backend).prepare(problem))
+    return Prepared(problem, backend(problem.backend).prepare(problem), _environment(problem))
+
+
+def unchanged(prepared: Prepared) -> bool:
+    """Whether what ``prepared``'s setup was built from still holds (an ODE setup: the compiler,
+    the compile threshold, the caches of its Functions: backends/ode._environment); a kept
+    preparation that fails this is prepared again."""
+    return prepared.environment == _environment(prepared.problem)
+
+
+def _environment(problem: Problem):
+    return setup_environment() if problem.backend == "ode" else None

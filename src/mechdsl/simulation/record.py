@@ -49,16 +49,28 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
     ``using``: objects besides the EOM's fields the columns were built from (the first
     integrals' Function), part of the cache key.  keep=False: columns built afresh for this
     call only (not cached: the Function is built, used and dropped)."""
+    names, F, maps = _function(eom, columns, tuple(using), keep)
+    return _evaluate(names, F, maps, (eom.n, len(eom.inputs), lam_symbol(eom).numel(), eom.input_defaults),
+                     t, Q, QD, p, U, LAM)
+
+
+def recorder(eom, columns: dict, using=()):
+    """``record`` of these columns as a function (t, Q, QD, p, U=None, LAM=None) -> signals, its
+    Function looked up once (a run's setup keeps it: the same numbers, without the look-up)."""
+    names, F, maps = _function(eom, columns, tuple(using), True)
+    sizes = (eom.n, len(eom.inputs), lam_symbol(eom).numel(), eom.input_defaults)
+    return lambda t, Q, QD, p, U=None, LAM=None: _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM)
+
+
+def _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM) -> dict[str, np.ndarray]:
     t = np.asarray(t, float).reshape(-1)
     N = len(t)
-    names, F, maps = _function(eom, columns, tuple(using), keep)
     if not names:
         return {}
     if N == 0:
         return {k: np.zeros(0) for k in names}
-    n, nu = eom.n, len(eom.inputs)
-    m = lam_symbol(eom).numel()
-    UT = (np.repeat(np.asarray(eom.input_defaults, float).reshape(-1, 1), N, axis=1) if U is None
+    n, nu, m, defaults = sizes
+    UT = (np.repeat(np.asarray(defaults, float).reshape(-1, 1), N, axis=1) if U is None
           else np.asarray(U, float).reshape(N, nu).T)
     LT = (np.asarray(LAM, float).reshape(N, m).T if LAM is not None and np.size(LAM) == N * m
           else np.zeros((m, N)))

@@ -28,7 +28,7 @@ from ..interrupts import interrupt_guard, was_interrupt
 from ..output.result import Result, RunInterrupted, versions
 from . import accuracy as A
 from .backends import backend, ignored_settings
-from .backends.ode import record_inputs
+from .backends.ode import plain_copy, record_inputs
 from .estimate import estimate
 from .prepared import Prepared, prepare
 from .record_dae import multiplier_column_units
@@ -37,12 +37,13 @@ from .problem import Problem, formulate
 from .settings import MIN_RTOL, SimulationSettings
 
 
-def simulate(eom, settings: SimulationSettings, progress=None) -> Result:
+def simulate(eom, settings: SimulationSettings, progress=None, problem: Problem | Prepared | None = None) -> Result:
     """Formulate and solve one run, after the start check (mechdsl.eom.preflight: what
     `mech check` accepts can start here; `p`, `x0` and `--set` values are judged too).  What the
-    run warns about is also a MechWarning (settings.warn; sweeps collect them instead)."""
+    run warns about is also a MechWarning (settings.warn; sweeps collect them instead).
+    ``problem``: ``formulate(eom, settings)`` (or its ``prepare``) made before (a warm Model keeps it)."""
     check_start(eom, p=settings.p, x0=settings.x0, t=settings.t_start, drift_bound=settings.dae.bound(settings.atol))
-    r = solve(formulate(eom, settings), progress=progress)
+    r = solve(problem if problem is not None else formulate(eom, settings), progress=progress)
     if settings.warn:
         announce(r)
     return r
@@ -118,14 +119,14 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         _hold_warning(r, problem)
     meta.setdefault("notes", [])
     meta.setdefault("conservative", "energy" in problem.invariants)
-    unused = ignored_settings(back, s)
+    unused, plain = _settings_facts(back, s)
     if unused:
         meta["notes"].append(f"settings without effect on {back.noun} problem: " + ", ".join(unused))
     ran = back.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,
                    "compiled": _ran_compiled(meta, r.stats),
-                   "settings": {k: v for k, v in s.as_dict().items() if k not in ("x0", "p")}}
+                   "settings": plain_copy(plain)}
     eom = problem.eom
     notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
     if notes:
@@ -156,6 +157,22 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         raise RunInterrupted(r) from None
     A.accuracy_warning(r, problem)
     return r
+
+
+_FACTS: dict = {}        # id(settings) -> (settings, its facts): a kept problem's runs share one settings object
+
+
+def _settings_facts(back, s) -> tuple[list, dict]:
+    """(the settings ``back`` does not use, the settings as plain data without x0 and p), worked
+    out once per settings object (the settings are frozen)."""
+    hit = _FACTS.get(id(s))
+    if hit is not None and hit[0] is s and hit[1] is back:
+        return hit[2]
+    facts = (ignored_settings(back, s), {k: v for k, v in s.as_dict().items() if k not in ("x0", "p")})
+    if len(_FACTS) >= 16:
+        _FACTS.pop(next(iter(_FACTS)))
+    _FACTS[id(s)] = (s, back, facts)
+    return facts
 
 
 def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:

@@ -89,6 +89,11 @@ RUN_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctype
 EVENTS_ARGTYPES = RUN_ARGTYPES + [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_double, ctypes.c_int, _DP,
                                   ctypes.POINTER(Fun), _DP, _DP, _DP, ctypes.c_longlong]
 
+# crk_run as run_compiled calls it: every array by its address (an int: numpy's data_as costs
+# 4.5 us an array, a tenth of a small model's whole run)
+LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctypes.c_longlong, _VP, _VP, _VP,
+                 ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
+
 
 def runtime():
     """(the runtime library (ctypes) or None, note): crk.c and vm.c, compiled once per cache
@@ -106,7 +111,7 @@ def runtime():
     if loaded is not None:
         try:
             lib = ctypes.CDLL(path)
-            for name, args in (("crk_run", RUN_ARGTYPES + [_VP, _VP]), ("crk_run_events", EVENTS_ARGTYPES),
+            for name, args in (("crk_run", LOOP_ARGTYPES), ("crk_run_events", EVENTS_ARGTYPES),
                                ("crk_eval_n", [ctypes.POINTER(Fun), ctypes.c_double, _DP, _DP, _DP, _DP,
                                                ctypes.c_longlong]),
                                ("crk_map", [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_longlong, _VP, _VP,
@@ -335,7 +340,7 @@ class Resume(ctypes.Structure):
     _fields_ = [("slice", ctypes.c_double), ("started", ctypes.c_int), ("t", ctypes.c_double),
                 ("h_abs", ctypes.c_double), ("k", ctypes.c_longlong), ("steps", ctypes.c_longlong),
                 ("rejected", ctypes.c_longlong), ("steps_here", ctypes.c_longlong), ("nfev", ctypes.c_longlong),
-                ("y", _DP), ("f", _DP)]
+                ("y", _VP), ("f", _VP)]
 
 
 class _Tab(ctypes.Structure):
@@ -388,19 +393,26 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
     between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run)."""
     grid = np.ascontiguousarray(grid, float)
     nx = x0.size
-    X = np.full((len(grid), nx), np.nan)
-    x0c = np.ascontiguousarray(x0, float)
-    pc = np.ascontiguousarray(np.ravel(p), float)
-    uc = np.ascontiguousarray(np.zeros(0) if u is None else np.ravel(u), float)
-    stats = np.zeros(4)
-    ctl = np.zeros(2, dtype=np.int64)
-    xfail = np.zeros(nx)
-    carry = np.zeros((2, max(nx, 1)))
-    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, _ptr(carry[0]), _ptr(carry[1]))
+    X = np.empty((len(grid), nx))
+    X.fill(np.nan)
+    pc = np.ravel(p)
+    uc = np.zeros(0) if u is None else np.ravel(u)
+    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
+    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
+    m, npar, nu = max(nx, 1), pc.size, uc.size
+    W = np.zeros(6 + 3 * m + m + npar + nu)
+    stats, ctl = W[:4], W[4:6].view(np.int64)
+    xfail = W[6:6 + nx]
+    o = 6 + 3 * m
+    W[o:o + nx] = x0
+    W[o + m:o + m + npar] = pc
+    W[o + m + npar:o + m + npar + nu] = uc
+    a = W.ctypes.data
+    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
     drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
-    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, _ptr(grid), len(grid), _ptr(x0c), _ptr(uc), _ptr(pc),
-            float(rtol), float(atol), float(hmin), int(max_steps), _ptr(X), _ptr(stats), ctl.ctypes.data_as(_I64P),
-            _ptr(xfail), ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o, a + 8 * (o + m + npar),
+            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.ctypes.data, a, a + 32,
+            a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
     interrupted = False
     try:
         while True:
@@ -421,6 +433,7 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
         t_end = float(stats[3])
         run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
         run.fail_time, run.fail_state = t_end, xfail.copy()
+    del keep
     return run
 
 
@@ -451,7 +464,11 @@ def run_batch(loop, method, grid, X0, P, u, rtol, atol, max_steps, hmin):
 
 # --------------------------------------------------------------------------- method = auto
 
-DOPRI5_RTOL = 1.0    # auto: always dop853 (benchmarks/auto_wp.py: dopri5 was never cheaper by more than noise, and less accurate)
+# auto: dopri5 at rtol >= this, dop853 below (benchmarks/auto_wp.py, issue 24 item 1: at rtol 1e-2..1e-4
+# dopri5 took 0.6-0.9 of dop853's CPU at the same tolerance on the double pendulum and the 5- and
+# 30-link chains, and no other run as accurate as it was cheaper by more than noise; from 1e-5 on
+# dop853 is the cheaper one at equal accuracy).  A rule of the tolerance alone: deterministic.
+DOPRI5_RTOL = 1e-4
 
 
 def rhs_cost(f) -> int | None:

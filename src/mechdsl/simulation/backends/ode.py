@@ -10,6 +10,7 @@ docs/simulate.md (users) and docs/internals/numerics.md (design).
 from __future__ import annotations
 
 import copy
+import threading
 import time
 from typing import Any
 
@@ -30,7 +31,7 @@ from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
 from . import plugins as P
-from .crk import LoopFunctions, auto_choice, engine_for, library, loop_ode, scipy_name
+from .crk import LoopFunctions, auto_choice, compiler, engine_for, library, loop_ode, scipy_name
 
 
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
@@ -50,12 +51,15 @@ class OdeBackend(Backend):
     accepts = {"formulation": ("ode",)}     # the unconstrained problem's own name: no note
 
     def prepare(self, problem) -> "OdeSetup":
-        return OdeSetup.build(problem.eom, problem.settings, problem.drive)
+        if problem.drive is not None:         # a drive carries what its signals did during a run
+            return OdeSetup.build(problem.eom, problem.settings, problem.drive)
+        return kept_setup(problem.eom, problem.settings,
+                          lambda: OdeSetup.build(problem.eom, problem.settings, problem.drive))
 
     def run(self, problem, progress, setup=None):
         setup = setup if setup is not None else self.prepare(problem)
-        pv = parameter_vector(problem.eom, problem.settings.p)
-        return setup.run(pv, start_vector(problem.eom, problem.settings.x0, pv), progress)
+        pv, xs = setup.start_of(problem.settings)
+        return setup.run(pv, xs, progress)
 
     def integration(self, problem, setup, pv, xs):
         if setup.method is None:
@@ -88,8 +92,11 @@ class OdeSetup:
 
     def __init__(self, eom, s, drive, grid, method, reason, funcs, post, meta, loop_compiled, out_names):
         self.eom, self.settings, self.drive, self.grid = eom, s, drive, grid
+        pv = parameter_vector(eom, s.p)
+        self._start = (pv, start_vector(eom, s.x0, pv))      # of the settings it was built for
         self.method, self.reason, self.funcs, self.post = method, reason, funcs, post
         self.meta, self.loop_compiled, self.out_names = meta, loop_compiled, out_names
+        self._named, self._recorders = None, {}
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
 
@@ -159,6 +166,19 @@ class OdeSetup:
             meta["notes"] += list(getattr(funcs, "notes", []))
         return cls(eom, s, drive, grid, method, meta["method_reason"], funcs, post, meta, loop_compiled, out_names)
 
+    def start_of(self, s):
+        """(parameter vector, start vector) of the settings ``s`` (copies: kept for a warm run)."""
+        same = s is self.settings
+        if not same:
+            try:
+                same = bool(s == self.settings)
+            except (ValueError, TypeError):       # arrays among the values: compared as keys
+                same = _frozen(s) == _frozen(self.settings)
+        if same:
+            return self._start[0].copy(), self._start[1].copy()
+        pv = parameter_vector(self.eom, s.p)
+        return pv, start_vector(self.eom, s.x0, pv)
+
     def options(self, fixed_steps: int | None = None, hmin: float | None = None) -> dict:
         """The CasADi integrator options a run of this setup uses (CasADi plug-ins)."""
         s, m = self.settings, spec(self.method)
@@ -175,12 +195,30 @@ class OdeSetup:
 
     def run(self, pv, xs, progress=None) -> Result:
         """Integrate from the start ``xs`` at the parameters ``pv`` (nothing is built again)."""
-        eom, s, drive, grid = self.eom, self.settings, self.drive, self.grid
         wall0 = time.perf_counter()
-        meta = copy.deepcopy(self.meta)
-        out_names = self.out_names
+        meta = plain_copy(self.meta)
         if self.method is None:
-            return _no_state_result(eom, grid, pv, out_names, meta, wall0, drive)
+            return _no_state_result(self.eom, self.grid, pv, self.out_names, meta, wall0, self.drive)
+        t, X, run, failure = self.integrate(pv, xs, meta, progress)
+        return self.record(t, X, pv, xs, meta, run, failure, self.loop_compiled, wall0)
+
+    def states(self, pv, xs) -> "States":
+        """The trajectory alone (no signals recorded, no metadata): what the default error
+        estimate's companion run needs (simulation/estimate.py)."""
+        if self.method is None:
+            return States(self.grid.copy(), np.zeros((len(self.grid), 0)), None, {})
+        t, X, run, failure = self.integrate(pv, xs, {"notes": [], "warnings": []})
+        bad = np.flatnonzero(~np.isfinite(X).all(axis=1))
+        if bad.size:                    # as the template's check_finite cuts a run's states
+            k = int(bad[0])
+            t, X = t[:k], X[:k]
+            if failure is None:
+                failure = Failure(float(self.grid[k]), "non-finite state", "a state became non-finite")
+        return States(t, X[:, :self.eom.n], failure, _counts(self.method, run.stats))
+
+    def integrate(self, pv, xs, meta, progress=None):
+        """(t, X, the integrator's Run, Failure or None): the states on the output times reached."""
+        eom, s, drive, grid = self.eom, self.settings, self.drive, self.grid
         method, funcs, max_steps, extra = self.method, self.funcs, self.max_steps, self.extra
         t0, t1, rtol, atol = s.t_start, s.t_end, s.rtol, s.atol
         uv = drive.vector(t0)
@@ -210,14 +248,23 @@ class OdeSetup:
         X = run.X[:n_ok].copy()
         X[0] = xs
         t = grid[:n_ok].copy()
-        return self.record(t, X, pv, xs, meta, run, failure, loop_compiled, wall0)
+        return t, X, run, failure
 
     def record(self, t, X, pv, xs, meta, run, failure, loop_compiled, wall0) -> Result:
         """The Result of a trajectory X on the times t: signals, statistics, metadata."""
         eom, s, drive, funcs = self.eom, self.settings, self.drive, self.funcs
         method, max_steps, extra, out_names = self.method, self.max_steps, self.extra, self.out_names
+        names = self._names()
         U = drive.values(t, X)
-        signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
+        if eom.inputs:
+            signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
+        else:                         # no inputs: the recorder of these parameter values, kept
+            rec = self._recorders.get(pv.tobytes())
+            if rec is None:
+                if len(self._recorders) >= 4:
+                    self._recorders.clear()
+                rec = self._recorders[pv.tobytes()] = Mon.signal_recorder(eom, pv, out_names)
+            signals = rec(t, X)
         record_inputs(drive, U, signals, meta)
         Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
         stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
@@ -227,19 +274,109 @@ class OdeSetup:
         stats["raw"] = run.stats
         if run.messages.strip():
             meta["integrator_messages"] = _dedup(run.messages)
-        meta["conservative"] = Mon.is_conservative(eom)
+        meta["conservative"] = names["conservative"]
+        n, coords = names["n"], names["coords"]
         meta["options"] = {"t_start": s.t_start, "t_end": s.t_end, "rtol": s.rtol, "atol": s.atol,
                            "points": len(self.grid), "method": method,
                            "compiled": (bool(getattr(funcs, "compiled", False)) if loop_compiled is None
                                         else bool(loop_compiled) and meta.get("loop_engine") == "compiled"),
                            "max_steps": max_steps, "outputs": list(out_names),
-                           "parameters": dict(zip(eom.params, map(float, pv))),
-                           "start": {**dict(zip(eom.coords, map(float, xs[:eom.n]))),
-                                     **{f"der({c})": float(v) for c, v in zip(eom.coords, xs[eom.n:])}},
+                           "parameters": dict(zip(names["params"], pv.tolist())),
+                           "start": {**dict(zip(coords, xs[:n].tolist())), **dict(zip(names["speeds"], xs[n:].tolist()))},
                            **({"integrator_options": extra} if extra else {})}
-        n = eom.n
-        return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=tuple(eom.coords), signals=signals,
+        return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=coords, signals=signals,
                       stats=stats, metadata=meta, failure=failure)
+
+    def _names(self) -> dict:
+        """What every run's record reads of the equations, read once (their fields are lazy)."""
+        if self._named is None:
+            eom = self.eom
+            coords = tuple(eom.coords)
+            self._named = {"n": eom.n, "coords": coords, "params": tuple(eom.params),
+                           "speeds": tuple(f"der({c})" for c in coords), "conservative": Mon.is_conservative(eom)}
+        return self._named
+
+
+def plain_copy(v):
+    """A deep copy of plain data (dicts, lists, strings, numbers; anything else deep-copied):
+    a setup's metadata for one run, at a third of copy.deepcopy's cost."""
+    if isinstance(v, dict):
+        return {k: plain_copy(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [plain_copy(x) for x in v]
+    if v is None or isinstance(v, (str, int, float, bool, tuple)) and (type(v) is not tuple or
+                                                                        all(isinstance(x, (str, int, float)) for x in v)):
+        return v
+    return copy.deepcopy(v)
+
+
+SETUPS_KEPT = 16          # OdeSetups kept for repeated runs (a warm Model, the error estimate's companion)
+_SETUPS: dict = {}
+_SETUPS_LOCK = threading.Lock()
+
+
+def kept_setup(eom, s, build) -> "OdeSetup":
+    """``build()``'s OdeSetup for the equations ``eom`` and the validated settings ``s``, kept for
+    the next run of the same equations and settings (a warm ``Model.simulate`` builds nothing
+    again: the method, Functions, compiled loop and output grid depend on these alone, and on
+    whether there is a C compiler).  Settings that cannot be hashed (a dict of start values,
+    Functions given by hand) are built every time.  The most recently used SETUPS_KEPT are
+    kept; holding the EOM keeps its id unique while its entry lives."""
+    try:
+        key = (id(eom), _frozen(s), _environment())
+        hash(key)
+    except TypeError:
+        return build()
+    with _SETUPS_LOCK:
+        hit = _SETUPS.pop(key, None)
+        if hit is not None and hit[0] is eom:
+            _SETUPS[key] = hit            # most recently used last
+            return hit[1]
+    setup = build()
+    with _SETUPS_LOCK:
+        while len(_SETUPS) >= SETUPS_KEPT:
+            _SETUPS.pop(next(iter(_SETUPS)))
+        _SETUPS[key] = (eom, setup)
+    return setup
+
+
+def _frozen(s):
+    """``s`` with array or list start and parameter values as hashable values of their own (a
+    benchmark passes the parameter vector as an array): a key for kept_setup."""
+    def freeze(v):
+        if isinstance(v, np.ndarray):
+            return ("array", v.dtype.str, v.shape, v.tobytes())
+        if isinstance(v, list):
+            return ("list", tuple(freeze(x) for x in v))
+        if isinstance(v, dict):
+            return ("dict", tuple(sorted((k, freeze(x)) for k, x in v.items())))
+        return v
+
+    if isinstance(s.p, (np.ndarray, list, dict)) or isinstance(s.x0, (np.ndarray, list, dict)):
+        return s.replace(p=freeze(s.p), x0=freeze(s.x0))
+    return s
+
+
+def _environment() -> tuple:
+    """What a setup depends on besides its equations and settings: whether there is a C
+    compiler, the compile threshold and the loop's method rule (crk), and the caches its
+    Functions and compiled loop came from (a new cache, e.g. emptied by a test, builds anew)."""
+    from ...eom import codegen
+    from . import crk
+
+    return (compiler(), crk.COMPILE_OPS, crk.DOPRI5_RTOL, id(crk._LIBS), id(crk._RUNTIME), id(codegen._SETS),
+            crk.library, codegen.compile_functions, codegen.find_compiler)
+
+
+class States:
+    """A run's trajectory without its signals (``OdeSetup.states``): times ``t``, coordinates
+    ``q`` (rows = times), ``failure`` (None: it reached the end), the integrator's ``stats``
+    (steps, rhs_evals, ...)."""
+
+    __slots__ = ("t", "q", "failure", "stats")
+
+    def __init__(self, t, q, failure, stats):
+        self.t, self.q, self.failure, self.stats = t, q, failure, stats
 
 
 def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None):

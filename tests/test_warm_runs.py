@@ -1,0 +1,145 @@
+"""Issue 24, items 1 and 2: a warm run builds nothing again, the error estimate's companion runs
+without recording, and ``auto`` chooses by the model and the options alone.
+
+What is kept between runs (backends/ode.kept_setup, Model's kept problems) must not change a
+number or the method: every test compares a warm run with a run that built everything afresh."""
+import warnings
+
+import numpy as np
+import pytest
+
+import mechdsl
+from conftest import MODELS
+from mechdsl.eom.codegen import find_compiler
+from mechdsl.simulation.backends import crk
+from mechdsl.simulation.backends import ode as O
+
+needs_cc = pytest.mark.skipif(find_compiler() is None, reason="the stepping loop is C")
+
+
+@pytest.fixture(scope="module")
+def double():
+    return mechdsl.load(MODELS / "double_pendulum.mech", scene="Chaos")
+
+
+def _run(m, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return m.simulate(**kw)
+
+
+@needs_cc
+def test_auto_takes_dopri5_at_loose_tolerances_and_dop853_below(double):
+    """The rule of crk.loop_method: dopri5 at rtol >= DOPRI5_RTOL, else dop853 (benchmarks/auto_wp.py)."""
+    loose = _run(double, t_end=2.0, rtol=1e-3, atol=1e-6)
+    tight = _run(double, t_end=2.0, rtol=1e-6, atol=1e-8)
+    assert crk.DOPRI5_RTOL == 1e-4
+    assert loose.metadata["method"] == "dopri5" and tight.metadata["method"] == "dop853"
+    assert "dopri5" in loose.metadata["method_reason"]
+    # its error estimate's companion keeps the method that ran (at the tighter tolerance)
+    assert "10x tighter" in loose.metadata["accuracy"]["error_estimate_method"]
+    assert crk.loop_method(1e-4) == "dopri5" and crk.loop_method(9.9e-5) == "dop853"
+
+
+@needs_cc
+def test_a_warm_run_is_the_run_built_afresh(double, monkeypatch):
+    """Same model and options -> same method and the same numbers, whatever the caches hold: the
+    second call reuses the kept setup and problem, the third builds everything again."""
+    first = _run(double, t_end=3.0, rtol=1e-7)
+    warm = _run(double, t_end=3.0, rtol=1e-7)
+    monkeypatch.setattr(O, "_SETUPS", {})
+    double.__dict__.pop("_runs", None)
+    fresh = _run(double, t_end=3.0, rtol=1e-7)
+    for r in (warm, fresh):
+        assert r.metadata["method"] == first.metadata["method"] == "dop853"
+        np.testing.assert_array_equal(r.q, first.q)          # the same steps: the same bits
+        np.testing.assert_array_equal(r["energy"], first["energy"])
+        assert r.metadata["accuracy"]["error_estimate"] == first.metadata["accuracy"]["error_estimate"]
+        assert r.stats["rhs_evals"] == first.stats["rhs_evals"]
+    # each Result owns its metadata and arrays: changing one leaves the next run alone
+    warm.metadata["notes"].append("mine")
+    warm.metadata["options"]["parameters"].clear()
+    again = _run(double, t_end=3.0, rtol=1e-7)
+    assert "mine" not in again.metadata["notes"] and again.metadata["options"]["parameters"]
+    assert again.q is not warm.q
+
+
+def test_other_arguments_are_other_runs(double):
+    """A kept problem is found by all the arguments: another tolerance, start or end is another run."""
+    a = _run(double, t_end=1.0, rtol=1e-6)
+    b = _run(double, t_end=1.0, rtol=1e-9)
+    c = _run(double, t_end=1.0, rtol=1e-6, x0={"j1.phi": 0.5})
+    d = _run(double, t_end=0.5, rtol=1e-6)
+    assert a.metadata["options"]["rtol"] == 1e-6 and b.metadata["options"]["rtol"] == 1e-9
+    assert c.metadata["options"]["start"]["j1.phi"] == 0.5 != a.metadata["options"]["start"]["j1.phi"]
+    assert d.t[-1] == 0.5 and a.t[-1] == 1.0
+    assert len(double.__dict__.get("_runs", {})) <= double.RUNS_KEPT
+
+
+def test_companion_work_is_counted_and_is_an_independent_run(double):
+    """stats["error_estimate_rhs_evals"] / ["error_estimate_steps"]: the companion's own work
+    (benchmarks/nlink_run.py counts it); the estimate is |run - companion| / (1 - 1/10) at the
+    companion's times, checked against a run made by hand at the companion's settings."""
+    r = _run(double, t_end=4.0, rtol=1e-6, atol=1e-8, points=401)
+    acc = r.metadata["accuracy"]
+    method = r.metadata["method"]
+    hand = _run(double, t_end=4.0, rtol=1e-7, atol=1e-9, points=201, method=method, error_estimate="off")
+    assert r.stats["error_estimate_rhs_evals"] == hand.stats["rhs_evals"] > 0
+    assert r.stats["error_estimate_steps"] == hand.stats["steps"] > 0
+    diff = np.abs(r.q[::2] - hand.q).max(axis=0) / 0.9
+    k = int(np.argmax(diff))
+    assert acc["error_estimate_coordinate"] == r.coordinates[k]
+    assert acc["error_estimate"] == pytest.approx(diff[k], rel=1e-9)
+
+
+def test_estimate_off_has_no_companion_work(double):
+    r = _run(double, t_end=1.0, error_estimate="off")
+    assert r.stats.get("error_estimate_rhs_evals") is None
+
+
+def test_kept_setups_are_bounded_and_keyed_by_values():
+    """Array start and parameter values are part of the key by value (a benchmark passes the
+    parameter vector as an array); the store holds at most SETUPS_KEPT setups."""
+    from mechdsl.simulation.settings import SimulationSettings
+
+    s = SimulationSettings(t_end=1.0)
+    a = O._frozen(s.replace(p=np.array([1.0, 2.0])))
+    b = O._frozen(s.replace(p=np.array([1.0, 2.0])))
+    c = O._frozen(s.replace(p=np.array([1.0, 3.0])))
+    assert a == b and hash(a) == hash(b) and a != c
+    assert O._frozen(s.replace(x0={"a": 1.0})) == O._frozen(s.replace(x0={"a": 1.0}))
+    m = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum")
+    for k in range(O.SETUPS_KEPT + 3):
+        _run(m, t_end=0.1 + 0.01 * k, points=3)
+    assert len(O._SETUPS) <= O.SETUPS_KEPT
+
+
+def test_plain_copy_is_deep():
+    meta = {"a": [1, {"b": [2.0, "x"]}], "t": (1, 2), "c": {"d": None}}
+    cp = O.plain_copy(meta)
+    assert cp == meta
+    cp["a"][1]["b"].append(3)
+    cp["c"]["d"] = 1
+    assert meta == {"a": [1, {"b": [2.0, "x"]}], "t": (1, 2), "c": {"d": None}}
+
+
+def test_non_finite_signal_still_fails_the_run():
+    """The non-finite check's quick path (a finite sum) must not hide an inf or a nan."""
+    from mechdsl.output.result import Result
+    from mechdsl.simulation.accuracy import check_finite
+
+    t = np.linspace(0, 1, 5)
+    q = np.zeros((5, 1))
+    sig = np.array([0.0, 1.0, np.inf, 2.0, 3.0])
+    r = Result(t=t, q=q, qd=q.copy(), coordinates=("x",), signals={"y": sig}, stats={}, metadata={})
+    check_finite(r)
+    assert r.failure is not None and r.failure.cause == "non-finite output" and len(r.t) == 2
+    big = np.array([1e308, 1e308, 1.0])          # a sum that overflows, every value finite
+    r = Result(t=t[:3], q=q[:3], qd=q[:3].copy(), coordinates=("x",), signals={"y": big}, stats={}, metadata={})
+    check_finite(r)
+    assert r.failure is None and len(r.t) == 3
+    qn = q.copy()
+    qn[3, 0] = np.nan
+    r = Result(t=t, q=qn, qd=q.copy(), coordinates=("x",), signals={}, stats={}, metadata={})
+    check_finite(r)
+    assert r.failure is not None and r.failure.cause == "non-finite state" and len(r.t) == 3
