@@ -15,7 +15,7 @@ parameter-only expressions are then shared (``casadi.cse``).  Fewer operations t
 and the state, so the ode and every derivative of it are cheaper, whatever the model
 (benchmarks/control_swingup.py: the cart-pole's default ode).
 
-The folded Function is kept only when it has at most the instructions of the one it replaces
+The folded Function is kept only when it has fewer instructions than the one it replaces
 and equals it at random points to 1e-12 relative (the reordered products differ by
 round-off); else the Function is returned unchanged.  Functions of more than FOLD_MAX
 instructions are not folded (the pass runs in Python, about 10 us an instruction).
@@ -131,7 +131,7 @@ def fold_parameters(f, pin: int = 3):
         at += o.numel()
     g = ca.Function(f.name(), ins, parts, f.name_in(), f.name_out(), {"allow_duplicate_io_names": True})
     g = simplify_parameters(g, pin)
-    if g.n_instructions() > f.n_instructions():
+    if g.n_instructions() >= f.n_instructions():
         return f
     rng = np.random.default_rng(20261127)
     for _ in range(PROBES):
