@@ -250,10 +250,68 @@ def _to_sx(exprs, psyms, p):
             return conv(b) ** conv(x)
         raise ValueError(e)
 
-    reps, reduced = sp.cse(exprs)
-    for s, e in reps:
-        env[s] = conv(e)
-    return [conv(e) for e in reduced]
+    order, forms, names = _shared(exprs, lambda e: _cost(conv, e, env))
+    for i in order:                   # common subterms: casadi.cse of the whole ode after
+        env[names[i]] = conv(forms[i])
+    return [env[names[i]] for i in range(len(exprs))]
+
+
+def _cost(conv, e, env):
+    """Operations of the SX of ``e`` (the symbols it names free)."""
+    import casadi as ca
+
+    free = [s for s in e.free_symbols if s not in env]
+    for s in free:
+        env[s] = ca.SX.sym(str(s))
+    try:
+        x = conv(e)
+        syms = ca.symvar(x)
+        f = ca.Function("cost", [ca.vertcat(*syms)] if syms else [], [x])
+        return f.n_instructions() - len(syms) - 1
+    finally:
+        for s in free:
+            del env[s]
+
+
+SHARE_MAX = 40        # combinations: up to this many, each is tried as a multiple of a simpler one
+
+
+def _shared(exprs, cost):
+    """(an order to compute ``exprs`` in, the forms to compute them by, their names): a
+    product that is a cheaper multiple of an earlier one is written so, its name times the
+    quotient (m l^2 / 3 = (m l / 2) (2 l / 3)): sympy's cse finds common factors, not such
+    quotients."""
+    import sympy as sp
+
+    names = [sp.Symbol(f"_c{i}") for i in range(len(exprs))]
+    if len(exprs) > SHARE_MAX:
+        return range(len(exprs)), list(exprs), names
+    costs = [cost(e) for e in exprs]
+    order = sorted(range(len(exprs)), key=lambda i: (costs[i], i))
+    out = list(exprs)
+    for a, i in enumerate(order):
+        if not exprs[i].is_Mul:
+            continue
+        best = costs[i]
+        for j in order[:a]:
+            if exprs[j].is_Mul:
+                q = sp.cancel(exprs[i] / exprs[j])
+                c = cost(names[j] * q)
+                if c < best:
+                    out[i], best = names[j] * q, c
+    return order, out, names
+
+
+def _rational(e):
+    """``e`` with its floating-point numbers that are small fractions (1/3, 1/12) made exact."""
+    import sympy as sp
+    from fractions import Fraction
+
+    def exact(v):
+        fr = Fraction(float(v)).limit_denominator(1000)
+        return sp.Rational(fr.numerator, fr.denominator) if abs(float(fr) - float(v)) <= 1e-15 * abs(float(v)) else v
+
+    return e.xreplace({f: exact(f) for f in e.atoms(sp.Float)})
 
 
 def simplify_parameters(g, pin: int = 3):
@@ -273,9 +331,14 @@ def simplify_parameters(g, pin: int = 3):
     if es is None:
         return g
     try:
-        new = _to_sx([sp.factor(sp.cancel(e)) for e in es], psyms, p)
+        new = _to_sx([sp.factor(sp.cancel(_rational(e))) for e in es], psyms, p)
     except (ValueError, TypeError, sp.PolynomialError):
         return g
     sub = ca.substitute([ca.vec(o) for o in outs], [ca.vertcat(*cs)], [ca.vertcat(*new)])
+    flat = ca.cse(ca.vertcat(*sub))
+    sub, at = [], 0
+    for o in outs:
+        sub.append(flat[at:at + o.numel()])
+        at += o.numel()
     return ca.Function(g.name(), ins, [ca.reshape(s, o.size1(), o.size2()) for s, o in zip(sub, outs)],
                        g.name_in(), g.name_out(), {"allow_duplicate_io_names": True})
