@@ -146,7 +146,11 @@ def fold_parameters(f, pin: int = 3):
 
 # --------------------------------------------------------------------------- parameter combinations
 
-COMBO_MAX = 60        # operations of one parameter combination that sympy simplifies
+TERMS_MAX = 64        # terms of one combination's polynomial: beyond, the combinations stay as they are
+
+
+class _TooBig(Exception):
+    """A combination this simplification leaves as it is."""
 
 
 def _split(f, pin: int):
@@ -185,154 +189,191 @@ def _split(f, pin: int):
     return ins, outs, cs, exprs
 
 
-def _to_sympy(exprs, p, psyms):
-    """sympy expressions of the parameter-only SX ``exprs`` (arithmetic only), or None."""
+class _Poly:
+    """Parameter combinations as Laurent polynomials {monomial: coefficient}; a monomial is a
+    sorted tuple of (atom, exponent), an atom a parameter (its index) or a sum met in a
+    denominator or under a function (an index past the parameters, ``atoms``).  Products,
+    quotients by a single term, like terms and fractions (m l^2 / 12 + m (l/2)^2 = m l^2 / 3)
+    fold here, without sympy (whose import costs a run's first ode 0.3 s)."""
+
+    def __init__(self, n_p):
+        self.n_p = n_p
+        self.atoms: list = []          # (op, poly a, poly b or None)
+        self.keys: dict = {}
+
+    @staticmethod
+    def const(v):
+        return {(): float(v)} if v != 0 else {}
+
+    def atom(self, op, a, b=None):
+        key = (op, tuple(sorted(a.items())), None if b is None else tuple(sorted(b.items())))
+        if key not in self.keys:
+            self.keys[key] = self.n_p + len(self.atoms)
+            self.atoms.append((op, a, b))
+        return {((self.keys[key], 1),): 1.0}
+
+    @staticmethod
+    def add(a, b, sign=1.0):
+        out = dict(a)
+        for k, c in b.items():
+            v = out.get(k, 0.0) + sign * c
+            if v == 0.0:
+                out.pop(k, None)
+            else:
+                out[k] = v
+        return out
+
+    @staticmethod
+    def _mono(k1, k2):
+        e = dict(k1)
+        for at, x in k2:
+            e[at] = e.get(at, 0) + x
+        return tuple(sorted((at, x) for at, x in e.items() if x != 0))
+
+    def mul(self, a, b):
+        out: dict = {}
+        for k1, c1 in a.items():
+            for k2, c2 in b.items():
+                k = self._mono(k1, k2)
+                v = out.get(k, 0.0) + c1 * c2
+                if v == 0.0:
+                    out.pop(k, None)
+                else:
+                    out[k] = v
+        if len(out) > TERMS_MAX:
+            raise _TooBig
+        return out
+
+    def inv(self, a):
+        import casadi as ca
+
+        if not a:
+            raise _TooBig                                      # a division by zero: left as it is
+        if len(a) == 1:
+            (k, c), = a.items()
+            return {tuple((at, -x) for at, x in k): 1.0 / c}
+        (key, _), = self.atom(ca.OP_ADD, a).items()          # the sum itself an atom, to the power -1
+        return {((key[0][0], -1),): 1.0}
+
+
+def _polys(exprs, p):
+    """The combinations ``exprs`` (SX of p alone) as Laurent polynomials, and the _Poly."""
     import casadi as ca
-    import sympy as sp
 
     f = ca.Function("c", [p], [ca.vertcat(*exprs)])
-    table = {ca.OP_ADD: lambda a: a[0] + a[1], ca.OP_SUB: lambda a: a[0] - a[1], ca.OP_MUL: lambda a: a[0] * a[1],
-             ca.OP_DIV: lambda a: a[0] / a[1], ca.OP_NEG: lambda a: -a[0], ca.OP_SQ: lambda a: a[0] ** 2,
-             ca.OP_TWICE: lambda a: 2 * a[0], ca.OP_INV: lambda a: 1 / a[0], ca.OP_SQRT: lambda a: sp.sqrt(a[0])}
+    P = _Poly(p.numel())
     work: dict = {}
     out = [None] * len(exprs)
     for k in range(f.n_instructions()):
         op, i, o = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
+        a = [work[j] for j in i] if op not in (ca.OP_INPUT, ca.OP_CONST, ca.OP_OUTPUT) else None
         if op == ca.OP_INPUT:
-            work[o[0]] = psyms[i[1]]
+            work[o[0]] = {((i[1], 1),): 1.0}
         elif op == ca.OP_CONST:
-            v = f.instruction_constant(k)
-            work[o[0]] = sp.Integer(int(v)) if v == int(v) and abs(v) < 1e15 else sp.Float(v, 17)
+            work[o[0]] = P.const(f.instruction_constant(k))
         elif op == ca.OP_OUTPUT:
             out[o[1]] = work[i[0]]
-        elif op in table:
-            work[o[0]] = table[op]([work[j] for j in i])
+        elif op == ca.OP_ADD:
+            work[o[0]] = P.add(a[0], a[1])
+        elif op == ca.OP_SUB:
+            work[o[0]] = P.add(a[0], a[1], -1.0)
+        elif op == ca.OP_NEG:
+            work[o[0]] = P.add({}, a[0], -1.0)
+        elif op == ca.OP_TWICE:
+            work[o[0]] = P.add(a[0], a[0])
+        elif op == ca.OP_MUL:
+            work[o[0]] = P.mul(a[0], a[1])
+        elif op == ca.OP_SQ:
+            work[o[0]] = P.mul(a[0], a[0])
+        elif op == ca.OP_DIV:
+            work[o[0]] = P.mul(a[0], P.inv(a[1]))
+        elif op == ca.OP_INV:
+            work[o[0]] = P.inv(a[0])
+        else:                                                 # a function of p: an atom
+            work[o[0]] = P.atom(op, a[0], a[1] if len(a) > 1 else None)
+    return out, P
+
+
+def _emit(polys, P, p):
+    """SX of the polynomials: a monomial is built as a multiple of the cheapest earlier one
+    when that saves operations (m l^2 / 3 = (m l / 2) (2 l / 3)), each atom once."""
+    import casadi as ca
+
+    atom_sx: dict = {}
+    done: list = []                    # (monomial, coefficient, SX) built so far
+
+    def atom(at):
+        if at < P.n_p:
+            return p[at]
+        if at not in atom_sx:
+            op, a, b = P.atoms[at - P.n_p]
+            if op == ca.OP_ADD:
+                atom_sx[at] = poly(a)
+            else:
+                atom_sx[at] = ca.SX.unary(op, poly(a)) if b is None else ca.SX.binary(op, poly(a), poly(b))
+        return atom_sx[at]
+
+    def power(mono):
+        num = den = None
+        for at, x in mono:
+            base = atom(at)
+            v = base if abs(x) == 1 else (ca.SX.unary(ca.OP_SQ, base) if abs(x) == 2 else base ** abs(x))
+            if x > 0:
+                num = v if num is None else num * v
+            else:
+                den = v if den is None else den * v
+        if den is None:
+            return num
+        return (1 / den) if num is None else num / den
+
+    def pcost(mono):                   # operations of power(mono)
+        return len(mono) - 1 + sum(abs(x) > 1 for _, x in mono) + all(x < 0 for _, x in mono)
+
+    def term(mono, c):
+        best, how = (pcost(mono) if mono else 0) + (c != 1.0), None
+        for m2, c2, sx in done:
+            rest = P._mono(mono, tuple((at, -x) for at, x in m2))
+            r = c / c2
+            k = (pcost(rest) + 1 if rest else 0) + (r != 1.0)
+            if k < best:
+                best, how = k, (rest, r, sx)
+        if how is None:
+            v = power(mono) if mono else None
+            out = ca.SX(c) if v is None else (v if c == 1.0 else (-v if c == -1.0 else c * v))
         else:
-            return None
+            rest, r, sx = how
+            v = sx if not rest else sx * power(rest)
+            out = v if r == 1.0 else (-v if r == -1.0 else r * v)
+        if mono:
+            done.append((mono, c, out))
+        return out
+
+    def poly(a):
+        if not a:
+            return ca.SX(0)
+        terms = [term(k, c) for k, c in sorted(a.items(), key=lambda kc: (len(kc[0]), kc[0]))]
+        return sum(terms[1:], terms[0])
+
+    order = sorted(range(len(polys)), key=lambda i: (sum(len(k) for k in polys[i]), i))
+    out = [None] * len(polys)
+    for i in order:
+        out[i] = poly(polys[i])
     return out
-
-
-def _to_sx(exprs, psyms, p):
-    """SX of sympy ``exprs`` (arithmetic of ``psyms`` = the entries of ``p``), shared subterms once."""
-    import casadi as ca
-    import sympy as sp
-
-    env = {s: p[i] for i, s in enumerate(psyms)}
-
-    def conv(e):
-        if e in env:
-            return env[e]
-        if e.is_Integer or e.is_Rational or e.is_Float:
-            return ca.SX(float(e))
-        if e.is_Add:
-            terms = [conv(a) for a in e.args]
-            return sum(terms[1:], terms[0])
-        if e.is_Mul:
-            num = [a for a in e.args if not (a.is_Pow and a.exp.is_negative)]
-            den = [1 / a for a in e.args if a.is_Pow and a.exp.is_negative]
-            top = ca.SX(1.0)
-            for a in num:
-                top = conv(a) if top.is_one() else top * conv(a)
-            if den:
-                bot = conv(sp.Mul(*den))
-                return top / bot
-            return top
-        if e.is_Pow:
-            b, x = e.args
-            if x == 2:
-                return ca.SX.unary(ca.OP_SQ, conv(b))
-            if x == -1:
-                return 1 / conv(b)
-            if x == sp.Rational(1, 2):
-                return ca.sqrt(conv(b))
-            if x.is_Integer and x > 0:
-                return conv(b) ** int(x)
-            return conv(b) ** conv(x)
-        raise ValueError(e)
-
-    order, forms, names = _shared(exprs, lambda e: _cost(conv, e, env))
-    for i in order:                   # common subterms: casadi.cse of the whole ode after
-        env[names[i]] = conv(forms[i])
-    return [env[names[i]] for i in range(len(exprs))]
-
-
-def _cost(conv, e, env):
-    """Operations of the SX of ``e`` (the symbols it names free)."""
-    import casadi as ca
-
-    free = [s for s in e.free_symbols if s not in env]
-    for s in free:
-        env[s] = ca.SX.sym(str(s))
-    try:
-        x = conv(e)
-        syms = ca.symvar(x)
-        f = ca.Function("cost", [ca.vertcat(*syms)] if syms else [], [x])
-        return f.n_instructions() - len(syms) - 1
-    finally:
-        for s in free:
-            del env[s]
-
-
-SHARE_MAX = 40        # combinations: up to this many, each is tried as a multiple of a simpler one
-
-
-def _shared(exprs, cost):
-    """(an order to compute ``exprs`` in, the forms to compute them by, their names): a
-    product that is a cheaper multiple of an earlier one is written so, its name times the
-    quotient (m l^2 / 3 = (m l / 2) (2 l / 3)): sympy's cse finds common factors, not such
-    quotients."""
-    import sympy as sp
-
-    names = [sp.Symbol(f"_c{i}") for i in range(len(exprs))]
-    if len(exprs) > SHARE_MAX:
-        return range(len(exprs)), list(exprs), names
-    costs = [cost(e) for e in exprs]
-    order = sorted(range(len(exprs)), key=lambda i: (costs[i], i))
-    out = list(exprs)
-    for a, i in enumerate(order):
-        if not exprs[i].is_Mul:
-            continue
-        best = costs[i]
-        for j in order[:a]:
-            if exprs[j].is_Mul:
-                q = sp.cancel(exprs[i] / exprs[j])
-                c = cost(names[j] * q)
-                if c < best:
-                    out[i], best = names[j] * q, c
-    return order, out, names
-
-
-def _rational(e):
-    """``e`` with its floating-point numbers that are small fractions (1/3, 1/12) made exact."""
-    import sympy as sp
-    from fractions import Fraction
-
-    def exact(v):
-        fr = Fraction(float(v)).limit_denominator(1000)
-        return sp.Rational(fr.numerator, fr.denominator) if abs(float(fr) - float(v)) <= 1e-15 * abs(float(v)) else v
-
-    return e.xreplace({f: exact(f) for f in e.atoms(sp.Float)})
 
 
 def simplify_parameters(g, pin: int = 3):
     """``g`` with its parameter combinations (the parameter-only operands of its state
-    operations) simplified by sympy and their common factors computed once, or ``g``."""
+    operations) simplified (``_Poly``) and built with their common factors once, or ``g``."""
     import casadi as ca
-    import sympy as sp
 
     ins, outs, cs, exprs = _split(g, pin)
     if not cs:
         return g
     p = ins[pin]
-    psyms = sp.symbols(f"p0:{p.numel()}")
-    if any(ca.Function("c", [p], [e]).n_instructions() > COMBO_MAX for e in exprs):
-        return g
-    es = _to_sympy(exprs, p, psyms)
-    if es is None:
-        return g
     try:
-        new = _to_sx([sp.factor(sp.cancel(_rational(e))) for e in es], psyms, p)
-    except (ValueError, TypeError, sp.PolynomialError):
+        polys, P = _polys(exprs, p)
+        new = _emit(polys, P, p)
+    except _TooBig:
         return g
     sub = ca.substitute([ca.vec(o) for o in outs], [ca.vertcat(*cs)], [ca.vertcat(*new)])
     flat = ca.cse(ca.vertcat(*sub))
