@@ -385,8 +385,8 @@ class Model:
 
         fixed_parameters: parameters an optimizer does not vary, built into the Functions as
         numbers so that CasADi folds the arithmetic on them (a leaner expression: the
-        cart-pole ``ode`` has 30 instructions instead of 43; codegen.drop_cancelled, eom.lean).  True fixes them all at the
-        model's values (p is then empty: pass ``[]``); a list of names fixes those at the
+        cart-pole ``ode`` has 30 instructions instead of 38; codegen.drop_cancelled, eom.lean,
+        eom.fold).  True fixes them all at the model's values (p is then empty: pass ``[]``); a list of names fixes those at the
         model's values, a dict {name: value} at the given values.  A dependent parameter
         (``I = m * l^2 / 3``) computed only from fixed ones is fixed with them, at its
         recomputed value, so it cannot go stale.  p then holds the other parameters, in

@@ -28,6 +28,7 @@ import casadi as ca
 
 from ..eom import fold_inputs
 from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of, specialize
+from ..eom.fold import fold_parameters
 from ..eom.start import fixed_start
 from .constrained_system import ConstrainedSystem
 from .dof import dof_report
@@ -84,7 +85,8 @@ class ConstrainedFunctionSet(FunctionSet):
         t, x, u, p = Sym.sym("t"), Sym.sym("x", 2 * n), Sym.sym("u", eom.u_sym.numel()), Sym.sym("p", eom.p.numel())
         qdd, lam = system.fn["accel"](x[:n], x[n:], t, ca.vertcat(p, u), 0, 0)
         if name == "ode":
-            return ca.Function("ode", [t, x, u, p], [ca.vertcat(x[n:], qdd)], TXUP, ["xdot"])
+            f = ca.Function("ode", [t, x, u, p], [ca.vertcat(x[n:], qdd)], TXUP, ["xdot"])
+            return fold_parameters(f) if self.sx else f      # the parameters' arithmetic folded (eom.fold)
         where = {i: k for k, i in enumerate(system.active)}
         full = ca.vertcat(*[lam[where[i]] if i in where else Sym(0) for i in range(m)]) if m else Sym(0, 1)
         if name == "multipliers":

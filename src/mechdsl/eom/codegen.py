@@ -108,13 +108,15 @@ SX_SOLVE_MAX = 40      # sx=True: unrolled LDL^T up to this many coordinates (O(
 
 
 def _lean(eom, plain):
-    """Small models' ode from M and bias without the terms that cancel (mechdsl.eom.lean)."""
+    """Small models' ode from M and bias without the terms that cancel (mechdsl.eom.lean),
+    the parameters' arithmetic folded into a few combinations (mechdsl.eom.fold)."""
+    from .fold import fold_parameters
     from .lean import lean_ode
 
     ca = _ca()
     s = _Symbols(eom)
-    return lean_ode(eom, plain, s, lambda M, b: _function("ode", s.txup, [ca.vertcat(s.qd, ldl_solve(M, b))], TXUP,
-                                                          ["xdot"]), _SMOOTH_OPS)
+    return fold_parameters(lean_ode(eom, plain, s, lambda M, b: _function("ode", s.txup, [ca.vertcat(s.qd, ldl_solve(M, b))], TXUP,
+                                                          ["xdot"]), _SMOOTH_OPS))
 
 
 def ldl_solve(M, b):
@@ -181,7 +183,12 @@ def build_ode(eom, sx: bool = False, loop: bool = False):
     _check_mass_matrix(eom)
     if n == 1:  # one coordinate: the "solve" is a division, exact in SX
         xdot = ca.vertcat(s.qd, eom.bias / eom.M)
-        return _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        f = _function("ode", s.txup, [xdot], TXUP, ["xdot"])
+        if sx:
+            from .fold import fold_parameters
+
+            return fold_parameters(f)
+        return f
     if sx and n <= SX_SOLVE_MAX:
         xdot = ca.vertcat(s.qd, ldl_solve(ca.SX(eom.M), ca.SX(eom.bias)))
         return _lean(eom, _function("ode", s.txup, [xdot], TXUP, ["xdot"]))
