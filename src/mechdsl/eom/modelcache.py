@@ -364,8 +364,27 @@ def unpack_eom(data: dict, model):
     eom = CachedEOM(**{k: v for k, v in values.items() if k in _FIELD_NAMES})
     # built Functions (codegen.FunctionSet takes them instead of building): the same algorithm,
     # so the same numbers bit for bit; kept in the EOM's workspace
-    eom.workspace.stored_functions(eom, {k: ca.Function.deserialize(s) for k, s in data["functions"].items()})
+    eom.workspace.stored_functions(eom, _functions_of(data["functions"]))
     return eom
+
+
+def _functions_of(texts: dict) -> dict:
+    """The stored Functions (key -> Function) from their serializations: one Function per text
+    (the ode of the SX and of the default Function set is often the same text: read once), and
+    the text's hash handed to mechdsl.eom.sxcode, whose keys would serialize it again."""
+    import casadi as ca
+
+    from . import sxcode
+
+    by_text: dict = {}
+    out = {}
+    for k, text in texts.items():
+        f = by_text.get(text)
+        if f is None:
+            f = by_text[text] = ca.Function.deserialize(text)
+            sxcode.serialized(f, text)
+        out[k] = f
+    return out
 
 
 from . import EOM  # noqa: E402  (after the helpers: eom imports ir, which the cache needs anyway)
