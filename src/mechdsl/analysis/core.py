@@ -14,13 +14,14 @@ needs the model text.  The pieces:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from ..eom import fold_inputs
 from ..eom import parameter_vector as param_vector  # noqa: F401  (re-exported)
+from ..model.records import record
 
 
 SEED = 20240605          # fixed: the analyses are deterministic
@@ -112,7 +113,7 @@ def parts(eom) -> Parts:
 # --------------------------------------------------------------------------- probing
 
 
-@dataclass
+@record(frozen=False)
 class Probe:
     """Deterministic random states (q, qd, t) at which identities are checked numerically."""
 
@@ -148,7 +149,7 @@ def vanishes(values: list[np.ndarray], scale: float, rel: float = REL_TOL) -> bo
     return all(np.max(np.abs(v), initial=0.0) <= rel * max(scale, 1e-300) for v in finite)
 
 
-@dataclass
+@record(frozen=False)
 class Structure:
     """What kind of mechanical system an EOM describes (for the given parameter values)."""
 

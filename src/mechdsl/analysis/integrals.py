@@ -17,7 +17,7 @@ the Jacobi integral.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import numpy as np
 
@@ -26,12 +26,13 @@ from .core import N_PROBE, Probe, _is_structural_zero, dense, null_space, param_
 from .rotations import label as rotation_label
 from .rotations import rotation_symmetries
 from .symbolic import make_symbols, simplify_small, sx_to_sympy, text, trig_normal
+from ..model.records import record
 
 
 MAX_PRINT_INSTRUCTIONS = 3000      # larger expressions are not converted to text
 
 
-@dataclass
+@record(frozen=False)
 class FirstIntegral:
     """A conserved quantity.  ``expression`` (text) and ``verified`` are computed on first use
     (they call sympy); ``sx`` is ready at once (CasADi SX in eom.q, eom.qd, eom.t, eom.p)."""
