@@ -141,3 +141,27 @@ def test_a_warm_run_loads_neither_openssl_nor_the_unit_parser(tmp_path):
     base = subprocess.run([sys.executable, "-c", "import sys, numpy, casadi; print(chr(10).join(sys.modules))"],
                           capture_output=True, text=True).stdout.split()
     assert {"hashlib", "_hashlib", "fractions", "decimal", "mechdsl.model.units"} & names - set(base) == set()
+
+
+# ----------------------------------------------------------------------------- probe states in one call
+
+
+def test_probe_states_in_one_map_call_are_the_calls_one_by_one():
+    import numpy as np
+
+    from mechdsl.analysis.core import Probe, at_states, dense
+
+    q, qd, t, p = ca.SX.sym("q", 3), ca.SX.sym("qd", 3), ca.SX.sym("t"), ca.SX.sym("p", 2)
+    outs = [ca.sin(q) * p[0] + qd * t, ca.SX.zeros(0, 3), ca.mtimes(q, qd.T) / (1 + p[1] * q[0] ** 2),
+            ca.sqrt(q[1]) + ca.sum1(qd)]                      # a matrix, an empty one, NaN where q[1] < 0
+    pr = Probe.states(3, count=9)
+    pv = np.array([1.5, -0.25])
+    for f in (ca.Function("f", [q, qd, t, p], outs), ca.Function("g", [q, qd, t, p], [outs[2]])):
+        batch = at_states(f, pr, pv)
+        one = [[dense(o) for o in (f(pr.q[i], pr.qd[i], pr.t[i], pv) if f.n_out() > 1
+                                   else [f(pr.q[i], pr.qd[i], pr.t[i], pv)])] for i in range(len(pr))]
+        assert len(batch) == len(one) == 9
+        for a, b in zip(batch, one):
+            assert [x.shape for x in a] == [y.shape for y in b]
+            assert all(np.array_equal(x, y, equal_nan=True) for x, y in zip(a, b))    # bit for bit
+    assert any(not np.all(np.isfinite(r[3])) for r in at_states(ca.Function("f", [q, qd, t, p], outs), pr, pv))
