@@ -17,21 +17,22 @@ the Jacobi integral.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import numpy as np
 
 from ..eom import fold_inputs
-from .core import N_PROBE, Probe, _is_structural_zero, dense, null_space, param_vector, parts, structure, vanishes
+from .core import N_PROBE, Probe, _is_structural_zero, at_states, null_space, param_vector, parts, structure, vanishes
 from .rotations import label as rotation_label
 from .rotations import rotation_symmetries
 from .symbolic import make_symbols, simplify_small, sx_to_sympy, text, trig_normal
+from ..model.records import record
 
 
 MAX_PRINT_INSTRUCTIONS = 3000      # larger expressions are not converted to text
 
 
-@dataclass
+@record(frozen=False)
 class FirstIntegral:
     """A conserved quantity.  ``expression`` (text) and ``verified`` are computed on first use
     (they call sympy); ``sx`` is ready at once (CasADi SX in eom.q, eom.qd, eom.t, eom.p)."""
@@ -94,8 +95,7 @@ def first_integrals(eom, p=None) -> list[FirstIntegral]:
     gt = ca.jacobian(eom.g, eom.t) if eom.m else ca.SX.zeros(0, 1)
     f = ca.Function("fi_probe", pt.args, [ca.gradient(pt.L, eom.q), pt.Qtot, G, gt, pt.L])
     rows = []
-    for i in range(len(pr)):
-        vals = [dense(o) for o in f(pr.q[i], pr.qd[i], pr.t[i], pv)]
+    for vals in at_states(f, pr, pv):
         if all(np.all(np.isfinite(v)) for v in vals):
             rows.append(vals)
     out: list[FirstIntegral] = []

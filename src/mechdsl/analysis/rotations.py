@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core import N_PROBE, Probe, dense, null_space
+from .core import N_PROBE, Probe, at_states, null_space
 
 
 MAX_COORDS = 15
@@ -44,8 +44,7 @@ def rotation_symmetries(eom, pt, pv) -> list[np.ndarray]:
     blocks: list[list[np.ndarray]] = [[], [], []]
     sizes = [0.0, 0.0, 0.0]        # the size of the terms (not of their difference, which may be noise)
     I, J = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-    for k in range(len(pr)):
-        Lq, Lv, Q, Gk = (dense(o) for o in f(pr.q[k], pr.qd[k], pr.t[k], pv))
+    for k, (Lq, Lv, Q, Gk) in enumerate(at_states(f, pr, pv)):
         if not all(np.all(np.isfinite(v)) for v in (Lq, Lv, Q, Gk)):
             continue
         q, v = pr.q[k], pr.qd[k]

@@ -14,7 +14,7 @@ kept exact (numbers within 1e-12 of a small rational multiple of pi or a small r
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 from fractions import Fraction
 
 import numpy as np
@@ -22,6 +22,7 @@ import numpy as np
 from ..eom import fold_inputs
 from ..model import ir
 from ..model.exprs import to_sympy
+from ..model.records import record
 
 
 class Untranslatable(Exception):
@@ -144,7 +145,7 @@ def _apply(op, a):
 # --------------------------------------------------------------------------- T, V, D, Q as sympy
 
 
-@dataclass
+@record(frozen=False)
 class SymbolicLagrangian:
     """T, V, D (sympy scalars) and Q (list) in the symbols q, qd, t and params."""
 
@@ -262,7 +263,7 @@ def lagrangian_of(eom) -> SymbolicLagrangian:
 # --------------------------------------------------------------------------- linearization
 
 
-@dataclass
+@record(frozen=False)
 class SymbolicLinearization:
     coords: tuple[str, ...]
     M: object                      # sympy Matrix (parameters as symbols)

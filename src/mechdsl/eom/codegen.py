@@ -37,7 +37,7 @@ loop.
 """
 from __future__ import annotations
 
-import hashlib
+from ..digest import sha256
 import logging
 import os
 from collections.abc import Mapping
@@ -743,7 +743,7 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         return None, f"not compiled: {what} (compile_budget); using the CasADi virtual machine", None
     version = compiler_version(cc)
     key = "\n".join([*units, repr(flags), version, ca.__version__])
-    full = hashlib.sha256(key.encode()).hexdigest()
+    full = sha256(key.encode()).hexdigest()
     digest = full[:24]
     d = cache_dir()
     # a library runs code when loaded: only from a folder no other user owns or can write
@@ -828,7 +828,7 @@ def _digest_path(lib: Path) -> Path:
 
 
 def _file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
+    h = sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)

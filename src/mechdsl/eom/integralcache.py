@@ -13,7 +13,7 @@ can write (mechdsl.eom.cachefiles).
 """
 from __future__ import annotations
 
-import hashlib
+from ..digest import sha256
 import json
 
 import numpy as np
@@ -64,7 +64,7 @@ def _key(eom, pv) -> str:
     parts = [ca.SX(eom.T), ca.SX(eom.V), ca.SX(eom.D), ca.SX(eom.Q),
              ca.SX(eom.g) if eom.g is not None else ca.SX(0, 1)]
     key_f = ca.Function("key", [eom.t, x, eom.p], parts)
-    h = hashlib.sha256()
+    h = sha256()
     for piece in (FORMAT, __version__, ca.__version__, ",".join(eom.coords), key_f.serialize(),
                   np.asarray(pv, float).tobytes().hex()):
         h.update(str(piece).encode())

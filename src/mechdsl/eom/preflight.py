@@ -520,14 +520,14 @@ def _negative_masses(eom, pv) -> list[Diagnostic]:
     model = eom.model
     if model is None or eom.n == 0 or eom.T is None:
         return []
-    from ..model import units as U
-
     declared = {par.name: par for par in model.real_parameters}
     suspects = []
     for i, name in enumerate(eom.params):
         par = declared.get(name)
         if par is None or pv[i] >= 0 or par.min is not None or not par.unit:
             continue
+        from ..model import units as U      # (fractions and decimal: 5 ms of a warm run; only for a negative one)
+
         try:
             dim = U.parse_unit(par.unit)[1]
         except ValueError:

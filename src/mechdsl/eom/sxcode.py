@@ -128,25 +128,35 @@ _CODE: list = []
 
 def _code_tag() -> str:
     if not _CODE:
-        import hashlib
+        from ..digest import sha256
         from pathlib import Path
 
-        _CODE.append(hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:16])
+        _CODE.append(sha256(Path(__file__).read_bytes()).hexdigest()[:16])
     return _CODE[0]
 
 
 _KEYS: dict = {}
 
 
+def serialized(f, text: str) -> None:
+    """``text`` is ``f.serialize()`` (``f`` was read from it): its hash, without serializing
+    ``f`` again (1-3 ms a model Function on a warm run)."""
+    from ..digest import sha256
+
+    if len(_KEYS) >= _MEMO_MAX:
+        _KEYS.pop(next(iter(_KEYS)), None)
+    _KEYS[id(f)] = (f, sha256(text.encode()).hexdigest())
+
+
 def _key(f, extra: str = "") -> str:
-    import hashlib
+    from ..digest import sha256
 
     hit = _KEYS.get(id(f))
     if hit is None or hit[0] is not f:      # one serialization per Function and process
         if len(_KEYS) >= _MEMO_MAX:
             _KEYS.pop(next(iter(_KEYS)), None)
-        hit = _KEYS[id(f)] = (f, hashlib.sha256(f.serialize().encode()).hexdigest())
-    return hashlib.sha256((hit[1] + _code_tag() + extra).encode()).hexdigest()[:32]
+        hit = _KEYS[id(f)] = (f, sha256(f.serialize().encode()).hexdigest())
+    return sha256((hit[1] + _code_tag() + extra).encode()).hexdigest()[:32]
 
 
 def _kept(f, kind: str, build, pack, unpack, extra: str = ""):

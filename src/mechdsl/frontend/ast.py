@@ -1,17 +1,19 @@
 """The abstract syntax tree ("ast" IR): what ``parse`` hands to ``analyze``.
 
-Small frozen dataclasses, keyword-only, each with a source :class:`Span`.  Spans do not
+Small frozen dataclasses (made by :func:`mechdsl.model.records.record`: the same classes at a
+fraction of dataclass's cost at import), keyword-only, each with a source :class:`Span`.  Spans do not
 take part in equality, so ``parse(print(parse(x))) == parse(x)`` is the round-trip check.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import field, fields
 from typing import Iterator, Union
 
 from ..diagnostics import Span
+from ..model.records import record
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Node:
     span: Span = field(default_factory=Span, compare=False, repr=False)
 
@@ -33,33 +35,33 @@ class Node:
 # ----------------------------------------------------------------------------- expressions
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Expr(Node):
     pass
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Number(Expr):
     value: int | float
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class String(Expr):
     value: str
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Bool(Expr):
     value: bool
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class RefPart(Node):
     name: str
     subscripts: tuple[Expr, ...] = ()
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Ref(Expr):
     """A component reference ``a.b[i].c``."""
 
@@ -77,13 +79,13 @@ class Ref(Expr):
         return None
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Call(Expr):
     func: Ref
     args: tuple[Expr, ...] = ()
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class BinOp(Expr):
     """op: + - * / ^ and or < <= > >= == <>"""
 
@@ -92,7 +94,7 @@ class BinOp(Expr):
     right: Expr
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class UnaryOp(Expr):
     """op: - + not"""
 
@@ -100,7 +102,7 @@ class UnaryOp(Expr):
     operand: Expr
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class IfExpr(Expr):
     """if c1 then v1 elseif c2 then v2 ... else other."""
 
@@ -108,12 +110,12 @@ class IfExpr(Expr):
     otherwise: Expr
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Array(Expr):
     items: tuple[Expr, ...] = ()
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Range(Node):
     """start:stop or start:step:stop (Modelica order)."""
 
@@ -122,7 +124,7 @@ class Range(Node):
     step: Expr | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Comprehension(Expr):
     """{expr for var in range}"""
 
@@ -135,7 +137,7 @@ class Comprehension(Expr):
 # ----------------------------------------------------------------------------- declarations
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Modifier(Node):
     """``name(sub-modifiers) = value`` inside a modification; ``each`` broadcasts over arrays."""
 
@@ -146,7 +148,7 @@ class Modifier(Node):
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Declaration(Node):
     """``prefix Type name[dims](modification) = value "doc";``"""
 
@@ -161,7 +163,7 @@ class Declaration(Node):
     type_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Extends(Node):
     name: str
     modification: tuple[Modifier, ...] | None = None
@@ -171,28 +173,28 @@ class Extends(Node):
 # ----------------------------------------------------------------------------- equations
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class SimpleEquation(Node):
     lhs: Expr
     rhs: Expr
     doc: str | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class EnergyEquation(Node):
     kind: str  # kinetic | potential | dissipation
     expr: Expr
     doc: str | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class ForceEquation(Node):
     coordinate: Ref
     expr: Expr
     doc: str | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Connect(Node):
     """connect(a, element, b): attach a joint or two-point force element between points a and b."""
 
@@ -202,7 +204,7 @@ class Connect(Node):
     doc: str | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class ForEquation(Node):
     var: str
     range: Range
@@ -215,7 +217,7 @@ EquationItem = Union[SimpleEquation, EnergyEquation, ForceEquation, Connect, For
 # ----------------------------------------------------------------------------- units
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class ModelDef(Node):
     name: str
     doc: str | None = None
@@ -224,21 +226,21 @@ class ModelDef(Node):
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class SceneModel(Node):
     name: str
     modification: tuple[Modifier, ...] | None = None
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class Setting(Node):
     name: str
     value: Expr
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class SceneDef(Node):
     name: str
     doc: str | None = None
@@ -246,7 +248,7 @@ class SceneDef(Node):
     name_span: Span = field(default_factory=Span, compare=False, repr=False)
 
 
-@dataclass(frozen=True, kw_only=True)
+@record(kw_only=True)
 class File(Node):
     items: tuple[ModelDef | SceneDef, ...] = ()
     filename: str = field(default="<input>", compare=False)

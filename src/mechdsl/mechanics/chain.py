@@ -36,12 +36,11 @@ it for compiled code of big chains only.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import casadi as ca
 
 from .kernels import NACC, NART, NPOSE, Kernel, Layout, LinkKernels, repack, run, settle
 from .tree import Tree, z3
+from ..model.records import record
 
 LOOP_MIN = 4          # links in a run below which nothing is looped
 
@@ -61,7 +60,7 @@ class _Placeholders:
 _PH = ca.SX.sym("ph", NPOSE)      # generic pose placeholder of the kernels
 
 
-@dataclass
+@record(frozen=False)
 class _Form:
     """One link's step in generic symbols: loc(xi) and f(xi, ph), its data and fingerprint."""
 
@@ -91,7 +90,7 @@ def _form(lk, nu, tau, fext, ph: _Placeholders) -> _Form:
     return _Form(lk.k, data, xi, loc_f, force_f, key)
 
 
-@dataclass
+@record(frozen=False)
 class _Segment:
     links: list                      # consecutive link indices, each the parent of the next
     kern: LinkKernels

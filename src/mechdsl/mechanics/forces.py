@@ -7,7 +7,7 @@ by the Lagrange route).  Equation-layer terms and generalized forces act in q-sp
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import casadi as ca
 
@@ -16,9 +16,10 @@ from ..diagnostics import Diagnostic, MechError
 from .kinematics import Kinematics
 from . import templates as tpl
 from .tree import z3
+from ..model.records import record
 
 
-@dataclass
+@record(frozen=False)
 class Loads:
     point_forces: list = field(default_factory=list)     # (link, r in link coords, F world)
     torques: list = field(default_factory=list)          # (link, tau world)

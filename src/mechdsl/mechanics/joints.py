@@ -18,11 +18,11 @@ and ``closure`` (which relative directions a loop-closing cut joint locks).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 from ..model import ir
 from ..diagnostics import Diagnostic, MechError
 from .rotations import euler_sequence
+from ..model.records import record
 
 E_X = (ir.ONE, ir.ZERO, ir.ZERO)
 E_Y = (ir.ZERO, ir.ONE, ir.ZERO)
@@ -31,7 +31,7 @@ UNIT = (E_X, E_Y, E_Z)
 QUAT_ROLES = ("q0", "q1", "q2", "q3")
 
 
-@dataclass(frozen=True)
+@record
 class Element:
     kind: str                                   # 'R' | 'P' | 'Q' | 'T'
     vars: tuple[ir.JointVar, ...] = ()
@@ -40,7 +40,7 @@ class Element:
     r: ir.Vec3 | None = None                    # T
 
 
-@dataclass(frozen=True)
+@record
 class Closure:
     """What a cut joint locks: translation along `lock_dirs` (None: all three parent axes),
     rotation: 'full' (3), 'axis' (keep `axis` aligned: 2), 'none'."""

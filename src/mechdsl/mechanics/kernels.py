@@ -8,11 +8,11 @@ links one by one; pass-to-pass values are flat vectors, link by link.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import casadi as ca
 
 from . import templates as tpl
+from ..model.records import record
 
 NPOSE = 18           # carry of pass 1: vec(R), o, w, v
 NART = 33            # carry of pass 2: vec(A), vec(B), vec(C), pn, pf
@@ -137,7 +137,7 @@ class LinkKernels:
         return c, [y1s, y2s], ca.vertcat(aw, av), [nd]
 
 
-@dataclass
+@record(frozen=False)
 class Kernel:
     """A settled kernel: (carry, xi_j for j in ``used``, *others) -> (carry, *others)."""
 

@@ -15,9 +15,9 @@ level (x*0 -> 0, x*1 -> x), so elementary joints cost only what their sparsity n
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import casadi as ca
+from ..model.records import record
 
 
 def vec(x) -> ca.SX:
@@ -46,7 +46,7 @@ def mul(A, x):
     return ca.mtimes(A, x)
 
 
-@dataclass
+@record(frozen=False)
 class Inertia:
     """A symmetric spatial inertia [[A, B], [B^T, C]] (3x3 SX blocks)."""
 

@@ -7,7 +7,7 @@ points are stored relative to that origin: r_link = r_body - r_C.  The world is 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 
 import casadi as ca
 
@@ -17,9 +17,10 @@ from . import joints as J
 from . import templates as tpl
 from .rotations import quat_G, quat_matrix, rot
 from .spatial import Inertia, vee
+from ..model.records import record
 
 
-@dataclass
+@record(frozen=False)
 class Var:
     """A joint variable in SX: value x, rate xd, and (prescribed only) acceleration xdd."""
 
@@ -30,7 +31,7 @@ class Var:
     coord: int | None = None        # index in q for 'coord'
 
 
-@dataclass
+@record(frozen=False)
 class Link:
     index: int
     parent: int                      # -1: the world
@@ -85,7 +86,7 @@ class Link:
         return self.inertia if self.inertia is not None else Inertia.zero()
 
 
-@dataclass
+@record(frozen=False)
 class Dof:
     link: int
     col: int

@@ -178,9 +178,9 @@ class Result:
         text = self.to_csv_text()
         items = [(path, text)]
         if sidecar:
-            import hashlib
+            from ..digest import sha256
 
-            summary = self.to_json_text(csv_sha256=hashlib.sha256(text.encode("utf-8")).hexdigest())
+            summary = self.to_json_text(csv_sha256=sha256(text.encode("utf-8")).hexdigest())
             items.append((sidecar_path(path), summary))
         return [str(p) for p in write_atomic_group(items, overwrite)]
 

@@ -10,11 +10,11 @@ def signal_units(result, model=None) -> dict[str, str]:
     model = model if model is not None else getattr(result, "source_model", None)
     ir_model = getattr(model, "model", model)
     units: dict[str, str] = {"time": "s"}
-    from ..model.units import si_unit
+    from ..numbers import si_unit      # (the common SI units without importing the unit parser)
 
     # the values are SI (a coordinate declared in "deg" is held in rad): label them so
-    coords = {c.name: si_unit(c.unit) for c in getattr(ir_model, "coordinates", ())}
-    outputs = {o.name: si_unit(o.unit) for o in getattr(ir_model, "outputs", ())}
+    coords = {c.name: si_unit(c.unit) or "" for c in getattr(ir_model, "coordinates", ())}
+    outputs = {o.name: si_unit(o.unit) or "" for o in getattr(ir_model, "outputs", ())}
     for c in result.coordinates:
         u = coords.get(c, "")
         units[c] = u

@@ -7,17 +7,18 @@ category.  Adding a class is adding an entry to ``CLASSES``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import field
 
 from ..model import exprs as X
 from ..model import ir
 from ..model import units as U
 from .values import ANY, Arr, CompRef, Scalar, Str, ValError, Val, describe_shape, shape_of
+from ..model.records import record
 
 REQUIRED = object()
 
 
-@dataclass(frozen=True)
+@record
 class Field:
     name: str
     kind: str                   # scalar vec3 mat3 point body bodies coordinate string bool
@@ -27,7 +28,7 @@ class Field:
     choices: tuple[str, ...] = ()
 
 
-@dataclass(frozen=True)
+@record
 class ComponentClass:
     name: str
     category: str               # body point frame joint force contact
@@ -332,7 +333,7 @@ def drawn_shape(f: dict[str, Val]) -> tuple[str, tuple[ir.Expr, ...], ir.Vec3]:
     return shape, size, normalized(as_vec3(f["axis"], "axis"), "axis")
 
 
-@dataclass
+@record(frozen=False)
 class Built:
     """What one component instance contributes to the IR."""
 

@@ -2,18 +2,19 @@
 component declaration (:class:`CompInst`), and what the concerns of the flattener share about them."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 
 from ..frontend import ast
 from ..model import ir
 from . import components as K
 from .mods import Mod
 from .values import Arr, Val
+from ..model.records import record
 
 COORD_ATTRS = {"start", "speed", "fixed", "speed_fixed", "unit", "displayUnit", "min", "max"}
 
 
-@dataclass
+@record(frozen=False)
 class Entry:
     decl: ast.Declaration
     kind: str                       # parameter input coordinate output variable component
@@ -31,7 +32,7 @@ class Entry:
     element_mods: dict = field(default_factory=dict)   # "q[2]" -> Mod: an override of one element (API, --set)
 
 
-@dataclass
+@record(frozen=False)
 class CompInst:
     name: str
     entry: Entry

@@ -1,13 +1,14 @@
 """Modifications: the nested ``name(sub = ...) = value`` trees of Modelica, merged outer-over-inner."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import field
 
 from ..frontend import ast
 from ..diagnostics import DiagnosticBag, Span
+from ..model.records import record
 
 
-@dataclass
+@record(frozen=False)
 class Mod:
     value: ast.Expr | None = None
     each: bool = False

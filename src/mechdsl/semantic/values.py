@@ -8,7 +8,6 @@ sums).  Unknown dimensions never cause an error; two known, different ones do.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import contextvars
 from fractions import Fraction
@@ -16,6 +15,7 @@ from fractions import Fraction
 from ..model import exprs as X
 from ..model import ir
 from ..model import units as U
+from ..model.records import record
 
 
 class _Any:
@@ -40,7 +40,7 @@ class Val:
     pass
 
 
-@dataclass(frozen=True)
+@record
 class Scalar(Val):
     expr: ir.Expr
     dim: object = None           # Dim | None | ANY
@@ -53,7 +53,7 @@ class Scalar(Val):
         return self.expr.value if isinstance(self.expr, ir.Const) else None
 
 
-@dataclass(frozen=True)
+@record
 class Arr(Val):
     items: tuple[Val, ...]
 
@@ -62,12 +62,12 @@ class Arr(Val):
         return shape_of(self)
 
 
-@dataclass(frozen=True)
+@record
 class Str(Val):
     value: str
 
 
-@dataclass(frozen=True)
+@record
 class CompRef(Val):
     """A reference to a component or a part of one.
 
