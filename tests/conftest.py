@@ -6,7 +6,18 @@ from pathlib import Path
 
 import pytest
 
-import mechdsl.examples
+# Compiled bytecode shared by every Python process of the session (this one, the `mech` and
+# `python -c` subprocesses, sweep workers): one temporary folder (PYTHONPYCACHEPREFIX), removed at
+# the end.  The machines run with PYTHONDONTWRITEBYTECODE=1, so every child compiled mechdsl's
+# modules from source again (about a third of a warm `mech simulate`: 0.35 s of CPU against
+# 0.25 s); nothing is written next to the sources or the tests.
+_SESSION_PYCACHE = tempfile.mkdtemp(prefix="mechdsl-test-pycache-")
+sys.pycache_prefix = _SESSION_PYCACHE
+sys.dont_write_bytecode = False
+os.environ["PYTHONPYCACHEPREFIX"] = _SESSION_PYCACHE
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+
+import mechdsl.examples  # noqa: E402 - after the bytecode folder is set: its modules are compiled into it
 
 TESTS = Path(__file__).resolve().parent
 # The shipped models as the installation has them (inside the wheel, or models/ of an editable
@@ -52,6 +63,7 @@ def chromium_path() -> str | None:
 
 def pytest_unconfigure(config):
     shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
+    shutil.rmtree(_SESSION_PYCACHE, ignore_errors=True)
 
 
 @pytest.fixture

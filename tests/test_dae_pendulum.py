@@ -40,7 +40,9 @@ def test_cash_scene_every_formulation(formulation):
 
 def _a01(t_end, points):
     tol = 1e-12
-    r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), t_end, rtol=tol, atol=tol, points=points)
+    # checked against the exact solution: the runs carry no error estimate
+    r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), t_end, rtol=tol, atol=tol, points=points,
+                     error_estimate="off")
     assert r.success, r.message
     x, y = pendulum_exact(r.t)
     err = np.hypot(r["x"] - x, r["y"] - y)

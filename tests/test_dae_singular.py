@@ -81,7 +81,8 @@ def check_against_reference(model, r, N: int, angle_tol: float):
 @pytest.mark.parametrize("N", [2, 3])
 def test_nfourbar_crosses_every_singular_configuration_like_the_one_dof_reference(N):
     model = nfourbar(N)
-    r = model.simulate(rtol=1e-9, atol=1e-11)          # the scene: 20 s, 2001 points, augmented
+    # the scene: 20 s, 2001 points, augmented; checked against the one-dof reference (no estimate)
+    r = model.simulate(rtol=1e-9, atol=1e-11, error_estimate="off")
     assert r.metadata["formulation"] == "augmented"
     assert r.success, r.message
     assert r.t[-1] == pytest.approx(20.0)
@@ -96,8 +97,8 @@ def test_nfourbar_crosses_every_singular_configuration_like_the_one_dof_referenc
 
 
 def test_energy_and_drift_stay_bounded_through_the_passages():
-    r = nfourbar(3).simulate(rtol=1e-9, atol=1e-11)
-    again = nfourbar(3).simulate(rtol=1e-9, atol=1e-11)
+    r = nfourbar(3).simulate(rtol=1e-9, atol=1e-11, error_estimate="off")
+    again = nfourbar(3).simulate(rtol=1e-9, atol=1e-11, error_estimate="off")
     np.testing.assert_array_equal(r.q, again.q)              # deterministic
     assert [e["time"] for e in r.events] == [e["time"] for e in again.events]
     E = r["energy"]
@@ -112,7 +113,7 @@ def test_accuracy_follows_the_tolerance():
     errs = []
     for tol in (1e-6, 1e-9):
         model = nfourbar(2)
-        r = model.simulate(rtol=tol, atol=tol * 1e-2, points=201)
+        r = model.simulate(rtol=tol, atol=tol * 1e-2, points=201, error_estimate="off")   # vs the reference
         th = reference_theta(2, 20.0)(r.t)[0]
         errs.append(np.max(np.abs(r.q[:, 0] + th)))
     assert errs[1] < 1e-2 * errs[0] and errs[1] < 2e-6

@@ -240,7 +240,8 @@ KILL_DRIVER = textwrap.dedent(r"""
 """)
 
 
-@pytest.mark.parametrize("suffix", [".nc", ".csv"])
+# the default format in the default run; the CSV (same contract, its sidecar) in the slow set
+@pytest.mark.parametrize("suffix", [".nc", pytest.param(".csv", marks=pytest.mark.slow)])
 def test_a_killed_sweep_resumes_and_leaves_nothing_unreadable(dp, tmp_path, suffix):
     out = tmp_path / f"s{suffix}"
     p = subprocess.run([sys.executable, "-c", KILL_DRIVER, str(DP), str(out)], capture_output=True, text=True,

@@ -94,8 +94,9 @@ def test_check_refuses_a_start_that_penetrates_a_contact(tmp_path, capsys):
     assert main(["check", str(path)]) == 0
 
 
+# the same contract on a larger model (its symbolic simplification takes seconds): slow set
 @pytest.mark.parametrize("file,model", [("pendulum_cartesian.mech", "PendulumCartesian"),
-                                        ("four_bar.mech", "FourBar")])
+                                        pytest.param("four_bar.mech", "FourBar", marks=pytest.mark.slow)])
 def test_equations_print_each_multipliers_terms(file, model, capsys):
     """`mech equations` on a constrained model printed the placeholder -(G^T lambda)[q]; now each
     equation carries -sum_c dg_c/dq_i lambda[c], checked against the derived G at random states."""

@@ -76,6 +76,16 @@ def parse(text: str, filename: str = "<input>") -> ast.File:
     return tree
 
 
+# The last texts parsed in this process, with their results: the AST and the diagnostics are
+# immutable records (tuples inside), so a second parse of the same text (check, then compile,
+# then equations of one file; an editor's unchanged buffer) returns the same objects instead
+# of lexing and building again (about 10 ms for a shipped model).  Keyed by the limits in
+# force, which the checks of nesting and depth read; texts over _MEMO_CHARS are not kept.
+_MEMO: dict = {}
+_MEMO_SIZE = 64
+_MEMO_CHARS = 200_000
+
+
 def parse_partial(text: str, filename: str = "<input>") -> tuple[ast.File | None, list[Diagnostic]]:
     """``parse`` for an editor's half-typed file: the diagnostics ``parse`` raises (the same list)
     and, when there are syntax errors, the AST of the text with the broken statements blanked as
@@ -84,6 +94,19 @@ def parse_partial(text: str, filename: str = "<input>") -> tuple[ast.File | None
     from ..diagnostics import remember_source
 
     remember_source(filename, text)
+    key = (text, filename, tuple(sorted(limits.current().items()))) if len(text) <= _MEMO_CHARS else None
+    hit = _MEMO.pop(key, None) if key is not None else None
+    if hit is None:
+        tree, diagnostics = _parse_partial(text, filename)
+        hit = (tree, tuple(diagnostics))
+    if key is not None:
+        _MEMO[key] = hit                          # most recent last
+        if len(_MEMO) > _MEMO_SIZE:
+            del _MEMO[next(iter(_MEMO))]
+    return hit[0], list(hit[1])
+
+
+def _parse_partial(text: str, filename: str) -> tuple[ast.File | None, list[Diagnostic]]:
     if not text.strip() or _only_comments(text):
         return None, [Diagnostic("E004", "file contains no model", Span(filename, 1, 1, 1, 1),
                                  "a file holds one or more `model Name ... end Name;` (and scenes)")]

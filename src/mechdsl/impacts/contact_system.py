@@ -15,7 +15,7 @@ normal force: lam > 0 pushes the bodies apart.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg as sla
+from scipy.linalg.lapack import dpotrf as _POTRF, dpotrs as _POTRS
 
 from ..diagnostics import Diagnostic, MechError
 from ..eom.codegen import dense_function
@@ -150,14 +150,14 @@ class ContactSystem:
         _, A, _, gam = self.cons(t, q, qd)
         A, gam = A[rows], gam[rows]
         cf = _cho(M)
-        a0 = sla.cho_solve(cf, b)
-        X = sla.cho_solve(cf, A.T)
+        a0 = _cho_solve(cf, b)
+        X = _cho_solve(cf, A.T)
         B = self._friction_columns(t, q, qd, rows)
         if B is None:
             lam = -_solve_sym(A @ X, A @ a0 + gam)
             return a0 + X @ lam, lam
         # M q'' = bias + (A' + B) lam: a contact's friction is proportional to its normal force
-        XB = X + sla.cho_solve(cf, B)
+        XB = X + _cho_solve(cf, B)
         W = A @ XB
         try:
             lam = -np.linalg.solve(W, A @ a0 + gam)
@@ -253,14 +253,14 @@ class ContactSystem:
             A = A[use]
             M, _ = self.dyn(t, q, qd)
             cf = _cho(M)
-            X = sla.cho_solve(cf, A.T)
+            X = _cho_solve(cf, A.T)
             q = q - X @ _solve_sym(A @ X, c[use])
         if rows:
             _, A, ct, _ = self.cons(t, q, qd)
             A, ct = A[rows], ct[rows]
             M, _ = self.dyn(t, q, qd)
             cf = _cho(M)
-            X = sla.cho_solve(cf, A.T)
+            X = _cho_solve(cf, A.T)
             qd = qd - X @ _solve_sym(A @ X, A @ qd + ct)
         return q, qd
 
@@ -272,12 +272,35 @@ class ContactSystem:
 
 
 def _cho(M):
-    return sla.cho_factor(M, lower=True, check_finite=False)
+    """scipy.linalg.cho_factor(M, lower=True, check_finite=False): the same LAPACK call (potrf),
+    without scipy's per-call wrapping, which cost more than the factorization of these small
+    matrices (accel runs for every right-hand side of a contact run)."""
+    c, info = _POTRF(np.asarray(M, dtype=float), lower=1, clean=0)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not positive definite")
+    if info < 0:
+        raise ValueError(f'LAPACK reported an illegal value in {-info}-th argument on entry to "POTRF".')
+    return c, True
+
+
+def _cho_solve(cf, b, check_finite: bool = True):
+    """scipy.linalg.cho_solve(cf, b, check_finite=...) of a lower factor from _cho: the same
+    LAPACK call (potrs) and the same refusal of non-finite input (ValueError)."""
+    c, _ = cf
+    b = np.asarray(b, dtype=float)
+    if check_finite and not (np.isfinite(b).all() and np.isfinite(c).all()):
+        raise ValueError("array must not contain infs or NaNs")
+    if b.size == 0:
+        return np.empty_like(b)
+    x, info = _POTRS(c, b, lower=1)
+    if info != 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
+    return x
 
 
 def _solve_spd(M, b):
     try:
-        return sla.cho_solve(_cho(M), b, check_finite=False)
+        return _cho_solve(_cho(M), b, check_finite=False)
     except np.linalg.LinAlgError:
         return np.linalg.solve(M, b)
 
@@ -285,6 +308,6 @@ def _solve_spd(M, b):
 def _solve_sym(W, r):
     """Solve W x = r for a symmetric positive (semi)definite W; minimum norm when singular."""
     try:
-        return sla.cho_solve(sla.cho_factor(W, lower=True, check_finite=False), r, check_finite=False)
+        return _cho_solve(_cho(W), r, check_finite=False)
     except np.linalg.LinAlgError:
         return np.linalg.lstsq(W, r, rcond=1e-12)[0]
