@@ -240,15 +240,13 @@ def test_ctrl_c_during_the_error_estimate_keeps_the_run_not_the_companion(monkey
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     m = mechdsl.load(MODELS / "double_pendulum.mech")
-    real = E.estimate
+    real = E._companion_run
 
-    def estimate_with_ctrl_c(r, problem, solve, given=None):
-        def solve_interrupted(p, progress=None):
-            _thread.interrupt_main()               # the Ctrl-C arrives as the companion starts
-            return solve(p, progress)
-        return real(r, problem, solve_interrupted, given)
+    def companion_with_ctrl_c(problem, tight, solve):
+        _thread.interrupt_main()                   # the Ctrl-C arrives as the companion starts
+        return real(problem, tight, solve)
 
-    monkeypatch.setattr("mechdsl.simulation.template.estimate", estimate_with_ctrl_c)
+    monkeypatch.setattr(E, "_companion_run", companion_with_ctrl_c)
     with pytest.raises(KeyboardInterrupt) as info:
         m.simulate(2.0, points=201)
     assert isinstance(info.value, RunInterrupted), type(info.value)
