@@ -9,12 +9,10 @@ import numpy as np
 import pytest
 
 import mechdsl
-from conftest import MODELS
-from mechdsl.eom.codegen import find_compiler
+from conftest import MODELS, needs_cc
 from mechdsl.simulation.backends import crk
 from mechdsl.simulation.backends import ode as O
 
-needs_cc = pytest.mark.skipif(find_compiler() is None, reason="the stepping loop is C")
 
 
 @pytest.fixture(scope="module")

@@ -16,13 +16,21 @@ import contextlib
 _SIGINT = {"seen": False}     # set by interrupt_guard's handler; read after every integrator call
 
 
-@contextlib.contextmanager
-def interrupt_guard():
+def _sigint_is_ours() -> bool:
+    """In the main thread with Python's default SIGINT handler in place (else another guard, or
+    the application, handles Ctrl-C and a guard here leaves it alone)."""
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+    return threading.current_thread() is threading.main_thread() and \
+        signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@contextlib.contextmanager
+def interrupt_guard():
+    import signal
+
+    if not _sigint_is_ours():
         yield                  # another guard (or the application) handles SIGINT
         return
 
@@ -49,11 +57,9 @@ def held_interrupt():
     block ends (a file write of bounded length finishes instead of losing the results);
     ``.seen`` says whether one came.  Elsewhere (another thread, another handler) it holds nothing."""
     import signal
-    import threading
 
     held = Held()
-    if threading.current_thread() is not threading.main_thread() or \
-            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+    if not _sigint_is_ours():
         yield held
         return
 

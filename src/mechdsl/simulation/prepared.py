@@ -31,7 +31,7 @@ from ..eom import parameter_vector
 from ..eom.start import start_vector
 from ..model.records import record
 from .backends import backend
-from .backends.ode import _environment as setup_environment
+from .backends.ode import setup_environment
 from .choose import default_inputs, fixed_step_count, min_step
 from .problem import Problem
 from .registry import METHODS, spec
@@ -120,7 +120,7 @@ def prepare(problem: Problem) -> Prepared:
 
 def unchanged(prepared: Prepared) -> bool:
     """Whether what ``prepared``'s setup was built from still holds (an ODE setup: the compiler,
-    the compile threshold, the caches of its Functions: backends/ode._environment); a kept
+    the compile threshold, the caches of its Functions: backends/ode.setup_environment); a kept
     preparation that fails this is prepared again."""
     return prepared.environment == _environment(prepared.problem)
 

@@ -222,7 +222,6 @@ class OdeSetup:
         method, funcs, max_steps, extra = self.method, self.funcs, self.max_steps, self.extra
         t0, t1, rtol, atol = s.t_start, s.t_end, s.rtol, s.atol
         uv = drive.vector(t0)
-        loop_compiled = self.loop_compiled
         bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
         breaks = drive.breakpoints(t0, t1)
         try:
@@ -323,7 +322,7 @@ def kept_setup(eom, s, build) -> "OdeSetup":
     Functions given by hand) are built every time.  The most recently used SETUPS_KEPT are
     kept; holding the EOM keeps its id unique while its entry lives."""
     try:
-        key = (id(eom), _frozen(s), _environment())
+        key = (id(eom), _frozen(s), setup_environment())
         hash(key)
     except TypeError:
         return build()
@@ -357,7 +356,7 @@ def _frozen(s):
     return s
 
 
-def _environment() -> tuple:
+def setup_environment() -> tuple:
     """What a setup depends on besides its equations and settings: whether there is a C
     compiler, the compile threshold and the loop's method rule (crk), and the caches its
     Functions and compiled loop came from (a new cache, e.g. emptied by a test, builds anew)."""
