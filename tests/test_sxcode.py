@@ -12,12 +12,12 @@ import re
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import needs_cc
 
 from mechdsl.eom import sxcode
-from mechdsl.eom.codegen import compile_functions, find_compiler
+from mechdsl.eom.codegen import compile_functions
 from mechdsl.simulation.backends import crk
 
-needs_cc = pytest.mark.skipif(find_compiler() is None, reason="needs a C compiler (the engines are C)")
 
 
 def every_op():

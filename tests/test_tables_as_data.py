@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import mechdsl
-from mechdsl.eom.codegen import find_compiler
+from conftest import needs_cc
 
 SLIDER = """
 model Slider
@@ -20,8 +20,6 @@ equation
   force(x) = F;
 end Slider;
 """
-needs_cc = pytest.mark.skipif(find_compiler() is None, reason="the stepping loop reads tables; without a C "
-                                                                 "compiler auto runs erk, which restarts at samples")
 
 
 @needs_cc
