@@ -476,3 +476,37 @@ def test_command_line(tmp_path, capsys):
     assert main(["export", str(MODELS / "pendulum.mech"), "--fmu", str(out), "--set", "L=2"]) == 0   # its own: replaced
     assert 'name="L"' in zipfile.ZipFile(out).read("modelDescription.xml").decode()
     assert os.path.getsize(out) > 10_000
+
+
+def test_fmi3_event_indicator_variables_read_as_the_indicators(fmus):
+    """FMI 3 model exchange of the falling rod (two contacts): the ``mechdsl.event_indicator[...]``
+    variables read in one fmi3GetFloat64 call, in any order and mixed with a state, are the values
+    fmi3GetEventIndicators gives (the indicators are evaluated once per call)."""
+    from ctypes import POINTER, c_double
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Model
+
+    m, path = fmus("falling_rod3", "falling_rod.mech", version=3)
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    ind = sorted((n for n in vr if n.startswith("mechdsl.event_indicator[")), key=vr.get)   # in indicator order
+    assert len(ind) == 2 and md.numberOfEventIndicators == 2
+    state = state_names(m)[0]
+    fmu = FMU3Model(guid=md.guid, unzipDirectory=extract(str(path)),
+                    modelIdentifier=md.modelExchange.modelIdentifier, instanceName="rod")
+    fmu.instantiate()
+    try:
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        e, x0 = np.zeros(2), np.zeros(len(state_names(m)))
+        fmu.getEventIndicators(e.ctypes.data_as(POINTER(c_double)), e.size)
+        fmu.getContinuousStates(x0.ctypes.data_as(POINTER(c_double)), x0.size)
+        got = np.array(fmu.getFloat64([vr[ind[1]], vr[state], vr[ind[0]], vr[ind[1]]]))
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+    assert np.all(e > 0.0), e                                  # both ends above the floor at the start
+    np.testing.assert_allclose(got[[0, 2]], e[[1, 0]], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(got[3], got[0], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(got[1], x0[0], rtol=1e-15, atol=0)

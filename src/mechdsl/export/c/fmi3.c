@@ -142,19 +142,21 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                           fmi3Float64 values[], size_t nValues) {
   CHECK(INST->mode != MODE_ERROR && nValues == nValueReferences, "fmi3GetFloat64");
+  double *e = NULL;                   /* mechdsl.event_indicator[...]: all k evaluated once per call, when first asked */
   for (size_t i = 0; i < nValueReferences; i++) {
     fmi3ValueReference vr = valueReferences[i];
     if (vr == VR_END) { values[i] = INST->t; continue; }
     if (vr > VR_END && vr <= VR_END + (unsigned)MECH.k && INST->kind == KIND_ME && MECH.contacts) {
-      double *e = (double *)calloc((size_t)MECH.k, sizeof(double));     /* mechdsl.event_indicator[...] */
-      int st = !e || mech_me_indicators(INST, e, (size_t)MECH.k);
-      if (!st) values[i] = e[vr - VR_END - 1];
-      free(e);
-      if (st) return fail(INST);
+      if (!e) {
+        e = (double *)calloc((size_t)MECH.k, sizeof(double));
+        if (!e || mech_me_indicators(INST, e, (size_t)MECH.k)) { free(e); return fail(INST); }
+      }
+      values[i] = e[vr - VR_END - 1];
       continue;
     }
-    if (mech_get_real(INST, vr, &values[i])) return fmi3Error;
+    if (mech_get_real(INST, vr, &values[i])) { free(e); return fmi3Error; }
   }
+  free(e);
   return fmi3OK;
 }
 
