@@ -16,7 +16,9 @@ from ..eom import fold_inputs
 from .charts import chart_speeds, normalize_blocks, quaternion_blocks
 from .constraints import constrained, setup
 from .core import param_vector, parts, structure
-from .equilibrium import Equilibrium, active_basis, chart_of, nearest_equilibrium, singular_mass
+from .equilibrium import nearest_equilibrium
+from .equilibrium_classify import active_basis, chart_of, singular_mass
+from .equilibrium_record import Equilibrium
 from .linear_model import Linearization, declared_inputs, input_columns
 from .matrices import first_order, second_order, singular_mass_error, sym
 from .reduced import linearize_constrained

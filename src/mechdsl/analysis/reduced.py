@@ -33,7 +33,9 @@ from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from ..eom import multiplier_units
 from .constraints import independent_basis, project, rest_multipliers
 from .core import parts, structure
-from .equilibrium import Equilibrium, nearest_equilibrium, singular_mass
+from .equilibrium import nearest_equilibrium
+from .equilibrium_classify import singular_mass
+from .equilibrium_record import Equilibrium
 from .linear_model import Linearization, declared_inputs, input_columns
 from .matrices import first_order, second_order, singular_mass_error
 from ..model.names import split_state

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..diagnostics import Diagnostic, MechError, UsageError, did_you_mean
 from .core import dense, param_vector, parts, require_ode, structure, wrap_angle
-from .equilibrium import levenberg_marquardt
+from .lm import levenberg_marquardt
 from .integrals import first_integrals
 from ..model.names import split_state
 
