@@ -107,3 +107,14 @@ def test_median_is_numpys_without_importing_numpy_ma():
         assert median(x) == float(np.median(x))
     assert np.isnan(median([1.0, float("nan"), 2.0]))
     assert np.isnan(median([]))
+
+
+def test_documented_submodules_after_a_plain_import():
+    """``import mechdsl`` then ``mechdsl.examples.path(...)`` (and the other documented submodules)
+    works as after ``import mechdsl.examples``: imported on first use, not by ``import mechdsl``."""
+    code = ("import sys, mechdsl; before = {'mechdsl.examples', 'mechdsl.sweep'} & set(sys.modules); "
+            "print(sorted(before), mechdsl.examples.path('pendulum').name, callable(mechdsl.sample.normal), "
+            "callable(mechdsl.sweep.table))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["[]", "pendulum.mech", "True", "True"]

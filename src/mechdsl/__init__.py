@@ -19,11 +19,20 @@ __version__ = "0.1.0"
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 
+# the documented submodules, imported on first use as scipy's are (``mechdsl.examples.path``
+# after a plain ``import mechdsl``), so that ``import mechdsl`` stays light
+_LAZY_SUBMODULES = frozenset({"examples", "sample", "sweep", "urdf", "dae", "analysis", "estimation", "export"})
+
+
 def __getattr__(name):
     if name == "SimulationFailed":          # output.result imports numpy: only when asked
         from .output.result import SimulationFailed
 
         return SimulationFailed
+    if name in _LAZY_SUBMODULES:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module 'mechdsl' has no attribute {name!r}")
 
 
