@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -82,8 +83,7 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     p_<coordinate>, the first integrals and the model outputs at every recorded point.
     """
     fs = s.fixed_step
-    method, dt, points, outputs, x0 = s.method, fs.dt, s.points, s.outputs, s.x0
-    newton_tol, max_newton = fs.newton_tol, fs.max_newton
+    method, dt = s.method, fs.dt
     constrained = eom.g is not None and eom.m > 0
     if constrained and not spec(method).constrained:
         raise UsageError(f"the method '{method}' ignores the constraints of {eom.name}; for a constrained "
@@ -101,67 +101,124 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
     pv = parameter_vector(eom, s.p)
     ham = hamiltonian(eom, pv)
     n = eom.n
-    out_names = _output_names(eom, outputs) if not constrained else outputs
-    extra_meta = {}
-    if constrained:
-        qs, qds, init, active, dof = consistent_start(eom, x0, t0, pv)
-        extra_meta = {"initialization": init.as_dict(), "dof": dof.as_dict(),
-                      "constraints": list(eom.constraint_names),
-                      "active_constraints": [eom.constraint_names[i] for i in active]}
-    elif x0 is not None:
-        xs = start_vector(eom, x0, pv)
-        qs, qds = xs[:n], xs[n:]
-    else:
-        qs, qds = eom.start(pv)
+    out_names = _output_names(eom, s.outputs) if not constrained else s.outputs
+    qs, qds, active, extra_meta = _start(eom, s.x0, t0, pv, constrained)
     pm0 = np.array(ham.function("momenta")(qs, qds, t0, pv), float).ravel()
-
     nsteps = max(1, int(math.ceil((t_end - t0) / dt - 1e-9)))
     h = (t_end - t0) / nsteps
+    st = _stepper(eom, ham, method, constrained, active, fs, qs, pm0, t0, pv, step_eom)
+    run = _steps(st, n, nsteps, h, t0, t_end, _stride(nsteps, s.points), fs.max_newton, progress)
+    S = np.array(run.states).T                     # (2n + extra, npts)
+    t = t0 + np.array(run.idx, float) * h
+    t[-1] = t_end if (run.failure is None and run.idx[-1] == nsteps) else t[-1]
+    q = S[:n].T
+    pm = S[n:2 * n].T
+    qd = _map(ham.function("qd"), [q.T, pm.T, t[None, :], pv]).T
+    signals = _signals(eom, ham, q, qd, pm, t, pv, out_names, active if constrained else None)
+    stats = _stats(st, run, h, len(t), _time.perf_counter() - wall0, fs, signals, constrained)
+    meta = {"model": eom.name, "route": getattr(eom, "route", ""), "coordinates": list(eom.coords),
+            "method": st.method, "method_reason": "requested", "why": _why(st.method, st.explicit_sv, ham),
+            "dt": h, "symplectic": spec(st.method).symplectic, "separable": ham.separable,
+            "canonical_variables": True, "notes": notes + list(ham.notes), "warnings": [],
+            "options": {"t_start": t0, "t_end": t_end, "dt": h, "method": st.method, "points": int(len(t)),
+                        "outputs": list(out_names or ()), "newton_tolerance": fs.newton_tol,
+                        "parameters": dict(zip(eom.params, map(float, pv))),
+                        "start": {**dict(zip(eom.coords, map(float, qs))),
+                                  **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}, **extra_meta}
+    if run.interrupted:
+        meta["interrupted"] = True
+    return Result(t=t, q=q, qd=qd, coordinates=tuple(eom.coords), signals=signals, stats=stats,
+                  metadata=meta, failure=run.failure)
+
+
+def _start(eom, x0, t0, pv, constrained: bool):
+    """(q, qd, the active constraints, metadata of a constrained start): the consistent start of
+    a constrained model, else the given or the model's start values."""
+    if constrained:
+        qs, qds, init, active, dof = consistent_start(eom, x0, t0, pv)
+        return qs, qds, active, {"initialization": init.as_dict(), "dof": dof.as_dict(),
+                                 "constraints": list(eom.constraint_names),
+                                 "active_constraints": [eom.constraint_names[i] for i in active]}
+    if x0 is not None:
+        xs = start_vector(eom, x0, pv)
+        return xs[:eom.n], xs[eom.n:], None, {}
+    qs, qds = eom.start(pv)
+    return qs, qds, None, {}
+
+
+@dataclass
+class _Stepper:
+    """One step as a CasADi Function (x, h, p) -> (x1, residual), its start state and parameters."""
+
+    method: str
+    step: object
+    state0: np.ndarray
+    pstep: np.ndarray
+    evals_per_step: int | None          # None: implicit (Newton iterations, not counted)
+    evals_init: int
+    explicit_sv: bool
+
+
+def _stepper(eom, ham, method, constrained, active, fs, qs, pm0, t0, pv, step_eom) -> _Stepper:
+    """The step of ``method``: RATTLE for constraints, the zero-order holds read at the step's
+    midpoint (a trailing parameter) when ``step_eom`` is given."""
     explicit_sv = method == "stormer-verlet" and ham.separable and not constrained
     if constrained:
-        method = "rattle"
-        step = rattle_step(ham, eom, active, newton_tol, max_newton)
-        state0, evals_per_step, evals_init = np.concatenate([qs, pm0, [t0], np.zeros(len(active))]), None, 0
-    elif step_eom is not None:        # zero-order holds read at the step's midpoint (a trailing parameter)
+        step = rattle_step(ham, eom, active, fs.newton_tol, fs.max_newton)
+        return _Stepper("rattle", step, np.concatenate([qs, pm0, [t0], np.zeros(len(active))]), pv, None, 0,
+                        explicit_sv)
+    if step_eom is not None:        # zero-order holds read at the step's midpoint (a trailing parameter)
         hs = hamiltonian(step_eom, np.r_[pv, t0])
         explicit_sv = method == "stormer-verlet" and hs.separable
-        step, state0, evals_per_step, evals_init = step_function(hs, method, explicit_sv, n, newton_tol,
-                                                                  max_newton, qs, pm0, t0, np.r_[pv, t0],
-                                                                  hold=True)
-    else:
-        step, state0, evals_per_step, evals_init = step_function(ham, method, explicit_sv, n, newton_tol,
-                                                                  max_newton, qs, pm0, t0, pv)
-    pstep = pv if step_eom is None or constrained else np.r_[pv, t0]
-    stride = _stride(nsteps, points)
-    rec_idx = [0]
-    rec_states = [state0.copy()]
-    failure = None
-    done = 0
-    x = state0.copy()
+        step, state0, per_step, init = step_function(hs, method, explicit_sv, eom.n, fs.newton_tol, fs.max_newton,
+                                                     qs, pm0, t0, np.r_[pv, t0], hold=True)
+        return _Stepper(method, step, state0, np.r_[pv, t0], per_step, init, explicit_sv)
+    step, state0, per_step, init = step_function(ham, method, explicit_sv, eom.n, fs.newton_tol, fs.max_newton,
+                                                 qs, pm0, t0, pv)
+    return _Stepper(method, step, state0, pv, per_step, init, explicit_sv)
+
+
+@dataclass
+class _Steps:
+    """What the step loop did: recorded step indices and states, steps done, failure, Ctrl-C."""
+
+    idx: list
+    states: list
+    done: int = 0
+    failure: Failure | None = None
+    interrupted: bool = False
+
+
+def _steps(st: _Stepper, n: int, nsteps: int, h: float, t0: float, t_end: float, stride: int, max_newton: int,
+           progress) -> _Steps:
+    """The steps in chunks through ``mapaccum`` (the first small, doubled call by call); a step
+    whose residual or state is bad ends the run there, Ctrl-C keeps the steps recorded so far."""
+    run = _Steps([0], [st.state0.copy()])
+    x = st.state0.copy()
     cache = {}
     res_tol = 1e-8
-    interrupted = False
     chunk = FIRST_CHUNK
     try:                       # Ctrl-C anywhere in the loop: the steps recorded so far are kept
-        while done < nsteps:
+        while run.done < nsteps:
+            done = run.done
             k = min(chunk, nsteps - done)
             chunk = min(CHUNK, 2 * chunk)
             F = cache.get(k)
             if F is None:
-                F = step.mapaccum("steps", k)
+                F = st.step.mapaccum("steps", k)
                 cache[k] = F
             try:
-                X, R = F(x, h, pstep)
+                X, R = F(x, h, st.pstep)
                 X = np.array(X, float)
                 R = np.array(R, float).ravel()
             except (RuntimeError, SystemError) as e:  # CasADi evaluation error, or Ctrl-C in disguise
-                interrupted = was_interrupt(e)
-                if not interrupted:
-                    failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
+                run.interrupted = was_interrupt(e)
+                if not run.interrupted:
+                    run.failure = Failure(t0 + done * h, "evaluation error in the step", str(e).splitlines()[0])
                     break
-            if interrupted or noted():
-                interrupted = True
-                failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
+            if run.interrupted or noted():
+                run.interrupted = True
+                run.failure = Failure(t0 + run.idx[-1] * h, "interrupted", INTERRUPTED)
                 break
             scale = 1.0 + np.max(np.abs(X[: 2 * n]), axis=0)
             bad = np.flatnonzero(~np.isfinite(R) | (R > res_tol * scale) | ~np.all(np.isfinite(X), axis=0))
@@ -169,69 +226,59 @@ def fixed_step_run(eom, s, progress=None, step_eom=None) -> Result:
             for j in range(good):
                 idx = done + j + 1
                 if idx % stride == 0 or idx == nsteps:
-                    rec_idx.append(idx)
-                    rec_states.append(X[:, j].copy())
+                    run.idx.append(idx)
+                    run.states.append(X[:, j].copy())
             if bad.size:
                 j = int(bad[0])
                 tf = t0 + (done + j + 1) * h
                 if not np.all(np.isfinite(X[:, j])):
-                    failure = Failure(tf, "the state became non-finite",
-                                      f"{method} step of size {h:.6g} from t = {tf - h:.6g}")
+                    run.failure = Failure(tf, "the state became non-finite",
+                                          f"{st.method} step of size {h:.6g} from t = {tf - h:.6g}")
                 else:
-                    failure = Failure(tf, "Newton iteration of the implicit step did not converge",
-                                      f"residual {R[j]:.3g} after {max_newton} iterations; try a smaller dt")
-                if good and (done + good) not in rec_idx:
-                    rec_idx.append(done + good)
-                    rec_states.append(X[:, good - 1].copy())
-                done += good
+                    run.failure = Failure(tf, "Newton iteration of the implicit step did not converge",
+                                          f"residual {R[j]:.3g} after {max_newton} iterations; try a smaller dt")
+                if good and (done + good) not in run.idx:
+                    run.idx.append(done + good)
+                    run.states.append(X[:, good - 1].copy())
+                run.done += good
                 break
             x = X[:, -1]
-            done += k
+            run.done += k
             if callable(progress):
-                progress(t0 + done * h, t_end)
+                progress(t0 + run.done * h, t_end)
     except KeyboardInterrupt:
-        interrupted = True
-        del rec_idx[len(rec_states):], rec_states[len(rec_idx):]     # (an append cut short in between)
-        failure = Failure(t0 + rec_idx[-1] * h, "interrupted", INTERRUPTED)
-    S = np.array(rec_states).T                     # (2n + extra, npts)
-    t = t0 + np.array(rec_idx, float) * h
-    t[-1] = t_end if (failure is None and rec_idx[-1] == nsteps) else t[-1]
-    q = S[:n].T
-    pm = S[n:2 * n].T
-    qd = _map(ham.function("qd"), [q.T, pm.T, t[None, :], pv]).T
-    signals = _signals(eom, ham, q, qd, pm, t, pv, out_names, active if constrained else None)
-    wall = _time.perf_counter() - wall0
-    stats = {"steps": int(done), "dt": h, "points": int(len(t)), "wall_time": wall,
-             "implicit": evals_per_step is None}
-    if evals_per_step is not None:    # explicit: exact count of right-hand-side (force) evaluations
-        stats["rhs_evaluations"] = int(evals_init + evals_per_step * done)
+        run.interrupted = True
+        del run.idx[len(run.states):], run.states[len(run.idx):]     # (an append cut short in between)
+        run.failure = Failure(t0 + run.idx[-1] * h, "interrupted", INTERRUPTED)
+    return run
+
+
+def _stats(st: _Stepper, run: _Steps, h: float, points: int, wall: float, fs, signals, constrained: bool) -> dict:
+    """The run's statistics: steps, step size, evaluations (explicit) or Newton settings
+    (implicit), the energy drift and, with constraints, the constraint drifts."""
+    stats = {"steps": int(run.done), "dt": h, "points": int(points), "wall_time": wall,
+             "implicit": st.evals_per_step is None}
+    if st.evals_per_step is not None:    # explicit: exact count of right-hand-side (force) evaluations
+        stats["rhs_evaluations"] = int(st.evals_init + st.evals_per_step * run.done)
     else:
-        stats["newton_max_iterations"] = int(max_newton)
-        stats["newton_tolerance"] = float(newton_tol)
-    why = {"stormer-verlet": ("explicit Stormer-Verlet (leapfrog): H is separable" if explicit_sv else
-                              "generalized (implicit) Stormer-Verlet: H is not separable ("
-                              + "; ".join(ham.notes) + ")"),
-           "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
-           "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
-           "rk4": "classical Runge-Kutta (explicit, order 4, not symplectic)",
-           "rattle": "RATTLE (constrained Stormer-Verlet: symplectic on the constraint manifold, order 2)"}[method]
+        stats["newton_max_iterations"] = int(fs.max_newton)
+        stats["newton_tolerance"] = float(fs.newton_tol)
     stats.update(_energy_drift(signals))
     if constrained:
         stats.update({"max_constraint_drift": float(np.max(signals["constraint_drift"], initial=0.0)),
                       "max_velocity_drift": float(np.max(signals["velocity_drift"], initial=0.0))})
-    meta = {"model": eom.name, "route": getattr(eom, "route", ""), "coordinates": list(eom.coords),
-            "method": method, "method_reason": "requested", "why": why, "dt": h,
-            "symplectic": spec(method).symplectic, "separable": ham.separable, "canonical_variables": True,
-            "notes": notes + list(ham.notes), "warnings": [],
-            "options": {"t_start": t0, "t_end": t_end, "dt": h, "method": method, "points": int(len(t)),
-                        "outputs": list(out_names or ()), "newton_tolerance": newton_tol,
-                        "parameters": dict(zip(eom.params, map(float, pv))),
-                        "start": {**dict(zip(eom.coords, map(float, qs))),
-                                  **{f"der({c})": float(v) for c, v in zip(eom.coords, qds)}}}, **extra_meta}
-    if interrupted:
-        meta["interrupted"] = True
-    return Result(t=t, q=q, qd=qd, coordinates=tuple(eom.coords), signals=signals, stats=stats,
-                  metadata=meta, failure=failure)
+    return stats
+
+
+def _why(method: str, explicit_sv: bool, ham) -> str:
+    """What the method is, in words (metadata["why"])."""
+    return {"stormer-verlet": ("explicit Stormer-Verlet (leapfrog): H is separable" if explicit_sv else
+                               "generalized (implicit) Stormer-Verlet: H is not separable ("
+                               + "; ".join(ham.notes) + ")"),
+            "implicit-midpoint": "implicit midpoint rule (symplectic, order 2)",
+            "gauss-legendre": "2-stage Gauss-Legendre collocation (symplectic, order 4)",
+            "rk4": "classical Runge-Kutta (explicit, order 4, not symplectic)",
+            "rattle": "RATTLE (constrained Stormer-Verlet: symplectic on the constraint manifold, order 2)"}[method]
 
 
 def _stride(nsteps: int, points: int | None) -> int:
