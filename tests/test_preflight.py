@@ -418,6 +418,26 @@ def test_a_loop_smaller_than_the_constraint_tolerance(tmp_path, capsys):
     assert found == []
 
 
+def test_a_contact_model_smaller_than_the_contact_tolerance(tmp_path, capsys):
+    """pendulum_wall with L = 1e-12 m: its wall is located to the contact tolerance (1e-8 m at the
+    scene's tolerance), ten thousand times the model; it started with the contact closed and
+    failed at t = 0 on a step budget.  Refused at the start (E758) at the contact, by check and
+    simulate alike; L = 1e-5 m (1000 x the tolerance) passes and runs, and so does the falling
+    rod (1.6 m) at atol 1e-3, whose contact tolerance is 0.1 m."""
+    old = 'L(unit = "m") = 1 '
+    path = _edited(tmp_path, "pendulum_wall.mech", old, 'L(unit = "m") = 1e-12 ')
+    for cmd in (["check", str(path)], ["simulate", str(path), "--no-progress", "-o", str(tmp_path / "o.csv")]):
+        rc, err = _cli(cmd, capsys)
+        assert rc == 1 and "measures only 1.14e-12 m across" in err
+        _located(err, "E758", path, 28)
+    assert not (tmp_path / "o.csv").exists()
+    m = mechdsl.load(MODELS / "pendulum_wall.mech")
+    assert preflight(m.eom, {"L": 1e-5}) == []
+    r = m.with_params(L=1e-5).simulate(0.01, error_estimate="off")
+    assert r.failure is None and len(r.events) >= 1          # it swings into the wall and bounces
+    assert preflight(mechdsl.load(MODELS / "falling_rod.mech").eom, drift_bound=1e-2) == []
+
+
 @pytest.mark.parametrize("model,old,new,code,line", [
     ("particle_on_sphere.mech", 'R(unit = "m") = 1 ', 'R(unit = "m") = 1.8e308 ', "E303", 17),
     ("pendulum_wall.mech", "tolerance = 1e-10;", "tolerance = 1e-300;", "E604", 37),

@@ -26,6 +26,8 @@ In order (the first group that finds something ends the check):
   E745  a spring or damper whose ends coincide at the start (its direction is undefined)
   E744  the accelerations are not finite at the start for another reason
   E756  a contact gap that is not finite at the start          (at the contact)
+  E861  a start that penetrates a contact by more than the contact tolerance   (at the contact)
+  E758  a model with contacts smaller than 10 times the contact tolerance (lengths 1e-12)
   E757  an output that is not finite at the start                (at the output)
 
 Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
@@ -46,6 +48,8 @@ ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this i
 COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
 PROBES = 3                 # seeded positions besides the start at which E747 judges dT/dp
 LOOP_SIZE_FACTOR = 100     # a closed loop must measure this many times the constraint drift bound (E755)
+CONTACT_SIZE_FACTOR = 10   # a model with contacts must measure this many times the contact tolerance (E758):
+                           # the falling rod (1.6 m) at atol 1e-3 (tolerance 0.1 m) still comes to rest
 DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
@@ -197,6 +201,10 @@ def _dynamics_problems(eom, q, qd, t, pv, drift_bound: float = DRIFT_BOUND) -> l
 def _gap_problems(eom, q, t, pv, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:
     """E756: a contact whose gap is not finite at the start can never be located (the
     newtons_cradle with r = 1e308: inf gaps in the results of a run that 'succeeded').
+    E758: a model with contacts smaller than CONTACT_SIZE_FACTOR times the contact tolerance (the
+    contact analogue of E755): pendulum_wall with L = 1e-12 m started with its contact closed
+    and failed at t = 0 on a step budget of 8.7e7 steps; its size: the largest of the gaps
+    and the spread of its points at the start.
     E861: a start that penetrates a contact by more than the contact tolerance (the contact back
     end's default gap_tol, max(1e-9, 100 atol) = max(1e-9, 10 x the drift bound)), which the run
     would refuse: `mech check` says so too (issue 23)."""
@@ -221,9 +229,41 @@ def _gap_problems(eom, q, t, pv, drift_bound: float = DRIFT_BOUND) -> list[Diagn
                                g.span or _model_span(eom),
                                "its sizes and positions overflow with these parameter values: keep them moderate")]
     touch = max(1e-9, 10.0 * drift_bound)
-    return [Diagnostic("E861", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
-                       g.span or _model_span(eom), "change the start values so that every gap is >= 0")
-            for g, v in zip(gaps, values) if v < -touch]
+    found = [Diagnostic("E861", f"the start state penetrates contact '{g.name}' (gap {v:.6g} m)",
+                        g.span or _model_span(eom), "change the start values so that every gap is >= 0")
+             for g, v in zip(gaps, values) if v < -touch]
+    if found:
+        return found
+    size = max(_points_size(eom, q, t, pv), float(np.max(np.abs(values))))
+    if 0.0 < size < CONTACT_SIZE_FACTOR * touch:
+        g = gaps[0]
+        return [Diagnostic("E758", f"the model measures only {size:.3g} m across: its contacts are located to "
+                                   f"{touch:.2g} m (the contact tolerance, max(1e-9, 100 atol)), more than "
+                                   f"1/{CONTACT_SIZE_FACTOR:g} of its size, so its motion is lost in the tolerance "
+                                   f"(contact '{g.name}' would start closed)", g.span or _model_span(eom),
+                           "choose units that make the lengths moderate (um or mm instead of m), "
+                           "or check the lengths for a mistake")]
+    return []
+
+
+def _points_size(eom, q, t, pv) -> float:
+    """The model's size at the start: twice the largest distance of its points (the world's
+    origin, bodies, declared points) from their centroid; 0 when it has no positions."""
+    model = eom.model
+    if model is None or eom.point_position is None or not model.points:
+        return 0.0
+    import casadi as ca
+
+    names = [pt.name for pt in model.points]
+    try:
+        fn = eom.workspace.memo("preflight_points", lambda: ca.Function(
+            "points", [eom.q, eom.t, eom.p], [ca.horzcat(*[ca.vec(eom.point_position(n)) for n in names])]))
+    except Exception:  # noqa: BLE001 - a point without a position: nothing to judge here
+        return 0.0
+    xyz = np.asarray(fn(q, t, pv), float).reshape(3, -1, order="F")
+    if xyz.shape[1] < 2 or not np.all(np.isfinite(xyz)):
+        return 0.0
+    return 2 * float(np.max(np.linalg.norm(xyz - xyz.mean(axis=1, keepdims=True), axis=0)))
 
 
 def _output_problems(eom, q, qd, t, pv) -> list[Diagnostic]:
