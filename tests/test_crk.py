@@ -217,6 +217,30 @@ def test_engines_give_the_same_bits_and_the_size_decides(monkeypatch):
             assert np.array_equal(r.q, c.q) and np.array_equal(r.qd, c.qd)
 
 
+@pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
+def test_the_estimates_companion_keeps_the_interpreted_loop(monkeypatch):
+    """A run whose model is interpreted in the stepping loop (above COMPILE_OPS) has its error
+    estimate's companion in that loop too (issue 24: it ran as scipy's DOP853 stepped in Python,
+    at 2-3x the run's cost per evaluation): both runs in the loop, and the same estimate to the
+    last bit as the compiled model's (the engines give the same bits)."""
+    e = chain(2)
+    c = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51, method="dop853")
+    engines = []
+    run = crk.run_compiled
+
+    def spy(loop, *a, **k):
+        engines.append(loop.engine)
+        return run(loop, *a, **k)
+    monkeypatch.setattr(crk, "COMPILE_OPS", 0)
+    monkeypatch.setattr(crk, "run_compiled", spy)
+    i = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51, method="dop853")
+    monkeypatch.undo()
+    assert engines == ["interpreted", "interpreted"]
+    ec, ei = c.metadata["accuracy"]["error_estimate"], i.metadata["accuracy"]["error_estimate"]
+    assert ec is not None and ec > 0 and np.array_equal(ei, ec)
+    assert i.stats["error_estimate_rhs_evals"] == c.stats["error_estimate_rhs_evals"]
+
+
 def test_rhs_cost_counts_instructions_and_the_linear_solve():
     from mechdsl.eom.codegen import casadi_functions
 
