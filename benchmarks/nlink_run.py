@@ -105,7 +105,7 @@ def rhs_work(m, r):
     from mechdsl.simulation.backends import crk
 
     ode = crk.loop_ode(casadi_functions(m.eom, names=("ode",)))
-    loop, _ = crk.library(ode, tag=m.eom.name)
+    loop, _ = crk.library(ode, tag=m.eom.name, engine=r.metadata.get("loop_engine"))    # the last run's
     if loop is None:
         return None, None
     x = np.r_[r.q[-1], r.qd[-1]]
