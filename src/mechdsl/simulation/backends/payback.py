@@ -24,21 +24,20 @@ method, its steps and the results are those of the model and the options alone.
 """
 from __future__ import annotations
 
+from ...eom import cachefiles, sxcode
+from . import crk
+
 PAYBACK_EVALS = 50_000      # interpreted evaluations after which the compile has paid (see above)
 
 _COUNTS: dict = {}          # key -> evaluations recorded (this process; the disk holds the same)
 
 
 def _path(ode):
-    from ...eom import cachefiles, sxcode
-
     return cachefiles.cache_dir() / "sxcode" / f"{sxcode._key(ode)}.work"
 
 
 def recorded(ode) -> int:
     """Evaluations of ``ode`` made interpreted so far (this process and earlier ones, by the cache)."""
-    from ...eom import cachefiles
-
     try:
         path = _path(ode)
     except Exception:  # noqa: BLE001 - no cache folder: this process's count alone
@@ -57,8 +56,6 @@ def recorded(ode) -> int:
 def add(ode, nfev: int) -> None:
     """Count ``nfev`` more interpreted evaluations of ``ode`` (written to the cache: losing a count
     only delays a compile)."""
-    from ...eom import cachefiles
-
     if nfev <= 0:
         return
     try:
@@ -78,8 +75,6 @@ class Payback:
         self.switched_at = None          # evaluations of the run when it went on compiled
 
     def _compiled(self):
-        from . import crk
-
         loop, _ = crk.library(self.ode, tag=self.tag, engine="compiled")
         return loop
 
