@@ -12,7 +12,7 @@ For each N (models/nlink_pendulum.mech, q1 = pi/2, the rest 0, at rest) it print
   every call in order with the compilers' (a model above crk.COMPILE_OPS runs interpreted
   until its interpreted evaluations, counted across runs in the cache, have paid for its
   compile (simulation/backends/payback.py): the run that compiles shows it; run with a fresh
-  $MECHDSL_CACHE to see the sequence from the start);
+  cache folder, the default (--cache DIR to use another), to see the sequence from the start);
 - scipy: ``solve_ivp(method="DOP853")`` with the same rtol, atol and output grid on the
   right-hand side x' = (v, pin.aba(q, v, 0)) (Pinocchio, C++ called from Python), same CPU
   timing; without pin (``pip install pin``) the right-hand side is mechdsl's own ``ode``
@@ -31,6 +31,7 @@ For each N (models/nlink_pendulum.mech, q1 = pi/2, the rest 0, at rest) it print
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 import time
@@ -146,7 +147,21 @@ def main(argv=None):
     ap.add_argument("--sizes", default="2,5,10,20,30,50,100,200")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-pin", action="store_true")
+    ap.add_argument("--cache", default=None,
+                    help="cache folder (default: a new empty one, removed at the end, so that the runs of "
+                         "each size go as from a first run on: the engine sequence does not depend on what "
+                         "an earlier benchmark left)")
     a = ap.parse_args(argv)
+    if a.cache is None:
+        import atexit
+        import shutil
+        import tempfile
+
+        fresh = tempfile.mkdtemp(prefix="mechdsl-nlink-run-")
+        atexit.register(shutil.rmtree, fresh, True)
+        os.environ["MECHDSL_CACHE"] = fresh
+    else:
+        os.environ["MECHDSL_CACHE"] = a.cache
     use_pin = not a.no_pin
     if use_pin:
         try:
