@@ -8,7 +8,11 @@ For each N (models/nlink_pendulum.mech, q1 = pi/2, the rest 0, at rest) it print
   501 output points, method auto, compiled automatic), warm: one run first (it derives, and
   compiles when ``auto`` decides to; the library is cached on disk), then the CPU time
   (``time.process_time``, all threads) of a whole run, minimum over --repeats runs; the
-  method auto chose, its steps and right-hand side evaluations; the first run's wall time;
+  method auto chose, its steps and right-hand side evaluations; "each run" lists the CPU of
+  every call in order with the compilers' (a model above crk.COMPILE_OPS runs interpreted
+  until its interpreted evaluations, counted across runs in the cache, have paid for its
+  compile (simulation/backends/payback.py): the run that compiles shows it; run with a fresh
+  cache folder, the default (--cache DIR to use another), to see the sequence from the start);
 - scipy: ``solve_ivp(method="DOP853")`` with the same rtol, atol and output grid on the
   right-hand side x' = (v, pin.aba(q, v, 0)) (Pinocchio, C++ called from Python), same CPU
   timing; without pin (``pip install pin``) the right-hand side is mechdsl's own ``ode``
@@ -27,6 +31,7 @@ For each N (models/nlink_pendulum.mech, q1 = pi/2, the rest 0, at rest) it print
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 import time
@@ -57,6 +62,24 @@ def cpu(fn, repeats):
     return best, out
 
 
+def with_children():
+    """CPU seconds of this process and of the child processes it waited for (gcc)."""
+    import resource
+
+    c = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + c.ru_utime + c.ru_stime
+
+
+def each_run(fn, runs):
+    """(CPU seconds of each of ``runs`` calls, compilers included; the last result)."""
+    times, out = [], None
+    for _ in range(runs):
+        t = with_children()
+        out = fn()
+        times.append(with_children() - t)
+    return times, out
+
+
 def pin_rhs(N):
     import pinocchio as pin
 
@@ -83,7 +106,7 @@ def rhs_work(m, r):
     from mechdsl.simulation.backends import crk
 
     ode = crk.loop_ode(casadi_functions(m.eom, names=("ode",)))
-    loop, _ = crk.library(ode, tag=m.eom.name)
+    loop, _ = crk.library(ode, tag=m.eom.name, engine=r.metadata.get("loop_engine"))    # the last run's
     if loop is None:
         return None, None
     x = np.r_[r.q[-1], r.qd[-1]]
@@ -101,8 +124,8 @@ def row(N, repeats, use_pin):
     from scipy.integrate import solve_ivp
 
     m = model(N)
-    r = m.simulate(t_end=T_END, rtol=RTOL)
-    t_mech, r = cpu(lambda: m.simulate(t_end=T_END, rtol=RTOL), repeats)
+    runs, r = each_run(lambda: m.simulate(t_end=T_END, rtol=RTOL), 1 + repeats)
+    t_mech = min(runs[1:])
     one, work = rhs_work(m, r)
     x0 = np.r_[r.q[0], r.qd[0]]
     rhs, kind = (pin_rhs(N), "pin.aba") if use_pin else (own_rhs(m), "mechdsl ode (VM)")
@@ -113,7 +136,7 @@ def row(N, repeats, use_pin):
     return {"N": N, "method": r.metadata["method"], "compiled": r.metadata.get("loop_engine") or
             ("compiled" if r.metadata["options"]["compiled"] else "no"), "rhs_us": None if one is None else 1e6 * one,
             "work_ms": None if work is None else 1e3 * work,
-            "mech_ms": 1e3 * t_mech, "steps": r.stats.get("steps"),
+            "mech_ms": 1e3 * t_mech, "runs": runs, "steps": r.stats.get("steps"),
             "evals": f"{r.stats.get('rhs_evals')} + {r.stats.get('error_estimate_rhs_evals') or 0}",
             "scipy_ms": 1e3 * t_sp, "scipy_steps": None, "scipy_evals": s.nfev, "ratio": t_mech / t_sp,
             "diff": diff, "kind": kind}
@@ -124,7 +147,21 @@ def main(argv=None):
     ap.add_argument("--sizes", default="2,5,10,20,30,50,100,200")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-pin", action="store_true")
+    ap.add_argument("--cache", default=None,
+                    help="cache folder (default: a new empty one, removed at the end, so that the runs of "
+                         "each size go as from a first run on: the engine sequence does not depend on what "
+                         "an earlier benchmark left)")
     a = ap.parse_args(argv)
+    if a.cache is None:
+        import atexit
+        import shutil
+        import tempfile
+
+        fresh = tempfile.mkdtemp(prefix="mechdsl-nlink-run-")
+        atexit.register(shutil.rmtree, fresh, True)
+        os.environ["MECHDSL_CACHE"] = fresh
+    else:
+        os.environ["MECHDSL_CACHE"] = a.cache
     use_pin = not a.no_pin
     if use_pin:
         try:
@@ -135,14 +172,17 @@ def main(argv=None):
             use_pin = False
     print(f"5 s of the N-link chain, rtol {RTOL:g}, atol {ATOL:g}, {POINTS} points; CPU ms (min of {a.repeats}, warm)")
     print("mechdsl evals = the run's + its default error estimate's companion run; RHS work counts both")
+    print("each run [s] = CPU of every mechdsl call in order, gcc included: the first derives the model, the "
+          "minimum is taken over the others; model code = the engine of the last run (payback.py)")
     print()
-    print("|   N | mechdsl method | model code | mechdsl CPU [ms] | evals (run + estimate) | RHS us | RHS work [ms] | whole / RHS | "
+    print("|   N | mechdsl method | model code | each run [s] | mechdsl CPU [ms] | evals (run + estimate) | RHS us | RHS work [ms] | whole / RHS | "
           "scipy DOP853 + RHS | scipy CPU [ms] | evals | ratio | final diff |")
-    print("|----:|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|")
+    print("|----:|---|---|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|")
     for N in [int(x) for x in a.sizes.split(",")]:
         d = row(N, a.repeats, use_pin)
         w = "-" if d["work_ms"] is None else f"{d['work_ms']:.2f} | {d['mech_ms'] / d['work_ms']:.1f}"
-        print(f"| {d['N']:3d} | {d['method']} | {d['compiled']} | {d['mech_ms']:.2f} | {d['evals']} | "
+        print(f"| {d['N']:3d} | {d['method']} | {d['compiled']} | {', '.join(f'{x:.2f}' for x in d['runs'])} | "
+              f"{d['mech_ms']:.2f} | {d['evals']} | "
               f"{'-' if d['rhs_us'] is None else format(d['rhs_us'], '.3f')} | {w} | {d['kind']} | "
               f"{d['scipy_ms']:.1f} | {d['scipy_evals']} | {d['ratio']:.3f} | {d['diff']:.1e} |", flush=True)
 

@@ -38,7 +38,7 @@ ITEMS = [
     ("3", "Generated C and its compile against the model's size",
      "C size and compile time linear in the number of links; a 7-joint arm in under 10 s of CPU and 500 MB",
      "codegen_scaling.py", [], ["--quick"]),
-    ("3, 8", "Whole `mech simulate` processes on empty, new-model and warm caches",
+    ("3, 8", "Whole `mech simulate` processes on empty, new-model and warm caches (and a third run)",
      "the 200-link chain's first run at most 3 s CPU and 200 MB (item 3); the 12-link chain warm 0.15 s, "
      "from an empty cache 0.5 s (item 8)",
      "first_run.py", ["--sizes", "12,50,200", "--runs", "3"], ["--sizes", "12", "--runs", "1"]),

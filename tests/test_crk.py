@@ -217,6 +217,59 @@ def test_engines_give_the_same_bits_and_the_size_decides(monkeypatch):
             assert np.array_equal(r.q, c.q) and np.array_equal(r.qd, c.qd)
 
 
+@pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
+def test_the_estimates_companion_keeps_the_interpreted_loop(monkeypatch):
+    """A run whose model is interpreted in the stepping loop (above COMPILE_OPS) has its error
+    estimate's companion in that loop too (issue 24: it ran as scipy's DOP853 stepped in Python,
+    at 2-3x the run's cost per evaluation): both runs in the loop, and the same estimate to the
+    last bit as the compiled model's (the engines give the same bits)."""
+    e = chain(2)
+    c = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51, method="dop853")
+    engines = []
+    run = crk.run_compiled
+
+    def spy(loop, *a, **k):
+        engines.append(loop.engine)
+        return run(loop, *a, **k)
+    monkeypatch.setattr(crk, "COMPILE_OPS", 0)
+    monkeypatch.setattr(crk, "run_compiled", spy)
+    i = simulate(e, 4.0, rtol=1e-9, atol=1e-9, points=51, method="dop853")
+    monkeypatch.undo()
+    assert engines == ["interpreted", "interpreted"]
+    ec, ei = c.metadata["accuracy"]["error_estimate"], i.metadata["accuracy"]["error_estimate"]
+    assert ec is not None and ec > 0 and np.array_equal(ei, ec)
+    assert i.stats["error_estimate_rhs_evals"] == c.stats["error_estimate_rhs_evals"]
+
+
+@pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
+def test_an_interpreted_model_compiles_once_it_has_paid_and_keeps_its_bits(monkeypatch, tmp_path):
+    """Above COMPILE_OPS the loop interprets the model until its interpreted evaluations, counted
+    across runs (payback.py), reach PAYBACK_EVALS: then it compiles, within the run (between two
+    slices) or from the start of the next.  The engines give the same bits and a slice carries the
+    whole state, so every run gives the numbers of the compiled run, wherever the switch lands."""
+    from mechdsl.simulation.backends import payback
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))          # a count of its own
+    e, kw = chain(3), dict(rtol=1e-10, atol=1e-10, points=51, method="dop853", error_estimate="off")
+    c = simulate(e, 20.0, **kw, compiled=True)
+    n = c.stats["rhs_evals"]
+    monkeypatch.setattr(crk, "COMPILE_OPS", 0)
+    monkeypatch.setattr(crk, "SLICE", 1e-5)                  # many slices: the switch lands inside the run
+    monkeypatch.setattr(payback, "PAYBACK_EVALS", 10 ** 12)
+    i = simulate(e, 20.0, **kw)                              # never paid: interpreted throughout
+    monkeypatch.setattr(payback, "PAYBACK_EVALS", n + n // 2)
+    first = simulate(e, 20.0, **kw)                          # paid half-way: compiled for the rest
+    second = simulate(e, 20.0, **kw)                         # paid before: compiled from the start
+    assert i.metadata["loop_engine"] == "interpreted" and "compiled_after" not in i.stats["raw"]
+    assert first.metadata["loop_engine"] == "compiled" and first.metadata["options"]["compiled"] is True
+    assert 0 < first.stats["raw"]["compiled_after"] < n
+    assert any("pay for its compile" in x for x in first.metadata["notes"])
+    assert second.metadata["loop_engine"] == "compiled" and second.stats["raw"]["compiled_after"] == 0
+    for r in (i, first, second):
+        assert r.stats["rhs_evals"] == n and r.stats["steps"] == c.stats["steps"]
+        assert np.array_equal(r.q, c.q) and np.array_equal(r.qd, c.qd)
+
+
 def test_rhs_cost_counts_instructions_and_the_linear_solve():
     from mechdsl.eom.codegen import casadi_functions
 

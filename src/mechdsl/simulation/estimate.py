@@ -100,8 +100,12 @@ def companion(problem, r):
         # at 1e-12 on a stiff pendulum: 40 s against 0.4 s).  The companion need not be the same
         # method, only 10x more accurate: the default path at the tighter tolerance is
         method = "auto"
-    # the outputs of the run (their recorder is built already and kept); compiled as the run ran
-    extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, compiled=bool(ran.get("compiled")))
+    # the outputs of the run (their recorder is built already and kept); compiled as the run ran,
+    # and a run in the stepping loop with the model interpreted (crk.engine_for: too large to
+    # compile) keeps that loop: compiled = false would step it in Python, at 2-3x the run's cost
+    # per evaluation (issue 24)
+    compiled = True if ran.get("compiled") else (None if r.metadata.get("loop_engine") == "interpreted" else False)
+    extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, compiled=compiled)
     if problem.kind == "ode":
         extra["points"] = points
     if problem.drive is not None and problem.kind != "ode":

@@ -390,10 +390,13 @@ SLICE = 0.05            # CPU seconds of one C call of a run: progress and Ctrl-
 YIELD = 11
 
 
-def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None) -> I.Run:
+def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
+                 payback=None) -> I.Run:
     """The run as C calls of SLICE seconds of CPU each in the calling thread (the state carried
     from call to call: the steps are those of one call), progress shown and Ctrl-C let through
-    between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run)."""
+    between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run).
+    ``payback`` (payback.Payback, an interpreted run): between calls, the compiled loop once the
+    interpreted evaluations have paid for its compile (the same bits: only the cost changes)."""
     grid = np.ascontiguousarray(grid, float)
     nx = x0.size
     X = np.empty((len(grid), nx))
@@ -423,12 +426,20 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
             if status != YIELD:
                 break
             progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
+            if payback is not None and loop.engine == "interpreted":
+                better = payback.check(int(rs.nfev))
+                if better is not None:          # the rest of the run in compiled code
+                    loop, args = better, (better.fun("ode"),) + args[1:]
     except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
         status, interrupted = CANCELLED, True
     reached = int(ctl[0])
     progress.update(float(grid[max(reached, 1) - 1]))
     raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
            "engine": loop.engine}
+    if payback is not None:
+        payback.record(int(stats[1]))
+        if payback.switched_at is not None and payback.switched_at >= 0:
+            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
     run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
     if interrupted:
         run.error = "interrupted (Ctrl-C)"
@@ -551,7 +562,8 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     why = (f"{ops} operations a right-hand side: compiled (at most {COMPILE_OPS}), cached on disk"
            if engine == "compiled" else
            f"{ops} operations a right-hand side: interpreted in C (above {COMPILE_OPS}, a first run would "
-           "spend seconds compiling; compiled = true compiles)")
+           "spend seconds compiling; compiled once its interpreted evaluations have paid for that, "
+           "the same bits; compiled = true compiles)")
     return method, why, info
 
 

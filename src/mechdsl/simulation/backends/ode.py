@@ -235,6 +235,14 @@ class OdeSetup:
             bar.close()
         if fixed is not None:
             meta["fixed_steps"] = fixed
+        engine = (run.stats or {}).get("engine")
+        if engine and meta.get("loop_engine") and engine != meta["loop_engine"]:     # payback.py
+            meta["loop_engine"] = engine
+            after = run.stats.get("compiled_after")
+            meta["notes"].append("the model, too large to compile up front, has been evaluated interpreted long "
+                                 "enough to pay for its compile: " + (f"compiled after {after} evaluations of this run"
+                                                                      if after else "compiled") +
+                                 " (the same bits as interpreted)")
         failure = None
         if run.interrupted:             # Ctrl-C: the rows reached are kept, nothing to diagnose
             failure = Failure(float(grid[max(run.reached, 1) - 1]), "interrupted", INTERRUPTED)

@@ -20,7 +20,7 @@ import numpy as np
 from ...eom.codegen import FastFunction
 from ...integrators import Run, casadi_counts, casadi_options, run_casadi, run_scipy
 from ..registry import spec
-from . import crk
+from . import crk, payback
 
 
 class IntegratorPlugin(abc.ABC):
@@ -82,8 +82,12 @@ class CrkPlugin(IntegratorPlugin):
         if extra:
             raise RuntimeError(f"{method} takes no integrator options (got {', '.join(sorted(extra))})")
         ode = crk.loop_ode(funcs)
-        loop, _ = crk.library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
-                              engine=getattr(funcs, "engine", None))
+        tag = getattr(getattr(funcs, "eom", None), "name", "model")
+        loop, _ = crk.library(ode, tag=tag, engine=getattr(funcs, "engine", None))
+        pay = None
+        if loop is not None and loop.engine == "interpreted":     # too large to compile up front
+            pay = payback.Payback(ode, tag)                       # ... until it has paid (payback.py)
+            loop = pay.compiled_now() or loop
         if loop is None:
             rhs = FastFunction(funcs["ode"]).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
             run = run_scipy(spec(crk.scipy_name(method)).plugin, rhs, None, grid, x0, rtol, atol, max_steps,
@@ -92,7 +96,7 @@ class CrkPlugin(IntegratorPlugin):
                          "n_reject": None, "fallback": "scipy"}
             return run
         return crk.run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress,
-                                drive=getattr(funcs, "drive", None))
+                                drive=getattr(funcs, "drive", None), payback=pay)
 
     def counts(self, method, raw):
         return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
