@@ -35,16 +35,30 @@ def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
     return R.record(eom, cols, t, X[:, :n], X[:, n:], pv, UT.T, using=(f,))
 
 
-def signal_recorder(eom, pv, out_names):
-    """``compute_signals`` of a model without inputs at the parameters ``pv`` as a function
-    (t, X) -> signals, its first integrals and columns looked up once (a setup keeps it for its
-    runs: the same numbers)."""
-    pv = np.array(pv, float)
+def _recorded_columns(eom, pv, out_names):
+    """(the first integrals' Function, the columns) a model without inputs records at ``pv``."""
     f, folded = _integral_search(eom, pv, np.zeros(0))
     cols = eom.workspace.memo(("model_columns", tuple(out_names), id(f), folded),
                               lambda: (f, R.model_columns(eom, out_names, f, folded)))[1]
+    return f, cols
+
+
+def recorder_function(eom, pv, out_names):
+    """The recorder's Function (record.py) of a model without inputs at ``pv``: the Function
+    ``signal_recorder`` evaluates (a setup compiles it beside the model's ode)."""
+    f, cols = _recorded_columns(eom, np.array(pv, float), out_names)
+    return R.recorder_function(eom, cols, using=(f,))
+
+
+def signal_recorder(eom, pv, out_names, mapper=None):
+    """``compute_signals`` of a model without inputs at the parameters ``pv`` as a function
+    (t, X) -> signals, its first integrals and columns looked up once (a setup keeps it for its
+    runs: the same numbers).  ``mapper``: (Function, its evaluator at many points) to use when
+    the recorder's Function is that one (compiled code of it: the same bits)."""
+    pv = np.array(pv, float)
+    f, cols = _recorded_columns(eom, pv, out_names)
     n = eom.n
-    evaluate = R.recorder(eom, cols, using=(f,))
+    evaluate = R.recorder(eom, cols, using=(f,), mapper=mapper)
 
     def rec(t, X):
         t = np.asarray(t, float).reshape(-1)

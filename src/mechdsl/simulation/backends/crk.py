@@ -216,10 +216,14 @@ class Mapped:
     the recorder evaluates on the output grid, without compiling and at about half the cost
     of CasADi's virtual machine."""
 
-    def __init__(self, rt, f):
-        self.rt, self.prog = rt, sxcode.program(f)
-        self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
-                       ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
+    def __init__(self, rt, f, loop=None, name=None):
+        if loop is not None:        # the compiled code of f in a loop's library (the same bits)
+            self.rt, self.prog, self._loop = rt, None, loop
+            self.fun = loop.funs[name]
+        else:
+            self.rt, self.prog = rt, sxcode.program(f)
+            self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
+                           ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
         self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.nout = f.nnz_out(0)
         sp = f.sparsity_out(0)      # the program writes the nonzeros: entries that are structurally 0 are not
@@ -249,6 +253,14 @@ class Mapped:
         return full
 
 
+def compiled_mapped(loop, name, f):
+    """A Mapped of the Function ``f`` compiled as ``name`` in the library of ``loop`` (a Loop
+    built with it, ``library(..., extra=...)``), or None when the loop does not have it."""
+    if loop is None or name not in loop.funs or loop.engine != "compiled":
+        return None
+    return Mapped(loop.rt, f, loop=loop, name=name)
+
+
 def mapped(f):
     """A Mapped of the SX Function ``f``, or None (no runtime library, an MX Function)."""
     rt, _ = runtime()
@@ -272,11 +284,18 @@ def rhs_seconds(loop, x, u, p, reps: int) -> float:
     return dt / reps
 
 
-def library(ode, tag: str = "model", engine: str | None = None):
+def library(ode, tag: str = "model", engine: str | None = None, extra: dict | None = None):
     """(Loop or None, note) for the model Function ``ode`` (its engine: ``engine_for`` unless
-    given); cached per Function and engine."""
+    given); cached per Function and engine.  ``extra``: more Functions (name -> SX Function)
+    compiled into the same library (one compile: a run's recorder, OdeSetup), part of the key."""
     engine = engine or engine_for(ode)
-    return cached_library((id(ode), engine), ode, {}, tag, engine)
+    if not extra:
+        return cached_library((id(ode), engine), ode, {}, tag, engine)
+    key = (id(ode), engine, *((n, id(f)) for n, f in sorted(extra.items())))
+    loop, note = cached_library(key, ode, extra, tag, engine)
+    if loop is not None:
+        loop._keep = [*loop._keep, *extra.values()]      # their ids stay theirs while the entry lives
+    return loop, note
 
 
 def cached_library(key, ode, extra: dict, tag, engine):
@@ -503,9 +522,10 @@ class LoopFunctions(dict):
     fallback) with the Function the loop integrates and its engine, decided once by the back
     end (``compiled = true`` compiles whatever the size)."""
 
-    def __init__(self, funcs, ode, engine, drive=None):
+    def __init__(self, funcs, ode, engine, drive=None, loop=None):
         super().__init__()
         self.funcs, self.loop_ode, self.engine = funcs, ode, engine
+        self.loop = loop            # the Loop built for them (None: looked up by ``library``)
         self.drive = drive if tables_in_loop(drive) else None      # tables read by the loop
         self.eom = getattr(funcs, "eom", None)
         self.notes = list(getattr(funcs, "notes", []))

@@ -82,8 +82,10 @@ class CrkPlugin(IntegratorPlugin):
         if extra:
             raise RuntimeError(f"{method} takes no integrator options (got {', '.join(sorted(extra))})")
         ode = crk.loop_ode(funcs)
-        loop, _ = crk.library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
-                              engine=getattr(funcs, "engine", None))
+        loop = getattr(funcs, "loop", None)      # the setup's (with its recorder compiled beside the ode)
+        if loop is None:
+            loop, _ = crk.library(ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
+                                  engine=getattr(funcs, "engine", None))
         if loop is None:
             rhs = FastFunction(funcs["ode"]).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
             run = run_scipy(spec(crk.scipy_name(method)).plugin, rhs, None, grid, x0, rtol, atol, max_steps,
