@@ -60,11 +60,18 @@ def signal_recorder(eom, pv, out_names, mapper=None):
     n = eom.n
     evaluate = R.recorder(eom, cols, using=(f,), mapper=mapper)
 
+    names = R.recorder_names(eom, cols, using=(f,))
+    fast = mapper[1] if mapper is not None and mapper[0] is R.recorder_function(eom, cols, using=(f,)) else None
+
     def rec(t, X):
         t = np.asarray(t, float).reshape(-1)
         if not len(t):
             return {}
         X = np.asarray(X, float).reshape(len(t), 2 * n)
+        vals = fast.states(t, X, n, pv) if fast is not None and names else None
+        if vals is not None:      # the compiled recorder reading the states in place (the same values)
+            vals = vals.T
+            return {k: vals[i] for i, k in enumerate(names)}
         return evaluate(t, X[:, :n], X[:, n:], pv, np.zeros((len(t), 0)))
     return rec
 

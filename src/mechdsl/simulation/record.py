@@ -71,6 +71,11 @@ def recorder_function(eom, columns: dict, using=()):
     return _function(eom, columns, tuple(using), True)[1]
 
 
+def recorder_names(eom, columns: dict, using=()) -> list:
+    """The signal names of ``recorder(eom, columns, using)``, in the order of its Function's rows."""
+    return _function(eom, columns, tuple(using), True)[0]
+
+
 def _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM) -> dict[str, np.ndarray]:
     t = np.asarray(t, float).reshape(-1)
     N = len(t)

@@ -229,6 +229,38 @@ class Mapped:
         sp = f.sparsity_out(0)      # the program writes the nonzeros: entries that are structurally 0 are not
         self.dense = sp.numel()
         self.where = None if sp.is_dense() else np.array(sp.find(), dtype=np.int64)
+        self._by_address = None     # crk_map with every pointer an address (states())
+        self._kept_strides = {}
+
+    def states(self, t, X, n: int, p):
+        """The recorder's Function (t, q, qd, u, p, lam) at the rows of the trajectory X (npts, 2n,
+        C order, float): q and qd read in place (strides of 2n), no u and no multipliers (a
+        model without inputs or constraints), p shared.  The values of ``__call__`` on the same
+        rows (one evaluation per row of the same code), as (npts, entries); None when the
+        Function does not have that shape (the caller then uses ``__call__``)."""
+        npts = len(t)
+        if (self.where is not None or len(self.nnz_in) != 6 or self.nnz_in[1] != n or self.nnz_in[2] != n
+                or self.nnz_in[3] or self.nnz_in[5] or self.nnz_in[0] != 1 or p.size != self.nnz_in[4]
+                or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
+                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
+                or p.dtype != np.float64 or npts == 0):
+            return None
+        if self._by_address is None:
+            fn = self.rt["crk_map"]          # a function pointer of its own: its argument types are these
+            fn.restype, fn.argtypes = ctypes.c_int, [_VP, ctypes.c_longlong, ctypes.c_longlong, _VP, _VP, _VP,
+                                                     ctypes.c_longlong]
+            self._by_address = (fn, ctypes.addressof(self.fun))
+        fn, fun = self._by_address
+        st = self._kept_strides.get(n)
+        if st is None:
+            st = self._kept_strides[n] = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
+        out = np.empty((npts, max(self.nout, 1)))
+        x = X.ctypes.data
+        ptrs = (_VP * 6)(t.ctypes.data, x, x + 8 * n, None, p.ctypes.data if p.size else None, None)
+        status = fn(fun, npts, 6, ctypes.addressof(ptrs), ctypes.addressof(st), out.ctypes.data, out.shape[1])
+        if status:
+            raise RuntimeError(f"evaluation failed (status {status})")
+        return out[:, :self.nout]
 
     def __call__(self, npts: int, rows) -> np.ndarray:
         """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its
