@@ -12,7 +12,7 @@ import numpy as np
 from .. import analysis  # its face: the first-integral search is imported when a run first searches
 from ..eom import fold_inputs, integralcache
 from . import record as R
-from .accuracy import energy_drift
+from .accuracy import drift_of, energy_drift, note_facts
 
 
 def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
@@ -70,8 +70,10 @@ def signal_recorder(eom, pv, out_names, mapper=None):
         X = np.asarray(X, float).reshape(len(t), 2 * n)
         vals = fast.states(t, X, n, pv) if fast is not None and names else None
         if vals is not None:      # the compiled recorder reading the states in place (the same values)
-            vals = vals.T
-            return {k: vals[i] for i, k in enumerate(names)}
+            vals = np.ascontiguousarray(vals.T)      # each signal contiguous
+            rows = [vals[i] for i in range(len(names))]
+            note_facts(vals, rows)                    # drift and finiteness of all of them in one pass
+            return dict(zip(names, rows))
         return evaluate(t, X[:, :n], X[:, n:], pv, np.zeros((len(t), 0)))
     return rec
 
@@ -147,9 +149,9 @@ def integral_drift(signals, eom) -> dict:
         fs = [v.workspace.first_integrals() for v in eom.workspace.folded_variants()]
     out = {}
     for name in [n for f in fs if f is not None for n in f.name_out()]:
-        v = signals.get(name)
-        if v is not None and len(v) and np.isfinite(v).all():
-            out[name] = float(np.abs(v - v[0]).max())
+        d = drift_of(signals.get(name))
+        if d is not None:
+            out[name] = d
     return {"first_integral_drift": out} if out else {}
 
 

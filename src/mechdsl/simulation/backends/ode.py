@@ -18,7 +18,7 @@ import numpy as np
 
 from ... import integrators as I
 from ...diagnostics import UsageError, did_you_mean
-from ...eom import parameter_vector, sxcode
+from ...eom import codegen, parameter_vector, sxcode
 from ...eom.codegen import casadi_functions
 from ...eom.start import start_vector
 from ...output.result import INTERRUPTED, Failure, Result
@@ -30,6 +30,7 @@ from ..record import ENERGY_NAMES
 from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
+from . import crk
 from . import plugins as P
 from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, scipy_name
 
@@ -364,9 +365,6 @@ def setup_environment() -> tuple:
     """What a setup depends on besides its equations and settings: whether there is a C
     compiler, the compile threshold and the loop's method rule (crk), and the caches its
     Functions and compiled loop came from (a new cache, e.g. emptied by a test, builds anew)."""
-    from ...eom import codegen
-    from . import crk
-
     return (compiler(), crk.COMPILE_OPS, crk.DOPRI5_RTOL, id(crk._LIBS), id(crk._RUNTIME), id(codegen._SETS),
             crk.library, codegen.compile_functions, codegen.find_compiler)
 
