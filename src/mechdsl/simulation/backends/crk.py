@@ -437,12 +437,12 @@ def loop_drive(drive, t0, t1, u0):
     return _Drive(len(sigs), tabs, _ptr(u0), _ptr(u), br.size, _ptr(br), 0), keep
 
 
-SLICE = 0.05            # CPU seconds of one C call of a run: progress and Ctrl-C between calls
+SLICE = 0.05            # seconds (monotonic clock) of one C call of a run: progress and Ctrl-C between calls
 YIELD = 11
 
 
 def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None) -> I.Run:
-    """The run as C calls of SLICE seconds of CPU each in the calling thread (the state carried
+    """The run as C calls of SLICE seconds each in the calling thread (the state carried
     from call to call: the steps are those of one call), progress shown and Ctrl-C let through
     between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run)."""
     grid = np.ascontiguousarray(grid, float)
