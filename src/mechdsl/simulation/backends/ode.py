@@ -259,7 +259,7 @@ class OdeSetup:
         eom, s, drive, funcs = self.eom, self.settings, self.drive, self.funcs
         method, max_steps, extra, out_names = self.method, self.max_steps, self.extra, self.out_names
         names = self._names()
-        U = drive.values(t, X)
+        U = drive.values(t, X) if drive.names else np.zeros((len(t), 0))     # (no inputs: nothing to look up)
         if eom.inputs:
             signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
         else:                         # no inputs: the recorder of these parameter values, kept
@@ -301,9 +301,17 @@ class OdeSetup:
         return self._named
 
 
+_LEAVES = frozenset((str, int, float, bool, type(None)))       # kept as they are, without a call
+
+
 def plain_copy(v):
     """A deep copy of plain data (dicts, lists, strings, numbers; anything else deep-copied):
-    a setup's metadata for one run, at a third of copy.deepcopy's cost."""
+    a setup's metadata for one run, at a third of copy.deepcopy's cost (leaves of the plain
+    types are taken without a call each)."""
+    if type(v) is dict:
+        return {k: x if type(x) in _LEAVES else plain_copy(x) for k, x in v.items()}
+    if type(v) is list:
+        return [x if type(x) in _LEAVES else plain_copy(x) for x in v]
     if isinstance(v, dict):
         return {k: plain_copy(x) for k, x in v.items()}
     if isinstance(v, list):
