@@ -192,8 +192,11 @@ def build_loop(funcs: dict, tag: str, engine: str):
     mine = {n: f for n, f in funcs.items() if sxcode.supported(f)}
     theirs = [f for n, f in funcs.items() if n not in mine]
     try:
+        # sxcode's sources in one translation unit (their helpers are guarded, their names
+        # prefixed): one gcc process for the ode and its recorder instead of one each
+        units = tuple(sxcode.c_source(f, n) for n, f in mine.items())
         loaded, note, path = compile_functions(theirs, tag=tag, jacobian=False,
-                                               extra_units=tuple(sxcode.c_source(f, n) for n, f in mine.items()),
+                                               extra_units=("\n".join(units),) if units else (),
                                                extra_flags=MODEL_FLAGS)
     except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
         return None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})"
