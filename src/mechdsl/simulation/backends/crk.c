@@ -88,7 +88,7 @@ typedef struct {
    one; clock() (process CPU time) costs about 1.3 us a call on Linux, which a small model's
    run paid some twenty times (every 16 steps) -- a tenth of its loop's overhead. */
 static double slice_clock(void) {
-#if defined(CLOCK_MONOTONIC)
+#if defined(CLOCK_MONOTONIC) && !defined(_WIN32)
   struct timespec ts;
   if (clock_gettime(CLOCK_MONOTONIC, &ts) == 0) return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 #endif

@@ -327,10 +327,7 @@ def library(ode, tag: str = "model", engine: str | None = None, extra: dict | No
     if not extra:
         return cached_library((id(ode), engine), ode, {}, tag, engine)
     key = (id(ode), engine, *((n, id(f)) for n, f in sorted(extra.items())))
-    loop, note = cached_library(key, ode, extra, tag, engine)
-    if loop is not None:
-        loop._keep = [*loop._keep, *extra.values()]      # their ids stay theirs while the entry lives
-    return loop, note
+    return cached_library(key, ode, extra, tag, engine)
 
 
 def cached_library(key, ode, extra: dict, tag, engine):
@@ -347,7 +344,7 @@ def cached_library(key, ode, extra: dict, tag, engine):
     with _LOCK:
         if len(_LIBS) >= 16:
             _LIBS.pop(next(iter(_LIBS)))
-        _LIBS[key] = (ode, loop, note)
+        _LIBS[key] = (ode, loop, note, tuple(extra.values()))     # (the extra Functions' ids stay theirs)
     return loop, note
 
 
