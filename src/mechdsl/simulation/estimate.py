@@ -123,7 +123,7 @@ def estimate(r, problem, solve, given=None) -> None:
         other, factor, how = given
         acc["error_estimate_method"] = how
     else:
-        tight, factor, how = companion(problem, r)
+        tight, factor, how = _kept_companion(problem, r)
         acc["error_estimate_method"] = how
         if tight is None:
             acc.update(error_estimate=None, error_estimate_unavailable=how)
@@ -179,13 +179,59 @@ def estimate(r, problem, solve, given=None) -> None:
                                       f"({other.failure.cause}): the estimate covers the times before")
 
 
+_PLANS: dict = {}        # id(settings) -> (settings, key, companion(...), its OdeSetup, environment, start)
+PLANS_KEPT = 16
+
+
+def _plain_ode(problem) -> bool:
+    """An ODE problem whose companion runs as its trajectory alone (``_companion_run``)."""
+    return problem.kind == "ode" and problem.drive is None and problem.step_eom is None
+
+
+def _kept_companion(problem, r):
+    """``companion(problem, r)``, kept for the next run of the same (frozen) settings object with
+    the same output times, method and engine (a warm Model.simulate): the same settings object
+    each time, so its setup is found without hashing the settings again."""
+    if not _plain_ode(problem):
+        return companion(problem, r)
+    s = problem.settings
+    ran = r.metadata.get("run") or {}
+    key = (len(r.t), ran.get("method"), bool(ran.get("compiled")), id(problem.eom))
+    hit = _PLANS.get(id(s))
+    if hit is not None and hit[0] is s and hit[1] == key:
+        return hit[2]
+    plan = companion(problem, r)
+    if len(_PLANS) >= PLANS_KEPT:
+        _PLANS.pop(next(iter(_PLANS)))
+    _PLANS[id(s)] = [s, key, plan, None, None, None, problem.eom]
+    return plan
+
+
+def _kept_states(problem, tight):
+    """The companion's trajectory (OdeSetup.states) with its setup and start values looked up
+    once per kept plan (the environment checked on every run, as kept_setup checks it)."""
+    from .backends.ode import setup_environment
+
+    hit = _PLANS.get(id(problem.settings))
+    env = setup_environment()
+    if hit is None or hit[2][0] is not tight or hit[6] is not problem.eom:
+        hit = None
+    elif hit[3] is not None and hit[4] == env:
+        pv, xs = hit[5]
+        return hit[3].states(pv.copy(), xs.copy())
+    setup = kept_setup(problem.eom, tight, lambda: prepare(formulate(problem.eom, tight.validated())).setup)
+    start = setup.start_of(tight)
+    if hit is not None:
+        hit[3], hit[4], hit[5] = setup, env, (start[0].copy(), start[1].copy())
+    return setup.states(*start)
+
+
 def _companion_run(problem, tight, solve):
     """The companion run of ``problem`` with the settings ``tight``: an ODE problem's as its
     trajectory alone (OdeSetup.states: no signals recorded, no Result built; its setup kept
     for the next run of the same settings, backends/ode.kept_setup), others through ``solve``."""
-    if problem.kind == "ode" and problem.drive is None and problem.step_eom is None:
-        setup = kept_setup(problem.eom, tight, lambda: prepare(formulate(problem.eom, tight.validated())).setup)
-        other = setup.states(*setup.start_of(tight))
+    if _plain_ode(problem):
+        other = _kept_states(problem, tight)
         if other.failure is not None and other.failure.cause == "interrupted":
             raise KeyboardInterrupt           # as solve raises RunInterrupted for a run Ctrl-C stopped
         return other

@@ -12,7 +12,7 @@ import numpy as np
 from .. import analysis  # its face: the first-integral search is imported when a run first searches
 from ..eom import fold_inputs, integralcache
 from . import record as R
-from .accuracy import energy_drift
+from .accuracy import drift_of, energy_drift, note_facts
 
 
 def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
@@ -35,22 +35,45 @@ def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
     return R.record(eom, cols, t, X[:, :n], X[:, n:], pv, UT.T, using=(f,))
 
 
-def signal_recorder(eom, pv, out_names):
-    """``compute_signals`` of a model without inputs at the parameters ``pv`` as a function
-    (t, X) -> signals, its first integrals and columns looked up once (a setup keeps it for its
-    runs: the same numbers)."""
-    pv = np.array(pv, float)
+def _recorded_columns(eom, pv, out_names):
+    """(the first integrals' Function, the columns) a model without inputs records at ``pv``."""
     f, folded = _integral_search(eom, pv, np.zeros(0))
     cols = eom.workspace.memo(("model_columns", tuple(out_names), id(f), folded),
                               lambda: (f, R.model_columns(eom, out_names, f, folded)))[1]
+    return f, cols
+
+
+def recorder_function(eom, pv, out_names):
+    """The recorder's Function (record.py) of a model without inputs at ``pv``: the Function
+    ``signal_recorder`` evaluates (a setup compiles it beside the model's ode)."""
+    f, cols = _recorded_columns(eom, np.array(pv, float), out_names)
+    return R.recorder_function(eom, cols, using=(f,))
+
+
+def signal_recorder(eom, pv, out_names, mapper=None):
+    """``compute_signals`` of a model without inputs at the parameters ``pv`` as a function
+    (t, X) -> signals, its first integrals and columns looked up once (a setup keeps it for its
+    runs: the same numbers).  ``mapper``: (Function, its evaluator at many points) to use when
+    the recorder's Function is that one (compiled code of it: the same bits)."""
+    pv = np.array(pv, float)
+    f, cols = _recorded_columns(eom, pv, out_names)
     n = eom.n
-    evaluate = R.recorder(eom, cols, using=(f,))
+    evaluate = R.recorder(eom, cols, using=(f,), mapper=mapper)
+
+    names = R.recorder_names(eom, cols, using=(f,))
+    fast = mapper[1] if mapper is not None and mapper[0] is R.recorder_function(eom, cols, using=(f,)) else None
 
     def rec(t, X):
         t = np.asarray(t, float).reshape(-1)
         if not len(t):
             return {}
         X = np.asarray(X, float).reshape(len(t), 2 * n)
+        vals = fast.states(t, X, n, pv) if fast is not None and names else None
+        if vals is not None:      # the compiled recorder reading the states in place (the same values)
+            vals = np.ascontiguousarray(vals.T)      # each signal contiguous
+            rows = [vals[i] for i in range(len(names))]
+            note_facts(vals, rows)                    # drift and finiteness of all of them in one pass
+            return dict(zip(names, rows))
         return evaluate(t, X[:, :n], X[:, n:], pv, np.zeros((len(t), 0)))
     return rec
 
@@ -126,9 +149,9 @@ def integral_drift(signals, eom) -> dict:
         fs = [v.workspace.first_integrals() for v in eom.workspace.folded_variants()]
     out = {}
     for name in [n for f in fs if f is not None for n in f.name_out()]:
-        v = signals.get(name)
-        if v is not None and len(v) and np.isfinite(v).all():
-            out[name] = float(np.abs(v - v[0]).max())
+        d = drift_of(signals.get(name))
+        if d is not None:
+            out[name] = d
     return {"first_integral_drift": out} if out else {}
 
 

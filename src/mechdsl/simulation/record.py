@@ -54,12 +54,26 @@ def record(eom, columns: dict, t, Q, QD, p, U=None, LAM=None, using=(), keep: bo
                      t, Q, QD, p, U, LAM)
 
 
-def recorder(eom, columns: dict, using=()):
+def recorder(eom, columns: dict, using=(), mapper=None):
     """``record`` of these columns as a function (t, Q, QD, p, U=None, LAM=None) -> signals, its
-    Function looked up once (a run's setup keeps it: the same numbers, without the look-up)."""
+    Function looked up once (a run's setup keeps it: the same numbers, without the look-up).
+    ``mapper``: (Function, evaluator at many points like crk.Mapped) used when the columns'
+    Function is that one (its compiled code, crk.compiled_mapped: the same bits)."""
     names, F, maps = _function(eom, columns, tuple(using), True)
     sizes = (eom.n, len(eom.inputs), lam_symbol(eom).numel(), eom.input_defaults)
+    if mapper is not None and mapper[0] is F and mapper[1] is not None:
+        maps = {"interpreted": mapper[1]}         # this recorder's own: the shared maps stay as they are
     return lambda t, Q, QD, p, U=None, LAM=None: _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM)
+
+
+def recorder_function(eom, columns: dict, using=()):
+    """The Function ``recorder(eom, columns, using)`` evaluates."""
+    return _function(eom, columns, tuple(using), True)[1]
+
+
+def recorder_names(eom, columns: dict, using=()) -> list:
+    """The signal names of ``recorder(eom, columns, using)``, in the order of its Function's rows."""
+    return _function(eom, columns, tuple(using), True)[0]
 
 
 def _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM) -> dict[str, np.ndarray]:

@@ -128,7 +128,7 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
                    "compiled": _ran_compiled(meta, r.stats),
                    "settings": plain_copy(plain)}
     eom = problem.eom
-    notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
+    notes = _friction(eom, s)
     if notes:
         meta["friction"] = notes          # regularized laws and their regularization (issue 17)
     renamed = [c for c in (eom.model.constraints if getattr(eom, "model", None) is not None else ())
@@ -173,6 +173,22 @@ def _settings_facts(back, s) -> tuple[list, dict]:
         _FACTS.pop(next(iter(_FACTS)))
     _FACTS[id(s)] = (s, back, facts)
     return facts
+
+
+_FRICTION: dict = {}     # id(settings) -> (settings, eom, notes): the same for every run of a kept problem
+
+
+def _friction(eom, s) -> list:
+    """friction_notes of ``eom`` at the settings' parameter values, worked out once per settings
+    object and equations (a fresh list each run)."""
+    hit = _FRICTION.get(id(s))
+    if hit is not None and hit[0] is s and hit[1] is eom:
+        return list(hit[2])
+    notes = friction_notes(getattr(eom, "model", None), dict(zip(eom.params, parameter_vector(eom, s.p))))
+    if len(_FRICTION) >= 16:
+        _FRICTION.pop(next(iter(_FRICTION)))
+    _FRICTION[id(s)] = (s, eom, tuple(notes))
+    return list(notes)
 
 
 def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:

@@ -77,12 +77,23 @@ enum { CRK_OK = 0, CRK_MAX_STEPS = 1, CRK_HMIN = 2, CRK_TOO_SMALL = 3, CRK_NONFI
    would: the caller (Python) shows progress and lets Ctrl-C through between slices, in its
    own thread.  y and f (nx each) are the caller's. */
 typedef struct {
-  double slice;
+  double slice;         /* seconds of the monotonic clock a call runs before it yields */
   int started;
   double t, h_abs;
   cint k, steps, rejected, steps_here, nfev;
   double *y, *f;
 } Resume;
+
+/* The clock of a slice: the monotonic clock (clock_gettime, about 50 ns a call), where there is
+   one; clock() (process CPU time) costs about 1.3 us a call on Linux, which a small model's
+   run paid some twenty times (every 16 steps) -- a tenth of its loop's overhead. */
+static double slice_clock(void) {
+#if defined(CLOCK_MONOTONIC) && !defined(_WIN32)
+  struct timespec ts;
+  if (clock_gettime(CLOCK_MONOTONIC, &ts) == 0) return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+  return (double)clock() / CLOCKS_PER_SEC;
+}
 
 static const double P5_A[6 * 5] = {
     0.0, 0.0, 0.0,
@@ -332,7 +343,22 @@ typedef struct {
   const double *A; int lda;
   const double *B, *C;
   int err_order;        /* order of the error estimator */
+  /* the stages that take part in each row (row s of A: j < s with A[s][j] != 0; row 16: B),
+     filled by tableau_pattern: combine walks these lists instead of testing every entry
+     (DOP853's tableau is two-thirds zeros; a test per entry mispredicts) */
+  unsigned char cnt[17], nz[17][16];
 } Tableau;
+
+#define B_ROW 16
+
+static void tableau_pattern(Tableau *t, int rows) {
+  for (int s = 0; s <= B_ROW; s++) {
+    const double *a = s == B_ROW ? t->B : t->A + (cint)s * t->lda;
+    int upto = s == B_ROW ? t->stages : (s < rows ? s : 0), c = 0;
+    for (int j = 0; j < upto; j++) if (a[j] != 0.0) t->nz[s][c++] = (unsigned char)j;
+    t->cnt[s] = (unsigned char)c;
+  }
+}
 
 static double rms(const double *v, const double *scale, cint n) {
   double s = 0.0;
@@ -340,21 +366,22 @@ static double rms(const double *v, const double *scale, cint n) {
   return sqrt(s / (double)n);
 }
 
-/* y + h * sum_{j<s} a[j] K_j into out (scipy: dy = (K[:s].T @ a[:s]) * h) */
-/* Row by row over the stages that take part (DOP853's tableau is two-thirds zeros), each a
-   contiguous sweep over the states: the sums per state in the same order as before. */
-static void combine(const double *y, const double *K, const double *a, int s, double h, cint n, double *out) {
-  double *acc = out;
-  int first = 1;
-  for (int j = 0; j < s; j++) {
-    const double aj = a[j];
-    if (aj == 0.0) continue;
-    const double *Kj = K + (cint)j * n;
-    if (first) { for (cint i = 0; i < n; i++) acc[i] = Kj[i] * aj; first = 0; }
-    else for (cint i = 0; i < n; i++) acc[i] += Kj[i] * aj;
+/* y + h * sum_{j<s} a[j] K_j into out (scipy: dy = (K[:s].T @ a[:s]) * h), over the stages
+   of row `row` of the tableau that take part (entries that are 0 add nothing): per state the
+   products summed in stage order, then times h and added to y (the same bits as the sum over
+   every stage) */
+static void combine(const double *y, const double *K, const Tableau *tab, int row, double h, cint n, double *out) {
+  const double *a = row == B_ROW ? tab->B : tab->A + (cint)row * tab->lda;
+  const unsigned char *nz = tab->nz[row];
+  const int c = tab->cnt[row];
+  if (c == 0) { for (cint i = 0; i < n; i++) out[i] = y[i] + 0.0 * h; return; }
+  const double a0 = a[nz[0]];
+  const double *K0 = K + (cint)nz[0] * n;
+  for (cint i = 0; i < n; i++) {
+    double acc = K0[i] * a0;
+    for (int q = 1; q < c; q++) acc += K[(cint)nz[q] * n + i] * a[nz[q]];
+    out[i] = y[i] + acc * h;
   }
-  if (first) for (cint i = 0; i < n; i++) acc[i] = 0.0;
-  for (cint i = 0; i < n; i++) out[i] = y[i] + acc[i] * h;
 }
 
 static double error_norm(int method, const double *K, double h, const double *scale, cint n) {
@@ -390,8 +417,8 @@ static void dense_eval(const Dense *d, double tt, double *out) {
   const cint n = d->n;
   const double *K = d->K, *F = d->F, *yold = d->yold;
   double x = (tt - d->t_old) / d->h;
-  for (cint i = 0; i < n; i++) {
-    if (d->method == 0) {   /* y_old + h * sum_m (K^T P)_im x^(m+1) */
+  if (d->method == 0) {     /* y_old + h * sum_m (K^T P)_im x^(m+1) */
+    for (cint i = 0; i < n; i++) {
       double acc = 0.0, xp = 1.0;
       for (int m = 0; m < 4; m++) {
         double q = 0.0;
@@ -400,14 +427,17 @@ static void dense_eval(const Dense *d, double tt, double *out) {
         acc += q * xp;
       }
       out[i] = yold[i] + d->h * acc;
-    } else {                /* scipy's Dop853DenseOutput: alternate factors x and 1 - x */
-      double acc = 0.0;
-      for (int m = 6; m >= 0; m--) {
-        acc += F[m * n + i];
-        acc *= ((6 - m) % 2 == 0) ? x : 1.0 - x;
-      }
-      out[i] = acc + yold[i];
     }
+    return;
+  }
+  const double x1 = 1.0 - x;  /* scipy's Dop853DenseOutput: alternate factors x and 1 - x */
+  for (cint i = 0; i < n; i++) {
+    double acc = 0.0;
+    for (int m = 6; m >= 0; m--) {
+      acc += F[m * n + i];
+      acc *= ((6 - m) % 2 == 0) ? x : x1;
+    }
+    out[i] = acc + yold[i];
   }
 }
 
@@ -596,7 +626,7 @@ static int impact_in_c(Events *e, double t, const double *x, const double *xdot,
 static int dense_coefficients(Rhs *r, const Tableau *tab, double *K, double *F, const double *y,
                               const double *yold, const double *f, double *tmp, double h, double t_old, cint n) {
   for (int s = tab->stages + 1; s < tab->extended; s++) {
-    combine(yold, K, tab->A + (cint)s * tab->lda, s, h, n, tmp);
+    combine(yold, K, tab, s, h, n, tmp);
     if (rhs(r, t_old + tab->C[s] * h, tmp, K + (cint)s * n)) return 1;
   }
   for (cint i = 0; i < n; i++) {
@@ -604,9 +634,10 @@ static int dense_coefficients(Rhs *r, const Tableau *tab, double *K, double *F, 
     F[i] = dy;
     F[n + i] = h * K[i] - dy;
     F[2 * n + i] = 2 * dy - h * (f[i] + K[i]);
-    for (int m = 0; m < 4; m++) {
+    for (int m = 0; m < 4; m++) {     /* P8_D's zeros (stages 1-4) add nothing: skipped */
       double d = 0.0;
-      for (int j = 0; j < 16; j++) d += P8_D[m * 16 + j] * K[(cint)j * n + i];
+      d += P8_D[m * 16] * K[i];
+      for (int j = 5; j < 16; j++) d += P8_D[m * 16 + j] * K[(cint)j * n + i];
       F[(3 + m) * n + i] = h * d;
     }
   }
@@ -651,8 +682,8 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
             Drive *drv, double *h_io, double t_limit, const double *f0, double *dense) {
   int *flags = NULL;
   Tableau tab;
-  if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4}; tab = t; }
-  else if (method == 1) { Tableau t = {12, 16, P8_A, 16, P8_B, P8_C, 7}; tab = t; }
+  if (method == 0) { Tableau t = {6, 7, P5_A, 5, P5_B, P5_C, 4, {0}, {{0}}}; tab = t; tableau_pattern(&tab, 6); }
+  else if (method == 1) { Tableau t = {12, 16, P8_A, 16, P8_B, P8_C, 7, {0}, {{0}}}; tab = t; tableau_pattern(&tab, 16); }
   else return CRK_BAD_METHOD;
   const cint n = nx;
   const int S = tab.stages;
@@ -677,8 +708,8 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
   const double expo = -1.0 / (tab.err_order + 1.0);
   double e_start = INFINITY;      /* the event function at the current step's start */
   double h_abs = 0.0, h_keep = 0.0;    /* h_keep: the step proposed for a next call (h_io) */
-  clock_t deadline = 0;
-  if (rs && rs->slice > 0) deadline = clock() + (clock_t)(rs->slice * CLOCKS_PER_SEC);
+  double deadline = 0.0;
+  if (rs && rs->slice > 0) deadline = slice_clock() + rs->slice;
   if (rs && rs->started) {        /* go on where the last slice stopped */
     t = rs->t; h_abs = rs->h_abs; k = rs->k; steps = rs->steps; rejected = rs->rejected;
     steps_here = rs->steps_here; r.nfev = rs->nfev;
@@ -730,10 +761,10 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       h_abs = fabs(h);
       memcpy(K, f, (size_t)n * sizeof(double));
       for (int s = 1; s < S; s++) {
-        combine(y, K, tab.A + (cint)s * tab.lda, s, h, n, tmp);
+        combine(y, K, &tab, s, h, n, tmp);
         if (rhs(&r, t + tab.C[s] * h, tmp, K + (cint)s * n)) { status = CRK_RHS_ERROR; goto done; }
       }
-      combine(y, K, tab.B, S, h, n, ynew);
+      combine(y, K, &tab, B_ROW, h, n, ynew);
       if (rhs(&r, t + h, ynew, K + (cint)S * n)) { status = CRK_RHS_ERROR; goto done; }
       for (cint i = 0; i < n; i++) scale[i] = atol + fmax(fabs(y[i]), fabs(ynew[i])) * rtol;
       double en = error_norm(method, K, h, scale, n);
@@ -815,7 +846,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
       continue;
     }
     if (steps_here >= max_steps) { status = CRK_MAX_STEPS; break; }
-    if (deadline && (steps & 15) == 0 && k < ngrid && clock() >= deadline) {
+    if (deadline > 0.0 && (steps & 15) == 0 && k < ngrid && slice_clock() >= deadline) {
       rs->t = t; rs->h_abs = h_abs; rs->k = k; rs->steps = steps; rs->rejected = rejected;
       rs->steps_here = steps_here; rs->nfev = r.nfev; rs->started = 1;
       memcpy(rs->y, y, (size_t)n * sizeof(double));

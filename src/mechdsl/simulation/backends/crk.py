@@ -192,8 +192,11 @@ def build_loop(funcs: dict, tag: str, engine: str):
     mine = {n: f for n, f in funcs.items() if sxcode.supported(f)}
     theirs = [f for n, f in funcs.items() if n not in mine]
     try:
+        # sxcode's sources in one translation unit (their helpers are guarded, their names
+        # prefixed): one gcc process for the ode and its recorder instead of one each
+        units = tuple(sxcode.c_source(f, n) for n, f in mine.items())
         loaded, note, path = compile_functions(theirs, tag=tag, jacobian=False,
-                                               extra_units=tuple(sxcode.c_source(f, n) for n, f in mine.items()),
+                                               extra_units=("\n".join(units),) if units else (),
                                                extra_flags=MODEL_FLAGS)
     except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
         return None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})"
@@ -216,15 +219,51 @@ class Mapped:
     the recorder evaluates on the output grid, without compiling and at about half the cost
     of CasADi's virtual machine."""
 
-    def __init__(self, rt, f):
-        self.rt, self.prog = rt, sxcode.program(f)
-        self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
-                       ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
+    def __init__(self, rt, f, loop=None, name=None):
+        if loop is not None:        # the compiled code of f in a loop's library (the same bits)
+            self.rt, self.prog, self._loop = rt, None, loop
+            self.fun = loop.funs[name]
+        else:
+            self.rt, self.prog = rt, sxcode.program(f)
+            self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
+                           ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
         self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.nout = f.nnz_out(0)
         sp = f.sparsity_out(0)      # the program writes the nonzeros: entries that are structurally 0 are not
         self.dense = sp.numel()
         self.where = None if sp.is_dense() else np.array(sp.find(), dtype=np.int64)
+        self._by_address = None     # crk_map with every pointer an address (states())
+        self._kept_strides = {}
+
+    def states(self, t, X, n: int, p):
+        """The recorder's Function (t, q, qd, u, p, lam) at the rows of the trajectory X (npts, 2n,
+        C order, float): q and qd read in place (strides of 2n), no u and no multipliers (a
+        model without inputs or constraints), p shared.  The values of ``__call__`` on the same
+        rows (one evaluation per row of the same code), as (npts, entries); None when the
+        Function does not have that shape (the caller then uses ``__call__``)."""
+        npts = len(t)
+        if (self.where is not None or len(self.nnz_in) != 6 or self.nnz_in[1] != n or self.nnz_in[2] != n
+                or self.nnz_in[3] or self.nnz_in[5] or self.nnz_in[0] != 1 or p.size != self.nnz_in[4]
+                or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
+                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
+                or p.dtype != np.float64 or npts == 0):
+            return None
+        if self._by_address is None:
+            fn = self.rt["crk_map"]          # a function pointer of its own: its argument types are these
+            fn.restype, fn.argtypes = ctypes.c_int, [_VP, ctypes.c_longlong, ctypes.c_longlong, _VP, _VP, _VP,
+                                                     ctypes.c_longlong]
+            self._by_address = (fn, ctypes.addressof(self.fun))
+        fn, fun = self._by_address
+        st = self._kept_strides.get(n)
+        if st is None:
+            st = self._kept_strides[n] = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
+        out = np.empty((npts, max(self.nout, 1)))
+        x = X.ctypes.data
+        ptrs = (_VP * 6)(t.ctypes.data, x, x + 8 * n, None, p.ctypes.data if p.size else None, None)
+        status = fn(fun, npts, 6, ctypes.addressof(ptrs), ctypes.addressof(st), out.ctypes.data, out.shape[1])
+        if status:
+            raise RuntimeError(f"evaluation failed (status {status})")
+        return out[:, :self.nout]
 
     def __call__(self, npts: int, rows) -> np.ndarray:
         """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its
@@ -247,6 +286,14 @@ class Mapped:
         full = np.zeros((npts, self.dense))
         full[:, self.where] = out[:, :self.nout]
         return full
+
+
+def compiled_mapped(loop, name, f):
+    """A Mapped of the Function ``f`` compiled as ``name`` in the library of ``loop`` (a Loop
+    built with it, ``library(..., extra=...)``), or None when the loop does not have it."""
+    if loop is None or name not in loop.funs or loop.engine != "compiled":
+        return None
+    return Mapped(loop.rt, f, loop=loop, name=name)
 
 
 def mapped(f):
@@ -272,11 +319,15 @@ def rhs_seconds(loop, x, u, p, reps: int) -> float:
     return dt / reps
 
 
-def library(ode, tag: str = "model", engine: str | None = None):
+def library(ode, tag: str = "model", engine: str | None = None, extra: dict | None = None):
     """(Loop or None, note) for the model Function ``ode`` (its engine: ``engine_for`` unless
-    given); cached per Function and engine."""
+    given); cached per Function and engine.  ``extra``: more Functions (name -> SX Function)
+    compiled into the same library (one compile: a run's recorder, OdeSetup), part of the key."""
     engine = engine or engine_for(ode)
-    return cached_library((id(ode), engine), ode, {}, tag, engine)
+    if not extra:
+        return cached_library((id(ode), engine), ode, {}, tag, engine)
+    key = (id(ode), engine, *((n, id(f)) for n, f in sorted(extra.items())))
+    return cached_library(key, ode, extra, tag, engine)
 
 
 def cached_library(key, ode, extra: dict, tag, engine):
@@ -293,7 +344,7 @@ def cached_library(key, ode, extra: dict, tag, engine):
     with _LOCK:
         if len(_LIBS) >= 16:
             _LIBS.pop(next(iter(_LIBS)))
-        _LIBS[key] = (ode, loop, note)
+        _LIBS[key] = (ode, loop, note, tuple(extra.values()))     # (the extra Functions' ids stay theirs)
     return loop, note
 
 
@@ -386,13 +437,13 @@ def loop_drive(drive, t0, t1, u0):
     return _Drive(len(sigs), tabs, _ptr(u0), _ptr(u), br.size, _ptr(br), 0), keep
 
 
-SLICE = 0.05            # CPU seconds of one C call of a run: progress and Ctrl-C between calls
+SLICE = 0.05            # seconds (monotonic clock) of one C call of a run: progress and Ctrl-C between calls
 YIELD = 11
 
 
 def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
                  payback=None) -> I.Run:
-    """The run as C calls of SLICE seconds of CPU each in the calling thread (the state carried
+    """The run as C calls of SLICE seconds each in the calling thread (the state carried
     from call to call: the steps are those of one call), progress shown and Ctrl-C let through
     between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run).
     ``payback`` (payback.Payback, an interpreted run): between calls, the compiled loop once the
@@ -514,9 +565,10 @@ class LoopFunctions(dict):
     fallback) with the Function the loop integrates and its engine, decided once by the back
     end (``compiled = true`` compiles whatever the size)."""
 
-    def __init__(self, funcs, ode, engine, drive=None):
+    def __init__(self, funcs, ode, engine, drive=None, loop=None):
         super().__init__()
         self.funcs, self.loop_ode, self.engine = funcs, ode, engine
+        self.loop = loop            # the Loop built for them (None: looked up by ``library``)
         self.drive = drive if tables_in_loop(drive) else None      # tables read by the loop
         self.eom = getattr(funcs, "eom", None)
         self.notes = list(getattr(funcs, "notes", []))

@@ -18,7 +18,7 @@ import numpy as np
 
 from ... import integrators as I
 from ...diagnostics import UsageError, did_you_mean
-from ...eom import parameter_vector
+from ...eom import codegen, parameter_vector, sxcode
 from ...eom.codegen import casadi_functions
 from ...eom.start import start_vector
 from ...output.result import INTERRUPTED, Failure, Result
@@ -30,8 +30,9 @@ from ..record import ENERGY_NAMES
 from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
+from . import crk
 from . import plugins as P
-from .crk import LoopFunctions, auto_choice, compiler, engine_for, library, loop_ode, scipy_name
+from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, scipy_name
 
 
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
@@ -97,6 +98,7 @@ class OdeSetup:
         self.method, self.reason, self.funcs, self.post = method, reason, funcs, post
         self.meta, self.loop_compiled, self.out_names = meta, loop_compiled, out_names
         self._named, self._recorders = None, {}
+        self._mapper = None       # (recorder Function, its compiled code in the loop's library) or None
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
 
@@ -138,12 +140,13 @@ class OdeSetup:
         if "compiled" not in meta:
             meta["compiled"] = "requested" if compiled else ("off (requested)" if compiled is False else "no")
         meta.update(method=method, method_reason=reason, integrator=spec(method).description)
-        loop_compiled = None
+        loop_compiled = mapper = None
         if functions is not None:
             funcs = functions
         elif spec(method).compiled_loop:     # the stepping loop, the model compiled or interpreted (crk.py)
-            funcs, loop_compiled = _compile_loop(eom, vm, meta, fallback="erk" if auto_compiled else None,
-                                                 compiled=compiled, drive=drive)
+            rec = None if eom.inputs else (lambda: Mon.recorder_function(eom, pv, out_names))
+            funcs, loop_compiled, mapper = _compile_loop(eom, vm, meta, fallback="erk" if auto_compiled else None,
+                                                         compiled=compiled, drive=drive, record=rec)
             if auto_compiled and not loop_compiled:     # could not build it: the automatic choice falls back
                 method, loop_compiled = "erk", None
                 meta.update(method=method, integrator=spec(method).description,
@@ -164,7 +167,9 @@ class OdeSetup:
             meta["warnings"].append("compiled code unavailable: " + "; ".join(getattr(funcs, "notes", [])))
         else:
             meta["notes"] += list(getattr(funcs, "notes", []))
-        return cls(eom, s, drive, grid, method, meta["method_reason"], funcs, post, meta, loop_compiled, out_names)
+        setup = cls(eom, s, drive, grid, method, meta["method_reason"], funcs, post, meta, loop_compiled, out_names)
+        setup._mapper = mapper
+        return setup
 
     def start_of(self, s):
         """(parameter vector, start vector) of the settings ``s`` (copies: kept for a warm run)."""
@@ -262,7 +267,7 @@ class OdeSetup:
         eom, s, drive, funcs = self.eom, self.settings, self.drive, self.funcs
         method, max_steps, extra, out_names = self.method, self.max_steps, self.extra, self.out_names
         names = self._names()
-        U = drive.values(t, X)
+        U = drive.values(t, X) if drive.names else np.zeros((len(t), 0))     # (no inputs: nothing to look up)
         if eom.inputs:
             signals = Mon.compute_signals(eom, t, X, pv, out_names, U=U)
         else:                         # no inputs: the recorder of these parameter values, kept
@@ -270,7 +275,7 @@ class OdeSetup:
             if rec is None:
                 if len(self._recorders) >= 4:
                     self._recorders.clear()
-                rec = self._recorders[pv.tobytes()] = Mon.signal_recorder(eom, pv, out_names)
+                rec = self._recorders[pv.tobytes()] = Mon.signal_recorder(eom, pv, out_names, self._mapper)
             signals = rec(t, X)
         record_inputs(drive, U, signals, meta)
         Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
@@ -304,9 +309,17 @@ class OdeSetup:
         return self._named
 
 
+_LEAVES = frozenset((str, int, float, bool, type(None)))       # kept as they are, without a call
+
+
 def plain_copy(v):
     """A deep copy of plain data (dicts, lists, strings, numbers; anything else deep-copied):
-    a setup's metadata for one run, at a third of copy.deepcopy's cost."""
+    a setup's metadata for one run, at a third of copy.deepcopy's cost (leaves of the plain
+    types are taken without a call each)."""
+    if type(v) is dict:
+        return {k: x if type(x) in _LEAVES else plain_copy(x) for k, x in v.items()}
+    if type(v) is list:
+        return [x if type(x) in _LEAVES else plain_copy(x) for x in v]
     if isinstance(v, dict):
         return {k: plain_copy(x) for k, x in v.items()}
     if isinstance(v, list):
@@ -368,9 +381,6 @@ def setup_environment() -> tuple:
     """What a setup depends on besides its equations and settings: whether there is a C
     compiler, the compile threshold and the loop's method rule (crk), and the caches its
     Functions and compiled loop came from (a new cache, e.g. emptied by a test, builds anew)."""
-    from ...eom import codegen
-    from . import crk
-
     return (compiler(), crk.COMPILE_OPS, crk.DOPRI5_RTOL, id(crk._LIBS), id(crk._RUNTIME), id(codegen._SETS),
             crk.library, codegen.compile_functions, codegen.find_compiler)
 
@@ -386,27 +396,39 @@ class States:
         self.t, self.q, self.failure, self.stats = t, q, failure, stats
 
 
-def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None):
-    """(Functions of the run, whether the loop runs) for a dopri5/dop853 run: the stepping loop
-    with the model compiled or interpreted (crk.engine_for; compiled = true compiles), built
-    or loaded from the cache; a fallback to scipy's stepping in Python (or to ``fallback``) is
-    a warning of the run."""
+def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None, record=None):
+    """(Functions of the run, whether the loop runs, (recorder Function, its compiled Mapped) or
+    None) for a dopri5/dop853 run: the stepping loop with the model compiled or interpreted
+    (crk.engine_for; compiled = true compiles), built or loaded from the cache; a fallback to
+    scipy's stepping in Python (or to ``fallback``) is a warning of the run.  ``record``: a
+    thunk of the recorder's Function, compiled into the same library when the model is compiled
+    and the recorder is small enough to be (engine_for): one compile, and the signals on the
+    output grid at compiled speed (the same bits as the interpreter, tests/test_sxcode.py)."""
     ode = loop_ode(funcs)
     engine = "compiled" if compiled else engine_for(ode)
-    loop, note = library(ode, tag=eom.name, engine=engine)
+    extra = {}
+    if record is not None and engine == "compiled":
+        F = record()
+        if F is not None and sxcode.supported(F) and engine_for(F) == "compiled":
+            extra = {"record": F}
+    loop, note = library(ode, tag=eom.name, engine=engine, extra=extra)
+    if loop is None and extra:        # the recorder's code would not build: the loop alone
+        extra = {}
+        loop, note = library(ode, tag=eom.name, engine=engine)
     if loop is None:
         instead = (f"{fallback} runs instead" if fallback else
                    f"{meta['method']} runs as scipy's same method stepped in Python")
         meta["warnings"].append(f"compiled stepping loop unavailable ({note}); {instead}")
-        return funcs, False
+        return funcs, False, None
     meta["loop_engine"] = engine
     if note:
         meta["notes"].append(f"{meta['method']} compiled stepping loop: {note}")
-    loop_funcs = LoopFunctions(funcs, ode, engine, drive)
+    loop_funcs = LoopFunctions(funcs, ode, engine, drive, loop=loop)
     if loop_funcs.drive is not None:
         meta["notes"].append("the input tables are read by the stepping loop (data, not code); steps end on the "
                              "zero-order holds' samples")
-    return loop_funcs, True
+    mapper = (extra["record"], compiled_mapped(loop, "record", extra["record"])) if extra else None
+    return loop_funcs, True, mapper
 
 
 def _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta):

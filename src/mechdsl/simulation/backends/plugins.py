@@ -83,7 +83,9 @@ class CrkPlugin(IntegratorPlugin):
             raise RuntimeError(f"{method} takes no integrator options (got {', '.join(sorted(extra))})")
         ode = crk.loop_ode(funcs)
         tag = getattr(getattr(funcs, "eom", None), "name", "model")
-        loop, _ = crk.library(ode, tag=tag, engine=getattr(funcs, "engine", None))
+        loop = getattr(funcs, "loop", None)      # the setup's (with its recorder compiled beside the ode)
+        if loop is None:
+            loop, _ = crk.library(ode, tag=tag, engine=getattr(funcs, "engine", None))
         pay = None
         if loop is not None and loop.engine == "interpreted":     # too large to compile up front
             pay = payback.Payback(ode, tag)                       # ... until it has paid (payback.py)
