@@ -117,6 +117,17 @@ def energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
+def integral_drift_of(signals, names) -> dict:
+    """{"first_integral_drift": {name: max |v - v(0)|}} of the first integrals ``names`` among
+    the signals (finite ones only); {} when there is none."""
+    out = {}
+    for name in names:
+        v = signals.get(name)
+        if v is not None and len(v) and np.isfinite(v).all():
+            out[name] = float(np.abs(v - v[0]).max())
+    return {"first_integral_drift": out} if out else {}
+
+
 def drift_limit(rtol: float) -> float:
     """The relative drift of an invariant (the energy of a conservative model, a first integral, a
     quaternion's norm) above which a run warns: DRIFT_FACTOR x rtol, never above DRIFT_CAP (a

@@ -59,7 +59,11 @@ def recorder(eom, columns: dict, using=()):
     Function looked up once (a run's setup keeps it: the same numbers, without the look-up)."""
     names, F, maps = _function(eom, columns, tuple(using), True)
     sizes = (eom.n, len(eom.inputs), lam_symbol(eom).numel(), eom.input_defaults)
-    return lambda t, Q, QD, p, U=None, LAM=None: _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM)
+
+    def call(t, Q, QD, p, U=None, LAM=None):
+        return _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM)
+    call.names, call.function, call.sizes = names, F, sizes      # (what a prepared warm run keeps)
+    return call
 
 
 def _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM) -> dict[str, np.ndarray]:

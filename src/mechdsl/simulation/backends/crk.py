@@ -37,7 +37,7 @@ from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
 from .crk_calls import (CANCELLED, CRK_METHODS, EVENTS_ARGTYPES, LOOP_ARGTYPES, RUN_ARGTYPES, SLICE,  # noqa: F401
-                        STATUS, YIELD, Fun, Loop, Resume, _DP, _I64P, _VP, _ptr, declare, loop_drive, map_rows, program_fun,
+                        STATUS, YIELD, Fun, Loop, Resume, counts, _DP, _I64P, _VP, _ptr, declare, loop_drive, map_rows, program_fun,
                         run_compiled, tables_in_loop)
 
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))

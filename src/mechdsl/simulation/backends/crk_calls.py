@@ -245,3 +245,9 @@ def open_loop(spec: dict) -> Loop:
     loop = Loop(rt, funs, spec["engine"], keep)
     loop.spec = spec
     return loop
+
+
+def counts(raw: dict) -> dict:
+    """A loop run's statistics (run_compiled's raw) under the names of every run's."""
+    return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
+            "rejected_steps": raw.get("n_reject")}
