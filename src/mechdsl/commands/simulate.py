@@ -60,7 +60,7 @@ def run(args) -> int:
     if args.plot:
         check_figure(args.plot, overwrite=args.force)
     progress = not (args.no_progress or args.out.quiet) and sys.stderr.isatty()
-    warm = None if progress else warm_key(args)
+    warm = warm_key(args)       # (a prepared run took under 0.5 s: the bar, shown after 0.5 s, would not show)
     r = _replay(warm) if warm is not None else None
     interrupted = False
     if r is None:
