@@ -5,13 +5,16 @@
 For the N-link chain (models/nlink_pendulum.mech --set N=... --t-end 5) runs ``python -m
 mechdsl simulate ... --no-progress`` as a fresh process and reads its CPU time (user + system)
 and peak resident memory from the operating system (os.wait4: the process and the compiler
-processes it waited for).  Three states of the cache folder ($MECHDSL_CACHE):
+processes it waited for).  Four states of the cache folder ($MECHDSL_CACHE):
 
 - ``empty``: a new, empty folder (nothing compiled, nothing derived: a first run on a new
   machine; the stepping loop's runtime library, crk.c + vm.c, is compiled in this run);
 - ``new model``: a folder where another model ran before (the runtime library built, the
   chain never seen: parsed, derived and its code compiled in this run);
-- ``warm``: the same command a second time (everything read from the cache).
+- ``warm``: the same command a second time (everything read from the cache: the prepared warm
+  run, simulation/warm_run.py, which imports no CasADi);
+- ``model cache``: the same command with the prepared run removed (the normal path: the model
+  cache, the compiled library; what a warm run cost before prepared runs).
 
 Each figure is the median of K processes (default 3), one new folder per process for the
 first two states; Python's bytecode caches are written (as after ``pip install``: the
@@ -60,7 +63,7 @@ def chain_args(n):
 
 def measure(n, runs) -> dict:
     out = {}
-    empty, new, warm = [], [], []
+    empty, new, warm, normal = [], [], [], []
     for _ in range(runs):
         d = Path(tempfile.mkdtemp(prefix="mechdsl-first-"))
         try:
@@ -72,9 +75,11 @@ def measure(n, runs) -> dict:
             process(["simulate", "models/pendulum.mech", "--t-end", "1", "--no-progress"], d)   # builds the runtime
             new.append(process(chain_args(n), d))
             warm.append(process(chain_args(n), d))
+            shutil.rmtree(d / "runs", ignore_errors=True)
+            normal.append(process(chain_args(n), d))
         finally:
             shutil.rmtree(d, ignore_errors=True)
-    for key, vals in (("empty", empty), ("new model", new), ("warm", warm)):
+    for key, vals in (("empty", empty), ("new model", new), ("warm", warm), ("model cache", normal)):
         out[key] = (statistics.median(v[0] for v in vals), max(v[1] for v in vals))
     return out
 
@@ -82,12 +87,14 @@ def measure(n, runs) -> dict:
 def table(sizes, runs) -> str:
     lines = [f"`benchmarks/first_run.py` (median of {runs} processes; CPU = user + system of the process and the "
              "compilers it ran; peak = largest resident size)", "",
-             "| chain | empty cache: CPU s | peak MB | new model: CPU s | peak MB | warm: CPU s | peak MB |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+             "| chain | empty cache: CPU s | peak MB | new model: CPU s | peak MB | warm: CPU s | peak MB "
+             "| model cache: CPU s | peak MB | warm / model cache |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for n in sizes:
         m = measure(n, runs)
         lines.append(f"| N = {n} | " + " | ".join(f"{m[k][0]:.2f} | {m[k][1]:.0f}" for k in ("empty", "new model",
-                                                                                              "warm")) + " |")
+                                                                                              "warm", "model cache"))
+                     + f" | {m['warm'][0] / m['model cache'][0]:.2f} |")
     return "\n".join(lines)
 
 
