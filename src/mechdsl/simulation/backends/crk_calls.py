@@ -224,6 +224,21 @@ def open_runtime(path: str):
     return lib
 
 
+def _open_model(path: str, names) -> tuple:
+    """(the model's library at ``path``, {name: (address, work sizes)}), loaded once a process
+    (a run and its error estimate's companion call the same library)."""
+    hit = _OPEN.get((path, tuple(names)))
+    if hit is None:
+        lib = ctypes.CDLL(path)
+        funs = {}
+        for name in names:
+            sz = [ctypes.c_longlong(0) for _ in range(4)]
+            getattr(lib, name + "_work")(*map(ctypes.byref, sz))
+            funs[name] = (ctypes.cast(getattr(lib, name), _VP).value, tuple(v.value for v in sz))
+        hit = _OPEN[(path, tuple(names))] = (lib, funs)
+    return hit
+
+
 def open_loop(spec: dict) -> Loop:
     """A Loop again from its ``spec`` (crk.build_loop's plain data: the libraries' paths, or the
     programs of the interpreter), without CasADi.  OSError/AttributeError: a library is gone."""
@@ -235,13 +250,11 @@ def open_loop(spec: dict) -> Loop:
             keep.append(prog)
             funs[name] = program_fun(rt, prog)
     else:
-        lib = ctypes.CDLL(spec["library"])
+        lib, found = _open_model(spec["library"], spec["functions"])
         keep.append(lib)
         ev = ctypes.cast(rt.crk_casadi_eval, _VP).value
-        for name in spec["functions"]:
-            sz = [ctypes.c_longlong(0) for _ in range(4)]
-            getattr(lib, name + "_work")(*map(ctypes.byref, sz))
-            funs[name] = Fun(ev, ctypes.cast(getattr(lib, name), _VP).value, None, *(v.value for v in sz))
+        for name, (address, sizes) in found.items():
+            funs[name] = Fun(ev, address, None, *sizes)
     loop = Loop(rt, funs, spec["engine"], keep)
     loop.spec = spec
     return loop
