@@ -8,7 +8,7 @@ choose, compile, integrate, record, estimate) and was one call of the compiled s
 the calls' arguments, the recorder's program and the Result's metadata that no number of the
 run decides (warm_capture.py).  The key is the SHA-256 of the file's text and name, every
 option of the command that is not about where output goes, mechdsl's code fingerprint, the
-versions of Python and numpy, CasADi's files and the compiler's environment.
+versions of Python and numpy, CasADi's files, the C compiler found and MECHDSL_CFLAGS.
 
 ``replay(key)`` runs it: loads the libraries by ctypes (crk_calls.py), integrates, records the
 signals with the runtime's interpreter, and computes the statistics, the invariant drift, the
@@ -29,6 +29,7 @@ import numpy as np
 
 from ..digest import sha256
 from ..eom import cachefiles
+from ..eom.compiler import find_compiler
 from ..eom.modelcache import code_fingerprint
 from ..eom.sxcode import Program
 from ..output.result import Result
@@ -51,12 +52,25 @@ def directory() -> Path:
 
 def key(filename: str, text: bytes, options: tuple) -> str:
     """The key of a prepared run: the file and every run option (``options``: plain values)."""
-    parts = (FORMAT, code_fingerprint(), sys.version, np.__version__, _casadi_files(), os.environ.get("CC"),
-             os.environ.get("PATH"), os.environ.get("MECHDSL_CFLAGS"), str(filename), options)
+    parts = (FORMAT, code_fingerprint(), sys.version, np.__version__, _casadi_files(), _compiler(),
+             os.environ.get("MECHDSL_CFLAGS"), str(filename), options)
     h = sha256(repr(parts).encode("utf-8"))
     h.update(b"\0")
     h.update(text)
     return h.hexdigest()
+
+
+def _compiler() -> tuple | None:
+    """The C compiler a normal run would use (codegen.find_compiler): its real path, size and
+    modification time (a new compiler builds new libraries, so the prepared run is not used)."""
+    cc = find_compiler()
+    if cc is None:
+        return None
+    try:
+        st = os.stat(cc)
+    except OSError:
+        return (cc,)
+    return os.path.realpath(cc), st.st_size, st.st_mtime_ns
 
 
 def _casadi_files() -> tuple:
