@@ -5,17 +5,20 @@
 For the N-link chain (models/nlink_pendulum.mech --set N=... --t-end 5) runs ``python -m
 mechdsl simulate ... --no-progress`` as a fresh process and reads its CPU time (user + system)
 and peak resident memory from the operating system (os.wait4: the process and the compiler
-processes it waited for).  Three states of the cache folder ($MECHDSL_CACHE):
+processes it waited for).  Five states of the cache folder ($MECHDSL_CACHE):
 
 - ``empty``: a new, empty folder (nothing compiled, nothing derived: a first run on a new
   machine; the stepping loop's runtime library, crk.c + vm.c, is compiled in this run);
 - ``new model``: a folder where another model ran before (the runtime library built, the
   chain never seen: parsed, derived and its code compiled in this run);
-- ``warm``: the same command a second time (everything read from the cache);
+- ``warm``: the same command a second time (everything read from the cache: the prepared warm
+  run, simulation/warm_run.py, which imports no CasADi, when the run is short enough to keep);
 - ``third``: and a third time.  A model above crk.COMPILE_OPS operations (the 200-link chain)
   runs interpreted until its interpreted evaluations, counted in the cache, have paid for its
   compile (simulation/backends/payback.py): the run that crosses that line (the second, for
-  the 200-link chain's 5 s) pays gcc, the runs after it are compiled.
+  the 200-link chain's 5 s) pays gcc, the runs after it are compiled;
+- ``model cache``: the same command with the prepared run removed (the normal path: the model
+  cache, the compiled library; what a warm run cost before prepared runs).
 
 Each figure is the median of K processes (default 3), one new folder per process for the
 first two states; Python's bytecode caches are written (as after ``pip install``: the
@@ -64,7 +67,7 @@ def chain_args(n):
 
 def measure(n, runs) -> dict:
     out = {}
-    empty, new, warm, third = [], [], [], []
+    empty, new, warm, third, normal = [], [], [], [], []
     for _ in range(runs):
         d = Path(tempfile.mkdtemp(prefix="mechdsl-first-"))
         try:
@@ -77,9 +80,12 @@ def measure(n, runs) -> dict:
             new.append(process(chain_args(n), d))
             warm.append(process(chain_args(n), d))
             third.append(process(chain_args(n), d))
+            shutil.rmtree(d / "runs", ignore_errors=True)
+            normal.append(process(chain_args(n), d))
         finally:
             shutil.rmtree(d, ignore_errors=True)
-    for key, vals in (("empty", empty), ("new model", new), ("warm", warm), ("third", third)):
+    for key, vals in (("empty", empty), ("new model", new), ("warm", warm), ("third", third),
+                      ("model cache", normal)):
         out[key] = (statistics.median(v[0] for v in vals), max(v[1] for v in vals))
     return out
 
@@ -87,13 +93,15 @@ def measure(n, runs) -> dict:
 def table(sizes, runs) -> str:
     lines = [f"`benchmarks/first_run.py` (median of {runs} processes; CPU = user + system of the process and the "
              "compilers it ran; peak = largest resident size)", "",
-             "| chain | empty cache: CPU s | peak MB | new model: CPU s | peak MB | warm: CPU s | peak MB | "
-             "third run: CPU s | peak MB |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| chain | empty cache: CPU s | peak MB | new model: CPU s | peak MB | warm: CPU s | peak MB "
+             "| third run: CPU s | peak MB | model cache: CPU s | peak MB | warm / model cache |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for n in sizes:
         m = measure(n, runs)
         lines.append(f"| N = {n} | " + " | ".join(f"{m[k][0]:.2f} | {m[k][1]:.0f}" for k in ("empty", "new model",
-                                                                                              "warm", "third")) + " |")
+                                                                                              "warm", "third",
+                                                                                              "model cache"))
+                     + f" | {m['warm'][0] / m['model cache'][0]:.2f} |")
     return "\n".join(lines)
 
 

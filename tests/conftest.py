@@ -41,6 +41,13 @@ _SESSION_CACHE = tempfile.mkdtemp(prefix="mechdsl-test-cache-")
 os.environ["MECHDSL_CACHE"] = _SESSION_CACHE
 
 
+def drop_prepared_runs(cache) -> None:
+    """Remove the prepared warm runs of ``mech simulate`` (simulation/warm_run.py) from the cache
+    folder ``cache``: the next run of the same command goes the normal way (through the model
+    cache), for tests of that path."""
+    shutil.rmtree(os.path.join(str(cache), "runs"), ignore_errors=True)
+
+
 def _has_compiler() -> bool:
     from mechdsl.eom.codegen import find_compiler
 

@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from conftest import MODELS
+from conftest import MODELS, drop_prepared_runs
 
 
 def imported(*args, env=None):
@@ -39,11 +39,15 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     args = ("simulate", str(MODELS / "pendulum.mech"), "--t-end", "0.1", "--points", "3", "--no-progress",
             "-o", str(tmp_path / "r.csv"), "--force")
     imported(*args, env=env)                    # the first run fills the model cache
-    r, names = imported(*args, env=env)
+    r, prepared = imported(*args, env=env)      # the prepared warm run (simulation/warm_run.py)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "mechdsl.simulation.warm_run" in prepared and "casadi" not in prepared
+    drop_prepared_runs(tmp_path)
+    r, names = imported(*args, env=env)         # the normal path through the model cache
     assert r.returncode == 0, r.stderr[-2000:]
     assert "mechdsl.simulation.backends.ode" in names
     unwanted = {"scipy", "secrets", "subprocess", "tempfile", "difflib", "mechdsl.output.display", "numpy.ma", "shutil"}
-    assert unwanted & names - imported_by_numpy_and_casadi() == set()
+    assert unwanted & (names | prepared) - imported_by_numpy_and_casadi() == set()
 
 
 def test_a_warm_compiled_run_starts_no_process(tmp_path):
@@ -54,6 +58,7 @@ def test_a_warm_compiled_run_starts_no_process(tmp_path):
     args = ("simulate", str(MODELS / "double_pendulum.mech"), "--no-progress", "-o", str(tmp_path / "r.csv"),
             "--force")
     imported(*args, env=env)                    # fills the model cache and compiles
+    drop_prepared_runs(tmp_path)                # (the normal path: model cache and compiled library)
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "loaded compiled model from cache" in r.stdout + r.stderr
@@ -80,10 +85,12 @@ def test_a_warm_run_creates_no_dataclass(tmp_path):
            f"sys.argv = ['mech', *{args!r}]\n"
            "runpy.run_module('mechdsl', run_name='__main__')\n")
     subprocess.run([sys.executable, "-m", "mechdsl", *args], capture_output=True, env=env)   # fills the cache
-    r = subprocess.run([sys.executable, "-c", spy], capture_output=True, text=True, env=env)
-    assert r.returncode == 0, r.stderr[-2000:]
-    made = [line for line in r.stderr.splitlines() if line.startswith("DATACLASSES")]
-    assert made == ["DATACLASSES []"], made
+    for _ in ("the prepared warm run", "the normal path through the model cache"):
+        r = subprocess.run([sys.executable, "-c", spy], capture_output=True, text=True, env=env)
+        assert r.returncode == 0, r.stderr[-2000:]
+        made = [line for line in r.stderr.splitlines() if line.startswith("DATACLASSES")]
+        assert made == ["DATACLASSES []"], made
+        drop_prepared_runs(tmp_path)
 
 
 def test_scipy_version_without_importing_scipy(monkeypatch):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import MODELS, needs_cc
+from conftest import MODELS, drop_prepared_runs, needs_cc
 
 
 def run(cache: Path, *args, env=None, check=True):
@@ -72,6 +72,7 @@ def test_every_cache_miss_says_why_under_mechdsl_debug(tmp_path):
     k = cache_key(cache, MODELS / "pendulum.mech")
     path = cache / "models" / f"{k}.pkl"
     path.write_bytes(path.read_bytes()[:-10])
+    drop_prepared_runs(cache)                  # (the same command again would be the prepared run)
     p = run(cache, "simulate", MODELS / "pendulum.mech", "--t-end", "0.01", "--points", "3", "--no-progress",
             env={"MECHDSL_DEBUG": "1"})
     assert "model cache: miss" in p.stderr and "hash" in p.stderr, p.stderr

@@ -15,7 +15,7 @@ import mechdsl.frontend.parser
 from mechdsl.eom import modelcache
 from mechdsl.cli import main
 
-from conftest import MODELS
+from conftest import MODELS, drop_prepared_runs
 
 WARNING_MODEL = """model P
   parameter Real m(unit = "kg") = 1;
@@ -63,6 +63,7 @@ def entries(d):
 
 
 def simulate_csv(path, out, *extra):
+    drop_prepared_runs(os.environ["MECHDSL_CACHE"])      # (these tests are about the model cache)
     assert main(["simulate", str(path), "--t-end", "0.5", "--points", "51", "--no-progress", "-o", str(out),
                  "--force", *extra]) == 0
     return out.read_bytes()

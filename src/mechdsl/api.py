@@ -511,6 +511,13 @@ class Model:
         except TypeError:
             return None
 
+    def prepared_run(self, t_end: float | None = None, *, rtol=None, atol=None, method=None, points=None, **kw):
+        """The Prepared problem (simulation/prepared.py) ``simulate`` kept for these arguments
+        (the same as its own, ``progress`` left out), or None: what a prepared warm run of
+        ``mech simulate`` is made from (simulation/warm_capture.py)."""
+        kept = self._kept_run(dict(t_end=t_end, rtol=rtol, atol=atol, method=method, points=points, **kw))
+        return None if kept is None or kept[0] is not self.eom else kept[1]
+
     @staticmethod
     def _keeps(args: dict) -> bool:
         try:

@@ -59,27 +59,33 @@ def run(args) -> int:
             check_writable(path, overwrite=args.force)
     if args.plot:
         check_figure(args.plot, overwrite=args.force)
-    model, x0 = load_model(args, starts_in_model=False)
-    t_end = args.t_end
-    if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
-        args.out.note(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
-    # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
-    # caller (argument > scene > default), so CLI and API give the same run for the same scene
+    progress = not (args.no_progress or args.out.quiet) and sys.stderr.isatty()
+    warm = warm_key(args)       # (a prepared run took under 0.5 s: the bar, shown after 0.5 s, would not show)
+    r = _replay(warm) if warm is not None else None
     interrupted = False
-    try:
-        r = model.simulate(t_end, **cli_settings(args), x0=x0 or None,
-                           progress=not (args.no_progress or args.out.quiet) and sys.stderr.isatty())
-    except KeyboardInterrupt as e:
-        # Ctrl-C: a back end that kept its results up to there (mechdsl.dae.RunInterrupted)
-        # hands them over; they are written like a failed run's, and the exit code is 130
-        r = getattr(e, "result", None)
-        if r is None:
-            raise
-        interrupted = True
-    r.metadata["source"] = str(args.file)
-    r.metadata["target"] = target_line(args, model)
-    if model.scene is not None:
-        r.metadata["scene"] = model.scene.name
+    if r is None:
+        model, x0 = load_model(args, starts_in_model=False)
+        t_end = args.t_end
+        if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
+            args.out.note(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
+        # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
+        # caller (argument > scene > default), so CLI and API give the same run for the same scene
+        settings = dict(cli_settings(args), x0=x0 or None)
+        try:
+            r = model.simulate(t_end, **settings, progress=progress)
+        except KeyboardInterrupt as e:
+            # Ctrl-C: a back end that kept its results up to there (mechdsl.dae.RunInterrupted)
+            # hands them over; they are written like a failed run's, and the exit code is 130
+            r = getattr(e, "result", None)
+            if r is None:
+                raise
+            interrupted = True
+        r.metadata["source"] = str(args.file)
+        r.metadata["target"] = target_line(args, model)
+        if model.scene is not None:
+            r.metadata["scene"] = model.scene.name
+        if warm is not None and not interrupted:
+            _prepare_warm(warm, model, t_end, settings, r)
     with held_interrupt() as held:          # a Ctrl-C now waits for the files to be written
         written, lost = write_outputs(r, args.output, args.plot, args.force)
     if held.seen and not interrupted:
@@ -107,6 +113,67 @@ def run(args) -> int:
     if r.failure is not None:
         out.fail("simulation", str(r.failure))
     return 0 if r.success and not lost else 1
+
+
+# --------------------------------------------------------------------------- prepared warm runs
+# (simulation/warm_run.py): a second run of the same command neither loads the model nor imports CasADi
+
+OUTPUT_ONLY = {"output", "plot", "force", "no_progress", "json", "quiet", "verbose", "out", "_run", "_where",
+               "command"}
+
+
+def warm_key(args) -> tuple | None:
+    """(key, text) of this command's prepared warm run, or None when it cannot have one (inputs,
+    --estimate-error, --plot, --no-cache, an option that is not plain data)."""
+    if args.inputs or args.estimate_error or args.plot or getattr(args, "no_cache", False):
+        return None
+    opts = []
+    for k, v in sorted(vars(args).items()):
+        if k in OUTPUT_ONLY:
+            continue
+        if not _plain(v):
+            return None
+        opts.append((k, v))
+    try:
+        with open(args.file, "rb") as fh:
+            text = fh.read()
+    except OSError:
+        return None              # (the normal path says why)
+    from ..simulation import warm_run
+
+    return warm_run.key(str(args.file), text, tuple(opts)), str(args.file)
+
+
+def _plain(v) -> bool:
+    if v is None or isinstance(v, (str, int, float, bool)):
+        return True
+    return isinstance(v, (list, tuple)) and all(_plain(x) for x in v)
+
+
+def _replay(warm):
+    from ..simulation import warm_run
+
+    data = warm_run.read(warm[0])
+    if data is None:
+        return None
+    r = warm_run.replay(data)
+    if r is not None:
+        r.metadata.update(data["command"])
+    return r
+
+
+def _prepare_warm(warm, model, t_end, settings, r) -> None:
+    """Store the prepared warm run of this command (simulation/warm_capture.py), if it can have one."""
+    from ..numbers import si_unit
+    from ..simulation import warm_capture, warm_run
+
+    ir = model.model
+    units = {"coordinates": {c.name: c.unit for c in ir.coordinates}, "outputs": {o.name: o.unit for o in ir.outputs},
+             "si": {c.name: si_unit(c.unit) for c in ir.coordinates}}
+    data, _why = warm_capture.payload(model.prepared_run(t_end, **settings), r, units)
+    if data is not None:
+        data["command"] = {k: r.metadata[k] for k in ("source", "target", "scene") if k in r.metadata}
+        warm_run.write(warm[0], data)
 
 
 def run_record(r) -> dict:

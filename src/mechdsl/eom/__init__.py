@@ -20,12 +20,14 @@ from __future__ import annotations
 
 from dataclasses import field
 import re
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from ..model import ir
 from ..model.records import record
+
+if TYPE_CHECKING:       # (an annotation only: a prepared warm run imports eom's helpers without the IR)
+    from ..model import ir
 
 
 @record(eq=False)      # eq=False: hashed and compared by identity (workspace key)

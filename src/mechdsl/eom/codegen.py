@@ -48,6 +48,7 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError
 from . import cachefiles
 from .cachefiles import cache_dir      # (also imported from here: mechdsl.eom.codegen.cache_dir)
+from .compiler import find_compiler  # noqa: F401  (the compiler search, without CasADi: also warm_run's)
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
             "start", "parameters", "singularity", "invariants")
@@ -559,31 +560,6 @@ _SETS_MAX = 64
 
 
 # --------------------------------------------------------------------------- C code generation
-
-
-def _which(name: str) -> str | None:
-    """shutil.which on POSIX (importing shutil costs a warm run 2 ms: it imports lzma and bz2)."""
-    if os.name != "posix":
-        import shutil
-
-        return shutil.which(name)
-    folders = [""] if os.sep in name else os.get_exec_path()
-    for d in folders:
-        path = os.path.join(d, name)
-        if os.path.isfile(path) and os.access(path, os.X_OK):
-            return path
-    return None
-
-
-def find_compiler() -> str | None:
-    for cand in (os.environ.get("CC"), "gcc", "cc", "clang"):
-        if cand:
-            path = _which(cand)
-            if path:
-                return path
-            if os.environ.get("CC") == cand:
-                return None  # an explicit CC that does not exist: do not guess another
-    return None
 
 
 def compiler_version(cc: str) -> str:

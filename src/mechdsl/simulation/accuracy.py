@@ -167,6 +167,17 @@ def energy_drift(signals) -> dict:
     return {"energy_drift": dE, "energy_drift_relative": dE / scale}
 
 
+def integral_drift_of(signals, names) -> dict:
+    """{"first_integral_drift": {name: max |v - v(0)|}} of the first integrals ``names`` among
+    the signals (finite ones only); {} when there is none."""
+    out = {}
+    for name in names:
+        d = drift_of(signals.get(name))       # (the facts noted in one pass when there are)
+        if d is not None:
+            out[name] = d
+    return {"first_integral_drift": out} if out else {}
+
+
 def drift_limit(rtol: float) -> float:
     """The relative drift of an invariant (the energy of a conservative model, a first integral, a
     quaternion's norm) above which a run warns: DRIFT_FACTOR x rtol, never above DRIFT_CAP (a

@@ -12,7 +12,7 @@ import numpy as np
 from .. import analysis  # its face: the first-integral search is imported when a run first searches
 from ..eom import fold_inputs, integralcache
 from . import record as R
-from .accuracy import drift_of, energy_drift, note_facts
+from .accuracy import energy_drift, integral_drift_of, note_facts
 
 
 def compute_signals(eom, t, X, pv, out_names, U=None) -> dict[str, np.ndarray]:
@@ -75,6 +75,7 @@ def signal_recorder(eom, pv, out_names, mapper=None):
             note_facts(vals, rows)                    # drift and finiteness of all of them in one pass
             return dict(zip(names, rows))
         return evaluate(t, X[:, :n], X[:, n:], pv, np.zeros((len(t), 0)))
+    rec.evaluate = evaluate
     return rec
 
 
@@ -144,15 +145,15 @@ def _integral_function(eom, pv):
 
 
 def integral_drift(signals, eom) -> dict:
+    return integral_drift_of(signals, integral_names(eom))
+
+
+def integral_names(eom) -> list[str]:
+    """The names of the first integrals a run of ``eom`` records (the search's, kept)."""
     fs = [eom.workspace.first_integrals()]
     if eom.inputs:      # the integrals were searched on the model with constant inputs folded in
         fs = [v.workspace.first_integrals() for v in eom.workspace.folded_variants()]
-    out = {}
-    for name in [n for f in fs if f is not None for n in f.name_out()]:
-        d = drift_of(signals.get(name))
-        if d is not None:
-            out[name] = d
-    return {"first_integral_drift": out} if out else {}
+    return [n for f in fs if f is not None for n in f.name_out()]
 
 
 def energy_drift_stats(signals) -> dict:

@@ -63,7 +63,11 @@ def recorder(eom, columns: dict, using=(), mapper=None):
     sizes = (eom.n, len(eom.inputs), lam_symbol(eom).numel(), eom.input_defaults)
     if mapper is not None and mapper[0] is F and mapper[1] is not None:
         maps = {"interpreted": mapper[1]}         # this recorder's own: the shared maps stay as they are
-    return lambda t, Q, QD, p, U=None, LAM=None: _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM)
+
+    def call(t, Q, QD, p, U=None, LAM=None):
+        return _evaluate(names, F, maps, sizes, t, Q, QD, p, U, LAM)
+    call.names, call.function, call.sizes = names, F, sizes      # (what a prepared warm run keeps)
+    return call
 
 
 def recorder_function(eom, columns: dict, using=()):

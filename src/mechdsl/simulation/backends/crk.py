@@ -32,23 +32,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import integrators as I
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
+from .crk_calls import (CANCELLED, CRK_METHODS, EVENTS_ARGTYPES, LOOP_ARGTYPES, RUN_ARGTYPES, SLICE,  # noqa: F401
+                        STATUS, YIELD, Fun, Loop, Resume, counts, _DP, _I64P, _VP, _ptr, declare, loop_drive, map_rows, program_fun,
+                        run_compiled, tables_in_loop)
 
-
-# method -> (id in crk.c, scipy class of the same algorithm)
-CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
-STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)",
-          2: "error control needs a step below the minimum {hmin:.3g} (min_step_size)",
-          3: "Required step size is less than spacing between numbers.",
-          4: "non-finite state",
-          5: "cancelled",
-          6: "out of memory in the compiled stepping loop",
-          7: "the right-hand side returned an error (non-finite or failed evaluation, NaN)",
-          8: "unknown method"}
+_LIBS: dict = {}
+_LOCK = threading.Lock()
+_RUNTIME: dict = {}
+
 # crk.c, vm.c (compiled once per cache folder, in a first run): crk.c at -O1 takes gcc 0.36 s
 # (-Og 0.19 s, but its loop steps about 5 % slower: pendulum, 2544 steps, 5.55 ms against 5.3 ms;
 # every later run pays that, so the one-time compile keeps -O1); the interpreter of vm.c is 1.4x
@@ -56,22 +51,6 @@ STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)
 RUNTIME_FLAGS = (["-O1"], ["-O2"])
 MODEL_FLAGS = ["-O1"]       # sxcode's chunks: within a few % of -O2 at 3/4 of its compile time
 COMPILE_OPS = 12_000        # models up to this many operations are compiled (about a second of gcc)
-
-CANCELLED = 5        # ctl[1] set: the loop stopped at its next step (Ctrl-C)
-
-_LIBS: dict = {}
-_LOCK = threading.Lock()
-_RUNTIME: dict = {}
-_I64P = ctypes.POINTER(ctypes.c_longlong)
-_DP = ctypes.POINTER(ctypes.c_double)
-_VP = ctypes.c_void_p
-
-
-class Fun(ctypes.Structure):
-    """crk.c's Fun: how the loop calls one model Function."""
-    _fields_ = [("eval", _VP), ("ctx", _VP), ("init", _VP), ("sz_arg", ctypes.c_longlong),
-                ("sz_res", ctypes.c_longlong), ("sz_iw", ctypes.c_longlong), ("sz_w", ctypes.c_longlong)]
-
 
 def dense_ode(ode):
     """``ode`` with a dense output column (the C loop reads xdot as a dense vector)."""
@@ -85,17 +64,6 @@ def dense_ode(ode):
         args = [ca.MX.sym(ode.name_in(i), ode.sparsity_in(i)) for i in range(ode.n_in())]
     outs = ode.call(args)
     return ca.Function(ode.name(), args, [ca.densify(o) for o in outs], ode.name_in(), ode.name_out())
-
-
-RUN_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP,
-                ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P, _DP]
-EVENTS_ARGTYPES = RUN_ARGTYPES + [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_double, ctypes.c_int, _DP,
-                                  ctypes.POINTER(Fun), _DP, _DP, _DP, ctypes.c_longlong]
-
-# crk_run as run_compiled calls it: every array by its address (an int: numpy's data_as costs
-# 4.5 us an array, a tenth of a small model's whole run)
-LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctypes.c_longlong, _VP, _VP, _VP,
-                 ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
 
 
 def runtime():
@@ -113,19 +81,7 @@ def runtime():
     lib = None
     if loaded is not None:
         try:
-            lib = ctypes.CDLL(path)
-            for name, args in (("crk_run", LOOP_ARGTYPES), ("crk_run_events", EVENTS_ARGTYPES),
-                               ("crk_eval_n", [ctypes.POINTER(Fun), ctypes.c_double, _DP, _DP, _DP, _DP,
-                                               ctypes.c_longlong]),
-                               ("crk_map", [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_longlong, _VP, _VP,
-                                            _DP, ctypes.c_longlong])):
-                fn = getattr(lib, name)
-                fn.restype, fn.argtypes = ctypes.c_int, args
-            lib.crk_run_batch.restype = ctypes.c_longlong
-            lib.crk_run_batch.argtypes = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong,
-                                          ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_longlong, ctypes.c_double,
-                                          ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P,
-                                          _I64P, _I64P]
+            lib = declare(ctypes.CDLL(path))
         except (OSError, AttributeError) as e:
             lib, note = None, f"cannot load the stepping loop's library {path}: {e}"
     out = (lib, note)
@@ -160,20 +116,6 @@ def engine_for(f) -> str:
     return "compiled" if f.n_instructions() <= COMPILE_OPS else "interpreted"
 
 
-class Loop:
-    """The model's Functions as the runtime calls them (``funs``: name -> Fun), the runtime's
-    entry points, and what keeps both alive (programs, the model's library)."""
-
-    def __init__(self, rt, funs: dict, engine: str, keep):
-        self.rt, self.funs, self.engine, self._keep = rt, funs, engine, keep
-        self.run = rt.crk_run
-        self.run_events = rt.crk_run_events
-
-    def fun(self, name):
-        f = self.funs.get(name)
-        return None if f is None else ctypes.byref(f)
-
-
 def build_loop(funcs: dict, tag: str, engine: str):
     """(Loop or None, note) for the Functions ``funcs`` (name -> casadi.Function, each called by
     its name) in ``engine``."""
@@ -182,13 +124,14 @@ def build_loop(funcs: dict, tag: str, engine: str):
         return None, note
     funs, keep = {}, []
     if engine == "interpreted":
-        ev = ctypes.cast(rt.vm_eval, _VP).value
-        init = ctypes.cast(rt.vm_init, _VP).value
+        progs = {}
         for name, f in funcs.items():
-            prog = sxcode.program(f)
+            prog = progs[name] = sxcode.program(f)
             keep.append(prog)
-            funs[name] = Fun(ev, ctypes.addressof(prog.prog), init, f.n_in(), f.n_out(), 0, prog.nreg)
-        return Loop(rt, funs, engine, keep), ""
+            funs[name] = program_fun(rt, prog)
+        loop = Loop(rt, funs, engine, keep)
+        loop.spec = {"engine": engine, "runtime": rt._name, "programs": {n: p.arrays() for n, p in progs.items()}}
+        return loop, ""
     mine = {n: f for n, f in funcs.items() if sxcode.supported(f)}
     theirs = [f for n, f in funcs.items() if n not in mine]
     try:
@@ -211,7 +154,9 @@ def build_loop(funcs: dict, tag: str, engine: str):
             funs[name] = Fun(ev, ctypes.cast(getattr(lib, name), _VP).value, None, *(v.value for v in sz))
     except (OSError, AttributeError) as e:
         return None, f"cannot load the model's library {path}: {e}"
-    return Loop(rt, funs, engine, [lib]), note
+    loop = Loop(rt, funs, engine, [lib])
+    loop.spec = {"engine": engine, "runtime": rt._name, "library": path, "functions": list(funcs)}
+    return loop, note
 
 
 class Mapped:
@@ -225,8 +170,7 @@ class Mapped:
             self.fun = loop.funs[name]
         else:
             self.rt, self.prog = rt, sxcode.program(f)
-            self.fun = Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(self.prog.prog),
-                           ctypes.cast(rt.vm_init, _VP).value, f.n_in(), f.n_out(), 0, self.prog.nreg)
+            self.fun = program_fun(rt, self.prog)
         self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.nout = f.nnz_out(0)
         sp = f.sparsity_out(0)      # the program writes the nonzeros: entries that are structurally 0 are not
@@ -268,24 +212,7 @@ class Mapped:
     def __call__(self, npts: int, rows) -> np.ndarray:
         """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its
         entries, C order) or one row shared by every point."""
-        arrs, strides = [], []
-        for a, nnz in zip(rows, self.nnz_in):
-            a = np.ascontiguousarray(a, float)
-            shared = a.size == nnz and not (npts == 1 and a.ndim > 1)
-            arrs.append(a)
-            strides.append(0 if shared or nnz == 0 else nnz)
-        out = np.zeros((npts, max(self.nout, 1)))
-        ptrs = (_VP * len(arrs))(*[a.ctypes.data if a.size else None for a in arrs])
-        st = np.array(strides, dtype=np.int64)
-        status = self.rt.crk_map(ctypes.byref(self.fun), npts, len(arrs), ptrs, st.ctypes.data, _ptr(out),
-                                 out.shape[1])
-        if status:
-            raise RuntimeError(f"evaluation failed (status {status})")
-        if self.where is None:
-            return out[:, :self.nout]
-        full = np.zeros((npts, self.dense))
-        full[:, self.where] = out[:, :self.nout]
-        return full
+        return map_rows(self.rt, self.fun, self.nnz_in, self.nout, self.dense, self.where, npts, rows)
 
 
 def compiled_mapped(loop, name, f):
@@ -348,10 +275,6 @@ def cached_library(key, ode, extra: dict, tag, engine):
     return loop, note
 
 
-def _ptr(a):
-    return a.ctypes.data_as(_DP)
-
-
 def call_in_thread(call, ctl, tick=None):
     """``call()`` (a ctypes call of the loop, which releases the GIL) in a worker thread; the main
     thread calls ``tick(rows written)`` every 0.1 s from the progress word ctl[0] and, on Ctrl-C,
@@ -387,119 +310,6 @@ def call_here_or_in_thread(call, ctl, tick=None):
     if tick is None and not in_main_thread():
         return call()
     return call_in_thread(call, ctl, tick)
-
-
-class Resume(ctypes.Structure):
-    """crk.c's Resume: the state of a run in slices."""
-    _fields_ = [("slice", ctypes.c_double), ("started", ctypes.c_int), ("t", ctypes.c_double),
-                ("h_abs", ctypes.c_double), ("k", ctypes.c_longlong), ("steps", ctypes.c_longlong),
-                ("rejected", ctypes.c_longlong), ("steps_here", ctypes.c_longlong), ("nfev", ctypes.c_longlong),
-                ("y", _VP), ("f", _VP)]
-
-
-class _Tab(ctypes.Structure):
-    _fields_ = [("hold", ctypes.c_int), ("n", ctypes.c_longlong), ("t", _DP), ("v", _DP), ("cur", ctypes.c_longlong)]
-
-
-class _Drive(ctypes.Structure):
-    _fields_ = [("nu", ctypes.c_longlong), ("tab", ctypes.POINTER(_Tab)), ("u0", _DP), ("u", _DP),
-                ("nb", ctypes.c_longlong), ("breaks", _DP), ("bcur", ctypes.c_longlong)]
-
-
-def tables_in_loop(drive) -> bool:
-    """Whether the loop reads every input itself: constants and tables only (a Python callable
-    or a Function of (t, x) is closed into the model's ode instead)."""
-    return drive is not None and bool(drive.signals) and all(
-        s.kind in ("default", "constant", "table") for s in drive.signals) and not drive.constant
-
-
-def loop_drive(drive, t0, t1, u0):
-    """(crk.c's Drive for one run, what keeps its arrays alive): the tables as data, their
-    samples inside (t0, t1) the times steps end on."""
-    sigs = drive.signals
-    tabs = (_Tab * max(len(sigs), 1))()
-    keep = []
-    for j, s in enumerate(sigs):
-        if s.kind == "table":
-            tt = np.ascontiguousarray(s.table.times, float)
-            vv = np.ascontiguousarray(s.table.values, float)
-            keep += [tt, vv]
-            tabs[j] = _Tab(0 if s.table.hold == "zoh" else 1, tt.size, _ptr(tt), _ptr(vv), 0)
-    # steps end on every sample: a hold's jump, and a linear table's kink (stepping across kinks
-    # left errors 1000 times the tolerance on the cart-pole with 11 samples)
-    held = [s.table.times for s in sigs if s.kind == "table"]
-    tol = 1e-12 * max(1.0, abs(t0), abs(t1))
-    br = np.unique(np.concatenate(held)) if held else np.zeros(0)
-    br = np.ascontiguousarray(br[(br > t0 + tol) & (br < t1 - tol)], float)
-    u0 = np.ascontiguousarray(u0, float)
-    u = np.zeros(max(len(sigs), 1))
-    keep += [br, u0, u, tabs]
-    return _Drive(len(sigs), tabs, _ptr(u0), _ptr(u), br.size, _ptr(br), 0), keep
-
-
-SLICE = 0.05            # seconds (monotonic clock) of one C call of a run: progress and Ctrl-C between calls
-YIELD = 11
-
-
-def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
-                 payback=None) -> I.Run:
-    """The run as C calls of SLICE seconds each in the calling thread (the state carried
-    from call to call: the steps are those of one call), progress shown and Ctrl-C let through
-    between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run).
-    ``payback`` (payback.Payback, an interpreted run): between calls, the compiled loop once the
-    interpreted evaluations have paid for its compile (the same bits: only the cost changes)."""
-    grid = np.ascontiguousarray(grid, float)
-    nx = x0.size
-    X = np.empty((len(grid), nx))
-    X.fill(np.nan)
-    pc = np.ravel(p)
-    uc = np.zeros(0) if u is None else np.ravel(u)
-    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
-    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
-    m, npar, nu = max(nx, 1), pc.size, uc.size
-    W = np.zeros(6 + 3 * m + m + npar + nu)
-    stats, ctl = W[:4], W[4:6].view(np.int64)
-    xfail = W[6:6 + nx]
-    o = 6 + 3 * m
-    W[o:o + nx] = x0
-    W[o + m:o + m + npar] = pc
-    W[o + m + npar:o + m + npar + nu] = uc
-    a = W.ctypes.data
-    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
-    drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
-    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o, a + 8 * (o + m + npar),
-            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.ctypes.data, a, a + 32,
-            a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
-    interrupted = False
-    try:
-        while True:
-            status = loop.run(*args)
-            if status != YIELD:
-                break
-            progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
-            if payback is not None and loop.engine == "interpreted":
-                better = payback.check(int(rs.nfev))
-                if better is not None:          # the rest of the run in compiled code
-                    loop, args = better, (better.fun("ode"),) + args[1:]
-    except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
-        status, interrupted = CANCELLED, True
-    reached = int(ctl[0])
-    progress.update(float(grid[max(reached, 1) - 1]))
-    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
-           "engine": loop.engine}
-    if payback is not None:
-        payback.record(int(stats[1]))
-        if payback.switched_at is not None and payback.switched_at >= 0:
-            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
-    run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
-    if interrupted:
-        run.error = "interrupted (Ctrl-C)"
-    elif status != 0 or reached < len(grid):
-        t_end = float(stats[3])
-        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
-        run.fail_time, run.fail_state = t_end, xfail.copy()
-    del keep
-    return run
 
 
 def run_batch(loop, method, grid, X0, P, u, rtol, atol, max_steps, hmin):

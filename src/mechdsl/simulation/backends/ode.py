@@ -32,7 +32,7 @@ from ..settings import DEFAULT_POINTS
 from . import Backend
 from . import crk
 from . import plugins as P
-from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, scipy_name
+from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, mapped, scipy_name
 
 
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
@@ -299,6 +299,35 @@ class OdeSetup:
         return Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=coords, signals=signals,
                       stats=stats, metadata=meta, failure=failure)
 
+    def loop_call(self, pv, xs) -> dict | None:
+        """What a run of this setup from (pv, xs) calls, as plain data for a prepared warm run
+        (simulation/warm_run.py): the compiled stepping loop's spec and the call's arguments,
+        as ``integrate`` passes them.  None: the run is not one call of the loop (another method,
+        inputs, a fixed step, integrator options)."""
+        funcs, s = self.funcs, self.settings
+        if (not isinstance(funcs, LoopFunctions) or funcs.drive is not None or self.eom.inputs or self.method is None
+                or s.fixed_step.dt is not None or self.extra or self.drive.breakpoints(s.t_start, s.t_end).size):
+            return None
+        loop, _ = library(funcs.loop_ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
+                          engine=getattr(funcs, "engine", None))
+        if loop is None or loop.spec is None:
+            return None
+        return {"loop": loop.spec, "method": self.method, "grid": self.grid.copy(), "x0": np.array(xs, float),
+                "p": np.array(pv, float), "u": self.drive.vector(s.t_start), "rtol": s.rtol, "atol": s.atol,
+                "max_steps": self.max_steps, "hmin": min_step(s.t_start, s.t_end), "n": self.eom.n}
+
+    def recorder_program(self, pv) -> dict | None:
+        """The recorder a run at the parameters ``pv`` used, as plain data (the interpreter's
+        program of its Function, its column names and sizes, the first integrals' names), for a
+        prepared warm run; None when this setup has not recorded at ``pv`` or cannot say."""
+        ev = getattr(self._recorders.get(np.asarray(pv, float).tobytes()), "evaluate", None)
+        m = None if ev is None else mapped(ev.function)
+        if m is None:
+            return None
+        return {"names": list(ev.names), "program": m.prog.arrays(), "nnz_in": list(m.nnz_in), "nout": m.nout,
+                "dense": m.dense, "where": m.where, "sizes": tuple(ev.sizes[:3]),
+                "integrals": Mon.integral_names(self.eom)}
+
     def _names(self) -> dict:
         """What every run's record reads of the equations, read once (their fields are lazy)."""
         if self._named is None:
@@ -358,6 +387,17 @@ def kept_setup(eom, s, build) -> "OdeSetup":
             _SETUPS.pop(next(iter(_SETUPS)))
         _SETUPS[key] = (eom, setup)
     return setup
+
+
+def peek_setup(eom, s) -> "OdeSetup | None":
+    """The setup ``kept_setup`` keeps for (eom, s), or None (nothing is built)."""
+    try:
+        key = (id(eom), _frozen(s), setup_environment())
+        with _SETUPS_LOCK:
+            hit = _SETUPS.get(key)
+    except TypeError:
+        return None
+    return hit[1] if hit is not None and hit[0] is eom else None
 
 
 def _frozen(s):

@@ -101,8 +101,7 @@ class CrkPlugin(IntegratorPlugin):
                                 drive=getattr(funcs, "drive", None), payback=pay)
 
     def counts(self, method, raw):
-        return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
-                "rejected_steps": raw.get("n_reject")}
+        return crk.counts(raw)
 
 
 PLUGINS: dict[str, IntegratorPlugin] = {"casadi": CasadiPlugin(), "scipy": ScipyPlugin(), "crk": CrkPlugin()}

@@ -1,0 +1,277 @@
+"""The compiled stepping loop's runtime as ctypes sees it: its records (Fun, Resume, Drive),
+its entry points' argument types and the calls of a run (``run_compiled``) and of a map
+(``map_rows``).  Without CasADi (crk.py builds the loops; a prepared warm run, warm_run.py,
+loads the libraries by path and calls them through here alone)."""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ... import integrators as I
+from ...eom.sxcode import Program
+
+# method -> (id in crk.c, scipy class of the same algorithm)
+CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
+STATUS = {1: "more than {max_steps} steps in one output interval (max_num_steps)",
+          2: "error control needs a step below the minimum {hmin:.3g} (min_step_size)",
+          3: "Required step size is less than spacing between numbers.",
+          4: "non-finite state",
+          5: "cancelled",
+          6: "out of memory in the compiled stepping loop",
+          7: "the right-hand side returned an error (non-finite or failed evaluation, NaN)",
+          8: "unknown method"}
+
+CANCELLED = 5        # ctl[1] set: the loop stopped at its next step (Ctrl-C)
+
+_I64P = ctypes.POINTER(ctypes.c_longlong)
+_DP = ctypes.POINTER(ctypes.c_double)
+_VP = ctypes.c_void_p
+
+
+class Fun(ctypes.Structure):
+    """crk.c's Fun: how the loop calls one model Function."""
+    _fields_ = [("eval", _VP), ("ctx", _VP), ("init", _VP), ("sz_arg", ctypes.c_longlong),
+                ("sz_res", ctypes.c_longlong), ("sz_iw", ctypes.c_longlong), ("sz_w", ctypes.c_longlong)]
+
+
+RUN_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong, _DP, _DP, _DP,
+                ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P, _DP]
+EVENTS_ARGTYPES = RUN_ARGTYPES + [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_double, ctypes.c_int, _DP,
+                                  ctypes.POINTER(Fun), _DP, _DP, _DP, ctypes.c_longlong]
+
+# crk_run as run_compiled calls it: every array by its address (an int: numpy's data_as costs
+# 4.5 us an array, a tenth of a small model's whole run)
+LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctypes.c_longlong, _VP, _VP, _VP,
+                 ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
+
+
+def _ptr(a):
+    return a.ctypes.data_as(_DP)
+
+
+def declare(lib):
+    """Set the argument and result types of the runtime library's entry points (``lib``: ctypes.CDLL)."""
+    for name, args in (("crk_run", LOOP_ARGTYPES), ("crk_run_events", EVENTS_ARGTYPES),
+                       ("crk_eval_n", [ctypes.POINTER(Fun), ctypes.c_double, _DP, _DP, _DP, _DP, ctypes.c_longlong]),
+                       ("crk_map", [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_longlong, _VP, _VP, _DP,
+                                    ctypes.c_longlong])):
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = ctypes.c_int, args
+    lib.crk_run_batch.restype = ctypes.c_longlong
+    lib.crk_run_batch.argtypes = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctypes.c_longlong,
+                                  ctypes.c_longlong, _DP, _DP, _DP, ctypes.c_longlong, ctypes.c_double,
+                                  ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _DP, _DP, _I64P,
+                                  _I64P, _I64P]
+    return lib
+
+
+def map_rows(rt, fun, nnz_in, nout, dense, where, npts: int, rows) -> np.ndarray:
+    """Values (npts, entries of output 0, structural zeros included) of the Fun ``fun`` (one
+    output of ``nout`` nonzeros at the places ``where`` of ``dense`` entries; None: dense) by
+    the runtime's ``crk_map``; ``rows``: per input an array of npts rows (its entries, C order)
+    or one row shared by every point."""
+    arrs, strides = [], []
+    for a, nnz in zip(rows, nnz_in):
+        a = np.ascontiguousarray(a, float)
+        shared = a.size == nnz and not (npts == 1 and a.ndim > 1)
+        arrs.append(a)
+        strides.append(0 if shared or nnz == 0 else nnz)
+    out = np.zeros((npts, max(nout, 1)))
+    ptrs = (_VP * len(arrs))(*[a.ctypes.data if a.size else None for a in arrs])
+    st = np.array(strides, dtype=np.int64)
+    status = rt.crk_map(ctypes.byref(fun), npts, len(arrs), ptrs, st.ctypes.data, _ptr(out), out.shape[1])
+    if status:
+        raise RuntimeError(f"evaluation failed (status {status})")
+    if where is None:
+        return out[:, :nout]
+    full = np.zeros((npts, dense))
+    full[:, where] = out[:, :nout]
+    return full
+
+
+class Resume(ctypes.Structure):
+    """crk.c's Resume: the state of a run in slices."""
+    _fields_ = [("slice", ctypes.c_double), ("started", ctypes.c_int), ("t", ctypes.c_double),
+                ("h_abs", ctypes.c_double), ("k", ctypes.c_longlong), ("steps", ctypes.c_longlong),
+                ("rejected", ctypes.c_longlong), ("steps_here", ctypes.c_longlong), ("nfev", ctypes.c_longlong),
+                ("y", _VP), ("f", _VP)]
+
+
+class _Tab(ctypes.Structure):
+    _fields_ = [("hold", ctypes.c_int), ("n", ctypes.c_longlong), ("t", _DP), ("v", _DP), ("cur", ctypes.c_longlong)]
+
+
+class _Drive(ctypes.Structure):
+    _fields_ = [("nu", ctypes.c_longlong), ("tab", ctypes.POINTER(_Tab)), ("u0", _DP), ("u", _DP),
+                ("nb", ctypes.c_longlong), ("breaks", _DP), ("bcur", ctypes.c_longlong)]
+
+
+def tables_in_loop(drive) -> bool:
+    """Whether the loop reads every input itself: constants and tables only (a Python callable
+    or a Function of (t, x) is closed into the model's ode instead)."""
+    return drive is not None and bool(drive.signals) and all(
+        s.kind in ("default", "constant", "table") for s in drive.signals) and not drive.constant
+
+
+def loop_drive(drive, t0, t1, u0):
+    """(crk.c's Drive for one run, what keeps its arrays alive): the tables as data, their
+    samples inside (t0, t1) the times steps end on."""
+    sigs = drive.signals
+    tabs = (_Tab * max(len(sigs), 1))()
+    keep = []
+    for j, s in enumerate(sigs):
+        if s.kind == "table":
+            tt = np.ascontiguousarray(s.table.times, float)
+            vv = np.ascontiguousarray(s.table.values, float)
+            keep += [tt, vv]
+            tabs[j] = _Tab(0 if s.table.hold == "zoh" else 1, tt.size, _ptr(tt), _ptr(vv), 0)
+    # steps end on every sample: a hold's jump, and a linear table's kink (stepping across kinks
+    # left errors 1000 times the tolerance on the cart-pole with 11 samples)
+    held = [s.table.times for s in sigs if s.kind == "table"]
+    tol = 1e-12 * max(1.0, abs(t0), abs(t1))
+    br = np.unique(np.concatenate(held)) if held else np.zeros(0)
+    br = np.ascontiguousarray(br[(br > t0 + tol) & (br < t1 - tol)], float)
+    u0 = np.ascontiguousarray(u0, float)
+    u = np.zeros(max(len(sigs), 1))
+    keep += [br, u0, u, tabs]
+    return _Drive(len(sigs), tabs, _ptr(u0), _ptr(u), br.size, _ptr(br), 0), keep
+
+
+SLICE = 0.05            # seconds (monotonic clock) of one C call of a run: progress and Ctrl-C between calls
+YIELD = 11
+
+
+def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
+                 payback=None) -> I.Run:
+    """The run as C calls of SLICE seconds each in the calling thread (the state carried
+    from call to call: the steps are those of one call), progress shown and Ctrl-C let through
+    between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run).
+    ``payback`` (payback.Payback, an interpreted run): between calls, the compiled loop once the
+    interpreted evaluations have paid for its compile (the same bits: only the cost changes)."""
+    grid = np.ascontiguousarray(grid, float)
+    nx = x0.size
+    X = np.empty((len(grid), nx))
+    X.fill(np.nan)
+    pc = np.ravel(p)
+    uc = np.zeros(0) if u is None else np.ravel(u)
+    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
+    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
+    m, npar, nu = max(nx, 1), pc.size, uc.size
+    W = np.zeros(6 + 3 * m + m + npar + nu)
+    stats, ctl = W[:4], W[4:6].view(np.int64)
+    xfail = W[6:6 + nx]
+    o = 6 + 3 * m
+    W[o:o + nx] = x0
+    W[o + m:o + m + npar] = pc
+    W[o + m + npar:o + m + npar + nu] = uc
+    a = W.ctypes.data
+    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
+    drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
+    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o, a + 8 * (o + m + npar),
+            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.ctypes.data, a, a + 32,
+            a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+    interrupted = False
+    try:
+        while True:
+            status = loop.run(*args)
+            if status != YIELD:
+                break
+            progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
+            if payback is not None and loop.engine == "interpreted":
+                better = payback.check(int(rs.nfev))
+                if better is not None:          # the rest of the run in compiled code
+                    loop, args = better, (better.fun("ode"),) + args[1:]
+    except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
+        status, interrupted = CANCELLED, True
+    reached = int(ctl[0])
+    progress.update(float(grid[max(reached, 1) - 1]))
+    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
+           "engine": loop.engine}
+    if payback is not None:
+        payback.record(int(stats[1]))
+        if payback.switched_at is not None and payback.switched_at >= 0:
+            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
+    run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
+    if interrupted:
+        run.error = "interrupted (Ctrl-C)"
+    elif status != 0 or reached < len(grid):
+        t_end = float(stats[3])
+        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
+        run.fail_time, run.fail_state = t_end, xfail.copy()
+    del keep
+    return run
+
+
+class Loop:
+    """The model's Functions as the runtime calls them (``funs``: name -> Fun), the runtime's
+    entry points, and what keeps both alive (programs, the model's library)."""
+
+    def __init__(self, rt, funs: dict, engine: str, keep):
+        self.rt, self.funs, self.engine, self._keep = rt, funs, engine, keep
+        self.spec = None        # how crk_calls.open_loop loads it again without CasADi (build_loop)
+        self.run = rt.crk_run
+        self.run_events = rt.crk_run_events
+
+    def fun(self, name):
+        f = self.funs.get(name)
+        return None if f is None else ctypes.byref(f)
+
+
+def program_fun(rt, prog) -> Fun:
+    """The Fun of vm.c's program ``prog`` (sxcode.Program; the caller keeps it alive)."""
+    return Fun(ctypes.cast(rt.vm_eval, _VP).value, ctypes.addressof(prog.prog), ctypes.cast(rt.vm_init, _VP).value,
+               prog.n_in, prog.n_out, 0, prog.nreg)
+
+
+_OPEN: dict = {}
+
+
+def open_runtime(path: str):
+    """The runtime library at ``path`` (ctypes, its entry points declared), loaded once a process."""
+    lib = _OPEN.get(path)
+    if lib is None:
+        lib = _OPEN[path] = declare(ctypes.CDLL(path))
+    return lib
+
+
+def _open_model(path: str, names) -> tuple:
+    """(the model's library at ``path``, {name: (address, work sizes)}), loaded once a process
+    (a run and its error estimate's companion call the same library)."""
+    hit = _OPEN.get((path, tuple(names)))
+    if hit is None:
+        lib = ctypes.CDLL(path)
+        funs = {}
+        for name in names:
+            sz = [ctypes.c_longlong(0) for _ in range(4)]
+            getattr(lib, name + "_work")(*map(ctypes.byref, sz))
+            funs[name] = (ctypes.cast(getattr(lib, name), _VP).value, tuple(v.value for v in sz))
+        hit = _OPEN[(path, tuple(names))] = (lib, funs)
+    return hit
+
+
+def open_loop(spec: dict) -> Loop:
+    """A Loop again from its ``spec`` (crk.build_loop's plain data: the libraries' paths, or the
+    programs of the interpreter), without CasADi.  OSError/AttributeError: a library is gone."""
+    rt = open_runtime(spec["runtime"])
+    funs, keep = {}, []
+    if spec["engine"] == "interpreted":
+        for name, arrays in spec["programs"].items():
+            prog = Program(arrays=arrays)
+            keep.append(prog)
+            funs[name] = program_fun(rt, prog)
+    else:
+        lib, found = _open_model(spec["library"], spec["functions"])
+        keep.append(lib)
+        ev = ctypes.cast(rt.crk_casadi_eval, _VP).value
+        for name, (address, sizes) in found.items():
+            funs[name] = Fun(ev, address, None, *sizes)
+    loop = Loop(rt, funs, spec["engine"], keep)
+    loop.spec = spec
+    return loop
+
+
+def counts(raw: dict) -> dict:
+    """A loop run's statistics (run_compiled's raw) under the names of every run's."""
+    return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
+            "rejected_steps": raw.get("n_reject")}
