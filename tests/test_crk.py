@@ -247,14 +247,14 @@ def test_an_interpreted_model_compiles_once_it_has_paid_and_keeps_its_bits(monke
     across runs (payback.py), reach PAYBACK_EVALS: then it compiles, within the run (between two
     slices) or from the start of the next.  The engines give the same bits and a slice carries the
     whole state, so every run gives the numbers of the compiled run, wherever the switch lands."""
-    from mechdsl.simulation.backends import payback
+    from mechdsl.simulation.backends import crk_calls, payback
 
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))          # a count of its own
     e, kw = chain(3), dict(rtol=1e-10, atol=1e-10, points=51, method="dop853", error_estimate="off")
     c = simulate(e, 20.0, **kw, compiled=True)
     n = c.stats["rhs_evals"]
     monkeypatch.setattr(crk, "COMPILE_OPS", 0)
-    monkeypatch.setattr(crk, "SLICE", 1e-5)                  # many slices: the switch lands inside the run
+    monkeypatch.setattr(crk_calls, "SLICE", 1e-5)            # many slices: the switch lands inside the run
     monkeypatch.setattr(payback, "PAYBACK_EVALS", 10 ** 12)
     i = simulate(e, 20.0, **kw)                              # never paid: interpreted throughout
     monkeypatch.setattr(payback, "PAYBACK_EVALS", n + n // 2)

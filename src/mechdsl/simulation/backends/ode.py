@@ -308,9 +308,11 @@ class OdeSetup:
         if (not isinstance(funcs, LoopFunctions) or funcs.drive is not None or self.eom.inputs or self.method is None
                 or s.fixed_step.dt is not None or self.extra or self.drive.breakpoints(s.t_start, s.t_end).size):
             return None
-        loop, _ = library(funcs.loop_ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
-                          engine=getattr(funcs, "engine", None))
-        if loop is None or loop.spec is None:
+        loop = getattr(funcs, "loop", None)      # the library the run used (its recorder compiled beside the ode)
+        if loop is None:
+            loop, _ = library(funcs.loop_ode, tag=getattr(getattr(funcs, "eom", None), "name", "model"),
+                              engine=getattr(funcs, "engine", None))
+        if loop is None or getattr(loop, "spec", None) is None:
             return None
         return {"loop": loop.spec, "method": self.method, "grid": self.grid.copy(), "x0": np.array(xs, float),
                 "p": np.array(pv, float), "u": self.drive.vector(s.t_start), "rtol": s.rtol, "atol": s.atol,
