@@ -145,8 +145,9 @@ def test_sweeps_on_request_carry_each_runs_estimate(pendulum, tmp_path, capsys):
     the same values reports (each run with its own companion, not the vectorized back end)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MechWarning)
+        # one worker process (the subject is each run's estimate, not the pool: test_sweep.py)
         ds = pendulum.sweep(params={"L": [1.0, 2.0]}, t_end=20.0, points=21, rtol=1e-6, atol=1e-8,
-                            error_estimate="on")
+                            error_estimate="on", workers=1)
         single = [pendulum.with_params(L=L).simulate(20.0, points=21, rtol=1e-6, atol=1e-8)
                   .metadata["accuracy"]["error_estimate"] for L in (1.0, 2.0)]
     assert ds.attrs["scheduler"] != "vectorized"
@@ -154,7 +155,7 @@ def test_sweeps_on_request_carry_each_runs_estimate(pendulum, tmp_path, capsys):
     assert all(e > 0 for e in single)
     assert main(["sweep", str(MODELS / "pendulum.mech"), "--model", "Pendulum", "--grid", "L=1,2",
                  "--t-end", "20", "--points", "21", "--rtol", "1e-6", "--atol", "1e-8",
-                 "--error-estimate", "on", "--no-progress"]) == 0
+                 "--error-estimate", "on", "--workers", "1", "--no-progress"]) == 0
     out = capsys.readouterr().out
     worst = int(np.argmax(single))
     assert f"error estimate: largest {single[worst]:.2g} (run {worst}: L = {worst + 1:g})" in out

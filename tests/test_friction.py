@@ -1,7 +1,5 @@
 """Issue 17: regularized Coulomb friction (Friction component), against closed forms."""
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -44,12 +42,14 @@ def test_flywheel_with_bearing_friction_torque():
     assert r["bearing.phi"][-1] == pytest.approx(w0**2 / (2 * tau / I), rel=1e-4)
 
 
-def test_regularization_is_visible_in_check_and_metadata():
-    p = subprocess.run([sys.executable, "-m", "mechdsl", "check", str(FILE)], capture_output=True, text=True,
-                       timeout=120)
-    assert p.returncode == 0, p.stderr
-    assert "rub: Coulomb friction on slide.s: -F tanh(der(slide.s)/v_eps), v_eps = 0.0001" in p.stdout
-    assert "drag: Coulomb friction on bearing.phi" in p.stdout and "v_eps = 0.001" in p.stdout
+def test_regularization_is_visible_in_check_and_metadata(capsys):
+    from mechdsl.cli import main
+
+    rc = main(["check", str(FILE)])             # in this process: the subject is what check prints
+    p = capsys.readouterr()
+    assert rc == 0, p.err
+    assert "rub: Coulomb friction on slide.s: -F tanh(der(slide.s)/v_eps), v_eps = 0.0001" in p.out
+    assert "drag: Coulomb friction on bearing.phi" in p.out and "v_eps = 0.001" in p.out
     r = mechdsl.load(FILE, model="FrictionIncline").with_params(v_eps=0.002).simulate(0.1, points=3)
     assert r.metadata["friction"] == ["rub: Coulomb friction on slide.s: -F tanh(der(slide.s)/v_eps), v_eps = 0.002"]
 

@@ -29,7 +29,7 @@ def run(size: str = "small") -> Case:
     from mechdsl.simulate import simulate
 
     check_size(size)
-    T = 2.0 if size == "small" else 10.0
+    T = 1.0 if size == "small" else 10.0
     pts = int(T * 20) + 1
     e = load(MODEL, scene="Fall").eom
     q0, _ = e.start()

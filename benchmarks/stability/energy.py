@@ -36,7 +36,7 @@ def run(size: str = "small") -> Case:
     from mechdsl.simulate import simulate
 
     check_size(size)
-    periods = 1000 if size == "small" else 100_000
+    periods = 200 if size == "small" else 100_000
     T = periods * PERIOD
     e = load(MODEL, model="Pendulum").eom
     case = Case(name="energy", title=f"Energy over {periods:g} periods", size=size)

@@ -27,7 +27,7 @@ def run(size: str = "small") -> Case:
     from mechdsl.eom.start import start_vector
 
     check_size(size)
-    T = 2.0 if size == "small" else 10.0
+    T = 1.0 if size == "small" else 10.0
     m = load(MODEL, scene="Swing")
     e = m.eom
     pts = 101

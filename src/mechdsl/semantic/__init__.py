@@ -92,15 +92,23 @@ class Program:
                                        f"models in this file: {', '.join(self._models) or 'none'}"))
         from . import values
 
-        token = values.UNITS.set(self.units)
-        try:
-            fl = Flattener(self, d, modification)
-            fl.diags.raise_if_errors()
-            model = fl.build()
-        finally:
-            values.UNITS.reset(token)
-        self.last_warnings = fl.diags.warnings
-        return model
+        key = _flat_key(self, name, modification)
+        hit = _FLAT_MEMO.pop(key, None) if key is not None else None
+        if hit is None or hit[0] is not self.file:
+            token = values.UNITS.set(self.units)
+            try:
+                fl = Flattener(self, d, modification)
+                fl.diags.raise_if_errors()
+                model = fl.build()
+            finally:
+                values.UNITS.reset(token)
+            hit = (self.file, model, tuple(fl.diags.warnings))
+        if key is not None:
+            _FLAT_MEMO[key] = hit                     # most recent last
+            if len(_FLAT_MEMO) > _FLAT_MEMO_SIZE:
+                del _FLAT_MEMO[next(iter(_FLAT_MEMO))]
+        self.last_warnings = list(hit[2])
+        return hit[1]
 
     def scene(self, name: str, extra: dict | None = None) -> ir.Scene:
         s = self._scenes.get(name)
@@ -234,6 +242,35 @@ def _expand_names(names: list[tuple[str, Span]], model: ir.Model) -> list[str]:
                     did_you_mean(n, known) or "declare it in the model as `output Real name = ...;`")
     diags.raise_if_errors()
     return out
+
+
+# The last models flattened in this process, like the parse memo (frontend/parser.py): the parser
+# returns the same (immutable) AST for the same text, so a model flattened again from the same
+# file object with the same modification, units switch and limits is the same (immutable)
+# ir.Model with the same warnings (check, then simulate, then equations of one file; an editor's
+# unchanged buffer; a scene's model).  The entry holds its AST, so the id in the key is never
+# reused while it is kept; models that failed are not kept (flattened again, the same errors).
+_FLAT_MEMO: dict = {}
+_FLAT_MEMO_SIZE = 64
+
+
+def _frozen(v):
+    if isinstance(v, dict):
+        return tuple(sorted((k, _frozen(x)) for k, x in v.items()))
+    if isinstance(v, (list, tuple)):
+        return tuple(_frozen(x) for x in v)
+    return v
+
+
+def _flat_key(program: Program, name: str, modification: dict | None):
+    """The memo's key, None when the modification holds something unhashable."""
+    try:
+        key = (id(program.file), bool(program.units), name, _frozen(modification or {}),
+               tuple(sorted(limits.current().items())))
+        hash(key)
+    except TypeError:
+        return None
+    return key
 
 
 def analyze(file: ast.File, units: bool = True) -> Program:
