@@ -10,6 +10,8 @@ model: the stepping loop's ``dop853`` and ``dopri5`` (compiled), ``erk``, ``cvod
 ``cvodes-bdf``, ``scipy-dop853``, ``scipy-lsoda``.  Printed per tolerance:
 
 - ``auto`` CPU, the method it ran, its final-time error;
+- the repeats of all methods at one tolerance are interleaved (run_bench: round-robin, the
+  order reversed every other round), so a change of the machine's load hits them alike;
 - ``best same tol``: the cheapest other method at that tolerance and auto / it;
 - ``best as accurate``: the cheapest run of any other method (any tolerance) whose error is at
   most auto's, and auto / it (the work-precision reading: goal at most 1.2);
@@ -66,7 +68,7 @@ def table(title, res) -> tuple[str, dict]:
         for k, v in (("same", x_same), ("accurate", x_acc), ("monotone", mono)):
             if v is not None:
                 worst[k] = max(worst[k], v)
-        ran = (a.method if a.method != "auto" else "") or "auto"
+        ran = a.ran or "?"
         out.append(f"{tol:7.0e} {a.cpu * 1e3:8.2f} {ran:>7} {a.err_final:8.1e} | "
                    + (f"{same.label:>12} {same.cpu * 1e3:7.2f} ms {x_same:5.2f}" if same else f"{'-':>22} {'':>5}")
                    + " | "
