@@ -27,7 +27,7 @@ from __future__ import annotations
 import casadi as ca
 
 from ..eom import fold_inputs
-from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of, specialize
+from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of, shared_derivatives, specialize
 from ..eom.fold import fold_parameters
 from ..eom.start import fixed_start
 from .constrained_system import ConstrainedSystem
@@ -59,7 +59,8 @@ class ConstrainedFunctionSet(FunctionSet):
         if name not in OWN:
             return super()._make(name, loop=False)
         f = self._build_own(name)
-        return specialize(f, self.fixed, len(self.eom.params)) if self.fixed else f
+        f = specialize(f, self.fixed, len(self.eom.params)) if self.fixed else f
+        return shared_derivatives(f) if self.sx else f
 
     def system(self) -> ConstrainedSystem:
         """The constrained system over the independent constraints at the consistent start
