@@ -364,6 +364,10 @@ class FunctionSet(Mapping):
                 self._cache[name] = jacobian_of(self["ode"])
             else:
                 self._cache[name] = self._make(name)
+            if self.sx:               # called in an MX graph with p as numbers: specialized (eom.numeric_p)
+                from .numeric_p import numeric_p
+
+                self._cache[name] = numeric_p(self._cache[name])
         return self._cache[name]
 
     def _make(self, name, loop: bool = False):
