@@ -130,7 +130,7 @@ def test_fold_handles_any_operation_and_keeps_what_is_not_leaner():
 
 
 def test_derivatives_are_built_with_common_subexpressions_merged():
-    """codegen.shared_derivatives: the default ode's derivative Functions that IPOPT evaluates
+    """eom.specialize.shared_derivatives: the default ode's derivative Functions that IPOPT evaluates
     (forward in 5 directions: the constraint Jacobian; forward over reverse in 3: the exact
     Hessian) have fewer instructions than CasADi builds for the same expressions by default,
     and the same values at random arguments (seeds included)."""

@@ -27,7 +27,8 @@ from __future__ import annotations
 import casadi as ca
 
 from ..eom import fold_inputs
-from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of, shared_derivatives, specialize
+from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of
+from ..eom.specialize import shared_derivatives, specialize
 from ..eom.fold import fold_parameters
 from ..eom.numeric_p import numeric_p
 from ..eom.start import fixed_start

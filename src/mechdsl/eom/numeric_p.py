@@ -13,7 +13,7 @@ instructions against 243 for a hand-written model with its numbers built in).
 ``NumericP`` is the Function itself (same class name, instructions, derivatives, serialization:
 every use as a CasADi object is unchanged); only its Python call is different when some
 argument is MX and p is numbers (numpy, list, DM): it calls the Function with those numbers
-built in (``codegen.specialize``: what ``fixed_parameters`` builds; CasADi folds the
+built in (``eom.specialize``: what ``fixed_parameters`` builds; CasADi folds the
 operations on the numbers, and the leaned, folded ode has 30 instructions, forward in 5
 directions 187).  The values are the same to round-off (tests/test_numeric_p.py).  Nothing is
 lost: p given as numbers is a constant of the graph, which nothing can differentiate; p given
@@ -66,7 +66,7 @@ class NumericP(ca.Function):
 
     def specialized(self, v):
         """The Function with p = ``v`` built in (its input p empty), built once per vector."""
-        from .codegen import shared_derivatives, specialize
+        from .specialize import shared_derivatives, specialize
 
         special = self.__dict__.setdefault("_special", {})
         key = np.asarray(v, float).tobytes()
