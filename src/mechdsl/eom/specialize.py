@@ -11,6 +11,7 @@ def _ca():
 
 
 DERIVATIVE_LEVELS = 2     # first and second derivatives (an optimizer's exact Hessian: forward over reverse)
+SHARED_MAX = 200          # instructions: above, merging costs ~10x the derivatives' build for ~1 % fewer instructions
 
 
 def shared_derivatives(f):
@@ -21,9 +22,12 @@ def shared_derivatives(f):
     quotient in every direction); merged, the cart-pole ``ode``'s forward-over-reverse
     derivative in 3 directions goes from 641 to 624 instructions and its sin and cos are
     evaluated once (benchmarks/control_swingup.py: 6-8 % less time in IPOPT's Jacobian and
-    Hessian).  Other Functions (MX) are returned as they are.  The values are the same
+    Hessian).  Only up to SHARED_MAX instructions: on the N-link chain (84 to 3467
+    instructions) the merge saved 0.5-2 % of the derivatives' instructions and made building
+    forward, reverse, Jacobian and forward over reverse 5-10x slower (N = 10: 35 -> 357 ms of
+    CPU).  Other Functions (MX, larger) are returned as they are.  The values are the same
     operations on the same inputs: equal to the last bit."""
-    if not f.is_a("SXFunction"):
+    if not f.is_a("SXFunction") or f.n_instructions() > SHARED_MAX:
         return f
     ca = _ca()
     opts: dict = {"cse": True}
