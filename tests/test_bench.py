@@ -449,3 +449,15 @@ def test_repeats_are_interleaved_across_the_variants(tmp_path, setup, monkeypatc
     # per tolerance: warm-up + one run each, then the two more rounds (reversed, then in order)
     a, e = ("auto", 1e-4), ("erk", 1e-4)
     assert order[:8] == [a, a, e, e, e, a, a, e]
+
+
+def test_fast_rows_are_repeated_until_their_runs_add_up(tmp_path, setup):
+    """min_total: a row whose timed runs add up to less gets more interleaved rounds than
+    ``repeats`` (at most runner.MAX_ROUNDS)."""
+    from mechdsl.bench.runner import MAX_ROUNDS
+
+    res = run_bench(setup, variants=parse_variants("erk,rk[dt=0.01]"), tolerances=[1e-4],
+                    reference=exact_csv(tmp_path / "exact.csv"), repeats=2, min_total=0.02)
+    for r in res.rows:
+        assert r.ok and len(r.cpu_runs) >= 2 and r.cpu == min(r.cpu_runs)
+        assert sum(r.cpu_runs) >= 0.02 or len(r.cpu_runs) == MAX_ROUNDS + 1

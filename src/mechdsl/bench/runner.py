@@ -365,13 +365,15 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
 
 def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="auto", reference_methods=None,
               compare="positions", repeats: int = 3, budget: float = DEFAULT_BUDGET,
-              sweep_budget: float | None = None, stop_after: float | None = None,
+              sweep_budget: float | None = None, stop_after: float | None = None, min_total: float = 0.0,
               log: Callable[[str], None] | None = None) -> BenchResult:
     """Every variant over the tolerance sweep against the reference.  budget: CPU seconds of
     one run beyond which its variant's tighter tolerances are skipped; sweep_budget: CPU
     seconds of all runs beyond which the remaining ones are skipped (None: no limit);
     stop_after: CPU seconds after which one run is stopped where the simulator reports
-    progress (its row is skipped, and so are its variant's tighter tolerances)."""
+    progress (its row is skipped, and so are its variant's tighter tolerances); min_total: CPU
+    seconds a row's timed runs add up to at least (more rounds than ``repeats`` for fast runs,
+    at most MAX_ROUNDS)."""
     from ..simulation.monitors import is_conservative
 
     if repeats < 1:
@@ -422,7 +424,7 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
                 done[v.label].append(row)
             if not interrupted:
                 try:
-                    spent += _rounds(rerun, repeats - 1)
+                    spent += _rounds(rerun, repeats - 1, min_total)
                 except KeyboardInterrupt:
                     interrupted = True
     rows = [r for v in variants for r in done[v.label]]
@@ -430,16 +432,21 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
                        repeats=repeats, kind=kind, machine=machine(), interrupted=interrupted)
 
 
-def _rounds(rerun: list, rounds: int) -> float:
+MAX_ROUNDS = 200       # rounds of timed runs (after the first) when min_total asks for more than the repeats
+
+
+def _rounds(rerun: list, rounds: int, min_total: float = 0.0) -> float:
     """Time every (row, run) of ``rerun`` again, ``rounds`` times round-robin (every other round
     in reverse order): runs compared with each other are measured side by side, so a change of
-    the machine's load hits them alike; each row keeps its minimum.  The CPU seconds spent."""
+    the machine's load hits them alike; each row keeps its minimum.  Rows whose timed runs
+    add up to less than ``min_total`` CPU seconds go on in further rounds (at most MAX_ROUNDS): the minimum of a millisecond run needs more than a few tries on a loaded machine.
+    The CPU seconds spent."""
     from ..interrupts import check_interrupt
 
     spent, stopped = 0.0, set()
-    for k in range(rounds):
+    for k in range(max(rounds, MAX_ROUNDS)):
         for row, once in (rerun if k % 2 else rerun[::-1]):
-            if id(row) in stopped:
+            if id(row) in stopped or (k >= rounds and sum(row.cpu_runs) >= min_total):
                 continue
             try:
                 dt, _ = cpu_call(once)
@@ -451,6 +458,8 @@ def _rounds(rerun: list, rounds: int) -> float:
             row.cpu_runs = row.cpu_runs + (dt,)
             row.cpu = min(row.cpu, dt)
             spent += dt
+        if k + 1 >= rounds and all(id(r) in stopped or sum(r.cpu_runs) >= min_total for r, _ in rerun):
+            break
     return spent
 
 
