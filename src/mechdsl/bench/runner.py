@@ -439,7 +439,8 @@ def _rounds(rerun: list, rounds: int, min_total: float = 0.0) -> float:
     """Time every (row, run) of ``rerun`` again, ``rounds`` times round-robin (every other round
     in reverse order): runs compared with each other are measured side by side, so a change of
     the machine's load hits them alike; each row keeps its minimum.  Rows whose timed runs
-    add up to less than ``min_total`` CPU seconds go on in further rounds (at most MAX_ROUNDS): the minimum of a millisecond run needs more than a few tries on a loaded machine.
+    add up to less than ``min_total`` CPU seconds go on in further rounds (at most MAX_ROUNDS):
+    the minimum of a millisecond run needs more than a few tries on a loaded machine.
     The CPU seconds spent."""
     from ..interrupts import check_interrupt
 
