@@ -10,9 +10,15 @@ model: the stepping loop's ``dop853`` and ``dopri5`` (compiled), ``erk``, ``cvod
 ``cvodes-bdf``, ``scipy-dop853``, ``scipy-lsoda``.  Printed per tolerance:
 
 - ``auto`` CPU, the method it ran, its final-time error;
+- the repeats of all methods at one tolerance are interleaved (run_bench: round-robin, the
+  order reversed every other round), so a change of the machine's load hits them alike, and a
+  fast run is repeated until its timed runs add up to MIN_TOTAL (the minimum of five 1 ms
+  runs on a loaded machine was 30 % off);
 - ``best same tol``: the cheapest other method at that tolerance and auto / it;
 - ``best as accurate``: the cheapest run of any other method (any tolerance) whose error is at
   most auto's, and auto / it (the work-precision reading: goal at most 1.2);
+- ``x ran``: auto / the method it ran, run by name at the same tolerance (the same steps:
+  auto's own overhead plus the timing noise);
 - ``monotone``: auto's CPU at this tolerance / its CPU at the next tighter one (goal <= 1,
   a loosened tolerance never costs more; above 1 within the timing noise: see the repeated
   runs' spread in ``noise``, the ratio of the second-best to the best repeat of auto).
@@ -29,6 +35,7 @@ sys.path.insert(0, str(ROOT / "src"))
 import mechdsl  # noqa: E402
 from mechdsl.bench import Setup, parse_tolerances, parse_variants, run_bench  # noqa: E402
 
+MIN_TOTAL = 0.05      # CPU s: a row's timed runs add up to at least this (a 1 ms run is timed about 50 times)
 METHODS = "auto,dop853,dopri5,erk,cvodes-adams,cvodes-bdf,scipy-dop853,scipy-lsoda"
 MODELS = {"dp": ("double pendulum (Chaos), 10 s", "models/double_pendulum.mech", dict(scene="Chaos"), {}, 10.0),
           "n5": ("5-link chain, 5 s", "models/nlink_pendulum.mech", {}, {"N": 5}, 5.0),
@@ -42,7 +49,7 @@ def sweep(key, tolerances, repeats, log=None):
         m = m.with_params(**params)
     st = Setup.from_model(m, t_end=t_end, points=101, source=path)
     return title, run_bench(st, variants=parse_variants(METHODS), tolerances=parse_tolerances(tolerances),
-                            repeats=repeats, budget=20.0, log=log)
+                            repeats=repeats, budget=20.0, min_total=MIN_TOTAL, log=log)
 
 
 def table(title, res) -> tuple[str, dict]:
@@ -50,11 +57,12 @@ def table(title, res) -> tuple[str, dict]:
     auto = {r.tolerance: r for r in rows if r.label == "auto"}
     others = [r for r in rows if r.label != "auto"]
     tols = sorted(auto, reverse=True)
-    out = [f"{title}: CPU ms (min of {res.repeats} after a warm-up), error = relative error of the coordinates at "
+    out = [f"{title}: CPU ms (min of at least {res.repeats} runs after a warm-up, interleaved across the methods, "
+           f"more until a row's runs add up to {MIN_TOTAL * 1e3:g} ms), error = relative error of the coordinates at "
            "the final time",
            f"{'tol':>7} {'auto ms':>8} {'ran':>7} {'error':>8} | {'best same tol':>22} {'x':>5} | "
-           f"{'best as accurate':>30} {'x':>5} | {'monotone':>8}"]
-    worst = {"same": 0.0, "accurate": 0.0, "monotone": 0.0}
+           f"{'best as accurate':>30} {'x':>5} | {'monotone':>8} | {'x ran':>5}"]
+    worst = {"same": 0.0, "accurate": 0.0, "monotone": 0.0, "ran": 0.0}
     for i, tol in enumerate(tols):
         a = auto[tol]
         same = min((r for r in others if r.tolerance == tol), key=lambda r: r.cpu, default=None)
@@ -63,18 +71,23 @@ def table(title, res) -> tuple[str, dict]:
         mono = a.cpu / tighter.cpu if tighter else None
         x_same = a.cpu / same.cpu if same else None
         x_acc = a.cpu / acc.cpu if acc else None
-        for k, v in (("same", x_same), ("accurate", x_acc), ("monotone", mono)):
+        twin = next((r for r in others if r.tolerance == tol and r.label == a.ran), None)
+        x_ran = a.cpu / twin.cpu if twin else None
+        for k, v in (("same", x_same), ("accurate", x_acc), ("monotone", mono), ("ran", x_ran)):
             if v is not None:
                 worst[k] = max(worst[k], v)
-        ran = (a.method if a.method != "auto" else "") or "auto"
+        ran = a.ran or "?"
         out.append(f"{tol:7.0e} {a.cpu * 1e3:8.2f} {ran:>7} {a.err_final:8.1e} | "
                    + (f"{same.label:>12} {same.cpu * 1e3:7.2f} ms {x_same:5.2f}" if same else f"{'-':>22} {'':>5}")
                    + " | "
                    + (f"{acc.label:>12} {acc.tolerance:.0e} {acc.cpu * 1e3:7.2f} ms {x_acc:5.2f}" if acc
                       else f"{'none as accurate':>30} {'':>5}")
-                   + " | " + (f"{mono:8.2f}" if mono is not None else f"{'-':>8}"))
+                   + " | " + (f"{mono:8.2f}" if mono is not None else f"{'-':>8}")
+                   + " | " + (f"{x_ran:5.2f}" if x_ran is not None else f"{'-':>5}"))
     out.append(f"worst: auto / best at the same tolerance {worst['same']:.2f}, auto / best as accurate "
-               f"{worst['accurate']:.2f} (goal <= 1.2), loosening the tolerance costs at most x{worst['monotone']:.2f}")
+               f"{worst['accurate']:.2f} (goal <= 1.2), loosening the tolerance costs at most x{worst['monotone']:.2f}; "
+               f"auto / the same method run by name at the same tolerance at most {worst['ran']:.2f} (its overhead and "
+               "the timing noise)")
     return "\n".join(out), worst
 
 

@@ -6,7 +6,9 @@ with IPOPT (exact Hessian) on
   hand       the cart-pole written out by hand in SX, its parameters as numbers
              (tests/test_control.py checks that both give the same xdot at random states to 1e-12)
   mechdsl    m.casadi()["ode"] of models/cart_pole.mech (an SXFunction: the recursive route
-             gives the accelerations explicitly), the parameters as the input p
+             gives the accelerations explicitly), the parameters as the input p, given as
+             numbers (called so in the OCP's MX graph it calls its specialization to them:
+             mechdsl.eom.numeric_p)
   fixed      m.casadi(fixed_parameters=True)["ode"]: the parameters built in as numbers
              (what the hand-written model does), p empty
   compiled   m.casadi(compiled=True, derivatives=2)["ode"] (C code with its first and second derivatives)
@@ -114,7 +116,9 @@ def rows(Ns, repeat):
         m.integrator(T / N, fixed_parameters=True, **SHOOT)), SHOOT))
     yield (f"cart-pole swing-up, T = {T} s, RK4 x {M_RK} per interval (integrator: {SHOOT['method']} at rtol "
            f"{SHOOT['rtol']:g}), |F| <= {F_MAX} N; ode classes: {', '.join(f'{n}={f.class_name()}' for n, f, _ in odes)}; "
-           f"VM instructions: {', '.join(f'{n}={f.n_instructions()}' for n, f, _ in odes if f.is_a('SXFunction'))}")
+           f"VM instructions: {', '.join(f'{n}={f.n_instructions()}' for n, f, _ in odes if f.is_a('SXFunction'))}"
+           + "".join(f"; {n} called with p as numbers in the OCP's MX graph: its specialization (eom.numeric_p), "
+                     f"{f.specialized(p).n_instructions()} instructions" for n, f, p in odes if hasattr(f, "specialized")))
     yield (f"{'N':>4} {'variant':>10} {'CPU s':>8} {'+build s':>9} {'iters':>6} {'x hand':>7} "
            f"{'replay gap':>11} {'exact gap':>10}")
     for N in Ns:

@@ -423,3 +423,41 @@ def test_reference_of_a_scene_formulation_comes_first():
     c = R.auto_candidates("dae", "augmented")
     assert c[:3] == ("augmented+cvodes-adams", "augmented+erk", "augmented+cvodes-bdf")
     assert "ggl+idas" in c and R.auto_candidates("ode", "augmented") == R.auto_candidates("ode")
+
+
+def test_repeats_are_interleaved_across_the_variants(tmp_path, setup, monkeypatch):
+    """run_bench times each variant once after its warm-up, then the other repeats round-robin
+    across the variants of the tolerance (order reversed every other round): runs compared
+    are measured side by side.  Each row keeps every timed run and their minimum; Row.ran is
+    the method that ran (what auto chose)."""
+    from mechdsl.bench import runner
+
+    order = []
+    plain = runner.simulate_variant
+
+    def traced(st, variant, tol, *a, **k):
+        order.append((variant.label, tol))
+        return plain(st, variant, tol, *a, **k)
+
+    monkeypatch.setattr(runner, "simulate_variant", traced)
+    res = run_bench(setup, variants=parse_variants("auto,erk"), tolerances=[1e-4, 1e-6],
+                    reference=exact_csv(tmp_path / "exact.csv"), repeats=3)
+    assert [r.status for r in res.rows] == ["ok"] * 4
+    for r in res.rows:
+        assert len(r.cpu_runs) == 3 and r.cpu == min(r.cpu_runs)
+    assert res.rows_of("erk")[0].ran == "erk" and res.rows_of("auto")[0].ran in ("dopri5", "dop853", "erk")
+    # per tolerance: warm-up + one run each, then the two more rounds (reversed, then in order)
+    a, e = ("auto", 1e-4), ("erk", 1e-4)
+    assert order[:8] == [a, a, e, e, e, a, a, e]
+
+
+def test_fast_rows_are_repeated_until_their_runs_add_up(tmp_path, setup):
+    """min_total: a row whose timed runs add up to less gets more interleaved rounds than
+    ``repeats`` (at most runner.MAX_ROUNDS)."""
+    from mechdsl.bench.runner import MAX_ROUNDS
+
+    res = run_bench(setup, variants=parse_variants("erk,rk[dt=0.01]"), tolerances=[1e-4],
+                    reference=exact_csv(tmp_path / "exact.csv"), repeats=2, min_total=0.02)
+    for r in res.rows:
+        assert r.ok and len(r.cpu_runs) >= 2 and r.cpu == min(r.cpu_runs)
+        assert sum(r.cpu_runs) >= 0.02 or len(r.cpu_runs) == MAX_ROUNDS + 1

@@ -373,7 +373,10 @@ class Model:
         ``parameter_vector()``.  A model with constraints: "ode" is the index-1 ODE the run
         integrates (the accelerations with the multipliers solved), "outputs" its outputs
         (reactions included), and the DAE pieces "multipliers", "constraints" (g, gdot),
-        "constraint_jacobian", "mass_matrix", "bias" (mechdsl.dae.functions).
+        "constraint_jacobian", "mass_matrix", "bias" (mechdsl.dae.functions).  An SX Function
+        called in an MX graph (an Opti problem) with p given as numbers calls itself with those
+        numbers built in (mechdsl.eom.numeric_p: the same values, CasADi folds the arithmetic on
+        them); p given as a symbol keeps every derivative with respect to p.
 
         compiled: each Function is compiled to C when it is first asked for, and only it;
         derivatives=1 or 2 adds its directional derivatives to its library (fwd1_, adj1_; with 2

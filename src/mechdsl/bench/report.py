@@ -59,7 +59,7 @@ def summary(res, table_name: str = "bench.csv") -> dict:
         "error": "relative per component (scaled by max |reference| over time); final = max at the last time, "
                  "l2 = root mean square over the reference times and components",
         "tolerances": list(res.tolerances), "rtol_equals_atol": True,
-        "timer": res.timer, "repeats": res.repeats, "timing": "minimum over repeats after one warm-up run",
+        "timer": res.timer, "repeats": res.repeats, "timing": "minimum over repeats after one warm-up run; the repeats interleaved across the variants at each tolerance",
         "reference": {"source": ref.source, "methods": list(ref.methods), "tolerance": ref.tolerance,
                       "accuracy": ref.accuracy, "cpu_s": ref.cpu, "times": len(ref.t), "notes": list(ref.notes)},
         "plan": list(s.notes),

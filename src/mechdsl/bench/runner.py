@@ -23,7 +23,7 @@ from ..diagnostics import MechError, Span, UsageError
 from . import measure, reference as R
 from .index1 import FORMULATION as INDEX1
 from .spec import SYMPLECTIC_ORDER, Variant, parse_variant
-from .timing import TIMER, OverBudget, timed
+from .timing import LONG, TIMER, OverBudget, cpu_call, timed
 
 DEFAULT_POINTS = 101
 DEFAULT_BUDGET = 30.0      # CPU seconds: a run longer than this ends the variant's sweep
@@ -91,6 +91,7 @@ class Row:
     steps: int | None = None
     rhs_evals: int | None = None
     t_reached: float | None = None
+    ran: str | None = None             # the method that ran (what auto chose)
 
     @property
     def ok(self) -> bool:
@@ -232,7 +233,10 @@ def _stat(st: dict, *keys):
 
 
 def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Reference, columns,
-                repeats: int, conservative, stop_after: float | None = None) -> Row:
+                repeats: int, conservative, stop_after: float | None = None, *, rerun: list | None = None) -> Row:
+    """One row: a warm-up run, ``repeats`` timed runs, the error against the reference.
+    ``rerun``: a list that gets (row, the timed run) of a successful row, for more timed runs
+    interleaved with the other variants' (run_bench)."""
     row = Row(label=variant.label, method=variant.method, formulation=variant.formulation, tolerance=tol)
     outputs = _outputs_for(setup.eom, columns)
     dt = variant.fixed_dt
@@ -264,6 +268,7 @@ def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Re
         return row
     r = tm.result
     row.cpu, row.cpu_runs, row.cpu_warmup = tm.best, tm.runs, tm.warmup
+    row.ran = (r.metadata or {}).get("method")
     st = r.stats or {}
     row.steps = _stat(st, "steps", "nsteps")
     row.rhs_evals = _stat(st, "rhs_evals", "rhs_evaluations", "nfevals")
@@ -292,6 +297,8 @@ def measure_run(setup: Setup, variant: Variant, tol, points, rows_idx, ref: R.Re
     Rv = np.column_stack([ref.values[c] for c in columns])
     e = measure.errors(Y, Rv, measure.component_scales(ref.values, columns))
     row.err_final, row.err_l2 = e["final"], e["l2"]
+    if rerun is not None and tm.warmup <= LONG:
+        rerun.append((row, once))
     return row
 
 
@@ -315,8 +322,6 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
     points = setup.points
     idx = np.arange(points)
     outputs = _outputs_for(setup.eom, columns)
-    from .timing import cpu_call
-
     given = reference_methods is not None
 
     def attempt(lab, t):
@@ -360,13 +365,15 @@ def make_reference(setup: Setup, reference, columns, tolerances, kind, reference
 
 def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="auto", reference_methods=None,
               compare="positions", repeats: int = 3, budget: float = DEFAULT_BUDGET,
-              sweep_budget: float | None = None, stop_after: float | None = None,
+              sweep_budget: float | None = None, stop_after: float | None = None, min_total: float = 0.0,
               log: Callable[[str], None] | None = None) -> BenchResult:
     """Every variant over the tolerance sweep against the reference.  budget: CPU seconds of
     one run beyond which its variant's tighter tolerances are skipped; sweep_budget: CPU
     seconds of all runs beyond which the remaining ones are skipped (None: no limit);
     stop_after: CPU seconds after which one run is stopped where the simulator reports
-    progress (its row is skipped, and so are its variant's tighter tolerances)."""
+    progress (its row is skipped, and so are its variant's tighter tolerances); min_total: CPU
+    seconds a row's timed runs add up to at least (more rounds than ``repeats`` for fast runs,
+    at most MAX_ROUNDS)."""
     from ..simulation.monitors import is_conservative
 
     if repeats < 1:
@@ -388,6 +395,7 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
     interrupted = False
     with interrupt_guard():              # a Ctrl-C CasADi swallows inside a run still stops the bench
         for i in range(max(len(sw) for sw in sweeps.values())):
+            rerun: list = []               # this tolerance's rows, timed again in rounds across the variants
             for v in variants:
                 sw = sweeps[v.label]
                 if i >= len(sw) or v.label in finished:
@@ -399,7 +407,7 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
                     continue
                 try:
                     row, cpu, measured = _next_row(setup, v, tol, over, budget, sweep_budget, spent, points, idx,
-                                                   ref, columns, repeats, conservative, stop_after)
+                                                   ref, columns, 1, conservative, stop_after, rerun)
                     check_interrupt()
                 except KeyboardInterrupt:
                     interrupted = True
@@ -414,13 +422,50 @@ def run_bench(setup: Setup, *, variants: list[Variant], tolerances, reference="a
                 if row.status == "n/a":        # the combination does not exist: one row says so
                     finished.add(v.label)
                 done[v.label].append(row)
+            if not interrupted:
+                try:
+                    spent += _rounds(rerun, repeats - 1, min_total)
+                except KeyboardInterrupt:
+                    interrupted = True
     rows = [r for v in variants for r in done[v.label]]
     return BenchResult(setup=setup, columns=columns, reference=ref, rows=rows, tolerances=tolerances,
                        repeats=repeats, kind=kind, machine=machine(), interrupted=interrupted)
 
 
+MAX_ROUNDS = 200       # rounds of timed runs (after the first) when min_total asks for more than the repeats
+
+
+def _rounds(rerun: list, rounds: int, min_total: float = 0.0) -> float:
+    """Time every (row, run) of ``rerun`` again, ``rounds`` times round-robin (every other round
+    in reverse order): runs compared with each other are measured side by side, so a change of
+    the machine's load hits them alike; each row keeps its minimum.  Rows whose timed runs
+    add up to less than ``min_total`` CPU seconds go on in further rounds (at most MAX_ROUNDS):
+    the minimum of a millisecond run needs more than a few tries on a loaded machine.
+    The CPU seconds spent."""
+    from ..interrupts import check_interrupt
+
+    spent, stopped = 0.0, set()
+    for k in range(max(rounds, MAX_ROUNDS)):
+        for row, once in (rerun if k % 2 else rerun[::-1]):
+            if id(row) in stopped or (k >= rounds and sum(row.cpu_runs) >= min_total):
+                continue
+            try:
+                dt, _ = cpu_call(once)
+            except OverBudget as e:        # stopped this time (the machine's load): its earlier runs stand
+                stopped.add(id(row))
+                spent += e.cpu
+                continue
+            check_interrupt()
+            row.cpu_runs = row.cpu_runs + (dt,)
+            row.cpu = min(row.cpu, dt)
+            spent += dt
+        if k + 1 >= rounds and all(id(r) in stopped or sum(r.cpu_runs) >= min_total for r, _ in rerun):
+            break
+    return spent
+
+
 def _next_row(setup, v, tol, over, budget, sweep_budget, spent, points, idx, ref, columns, repeats,
-              conservative, stop_after) -> tuple[Row, float, bool]:
+              conservative, stop_after, rerun=None) -> tuple[Row, float, bool]:
     """(row, CPU seconds spent, measured) of variant ``v`` at tolerance ``tol``: skipped for a
     budget, or measured."""
     import time
@@ -434,7 +479,7 @@ def _next_row(setup, v, tol, over, budget, sweep_budget, spent, points, idx, ref
         return Row(label=v.label, method=v.method, formulation=v.formulation, tolerance=tol, status="skipped",
                    message=f"the sweep used its budget of {sweep_budget:g} s of CPU"), 0.0, False
     c0 = time.process_time()
-    row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative, stop_after)
+    row = measure_run(setup, v, tol, points, idx, ref, columns, repeats, conservative, stop_after, rerun=rerun)
     return row, time.process_time() - c0, True
 
 

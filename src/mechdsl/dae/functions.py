@@ -27,8 +27,10 @@ from __future__ import annotations
 import casadi as ca
 
 from ..eom import fold_inputs
-from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of, specialize
+from ..eom.codegen import TXUP, FunctionSet, available, jacobian_of
+from ..eom.specialize import shared_derivatives, specialize
 from ..eom.fold import fold_parameters
+from ..eom.numeric_p import numeric_p
 from ..eom.start import fixed_start
 from .constrained_system import ConstrainedSystem
 from .dof import dof_report
@@ -51,7 +53,8 @@ class ConstrainedFunctionSet(FunctionSet):
     def __getitem__(self, name):
         if name in OWN + ("ode_jacobian",) and not self.want_compiled and name in self._names:
             if name not in self._cache:          # never the model cache's (the tree's ode)
-                self._cache[name] = jacobian_of(self["ode"]) if name == "ode_jacobian" else self._make(name)
+                f = jacobian_of(self["ode"]) if name == "ode_jacobian" else self._make(name)
+                self._cache[name] = numeric_p(f) if self.sx else f
             return self._cache[name]
         return super().__getitem__(name)
 
@@ -59,7 +62,8 @@ class ConstrainedFunctionSet(FunctionSet):
         if name not in OWN:
             return super()._make(name, loop=False)
         f = self._build_own(name)
-        return specialize(f, self.fixed, len(self.eom.params)) if self.fixed else f
+        f = specialize(f, self.fixed, len(self.eom.params)) if self.fixed else f
+        return shared_derivatives(f) if self.sx else f
 
     def system(self) -> ConstrainedSystem:
         """The constrained system over the independent constraints at the consistent start

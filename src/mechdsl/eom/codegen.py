@@ -49,6 +49,7 @@ from ..diagnostics import Diagnostic, MechError
 from . import cachefiles
 from .cachefiles import cache_dir      # (also imported from here: mechdsl.eom.codegen.cache_dir)
 from .compiler import find_compiler  # noqa: F401  (the compiler search, without CasADi: also warm_run's)
+from .specialize import shared_derivatives, specialize
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
             "start", "parameters", "singularity", "invariants")
@@ -365,16 +366,20 @@ class FunctionSet(Mapping):
                 self._cache[name] = jacobian_of(self["ode"])
             else:
                 self._cache[name] = self._make(name)
+            if self.sx:               # called in an MX graph with p as numbers: specialized (eom.numeric_p)
+                from .numeric_p import numeric_p
+
+                self._cache[name] = numeric_p(self._cache[name])
         return self._cache[name]
 
     def _make(self, name, loop: bool = False):
         # the looped ode (big chains, compiled only) is an MX Function: parameters are not
         # specialized into it (specialize keeps the Function's kind)
         f = _build(self.eom, name, self.outputs, self.sx, loop=loop and not self.fixed)
-        if not self.fixed:
-            return f
-        f = specialize(f, self.fixed, len(self.eom.params))
-        return drop_cancelled(f) if name == "ode" else f
+        if self.fixed:
+            f = specialize(f, self.fixed, len(self.eom.params))
+            f = drop_cancelled(f) if name == "ode" else f
+        return shared_derivatives(f) if self.sx else f
 
     def __iter__(self):
         return iter(self._names)
@@ -422,32 +427,6 @@ class FunctionSet(Mapping):
 
 _STRUCTURE = ("q", "qd", "t", "u", "p", "T", "V", "M", "bias", "qdd", "g", "outputs", "q0", "qd0",
               "singularity_monitors", "invariants")
-
-
-def specialize(f, fixed, n_p: int):
-    """``f`` with the parameter entries ``fixed`` ((index in p, value) pairs) built in as numbers:
-    its input "p" (or its output "p", for the ``parameters`` Function) keeps only the other
-    entries, in order.  The Function is rebuilt from its own expression graph (an SX Function
-    stays SX), so CasADi folds the constants: operations on parameters alone disappear."""
-    ca = _ca()
-    at = dict(fixed)
-    keep = [i for i in range(n_p) if i not in at]
-    if "p" in f.name_in():
-        sym = ca.SX if f.is_a("SXFunction") else ca.MX
-        ins = [sym.sym(nm, f.sparsity_in(i)) for i, nm in enumerate(f.name_in())]
-        k = f.name_in().index("p")
-        ins[k] = sym.sym("p", len(keep))
-        rest = iter(ca.vertsplit(ins[k]))
-        full = ca.vertcat(*[sym(at[i]) if i in at else next(rest) for i in range(n_p)]) if n_p else sym(0, 1)
-        outs = f.call([full if i == k else a for i, a in enumerate(ins)])
-        return ca.Function(f.name(), ins, outs, f.name_in(), f.name_out(), {"allow_duplicate_io_names": True})
-    if "p" in f.name_out():               # parameters: free -> p, the kept entries of p
-        ins = [ca.SX.sym(nm, f.sparsity_in(i)) for i, nm in enumerate(f.name_in())]
-        outs = f.call(ins)
-        k = f.name_out().index("p")
-        outs[k] = outs[k][keep] if keep else ca.SX(0, 1)
-        return ca.Function(f.name(), ins, outs, f.name_in(), f.name_out())
-    return f
 
 
 _SMOOTH_OPS = ("ASSIGN", "ADD", "SUB", "MUL", "DIV", "NEG", "EXP", "LOG", "POW", "CONSTPOW", "SQRT", "SQ",
