@@ -104,8 +104,14 @@ def companion(problem, r):
     # the outputs of the run (their recorder is built already and kept); compiled as the run ran,
     # and a run in the stepping loop with the model interpreted (crk.engine_for: too large to
     # compile) keeps that loop: compiled = false would step it in Python, at 2-3x the run's cost
-    # per evaluation (issue 24)
-    compiled = True if ran.get("compiled") else (None if r.metadata.get("loop_engine") == "interpreted" else False)
+    # per evaluation (issue 24).  A run in the loop with compiled unset keeps it unset: the
+    # companion's engine then follows the same rules (crk.engine_for, payback.py; the same bits),
+    # where compiled = true would build another library for a large model that the pay-back rule
+    # switched to compiled code (a third gcc call of the 200-link chain's runs)
+    if r.metadata.get("loop_engine") is not None and s.compiled is None:
+        compiled = None
+    else:
+        compiled = True if ran.get("compiled") else (None if r.metadata.get("loop_engine") == "interpreted" else False)
     extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, compiled=compiled)
     if problem.kind == "ode":
         extra["points"] = points
