@@ -27,7 +27,7 @@ In order (the first group that finds something ends the check):
   E744  the accelerations are not finite at the start for another reason
   E756  a contact gap that is not finite at the start          (at the contact)
   E861  a start that penetrates a contact by more than the contact tolerance   (at the contact)
-  E758  a model with contacts smaller than 10 times the contact tolerance (lengths 1e-12)
+  E758  a model with contacts smaller than 100 times the contact tolerance's floor, 1e-7 m (lengths 1e-12)
   E757  an output that is not finite at the start                (at the output)
 
 Cost: one evaluation of the Functions the simulation builds anyway (the forward dynamics,
@@ -48,8 +48,9 @@ ANGLE_RESOLUTION = 1e-6    # rad: a start angle known less precisely than this i
 COINCIDE_REL = 1e-12        # spring/damper ends closer than this times the model's size coincide
 PROBES = 3                 # seeded positions besides the start at which E747 judges dT/dp
 LOOP_SIZE_FACTOR = 100     # a closed loop must measure this many times the constraint drift bound (E755)
-CONTACT_SIZE_FACTOR = 10   # a model with contacts must measure this many times the contact tolerance (E758):
-                           # the falling rod (1.6 m) at atol 1e-3 (tolerance 0.1 m) still comes to rest
+CONTACT_FLOOR = 1e-9       # m: the contact tolerance's floor, max(1e-9, 100 atol, 2 offset) (impacts/contact_run.py)
+CONTACT_SIZE_FACTOR = 100  # a model with contacts must measure this many times that floor (E758); a loose
+                           # tolerance is the user's choice (the cradle, 0.45 m, at atol 1e-3 still runs)
 DRIFT_BOUND = 1e-9          # the DAE's default drift bound, max(10 atol, 1e-10) for atol = 1e-10
 
 _HINT_POINT_ROTATION = ("a point mass on a {kind} joint has no inertia about the rod: use Revolute joints, "
@@ -201,7 +202,7 @@ def _dynamics_problems(eom, q, qd, t, pv, drift_bound: float = DRIFT_BOUND) -> l
 def _gap_problems(eom, q, t, pv, drift_bound: float = DRIFT_BOUND) -> list[Diagnostic]:
     """E756: a contact whose gap is not finite at the start can never be located (the
     newtons_cradle with r = 1e308: inf gaps in the results of a run that 'succeeded').
-    E758: a model with contacts smaller than CONTACT_SIZE_FACTOR times the contact tolerance (the
+    E758: a model with contacts smaller than CONTACT_SIZE_FACTOR times the contact tolerance's floor (the
     contact analogue of E755): pendulum_wall with L = 1e-12 m started with its contact closed
     and failed at t = 0 on a step budget of 8.7e7 steps; its size: the largest of the gaps
     and the spread of its points at the start.
@@ -235,12 +236,12 @@ def _gap_problems(eom, q, t, pv, drift_bound: float = DRIFT_BOUND) -> list[Diagn
     if found:
         return found
     size = max(_points_size(eom, q, t, pv), float(np.max(np.abs(values))))
-    if 0.0 < size < CONTACT_SIZE_FACTOR * touch:
+    if 0.0 < size < CONTACT_SIZE_FACTOR * CONTACT_FLOOR:
         g = gaps[0]
-        return [Diagnostic("E758", f"the model measures only {size:.3g} m across: its contacts are located to "
-                                   f"{touch:.2g} m (the contact tolerance, max(1e-9, 100 atol)), more than "
-                                   f"1/{CONTACT_SIZE_FACTOR:g} of its size, so its motion is lost in the tolerance "
-                                   f"(contact '{g.name}' would start closed)", g.span or _model_span(eom),
+        return [Diagnostic("E758", f"the model measures only {size:.3g} m across: contacts are located to "
+                                   f"{CONTACT_FLOOR:g} m at best (the contact tolerance, max(1e-9, 100 atol)), more "
+                                   f"than 1/{CONTACT_SIZE_FACTOR:g} of its size, so its motion is lost in the "
+                                   f"tolerance (contact '{g.name}' would start closed)", g.span or _model_span(eom),
                            "choose units that make the lengths moderate (um or mm instead of m), "
                            "or check the lengths for a mistake")]
     return []
