@@ -159,6 +159,14 @@ def _key(f, extra: str = "") -> str:
     return sha256((hit[1] + _code_tag() + extra).encode()).hexdigest()[:32]
 
 
+def entry_path(f, kind: str, extra: str = ""):
+    """The cache file of ``f``'s entry of this kind (``<cache>/sxcode/<key>.<kind>``; the key: the
+    Function's serialization, the code's tag and ``extra``)."""
+    from . import cachefiles
+
+    return cachefiles.cache_dir() / "sxcode" / f"{_key(f, extra)}.{kind}"
+
+
 def _kept(f, kind: str, build, pack, unpack, extra: str = ""):
     mem = _MEMO.get((id(f), kind, extra))
     if mem is not None and mem[0] is f:
@@ -167,7 +175,7 @@ def _kept(f, kind: str, build, pack, unpack, extra: str = ""):
     try:
         from . import cachefiles
 
-        path = cachefiles.cache_dir() / "sxcode" / f"{_key(f, extra)}.{kind}"
+        path = entry_path(f, kind, extra)
         data, _why = cachefiles.read_bytes(path)        # the cache's trust rule (issue 25)
         value = unpack(data) if data is not None else None
     except Exception:  # noqa: BLE001 - an unreadable entry is rebuilt

@@ -33,7 +33,7 @@ _COUNTS: dict = {}          # key -> evaluations recorded (this process; the dis
 
 
 def _path(ode):
-    return cachefiles.cache_dir() / "sxcode" / f"{sxcode._key(ode)}.work"
+    return sxcode.entry_path(ode, "work")
 
 
 def recorded(ode) -> int:
