@@ -143,6 +143,7 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
     meta["versions"] = versions()        # provenance belongs to the Result, stamped here once
     if meta.get("interrupted"):
         raise RunInterrupted(r)           # a KeyboardInterrupt carrying the results up to there
+    stopped = False
     try:
         thorough = _estimate_error(r, problem) if s.estimate_error else None
         _default_estimate(r, problem, thorough)
@@ -153,9 +154,10 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         acc.update(error_estimate=None, error_estimate_unavailable="interrupted (Ctrl-C) during the companion run")
         meta["interrupted"] = True
         meta["interrupted_during"] = "the error estimate (the run itself reached its end time)"
-        A.accuracy_warning(r, problem)
-        raise RunInterrupted(r) from None
+        stopped = True
     A.accuracy_warning(r, problem)
+    if stopped:
+        raise RunInterrupted(r)
     return r
 
 
