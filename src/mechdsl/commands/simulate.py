@@ -61,13 +61,15 @@ def run(args) -> int:
         check_figure(args.plot, overwrite=args.force)
     progress = not (args.no_progress or args.out.quiet) and sys.stderr.isatty()
     warm = warm_key(args)       # (a prepared run took under 0.5 s: the bar, shown after 0.5 s, would not show)
-    r = _replay(warm) if warm is not None else None
+    r = _replay(warm, args.out) if warm is not None else None
     interrupted = False
     if r is None:
         model, x0 = load_model(args, starts_in_model=False)
         t_end = args.t_end
+        notes = []
         if t_end is None and model.scene_settings.get("stop_time") is None:     # the layer's default end
-            args.out.note(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
+            notes.append(f"no --t-end and no scene stop_time: simulating {DEFAULT_T_END:g} s")
+            args.out.note(notes[-1])
         # thin over mechdsl.Model: the settings resolve in Model.simulate exactly as for a Python
         # caller (argument > scene > default), so CLI and API give the same run for the same scene
         settings = dict(cli_settings(args), x0=x0 or None)
@@ -85,7 +87,7 @@ def run(args) -> int:
         if model.scene is not None:
             r.metadata["scene"] = model.scene.name
         if warm is not None and not interrupted:
-            _prepare_warm(warm, model, t_end, settings, r)
+            _prepare_warm(warm, model, t_end, settings, r, notes)
     with held_interrupt() as held:          # a Ctrl-C now waits for the files to be written
         written, lost = write_outputs(r, args.output, args.plot, args.force)
     if held.seen and not interrupted:
@@ -150,7 +152,9 @@ def _plain(v) -> bool:
     return isinstance(v, (list, tuple)) and all(_plain(x) for x in v)
 
 
-def _replay(warm):
+def _replay(warm, out):
+    """The prepared run's Result (None: the normal path runs), the command's notes said as the
+    normal path says them."""
     from ..simulation import warm_run
 
     data = warm_run.read(warm[0])
@@ -159,10 +163,12 @@ def _replay(warm):
     r = warm_run.replay(data)
     if r is not None:
         r.metadata.update(data["command"])
+        for note in data.get("command_notes", ()):
+            out.note(note)
     return r
 
 
-def _prepare_warm(warm, model, t_end, settings, r) -> None:
+def _prepare_warm(warm, model, t_end, settings, r, notes=()) -> None:
     """Store the prepared warm run of this command (simulation/warm_capture.py), if it can have one."""
     from ..numbers import si_unit
     from ..simulation import warm_capture, warm_run
@@ -173,6 +179,7 @@ def _prepare_warm(warm, model, t_end, settings, r) -> None:
     data, _why = warm_capture.payload(model.prepared_run(t_end, **settings), r, units)
     if data is not None:
         data["command"] = {k: r.metadata[k] for k in ("source", "target", "scene") if k in r.metadata}
+        data["command_notes"] = list(notes)
         warm_run.write(warm[0], data)
 
 

@@ -101,17 +101,14 @@ def companion(problem, r):
         # at 1e-12 on a stiff pendulum: 40 s against 0.4 s).  The companion need not be the same
         # method, only 10x more accurate: the default path at the tighter tolerance is
         method = "auto"
-    # the outputs of the run (their recorder is built already and kept); compiled as the run ran,
-    # and a run in the stepping loop with the model interpreted (crk.engine_for: too large to
-    # compile) keeps that loop: compiled = false would step it in Python, at 2-3x the run's cost
-    # per evaluation (issue 24).  A run in the loop with compiled unset keeps it unset: the
-    # companion's engine then follows the same rules (crk.engine_for, payback.py; the same bits),
-    # where compiled = true would build another library for a large model that the pay-back rule
-    # switched to compiled code (a third gcc call of the 200-link chain's runs)
-    if r.metadata.get("loop_engine") is not None and s.compiled is None:
-        compiled = None
-    else:
-        compiled = True if ran.get("compiled") else (None if r.metadata.get("loop_engine") == "interpreted" else False)
+    # the outputs of the run (their recorder is built already and kept); compiled as the run ran.
+    # A run in the stepping loop with compiled unset keeps it unset: the companion's engine then
+    # follows the same rules (crk.engine_for, payback.py; the same bits).  compiled = false would
+    # step an interpreted model in Python at 2-3x the run's cost per evaluation, and compiled =
+    # true would build a second library for a large model the pay-back rule switched to compiled
+    # code (a third gcc call of the 200-link chain's runs) (issue 24)
+    in_loop = r.metadata.get("loop_engine") is not None
+    compiled = None if in_loop and s.compiled is None else bool(ran.get("compiled"))
     extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, compiled=compiled)
     if problem.kind == "ode":
         extra["points"] = points
@@ -151,7 +148,19 @@ def estimate(r, problem, solve, given=None) -> None:
     compare(r, other, factor, s, lambda c: _unit(problem.eom, c))
 
 
-_PLANS: dict = {}        # id(settings) -> (settings, key, companion(...), its OdeSetup, environment, start)
+class _Plan:
+    """A kept companion plan: for the settings object ``settings`` and the run's ``key`` (output
+    times, method, engine, equations), ``companion(...)``'s answer and, once the companion ran,
+    its OdeSetup, the environment it was built in and its start values."""
+
+    __slots__ = ("settings", "key", "plan", "eom", "setup", "env", "start")
+
+    def __init__(self, settings, key, plan, eom):
+        self.settings, self.key, self.plan, self.eom = settings, key, plan, eom
+        self.setup = self.env = self.start = None
+
+
+_PLANS: dict = {}        # id(settings) -> _Plan
 PLANS_KEPT = 16
 
 
@@ -170,12 +179,12 @@ def _kept_companion(problem, r):
     ran = r.metadata.get("run") or {}
     key = (len(r.t), ran.get("method"), bool(ran.get("compiled")), id(problem.eom))
     hit = _PLANS.get(id(s))
-    if hit is not None and hit[0] is s and hit[1] == key:
-        return hit[2]
+    if hit is not None and hit.settings is s and hit.key == key:
+        return hit.plan
     plan = companion(problem, r)
     if len(_PLANS) >= PLANS_KEPT:
         _PLANS.pop(next(iter(_PLANS)))
-    _PLANS[id(s)] = [s, key, plan, None, None, None, problem.eom]
+    _PLANS[id(s)] = _Plan(s, key, plan, problem.eom)
     return plan
 
 
@@ -186,15 +195,15 @@ def _kept_states(problem, tight):
 
     hit = _PLANS.get(id(problem.settings))
     env = setup_environment()
-    if hit is None or hit[2][0] is not tight or hit[6] is not problem.eom:
+    if hit is None or hit.plan[0] is not tight or hit.eom is not problem.eom:
         hit = None
-    elif hit[3] is not None and hit[4] == env:
-        pv, xs = hit[5]
-        return hit[3].states(pv.copy(), xs.copy())
+    elif hit.setup is not None and hit.env == env:
+        pv, xs = hit.start
+        return hit.setup.states(pv.copy(), xs.copy())
     setup = kept_setup(problem.eom, tight, lambda: prepare(formulate(problem.eom, tight.validated())).setup)
     start = setup.start_of(tight)
     if hit is not None:
-        hit[3], hit[4], hit[5] = setup, env, (start[0].copy(), start[1].copy())
+        hit.setup, hit.env, hit.start = setup, env, (start[0].copy(), start[1].copy())
     return setup.states(*start)
 
 
