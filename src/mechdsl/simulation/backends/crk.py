@@ -35,9 +35,8 @@ import numpy as np
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
-from .crk_calls import (CANCELLED, CRK_METHODS, EVENTS_ARGTYPES, LOOP_ARGTYPES, RUN_ARGTYPES, SLICE,  # noqa: F401
-                        STATUS, YIELD, Fun, Loop, Resume, counts, _DP, _I64P, _VP, _ptr, declare, loop_drive, map_rows, program_fun,
-                        run_compiled, tables_in_loop)
+from .crk_calls import CANCELLED, CRK_METHODS, counts, run_compiled  # noqa: F401  (crk.X for the back ends)
+from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, declare, map_rows, program_fun, tables_in_loop
 
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
 _LIBS: dict = {}
