@@ -255,11 +255,13 @@ _FLAT_MEMO_SIZE = 64
 
 
 def _frozen(v):
+    """``v`` hashable, each value with its type (2, 2.0 and True are equal keys otherwise, and an
+    Integer parameter given 2.0 is an error where 2 is not)."""
     if isinstance(v, dict):
         return tuple(sorted((k, _frozen(x)) for k, x in v.items()))
     if isinstance(v, (list, tuple)):
-        return tuple(_frozen(x) for x in v)
-    return v
+        return (type(v).__name__, tuple(_frozen(x) for x in v))
+    return type(v).__name__, v
 
 
 def _flat_key(program: Program, name: str, modification: dict | None):
