@@ -123,7 +123,7 @@ def test_the_driver_loop_is_bounded(monkeypatch):
     """Every loop of the driver counts its integrator calls; at the bound the run fails (E824)
     with the results up to there (here the bound is lowered to 5 calls of 0.1 s)."""
     from dae_models import pendulum_eom
-    from mechdsl.simulation.backends import dae as driver
+    from mechdsl.simulation.backends import dae_loop as driver
 
     monkeypatch.setattr(driver, "MAX_CALLS", 5)
     r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0.0, 0.0)), 2.0, points=3, max_interval=0.1)

@@ -9,7 +9,7 @@
          drift measurement (||g||, ||G q' + g_t||)
     -> outputs, multipliers and reactions at the output times -> Result
 
-Chunks.  One integrator call covers up to CHUNK monitoring intervals (the integrator returns
+Chunks (the loop: dae_loop.SegmentLoop).  One integrator call covers up to CHUNK monitoring intervals (the integrator returns
 the states at each monitoring and output time); a formulation may accept only a prefix
 (projection does when the drift grows).  A chunk that fails is retried one monitoring interval at a time, and
 a failing interval is halved up to MAX_RETRIES times before the run stops with a Failure.
@@ -34,16 +34,15 @@ from ...dae.augmented import AugmentedStepper, ode_eigenvalues
 from ...dae.baumgarte import BaumgarteStepper
 from ...dae.constrained_system import ConstrainedSystem
 from ...dae.dae_run import FORMULATIONS, DaeRun, resolve_formulation
-from ...dae.dof import dof_report, short_list, singular_ratio, singular_ratios
+from ...dae.dof import dof_report, short_list
 from ...dae.ggl import GGLStepper
 from ...dae.init import initialize, start_jacobian
 from ...dae.partitioning import PartitioningStepper
 from ...dae.projection import ProjectionStepper
-from ...dae.segments import NonFiniteError, SegmentInterrupted, StepError, locate_nonfinite
 from ...diagnostics import UsageError
 from ...eom import parameter_vector
 from ...eom.start import fixed_start
-from ...output.result import INTERRUPTED, Failure, Result
+from ...output.result import Failure, Result
 from ..accuracy import DRIFT_CAP, DRIFT_FACTOR, drift_limit
 from ..choose import choose_method
 from ..functions import problem_functions
@@ -52,53 +51,7 @@ from ..record_dae import constrained_signals, multipliers, select_signals
 from ..registry import dae_method
 from ..settings import DEFAULT_POINTS
 from . import Backend, compiled_setting
-
-
-SINGULAR_WATCH = 1e-3      # start shortening segments once sigma ratio is below this
-MONITOR_POINTS = 61       # the monitoring grid (drift, conditioning, projection), whatever the output points
-MAX_RETRIES = 12           # halvings of a failing segment before giving up
-FIRST_CHUNK = 8            # intervals of the first segment (ggl, partitioning: doubled after each full one)
-BUDGET_MARGIN = 8.0        # a call may take this many times the steps per unit time seen before
-MAX_CALLS = 100_000        # integrator calls per run: a bound on every loop of the driver
-CHUNK = 64                 # most output intervals per integrator call (one integrator is built
-                           # per segment length and kept with the system, so reruns reuse it)
-
-
-FIRST_PERIODS = 50         # the first segment of an ODE formulation spans at most this many periods
-
-
-def first_chunk(system, stepper, grid) -> int:
-    """Monitoring intervals of the first segment of the ODE formulations: all (CHUNK) unless
-    the run is long against the model's time scale 2 pi / rate, rate = sqrt(|q''| / |q|) at
-    the start (no Jacobian: it can take seconds to build); then about FIRST_PERIODS periods.  A segment is
-    integrated to its end before the drift check cuts it, so a first segment through a whole
-    long run (IFToMM A01: 2000 s, cut after ~100 s) doubled the work."""
-    q, qd, t = stepper.q, stepper.qd, stepper.t
-    try:
-        qdd, _ = system.accel(q, qd, t)
-        with np.errstate(all="ignore"):     # q = 0: an infinite rate (no warning on stderr), the default
-            rate = float(np.sqrt(np.linalg.norm(qdd) / max(np.linalg.norm(q), 1e-300)))
-    except Exception:  # noqa: BLE001 -- no estimate: the default
-        return CHUNK
-    if not np.isfinite(rate) or rate <= 0:
-        return CHUNK
-    dt = float(grid[1] - grid[0])
-    return int(max(1, min(CHUNK, np.ceil(FIRST_PERIODS * 2 * np.pi / rate / dt))))
-
-
-def with_outputs(times, outs, t_now: float, tiny: float):
-    """The segment's times with the output times strictly inside it added, and a flag per time:
-    True for the segment's own (monitoring) times."""
-    times = np.atleast_1d(np.asarray(times, float))
-    inner = outs[(outs > t_now + tiny) & (outs < times[-1] - tiny)]
-    if inner.size:
-        inner = inner[np.min(np.abs(inner[:, None] - times[None, :]), axis=1) > tiny]
-    if not inner.size:
-        return times, np.ones(len(times), bool)
-    allt = np.concatenate([times, inner])
-    mon = np.concatenate([np.ones(len(times), bool), np.zeros(len(inner), bool)])
-    order = np.argsort(allt, kind="stable")
-    return allt[order], mon[order]
+from .dae_loop import CODE_INTEGRATOR, MONITOR_POINTS, SegmentLoop
 
 
 def make_stepper(system, opts: DaeRun, t0, q0, qd0, span):
@@ -220,189 +173,13 @@ class SegmentRun:
         self.system, self.stepper, self.method_reason, self.too_much = system, stepper, method_reason, too_much
 
     def loop(self) -> None:
-        """Advance segment by segment to each output time; after each segment the formulation's
-        projection, the conditioning check of G and the drift measurement (module docstring)."""
-        opts = self.opts
-        system, stepper, too_much = self.system, self.stepper, self.too_much
-        grid, out_t, t0, t_end, span = self.grid, self.out_t, self.t0, self.t_end, self.span
-        T, Qs, QDs, D, VD = [], [], [], [], []
-        events: list[dict] = []
-        failure, failure_code = (too_much, CODE_INTEGRATOR) if too_much is not None else (None, None)
-        rank = system.m
-
-        def ratio_at(q, t):
-            return singular_ratio(system.scaled_G(q, t), rank)
-
-        def record(t, q, qd, dv=None):
-            d, v = dv if dv is not None else system.drift(q, qd, t)
-            T.append(t)
-            Qs.append(q.copy())
-            QDs.append(qd.copy())
-            D.append(d)
-            VD.append(v)
-
-        record(t0, stepper.q, stepper.qd)
-        j_out = 1              # next output time to record
-        ratio_prev, t_prev = ratio_at(stepper.q, t0), t0
-        min_ratio = ratio_prev
-        seen_d, seen_v = 0.0, 0.0
-        h_sing = np.inf
-        k = 1
-        retries = 0
-        h_fail = np.inf
-        # IDAS (ggl) and the partitioned CVODES with its Newton solves grind for minutes when a segment
-        # runs into a singular configuration before they fail; they start with short segments and stop
-        # each well before an extrapolated loss of rank. The explicit index-1 ODE fails fast there.
-        cautious = opts.formulation in ("ggl", "partitioning")
-        crossing = getattr(stepper, "crosses_singular", False)   # augmented: passes through singular configurations
-        # step budget per integrator output interval (CasADi's max_num_steps): max_steps until a segment
-        # succeeded (a model with absurd time scales then fails within seconds), afterwards also up to
-        # BUDGET_MARGIN times the steps per unit time seen there (long monitoring intervals of long runs)
-        chunk = FIRST_CHUNK if cautious else first_chunk(system, stepper, grid)
-        density = None         # integrator steps per unit time of the last successful segment
-        tau_pred = np.inf      # time until the singular ratio reaches 0, extrapolated from the last decrease
-        tiny = 1e-13 * max(abs(t_end), span)
-        interrupted = False
-        try:           # (Ctrl-C: the template's interrupt_guard notes what CasADi swallows; segments.call_integrator)
-            calls = 0
-            while k < len(grid) and failure is None:
-                calls += 1
-                if calls > MAX_CALLS:
-                    failure, failure_code = Failure(stepper.t, f"{opts.formulation} integrator failed",
-                                                    f"[{CODE_INTEGRATOR}] the run needed more than {MAX_CALLS} integrator "
-                                                    "calls (segments shortened near a singular configuration or after "
-                                                    "failures without end)"), CODE_INTEGRATOR
-                    if stepper.t > T[-1]:
-                        record(stepper.t, stepper.q, stepper.qd)
-                    break
-                single = np.isfinite(h_sing) or np.isfinite(h_fail) or chunk == 1
-                if single:
-                    target = grid[k]
-                    h = min(target - stepper.t, opts.max_interval or np.inf, h_sing, h_fail)
-                    times = np.array([target if stepper.t + h >= target - tiny else stepper.t + h])
-                else:
-                    K = min(chunk, len(grid) - k)     # the tail in one segment (integrators are cached per K)
-                    # a segment stops well before an extrapolated loss of rank: an integrator driven into a
-                    # singular configuration grinds (IDAS: minutes) before it fails
-                    if cautious and np.isfinite(tau_pred):
-                        K = max(1, min(K, int(0.5 * tau_pred / (grid[1] - grid[0]))))
-                    if opts.max_interval:
-                        K = max(1, min(K, int((opts.max_interval + tiny) // (grid[1] - grid[0]))))
-                    times = grid[k:k + K]
-                    if opts.max_interval and times[-1] - stepper.t > opts.max_interval + tiny:
-                        times = np.array([stepper.t + opts.max_interval])
-                saved = (stepper.t, stepper.q.copy(), stepper.qd.copy())
-                times, is_mon = with_outputs(times, out_t[j_out:], stepper.t, tiny)
-                H = float(times[-1] - stepper.t)
-                budget = opts.steps
-                if density is not None:
-                    budget = max(budget, int(np.ceil(BUDGET_MARGIN * density * H / max(1, int(np.sum(is_mon))))))
-                stepper.step_budget = budget if budget > opts.steps else None     # None: max_steps exactly
-                steps_before = stepper.stats.get("nsteps", 0)
-                try:
-                    try:
-                        T_acc, Q_acc, QD_acc = stepper.advance(times, is_mon)
-                    except np.linalg.LinAlgError as la:   # degenerate linear algebra: a failed segment, retried
-                        raise StepError(f"linear algebra failed in the {opts.formulation} step ({la})") from None
-                except StepError as e:
-                    stepper.reset(*saved)
-                    if getattr(e, "stats", None):     # a failed call's work counts too
-                        stepper.count_stats(e.stats)
-                    if int(np.sum(is_mon)) > 1:     # retry the chunk one monitoring interval at a time
-                        chunk = 1
-                        continue
-                    if hasattr(stepper, "recover_from_failure") and retries == 0 and stepper.recover_from_failure():
-                        retries += 1
-                        continue
-                    retries += 1
-                    h_fail = (times[-1] - saved[0]) / 2
-                    r_now = ratio_at(saved[1], saved[0])
-                    near_singular = r_now < 100 * opts.singular_tol
-                    if retries > MAX_RETRIES or h_fail < tiny or near_singular:
-                        # (near a singular configuration, halving the step only makes the solver retry
-                        # ever more ill-conditioned systems: stop at once)
-                        if near_singular or (r_now < ratio_prev and r_now < 10 * SINGULAR_WATCH):
-                            failure = Failure(saved[0], "singular configuration",
-                                              f"the constraint Jacobian is losing rank (sigma_min/sigma_max = {r_now:.2e}) "
-                                              f"and the {opts.formulation} integrator failed: {e}")
-                        else:
-                            failure, failure_code = integrator_failure(system, opts, saved, times[-1] - saved[0], e)
-                        if saved[0] > T[-1]:        # keep the last good state (between output times)
-                            record(*saved)
-                    continue
-                retries = 0
-                h_fail = np.inf
-                density = (stepper.stats.get("nsteps", 0) - steps_before) / H
-                if self.progress is not None:
-                    self.progress(float(T_acc[-1]), t_end)
-                n_mon = int(np.sum(is_mon[:len(T_acc)]))
-                if not single:
-                    chunk = min(CHUNK, 2 * chunk) if len(T_acc) == len(times) else max(1, n_mon)
-                elif chunk == 1 and not np.isfinite(h_sing):
-                    chunk = 2
-                d_all, v_all, Gs_all = system.monitor_many(Q_acc, QD_acc, T_acc)   # one call per segment
-                ratios = singular_ratios(Gs_all, rank)
-                for i in range(len(T_acc)):
-                    t_now, q_now, qd_now = float(T_acc[i]), Q_acc[i], QD_acc[i]
-                    d_now, v_now, ratio = float(d_all[i]), float(v_all[i]), float(ratios[i])
-                    is_output = j_out < len(out_t) and abs(t_now - out_t[j_out]) <= tiny
-                    if not is_mon[i]:       # an output time between checks: recorded, never acted upon
-                        min_ratio = min(min_ratio, ratio)
-                        if crossing:        # (augmented: passages are reported from every state seen)
-                            stepper.watch(t_now, ratio)
-                        if is_output:
-                            record(t_now, *stepper.for_record(t_now, q_now, qd_now))
-                            j_out += 1
-                        continue
-                    min_ratio = min(min_ratio, ratio)
-                    seen_d, seen_v = max(seen_d, d_now), max(seen_v, v_now)
-                    on_grid = abs(t_now - grid[k]) <= tiny
-                    if ratio < opts.singular_tol and not crossing:
-                        events.append({"time": t_now, "kind": "singular", "contact": "-",
-                                       "detail": f"sigma_min/sigma_max of the scaled constraint Jacobian = {ratio:.2e}"})
-                        failure = Failure(t_now, "singular configuration",
-                                          f"the constraint Jacobian lost rank (sigma_min/sigma_max = {ratio:.2e} < "
-                                          f"singular_tol = {opts.singular_tol:g}); the motion past this point is not "
-                                          "determined by the equations (a dead point or change point of the mechanism)")
-                        record(t_now, q_now, qd_now, (d_now, v_now))
-                        break
-                    h_sing = np.inf
-                    if t_now > t_prev:
-                        tau_pred = np.inf
-                    if ratio < ratio_prev and t_now > t_prev and not crossing:
-                        tau = ratio / ((ratio_prev - ratio) / (t_now - t_prev))   # linear extrapolation to 0
-                        tau_pred = tau
-                        if ratio < SINGULAR_WATCH or tau < 2 * (grid[1] - grid[0]):
-                            h_sing = max(0.5 * tau, 1e3 * tiny)
-                    ratio_prev, t_prev = ratio, t_now
-                    if crossing:
-                        stepper.watch(t_now, ratio)
-                    if is_output:
-                        record(t_now, q_now, qd_now, (d_now, v_now))
-                        j_out += 1
-                    if on_grid:
-                        k += 1
-                    if np.isfinite(h_sing) and i < len(T_acc) - 1:
-                        # approaching a singular configuration: rewind to here, continue in short segments
-                        stepper.reset(t_now, q_now, qd_now)
-                        break
-        except KeyboardInterrupt as stop:     # Ctrl-C: stop now, keep what was recorded (the template raises it)
-            interrupted = True
-            n_rec = min(map(len, (T, Qs, QDs, D, VD)))      # a record() cut short in the middle
-            del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
-            if isinstance(stop, SegmentInterrupted):        # the output times the interrupted segment reached
-                try:
-                    for t_now, q_now, qd_now in zip(stop.times, stop.Q, stop.QD):
-                        if j_out < len(out_t) and abs(float(t_now) - out_t[j_out]) <= tiny and t_now > T[-1]:
-                            record(float(t_now), np.asarray(q_now, float), np.asarray(qd_now, float))
-                            j_out += 1
-                except KeyboardInterrupt:                   # (a second Ctrl-C: what is recorded stays)
-                    n_rec = min(map(len, (T, Qs, QDs, D, VD)))
-                    del T[n_rec:], Qs[n_rec:], QDs[n_rec:], D[n_rec:], VD[n_rec:]
-            failure = Failure(T[-1], "interrupted", INTERRUPTED)
-        self.T, self.Qs, self.QDs, self.D, self.VD = T, Qs, QDs, D, VD      # the recorded states and drift
-        self.events, self.failure, self.failure_code, self.interrupted = events, failure, failure_code, interrupted
-        self.min_ratio, self.seen_d, self.seen_v = min_ratio, seen_d, seen_v
+        """Advance segment by segment to each output time (``SegmentLoop``); keeps what it recorded."""
+        lp = SegmentLoop(self.opts, self.system, self.stepper, self.grid, self.out_t, self.t0, self.t_end,
+                         self.span, self.too_much, self.progress)
+        lp.run()
+        self.T, self.Qs, self.QDs, self.D, self.VD = lp.T, lp.Qs, lp.QDs, lp.D, lp.VD   # the recorded states and drift
+        self.events, self.failure, self.failure_code, self.interrupted = lp.events, lp.failure, lp.failure_code, lp.interrupted
+        self.min_ratio, self.seen_d, self.seen_v = lp.min_ratio, lp.seen_d, lp.seen_v
 
     def finish(self) -> Result:
         """Outputs, multipliers and reactions at the output times, drift and energy checks,
@@ -470,28 +247,6 @@ class SegmentRun:
         if interrupted:
             metadata["interrupted"] = True      # (the template raises RunInterrupted with it)
         return result
-
-
-CODE_INTEGRATOR = "E824"    # the integrator gave up (step budget, step size collapse, Newton)
-CODE_NONFINITE = "E825"     # the equations or the state became inf/nan
-
-
-def integrator_failure(system, opts: DaeRun, saved, h: float, e: StepError):
-    """The Failure (and its code) of a segment that failed for good, from the last good state
-    ``saved`` = (t, q, q'): a non-finite state or right-hand side is named with its time and
-    coordinate; otherwise the integrator's own message and the work it did."""
-    t, q, qd = saved
-    where = (e.t, e.name) if isinstance(e, NonFiniteError) else locate_nonfinite(system, t, q, qd, h)
-    if where is not None:
-        tw, name = where
-        return Failure(t, "non-finite state",
-                       f"[{CODE_NONFINITE}] {name} is inf or nan at t = {tw:.10g} (after the last good state at "
-                       f"t = {t:.10g}); the model's equations are not defined there"), CODE_NONFINITE
-    return Failure(t, f"{opts.formulation} integrator failed",
-                   f"[{CODE_INTEGRATOR}] {e}; the step budget is max_steps = {opts.steps} steps per interval until "
-                   "a segment succeeded, then 8 times the steps per unit time seen; failing intervals were halved "
-                   f"up to {MAX_RETRIES} times; a model with time scales far shorter than the run (check its masses "
-                   "and lengths) or a stiff one (method = \"bdf\") ends here"), CODE_INTEGRATOR
 
 
 def energy_check(eom, signals, opts: DaeRun, complete: bool) -> dict:
