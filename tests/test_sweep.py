@@ -307,3 +307,29 @@ def test_a_run_failing_in_the_ensemble_is_rerun_alone_with_its_cause(dp):
                     method="dop853")
     assert not r.success and r.failure.time == pytest.approx(float(ds["failure_time"].values[i]))
     assert str(ds["cause"].values[i]) == r.failure.cause
+
+
+def test_a_large_models_chunks_compile_once_they_have_paid(dp, monkeypatch, tmp_path):
+    """The vectorized sweep of a model interpreted in the stepping loop (above COMPILE_OPS)
+    counts its chunks' interpreted evaluations like single runs do (payback.py): once they have
+    paid for the compile, the next chunks run compiled, with the same bits."""
+    from mechdsl.simulation.backends import crk, payback
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))          # a count of its own
+    kw = dict(params={"l": [0.5, 0.8, 1.1, 1.4, 1.7, 2.0]}, t_end=1.0, points=11, method="dop853",
+              chunk_size=2, progress=False, scheduler="vectorized")
+    compiled = dp.sweep(**kw)
+    engines = []
+    batch = crk.run_batch
+
+    def spy(loop, *a, **k):
+        engines.append(loop.engine)
+        return batch(loop, *a, **k)
+    monkeypatch.setattr(crk, "run_batch", spy)
+    monkeypatch.setattr(crk, "COMPILE_OPS", 0)
+    monkeypatch.setattr(payback, "PAYBACK_EVALS", 1)          # the first chunk pays
+    paid = dp.sweep(**kw)
+    assert engines == ["interpreted", "compiled", "compiled"]
+    assert paid.attrs["n_failed"] == 0
+    for name in ("j1.phi", "j2.phi", "y2"):
+        assert np.array_equal(paid[name].values, compiled[name].values)

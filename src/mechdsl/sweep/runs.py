@@ -205,7 +205,7 @@ def _ensemble(prep, todo: list, runs: dict):
     """(trajectories (run, time, state), raw statistics per run or None, runs that failed) of
     ``todo`` in one C call of the stepping loop (crk_run_batch), or None when the prepared
     problem does not run in the loop (then the mapped CasADi integrator)."""
-    from ..simulation.backends import crk
+    from ..simulation.backends import crk, payback
 
     setup = prep.setup
     funcs = setup.funcs
@@ -214,6 +214,10 @@ def _ensemble(prep, todo: list, runs: dict):
     loop, _ = crk.library(funcs.loop_ode, tag=setup.eom.name, engine=funcs.engine)
     if loop is None:
         return None
+    pay = None
+    if loop.engine == "interpreted":      # too large to compile up front: until the chunks have paid
+        pay = payback.Payback(funcs.loop_ode, setup.eom.name)     # (payback.py; the same bits either way)
+        loop = pay.compiled_now() or loop
     s = setup.settings
     X0 = np.vstack([runs[i][1].x0 for i in todo])
     P = np.vstack([np.ravel(runs[i][1].p) for i in todo])
@@ -223,6 +227,8 @@ def _ensemble(prep, todo: list, runs: dict):
                                               s.rtol, s.atol, setup.max_steps, min_step(s.t_start, s.t_end))
     raw = [{"n_steps": int(st[0]), "n_rhs": int(st[1]), "n_reject": int(st[2]), "status": 0, "engine": loop.engine}
            for st in stats]
+    if pay is not None and loop.engine == "interpreted":
+        pay.record(sum(int(st[1]) for st in stats))
     failed = {j for j in range(len(todo)) if status[j] != 0 or reached[j] < len(setup.grid)}
     return X, raw, failed
 
