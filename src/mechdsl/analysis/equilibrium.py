@@ -66,10 +66,7 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     equilibrium carries its multipliers.
     """
     eom = fold_inputs(eom)          # inputs held at their defaults: trailing parameters
-    import casadi as ca
-
     pv = param_vector(eom, p)
-    n = eom.n
     con = setup(eom, pv, t, "equilibrium analysis") if constrained(eom) else None
     st = structure(eom, pv)
     q0, _ = eom.start(pv)
@@ -93,8 +90,45 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
                       con=con, lam=np.zeros(ma))
         return equilibria_result([e], Search(), contact_notes(eom, [e], pv, t))
 
-    # unknowns w = (q, mu, alpha), lambda = lam_scale * mu:
-    # bias(q, 0, t) - G(q)' lambda - M(q) N alpha ; g(q) / |G row| ; N'(q - q_ref)
+    F, JF, rs, lam_scale = _residual(eom, st, con, blocks, t, N)
+    tol = 1e-8 * max(st.force_scale, 1e-300)
+    found: list[tuple[np.ndarray, np.ndarray, float]] = []
+    search = Search()
+    # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
+    families = con is None
+    for g in _guesses(eom, guesses, q0, st, max_guesses, con):
+        if blocks:
+            g = charts.normalize_blocks(g, blocks, fallback=q0)
+        search.guesses += 1
+        x0 = np.concatenate([g, _start_multipliers(eom, con, g, t, pv, lam_scale), np.zeros(k)])
+        sol = _solve(eom, st, con, blocks, F, JF, rs, x0, g, qref, pv, t, tol, search)
+        if sol is not None:
+            _keep(eom, st, blocks, F, qref, pv, t, tol, families, found, *sol)
+    found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
+    out = []
+    for qs, rest, resid in found:
+        locked = charts.locked_joints(eom, qs, t, pv) if con is None else []
+        if blocks or locked:
+            e = classify_in_chart(eom, st, pv, qs, rest[ma:], t, resid, list(notes), blocks, locked)
+            if e is not None:       # None: a critical point of the Euler chart only (gimbal lock)
+                out.append(e)
+        elif families:
+            st_f, a_f, more = with_families(eom, st, pv, qs, t, rest[ma:])
+            out.append(classify(eom, st_f, pv, qs, a_f, t, resid, list(notes) + more))
+        else:
+            out.append(classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
+                                 lam=_clean(lam_scale * rest[:ma], lam_scale)))
+    return equilibria_result(out, search, contact_notes(eom, out, pv, t))
+
+
+def _residual(eom, st, con, blocks, t, N):
+    """The residual Function F(w, q_ref, p), its Jacobian JF, the row scales rs and the
+    multipliers' scales.  Unknowns w = (q, mu, alpha), lambda = lam_scale * mu; rows
+    bias(q, 0, t) - G(q)' lambda - M(q) N alpha ; g(q) / |G row| ; N'(q - q_ref) ; |quaternion|^2 - 1."""
+    import casadi as ca
+
+    n, k = eom.n, N.shape[1]
+    ma = 0 if con is None else con.ma
     scale = max(st.force_scale, 1e-300)
     w = ca.SX.sym("w", n + ma + k)
     qr = ca.SX.sym("qref", n)
@@ -119,76 +153,65 @@ def equilibria(eom, guesses=None, *, t: float = 0.0, p=None, max_guesses: int = 
     args = [w, qr, eom.p]
     F = ca.Function("eq_res", args, [r])
     JF = ca.Function("eq_jac", args, [ca.jacobian(r, w)])
+    rs = np.concatenate([st.scales(), np.ones(ma), np.full(k, scale), np.ones(len(blocks))])
+    return F, JF, rs, lam_scale
+
+
+def _solve(eom, st, con, blocks, F, JF, rs, x0, g, qref, pv, t, tol, search: Search):
+    """Levenberg-Marquardt from x0 (the guess g): (q, the other unknowns, the largest force
+    residual) of a solution, or None (no convergence, a residual above the per-coordinate
+    tolerance, a run-away to where the force decayed, off the constraints, a gimbal-lock
+    artefact); the search's counts updated."""
+    n = eom.n
     fscales = st.scales()
-    rs = np.concatenate([fscales, np.ones(ma), np.full(k, scale), np.ones(len(blocks))])
-
-    tol = 1e-8 * scale
     tols = 1e-8 * fscales           # per coordinate: a stiff spring elsewhere does not hide a force
-    found: list[tuple[np.ndarray, np.ndarray, float]] = []
-    search = Search()
-    # rotation joints: solutions on one continuous family (a top turned about the vertical) merge
-    families = con is None
-    for g in _guesses(eom, guesses, q0, st, max_guesses, con):
-        if blocks:
-            g = charts.normalize_blocks(g, blocks, fallback=q0)
-        search.guesses += 1
-        x0 = np.concatenate([g, _start_multipliers(eom, con, g, t, pv, lam_scale), np.zeros(k)])
-        try:
-            x = levenberg_marquardt(lambda x: dense(F(x, qref, pv)).ravel() / rs,
-                                    lambda x: dense(JF(x, qref, pv)) / rs[:, None], x0)
-        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-            continue
-        if x is None:
-            continue
-        res = dense(F(x, qref, pv)).ravel()
-        if not np.all(np.isfinite(res)):
-            continue
-        resid = float(np.max(np.abs(res[:n])))
-        if np.any(np.abs(res[:n]) > tols):
-            _note_failure(search, x[:n], g, float(np.max(np.abs(res[:n]) / fscales)))
-            continue
-        if _decayed(x, g, n, JF, qref, pv, st):
-            search.runaway += 1
-            continue
-        search.converged += 1
-        qs = x[:n].copy()
-        if blocks:
-            qs = charts.normalize_blocks(qs, blocks)
-            x = np.concatenate([qs, x[n:]])
-            resid = float(np.max(np.abs(dense(F(x, qref, pv)).ravel()[:n])))
-        if con is not None and np.max(con.distances(qs), initial=0.0) > 1e-9 * (1.0 + np.max(np.abs(qs))):
-            continue
-        for i in range(n):
-            if st.periodic[i]:
-                qs[i] = wrap_angle(qs[i])
-        if con is None and eom.singularity_monitors and _lock_artefact(eom, qs, t, pv, tol):
-            continue
-        qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
-        for i, f_ in enumerate(found):
-            if same_point(qs, f_[0], st.periodic, blocks) or euler_same(eom, qs, f_[0], st) or \
-                    joined(F, qref, pv, qs, f_[0], x[n:], f_[1], tols, st.periodic, blocks, families) or \
-                    (families and rotation_joined(eom, qs, f_[0], t, pv, tol)):
-                if resid < f_[2]:
-                    found[i] = (qs, x[n:].copy(), resid)
-                break
-        else:
-            found.append((qs, x[n:].copy(), resid))
+    try:
+        x = levenberg_marquardt(lambda x: dense(F(x, qref, pv)).ravel() / rs,
+                                lambda x: dense(JF(x, qref, pv)) / rs[:, None], x0)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+        return None
+    if x is None:
+        return None
+    res = dense(F(x, qref, pv)).ravel()
+    if not np.all(np.isfinite(res)):
+        return None
+    resid = float(np.max(np.abs(res[:n])))
+    if np.any(np.abs(res[:n]) > tols):
+        _note_failure(search, x[:n], g, float(np.max(np.abs(res[:n]) / fscales)))
+        return None
+    if _decayed(x, g, n, JF, qref, pv, st):
+        search.runaway += 1
+        return None
+    search.converged += 1
+    qs = x[:n].copy()
+    if blocks:
+        qs = charts.normalize_blocks(qs, blocks)
+        x = np.concatenate([qs, x[n:]])
+        resid = float(np.max(np.abs(dense(F(x, qref, pv)).ravel()[:n])))
+    if con is not None and np.max(con.distances(qs), initial=0.0) > 1e-9 * (1.0 + np.max(np.abs(qs))):
+        return None
+    for i in range(n):
+        if st.periodic[i]:
+            qs[i] = wrap_angle(qs[i])
+    if con is None and eom.singularity_monitors and _lock_artefact(eom, qs, t, pv, tol):
+        return None
+    qs[np.abs(qs) <= 1e-15 * (1.0 + np.max(np.abs(qs), initial=0.0))] = 0.0    # round-off, not a value
+    return qs, x[n:].copy(), resid
 
-    found.sort(key=lambda f_: tuple(np.round(f_[0], 9)))
-    out = []
-    for qs, rest, resid in found:
-        locked = charts.locked_joints(eom, qs, t, pv) if con is None else []
-        if blocks or locked:
-            e = classify_in_chart(eom, st, pv, qs, rest[ma:], t, resid, list(notes), blocks, locked)
-            if e is not None:       # None: a critical point of the Euler chart only (gimbal lock)
-                out.append(e)
-        elif families:
-            st_f, a_f, more = with_families(eom, st, pv, qs, t, rest[ma:])
-            out.append(classify(eom, st_f, pv, qs, a_f, t, resid, list(notes) + more))
-        else:
-            out.append(classify(eom, st, pv, qs, rest[ma:], t, resid, list(notes), con=con,
-                                 lam=_clean(lam_scale * rest[:ma], lam_scale)))
-    return equilibria_result(out, search, contact_notes(eom, out, pv, t))
+
+def _keep(eom, st, blocks, F, qref, pv, t, tol, families, found: list, qs, rest, resid) -> None:
+    """Add a solution to ``found`` unless it is one already there (then the one with the smaller
+    residual stays): the same point, the same Euler-angle rotation, joined by a path of
+    solutions, or one rotation family."""
+    tols = 1e-8 * st.scales()
+    for i, f_ in enumerate(found):
+        if same_point(qs, f_[0], st.periodic, blocks) or euler_same(eom, qs, f_[0], st) or \
+                joined(F, qref, pv, qs, f_[0], rest, f_[1], tols, st.periodic, blocks, families) or \
+                (families and rotation_joined(eom, qs, f_[0], t, pv, tol)):
+            if resid < f_[2]:
+                found[i] = (qs, rest, resid)
+            return
+    found.append((qs, rest, resid))
 
 
 def _lock_artefact(eom, q, t, pv, tol) -> bool:
