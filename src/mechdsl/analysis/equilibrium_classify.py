@@ -199,7 +199,6 @@ def classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equi
     ev = np.linalg.eigvals(A) if A.size else np.zeros(0, complex)
     ev = ev[np.lexsort((ev.imag, ev.real))]
     lscale = max(1.0, np.max(np.abs(ev), initial=0.0))
-    growth = float(np.max(ev.real, initial=-np.inf)) if ev.size else -np.inf
     # each eigenvalue against the terms along its own direction u (full coordinates): |u|'|K||u|,
     # so that 5.96 beside a spring of 1e12 N/m is resolved (issue 23: a global 1e-9 x max|K| called
     # it zero); a floor at round-off of the largest terms anywhere
@@ -219,6 +218,34 @@ def classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equi
         notes = notes + ["singular configuration: the active constraints lose rank here, so the "
                          "multipliers are not unique"]
 
+    growth = float(np.max(ev.real, initial=-np.inf)) if ev.size else -np.inf
+    stable, reason = _stability(st, ev, growth, lscale, heig, etol, potential, hu, massless=massless,
+                                singular=singular, circulatory=circulatory, damping_ok=damping_ok, symmetric=bool(k),
+                                no_dof=con is not None and Z.shape[1] == 0)
+    if gyro and stable is not None:
+        notes = notes + ["gyroscopic terms present (T1 != 0)"]
+    if accel:
+        notes = notes + ["uniformly accelerated reference motion q(t) = q* + a t^2/2 with acceleration a = "
+                         + ", ".join(f"{c}: {v:.6g}" + _unit_suffix(u and u + "/s2")
+                                     for c, v, u in zip(eom.coords, acc, coordinate_units(eom)) if abs(v) > 0)]
+    extra = {}
+    if con is not None:
+        extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
+                     multiplier_units=multiplier_units(eom),
+                     active_constraints=tuple(eom.constraint_names[i] for i in con.active), tangent_basis=Z)
+    return Equilibrium(coords=tuple(eom.coords), q=np.asarray(q, float), stable=stable,
+                       hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,
+                       acceleration=acc if k else np.zeros(n), linear_eigenvalues=ev,
+                       symmetry_directions=N if k else None, t=float(t), notes=list(notes), **extra)
+
+
+def _stability(st, ev, growth, lscale, heig, etol, potential, hu, *, massless, singular, circulatory, damping_ok,
+               symmetric, no_dof):
+    """(stable: True / False / None when not decided, the reason) from the linearization's
+    eigenvalues ``ev`` (largest real part ``growth``) and the reduced Hessian's ``heig``, each
+    resolved against ``etol``, in the order the theorems apply: time dependence, a singular
+    mass matrix or constraint Jacobian, a growing mode (Lyapunov), circulatory forces,
+    Lagrange-Dirichlet, gyroscopic stabilization, nothing to decide, zero eigenvalues."""
     if not st.autonomous:
         stable, reason = None, "explicitly time-dependent equations: stability is not decided here"
     elif massless:
@@ -239,13 +266,13 @@ def classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equi
     elif heig.size and np.all(heig > etol) and damping_ok:
         stable, reason = True, (f"Lagrange-Dirichlet: Hessian of {potential} positive definite "
                                 f"(eigenvalues {_fmt_list(heig)}{hu})")
-        if k:
+        if symmetric:
             reason += "; neutral along the symmetry directions"
     elif heig.size and np.any(heig < -etol):
         stable, reason = None, (f"Hessian of {potential} has negative eigenvalue(s) "
                                 f"{_fmt_list(heig[heig < -etol])}{hu} but gyroscopic terms keep the linear "
                                 "model bounded (gyroscopic stabilization): nonlinear stability undetermined")
-    elif heig.size == 0 and con is not None and Z.shape[1] == 0:
+    elif heig.size == 0 and no_dof:
         stable, reason = None, "no degree of freedom: the constraints fix the configuration"
     elif heig.size == 0:
         stable, reason = None, "no coordinate transverse to the symmetry directions: nothing to decide"
@@ -257,21 +284,7 @@ def classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equi
                                 "the damping matrix is not positive semidefinite (a force that feeds energy in "
                                 "at some speeds): Lagrange-Dirichlet does not apply, and the linear model has no "
                                 "growing mode; stability is not decided")
-    if gyro and stable is not None:
-        notes = notes + ["gyroscopic terms present (T1 != 0)"]
-    if accel:
-        notes = notes + ["uniformly accelerated reference motion q(t) = q* + a t^2/2 with acceleration a = "
-                         + ", ".join(f"{c}: {v:.6g}" + _unit_suffix(u and u + "/s2")
-                                     for c, v, u in zip(eom.coords, acc, coordinate_units(eom)) if abs(v) > 0)]
-    extra = {}
-    if con is not None:
-        extra = dict(multipliers=con.full_multipliers(lam), constraint_names=tuple(eom.constraint_names),
-                     multiplier_units=multiplier_units(eom),
-                     active_constraints=tuple(eom.constraint_names[i] for i in con.active), tangent_basis=Z)
-    return Equilibrium(coords=tuple(eom.coords), q=np.asarray(q, float), stable=stable,
-                       hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,
-                       acceleration=acc if k else np.zeros(n), linear_eigenvalues=ev,
-                       symmetry_directions=N if k else None, t=float(t), notes=list(notes), **extra)
+    return stable, reason
 
 
 def drop_inert(M, C, K, N):
