@@ -71,14 +71,42 @@ def _per_second(unit: str | None, power: int) -> str | None:
 
 def table(model, plan, settings, start_calculated, fmi_version: int, event_indicators: int = 0) -> list[Variable]:
     """Every variable of the FMU (see the module docstring).  ``settings``: defaults of the
-    mechdsl.* settings ({name: value}); ``event_indicators``: how many (FMI 3.0 names them)."""
+    mechdsl.* settings ({name: value}); ``event_indicators``: how many (FMI 3.0 names them).
+    Value references in the order of the blocks below; a setting a model does not use keeps its
+    reference (reserved) without a variable."""
+    out: list[Variable] = []
+    vr = _parameters(model, out, 0)
+    vr = _states(model, start_calculated, out, vr)
+    vr = _inputs_outputs(model, out, vr)
+    vr = _mechdsl_variables(model, plan, settings, out, vr)
+    if fmi_version == 3:
+        out.append(Variable("time", vr, "Real", "independent", "continuous", None, None, "s", None, None,
+                            "simulation time", kind="time"))
+        for g in plan.gaps[:event_indicators]:
+            vr += 1
+            out.append(Variable(f"mechdsl.event_indicator[{g.name}]", vr, "Real", "local", "continuous",
+                                "calculated", None, None, None, None,
+                                f"contact {g.name}: its gap while open (+ the event offset while it opens), its "
+                                "normal force (+ the offset) while closed; an event where it crosses zero",
+                                kind="event_indicator"))
+    names = [v.name for v in out]
+    clash = sorted({x for x in names if names.count(x) > 1})
+    if clash:
+        from ..diagnostics import Diagnostic, MechError
+
+        raise MechError(Diagnostic("E891", f"cannot export '{model.name}': the name '{clash[0]}' is used twice "
+                                   "among its variables and the FMU's own (mechdsl.*, time)",
+                                   help="rename the model's declaration"))
+    return out
+
+
+def _parameters(model, out: list, vr: int) -> int:
+    """The model's parameters: tunable (exact) or computed from others (calculatedParameter)."""
     from ..eom.codegen import free_parameters
 
     eom = model.eom
     by_name = {p.name: p for p in model.model.parameters}
     free = set(free_parameters(eom))
-    out: list[Variable] = []
-    vr = 0
     for name, value in zip(eom.params, eom.param_values):
         p = by_name.get(name)
         doc, unit = (p.doc, si_unit(p.unit) or None) if p is not None else ("", None)
@@ -90,6 +118,13 @@ def table(model, plan, settings, start_calculated, fmi_version: int, event_indic
             out.append(Variable(name, vr, "Real", "calculatedParameter", "tunable", "calculated", None, unit, lo, hi,
                                 doc or "computed from other parameters", kind="parameter"))
         vr += 1
+    return vr
+
+
+def _states(model, start_calculated, out: list, vr: int) -> int:
+    """The states q, der(q) (start exact, approx when made consistent, or calculated) and the
+    accelerations der(der(q))."""
+    eom = model.eom
     coords = {c.name: c for c in model.model.coordinates}
     n = eom.n
     fixed_q = list(eom.fixed_q) if len(eom.fixed_q) == n else [True] * n
@@ -119,18 +154,28 @@ def table(model, plan, settings, start_calculated, fmi_version: int, event_indic
                             _per_second((si_unit(info.unit) or None) if info is not None else None, 2), None, None,
                             f"acceleration of {c}", derivative_of=x_vr + n + i, kind="derivative"))
         vr += 1
+    return vr
+
+
+def _inputs_outputs(model, out: list, vr: int) -> int:
     for inp in model.inputs:
         out.append(Variable(inp.name, vr, "Real", "input", "continuous", None, float(inp.default), si_unit(inp.unit) or None,
                             inp.min, inp.max, inp.doc, kind="input"))
         vr += 1
     outs = {o.name: o for o in model.model.outputs}
-    for name in eom.outputs:
+    for name in model.eom.outputs:
         base = name.split("[")[0]
         o = outs.get(base)
         out.append(Variable(name, vr, "Real", "output", "continuous", "calculated", None,
                             (si_unit(o.unit) or None) if o is not None else None, None, None, o.doc if o is not None else "",
                             kind="output"))
         vr += 1
+    return vr
+
+
+def _mechdsl_variables(model, plan, settings, out: list, vr: int) -> int:
+    """The mechdsl.* settings (those the model uses), the run's statistics, and the structural
+    Integer parameters (constants of this FMU)."""
     used = _settings_used(plan)
     for name, doc, unit in REAL_SETTINGS:
         if name in used:
@@ -152,25 +197,7 @@ def table(model, plan, settings, start_calculated, fmi_version: int, event_indic
                                 None, None, (p.doc + "; " if p.doc else "") + "structural: fixed in this FMU",
                                 kind="constant"))
             vr += 1
-    if fmi_version == 3:
-        out.append(Variable("time", vr, "Real", "independent", "continuous", None, None, "s", None, None,
-                            "simulation time", kind="time"))
-        for g in plan.gaps[:event_indicators]:
-            vr += 1
-            out.append(Variable(f"mechdsl.event_indicator[{g.name}]", vr, "Real", "local", "continuous",
-                                "calculated", None, None, None, None,
-                                f"contact {g.name}: its gap while open (+ the event offset while it opens), its "
-                                "normal force (+ the offset) while closed; an event where it crosses zero",
-                                kind="event_indicator"))
-    names = [v.name for v in out]
-    clash = sorted({x for x in names if names.count(x) > 1})
-    if clash:
-        from ..diagnostics import Diagnostic, MechError
-
-        raise MechError(Diagnostic("E891", f"cannot export '{model.name}': the name '{clash[0]}' is used twice "
-                                   "among its variables and the FMU's own (mechdsl.*, time)",
-                                   help="rename the model's declaration"))
-    return out
+    return vr
 
 
 def _settings_used(plan) -> set[str]:
