@@ -27,6 +27,7 @@ consistent start by ``mechdsl.dae.dof_report`` (redundant rows dropped).
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 
@@ -90,33 +91,55 @@ def step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv,
 
     hold: the last parameter is the zero-order holds' time, set to the step's midpoint t_n + h/2
     for every stage of the step (the value passed in is ignored)."""
-    import casadi as ca
+    sc = _Scheme(ham, n, hold, method in ("rk4",) or explicit_sv)
+    if explicit_sv:
+        return sc.explicit_sv(q0, pm0, t0, pv)
+    if method == "rk4":
+        return sc.rk4(q0, pm0, t0)
+    c = sc.implicit(tol, max_newton)
+    build = {"stormer-verlet": _stormer_verlet, "implicit-midpoint": _implicit_midpoint}.get(method, _gauss_legendre)
+    return build(sc, c), np.concatenate([q0, pm0, [t0]]), None, 0
 
-    q, pm, t, p = ham.q, ham.pm, ham.t, ham.p
-    rhs0 = ca.Function("f", [q, pm, t, p], [ham.qd_of_p, ham.pdot])
-    held = {}                           # id(parameter symbol) -> its value in the step
 
-    def rhs(qq, pp, tt, pps):
-        return rhs0(qq, pp, tt, held.get(id(pps), pps))
+class _Scheme:
+    """The canonical right-hand side of ``ham`` as the step functions call it: ``rhs(q, p, t,
+    params)`` -> (q', p'), where with ``hold`` the parameters' last entry (the zero-order holds'
+    time) is the step's midpoint (``holding``)."""
 
-    def holding(pps, tt, hh):
+    def __init__(self, ham, n, hold, explicit):
+        import casadi as ca
+
+        self.ham, self.n, self.hold = ham, n, hold
+        self.rhs0 = ca.Function("f", [ham.q, ham.pm, ham.t, ham.p], [ham.qd_of_p, ham.pdot])
+        self.held = {}                      # id(parameter symbol) -> its value in the step
+        self.h = ca.SX.sym("h") if explicit else ca.MX.sym("h")
+
+    def rhs(self, qq, pp, tt, pps):
+        return self.rhs0(qq, pp, tt, self.held.get(id(pps), pps))
+
+    def holding(self, pps, tt, hh):
         """The parameters of a step from tt of size hh: the hold time at its midpoint."""
-        if hold:
-            held[id(pps)] = ca.vertcat(pps[:-1], tt + 0.5 * hh)
+        import casadi as ca
+
+        if self.hold:
+            self.held[id(pps)] = ca.vertcat(pps[:-1], tt + 0.5 * hh)
         return pps
 
-    h = ca.SX.sym("h") if method in ("rk4",) or explicit_sv else ca.MX.sym("h")
+    def explicit_sv(self, q0, pm0, t0, pv):
+        """Stormer-Verlet for a separable H: the force at the step's end carried to the next step."""
+        import casadi as ca
 
-    if explicit_sv:
+        ham, n, h = self.ham, self.n, self.h
+        q, pm, t, p = ham.q, ham.pm, ham.t, ham.p
         force0 = ca.Function("force", [q, t, p], [ca.substitute(ham.pdot, pm, ca.SX.zeros(n))])
         vel = ca.Function("vel", [pm, p], [ca.substitute(ham.qd_of_p, q, ca.SX.zeros(n))])
 
         def force(qq, tt, pps):
-            return force0(qq, tt, held.get(id(pps), pps))
+            return force0(qq, tt, self.held.get(id(pps), pps))
         X = ca.SX.sym("X", 2 * n + 1 + n)
         qn, pn, tn, Fn = X[:n], X[n:2 * n], X[2 * n], X[2 * n + 1:]
-        ps = holding(ca.SX.sym("p", p.numel()), tn, h)
-        if hold:                        # the force carried from the last step read the last step's hold
+        ps = self.holding(ca.SX.sym("p", p.numel()), tn, h)
+        if self.hold:                   # the force carried from the last step read the last step's hold
             Fn = force(qn, tn, ps)
         ph = pn + 0.5 * h * Fn
         q1 = qn + h * vel(ph, ps)
@@ -124,15 +147,18 @@ def step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv,
         p1 = ph + 0.5 * h * F1
         step = ca.Function("sv", [X, h, ps], [ca.vertcat(q1, p1, tn + h, F1), ca.SX(0)])
         F0 = np.array(force0(q0, t0, pv), float).ravel()
-        return step, np.concatenate([q0, pm0, [t0], F0]), 2 if hold else 1, 1
+        return step, np.concatenate([q0, pm0, [t0], F0]), 2 if self.hold else 1, 1
 
-    if method == "rk4":
+    def rk4(self, q0, pm0, t0):
+        import casadi as ca
+
+        n, h = self.n, self.h
         X = ca.SX.sym("X", 2 * n + 1)
         qn, pn, tn = X[:n], X[n:2 * n], X[2 * n]
-        ps = holding(ca.SX.sym("p", p.numel()), tn, h)
+        ps = self.holding(ca.SX.sym("p", self.ham.p.numel()), tn, h)
 
         def f(qq, pp, tt):
-            a, b = rhs(qq, pp, tt, ps)
+            a, b = self.rhs(qq, pp, tt, ps)
             return a, b
 
         k1 = f(qn, pn, tn)
@@ -144,51 +170,73 @@ def step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv,
         step = ca.Function("rk4", [X, h, ps], [ca.vertcat(q1, p1, tn + h), ca.SX(0)])
         return step, np.concatenate([q0, pm0, [t0]]), 4, 0
 
-    opts = {"abstol": tol, "abstolStep": tol, "max_iter": max_newton, "error_on_fail": False}
-    X = ca.MX.sym("X", 2 * n + 1)
-    qn, pn, tn = X[:n], X[n:2 * n], X[2 * n]
-    # residual functions in SX (Jacobians by AD), called from the MX step
-    zq = ca.SX.sym("zq", n)
-    zp = ca.SX.sym("zp", n)
-    Sq, Sp, St, Sh = ca.SX.sym("Sq", n), ca.SX.sym("Sp", n), ca.SX.sym("St"), ca.SX.sym("Sh")
-    ps = holding(ca.MX.sym("p", p.numel()), tn, h)
-    Sps = holding(ca.SX.sym("Sps", p.numel()), St, Sh)
+    def implicit(self, tol, max_newton):
+        """The symbols of an implicit step: the MX step's state X = (q_n, p_n, t_n) and parameters
+        ps, the SX residuals' arguments (Sq, Sp, St, Sh, Sps; unknowns zq, zp) with their
+        right-hand side ``frhs``, and the Newton rootfinder's options."""
+        import casadi as ca
 
-    def frhs(qq, pp, tt):
-        return rhs(qq, pp, tt, Sps)
+        n = self.n
+        c = types.SimpleNamespace(opts={"abstol": tol, "abstolStep": tol, "max_iter": max_newton,
+                                        "error_on_fail": False})
+        c.X = ca.MX.sym("X", 2 * n + 1)
+        c.qn, c.pn, c.tn = c.X[:n], c.X[n:2 * n], c.X[2 * n]
+        # residual functions in SX (Jacobians by AD), called from the MX step
+        c.zq = ca.SX.sym("zq", n)
+        c.zp = ca.SX.sym("zp", n)
+        c.Sq, c.Sp, c.St, c.Sh = ca.SX.sym("Sq", n), ca.SX.sym("Sp", n), ca.SX.sym("St"), ca.SX.sym("Sh")
+        c.ps = self.holding(ca.MX.sym("p", self.ham.p.numel()), c.tn, self.h)
+        c.Sps = self.holding(ca.SX.sym("Sps", self.ham.p.numel()), c.St, c.Sh)
+        c.frhs = lambda qq, pp, tt: self.rhs(qq, pp, tt, c.Sps)
+        return c
 
-    if method == "stormer-verlet":           # generalized Stormer-Verlet (implicit)
-        a = frhs(Sq, zp, St)                                      # at (q_n, p_half, t_n)
-        G1 = ca.Function("G1", [zp, Sq, Sp, St, Sh, Sps], [zp - Sp - 0.5 * Sh * a[1]])
-        G2 = ca.Function("G2", [zq, Sq, Sp, St, Sh, Sps],
-                         [zq - Sq - 0.5 * Sh * (frhs(Sq, Sp, St)[0] + frhs(zq, Sp, St + Sh)[0])])
-        rf1 = ca.rootfinder("rf1", "newton", G1, opts)
-        rf2 = ca.rootfinder("rf2", "newton", G2, opts)
-        f0 = rhs(qn, pn, tn, ps)
-        ph = rf1(pn + 0.5 * h * f0[1], qn, pn, tn, h, ps)
-        q1 = rf2(qn + h * rhs(qn, ph, tn, ps)[0], qn, ph, tn, h, ps)
-        p1 = ph + 0.5 * h * rhs(q1, ph, tn + h, ps)[1]
-        r = ca.vertcat(G1(ph, qn, pn, tn, h, ps), G2(q1, qn, ph, tn, h, ps))
-        step = ca.Function("gsv", [X, h, ps], [ca.vertcat(q1, p1, tn + h), ca.norm_inf(r)])
-        return step, np.concatenate([q0, pm0, [t0]]), None, 0
 
-    if method == "implicit-midpoint":
-        Y = ca.SX.sym("Y", 2 * n)
-        fm = frhs(Y[:n], Y[n:], St + 0.5 * Sh)
-        G = ca.Function("G", [Y, Sq, Sp, St, Sh, Sps],
-                        [Y - ca.vertcat(Sq, Sp) - 0.5 * Sh * ca.vertcat(fm[0], fm[1])])
-        rf = ca.rootfinder("rf", "newton", G, opts)
-        f0 = rhs(qn, pn, tn, ps)
-        y0 = ca.vertcat(qn, pn)
-        Ym = rf(y0 + 0.5 * h * ca.vertcat(f0[0], f0[1]), qn, pn, tn, h, ps)
-        y1 = 2 * Ym - y0
-        step = ca.Function("imr", [X, h, ps], [ca.vertcat(y1, tn + h), ca.norm_inf(G(Ym, qn, pn, tn, h, ps))])
-        return step, np.concatenate([q0, pm0, [t0]]), None, 0
+def _stormer_verlet(sc: _Scheme, c):
+    """The generalized (implicit) Stormer-Verlet step."""
+    import casadi as ca
 
-    # gauss-legendre, s = 2
+    h, rhs = sc.h, sc.rhs
+    X, qn, pn, tn, ps, Sq, Sp, St, Sh, Sps, zq, zp = c.X, c.qn, c.pn, c.tn, c.ps, c.Sq, c.Sp, c.St, c.Sh, c.Sps, c.zq, c.zp
+    a = c.frhs(Sq, zp, St)                                    # at (q_n, p_half, t_n)
+    G1 = ca.Function("G1", [zp, Sq, Sp, St, Sh, Sps], [zp - Sp - 0.5 * Sh * a[1]])
+    G2 = ca.Function("G2", [zq, Sq, Sp, St, Sh, Sps],
+                     [zq - Sq - 0.5 * Sh * (c.frhs(Sq, Sp, St)[0] + c.frhs(zq, Sp, St + Sh)[0])])
+    rf1 = ca.rootfinder("rf1", "newton", G1, c.opts)
+    rf2 = ca.rootfinder("rf2", "newton", G2, c.opts)
+    f0 = rhs(qn, pn, tn, ps)
+    ph = rf1(pn + 0.5 * h * f0[1], qn, pn, tn, h, ps)
+    q1 = rf2(qn + h * rhs(qn, ph, tn, ps)[0], qn, ph, tn, h, ps)
+    p1 = ph + 0.5 * h * rhs(q1, ph, tn + h, ps)[1]
+    r = ca.vertcat(G1(ph, qn, pn, tn, h, ps), G2(q1, qn, ph, tn, h, ps))
+    return ca.Function("gsv", [X, h, ps], [ca.vertcat(q1, p1, tn + h), ca.norm_inf(r)])
+
+
+def _implicit_midpoint(sc: _Scheme, c):
+    import casadi as ca
+
+    h, n = sc.h, sc.n
+    X, qn, pn, tn, ps, Sq, Sp, St, Sh, Sps = c.X, c.qn, c.pn, c.tn, c.ps, c.Sq, c.Sp, c.St, c.Sh, c.Sps
+    Y = ca.SX.sym("Y", 2 * n)
+    fm = c.frhs(Y[:n], Y[n:], St + 0.5 * Sh)
+    G = ca.Function("G", [Y, Sq, Sp, St, Sh, Sps],
+                    [Y - ca.vertcat(Sq, Sp) - 0.5 * Sh * ca.vertcat(fm[0], fm[1])])
+    rf = ca.rootfinder("rf", "newton", G, c.opts)
+    f0 = sc.rhs(qn, pn, tn, ps)
+    y0 = ca.vertcat(qn, pn)
+    Ym = rf(y0 + 0.5 * h * ca.vertcat(f0[0], f0[1]), qn, pn, tn, h, ps)
+    y1 = 2 * Ym - y0
+    return ca.Function("imr", [X, h, ps], [ca.vertcat(y1, tn + h), ca.norm_inf(G(Ym, qn, pn, tn, h, ps))])
+
+
+def _gauss_legendre(sc: _Scheme, c):
+    """The 2-stage Gauss-Legendre step (order 4)."""
+    import casadi as ca
+
+    h, n = sc.h, sc.n
+    X, qn, pn, tn, ps, Sq, Sp, St, Sh, Sps = c.X, c.qn, c.pn, c.tn, c.ps, c.Sq, c.Sp, c.St, c.Sh, c.Sps
     s3 = math.sqrt(3.0)
     A = [[0.25, 0.25 - s3 / 6], [0.25 + s3 / 6, 0.25]]
-    c = [0.5 - s3 / 6, 0.5 + s3 / 6]
+    cs = [0.5 - s3 / 6, 0.5 + s3 / 6]
     d = [-s3, s3]                        # b' A^-1: y1 = y0 + d1 Z1 + d2 Z2
     m2 = 2 * n
     Z = ca.SX.sym("Z", 2 * m2)
@@ -196,14 +244,13 @@ def step_function(ham, method, explicit_sv, n, tol, max_newton, q0, pm0, t0, pv,
     fs = []
     for j in range(2):
         Yj = y0s + Z[j * m2:(j + 1) * m2]
-        fj = frhs(Yj[:n], Yj[n:], St + c[j] * Sh)
+        fj = c.frhs(Yj[:n], Yj[n:], St + cs[j] * Sh)
         fs.append(ca.vertcat(fj[0], fj[1]))
     res = ca.vertcat(*[Z[i * m2:(i + 1) * m2] - Sh * (A[i][0] * fs[0] + A[i][1] * fs[1]) for i in range(2)])
     G = ca.Function("G", [Z, Sq, Sp, St, Sh, Sps], [res])
-    rf = ca.rootfinder("rf", "newton", G, opts)
-    f0 = rhs(qn, pn, tn, ps)
+    rf = ca.rootfinder("rf", "newton", G, c.opts)
+    f0 = sc.rhs(qn, pn, tn, ps)
     f0v = ca.vertcat(f0[0], f0[1])
-    Zs = rf(ca.vertcat(c[0] * h * f0v, c[1] * h * f0v), qn, pn, tn, h, ps)
+    Zs = rf(ca.vertcat(cs[0] * h * f0v, cs[1] * h * f0v), qn, pn, tn, h, ps)
     y1 = ca.vertcat(qn, pn) + d[0] * Zs[:m2] + d[1] * Zs[m2:]
-    step = ca.Function("gl2", [X, h, ps], [ca.vertcat(y1, tn + h), ca.norm_inf(G(Zs, qn, pn, tn, h, ps))])
-    return step, np.concatenate([q0, pm0, [t0]]), None, 0
+    return ca.Function("gl2", [X, h, ps], [ca.vertcat(y1, tn + h), ca.norm_inf(G(Zs, qn, pn, tn, h, ps))])
