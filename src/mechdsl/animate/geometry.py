@@ -88,46 +88,74 @@ class Geometry:
 
 def build(eom, p=None, traces=()) -> Geometry:
     """The drawables of ``eom.model`` and the one Function that places them."""
-    import casadi as ca
-
-    model: ir.Model = eom.model
     p = np.asarray(eom.param_values if p is None else p, float).ravel()
-    cols: list = []
-    items: list[Item] = []
-    anchors: list[int] = []
-    has_points = eom.point_position is not None and model is not None
-    env = _env(eom) if has_points else None
+    if eom.point_position is None or eom.model is None:
+        return Geometry([], None, [], p)
+    g = _Builder(eom, p)
+    g.bodies()
+    g.frames()
+    g.springs()
+    g.joints()
+    for c in g.model.contacts:
+        _contact_items(c, eom, g.env, g.num, g.add)
+    g.traces(traces)
+    return g.geometry()
 
-    def num(e) -> float:                          # a size: its value for these parameters
-        sx = env.translate(e) if isinstance(e, ir.Expr) else ca.SX(float(e))
-        return float(ca.Function("v", [eom.p], [sx])(p))
 
-    def add(kind, name, pts, anchor=True, **kw) -> Item:
-        start = len(cols)
-        cols.extend(pts)
+class _Builder:
+    """The drawables as they are added: ``cols`` (the symbolic points, 3 each), ``items`` (each
+    with its slice of the points), ``anchors`` (points that move with the mechanism: the view's
+    framing), and the bodies whose pose (origin, rotation) the Function returns."""
+
+    def __init__(self, eom, p):
+        import casadi as ca
+
+        self.eom, self.model, self.p = eom, eom.model, p
+        self.cols: list = []
+        self.items: list[Item] = []
+        self.anchors: list[int] = []
+        self.env = _env(eom)
+        self.shapes = tuple(getattr(self.model, "shapes", ()))
+        self.rot = eom.body_rotation or (lambda name: ca.SX.eye(3))
+        self.posed: list[str] = []
+        self.poses: list = []
+        self.contact_radius = _contact_radii(self.model, self.num)
+        self.up = gravity_up([[self.num(c) for c in f.g] for f in self.model.forces if isinstance(f, ir.Gravity)])
+
+    def num(self, e) -> float:                    # a size: its value for these parameters
+        import casadi as ca
+
+        sx = self.env.translate(e) if isinstance(e, ir.Expr) else ca.SX(float(e))
+        return float(ca.Function("v", [self.eom.p], [sx])(self.p))
+
+    def add(self, kind, name, pts, anchor=True, **kw) -> Item:
+        start = len(self.cols)
+        self.cols.extend(pts)
         if anchor:
-            anchors.extend(range(start, len(cols)))
-        it = Item(kind, name, slice(start, len(cols)), **kw)
-        items.append(it)
+            self.anchors.extend(range(start, len(self.cols)))
+        it = Item(kind, name, slice(start, len(self.cols)), **kw)
+        self.items.append(it)
         return it
 
-    if not has_points:
-        return Geometry([], None, [], p)
-    contact_radius = _contact_radii(model, num)
-    up = gravity_up([[num(c) for c in f.g] for f in model.forces if isinstance(f, ir.Gravity)])
-    rot = eom.body_rotation or (lambda name: ca.SX.eye(3))
-    posed: list[str] = []
-    poses: list = []
+    def pose(self, body: str) -> None:
+        import casadi as ca
 
-    def pose(body: str):
-        if body not in posed:
-            posed.append(body)
-            poses.append(ca.vertcat(ca.reshape(eom.point_position(body), 3, 1), ca.reshape(rot(body), 9, 1)))
+        if body not in self.posed:
+            self.posed.append(body)
+            self.poses.append(ca.vertcat(ca.reshape(self.eom.point_position(body), 3, 1),
+                                         ca.reshape(self.rot(body), 9, 1)))
 
-    shapes = tuple(getattr(model, "shapes", ()))
+    def to_world(self, body: str):
+        """Body axes -> world of ``body``: r -> o + R r."""
+        import casadi as ca
 
-    def add_solid(body: str, solid, world, moving: bool = True) -> None:
+        o = ca.reshape(self.eom.point_position(body), 3, 1)
+        R = self.rot(body)
+        return lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r))
+
+    def add_solid(self, body: str, solid, world, moving: bool = True) -> None:
         """One drawable for a solid of ``body`` (body axes -> world by ``world``)."""
+        add = self.add
         if solid.kind == "rod":
             h = 0.5 * solid.size[0] * solid.rot[:, 2]
             add("rod", body, [world(solid.center - h), world(solid.center + h)], anchor=moving, body=body,
@@ -140,77 +168,97 @@ def build(eom, p=None, traces=()) -> Geometry:
             add("ellipsoid", body, [world(solid.center)] + [world(r) for r in tips], anchor=False, body=body,
                 extra={"solid": solid})
             if moving:
-                anchors.append(len(cols) - 4)                    # the centre moves with the mechanism
+                self.anchors.append(len(self.cols) - 4)          # the centre moves with the mechanism
         else:
             add("solid", body, [world(r) for r in outline_samples(solid)], anchor=False, body=body,
                 extra={"solid": solid})
 
-    for b in model.bodies:
-        if b.kind in ("world", "frame"):
-            continue
-        o = ca.reshape(eom.point_position(b.name), 3, 1)
-        R = rot(b.name)
-        world = lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r))  # noqa: E731   body axes -> world
-        solids = body_solids(b, shapes, num)
-        com = np.array([num(c) for c in b.com])
-        if solids:
-            pose(b.name)
-        for solid in solids:
-            add_solid(b.name, solid, world)
-        if any(s.kind in ("box", "disk", "cylinder") for s in solids):   # (an outline is not an anchor)
-            add("point", b.name + ".com", [world(com)], body=b.name, radius=0.0, extra={"hidden": True})
-        if not solids:
-            r = contact_radius.get(b.name, 0.0)
-            add("sphere" if r > 0 else "point", b.name, [world(com)], radius=r, body=b.name)
-        drawn = b.shape or any(sh.body == b.name for sh in shapes)
-        if b.kind == "rigid" and not drawn and np.linalg.norm(com) > 0:   # a general body: its frame to its centre
-            add("link", b.name + ".frame", [o, world(com)], body=b.name)
-    frames = ["world"] + [b.name for b in model.bodies if b.kind == "frame"]
-    for name in frames:                          # shapes on the world (fixed) and on moving frames
-        placed = [s for s in (shape_solid(sh, num) for sh in shapes if sh.body == name) if s is not None]
-        if not placed:
-            continue
-        pose(name)
-        o = ca.reshape(eom.point_position(name), 3, 1)
-        R = rot(name)
-        for solid in placed:
-            add_solid(name, solid, lambda r, o=o, R=R: o + ca.mtimes(R, ca.DM(r)), moving=name != "world")
-    for f in model.forces:
-        if isinstance(f, ir.SpringDamper):
-            add("damper" if f.kind == "damper" else "spring", f.name,
-                [eom.point_position(f.a), eom.point_position(f.b)])
-    shaped = {b.name for b in model.bodies if b.shape} | {sh.body for sh in shapes}
-    hoops = _hoops(model, eom, p)
-    for j in model.joints:
-        if j.name in hoops:
-            centre, normal, radius = hoops[j.name]
-            o = ca.reshape(eom.point_position(j.parent_body), 3, 1)
-            R = rot(j.parent_body)
-            pose(j.parent_body)
-            add("hoop", j.name, [o + ca.mtimes(R, ca.DM(r)) for r in circle_samples(centre, normal, radius)],
-                anchor=False, body=j.parent_body, radius=radius, extra={"center": centre, "normal": normal})
-        elif j.child != j.child_body and j.child_body not in shaped:     # a massless arm to the body
-            add("arm", j.name, [eom.point_position(j.child), eom.point_position(j.child_body)])
-        if j.kind in PINNED:
-            add("pin", j.name, [eom.point_position(j.parent)], extra={"ground": j.parent_body == "world"})
-        elif j.kind in ("prismatic", "cylindrical") and j.parent_body == "world":
-            add("rail", j.name, [eom.point_position(j.child)])
-    for c in model.contacts:
-        _contact_items(c, eom, env, num, add)
-    for name in traces:
-        known = [pt.name for pt in model.points]
-        if name not in known:
-            hint = did_you_mean(name, known)
-            raise UsageError(f"--trail: no point named '{name}' in {model.name}"
-                             + (f"; {hint}" if hint else f" (points: {', '.join(known[:12])}"
-                                                          + (", ..." if len(known) > 12 else "") + ")"))
-        add("trace", name, [eom.point_position(name)])
-    if not cols:
-        return Geometry([], None, [], p, up)
-    X = ca.horzcat(*[ca.reshape(c, 3, 1) for c in cols])
-    P = ca.horzcat(*poses) if poses else ca.SX.zeros(12, 0)
-    fn = ca.Function("draw", [eom.t, eom.q, eom.p], [X, P], ["t", "q", "p"], ["X", "P"])
-    return Geometry(items, fn, anchors, p, up, posed)
+    def bodies(self) -> None:
+        """Each moving body: its solids (or a point / contact sphere at its centre of mass), and
+        the link from its frame to its centre for a general rigid body drawn by nothing else."""
+        import casadi as ca
+
+        add, shapes = self.add, self.shapes
+        for b in self.model.bodies:
+            if b.kind in ("world", "frame"):
+                continue
+            o = ca.reshape(self.eom.point_position(b.name), 3, 1)
+            world = self.to_world(b.name)
+            solids = body_solids(b, shapes, self.num)
+            com = np.array([self.num(c) for c in b.com])
+            if solids:
+                self.pose(b.name)
+            for solid in solids:
+                self.add_solid(b.name, solid, world)
+            if any(s.kind in ("box", "disk", "cylinder") for s in solids):   # (an outline is not an anchor)
+                add("point", b.name + ".com", [world(com)], body=b.name, radius=0.0, extra={"hidden": True})
+            if not solids:
+                r = self.contact_radius.get(b.name, 0.0)
+                add("sphere" if r > 0 else "point", b.name, [world(com)], radius=r, body=b.name)
+            drawn = b.shape or any(sh.body == b.name for sh in shapes)
+            if b.kind == "rigid" and not drawn and np.linalg.norm(com) > 0:   # a general body: its frame to its centre
+                add("link", b.name + ".frame", [o, world(com)], body=b.name)
+
+    def frames(self) -> None:
+        """Shapes on the world (fixed) and on moving frames."""
+        for name in ["world"] + [b.name for b in self.model.bodies if b.kind == "frame"]:
+            placed = [s for s in (shape_solid(sh, self.num) for sh in self.shapes if sh.body == name) if s is not None]
+            if not placed:
+                continue
+            self.pose(name)
+            world = self.to_world(name)
+            for solid in placed:
+                self.add_solid(name, solid, world, moving=name != "world")
+
+    def springs(self) -> None:
+        pos = self.eom.point_position
+        for f in self.model.forces:
+            if isinstance(f, ir.SpringDamper):
+                self.add("damper" if f.kind == "damper" else "spring", f.name, [pos(f.a), pos(f.b)])
+
+    def joints(self) -> None:
+        """Hoops (a bead's circle), massless arms to a body, pins and rails."""
+        import casadi as ca
+
+        model, eom, add, pos = self.model, self.eom, self.add, self.eom.point_position
+        shaped = {b.name for b in model.bodies if b.shape} | {sh.body for sh in self.shapes}
+        hoops = _hoops(model, eom, self.p)
+        for j in model.joints:
+            if j.name in hoops:
+                centre, normal, radius = hoops[j.name]
+                o = ca.reshape(pos(j.parent_body), 3, 1)
+                R = self.rot(j.parent_body)
+                self.pose(j.parent_body)
+                add("hoop", j.name, [o + ca.mtimes(R, ca.DM(r)) for r in circle_samples(centre, normal, radius)],
+                    anchor=False, body=j.parent_body, radius=radius, extra={"center": centre, "normal": normal})
+            elif j.child != j.child_body and j.child_body not in shaped:     # a massless arm to the body
+                add("arm", j.name, [pos(j.child), pos(j.child_body)])
+            if j.kind in PINNED:
+                add("pin", j.name, [pos(j.parent)], extra={"ground": j.parent_body == "world"})
+            elif j.kind in ("prismatic", "cylindrical") and j.parent_body == "world":
+                add("rail", j.name, [pos(j.child)])
+
+    def traces(self, names) -> None:
+        """The points whose paths are drawn (--trail)."""
+        known = [pt.name for pt in self.model.points]
+        for name in names:
+            if name not in known:
+                hint = did_you_mean(name, known)
+                raise UsageError(f"--trail: no point named '{name}' in {self.model.name}"
+                                 + (f"; {hint}" if hint else f" (points: {', '.join(known[:12])}"
+                                                              + (", ..." if len(known) > 12 else "") + ")"))
+            self.add("trace", name, [self.eom.point_position(name)])
+
+    def geometry(self) -> Geometry:
+        import casadi as ca
+
+        if not self.cols:
+            return Geometry([], None, [], self.p, self.up)
+        eom = self.eom
+        X = ca.horzcat(*[ca.reshape(c, 3, 1) for c in self.cols])
+        P = ca.horzcat(*self.poses) if self.poses else ca.SX.zeros(12, 0)
+        fn = ca.Function("draw", [eom.t, eom.q, eom.p], [X, P], ["t", "q", "p"], ["X", "P"])
+        return Geometry(self.items, fn, self.anchors, self.p, self.up, self.posed)
 
 
 def _env(eom):
