@@ -180,18 +180,30 @@ def _initialize(eom, q0, qd0, t, p, tol, max_iter, fixed_q, fixed_qd) -> InitRep
     free = [i for i in range(n) if not fixed_q[i]]
     freev = [i for i in range(n) if not fixed_qd[i]]
 
-    def ev(f, *args, shape=None):
-        a = np.array(f(*args), float)
-        return a.reshape(shape) if shape else a.ravel()
+    q, g, G, it = _positions(eom, fg, fG, fM, q, t, pv, free, tol, max_iter, labels)
+    qd, r = _velocities(eom, fG, fgt, fM, q, qd, G, t, pv, freev, tol, labels)
+    return InitReport(q=q, qd=qd, changes=_changes(eom, q0, qd0, q, qd), position_residual=float(np.max(np.abs(g))),
+                      velocity_residual=float(np.max(np.abs(r))), iterations=it,
+                      free_positions=tuple(eom.coords[i] for i in free),
+                      free_speeds=tuple(eom.coords[i] for i in freev))
 
-    # ---- positions: Gauss-Newton with minimum-norm steps in the mass metric
+
+def _ev(f, *args, shape=None):
+    a = np.array(f(*args), float)
+    return a.reshape(shape) if shape else a.ravel()
+
+
+def _positions(eom, fg, fG, fM, q, t, pv, free, tol, max_iter, labels):
+    """Gauss-Newton with minimum-norm steps in the mass metric on the free coordinates,
+    backtracking on ||g||: (q, g, G, iterations); E821 when the constraints stay violated."""
+    n, m = eom.n, eom.m
     it = 0
-    g = ev(fg, q, t, pv)
-    G = ev(fG, q, t, pv, shape=(m, n))
+    g = _ev(fg, q, t, pv)
+    G = _ev(fG, q, t, pv, shape=(m, n))
     check_defined(eom, g, G)
     scale = 1.0 + np.max(np.abs(q))
     if free:
-        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(_ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
         for it in range(1, max_iter + 1):
             if np.max(_distances(g, G)) <= 1e-3 * tol * scale:
                 break
@@ -203,8 +215,8 @@ def _initialize(eom, q0, qd0, t, p, tol, max_iter, fixed_q, fixed_qd) -> InitRep
             while True:
                 trial = q.copy()
                 trial[free] += lam * step
-                g_trial = ev(fg, trial, t, pv)
-                G_trial = ev(fG, trial, t, pv, shape=(m, n))
+                g_trial = _ev(fg, trial, t, pv)
+                G_trial = _ev(fG, trial, t, pv, shape=(m, n))
                 ok = np.all(np.isfinite(g_trial)) and np.all(np.isfinite(G_trial))
                 if (ok and np.linalg.norm(g_trial) < g_norm) or lam < 1e-4:
                     break
@@ -227,12 +239,17 @@ def _initialize(eom, q0, qd0, t, p, tol, max_iter, fixed_q, fixed_qd) -> InitRep
                   "some of them be computed (fixed = false)" if not free else
                   "the coordinates left free (" + ", ".join(eom.coords[i] for i in free) + ") cannot close "
                   "these constraints; check the start values, the dimensions, or free other coordinates")))
+    return q, g, G, it
 
-    # ---- velocities: one linear least-squares solve (the problem is linear in q')
-    gt = ev(fgt, q, t, pv)
+
+def _velocities(eom, fG, fgt, fM, q, qd, G, t, pv, freev, tol, labels):
+    """One linear least-squares solve for the free speeds (the problem is linear in q'):
+    (q', G q' + g_t); E822 when the velocity constraints stay violated."""
+    n, m = eom.n, eom.m
+    gt = _ev(fgt, q, t, pv)
     r = G @ qd + gt
     if freev:
-        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
+        d = 1.0 / np.sqrt(np.maximum(np.abs(np.diag(_ev(fM, q, t, pv, shape=(n, n)))), 1e-300))
         A = G[:, freev] * d[freev][None, :]
         y = _lstsq(eom, A, -r, labels)
         qd[freev] += d[freev] * y
@@ -249,18 +266,19 @@ def _initialize(eom, q0, qd0, t, p, tol, max_iter, fixed_q, fixed_qd) -> InitRep
             help=("every speed in them has a fixed start value; correct the speeds or let some be computed "
                   "(speed fixed = false)" if not freev else
                   "the speeds left free (" + ", ".join(eom.coords[i] for i in freev) + ") cannot satisfy them")))
+    return qd, r
 
+
+def _changes(eom, q0, qd0, q, qd) -> list:
+    """What initialization changed, starts before speeds, in the coordinates' order."""
     changes = []
     q_in, qd_in = np.asarray(q0, float), np.asarray(qd0, float)
-    for i in range(n):
+    for i in range(eom.n):
         for kind, a, b in (("start", q_in[i], q[i]), ("speed", qd_in[i], qd[i])):
             if abs(b - a) > 4 * np.finfo(float).eps * (1 + abs(a)):
                 changes.append(InitChange(eom.coords[i], kind, float(a), float(b)))
     changes.sort(key=lambda c: (c.kind != "start", eom.coords.index(c.name)))
-    return InitReport(q=q, qd=qd, changes=changes, position_residual=float(np.max(np.abs(g))),
-                      velocity_residual=float(np.max(np.abs(r))), iterations=it,
-                      free_positions=tuple(eom.coords[i] for i in free),
-                      free_speeds=tuple(eom.coords[i] for i in freev))
+    return changes
 
 
 def check_report(eom: EOM, p=None, t: float = 0.0) -> list[str]:
