@@ -26,12 +26,15 @@ import numpy as np
 from .model import ir
 from .model.records import record
 from .diagnostics import Diagnostic, MechError, Span, UsageError, did_you_mean
-from .numbers import Quantity, declared_value, finite, in_declared_unit, quantity
+from .numbers import declared_value
+from .overrides import (add_override, dependents_of, in_declared_unit_of, key_value, merge_overrides, number,
+                        overrides_of, with_values)
 
 # the front end (lark, ast, semantic) is imported on use: a model served from the model cache
 # (mechdsl.eom.modelcache) never needs it
 if TYPE_CHECKING:
     from .semantic import Program
+    from .semantic.mods import Mod
 
 log = logging.getLogger(__name__)
 
@@ -133,7 +136,7 @@ class Model:
     @property
     def _overrides(self) -> dict:
         if self._ov is None:
-            self._ov = _overrides_of(self._cache.items, self.model) if self._cache is not None else {}
+            self._ov = overrides_of(self._cache.items, self.model) if self._cache is not None else {}
         return self._ov
 
     @classmethod
@@ -262,20 +265,20 @@ class Model:
             if k in by_name and not by_name[k].integer:
                 real[k] = declared_value(v, by_name[k].unit, k)       # a bare number: the declared unit
             elif k in by_name or "." in k or k in coords:
-                structural.append((k, _in_declared_unit(self.model, k, v)))
+                structural.append((k, in_declared_unit_of(self.model, k, v)))
             else:
                 hint = did_you_mean(k, list(by_name) + [f"{c}.start" for c in coords])
                 raise UsageError(f"'{k}' is not a parameter of {self.name}" + (f"; {hint}" if hint else ""))
         m: Model = self
         if structural:
             kind, name = self._target
-            info = self._cache.more(tuple((k, _key_value(v)) for k, v in structural)) if self._cache is not None else None
+            info = self._cache.more(tuple((k, key_value(v)) for k, v in structural)) if self._cache is not None else None
             m = info.lookup() if info is not None else None      # stored only if the items were valid
             if m is None:
                 tree: dict = {}
                 for k, v in structural:
-                    _add_override(tree, k, v, by_name, coords)
-                ov = _merge_overrides(self._overrides, tree)
+                    add_override(tree, k, v, by_name, coords)
+                ov = merge_overrides(self._overrides, tree)
                 m = Model._from_program(self.program, name if kind == "model" else None,
                                         name if kind == "scene" else None, ov)
                 if info is not None:
@@ -286,24 +289,7 @@ class Model:
         return m
 
     def _with_real(self, values: dict[str, float]) -> "Model":
-        from .model.exprs import evaluate
-
-        params = [dataclasses.replace(p, value=values[p.name], binding=None) if p.name in values else p
-                  for p in self.model.parameters]
-        dependent = [k for k, p in enumerate(params) if p.binding is not None and not p.integer]
-        env = {p.name: p.value for k, p in enumerate(params) if k not in dependent}
-        while dependent:              # in the order they depend on each other (a value may refer ahead)
-            left = []
-            for k in dependent:
-                try:
-                    params[k] = dataclasses.replace(params[k], value=_dependent_value(params[k], env, evaluate))
-                    env[params[k].name] = params[k].value
-                except KeyError:      # refers to a dependent parameter not yet evaluated
-                    left.append(k)
-            if len(left) == len(dependent):
-                raise UsageError(f"parameter {params[left[0]].name} depends on parameters that cannot be evaluated")
-            dependent = left
-        model = dataclasses.replace(self.model, parameters=tuple(params))
+        model = with_values(self.model, values)
         from .semantic.physical import errors, value_problems
 
         problems = errors(value_problems(model))
@@ -439,7 +425,7 @@ class Model:
         if self.eom.g is not None and self.eom.m > 0 or self.model.contacts:
             raise UsageError(f"{self.name} has constraints or contacts: an integrator Function exists for ODE "
                              "models only (multiple shooting on a DAE needs its own formulation)")
-        dt = _number("dt", dt)
+        dt = number("dt", dt)
         if not (math.isfinite(dt) and dt > 0):
             raise UsageError(f"dt must be a positive, finite interval (got {dt!r})")
         if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
@@ -470,7 +456,7 @@ class Model:
                                  f"{', '.join(names) or 'nothing'})" + (f"; {hint}" if hint else ""))
         values = self.parameter_vector(**dict(spec)) if isinstance(spec, dict) else self.parameter_values
         idx = {names.index(k) for k in chosen}
-        idx |= _dependents_of(self.eom, idx)
+        idx |= dependents_of(self.eom, idx)
         return tuple((i, float(values[i])) for i in sorted(idx))
 
     def simulate(self, t_end: float | None = None, *, rtol: float | None = None, atol: float | None = None,
@@ -767,111 +753,6 @@ class InputInfo:
     doc: str = ""
 
 
-def _dependents_of(eom, fixed: set[int]) -> set[int]:
-    """Entries of p computed (by bindings) only from the free parameters among ``fixed``."""
-    from .eom.codegen import casadi_functions, free_parameters
-
-    free = free_parameters(eom)
-    f = casadi_functions(eom, names=("parameters",))["parameters"]
-    sp = f.jac_sparsity(0, 0)           # rows: entries of p, columns: free parameters
-    fixed_free = {j for j, n in enumerate(free) if eom.params.index(n) in fixed}
-    out = set()
-    for i in range(len(eom.params)):
-        cols = {j for j in range(len(free)) if sp.has_nz(i, j)}
-        if eom.params[i] not in free and cols and cols <= fixed_free:
-            out.add(i)
-    return out
-
-
-def _dependent_value(p: ir.Parameter, env: dict[str, float], evaluate) -> float:
-    """A dependent parameter re-evaluated with new values: a value it cannot have (1/0,
-    sqrt(-1), overflow) is E303 at the parameter, as when the file itself is analyzed."""
-    problem = None
-    try:
-        with np.errstate(all="ignore"):
-            value = float(evaluate(p.binding, env))
-        if not math.isfinite(value):
-            problem = f"evaluates to {value}"
-    except (ValueError, ZeroDivisionError, OverflowError) as ex:
-        problem = f"cannot be evaluated: {ex}"
-    except TypeError:  # a complex number: a negative base to a fractional power
-        problem = "has no real value"
-    if problem is None:
-        return value
-    raise MechError(Diagnostic("E303", f"parameter '{p.name}' {problem} with the values given", p.span,
-                               "it depends on the parameters changed (--set / with_params): check their "
-                               "values against its formula (division by zero, a function's domain)"))
-
-
-def _in_declared_unit(model: ir.Model, key: str, v):
-    """A start value or speed given with a unit (``deg(30)``, ``"30 deg"``) -> a bare number in the
-    coordinate's declared unit, which the front end reads as it reads a scene modifier (issue 23)."""
-    if isinstance(v, bool) or not isinstance(v, (str, Quantity)):
-        return v
-    if isinstance(v, str):
-        try:
-            v = quantity(v, key)
-        except UsageError:
-            return v                       # not a number: _literal says so, naming the parameter
-    name, _, attr = key.rpartition(".")
-    if attr not in ("start", "speed"):
-        name, attr = key, "start"
-    try:
-        unit = model.coordinate(name).unit
-    except KeyError:
-        unit = None
-    return in_declared_unit(v, unit, key, speed=attr == "speed")
-
-
-def _number(name: str, v) -> float:
-    return finite(v, f"value of '{name}'")
-
-
-def _literal(v, name: str = "value"):
-    from .frontend import ast
-
-    if isinstance(v, bool):
-        return ast.Bool(value=v)
-    x = _number(name, v)
-    if float(x).is_integer() and isinstance(v, int):
-        return ast.Number(value=int(v)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-int(v)))
-    return ast.Number(value=abs(x)) if x >= 0 else ast.UnaryOp(op="-", operand=ast.Number(value=-x))
-
-
-def _add_override(tree: dict, key: str, value, by_name, coords) -> None:
-    from .semantic.mods import Mod
-
-    parts = key.split(".")
-    if parts[-1] not in ("start", "speed", "fixed") and key not in by_name:
-        if key in coords:
-            parts = parts + ["start"]
-        else:
-            raise UsageError(f"'{key}' is not a parameter or a start value (use NAME.start or NAME.speed)")
-    node_dict = tree
-    for i, part in enumerate(parts):
-        node = node_dict.setdefault(part, Mod())
-        if i == len(parts) - 1:
-            node.value = _literal(value, key)
-        node_dict = node.sub
-
-
-def _key_value(v):
-    """A structural value as the cache key sees it: N=4 and N=4.0 are one model."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return v
-    return float(v)
-
-
-def _overrides_of(items, model: ir.Model) -> dict:
-    """The override tree of structural ``with_params`` items (a cached Model keeps only these)."""
-    by_name = {p.name: p for p in model.parameters}
-    coords = set(model.coordinate_names)
-    tree: dict = {}
-    for k, v in items:
-        _add_override(tree, k, v, by_name, coords)
-    return tree
-
-
 class _Cache:
     """Where a Model's resolved IR and derived equations are remembered on disk
     (mechdsl.eom.modelcache): its source, the target asked for and the structural overrides.
@@ -954,12 +835,6 @@ def _args_key(args: dict) -> tuple:
     key = tuple(sorted((k, type(v).__name__, v) for k, v in args.items() if v is not None))
     hash(key)
     return key
-
-
-def _merge_overrides(a: dict, b: dict) -> dict:
-    from .semantic.mods import merge_dicts
-
-    return merge_dicts(a, b)
 
 
 def _structure_key(model: ir.Model):
