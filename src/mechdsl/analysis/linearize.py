@@ -44,40 +44,10 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
     pv = param_vector(eom, p)
     if constrained(eom):
         return linearize_constrained(eom, setup(eom, pv, t, "linearization"), at, inputs, pv, t, guesses)
-    n = eom.n
     q0, qd0 = eom.start(pv)
-    eq = None
     notes: list[str] = []
-    acc = None
-    if isinstance(at, Equilibrium):
-        eq = at
-    elif isinstance(at, str) and at.strip() == "equilibrium":
-        eq = nearest_equilibrium(eom, guesses, t, pv, q0, notes, "linearize about a state (--at t=0)")
-    if eq is not None:
-        q, qd, t, acc = np.asarray(eq.q, float), np.zeros(n), eq.t, eq.acceleration
-        kind = "accelerated-reference" if eq.kind == "accelerated-reference" else "equilibrium"
-    else:
-        q, qd, t = _state(eom, at, q0, qd0, pv, t)
-        kind = "state"
-
-    # quaternion joints and Euler angles at gimbal lock: the linear model lives in a chart
-    # (analysis.charts); base is the EOM whose coordinates the result reports
-    base, work, qw, qdw, accw, Zc = eom, eom, q, qd, acc, None
-    blocks = quaternion_blocks(eom)
-    if blocks:
-        q = qw = normalize_blocks(q, blocks, fallback=q0)
-    ch = chart_of(eom, q, t, pv)
-    if ch is not None:
-        work, _, qb, Zc, base, more = ch
-        notes.extend(more)
-        if base is not eom and np.any(qd):
-            raise MechError(Diagnostic("E911", f"the Euler angles of '{eom.name}' are at gimbal lock in this "
-                                               "state and the angle rates do not carry over to another chart",
-                                       help="linearize about a state at rest here, or use a quaternion joint"))
-        qdb = np.zeros(base.n) if base is not eom else qd
-        qw, qdw = np.zeros(work.n), chart_speeds(qb, qdb, quaternion_blocks(base), base.n)
-        accw = None if acc is None else np.linalg.lstsq(Zc, _to_base(acc, base, eom), rcond=None)[0]
-        q, qd = qb, qdb
+    q, qd, t, acc, kind, eq = _point(eom, at, guesses, q0, qd0, pv, t, notes)
+    base, work, q, qd, qw, qdw, accw, Zc = _chart(eom, q, qd, acc, q0, t, pv, notes)
     nw = work.n
     M, C, K, bias, accw = second_order(work, qw, qdw, t, pv, acc=accw)
     if kind == "state":
@@ -117,6 +87,45 @@ def linearize(eom, at="equilibrium", inputs=None, *, p=None, t: float = 0.0, gue
                          q=np.asarray(q, float), qd=np.asarray(qd, float), t=float(t),
                          acceleration=acc_out, kind=kind, p=pv, equilibrium=eq,
                          notes=notes, eom=eom, **extra)
+
+
+def _point(eom, at, guesses, q0, qd0, pv, t, notes):
+    """The point linearized about: (q, q', t, reference acceleration or None, kind, the
+    equilibrium or None)."""
+    eq = None
+    if isinstance(at, Equilibrium):
+        eq = at
+    elif isinstance(at, str) and at.strip() == "equilibrium":
+        eq = nearest_equilibrium(eom, guesses, t, pv, q0, notes, "linearize about a state (--at t=0)")
+    if eq is not None:
+        kind = "accelerated-reference" if eq.kind == "accelerated-reference" else "equilibrium"
+        return np.asarray(eq.q, float), np.zeros(eom.n), eq.t, eq.acceleration, kind, eq
+    q, qd, t = _state(eom, at, q0, qd0, pv, t)
+    return q, qd, t, None, "state", None
+
+
+def _chart(eom, q, qd, acc, q0, t, pv, notes):
+    """Quaternion joints and Euler angles at gimbal lock: the linear model lives in a chart
+    (analysis.charts).  (base: the EOM whose coordinates the result reports, work: the one
+    differentiated, q and q' over base, qw, qdw, the acceleration over work, Zc: work -> base
+    or None)."""
+    base, work, qw, qdw, accw, Zc = eom, eom, q, qd, acc, None
+    blocks = quaternion_blocks(eom)
+    if blocks:
+        q = qw = normalize_blocks(q, blocks, fallback=q0)
+    ch = chart_of(eom, q, t, pv)
+    if ch is not None:
+        work, _, qb, Zc, base, more = ch
+        notes.extend(more)
+        if base is not eom and np.any(qd):
+            raise MechError(Diagnostic("E911", f"the Euler angles of '{eom.name}' are at gimbal lock in this "
+                                               "state and the angle rates do not carry over to another chart",
+                                       help="linearize about a state at rest here, or use a quaternion joint"))
+        qdb = np.zeros(base.n) if base is not eom else qd
+        qw, qdw = np.zeros(work.n), chart_speeds(qb, qdb, quaternion_blocks(base), base.n)
+        accw = None if acc is None else np.linalg.lstsq(Zc, _to_base(acc, base, eom), rcond=None)[0]
+        q, qd = qb, qdb
+    return base, work, q, qd, qw, qdw, accw, Zc
 
 
 def _to_base(v, base, eom) -> np.ndarray:
