@@ -164,7 +164,7 @@ def _follow(r, problem, tight, factor) -> None:
     if not f.t:
         acc.update(error_estimate=None, error_estimate_unavailable=f.note or "the companion recorded no time")
         return
-    fill(r, np.vstack(f.err), np.array(f.t), factor, problem.settings, lambda c: _unit(problem.eom, c))
+    fill(r, np.vstack(f.err), np.concatenate(f.t), factor, problem.settings, lambda c: _unit(problem.eom, c))
     acc["error_estimate_event_time"] = f.dt_event / factor      # s: the largest difference of an event's time
     if f.note:
         acc["error_estimate_note"] = f.note

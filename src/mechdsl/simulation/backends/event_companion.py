@@ -72,15 +72,18 @@ class Followed:
     divided by the factor), the largest event-time difference, the work, a note when it stopped."""
 
     def __init__(self, n: int):
-        self.t: list[float] = []
+        self.t: list[np.ndarray] = []
         self.err: list[np.ndarray] = []
         self.dt_event, self.dt_event_time = 0.0, None
         self.segments, self.steps, self.rhs_evals = 0, 0, 0
         self.note = None
 
     def row(self, t: float, e: np.ndarray) -> None:
-        self.t.append(float(t))
-        self.err.append(np.array(e, float))
+        self.rows(np.array([t], float), np.reshape(e, (1, -1)))
+
+    def rows(self, t: np.ndarray, e: np.ndarray) -> None:
+        self.t.append(np.asarray(t, float))
+        self.err.append(np.asarray(e, float))
 
 
 def instants(events) -> list[tuple[float, dict, dict]]:
@@ -175,10 +178,13 @@ def follow(eom, s, r, stride: int = 1, band: float = 0.0) -> Followed:
         t_cut = t_next if hit is None else min(t_next, hit)
         m = run.gi
         inside = (pts[:m] < t_cut) if not last else (pts[:m] <= t_cut)
-        for t, y in zip(pts[:m][inside], run.out_y[:m][inside]):
-            j = int(np.argmin(np.abs(T - t)))
-            if abs(T[j] - t) <= 1e-12 * max(1.0, abs(t)):
-                out.row(t, carried + np.abs(Q[j] - y[:n]))
+        tt, yy = pts[:m][inside], run.out_y[:m][inside]
+        if len(tt):
+            j = np.clip(np.searchsorted(T, tt), 0, len(T) - 1)
+            jm = np.maximum(j - 1, 0)
+            j = np.where(np.abs(T[jm] - tt) < np.abs(T[j] - tt), jm, j)
+            ok = np.abs(T[j] - tt) <= 1e-12 * np.maximum(1.0, np.abs(tt))
+            out.rows(tt[ok], carried + np.abs(Q[j[ok]] - yy[ok, :n]))
         if last:
             break
         t_run, before, after = inst[k]
