@@ -63,6 +63,12 @@ class _SegmentRun(Run):
     def _store(self, gi, t, y):
         self.out_y[gi] = y
 
+    def _store_many(self, sol, ts):
+        K = len(ts)
+        self.out_y[self.gi:self.gi + K] = np.asarray(sol(ts), float).reshape(2 * self.n, -1).T
+        self.gi += K
+        return True
+
     def _check_work(self, t0, t_end, y):        # the run passed it
         return None
 
