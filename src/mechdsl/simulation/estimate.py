@@ -161,6 +161,9 @@ def _follow(r, problem, tight, factor) -> None:
         r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0
     r.stats.update(error_estimate_steps=f.steps, error_estimate_rhs_evals=f.rhs_evals,
                    error_estimate_segments=f.segments)
+    acc["error_estimate_method"] = (f"the run's {f.segments} segment{'s' if f.segments != 1 else ''} between its "
+                                    f"events again at rtol = {tight.rtol:.3g}, atol = {tight.atol:.3g} "
+                                    f"({1 / (1 - factor):.3g}x tighter), each from the run's state after its events")
     if not f.t:
         acc.update(error_estimate=None, error_estimate_unavailable=f.note or "the companion recorded no time")
         return
