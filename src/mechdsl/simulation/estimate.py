@@ -30,6 +30,9 @@ import numpy as np
 from ..numbers import si_unit
 from .difference import compare, fill     # (the comparison, without CasADi: a warm prepared run shares it)
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
+from ..impacts.contact_run import ContactRun
+from .backends.event_companion import follow
+from .backends.event_loop import REST_BAND
 from .backends.ode import kept_setup
 from .prepared import prepare
 from .problem import formulate
@@ -146,10 +149,6 @@ def estimate(r, problem, solve, given=None) -> None:
 def _follow(r, problem, tight, factor) -> None:
     """A contact run's estimate: the companion follows the run's own impacts
     (backends/event_companion.py), whatever their number."""
-    from ..impacts.contact_run import ContactRun
-    from .backends.event_companion import follow
-    from .backends.event_loop import REST_BAND
-
     s = problem.settings
     acc = r.metadata["accuracy"]
     cpu0 = time.process_time()

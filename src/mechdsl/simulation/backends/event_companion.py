@@ -33,6 +33,7 @@ from ..registry import events_method
 from ..settings import DEFAULT_POINTS
 from .event_flight import COMPILED_CLASSES, flight
 from .event_loop import Run, RunFailure
+from .events import _contact_setup
 
 MARGIN = 0.5        # a companion segment runs at most this fraction of the segment past the run's next instant
 
@@ -130,8 +131,6 @@ def follow(eom, s, r, stride: int = 1, band: float = 0.0) -> Followed:
     """Integrate the segments of the contact run ``r`` with the (tighter) settings ``s``; output
     times: every ``stride``-th of the run's grid; ``band``: the run's rest band in its gaps
     (REST_BAND event offsets of the run)."""
-    from .events import _contact_setup
-
     c = s.contacts
     opts = ContactRun(c, s.rtol, s.atol)
     method_cls, _ = events_method(s.method)
