@@ -30,9 +30,7 @@ import numpy as np
 from ..numbers import si_unit
 from .difference import compare, fill     # (the comparison, without CasADi: a warm prepared run shares it)
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
-from ..impacts.contact_run import ContactRun
-from .backends.event_companion import follow
-from .backends.event_loop import REST_BAND
+from .backends import backend
 from .backends.ode import kept_setup
 from .prepared import prepare
 from .problem import formulate
@@ -149,13 +147,11 @@ def estimate(r, problem, solve, given=None) -> None:
 def _follow(r, problem, tight, factor) -> None:
     """A contact run's estimate: the companion follows the run's own impacts
     (backends/event_companion.py), whatever their number."""
-    s = problem.settings
     acc = r.metadata["accuracy"]
     cpu0 = time.process_time()
     r.stats["error_estimate_cpu_time"] = None
     try:
-        band = REST_BAND * ContactRun(s.contacts, s.rtol, s.atol).offset      # the run's rest band
-        f = follow(problem.eom, tight, r, coarse_points(tight.points or DEFAULT_POINTS)[1], band)
+        f = backend(problem.backend).follow(problem, tight, r, coarse_points(tight.points or DEFAULT_POINTS)[1])
     finally:
         r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0
     r.stats.update(error_estimate_steps=f.steps, error_estimate_rhs_evals=f.rhs_evals,

@@ -33,7 +33,6 @@ from ..registry import events_method
 from ..settings import DEFAULT_POINTS
 from .event_flight import COMPILED_CLASSES, flight
 from .event_loop import Run, RunFailure
-from .events import _contact_setup
 
 MARGIN = 0.5        # a companion segment runs at most this fraction of the segment past the run's next instant
 
@@ -127,14 +126,15 @@ def _dropped(events, t, system, band, rest_speed, q_of, qd_of) -> np.ndarray:
     return out
 
 
-def follow(eom, s, r, stride: int = 1, band: float = 0.0) -> Followed:
-    """Integrate the segments of the contact run ``r`` with the (tighter) settings ``s``; output
-    times: every ``stride``-th of the run's grid; ``band``: the run's rest band in its gaps
-    (REST_BAND event offsets of the run)."""
+def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
+    """Integrate the segments of the contact run ``r`` with the (tighter) settings ``s`` and the
+    model's contact ``parts`` (gaps, fixations, Functions: events._contact_setup); output times:
+    every ``stride``-th of the run's grid; ``band``: the run's rest band in its gaps (REST_BAND
+    event offsets of the run)."""
     c = s.contacts
     opts = ContactRun(c, s.rtol, s.atol)
     method_cls, _ = events_method(s.method)
-    gaps, fixes, functions = _contact_setup(eom, c.contacts, c.fixations)
+    gaps, fixes, functions = parts
     pv = parameter_vector(eom, s.p)
     xs = start_vector(eom, s.x0, pv)
     n = eom.n
