@@ -92,27 +92,29 @@ class Followed:
         self.err.append(np.asarray(e, float))
 
 
-def instants(events) -> list[tuple[float, dict, dict]]:
-    """(time, state before the first event, state after the last one) per instant with events."""
+def instants(events) -> list[tuple[float, dict, dict, list]]:
+    """(time, state before the first event, state after the last one, the events) per instant
+    with events."""
     out = []
     for ev in events:
         t = float(ev["time"])
         if out and out[-1][0] == t:
-            out[-1] = (t, out[-1][1], ev["state_after"])
+            out[-1] = (t, out[-1][1], ev["state_after"], out[-1][3] + [ev])
         else:
-            out.append((t, ev["state_before"], ev["state_after"]))
+            out.append((t, ev["state_before"], ev["state_after"], [ev]))
     return out
 
 
-def _dropped(events, t, system, band, rest_speed, q_of, qd_of) -> np.ndarray:
-    """Per coordinate, how far the rebounds the run declared resting at t would have moved it:
+def _dropped(events, system, band, rest_speed, q_of, qd_of) -> np.ndarray:
+    """Per coordinate, how far the rebounds the run declared resting at an instant (its
+    ``events``) would have moved it:
     an impact with restitution e > 0 whose rebound e |u| was above rest_speed but ended at rest
     (the rest band: it would rise less than ``band`` in its gap) loses e times its velocity jump
     for the rise time, a displacement |jump| band / |u| (e cancels; an upper bound)."""
     names = [g.name for g in system.gaps]
     out = np.zeros(len(system.eom.coords))
     for ev in events:
-        if ev["time"] != t or ev["kind"] != "impact":
+        if ev["kind"] != "impact":
             continue
         cs = [x.strip() for x in str(ev["contact"]).split(",")]
         ub, ua = np.atleast_1d(ev["speed_before"]), np.atleast_1d(ev["speed_after"])
@@ -154,7 +156,7 @@ def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
     inst = instants(r.events)
     out = Followed(n)
     carried = np.zeros(n)
-    starts = [(s.t_start, xs[:n], xs[n:])] + [(t, q_of(a), qd_of(a)) for t, _, a in inst]
+    starts = [(s.t_start, xs[:n], xs[n:])] + [(t, q_of(a), qd_of(a)) for t, _, a, _ in inst]
     for k, (tk, q0, qd0) in enumerate(starts):
         if tk >= s.t_end and k:
             break
@@ -192,7 +194,7 @@ def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
             out.rows(tt[ok], carried + np.abs(Q[j[ok]] - yy[ok, :n]))
         if last:
             break
-        t_run, before, after = inst[k]
+        t_run, before, after, evs = inst[k]
         t_c = stop if hit is None else hit           # no event before stop: at least that late
         q_c = y_end[:n] + (t_run - t_c) * y_end[n:]
         jump = np.abs(qd_of(after) - qd_of(before))
@@ -200,7 +202,7 @@ def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
         if not np.all(np.isfinite(d)):
             d = np.where(np.isfinite(d), d, np.inf)
         carried = carried + d
-        out.row(t_run, carried + _dropped(r.events, t_run, system, band, c.rest_speed, q_of, qd_of))
+        out.row(t_run, carried + _dropped(evs, system, band, c.rest_speed, q_of, qd_of))
         if abs(t_run - t_c) >= out.dt_event:
             out.dt_event, out.dt_event_time = abs(t_run - t_c), t_run
     return out
