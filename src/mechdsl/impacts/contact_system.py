@@ -65,6 +65,9 @@ def contact_functions(eom, gaps, fixations) -> dict:
     return out
 
 
+MAP_SIZES = (1, 2, 4, 8, 16, 32, 64)     # the batch sizes of multipliers_at (padded up, chunked above)
+
+
 class ContactSystem:
     def __init__(self, eom, gaps, fixations, p: np.ndarray, functions: dict | None = None):
         self.eom, self.gaps, self.fixations = eom, list(gaps), list(fixations)
@@ -87,7 +90,9 @@ class ContactSystem:
         self.friction = [i for i, g in enumerate(self.gaps) if g.friction is not None]
         self.f_fric = FastFunction(fs["friction"]) if fs["friction"] is not None else None
         self.anchor = np.zeros(self.n_rows)
+        self._fs = fs
         self._gap_maps: dict[int, object] = {}
+        self._maps: dict[tuple, object] = {}
         self._f_jac = None
         self._jac_unavailable = False
         self.n_rhs = 0
@@ -128,6 +133,43 @@ class ContactSystem:
         if f is None:
             f = self._gap_maps[K] = FastFunction(self._f_gap.map(K))
         return f(ts.reshape(1, -1), Q, np.repeat(self.p.reshape(-1, 1), K, 1))[0].reshape(self.k, K)
+
+    def _mapped(self, name: str, K: int):
+        key = (name, K)
+        f = self._maps.get(key)
+        if f is None:
+            f = self._maps[key] = FastFunction(self._fs[name].map(K))
+        return f
+
+    def multipliers_at(self, ts: np.ndarray, Y: np.ndarray, rows) -> np.ndarray | None:
+        """The multipliers of the active ``rows`` at many states (Y: (2n, K)), as ``accel`` gives
+        them one state at a time: (K, len(rows)); None with friction on an active row (the caller
+        then asks ``accel`` per state).  One mapped call of the dynamics and the constraints and
+        batched solves instead of K calls (the output rows of a resting phase)."""
+        if self._friction_columns(ts[0], Y[:self.n, 0], Y[self.n:, 0], rows) is not None:
+            return None
+        if len(ts) > MAP_SIZES[-1]:
+            step = MAP_SIZES[-1]
+            return np.vstack([self.multipliers_at(ts[i:i + step], Y[:, i:i + step], rows)
+                              for i in range(0, len(ts), step)])
+        size = next(k for k in MAP_SIZES if k >= len(ts))     # a few mapped Functions, the last state repeated
+        if size > len(ts):
+            pad = size - len(ts)
+            return self.multipliers_at(np.r_[ts, np.repeat(ts[-1:], pad)],
+                                       np.hstack([Y, np.repeat(Y[:, -1:], pad, 1)]), rows)[:len(ts)]
+        n, K = self.n, len(ts)
+        t1, Q, QD, P = ts.reshape(1, -1), Y[:n], Y[n:], np.repeat(self.p.reshape(-1, 1), K, 1)
+        M, b = self._mapped("dyn", K)(t1, Q, QD, P)
+        c, A, ct, gam = self._mapped("cons", K)(t1, Q, QD, P)
+        self.n_rhs += K
+        M3 = np.asarray(M).reshape(n, K, n).transpose(1, 0, 2)
+        A3 = np.asarray(A).reshape(self.n_rows, K, n).transpose(1, 0, 2)[:, rows, :]
+        b3 = np.asarray(b).reshape(n, K).T[:, :, None]
+        g3 = np.asarray(gam).reshape(self.n_rows, K).T[:, rows, None]
+        a0 = np.linalg.solve(M3, b3)
+        X = np.linalg.solve(M3, A3.transpose(0, 2, 1))
+        lam = -np.linalg.solve(A3 @ X, A3 @ a0 + g3)
+        return lam[:, :, 0]
 
     def normal_speeds(self, t, q, qd) -> np.ndarray:
         _, A, ct, _ = self.cons(t, q, qd)

@@ -17,7 +17,17 @@ def compare(r, other, factor: float, s, unit_of) -> None:
                else "no output time in common with the companion run")
         acc.update(error_estimate=None, error_estimate_unavailable=why)
         return
-    diff = np.abs(qa - qb) / factor                          # (times, coordinates)
+    fill(r, np.abs(qa - qb), ta, factor, s, unit_of)
+    if other.failure is not None:
+        acc["error_estimate_note"] = (f"the companion run stopped at t = {other.failure.time:.6g} "
+                                      f"({other.failure.cause}): the estimate covers the times before")
+
+
+def fill(r, diff: np.ndarray, ta: np.ndarray, factor: float, s, unit_of) -> None:
+    """r.metadata["accuracy"] from the differences ``diff`` (times ``ta``, coordinates) of the run
+    and its companion, divided by ``factor``."""
+    acc = r.metadata.setdefault("accuracy", {})
+    diff = np.asarray(diff, float) / factor                  # (times, coordinates)
     if not np.isfinite(np.add.reduce(diff, axis=None)):
         diff[~np.isfinite(diff)] = np.inf
     per = diff.max(axis=0) if diff.size else np.zeros(len(r.coordinates))
@@ -43,9 +53,6 @@ def compare(r, other, factor: float, s, unit_of) -> None:
     if s.error_estimate == "coordinates":
         acc["error_estimate_by_coordinate"] = {c: float(v) for c, v in zip(r.coordinates, per)}
         acc["tolerance_class"] = {c: float(v) for c, v in zip(r.coordinates, tol)}
-    if other.failure is not None:
-        acc["error_estimate_note"] = (f"the companion run stopped at t = {other.failure.time:.6g} "
-                                      f"({other.failure.cause}): the estimate covers the times before")
 
 
 def common_times(t: np.ndarray, u: np.ndarray, span: float) -> tuple[np.ndarray, np.ndarray]:

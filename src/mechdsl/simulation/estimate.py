@@ -28,13 +28,14 @@ import time
 import numpy as np
 
 from ..numbers import si_unit
-from .difference import compare     # (the comparison, without CasADi: a warm prepared run shares it)
+from .difference import compare, fill     # (the comparison, without CasADi: a warm prepared run shares it)
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
+from .backends import backend
 from .backends.ode import kept_setup
 from .prepared import prepare
 from .problem import formulate
 from .registry import spec
-from .settings import MIN_RTOL
+from .settings import DEFAULT_POINTS, MIN_RTOL
 
 TIGHTER = 10.0       # the companion's tolerance is this many times tighter
 COARSE = 201         # the companion records at most this many of the run's output times
@@ -59,9 +60,6 @@ def coarse_points(n: int) -> tuple[int, int]:
     return n, 1
 
 
-MAX_EVENTS = 20        # contact runs with more events carry no default estimate (see companion)
-
-
 def companion(problem, r):
     """(settings of the companion run, factor the difference is divided by, what it is) or
     (None, None, why not)."""
@@ -76,13 +74,6 @@ def companion(problem, r):
         tight = s.replace(**base, dt=dt / 2, points=n if n >= 2 else None,
                           budget=max(s.budget, 4 * steps + 4))
         return tight, 1.0 - 2.0 ** -order, f"a run with half the step (dt = {dt / 2:.3g}; order {order})"
-    if problem.kind == "hybrid" and len(r.events) > MAX_EVENTS:
-        # a companion that is to follow that many impacts at a tighter tolerance costs several times
-        # the run (the falling rod at g = 1e12: 38 impacts, 5 s; its companion 30 s), and where impacts
-        # accumulate the two runs part at the first one timed differently, so the difference would
-        # not be the run's error either
-        return None, None, (f"{len(r.events)} events (more than {MAX_EVENTS}): a companion run would not "
-                            "follow the same impacts; compare runs at two tolerances (estimate_error) instead")
     k = TIGHTER
     rtol = s.rtol / k
     if rtol < MIN_RTOL:
@@ -109,6 +100,8 @@ def companion(problem, r):
     # code (a third gcc call of the 200-link chain's runs) (issue 24)
     in_loop = r.metadata.get("loop_engine") is not None
     compiled = None if in_loop and s.compiled is None else bool(ran.get("compiled"))
+    if problem.kind == "hybrid":
+        compiled = s.compiled            # free flight in the compiled loop as the run stepped it
     extra = dict(base, rtol=rtol, atol=s.atol / k, method=method, compiled=compiled)
     if problem.kind == "ode":
         extra["points"] = points
@@ -132,6 +125,9 @@ def estimate(r, problem, solve, given=None) -> None:
         if tight is None:
             acc.update(error_estimate=None, error_estimate_unavailable=how)
             return
+        if problem.kind == "hybrid":
+            _follow(r, problem, tight, factor)
+            return
         cpu0 = time.process_time()
         r.stats["error_estimate_cpu_time"] = None
         try:
@@ -146,6 +142,30 @@ def estimate(r, problem, solve, given=None) -> None:
         r.stats["error_estimate_steps"] = (other.stats or {}).get("steps")
         r.stats["error_estimate_rhs_evals"] = (other.stats or {}).get("rhs_evals")
     compare(r, other, factor, s, lambda c: _unit(problem.eom, c))
+
+
+def _follow(r, problem, tight, factor) -> None:
+    """A contact run's estimate: the companion follows the run's own impacts
+    (backends/event_companion.py), whatever their number."""
+    acc = r.metadata["accuracy"]
+    cpu0 = time.process_time()
+    r.stats["error_estimate_cpu_time"] = None
+    try:
+        f = backend(problem.backend).follow(problem, tight, r, coarse_points(tight.points or DEFAULT_POINTS)[1])
+    finally:
+        r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0
+    r.stats.update(error_estimate_steps=f.steps, error_estimate_rhs_evals=f.rhs_evals,
+                   error_estimate_segments=f.segments)
+    acc["error_estimate_method"] = (f"the run's {f.segments} segment{'s' if f.segments != 1 else ''} between its "
+                                    f"events again at rtol = {tight.rtol:.3g}, atol = {tight.atol:.3g} "
+                                    f"({1 / (1 - factor):.3g}x tighter), each from the run's state after its events")
+    if not f.t:
+        acc.update(error_estimate=None, error_estimate_unavailable=f.note or "the companion recorded no time")
+        return
+    fill(r, np.vstack(f.err), np.concatenate(f.t), factor, problem.settings, lambda c: _unit(problem.eom, c))
+    acc["error_estimate_event_time"] = f.dt_event / factor      # s: the largest difference of an event's time
+    if f.note:
+        acc["error_estimate_note"] = f.note
 
 
 class _Plan:

@@ -31,6 +31,7 @@ from .event_flight import CANCELLED, COMPILED_CLASSES, EVENT, OK
 ZENO_EVENTS = 500           # this many events ...
 IMPACTS_PER_CALL = 1024     # impact records one compiled call may hold
 ZENO_SPAN = 1e-6            # ... within this fraction of the run's span: the events accumulate (Zeno)
+BATCH = 4                   # output rows of one step from this many on: their multipliers in one batched call
 REST_BAND = 2.0             # a rebound must rise this many event offsets to count as a bounce
 
 
@@ -132,9 +133,32 @@ class Run:
 
     def emit(self, sol, t_hi: float, inclusive: bool) -> None:
         g = self.grid
+        j = int(np.searchsorted(g, t_hi, side="right" if inclusive else "left"))
+        if j - self.gi >= BATCH and self.active and self._store_many(sol, g[self.gi:j]):
+            return
         while self.gi < len(g) and (g[self.gi] < t_hi or (inclusive and g[self.gi] <= t_hi)):
             self._store(self.gi, g[self.gi], sol(g[self.gi]))
             self.gi += 1
+
+    def _store_many(self, sol, ts: np.ndarray) -> bool:
+        """The output rows at the times ts of one step with active rows (a resting phase), the
+        multipliers in one batched evaluation; False when that cannot be (friction: per row)."""
+        Y = np.asarray(sol(ts), float).reshape(2 * self.n, -1)
+        lam = self.s.multipliers_at(ts, Y, self.active)
+        if lam is None:
+            return False
+        K, s = len(ts), self.s
+        i = self.gi
+        self.out_y[i:i + K] = Y.T
+        self.out_lam[i:i + K] = 0.0
+        self.out_force[i:i + K] = 0.0
+        for j, r in enumerate(self.active):
+            if r < s.m:
+                self.out_lam[i:i + K, r] = -lam[:, j]      # EOM convention: M q'' = bias - g_q^T lam
+            elif r < s.m + s.k:
+                self.out_force[i:i + K, r - s.m] = lam[:, j]
+        self.gi += K
+        return True
 
     # ------------------------------------------------------------------ events
     def event_matrix(self, ts: np.ndarray, Y: np.ndarray):
@@ -147,10 +171,15 @@ class Run:
             labels += [("impact", i) for i in open_idx]
         closed_idx = [i for i, c in enumerate(self.closed) if c]
         if closed_idx:
-            L = np.zeros((len(closed_idx), len(ts)))
-            for j, t in enumerate(ts):
-                lam = self._lam_closed(t, Y[:self.n, j], Y[self.n:, j])
-                L[:, j] = [lam[i] for i in closed_idx]
+            lam_all = self.s.multipliers_at(ts, Y, self.active) if len(ts) >= BATCH else None
+            if lam_all is not None:            # one batched evaluation (no friction)
+                pos = {r: j for j, r in enumerate(self.active)}
+                L = lam_all[:, [pos[self.s.contact_row(i)] for i in closed_idx]].T
+            else:
+                L = np.zeros((len(closed_idx), len(ts)))
+                for j, t in enumerate(ts):
+                    lam = self._lam_closed(t, Y[:self.n, j], Y[self.n:, j])
+                    L[:, j] = [lam[i] for i in closed_idx]
             vals.append(L)
             labels += [("release", i) for i in closed_idx]
         return labels, (np.vstack(vals) if vals else np.zeros((0, len(ts))))

@@ -28,7 +28,8 @@ from ..registry import events_method, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
 from .event_flight import COMPILED_CLASSES, flight
-from .event_loop import Run, RunFailure
+from .event_companion import follow
+from .event_loop import REST_BAND, Run, RunFailure
 
 
 class EventsBackend(Backend):
@@ -39,6 +40,14 @@ class EventsBackend(Backend):
 
     def run(self, problem, progress, setup=None):
         return contact_run(problem.eom, problem.settings, progress)
+
+    def follow(self, problem, tight, r, stride):
+        """The error estimate's companion of the run ``r``: its segments between events again
+        with the settings ``tight`` (event_companion.py)."""
+        s = problem.settings
+        band = REST_BAND * ContactRun(s.contacts, s.rtol, s.atol).offset      # the run's rest band
+        parts = _contact_setup(problem.eom, tight.contacts.contacts, tight.contacts.fixations)
+        return follow(problem.eom, tight, r, parts, stride, band)
 
     def describe(self, r):
         m = r.metadata.get("method")
