@@ -1,9 +1,9 @@
 """The compiled stepping loop's runtime as ctypes sees it: its records (Fun, Resume, Drive),
-its entry points' argument types and the calls of a run (``run_compiled``) and of a map
+its entry points' argument types and the calls of a run (``call_loop``) and of a map
 (``map_rows``).  Without CasADi (crk.py builds the loops; a prepared warm run, warm_run.py,
 loads the libraries by path and calls them through here alone) and without numpy at import:
-``call_loop`` runs on array.array buffers (a prepared warm run imports no numpy), the numpy
-front ends (``run_compiled``, ``map_rows``, ``loop_drive``) import it when called."""
+``call_loop`` runs on array.array buffers (a prepared warm run imports no numpy; crk.run_compiled
+is its numpy face), ``map_rows`` and ``loop_drive`` import numpy when called."""
 from __future__ import annotations
 
 import ctypes
@@ -40,7 +40,7 @@ RUN_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctype
 EVENTS_ARGTYPES = RUN_ARGTYPES + [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_double, ctypes.c_int, _DP,
                                   ctypes.POINTER(Fun), _DP, _DP, _DP, ctypes.c_longlong]
 
-# crk_run as run_compiled calls it: every array by its address (an int: numpy's data_as costs
+# crk_run as call_loop calls it: every array by its address (an int: numpy's data_as costs
 # 4.5 us an array, a tenth of a small model's whole run)
 LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctypes.c_longlong, _VP, _VP, _VP,
                  ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
@@ -216,27 +216,6 @@ def call_loop(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progres
                 list(W[6:6 + nx]) if failed else None)
 
 
-def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
-                 payback=None):
-    """``call_loop`` as an integrators.Run (numpy arrays)."""
-    import numpy as np
-
-    from ... import integrators as I
-
-    grid = np.ascontiguousarray(grid, float)
-    x0 = np.ravel(x0)
-    c = call_loop(loop, method, grid, x0, np.ravel(p), None if u is None else np.ravel(u), rtol, atol,
-                  max_steps, hmin, progress, drive, payback)
-    run = I.Run(X=np.frombuffer(c.X, float).reshape(len(grid), x0.size), reached=c.reached, stats=c.raw,
-                interrupted=c.interrupted)
-    if c.interrupted:
-        run.error = "interrupted (Ctrl-C)"
-    elif c.fail_time is not None:
-        run.error = STATUS.get(c.status, f"status {c.status}").format(max_steps=max_steps, hmin=hmin)
-        run.fail_time, run.fail_state = c.fail_time, np.array(c.fail_state)
-    return run
-
-
 class Loop:
     """The model's Functions as the runtime calls them (``funs``: name -> Fun), the runtime's
     entry points, and what keeps both alive (programs, the model's library)."""
@@ -306,6 +285,6 @@ def open_loop(spec: dict) -> Loop:
 
 
 def counts(raw: dict) -> dict:
-    """A loop run's statistics (run_compiled's raw) under the names of every run's."""
+    """A loop run's statistics (call_loop's raw) under the names of every run's."""
     return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
             "rejected_steps": raw.get("n_reject")}
