@@ -108,3 +108,20 @@ def test_plain_figures_are_numpys():
     A.note_facts(block, views)
     assert plain == [A._facts(v) for v in views]
     assert not A.note_plain([array("d", [1.0, float("nan")])])
+
+
+def test_a_payload_that_needs_numpy_is_not_used(tmp_path, monkeypatch):
+    """A prepared run is plain data: one holding a numpy value (another writer) is refused on read
+    (the normal path runs) rather than importing numpy; the plain one reads back."""
+    from array import array
+
+    import numpy as np
+
+    from mechdsl.simulation import warm_run
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    plain = {"run": {"loop": {"runtime": None}}, "companion": None, "grid": array("d", [0.0, 1.0])}
+    assert warm_run.write("a" * 64, plain)
+    assert warm_run.read("a" * 64)["grid"] == array("d", [0.0, 1.0])
+    assert warm_run.write("b" * 64, {**plain, "grid": np.array([0.0, 1.0])})
+    assert warm_run.read("b" * 64) is None
