@@ -20,7 +20,7 @@ def address(a) -> int | None:
     (None when it is empty)."""
     if not len(a):
         return None
-    return a.ctypes.data if hasattr(a, "ctypes") else a.buffer_info()[0]
+    return a.buffer_info()[0] if type(a) is array else a.ctypes.data
 
 
 def plain(a, code: str) -> array:

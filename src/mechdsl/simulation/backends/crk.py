@@ -44,9 +44,10 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
                  payback=None):
     """``call_loop`` as an integrators.Run (numpy arrays)."""
     grid = np.ascontiguousarray(grid, float)
-    x0 = np.ravel(x0)
-    c = call_loop(loop, method, grid, x0, np.ravel(p), None if u is None else np.ravel(u), rtol, atol,
-                  max_steps, hmin, progress, drive, payback)
+    x0 = np.ascontiguousarray(np.ravel(x0), float)
+    c = call_loop(loop, method, grid, x0, np.ascontiguousarray(np.ravel(p), float),
+                  None if u is None else np.ascontiguousarray(np.ravel(u), float), rtol, atol, max_steps, hmin,
+                  progress, drive, payback)
     run = I.Run(X=np.frombuffer(c.X, float).reshape(len(grid), x0.size), reached=c.reached, stats=c.raw,
                 interrupted=c.interrupted)
     if c.interrupted:

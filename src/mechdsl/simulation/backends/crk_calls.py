@@ -158,7 +158,19 @@ class Call:
 
 
 def _doubles(v) -> array:
-    return v if isinstance(v, array) and v.typecode == "d" else array("d", v)
+    """``v`` as array.array('d'): itself, or a copy of a contiguous float64 numpy array's bytes
+    (iterating the array would make a numpy scalar per entry)."""
+    if type(v) is array and v.typecode == "d":
+        return v
+    try:
+        mv = memoryview(v)
+    except TypeError:                   # a list or a tuple
+        return array("d", v)
+    if mv.format != "d" or not mv.c_contiguous:
+        return array("d", v.tolist() if hasattr(v, "tolist") else list(v))
+    out = array("d")
+    out.frombytes(mv.cast("B"))
+    return out
 
 
 def call_loop(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
