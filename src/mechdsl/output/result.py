@@ -165,7 +165,7 @@ class Result:
 
     def to_csv_text(self) -> str:
         """The CSV (header of ``columns``, one row per output time, full precision) as text."""
-        return csv_text(self.columns, self.table().tolist())
+        return csv_text(self.columns, self.table().astype(float, copy=False).tolist())
 
     def to_csv(self, path, sidecar: bool = True, overwrite: bool = False) -> list[str]:
         """Write the CSV and, by default, its JSON sidecar (OUT.csv -> OUT.json), atomically.
