@@ -20,7 +20,11 @@ processes it waited for).  Five states of the cache folder ($MECHDSL_CACHE):
 - ``model cache``: the same command with the prepared run removed (the normal path: the model
   cache, the compiled library; what a warm run cost before prepared runs).
 
-Each figure is the median of K processes (default 3), one new folder per process for the
+Beside them, measured in the same loop: ``python -c pass`` (the interpreter's own start, the
+floor of any process) and ``python -c "import numpy"``; the last columns are the warm run's
+ratios to the normal path (model cache) and to ``python -c pass``.
+
+Each figure is the least CPU time of K processes (default 3; the peak: the largest), one new folder per process for the
 first two states; Python's bytecode caches are written (as after ``pip install``: the
 PYTHONDONTWRITEBYTECODE variable is removed).  Goals: the 12-link chain warm 0.15 s and from
 an empty cache 0.5 s (item 8); the 200-link chain's first run at most 3 s and 200 MB, growing
@@ -31,7 +35,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -48,9 +51,10 @@ def env(cache):
     return e
 
 
-def process(args, cache) -> tuple[float, float]:
-    """(CPU seconds, peak MB) of one process and the processes it waited for."""
-    p = subprocess.Popen([sys.executable, "-m", "mechdsl", *args], cwd=ROOT, env=env(cache),
+def process(args, cache, python=False) -> tuple[float, float]:
+    """(CPU seconds, peak MB) of one process and the processes it waited for (``python``: the
+    interpreter with ``args``, else ``python -m mechdsl args``)."""
+    p = subprocess.Popen([sys.executable, *([] if python else ["-m", "mechdsl"]), *args], cwd=ROOT, env=env(cache),
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     _, status, ru = os.wait4(p.pid, 0)
     err = p.stderr.read().decode(errors="replace")
@@ -67,8 +71,10 @@ def chain_args(n):
 
 def measure(n, runs) -> dict:
     out = {}
-    empty, new, warm, third, normal = [], [], [], [], []
+    empty, new, warm, third, normal, bare, numpy = [], [], [], [], [], [], []
     for _ in range(runs):
+        bare.append(process(["-c", "pass"], ROOT, python=True))
+        numpy.append(process(["-c", "import numpy"], ROOT, python=True))
         d = Path(tempfile.mkdtemp(prefix="mechdsl-first-"))
         try:
             empty.append(process(chain_args(n), d))
@@ -85,23 +91,25 @@ def measure(n, runs) -> dict:
         finally:
             shutil.rmtree(d, ignore_errors=True)
     for key, vals in (("empty", empty), ("new model", new), ("warm", warm), ("third", third),
-                      ("model cache", normal)):
-        out[key] = (statistics.median(v[0] for v in vals), max(v[1] for v in vals))
+                      ("model cache", normal), ("python", bare), ("numpy", numpy)):
+        out[key] = (min(v[0] for v in vals), max(v[1] for v in vals))
     return out
 
 
 def table(sizes, runs) -> str:
-    lines = [f"`benchmarks/first_run.py` (median of {runs} processes; CPU = user + system of the process and the "
+    lines = [f"`benchmarks/first_run.py` (least of {runs} processes; CPU = user + system of the process and the "
              "compilers it ran; peak = largest resident size)", "",
              "| chain | empty cache: CPU s | peak MB | new model: CPU s | peak MB | warm: CPU s | peak MB "
-             "| third run: CPU s | peak MB | model cache: CPU s | peak MB | warm / model cache |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| third run: CPU s | peak MB | model cache: CPU s | peak MB | `python -c pass`: CPU s "
+             "| `import numpy`: CPU s | warm / model cache | warm / python |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for n in sizes:
         m = measure(n, runs)
         lines.append(f"| N = {n} | " + " | ".join(f"{m[k][0]:.2f} | {m[k][1]:.0f}" for k in ("empty", "new model",
                                                                                               "warm", "third",
                                                                                               "model cache"))
-                     + f" | {m['warm'][0] / m['model cache'][0]:.2f} |")
+                     + f" | {m['python'][0]:.3f} | {m['numpy'][0]:.3f}"
+                     + f" | {m['warm'][0] / m['model cache'][0]:.2f} | {m['warm'][0] / m['python'][0]:.1f} |")
     return "\n".join(lines)
 
 

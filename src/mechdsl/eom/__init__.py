@@ -22,8 +22,6 @@ from dataclasses import field
 import re
 from typing import TYPE_CHECKING, Callable
 
-import numpy as np
-
 from ..model.records import record
 
 if TYPE_CHECKING:       # (an annotation only: a prepared warm run imports eom's helpers without the IR)
@@ -128,6 +126,7 @@ class EOM:
     def start(self, p: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Numeric start values (q0, qd0) for parameter vector p (default: model values)."""
         import casadi as ca
+        import numpy as np
 
         pv = np.asarray(self.param_values if p is None else p, float)
         kept = self.workspace.memo("start_values", dict)      # by parameter values: a run asks twice
@@ -185,6 +184,7 @@ def fold_inputs(eom: "EOM", u=None) -> "EOM":
     if not eom.inputs:
         return eom
     import casadi as ca
+    import numpy as np
 
     base = eom.workspace.folded("base", lambda: eom.replace(p=ca.vertcat(eom.p, eom.u), params=eom.params + eom.inputs,
                                                     u=None, inputs=(), input_defaults=()))
@@ -195,6 +195,8 @@ def fold_inputs(eom: "EOM", u=None) -> "EOM":
 def parameter_vector(eom: "EOM", p=None) -> np.ndarray:
     """The numeric parameter vector: the model's values, or overrides (a dict by name, or a
     full vector).  Shared by every phase that takes ``p=``."""
+    import numpy as np
+
     from ..diagnostics import UsageError, did_you_mean
 
     base = np.array(eom.param_values, float).ravel().copy()
@@ -236,6 +238,7 @@ def from_lagrangian(name, coords, params, param_values, q, qd, t, p, T, V, D=Non
     Convenient for tests of formulations and analyses: write T and V in CasADi directly.
     """
     import casadi as ca
+    import numpy as np
 
     n = len(coords)
     D = ca.SX(0) if D is None else D

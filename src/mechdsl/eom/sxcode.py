@@ -21,9 +21,9 @@ Functions, ...) are refused with ``Unsupported``: callers use CasADi's code gene
 """
 from __future__ import annotations
 
-import ctypes
-
 import numpy as np
+
+from . import vmprog
 
 CHUNK = 256          # operations per C function: gcc's time per operation stays flat
 
@@ -323,33 +323,15 @@ def _c_source(f, name: str, chunk: int) -> str:
 # --------------------------------------------------------------------------- interpreter programs
 
 
-_CI = ctypes.c_longlong
-
-
-class _Prog(ctypes.Structure):
-    _fields_ = [("ins", ctypes.POINTER(ctypes.c_int)), ("nins", _CI), ("consts", ctypes.POINTER(ctypes.c_double)),
-                ("nconst", _CI), ("const_off", _CI), ("nin", ctypes.c_int), ("in_off", ctypes.POINTER(_CI)),
-                ("in_nnz", ctypes.POINTER(_CI))]
-
-
-class Program:
-    """An SX Function as vm.c's program: ``prog`` (a ctypes record the interpreter reads; this
-    object keeps its arrays alive) and ``nreg``, the work memory it needs (doubles)."""
+class Program(vmprog.Program):
+    """An SX Function as vm.c's program (eom/vmprog.py): ``prog`` (a ctypes record the
+    interpreter reads; this object keeps its arrays alive) and ``nreg``, the work memory it
+    needs (doubles)."""
 
     def __init__(self, f=None, arrays=None):
         if arrays is None:
             arrays = (*_kept(f, "prog", lambda: _program_arrays(f), _pack_prog, _unpack_prog), f.n_in(), f.n_out())
-        code, consts, in_off, in_nnz, nreg, self.n_in, self.n_out = arrays
-        self.ins, self.consts, self.in_off, self.in_nnz, self.nreg = code, consts, in_off, in_nnz, nreg
-        self.prog = _Prog(self.ins.ctypes.data_as(ctypes.POINTER(ctypes.c_int)), self.ins.size // 4,
-                          self.consts.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), len(self.consts),
-                          int(self.in_off[-1] + self.in_nnz[-1]) if self.in_nnz.size else 0, self.n_in,
-                          self.in_off.ctypes.data_as(ctypes.POINTER(_CI)),
-                          self.in_nnz.ctypes.data_as(ctypes.POINTER(_CI)))
-
-    def arrays(self) -> tuple:
-        """What ``Program(arrays=...)`` rebuilds it from, without the Function (plain data)."""
-        return self.ins, self.consts, self.in_off, self.in_nnz, self.nreg, self.n_in, self.n_out
+        super().__init__(arrays)
 
 
 def _pack_prog(value) -> bytes:

@@ -11,11 +11,11 @@ integrator, method, tolerances, compiled), ``r.success``/``r.message``/``r.failu
 """
 from __future__ import annotations
 
+import math
 import re
+import sys
 from dataclasses import field
 from typing import Any
-
-import numpy as np
 
 from .fileio import write_atomic_group
 from ..model.records import record
@@ -155,6 +155,8 @@ class Result:
     # -- output -----------------------------------------------------------------------
     def table(self) -> np.ndarray:
         """Every column (``columns``) as one (n_t, n_columns) array: what the CSV holds."""
+        import numpy as np
+
         if not len(self.t):
             return np.zeros((0, len(self.columns)))
         cols = [self.t[:, None], self.q, self.qd] + [np.asarray(v, float).reshape(len(self.t), -1)
@@ -163,10 +165,7 @@ class Result:
 
     def to_csv_text(self) -> str:
         """The CSV (header of ``columns``, one row per output time, full precision) as text."""
-        lines = [",".join(_csv_name(c) for c in self.columns)]
-        for row in self.table():
-            lines.append(",".join(_fmt(v) for v in row))
-        return "\n".join(lines) + "\n"
+        return csv_text(self.columns, self.table().astype(float, copy=False).tolist())
 
     def to_csv(self, path, sidecar: bool = True, overwrite: bool = False) -> list[str]:
         """Write the CSV and, by default, its JSON sidecar (OUT.csv -> OUT.json), atomically.
@@ -257,8 +256,12 @@ def _csv_name(c: str) -> str:
     return f'"{c}"' if "," in c or '"' in c else c
 
 
-def _fmt(v: float) -> str:
-    return repr(float(v))
+def csv_text(columns, rows) -> str:
+    """The CSV of the ``columns`` and the ``rows`` (sequences of Python floats): full precision
+    (``repr``), the one text of Result.to_csv and of a prepared warm run."""
+    lines = [",".join(_csv_name(c) for c in columns)]
+    lines += [",".join(map(float.__repr__, row)) for row in rows]
+    return "\n".join(lines) + "\n"
 
 
 def _plain(name: str) -> str:
@@ -279,13 +282,15 @@ def _jsonable(x):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating,)):
-        return float(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, float) and not np.isfinite(x):
+    np = sys.modules.get("numpy")      # (not imported: no numpy value can be here)
+    if np is not None:
+        if isinstance(x, np.ndarray):
+            return _jsonable(x.tolist())
+        if isinstance(x, (np.floating,)):
+            return float(x)
+        if isinstance(x, (np.integer,)):
+            return int(x)
+    if isinstance(x, float) and not math.isfinite(x):
         return str(x)
     return x
 
@@ -323,6 +328,7 @@ def versions() -> dict[str, str]:
         import platform
 
         import casadi
+        import numpy as np
 
         from .. import __version__
 
@@ -334,8 +340,6 @@ def versions() -> dict[str, str]:
 def _scipy_version() -> str:
     """scipy.__version__ without importing scipy (8 ms) when the run did not: its version.py
     is a file of plain assignments, read on its own."""
-    import sys
-
     mod = sys.modules.get("scipy")
     if mod is None:
         import importlib.util

@@ -12,8 +12,7 @@ Back ends may add their own keys beside these (e.g. ``nsteps`` from CVODES in DA
 from __future__ import annotations
 
 import math
-
-import numpy as np
+import sys
 
 from ..output.result import Failure, Result
 
@@ -36,19 +35,39 @@ _FACTS: dict = {}
 FACTS_KEPT = 256
 
 
-def note_facts(block: np.ndarray, rows) -> None:
+def note_facts(block, rows) -> None:
     """Note the facts of the signals ``rows`` (the rows of ``block``, (k, N), as arrays)."""
-    import weakref
+    import numpy as np
 
     if block.ndim != 2 or block.shape[1] == 0 or len(rows) != block.shape[0]:
         return
     finite = np.isfinite(block).all(axis=1)
     amax = np.abs(block).max(axis=1)
     dmax = np.abs(block - block[:, :1]).max(axis=1)
-    if len(_FACTS) + len(rows) > FACTS_KEPT:
+    _note([(v, bool(finite[i]), float(amax[i]), float(dmax[i])) for i, v in enumerate(rows)])
+
+
+def note_plain(signals) -> bool:
+    """Note the facts of the ``signals`` (array.arrays of floats, none empty) in plain Python, the
+    same numbers as note_facts (max of exact differences and magnitudes); False when a value is
+    not finite (nothing noted)."""
+    facts = []
+    for v in signals:
+        if not math.isfinite(sum(v)):          # (a nan or inf makes the sum non-finite; so may an overflow)
+            return False
+        v0 = v[0]
+        facts.append((v, True, max(map(abs, v)), max(abs(x - v0) for x in v)))
+    _note(facts)
+    return True
+
+
+def _note(facts) -> None:
+    import weakref
+
+    if len(_FACTS) + len(facts) > FACTS_KEPT:
         _FACTS.clear()
-    for i, v in enumerate(rows):
-        _FACTS[id(v)] = (weakref.ref(v), bool(finite[i]), float(amax[i]), float(dmax[i]))
+    for v, finite, amax, dmax in facts:
+        _FACTS[id(v)] = (weakref.ref(v), finite, amax, dmax)
 
 
 def _facts(v):
@@ -64,7 +83,11 @@ def drift_of(v) -> float | None:
     f = _facts(v)
     if f is not None:
         return f[1]
-    if v is None or len(v) == 0 or not np.isfinite(v).all():
+    if v is None or len(v) == 0:
+        return None
+    import numpy as np
+
+    if not np.isfinite(v).all():
         return None
     return float(np.abs(v - v[0]).max())
 
@@ -79,6 +102,8 @@ def check_finite(r: Result) -> None:
     """A run whose state or a recorded signal (an output, an energy) became inf/nan fails at
     the first such time, naming it; the results before that time are kept.  A CSV never
     carries inf or nan from a run that says it succeeded."""
+    import numpy as np
+
     _check_states(r)
     first = None
     for name, v in r.signals.items():
@@ -101,6 +126,8 @@ def check_finite(r: Result) -> None:
 
 
 def _check_states(r: Result) -> None:
+    import numpy as np
+
     if r.q.size == 0 and r.qd.size == 0:
         return
     if math.isfinite(np.add.reduce(r.q, axis=None)) and math.isfinite(np.add.reduce(r.qd, axis=None)):
@@ -124,6 +151,8 @@ def _check_states(r: Result) -> None:
 
 def _truncate(r: Result, keep: int) -> None:
     """Keep the first ``keep`` output times of the result (signals and events with them)."""
+    import numpy as np
+
     r.t = r.t[:keep].copy()
     r.q = r.q[:keep].copy()
     r.qd = r.qd[:keep].copy()
@@ -139,7 +168,8 @@ def normalize_stats(r: Result, cpu_time: float, wall_time: float) -> None:
         if st.get(key) is None:
             st[key] = next((st[n] for n in names if st.get(n) is not None), None)
     ev = st.get("events")
-    st["events"] = len(r.events) if not isinstance(ev, (int, np.integer)) else int(ev)
+    np = sys.modules.get("numpy")         # (not imported: the count is no numpy integer)
+    st["events"] = int(ev) if isinstance(ev, int) or np is not None and isinstance(ev, np.integer) else len(r.events)
     st["points"] = int(len(r.t))
     st["cpu_time"] = float(cpu_time)            # both over the whole back-end call (set-up included)
     st["wall_time"] = float(wall_time)
@@ -159,7 +189,11 @@ def energy_drift(signals) -> dict:
             dE = fe[1]
             scale = max(abs(float(E[0])), fk[0], fp[0], 1e-300)
             return {"energy_drift": dE, "energy_drift_relative": dE / scale}
-    if E is None or len(E) == 0 or not np.isfinite(E).all():
+    if E is None or len(E) == 0:
+        return {"energy_drift": None, "energy_drift_relative": None}
+    import numpy as np
+
+    if not np.isfinite(E).all():
         return {"energy_drift": None, "energy_drift_relative": None}
     dE = float(np.abs(E - E[0]).max())
     scale = max(abs(float(E[0])), float(np.abs(signals.get("kinetic_energy", E)).max()),
@@ -197,15 +231,24 @@ def accuracy_report(r: Result, problem, fixed_step: bool) -> None:
     for name in names:
         v = r.signals.get(name)
         fv = None if v is None else _facts(v)
-        if fv is None and (v is None or len(v) == 0 or not np.isfinite(v).all()):
-            continue
+        if fv is None:
+            if v is None or len(v) == 0:
+                continue
+            import numpy as np
+
+            if not np.isfinite(v).all():
+                continue
         d, scale = (fv[1], fv[0]) if fv is not None else (float(np.abs(v - v[0]).max()), float(np.abs(v).max()))
         if name == "energy":
             fk = _facts(r.signals.get("kinetic_energy", v))
             fp = _facts(r.signals.get("potential_energy", v))
-            scale = (max(scale, fk[0], fp[0]) if fk is not None and fp is not None else
-                     max(scale, float(np.abs(r.signals.get("kinetic_energy", v)).max()),
-                         float(np.abs(r.signals.get("potential_energy", v)).max())))
+            if fk is not None and fp is not None:
+                scale = max(scale, fk[0], fp[0])
+            else:
+                import numpy as np
+
+                scale = max(scale, float(np.abs(r.signals.get("kinetic_energy", v)).max()),
+                            float(np.abs(r.signals.get("potential_energy", v)).max()))
         rel = d / scale if scale > 1e-300 else d
         drift[name] = d
         report[name] = {"drift": d, "relative": rel}
@@ -257,6 +300,8 @@ def accuracy_warning(r: Result, problem) -> str | None:
 
 def error_estimate(r: Result, tight: Result) -> dict:
     """Per recorded quantity: max |x - x_tight| over the common output points."""
+    import numpy as np
+
     n = min(len(r.t), len(tight.t))
     out = {}
     if n == 0:

@@ -6,6 +6,11 @@ first-integral search that found nothing to name...) makes no prepared run: the 
 goes the normal way."""
 from __future__ import annotations
 
+from array import array
+from types import SimpleNamespace
+
+from ..eom import vmprog
+
 from .backends.ode import OdeSetup, peek_setup, plain_copy
 from .estimate import companion
 
@@ -53,12 +58,68 @@ def payload(prepared, r, units) -> tuple[dict | None, str]:
         comp.update(factor=factor, how=how)
     elif s.error_estimate != "off":
         return None, "no error estimate"
-    meta = {k: plain_copy(v) for k, v in m.items() if k not in NUMBERS}
+    meta = {k: plain(plain_copy(v)) for k, v in m.items() if k not in NUMBERS}
     if call["loop"]["engine"] == "compiled":      # what a warm run says of its library
         prefix = f"{m['method']} compiled stepping loop: "
         meta["notes"] = [prefix + f"loaded compiled model from cache {call['loop']['library']}"
                          if n.startswith(prefix) else n for n in meta.get("notes", [])]
-    return {"run": call, "companion": comp, "recorder": rec, "metadata": meta, "settings": s,
+    return {"run": _plain_call(call), "companion": comp and _plain_call(comp), "recorder": _plain_recorder(rec),
+            "metadata": meta, "settings": _settings(s),
             "invariants": tuple(problem.invariants), "coordinates": list(r.coordinates), "units": units,
-            "estimate_off": None if comp is not None else {k: acc.get(k) for k in
+            "estimate_off": None if comp is not None else {k: plain(acc.get(k)) for k in
                                                            ("error_estimate", "error_estimate_unavailable")}}, ""
+
+
+# --------------------------------------------------------------------------- plain data
+# A prepared run holds no numpy value (warm_run reads it without importing numpy; a payload that
+# asks for numpy is refused there): arrays as array.array, numbers as Python's.
+
+def plain(x):
+    """``x`` with numpy arrays and scalars (in dicts, lists and tuples) as lists and Python
+    numbers: what the JSON sidecar and the summary make of them anyway."""
+    import numpy as np
+
+    if type(x) is dict:
+        return {k: plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return type(x)(plain(v) for v in x) if type(x) in (list, tuple) else x
+    if isinstance(x, np.ndarray):
+        return plain(x.tolist())
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    return x
+
+
+def _doubles(v) -> array:
+    import numpy as np
+
+    return vmprog.plain(np.ascontiguousarray(np.ravel(v), float), "d")
+
+
+def _number(v):
+    return v if type(v) in (int, float) else float(v)
+
+
+def _plain_call(c: dict) -> dict:
+    """A loop call (OdeSetup.loop_call) as plain data."""
+    return {**c, "grid": _doubles(c["grid"]), "x0": _doubles(c["x0"]), "p": _doubles(c["p"]),
+            "u": None if c["u"] is None else _doubles(c["u"]), "rtol": _number(c["rtol"]),
+            "atol": _number(c["atol"]), "max_steps": int(c["max_steps"]), "hmin": float(c["hmin"]), "n": int(c["n"]),
+            **({"factor": _number(c["factor"])} if "factor" in c else {})}
+
+
+def _plain_recorder(rec: dict) -> dict:
+    return {**rec, "nnz_in": [int(k) for k in rec["nnz_in"]], "nout": int(rec["nout"]), "dense": int(rec["dense"]),
+            "where": None if rec["where"] is None else [int(k) for k in rec["where"]],
+            "sizes": tuple(int(k) for k in rec["sizes"]), "integrals": list(rec["integrals"])}
+
+
+def _settings(s) -> SimpleNamespace:
+    """What the replay's accuracy report, warning and estimate read of the settings."""
+    return SimpleNamespace(rtol=_number(s.rtol), atol=_number(s.atol), t_start=_number(s.t_start),
+                           t_end=_number(s.t_end), error_estimate=s.error_estimate,
+                           dt=None if s.dt is None else _number(s.dt))

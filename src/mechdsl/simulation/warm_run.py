@@ -14,30 +14,35 @@ versions of Python and numpy, CasADi's files, the C compiler found and MECHDSL_C
 signals with the runtime's interpreter, and computes the statistics, the invariant drift, the
 error estimate (the companion run and estimate.compare) and the accuracy warning with the same
 functions as the normal path, so the numbers and files are the same (tests/test_warm_run.py).
+Without numpy (whose import alone is most of a warm process): the loops run on array.array
+buffers (crk_calls.call_loop), the signals, drift and estimate figures are computed in plain
+Python over them (accuracy.note_plain, difference.report: the same floating-point operations),
+and the CSV is written by the one formatter of Result (result.csv_text).
 None (the normal path runs) when there is no entry or it cannot be trusted or used (a
 library removed, a run that did not reach its end).
 """
 from __future__ import annotations
 
+import ctypes
+import math
 import os
 import pickle
 import sys
 import time
+from array import array
 from pathlib import Path
-
-import numpy as np
 
 from ..digest import sha256
 from ..eom import cachefiles
 from ..eom.compiler import find_compiler
 from ..eom.modelcache import code_fingerprint
-from ..eom.sxcode import Program
-from ..output.result import Result
+from ..eom.vmprog import Program, address
+from ..output.result import Result, csv_text
 from . import accuracy as A
 from .backends import crk_calls as C
-from .difference import compare
+from .difference import every_kth, report
 
-FORMAT = "mechdsl-warm-run 1"
+FORMAT = "mechdsl-warm-run 2"
 MAX_ENTRIES = 200
 
 
@@ -52,8 +57,9 @@ def directory() -> Path:
 
 def key(filename: str, text: bytes, options: tuple) -> str:
     """The key of a prepared run: the file and every run option (``options``: plain values)."""
-    parts = (FORMAT, code_fingerprint(), sys.version, np.__version__, _casadi_files(), _compiler(),
-             os.environ.get("MECHDSL_CFLAGS"), str(filename), options)
+    parts = (FORMAT, code_fingerprint(), sys.version, _package_files("numpy", ("__init__.py", "version.py")),
+             _package_files("casadi", ("__init__.py", "casadi.py")), _compiler(), os.environ.get("MECHDSL_CFLAGS"),
+             str(filename), options)
     h = sha256(repr(parts).encode("utf-8"))
     h.update(b"\0")
     h.update(text)
@@ -73,17 +79,17 @@ def _compiler() -> tuple | None:
     return os.path.realpath(cc), st.st_size, st.st_mtime_ns
 
 
-def _casadi_files() -> tuple:
-    """CasADi's installed files as the key sees them (size, modification time): a prepared run
-    holds what that CasADi built."""
+def _package_files(package: str, names) -> tuple:
+    """A package's installed files as the key sees them (size, modification time), without
+    importing it: a prepared run holds what that CasADi built and numbers that numpy computed."""
     import importlib.util
 
-    spec = importlib.util.find_spec("casadi")
+    spec = importlib.util.find_spec(package)
     if spec is None or not spec.origin:
         return ()
     d = os.path.dirname(spec.origin)
     out = []
-    for name in ("__init__.py", "casadi.py"):
+    for name in names:
         try:
             st = os.stat(os.path.join(d, name))
             out.append((name, st.st_size, st.st_mtime_ns))
@@ -108,6 +114,16 @@ def write(k: str, data: dict) -> bool:
     return ok
 
 
+class _Plain(pickle.Unpickler):
+    """A prepared run's payload holds plain data (warm_capture.plain): one that needs numpy is
+    refused (a warm run would import it) rather than loaded."""
+
+    def find_class(self, module, name):
+        if module == "numpy" or module.startswith("numpy."):
+            raise pickle.UnpicklingError("the payload holds numpy values")
+        return super().find_class(module, name)
+
+
 def read(k: str) -> dict | None:
     data, why = cachefiles.read_bytes(directory() / f"{k}.pkl")
     if data is None:
@@ -119,7 +135,9 @@ def read(k: str) -> dict | None:
         cachefiles.miss("warm-run", k[:16], "another format, key or content")
         return None
     try:
-        out = pickle.loads(payload)
+        import io
+
+        out = _Plain(io.BytesIO(payload)).load()
     except Exception as e:  # noqa: BLE001 - written by another version of a dependency
         cachefiles.miss("warm-run", k[:16], f"the payload does not load ({type(e).__name__})")
         return None
@@ -137,18 +155,22 @@ def read(k: str) -> dict | None:
 
 
 def _call(c: dict):
-    """(t, X, raw statistics) of one loop call ``c`` (warm_capture's loop_call), or None when it
-    did not reach its end (the normal path then runs and says why)."""
+    """(raw statistics, X) of one loop call ``c`` (warm_capture's loop_call): X the states,
+    array.array of rows [q, qd] (the first row the start values, as the normal path sets it),
+    or None when the run did not reach its end or a value is not finite (the normal path then
+    runs and says why)."""
     loop = C.open_loop(c["loop"])
-    run = C.run_compiled(loop, c["method"], c["grid"], c["x0"], c["p"], c["u"], c["rtol"], c["atol"],
-                         c["max_steps"], c["hmin"], _NoProgress())
+    run = C.call_loop(loop, c["method"], c["grid"], c["x0"], c["p"], c["u"], c["rtol"], c["atol"],
+                      c["max_steps"], c["hmin"], _NoProgress())
     if run.interrupted:
         raise KeyboardInterrupt
-    if run.error is not None or run.reached < len(c["grid"]):
+    if run.fail_time is not None or run.reached < len(c["grid"]):
         return None
-    X = run.X.copy()
-    X[0] = c["x0"]
-    return c["grid"].copy(), X, run.stats
+    X = run.X
+    X[:len(c["x0"])] = c["x0"]
+    if not math.isfinite(sum(X)):       # (the normal path says which value and when)
+        return None
+    return run.raw, X
 
 
 class _Declared:
@@ -171,70 +193,113 @@ class _Problem:
         self.settings, self.invariants, self.kind = settings, invariants, "ode"
 
 
+class Rows(Result):
+    """A prepared run's Result for ``mech simulate`` (summary, CSV and sidecar): ``t`` and each
+    signal an array.array, the states the rows of ``X`` ([q, qd] each, array.array); ``q`` and
+    ``qd`` are None (no numpy: this Result is written, never handed to a caller)."""
+
+    X: array = None
+
+    def to_csv_text(self) -> str:
+        t, X, sigs = self.t, self.X, list(self.signals.values())
+        nx = len(X) // len(t) if len(t) else 0
+        return csv_text(self.columns, ([t[i], *X[i * nx:(i + 1) * nx], *[v[i] for v in sigs]]
+                                       for i in range(len(t))))
+
+
 def replay(data: dict) -> Result | None:
     """The Result of the prepared run ``data`` (read), as the normal path makes it; None when
-    its loop did not reach the end."""
+    its loop did not reach the end or a value is not finite."""
     wall0, cpu0 = time.perf_counter(), time.process_time()
     c = data["run"]
     got = _call(c)
     if got is None:
         return None
-    t, X, raw = got
-    n = c["n"]
-    meta = data["metadata"]            # (read for this run: its own)
+    raw, X = got
+    t = array("d", c["grid"])
     signals = _record(data["recorder"], t, X, c["p"])
-    stats = {**{k: v for k, v in C.counts(raw).items() if v is not None}, "points": int(len(t)),
+    if signals is None or not A.note_plain(signals.values()):
+        return None
+    meta = data["metadata"]            # (read for this run: its own)
+    stats = {**{k: v for k, v in C.counts(raw).items() if v is not None}, "points": len(t),
              "wall_time": time.perf_counter() - wall0}
     stats.update({k: v for k, v in A.energy_drift(signals).items() if v is not None})
     stats.update(A.integral_drift_of(signals, data["recorder"]["integrals"]))
     stats["raw"] = raw
-    r = Result(t=t, q=X[:, :n], qd=X[:, n:], coordinates=list(data["coordinates"]), signals=signals, stats=stats,
-               metadata=meta, failure=None)
+    r = Rows(t=t, q=None, qd=None, coordinates=list(data["coordinates"]), signals=signals, stats=stats,
+             metadata=meta, failure=None)
+    r.X = X
     r.source_model = _Declared(data["units"])
     problem = _Problem(data["settings"], data["invariants"])
-    A.check_finite(r)
     A.normalize_stats(r, time.process_time() - cpu0, time.perf_counter() - wall0)
     A.accuracy_report(r, problem, fixed_step=False)
     if data["companion"] is None:
         r.metadata.setdefault("accuracy", {}).update(data["estimate_off"])
-    elif not _estimate(r, data):
+    elif not _estimate(r, data, c["n"]):
         return None
     A.accuracy_warning(r, problem)
     return r
 
 
-def _estimate(r: Result, data: dict) -> bool:
-    """The default error estimate from the companion call (estimate.estimate's steps)."""
+def _estimate(r: Rows, data: dict, n: int) -> bool:
+    """The default error estimate from the companion call (estimate.estimate's steps, compare's
+    numbers by difference.report over the buffers)."""
     comp, s = data["companion"], data["settings"]
     acc = r.metadata.setdefault("accuracy", {})
     acc["error_estimate_method"] = comp["how"]
     cpu0 = time.process_time()
     got = _call(comp)
     r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0
-    if got is None or not np.isfinite(got[1]).all():
+    if got is None:
         return False
-    t, X, raw = got
+    raw, Y = got
     counted = C.counts(raw)
     r.stats["error_estimate_steps"] = counted["steps"]
     r.stats["error_estimate_rhs_evals"] = counted["rhs_evals"]
-    other = _States(t, X[:, :comp["n"]])
+    t, X, u = r.t, r.X, comp["grid"]
+    k = every_kth(t, u, s.t_end - s.t_start)
+    nx, ny = len(X) // len(t), len(Y) // len(u)
+    if k is None or comp["n"] != n:
+        return False                    # (the normal path's general matching of times)
+    factor = comp["factor"]
+    per, where = [], []
+    for j in range(n):
+        d = [abs(a - b) / factor for a, b in zip(X[j::k * nx], Y[j::ny])]
+        per.append(max(d))
+        where.append(d.index(per[-1]))
+    qmax = [max(map(abs, X[j::nx])) for j in range(n)]
     units = data["units"]["si"]
-    compare(r, other, comp["factor"], s, lambda name: units.get(name))
+    report(acc, r.coordinates, per, qmax, lambda j: t[where[j] * k], s, lambda name: units.get(name))
     return True
 
 
-class _States:
-    def __init__(self, t, q):
-        self.t, self.q, self.failure = t, q, None
-
-
-def _record(rec: dict, t, X, p) -> dict:
-    """The recorded signals (record._evaluate's interpreted branch, from the program alone)."""
+def _record(rec: dict, t, X, p) -> dict | None:
+    """The recorded signals (record._evaluate's interpreted branch, from the program alone, by
+    the runtime's crk_map: q and qd read in place from the rows of X), or None when the
+    recorder does not have the inputs (t, q, qd, u, p, lam) this reads."""
     N = len(t)
     n, nu, m = rec["sizes"]
+    nnz = rec["nnz_in"]
+    nx = len(X) // N
+    if len(nnz) != 6 or nnz[:3] != [1, n, n] or nnz[3] != nu or nnz[5] != m or nnz[4] != len(p) or nx != 2 * n:
+        return None
     rt = C.open_runtime(rec["runtime"])
-    prog = Program(arrays=rec["program"])
+    prog = Program(rec["program"])
     fun = C.program_fun(rt, prog)
-    rows = (t.reshape(N, 1), X[:, :n], X[:, n:], np.zeros((N, nu)), np.asarray(p, float).reshape(-1), np.zeros((N, m)))
-    vals = C.map_rows(rt, fun, rec["nnz_in"], rec["nout"], rec["dense"], rec["where"], N, rows).T
-    return {k: vals[i] for i, k in enumerate(rec["names"])}
+    width = max(rec["nout"], 1)
+    out = array("d", bytes(8 * N * width))
+    zeros = array("d", bytes(8 * max(nu, m, 1)))
+    x = address(X)
+    args = (ctypes.c_void_p * 6)(address(t), x, x + 8 * n, address(zeros) if nu else None, address(p),
+                                 address(zeros) if m else None)
+    strides = array("q", [1, nx, nx, 0, 0, 0])
+    status = rt.crk_map(ctypes.byref(fun), N, 6, args, address(strides), ctypes.cast(address(out), C._DP), width)
+    if status:
+        return None
+    cols = [out[i::width] for i in range(rec["nout"])]
+    if rec["where"] is not None:
+        dense = [None] * rec["dense"]
+        for i, w in enumerate(rec["where"]):
+            dense[w] = cols[i]
+        cols = [v if v is not None else array("d", bytes(8 * N)) for v in dense]
+    return dict(zip(rec["names"], cols))

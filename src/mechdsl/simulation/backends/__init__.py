@@ -24,8 +24,6 @@ from __future__ import annotations
 import abc
 import dataclasses
 
-import numpy as np
-
 from ...diagnostics import UsageError
 from ...output.result import Result
 from ..settings import GROUPS
@@ -65,6 +63,8 @@ class Backend(abc.ABC):
         """(x, dx/dx_given, dx/dp): the start a run of ``problem`` begins from, given the start
         values ``xs`` (overrides ``x0`` applied) at the parameters ``pv``, and its
         linearization; without constraints the start values as given."""
+        import numpy as np
+
         return xs, np.eye(xs.size), np.zeros((xs.size, np.size(pv)))
 
 

@@ -32,11 +32,31 @@ from pathlib import Path
 
 import numpy as np
 
+from ... import integrators as I
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
-from .crk_calls import CANCELLED, CRK_METHODS, counts, run_compiled  # noqa: F401  (crk.X for the back ends)
-from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, declare, map_rows, program_fun, tables_in_loop
+from .crk_calls import CANCELLED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
+from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, program_fun, tables_in_loop
+
+
+def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
+                 payback=None):
+    """``call_loop`` as an integrators.Run (numpy arrays)."""
+    grid = np.ascontiguousarray(grid, float)
+    x0 = np.ascontiguousarray(np.ravel(x0), float)
+    c = call_loop(loop, method, grid, x0, np.ascontiguousarray(np.ravel(p), float),
+                  None if u is None else np.ascontiguousarray(np.ravel(u), float), rtol, atol, max_steps, hmin,
+                  progress, drive, payback)
+    run = I.Run(X=np.frombuffer(c.X, float).reshape(len(grid), x0.size), reached=c.reached, stats=c.raw,
+                interrupted=c.interrupted)
+    if c.interrupted:
+        run.error = "interrupted (Ctrl-C)"
+    elif c.fail_time is not None:
+        run.error = STATUS.get(c.status, f"status {c.status}").format(max_steps=max_steps, hmin=hmin)
+        run.fail_time, run.fail_state = c.fail_time, np.array(c.fail_state)
+    return run
+
 
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
 _LIBS: dict = {}

@@ -1,15 +1,15 @@
 """The compiled stepping loop's runtime as ctypes sees it: its records (Fun, Resume, Drive),
-its entry points' argument types and the calls of a run (``run_compiled``) and of a map
+its entry points' argument types and the calls of a run (``call_loop``) and of a map
 (``map_rows``).  Without CasADi (crk.py builds the loops; a prepared warm run, warm_run.py,
-loads the libraries by path and calls them through here alone)."""
+loads the libraries by path and calls them through here alone) and without numpy at import:
+``call_loop`` runs on array.array buffers (a prepared warm run imports no numpy; crk.run_compiled
+is its numpy face), ``map_rows`` and ``loop_drive`` import numpy when called."""
 from __future__ import annotations
 
 import ctypes
+from array import array
 
-import numpy as np
-
-from ... import integrators as I
-from ...eom.sxcode import Program
+from ...eom.vmprog import Program, address
 
 # method -> (id in crk.c, scipy class of the same algorithm)
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
@@ -40,14 +40,14 @@ RUN_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _DP, ctype
 EVENTS_ARGTYPES = RUN_ARGTYPES + [ctypes.POINTER(Fun), ctypes.c_longlong, ctypes.c_double, ctypes.c_int, _DP,
                                   ctypes.POINTER(Fun), _DP, _DP, _DP, ctypes.c_longlong]
 
-# crk_run as run_compiled calls it: every array by its address (an int: numpy's data_as costs
+# crk_run as call_loop calls it: every array by its address (an int: numpy's data_as costs
 # 4.5 us an array, a tenth of a small model's whole run)
 LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctypes.c_longlong, _VP, _VP, _VP,
                  ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
 
 
 def _ptr(a):
-    return a.ctypes.data_as(_DP)
+    return a.ctypes.data_as(_DP)       # (a numpy array)
 
 
 def declare(lib):
@@ -66,11 +66,13 @@ def declare(lib):
     return lib
 
 
-def map_rows(rt, fun, nnz_in, nout, dense, where, npts: int, rows) -> np.ndarray:
+def map_rows(rt, fun, nnz_in, nout, dense, where, npts: int, rows):
     """Values (npts, entries of output 0, structural zeros included) of the Fun ``fun`` (one
     output of ``nout`` nonzeros at the places ``where`` of ``dense`` entries; None: dense) by
     the runtime's ``crk_map``; ``rows``: per input an array of npts rows (its entries, C order)
     or one row shared by every point."""
+    import numpy as np
+
     arrs, strides = [], []
     for a, nnz in zip(rows, nnz_in):
         a = np.ascontiguousarray(a, float)
@@ -117,6 +119,8 @@ def tables_in_loop(drive) -> bool:
 def loop_drive(drive, t0, t1, u0):
     """(crk.c's Drive for one run, what keeps its arrays alive): the tables as data, their
     samples inside (t0, t1) the times steps end on."""
+    import numpy as np
+
     sigs = drive.signals
     tabs = (_Tab * max(len(sigs), 1))()
     keep = []
@@ -142,34 +146,60 @@ SLICE = 0.05            # seconds (monotonic clock) of one C call of a run: prog
 YIELD = 11
 
 
-def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
-                 payback=None) -> I.Run:
+class Call:
+    """One run of the loop on plain buffers (``call_loop``): ``X`` (array.array of npts x nx
+    doubles, row-major, NaN where not reached), ``reached`` (grid points with a state),
+    ``status``, ``raw`` (the loop's counts), ``interrupted``, ``fail_time`` and ``fail_state``
+    (list) after a failure."""
+
+    def __init__(self, X, reached, status, raw, interrupted, fail_time, fail_state):
+        self.X, self.reached, self.status, self.raw = X, reached, status, raw
+        self.interrupted, self.fail_time, self.fail_state = interrupted, fail_time, fail_state
+
+
+def _doubles(v) -> array:
+    """``v`` as array.array('d'): itself, or a copy of a contiguous float64 numpy array's bytes
+    (iterating the array would make a numpy scalar per entry)."""
+    if type(v) is array and v.typecode == "d":
+        return v
+    try:
+        mv = memoryview(v)
+    except TypeError:                   # a list or a tuple
+        return array("d", v)
+    if mv.format != "d" or not mv.c_contiguous:
+        return array("d", v.tolist() if hasattr(v, "tolist") else list(v))
+    out = array("d")
+    out.frombytes(mv.cast("B"))
+    return out
+
+
+def call_loop(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
+              payback=None) -> Call:
     """The run as C calls of SLICE seconds each in the calling thread (the state carried
     from call to call: the steps are those of one call), progress shown and Ctrl-C let through
     between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run).
-    ``payback`` (payback.Payback, an interpreted run): between calls, the compiled loop once the
-    interpreted evaluations have paid for its compile (the same bits: only the cost changes)."""
-    grid = np.ascontiguousarray(grid, float)
-    nx = x0.size
-    X = np.empty((len(grid), nx))
-    X.fill(np.nan)
-    pc = np.ravel(p)
-    uc = np.zeros(0) if u is None else np.ravel(u)
+    ``grid``: a contiguous float64 numpy array or array.array('d'); ``x0``, ``p``, ``u`` (None:
+    no inputs): sequences of floats.  ``payback`` (payback.Payback, an interpreted run): between
+    calls, the compiled loop once the interpreted evaluations have paid for its compile (the same
+    bits: only the cost changes)."""
+    npts = len(grid)
+    x0, pc, uc = _doubles(x0), _doubles(p), _doubles(() if u is None else u)
+    nx = len(x0)
+    X = array("d", [float("nan")]) * (npts * nx)
     # one buffer for the small arrays, each passed by its address: stats (4), the progress and
     # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
-    m, npar, nu = max(nx, 1), pc.size, uc.size
-    W = np.zeros(6 + 3 * m + m + npar + nu)
-    stats, ctl = W[:4], W[4:6].view(np.int64)
-    xfail = W[6:6 + nx]
+    m, npar, nu = max(nx, 1), len(pc), len(uc)
+    W = array("d", bytes(8 * (6 + 3 * m + m + npar + nu)))
     o = 6 + 3 * m
     W[o:o + nx] = x0
     W[o + m:o + m + npar] = pc
     W[o + m + npar:o + m + npar + nu] = uc
-    a = W.ctypes.data
+    a = W.buffer_info()[0]
+    ctl = ctypes.c_longlong.from_address(a + 32)
     rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
     drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
-    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o, a + 8 * (o + m + npar),
-            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.ctypes.data, a, a + 32,
+    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, address(grid), npts, a + 8 * o, a + 8 * (o + m + npar),
+            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.buffer_info()[0], a, a + 32,
             a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
     interrupted = False
     try:
@@ -177,30 +207,25 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
             status = loop.run(*args)
             if status != YIELD:
                 break
-            progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
+            progress.update(float(grid[max(ctl.value, 1) - 1]))
             if payback is not None and loop.engine == "interpreted":
                 better = payback.check(int(rs.nfev))
                 if better is not None:          # the rest of the run in compiled code
                     loop, args = better, (better.fun("ode"),) + args[1:]
     except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
         status, interrupted = CANCELLED, True
-    reached = int(ctl[0])
+    reached = ctl.value
     progress.update(float(grid[max(reached, 1) - 1]))
-    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
+    raw = {"n_steps": int(W[0]), "n_rhs": int(W[1]), "n_reject": int(W[2]), "status": int(status),
            "engine": loop.engine}
     if payback is not None:
-        payback.record(int(stats[1]))
+        payback.record(int(W[1]))
         if payback.switched_at is not None and payback.switched_at >= 0:
             raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
-    run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
-    if interrupted:
-        run.error = "interrupted (Ctrl-C)"
-    elif status != 0 or reached < len(grid):
-        t_end = float(stats[3])
-        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
-        run.fail_time, run.fail_state = t_end, xfail.copy()
+    failed = not interrupted and (status != 0 or reached < npts)
     del keep
-    return run
+    return Call(X, reached, status, raw, interrupted, float(W[3]) if failed else None,
+                list(W[6:6 + nx]) if failed else None)
 
 
 class Loop:
@@ -272,6 +297,6 @@ def open_loop(spec: dict) -> Loop:
 
 
 def counts(raw: dict) -> dict:
-    """A loop run's statistics (run_compiled's raw) under the names of every run's."""
+    """A loop run's statistics (call_loop's raw) under the names of every run's."""
     return {"steps": raw.get("n_steps"), "rhs_evals": raw.get("n_rhs"), "jac_evals": 0,
             "rejected_steps": raw.get("n_reject")}
