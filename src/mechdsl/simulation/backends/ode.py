@@ -10,6 +10,7 @@ docs/simulate.md (users) and docs/internals/numerics.md (design).
 from __future__ import annotations
 
 import copy
+import math
 import threading
 import time
 from typing import Any
@@ -35,6 +36,14 @@ from . import plugins as P
 from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, mapped, scipy_name
 
 
+class _Quiet:
+    """The progress of a companion run: nothing shown."""
+
+    def update(self, t: float) -> None:
+        pass
+
+
+_QUIET = _Quiet()
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 
 
@@ -101,6 +110,7 @@ class OdeSetup:
         self._mapper = None       # (recorder Function, its compiled code in the loop's library) or None
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
+        self._direct = None       # the compiled loop's call of a plain run, worked out once (_direct_call)
 
     @classmethod
     def build(cls, eom, s, drive=None) -> "OdeSetup":
@@ -207,11 +217,38 @@ class OdeSetup:
         t, X, run, failure = self.integrate(pv, xs, meta, progress)
         return self.record(t, X, pv, xs, meta, run, failure, self.loop_compiled, wall0)
 
+    def _direct_call(self):
+        """(loop, method, grid, u, rtol, atol, max_steps, hmin) when a run of this setup is one
+        call of the compiled model's stepping loop, as ``_run`` and the loop's plug-in make it
+        (no inputs, tables, fixed step, integrator options or interpreted model that may switch
+        engines: payback.py); False otherwise.  Worked out once: a warm run skips the layers
+        between (the same call, the same bits)."""
+        if self._direct is None:
+            funcs, s = self.funcs, self.settings
+            loop = getattr(funcs, "loop", None)
+            plain = (isinstance(funcs, LoopFunctions) and funcs.drive is None and not self.eom.inputs
+                     and self.method is not None and spec(self.method).compiled_loop
+                     and not spec(self.method).fixed_step and s.fixed_step.dt is None and not self.extra
+                     and not self.drive.breakpoints(s.t_start, s.t_end).size and loop is not None
+                     and loop.engine == "compiled")
+            self._direct = (loop, self.method, self.grid, self.drive.vector(s.t_start), s.rtol, s.atol,
+                            self.max_steps, min_step(s.t_start, s.t_end)) if plain else False
+        return self._direct
+
     def states(self, pv, xs) -> "States":
         """The trajectory alone (no signals recorded, no metadata): what the default error
         estimate's companion run needs (simulation/estimate.py)."""
         if self.method is None:
             return States(self.grid.copy(), np.zeros((len(self.grid), 0)), None, {})
+        call = self._direct_call()
+        if call:                        # one call of the loop; a run that did not simply succeed goes the long way
+            loop, method, grid, u, rtol, atol, max_steps, hmin = call
+            run = crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, _QUIET)
+            if (run.error is None and not run.interrupted and run.reached == len(grid)
+                    and math.isfinite(np.add.reduce(run.X, axis=None))):
+                X = run.X.copy()
+                X[0] = xs
+                return States(grid.copy(), X[:, :self.eom.n], None, crk.counts(run.stats))
         t, X, run, failure = self.integrate(pv, xs, {"notes": [], "warnings": []})
         bad = np.flatnonzero(~np.isfinite(X).all(axis=1))
         if bad.size:                    # as the template's check_finite cuts a run's states
@@ -229,8 +266,12 @@ class OdeSetup:
         uv = drive.vector(t0)
         bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
         breaks = drive.breakpoints(t0, t1)
+        call = self._direct_call()
         try:
-            if breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
+            if call:                    # one call of the compiled loop, as _run would make it
+                loop, method, grid, u, rtol, atol, max_steps, hmin = call
+                run, fixed = crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar), None
+            elif breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
                 run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra,
                                          bar, eom, t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
             else:
