@@ -17,12 +17,15 @@ def compare(r, other, factor: float, s, unit_of) -> None:
                else "no output time in common with the companion run")
         acc.update(error_estimate=None, error_estimate_unavailable=why)
         return
-    diff = np.abs(qa - qb) / factor                          # (times, coordinates)
+    # (coordinates, times): each coordinate's values contiguous, so that the reductions over the
+    # times run along rows (numpy's max over axis 0 of a (501, 2) block took 23 us, of the
+    # transposed copy 3.5 us); the same elements, so the same maxima and the same first argmax
+    diff = np.abs(np.ascontiguousarray(qa.T) - np.ascontiguousarray(qb.T)) / factor
     if not np.isfinite(np.add.reduce(diff, axis=None)):
         diff[~np.isfinite(diff)] = np.inf
-    per = diff.max(axis=0) if diff.size else np.zeros(len(r.coordinates))
+    per = diff.max(axis=1) if diff.size else np.zeros(len(r.coordinates))
     if r.q.size:
-        qmax = np.abs(r.q).max(axis=0)
+        qmax = np.abs(np.ascontiguousarray(r.q.T)).max(axis=1)
         if np.isnan(qmax).any():
             qmax = np.nanmax(np.abs(r.q), axis=0)
     else:
@@ -32,7 +35,7 @@ def compare(r, other, factor: float, s, unit_of) -> None:
         acc.update(error_estimate=0.0, error_estimate_ratio=0.0)
         return
     k = int(np.argmax(per))
-    it = int(np.argmax(diff[:, k]))
+    it = int(np.argmax(diff[k]))
     acc.update(error_estimate=float(per[k]), error_estimate_coordinate=r.coordinates[k],
                error_estimate_unit=unit_of(r.coordinates[k]),
                error_estimate_time=float(ta[it]), error_estimate_ratio=float((per / tol).max()))
