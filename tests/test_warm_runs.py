@@ -141,3 +141,27 @@ def test_non_finite_signal_still_fails_the_run():
     r = Result(t=t, q=qn, qd=q.copy(), coordinates=("x",), signals={}, stats={}, metadata={})
     check_finite(r)
     assert r.failure is not None and r.failure.cause == "non-finite state" and len(r.t) == 3
+
+
+@needs_cc
+def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monkeypatch):
+    """From the second warm run on, the default estimate's companion runs in the run's own C call
+    (crk_run_pair, backends/ode.Partner): the same run, the same companion, so the same estimate
+    and the same work as the companion run on its own (Partners forgotten); its seconds are the
+    estimate's (error_estimate_cpu_time), not the run's."""
+    runs = [_run(double, t_end=2.0, rtol=1e-8) for _ in range(3)]
+    paired = runs[-1]
+    assert "companion_cpu_time" in paired.stats["raw"]          # the pair ran
+    from mechdsl.simulation import estimate as E
+
+    monkeypatch.setattr(O, "PARTNERS", {})
+    monkeypatch.setattr(E, "partner", lambda s, setup, pv, xs: O.Partner(s, setup, pv, xs))   # never registered
+    alone = _run(double, t_end=2.0, rtol=1e-8)
+    assert "companion_cpu_time" not in alone.stats["raw"]
+    np.testing.assert_array_equal(paired.q, alone.q)
+    for key in ("error_estimate", "error_estimate_time", "error_estimate_coordinate", "error_estimate_ratio"):
+        assert paired.metadata["accuracy"][key] == alone.metadata["accuracy"][key]
+    for key in ("rhs_evals", "error_estimate_rhs_evals", "error_estimate_steps", "steps"):
+        assert paired.stats[key] == alone.stats[key]
+    raw = paired.stats["raw"]
+    assert 0.0 <= raw["companion_cpu_time"] <= paired.stats["error_estimate_cpu_time"] + 1e-9

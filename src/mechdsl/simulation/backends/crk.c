@@ -95,6 +95,15 @@ static double slice_clock(void) {
   return (double)clock() / CLOCKS_PER_SEC;
 }
 
+/* CPU seconds of the process (crk_run_pair: the companion's share of the call) */
+static double cpu_clock(void) {
+#if defined(CLOCK_PROCESS_CPUTIME_ID) && !defined(_WIN32)
+  struct timespec ts;
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) == 0) return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+  return (double)clock() / CLOCKS_PER_SEC;
+}
+
 static const double P5_A[6 * 5] = {
     0.0, 0.0, 0.0,
     0.0, 0.0, 0.2,
@@ -868,6 +877,33 @@ int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid,
             double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv) {
   return crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs,
                   drv, NULL, 0.0, NULL, NULL);
+}
+
+/* A run and, when it reached its last output time with CRK_OK, a second run of the same model
+   (the default error estimate's companion: its own Fun, method, grid, start, parameters and
+   tolerances; no inputs read from tables) in the same call: a small model's warm run pays one
+   call from Python for both (issue 24).  The first run is crk_run's, sliced by its Resume; the
+   second has a Resume of its own (its slice starts when it does).  *second: the second run's
+   status (CRK_YIELD: it stopped at its slice, the caller runs it again from the start), or -1
+   when it did not start (the first did not reach its end in this call). */
+int crk_run_pair(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                 const double *p, double rtol, double atol, double hmin, cint max_steps,
+                 double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv,
+                 const Fun *ode2, int method2, const double *grid2, cint ngrid2, const double *x02, const double *u2,
+                 const double *p2, double rtol2, double atol2, double hmin2, cint max_steps2,
+                 double *X2, double *stats2, volatile cint *ctl2, double *xfail2, Resume *rs2, int *second,
+                 double *took) {
+  int st = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs,
+                    drv, NULL, 0.0, NULL, NULL);
+  *second = -1;
+  took[0] = took[1] = 0.0;
+  if (st != CRK_OK || ctl[0] < ngrid || ctl[1]) return st;
+  double c0 = cpu_clock(), w0 = slice_clock();
+  *second = crk_core(ode2, method2, nx, grid2, ngrid2, x02, u2, p2, rtol2, atol2, hmin2, max_steps2, X2, stats2, ctl2,
+                     xfail2, NULL, rs2, NULL, NULL, 0.0, NULL, NULL);
+  took[0] = cpu_clock() - c0;       /* the second run's CPU and wall seconds: reported as the estimate's */
+  took[1] = slice_clock() - w0;
+  return st;
 }
 
 /* crk_run with the first step taken from *h_io when it is positive (else the initial-step

@@ -46,6 +46,11 @@ LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctyp
                  ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
 
 
+# crk_run_pair's second run (after crk_run's arguments): no nx (the same model's) and no Drive
+PAIR_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, _VP, ctypes.c_longlong, _VP, _VP, _VP, ctypes.c_double,
+                 ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP, _VP]
+
+
 def _ptr(a):
     return a.ctypes.data_as(_DP)
 
@@ -142,6 +147,60 @@ SLICE = 0.05            # seconds (monotonic clock) of one C call of a run: prog
 YIELD = 11
 
 
+class _Call:
+    """One crk_run call's arrays and arguments (kept alive with it): the output rows ``X``, the
+    small arrays in one buffer (stats, ctl, xfail, the carried y and f, x0, p, u), the Resume."""
+
+    __slots__ = ("grid", "X", "W", "stats", "ctl", "xfail", "rs", "args", "keep")
+
+
+def _call(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, drive=None) -> _Call:
+    c = _Call()
+    c.grid = grid = np.ascontiguousarray(grid, float)
+    nx = x0.size
+    c.X = X = np.empty((len(grid), nx))
+    X.fill(np.nan)
+    pc = np.ravel(p)
+    uc = np.zeros(0) if u is None else np.ravel(u)
+    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
+    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
+    m, npar, nu = max(nx, 1), pc.size, uc.size
+    c.W = W = np.zeros(6 + 3 * m + m + npar + nu)
+    c.stats, c.ctl = W[:4], W[4:6].view(np.int64)
+    c.xfail = W[6:6 + nx]
+    o = 6 + 3 * m
+    W[o:o + nx] = x0
+    W[o + m:o + m + npar] = pc
+    W[o + m + npar:o + m + npar + nu] = uc
+    a = W.ctypes.data
+    c.rs = rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
+    drv, c.keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
+    c.args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o,
+              a + 8 * (o + m + npar), a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps),
+              X.ctypes.data, a, a + 32, a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+    return c
+
+
+def _finish(c: _Call, engine: str, status: int, interrupted: bool, max_steps, hmin, payback=None) -> I.Run:
+    """The I.Run of a call ``c`` that ended with ``status``."""
+    stats, grid = c.stats, c.grid
+    reached = int(c.ctl[0])
+    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
+           "engine": engine}
+    if payback is not None:
+        payback.record(int(stats[1]))
+        if payback.switched_at is not None and payback.switched_at >= 0:
+            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
+    run = I.Run(X=c.X, reached=reached, stats=raw, interrupted=interrupted)
+    if interrupted:
+        run.error = "interrupted (Ctrl-C)"
+    elif status != 0 or reached < len(grid):
+        t_end = float(stats[3])
+        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
+        run.fail_time, run.fail_state = t_end, c.xfail.copy()
+    return run
+
+
 def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
                  payback=None) -> I.Run:
     """The run as C calls of SLICE seconds each in the calling thread (the state carried
@@ -149,34 +208,23 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
     between calls; a short run is one call (no thread is started: 0.12 ms of CPU a run).
     ``payback`` (payback.Payback, an interpreted run): between calls, the compiled loop once the
     interpreted evaluations have paid for its compile (the same bits: only the cost changes)."""
-    grid = np.ascontiguousarray(grid, float)
-    nx = x0.size
-    X = np.empty((len(grid), nx))
-    X.fill(np.nan)
-    pc = np.ravel(p)
-    uc = np.zeros(0) if u is None else np.ravel(u)
-    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
-    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
-    m, npar, nu = max(nx, 1), pc.size, uc.size
-    W = np.zeros(6 + 3 * m + m + npar + nu)
-    stats, ctl = W[:4], W[4:6].view(np.int64)
-    xfail = W[6:6 + nx]
-    o = 6 + 3 * m
-    W[o:o + nx] = x0
-    W[o + m:o + m + npar] = pc
-    W[o + m + npar:o + m + npar + nu] = uc
-    a = W.ctypes.data
-    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
-    drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
-    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o, a + 8 * (o + m + npar),
-            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.ctypes.data, a, a + 32,
-            a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+    c = _call(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, drive)
+    status, interrupted, loop = _slices(loop, c, progress, payback, None)
+    return _finish(c, loop.engine, status, interrupted, max_steps, hmin, payback)
+
+
+def _slices(loop, c: _Call, progress, payback, status):
+    """(status, interrupted, the loop that ran last): ``c`` called until it does not yield
+    (``status``: of a call made already; None: none yet)."""
+    grid, ctl, rs, args = c.grid, c.ctl, c.rs, c.args
     interrupted = False
     try:
         while True:
-            status = loop.run(*args)
+            if status is None:
+                status = loop.run(*args)
             if status != YIELD:
                 break
+            status = None
             progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
             if payback is not None and loop.engine == "interpreted":
                 better = payback.check(int(rs.nfev))
@@ -184,23 +232,50 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
                     loop, args = better, (better.fun("ode"),) + args[1:]
     except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
         status, interrupted = CANCELLED, True
-    reached = int(ctl[0])
-    progress.update(float(grid[max(reached, 1) - 1]))
-    raw = {"n_steps": int(stats[0]), "n_rhs": int(stats[1]), "n_reject": int(stats[2]), "status": int(status),
-           "engine": loop.engine}
-    if payback is not None:
-        payback.record(int(stats[1]))
-        if payback.switched_at is not None and payback.switched_at >= 0:
-            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
-    run = I.Run(X=X, reached=reached, stats=raw, interrupted=interrupted)
-    if interrupted:
-        run.error = "interrupted (Ctrl-C)"
-    elif status != 0 or reached < len(grid):
-        t_end = float(stats[3])
-        run.error = STATUS.get(status, f"status {status}").format(max_steps=max_steps, hmin=hmin)
-        run.fail_time, run.fail_state = t_end, xfail.copy()
-    del keep
-    return run
+    progress.update(float(grid[max(int(ctl[0]), 1) - 1]))
+    return status, interrupted, loop
+
+
+def run_pair(loop, first: tuple, loop2, second: tuple, progress):
+    """(the run, its companion's run or None; its stats with its own cpu_time and wall_time,
+    seconds of the call that were the companion's): run_compiled of ``first`` = (method, grid, x0, p,
+    u, rtol, atol, max_steps, hmin) on ``loop`` and of ``second`` on ``loop2`` (the same model
+    in the same runtime, no input tables) in one C call when the first reaches its end within
+    its first slice (crk_run_pair; the same steps, so the same bits as two calls).  The
+    companion is None when it did not run to its end in that call (a long or failed run: the
+    caller runs it as usual)."""
+    pair = getattr(loop.rt, "_pair", None)
+    if pair is None:
+        pair = loop.rt._pair = _declared_pair(loop.rt)
+    if pair is False or loop2.rt is not loop.rt:
+        return run_compiled(loop, *first, progress), None
+    c1, c2 = _call(loop, *first), _call(loop2, *second)
+    which = ctypes.c_int(-1)
+    took = (ctypes.c_double * 2)()
+    a2 = c2.args
+    try:
+        status = pair(*c1.args, a2[0], a2[1], *a2[3:17], ctypes.byref(which), took)
+    except KeyboardInterrupt:            # Ctrl-C during the call: the rows written are kept, no companion
+        status, interrupted = CANCELLED, True
+        progress.update(float(c1.grid[max(int(c1.ctl[0]), 1) - 1]))
+    else:
+        status, interrupted, _ = _slices(loop, c1, progress, None, status)
+    run = _finish(c1, loop.engine, status, interrupted, first[7], first[8])
+    other = None
+    if not interrupted and which.value == 0 and int(c2.ctl[0]) == len(c2.grid):
+        other = _finish(c2, loop2.engine, 0, False, second[7], second[8])
+        other.stats["cpu_time"], other.stats["wall_time"] = took[0], took[1]
+    return run, other
+
+
+def _declared_pair(rt):
+    """The runtime's crk_run_pair (argument types declared), or False (a runtime built before it)."""
+    try:
+        fn = rt.crk_run_pair
+    except AttributeError:
+        return False
+    fn.restype, fn.argtypes = ctypes.c_int, LOOP_ARGTYPES + PAIR_ARGTYPES
+    return fn
 
 
 class Loop:

@@ -217,6 +217,30 @@ class OdeSetup:
         t, X, run, failure = self.integrate(pv, xs, meta, progress)
         return self.record(t, X, pv, xs, meta, run, failure, self.loop_compiled, wall0)
 
+    def _direct_run(self, call, pv, xs, bar):
+        """The direct loop call of a run; with the error estimate's companion in the same C call
+        when estimate.py registered it for these settings (a Partner: its setup and start), its
+        States then left in ``partner.ready`` for the estimate (crk_calls.run_pair)."""
+        loop, method, grid, u, rtol, atol, max_steps, hmin = call
+        partner = PARTNERS.get(id(self.settings))
+        if partner is None or partner.settings is not self.settings:
+            return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
+        partner.ready = None
+        other = partner.setup._direct_call()
+        if not other or other[0].rt is not loop.rt:
+            return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
+        loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
+        run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                                   (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2), bar)
+        if second is not None:
+            ready = partner.setup._states_of(second, partner.xs)
+            if ready is not None:       # the call's seconds that were the companion's: the estimate's, not the run's
+                ready.stats.update(cpu_time=second.stats["cpu_time"], wall_time=second.stats["wall_time"])
+                run.stats.update(companion_cpu_time=second.stats["cpu_time"],
+                                 companion_wall_time=second.stats["wall_time"])
+            partner.ready = ready
+        return run
+
     def _direct_call(self):
         """(loop, method, grid, u, rtol, atol, max_steps, hmin) when a run of this setup is one
         call of the compiled model's stepping loop, as ``_run`` and the loop's plug-in make it
@@ -243,12 +267,10 @@ class OdeSetup:
         call = self._direct_call()
         if call:                        # one call of the loop; a run that did not simply succeed goes the long way
             loop, method, grid, u, rtol, atol, max_steps, hmin = call
-            run = crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, _QUIET)
-            if (run.error is None and not run.interrupted and run.reached == len(grid)
-                    and math.isfinite(np.add.reduce(run.X, axis=None))):
-                X = run.X.copy()
-                X[0] = xs
-                return States(grid.copy(), X[:, :self.eom.n], None, crk.counts(run.stats))
+            done = self._states_of(crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin,
+                                                    _QUIET), xs)
+            if done is not None:
+                return done
         t, X, run, failure = self.integrate(pv, xs, {"notes": [], "warnings": []})
         bad = np.flatnonzero(~np.isfinite(X).all(axis=1))
         if bad.size:                    # as the template's check_finite cuts a run's states
@@ -257,6 +279,16 @@ class OdeSetup:
             if failure is None:
                 failure = Failure(float(self.grid[k]), "non-finite state", "a state became non-finite")
         return States(t, X[:, :self.eom.n], failure, _counts(self.method, run.stats))
+
+    def _states_of(self, run, xs) -> "States | None":
+        """``states``' answer from a direct loop call's Run that reached its end with every state
+        finite (as ``integrate`` and ``states`` make it), else None."""
+        if (run.error is None and not run.interrupted and run.reached == len(self.grid)
+                and math.isfinite(np.add.reduce(run.X, axis=None))):
+            X = run.X.copy()
+            X[0] = xs
+            return States(self.grid.copy(), X[:, :self.eom.n], None, crk.counts(run.stats))
+        return None
 
     def integrate(self, pv, xs, meta, progress=None):
         """(t, X, the integrator's Run, Failure or None): the states on the output times reached."""
@@ -270,7 +302,7 @@ class OdeSetup:
         try:
             if call:                    # one call of the compiled loop, as _run would make it
                 loop, method, grid, u, rtol, atol, max_steps, hmin = call
-                run, fixed = crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar), None
+                run, fixed = self._direct_run(call, pv, xs, bar), None
             elif breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
                 run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra,
                                          bar, eom, t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
@@ -400,6 +432,33 @@ def plain_copy(v):
                                                                         all(isinstance(x, (str, int, float)) for x in v)):
         return v
     return copy.deepcopy(v)
+
+
+class Partner:
+    """The default error estimate's companion of runs with the settings object ``settings``
+    (estimate.py registers it once its plan and setup are kept): its OdeSetup and start
+    (``pv``, ``xs``), run in the same C call as the run when both are direct loop calls;
+    ``ready``: the companion's States of the last run, for the estimate to take."""
+
+    __slots__ = ("settings", "setup", "pv", "xs", "ready")
+
+    def __init__(self, settings, setup, pv, xs):
+        self.settings, self.setup, self.pv, self.xs, self.ready = settings, setup, pv, xs, None
+
+
+PARTNERS: dict = {}       # id(settings of the run) -> Partner
+PARTNERS_KEPT = 16
+
+
+def partner(settings, setup, pv, xs) -> Partner:
+    """Register (or find) the companion ``setup`` at (pv, xs) of runs with ``settings``."""
+    hit = PARTNERS.get(id(settings))
+    if hit is not None and hit.settings is settings and hit.setup is setup:
+        return hit
+    if len(PARTNERS) >= PARTNERS_KEPT:
+        PARTNERS.pop(next(iter(PARTNERS)))
+    hit = PARTNERS[id(settings)] = Partner(settings, setup, pv.copy(), xs.copy())
+    return hit
 
 
 SETUPS_KEPT = 16          # OdeSetups kept for repeated runs (a warm Model, the error estimate's companion)
