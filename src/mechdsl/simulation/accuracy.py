@@ -42,13 +42,16 @@ def note_facts(block: np.ndarray, rows) -> None:
 
     if block.ndim != 2 or block.shape[1] == 0 or len(rows) != block.shape[0]:
         return
-    finite = np.isfinite(block).all(axis=1)
     amax = np.abs(block).max(axis=1)
-    dmax = np.abs(block - block[:, :1]).max(axis=1)
+    # a row is all finite exactly when its max |v| is (the max carries a NaN and an inf through)
+    finite = np.isfinite(amax).tolist()
+    dmax = np.abs(block - block[:, :1]).max(axis=1).tolist()
+    amax = amax.tolist()
     if len(_FACTS) + len(rows) > FACTS_KEPT:
         _FACTS.clear()
+    ref = weakref.ref
     for i, v in enumerate(rows):
-        _FACTS[id(v)] = (weakref.ref(v), bool(finite[i]), float(amax[i]), float(dmax[i]))
+        _FACTS[id(v)] = (ref(v), finite[i], amax[i], dmax[i])
 
 
 def _facts(v):

@@ -27,6 +27,7 @@ The outcome is a ``mechdsl.integrators.Run`` like every other integrator plug-in
 from __future__ import annotations
 
 import ctypes
+import os
 import threading
 from pathlib import Path
 
@@ -90,13 +91,22 @@ def runtime():
 
 
 _COMPILER: dict = {}
+# os.environ's own dict where it has one (POSIX: bytes keys; os.environ.get costs about 1.5 us
+# through its Mapping layers, and every run asks twice, checking its kept setups): the same values
+_ENVIRON = getattr(os.environ, "_data", None)
+if not isinstance(_ENVIRON, dict) or os.name != "posix":
+    _ENVIRON = None
+_CC, _PATH = (b"CC", b"PATH") if _ENVIRON is not None else ("CC", "PATH")
+
+
+def _environ_strings():
+    return os.environ
 
 
 def compiler() -> str | None:
     """codegen.find_compiler, kept per $CC and $PATH (method = auto asks on every run)."""
-    import os
-
-    key = (os.environ.get("CC"), os.environ.get("PATH"))
+    env = _ENVIRON if _ENVIRON is not None else _environ_strings()
+    key = (env.get(_CC), env.get(_PATH))
     if key not in _COMPILER:
         _COMPILER.clear()
         _COMPILER[key] = find_compiler()

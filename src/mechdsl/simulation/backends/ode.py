@@ -349,13 +349,17 @@ class OdeSetup:
                 if len(self._recorders) >= 4:
                     self._recorders.clear()
                 rec = self._recorders[pv.tobytes()] = Mon.signal_recorder(eom, pv, out_names, self._mapper)
+                # the first integrals' names (the search ran with the recorder's columns and is
+                # memoized in the workspace: the same names on every later run)
+                rec.integrals = Mon.integral_names(eom)
             signals = rec(t, X)
         record_inputs(drive, U, signals, meta)
         Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
         stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
                  "points": int(len(t)), "wall_time": time.perf_counter() - wall0}
         stats.update(Mon.energy_drift_stats(signals))
-        stats.update(Mon.integral_drift(signals, eom))
+        stats.update(Mon.integral_drift_of(signals, rec.integrals) if not eom.inputs else
+                     Mon.integral_drift(signals, eom))
         stats["raw"] = run.stats
         if run.messages.strip():
             meta["integrator_messages"] = _dedup(run.messages)
