@@ -154,18 +154,33 @@ class _Call:
     __slots__ = ("grid", "X", "W", "stats", "ctl", "xfail", "rs", "args", "keep")
 
 
+_GRIDS: dict = {}          # id(grid) -> (grid, its address): a kept setup's output times, looked up once
+
+
+def _address(grid) -> int:
+    hit = _GRIDS.get(id(grid))
+    if hit is not None and hit[0] is grid:
+        return hit[1]
+    if len(_GRIDS) >= 64:
+        _GRIDS.clear()
+    _GRIDS[id(grid)] = (grid, grid.ctypes.data)       # (holding the grid keeps its id and address)
+    return _GRIDS[id(grid)][1]
+
+
 def _call(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, drive=None) -> _Call:
     c = _Call()
     c.grid = grid = np.ascontiguousarray(grid, float)
-    nx = x0.size
-    c.X = X = np.empty((len(grid), nx))
-    X.fill(np.nan)
+    nx, ng = x0.size, len(grid)
     pc = np.ravel(p)
     uc = np.zeros(0) if u is None else np.ravel(u)
-    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
-    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
+    # one buffer, each part passed by its address (numpy's ctypes.data costs 2-4 us an array): the
+    # small arrays -- stats (4), the progress and cancel words ctl (2, int64), xfail (nx), the
+    # carried y and f (nx each), x0, p, u -- then the output rows X (ng x nx, NaN where not reached)
     m, npar, nu = max(nx, 1), pc.size, uc.size
-    c.W = W = np.zeros(6 + 3 * m + m + npar + nu)
+    small = 6 + 3 * m + m + npar + nu
+    c.W = W = np.zeros(small + ng * nx)
+    c.X = X = W[small:].reshape(ng, nx)
+    X.fill(np.nan)
     c.stats, c.ctl = W[:4], W[4:6].view(np.int64)
     c.xfail = W[6:6 + nx]
     o = 6 + 3 * m
@@ -175,9 +190,9 @@ def _call(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, drive=None)
     a = W.ctypes.data
     c.rs = rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
     drv, c.keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
-    c.args = (loop.fun("ode"), CRK_METHODS[method][0], nx, grid.ctypes.data, len(grid), a + 8 * o,
+    c.args = (loop.fun("ode"), CRK_METHODS[method][0], nx, _address(grid), ng, a + 8 * o,
               a + 8 * (o + m + npar), a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps),
-              X.ctypes.data, a, a + 32, a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+              a + 8 * small, a, a + 32, a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
     return c
 
 
