@@ -165,3 +165,42 @@ def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monk
         assert paired.stats[key] == alone.stats[key]
     raw = paired.stats["raw"]
     assert 0.0 <= raw["companion_cpu_time"] <= paired.stats["error_estimate_cpu_time"] + 1e-9
+
+
+@needs_cc
+@pytest.mark.parametrize("case", ["plain", "nan", "inf", "other grid"])
+def test_the_comparison_in_c_is_the_numpy_comparison(case):
+    """difference.compare with the runtime (crk_compare: one pass in C) fills the same numbers as
+    without it (numpy), non-finite differences and a companion on other times included."""
+    from types import SimpleNamespace
+
+    from mechdsl.simulation import difference as D
+
+    rng = np.random.default_rng(7)
+    t = np.linspace(0.0, 2.0, 101)
+    X = rng.normal(size=(101, 6))
+    u = t[::4].copy() if case != "other grid" else np.linspace(0.0, 2.0, 26) * (1 + 1e-9)
+    Y = X[::4].copy() + 1e-6 * rng.normal(size=(26, 6))
+    if case == "nan":
+        Y[7, 1] = np.nan
+    if case == "inf":
+        Y[3, 2] = np.inf
+        X[40, 0] = -np.inf
+    s = SimpleNamespace(t_start=0.0, t_end=2.0, rtol=1e-6, atol=1e-8, error_estimate="coordinates")
+
+    def filled(rt):
+        r = SimpleNamespace(t=t, q=X[:, :3], coordinates=("a", "b", "c"), metadata={})
+        other = SimpleNamespace(t=u, q=Y[:, :3], failure=None)
+        D.compare(r, other, 0.9, s, lambda c: "m", rt=rt)
+        return r.metadata["accuracy"]
+
+    rt, _ = crk.runtime()
+    in_c, in_numpy = filled(rt), filled(None)
+    assert in_c.keys() == in_numpy.keys()
+    for key, v in in_numpy.items():
+        if isinstance(v, float) and np.isnan(v):
+            assert np.isnan(in_c[key])
+        else:
+            assert in_c[key] == v, key          # the same operations on the same values: the same bits
+    assert (D._in_c(rt, SimpleNamespace(t=t, q=X[:, :3]), SimpleNamespace(t=u, q=Y[:, :3]), 2.0, 0.9) is None) == (
+        case == "other grid")

@@ -30,6 +30,7 @@ import numpy as np
 from ..numbers import si_unit
 from .difference import compare     # (the comparison, without CasADi: a warm prepared run shares it)
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
+from .backends.crk import loaded_runtime
 from .backends.ode import kept_setup, partner
 from .prepared import prepare
 from .problem import formulate
@@ -147,7 +148,7 @@ def estimate(r, problem, solve, given=None) -> None:
         r.stats["error_estimate_cpu_time"] += (other.stats or {}).get("cpu_time") or 0.0
         r.stats["error_estimate_steps"] = (other.stats or {}).get("steps")
         r.stats["error_estimate_rhs_evals"] = (other.stats or {}).get("rhs_evals")
-    compare(r, other, factor, s, lambda c: _unit(problem.eom, c))
+    compare(r, other, factor, s, lambda c: _unit(problem.eom, c), rt=loaded_runtime())
 
 
 class _Plan:

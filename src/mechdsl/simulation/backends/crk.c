@@ -1034,6 +1034,35 @@ cint crk_run_batch(const Fun *ode, int method, cint nx, const double *grid, cint
   return bad;
 }
 
+/* The default error estimate's comparison of a run with its companion (simulation/difference.py),
+   one pass over both: the run's output times t (nt) every k-th of which is the companion's u (nu
+   = (nt - 1) / k + 1), checked (|t[ik] - u[i]| <= tol and t strictly increasing: else 1 and
+   nothing else is written); per coordinate j < n of the rows (row strides sa, sb doubles) of the
+   run's a and the companion's b at the common times: d = |a - b| / factor (a non-finite d as
+   inf), out[j] its largest value, out[n + j] the first common-time index where it is, out[2n + j]
+   the largest |a| over all of the run's nt rows (NaN values skipped; NaN when all are).  The
+   same operations as numpy's on the same values: the same bits. */
+int crk_compare(const double *t, cint nt, const double *u, cint nu, cint k, double tol, const double *a, cint sa,
+                const double *b, cint sb, cint n, double factor, double *out) {
+  for (cint i = 1; i < nt; i++) if (!(t[i] > t[i - 1])) return 1;
+  for (cint i = 0; i < nu; i++) if (!(fabs(t[i * k] - u[i]) <= tol)) return 1;
+  for (cint j = 0; j < n; j++) {
+    double best = -1.0, qmax = NAN;
+    cint at = 0;
+    for (cint i = 0; i < nu; i++) {
+      double d = fabs(a[i * k * sa + j] - b[i * sb + j]) / factor;
+      if (!isfinite(d)) d = INFINITY;
+      if (d > best) { best = d; at = i; }
+    }
+    for (cint i = 0; i < nt; i++) {
+      double v = fabs(a[i * sa + j]);
+      if (v == v && !(v <= qmax)) qmax = v;
+    }
+    out[j] = best; out[n + j] = (double)at; out[2 * n + j] = qmax;
+  }
+  return 0;
+}
+
 /* `reps` evaluations of `f` at (t, x, u, p) into xdot (nx): the right-hand side's own cost,
    measured by the benchmarks against a whole run (benchmarks/nlink_run.py). */
 int crk_eval_n(const Fun *f, double t, const double *x, const double *u, const double *p, double *xdot, cint reps) {

@@ -90,6 +90,13 @@ def runtime():
         return _RUNTIME["lib"]
 
 
+def loaded_runtime():
+    """The runtime library when a run of this process has loaded it already, else None (nothing
+    is compiled): the error estimate's comparison uses it (simulation/difference.py)."""
+    hit = _RUNTIME.get("lib")
+    return None if hit is None else hit[0]
+
+
 _COMPILER: dict = {}
 # os.environ's own dict where it has one (POSIX: bytes keys; os.environ.get costs about 1.5 us
 # through its Mapping layers, and every run asks twice, checking its kept setups): the same values
