@@ -106,7 +106,12 @@ def check_finite(r: Result) -> None:
 def _check_states(r: Result) -> None:
     if r.q.size == 0 and r.qd.size == 0:
         return
-    if math.isfinite(np.add.reduce(r.q, axis=None)) and math.isfinite(np.add.reduce(r.qd, axis=None)):
+    b = r.q.base
+    if (b is not None and b is r.qd.base and type(b) is np.ndarray and b.ndim == 2 and b.flags.c_contiguous
+            and b.shape == (r.q.shape[0], r.q.shape[1] + r.qd.shape[1])):
+        if math.isfinite(np.add.reduce(b, axis=None)):
+            return                    # q and qd are the two halves of one block (a run's states): one sum
+    elif math.isfinite(np.add.reduce(r.q, axis=None)) and math.isfinite(np.add.reduce(r.qd, axis=None)):
         return                        # a finite sum: every value finite
     X = np.hstack([r.q, r.qd])
     bad = ~np.isfinite(X)
