@@ -42,10 +42,15 @@ def note_facts(block: np.ndarray, rows) -> None:
 
     if block.ndim != 2 or block.shape[1] == 0 or len(rows) != block.shape[0]:
         return
-    amax = np.abs(block).max(axis=1)
-    # a row is all finite exactly when its max |v| is (the max carries a NaN and an inf through)
+    # from each row's max and min alone: max |v| = max(hi, -lo), and max |v - v0| = max(hi - v0,
+    # v0 - lo) exactly (rounding is monotonic and symmetric: the largest rounded difference is the
+    # rounded difference of the extreme); a NaN or an inf carries through both.  A row is all
+    # finite exactly when its max |v| is.
+    hi, lo = block.max(axis=1), block.min(axis=1)
+    v0 = block[:, 0]
+    amax = np.maximum(hi, -lo)
     finite = np.isfinite(amax).tolist()
-    dmax = np.abs(block - block[:, :1]).max(axis=1).tolist()
+    dmax = np.maximum(hi - v0, v0 - lo).tolist()
     amax = amax.tolist()
     if len(_FACTS) + len(rows) > FACTS_KEPT:
         _FACTS.clear()
