@@ -204,3 +204,32 @@ def test_the_comparison_in_c_is_the_numpy_comparison(case):
             assert in_c[key] == v, key          # the same operations on the same values: the same bits
     assert (D._in_c(rt, SimpleNamespace(t=t, q=X[:, :3]), SimpleNamespace(t=u, q=Y[:, :3]), 2.0, 0.9) is None) == (
         case == "other grid")
+
+
+@needs_cc
+def test_a_ctrl_c_during_the_paired_companion_is_an_interrupted_estimate(double, monkeypatch):
+    """A Ctrl-C that arrives while the run's own C call runs the companion (after the run reached
+    its end) is reported as before, when the companion ran alone: the run complete, its estimate
+    interrupted (RunInterrupted, interrupted_during the error estimate)."""
+    from mechdsl.output.result import RunInterrupted
+
+    for _ in range(2):
+        _run(double, t_end=1.0, rtol=1e-8)            # the second registers the companion
+    s = next(v[1] for v in O._SETUPS.values() if v[0] is double.eom and v[1].settings.rtol == 1e-8)
+    rt = s._direct_call()[0].rt
+    real = rt._pair
+
+    def pair_then_ctrl_c(*args):
+        real(*args)
+        raise KeyboardInterrupt                       # as the signal is raised when the call returns
+
+    monkeypatch.setattr(rt, "_pair", pair_then_ctrl_c)
+    with pytest.raises(RunInterrupted) as info:
+        _run(double, t_end=1.0, rtol=1e-8)
+    r = info.value.result
+    assert r.failure is None and r.t[-1] == pytest.approx(1.0, abs=1e-12)
+    assert "error estimate" in r.metadata["interrupted_during"]
+    assert "interrupted" in r.metadata["accuracy"]["error_estimate_unavailable"]
+    monkeypatch.undo()
+    again = _run(double, t_end=1.0, rtol=1e-8)
+    np.testing.assert_array_equal(again.q, r.q)

@@ -30,7 +30,7 @@ import numpy as np
 from ..numbers import si_unit
 from .difference import compare     # (the comparison, without CasADi: a warm prepared run shares it)
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
-from .backends.crk import loaded_runtime
+from .backends.crk import COMPANION_INTERRUPTED, loaded_runtime
 from .backends.ode import kept_setup, partner
 from .prepared import prepare
 from .problem import formulate
@@ -204,6 +204,8 @@ def _kept_states(problem, tight):
         pv, xs = hit.start
         pair = partner(problem.settings, hit.setup, pv, xs)     # the next run calls both at once
         ready, pair.ready = pair.ready, None
+        if ready is COMPANION_INTERRUPTED:  # a Ctrl-C during the companion in the run's own C call
+            raise KeyboardInterrupt
         if ready is not None:               # run with the run itself, in the same C call (the same bits)
             return ready
         return hit.setup.states(pv.copy(), xs.copy())

@@ -885,7 +885,8 @@ int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid,
    call from Python for both (issue 24).  The first run is crk_run's, sliced by its Resume; the
    second has a Resume of its own (its slice starts when it does).  *second: the second run's
    status (CRK_YIELD: it stopped at its slice, the caller runs it again from the start), or -1
-   when it did not start (the first did not reach its end in this call). */
+   when it did not start (the first did not reach its end in this call): anything else says
+   that the first run reached its end with CRK_OK. */
 int crk_run_pair(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
                  const double *p, double rtol, double atol, double hmin, cint max_steps,
                  double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv,
@@ -899,6 +900,7 @@ int crk_run_pair(const Fun *ode, int method, cint nx, const double *grid, cint n
   took[0] = took[1] = 0.0;
   if (st != CRK_OK || ctl[0] < ngrid || ctl[1]) return st;
   double c0 = cpu_clock(), w0 = slice_clock();
+  *second = -2;                     /* (started: the first run reached its end) */
   *second = crk_core(ode2, method2, nx, grid2, ngrid2, x02, u2, p2, rtol2, atol2, hmin2, max_steps2, X2, stats2, ctl2,
                      xfail2, NULL, rs2, NULL, NULL, 0.0, NULL, NULL);
   took[0] = cpu_clock() - c0;       /* the second run's CPU and wall seconds: reported as the estimate's */

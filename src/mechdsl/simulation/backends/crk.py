@@ -36,7 +36,7 @@ import numpy as np
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
-from .crk_calls import CANCELLED, CRK_METHODS, counts, run_compiled, run_pair  # noqa: F401  (crk.X for the back ends)
+from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, counts, run_compiled, run_pair  # noqa: F401  (crk.X for the back ends)
 from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, declare, map_rows, program_fun, tables_in_loop
 
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))

@@ -251,6 +251,9 @@ def _slices(loop, c: _Call, progress, payback, status):
     return status, interrupted, loop
 
 
+COMPANION_INTERRUPTED = "the companion run was interrupted (Ctrl-C)"     # run_pair's second answer then
+
+
 def run_pair(loop, first: tuple, loop2, second: tuple, progress):
     """(the run, its companion's run or None; its stats with its own cpu_time and wall_time,
     seconds of the call that were the companion's): run_compiled of ``first`` = (method, grid, x0, p,
@@ -258,7 +261,8 @@ def run_pair(loop, first: tuple, loop2, second: tuple, progress):
     in the same runtime, no input tables) in one C call when the first reaches its end within
     its first slice (crk_run_pair; the same steps, so the same bits as two calls).  The
     companion is None when it did not run to its end in that call (a long or failed run: the
-    caller runs it as usual)."""
+    caller runs it as usual), COMPANION_INTERRUPTED when a Ctrl-C came after the run had reached
+    its end (the caller says so as an interrupted estimate, as when the companion runs alone)."""
     pair = getattr(loop.rt, "_pair", None)
     if pair is None:
         pair = loop.rt._pair = _declared_pair(loop.rt)
@@ -270,8 +274,11 @@ def run_pair(loop, first: tuple, loop2, second: tuple, progress):
     a2 = c2.args
     try:
         status = pair(*c1.args, a2[0], a2[1], *a2[3:17], ctypes.byref(which), took)
-    except KeyboardInterrupt:            # Ctrl-C during the call: the rows written are kept, no companion
-        status, interrupted = CANCELLED, True
+    except KeyboardInterrupt:
+        if which.value != -1:            # during the companion: the run itself reached its end
+            progress.update(float(c1.grid[-1]))
+            return _finish(c1, loop.engine, 0, False, first[7], first[8]), COMPANION_INTERRUPTED
+        status, interrupted = CANCELLED, True      # during the run: the rows written are kept
         progress.update(float(c1.grid[max(int(c1.ctl[0]), 1) - 1]))
     else:
         status, interrupted, _ = _slices(loop, c1, progress, None, status)

@@ -232,7 +232,9 @@ class OdeSetup:
         loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
         run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
                                    (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2), bar)
-        if second is not None:
+        if second is crk.COMPANION_INTERRUPTED:       # the estimate raises it (estimate._kept_states)
+            partner.ready = second
+        elif second is not None:
             ready = partner.setup._states_of(second, partner.xs)
             if ready is not None:       # the call's seconds that were the companion's: the estimate's, not the run's
                 ready.stats.update(cpu_time=second.stats["cpu_time"], wall_time=second.stats["wall_time"])
