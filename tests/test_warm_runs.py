@@ -141,3 +141,95 @@ def test_non_finite_signal_still_fails_the_run():
     r = Result(t=t, q=qn, qd=q.copy(), coordinates=("x",), signals={}, stats={}, metadata={})
     check_finite(r)
     assert r.failure is not None and r.failure.cause == "non-finite state" and len(r.t) == 3
+
+
+@needs_cc
+def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monkeypatch):
+    """From the second warm run on, the default estimate's companion runs in the run's own C call
+    (crk_run_pair, backends/ode.Partner): the same run, the same companion, so the same estimate
+    and the same work as the companion run on its own (Partners forgotten); its seconds are the
+    estimate's (error_estimate_cpu_time), not the run's."""
+    runs = [_run(double, t_end=2.0, rtol=1e-8) for _ in range(3)]
+    paired = runs[-1]
+    assert "companion_cpu_time" in paired.stats["raw"]          # the pair ran
+    from mechdsl.simulation import estimate as E
+
+    monkeypatch.setattr(O, "PARTNERS", {})
+    monkeypatch.setattr(E, "partner", lambda s, setup, pv, xs: O.Partner(s, setup, pv, xs))   # never registered
+    alone = _run(double, t_end=2.0, rtol=1e-8)
+    assert "companion_cpu_time" not in alone.stats["raw"]
+    np.testing.assert_array_equal(paired.q, alone.q)
+    for key in ("error_estimate", "error_estimate_time", "error_estimate_coordinate", "error_estimate_ratio"):
+        assert paired.metadata["accuracy"][key] == alone.metadata["accuracy"][key]
+    for key in ("rhs_evals", "error_estimate_rhs_evals", "error_estimate_steps", "steps"):
+        assert paired.stats[key] == alone.stats[key]
+    raw = paired.stats["raw"]
+    assert 0.0 <= raw["companion_cpu_time"] <= paired.stats["error_estimate_cpu_time"] + 1e-9
+
+
+@needs_cc
+@pytest.mark.parametrize("case", ["plain", "nan", "inf", "other grid"])
+def test_the_comparison_in_c_is_the_numpy_comparison(case):
+    """difference.compare with the runtime (crk_compare: one pass in C) fills the same numbers as
+    without it (numpy), non-finite differences and a companion on other times included."""
+    from types import SimpleNamespace
+
+    from mechdsl.simulation import difference as D
+
+    rng = np.random.default_rng(7)
+    t = np.linspace(0.0, 2.0, 101)
+    X = rng.normal(size=(101, 6))
+    u = t[::4].copy() if case != "other grid" else np.linspace(0.0, 2.0, 26) * (1 + 1e-9)
+    Y = X[::4].copy() + 1e-6 * rng.normal(size=(26, 6))
+    if case == "nan":
+        Y[7, 1] = np.nan
+    if case == "inf":
+        Y[3, 2] = np.inf
+        X[40, 0] = -np.inf
+    s = SimpleNamespace(t_start=0.0, t_end=2.0, rtol=1e-6, atol=1e-8, error_estimate="coordinates")
+
+    def filled(rt):
+        r = SimpleNamespace(t=t, q=X[:, :3], coordinates=("a", "b", "c"), metadata={})
+        other = SimpleNamespace(t=u, q=Y[:, :3], failure=None)
+        D.compare(r, other, 0.9, s, lambda c: "m", rt=rt)
+        return r.metadata["accuracy"]
+
+    rt, _ = crk.runtime()
+    in_c, in_numpy = filled(rt), filled(None)
+    assert in_c.keys() == in_numpy.keys()
+    for key, v in in_numpy.items():
+        if isinstance(v, float) and np.isnan(v):
+            assert np.isnan(in_c[key])
+        else:
+            assert in_c[key] == v, key          # the same operations on the same values: the same bits
+    assert (D._in_c(rt, SimpleNamespace(t=t, q=X[:, :3]), SimpleNamespace(t=u, q=Y[:, :3]), 2.0, 0.9) is None) == (
+        case == "other grid")
+
+
+@needs_cc
+def test_a_ctrl_c_during_the_paired_companion_is_an_interrupted_estimate(double, monkeypatch):
+    """A Ctrl-C that arrives while the run's own C call runs the companion (after the run reached
+    its end) is reported as before, when the companion ran alone: the run complete, its estimate
+    interrupted (RunInterrupted, interrupted_during the error estimate)."""
+    from mechdsl.output.result import RunInterrupted
+
+    for _ in range(2):
+        _run(double, t_end=1.0, rtol=1e-8)            # the second registers the companion
+    s = next(v[1] for v in O._SETUPS.values() if v[0] is double.eom and v[1].settings.rtol == 1e-8)
+    rt = s._direct_call()[0].rt
+    real = rt._pair
+
+    def pair_then_ctrl_c(*args):
+        real(*args)
+        raise KeyboardInterrupt                       # as the signal is raised when the call returns
+
+    monkeypatch.setattr(rt, "_pair", pair_then_ctrl_c)
+    with pytest.raises(RunInterrupted) as info:
+        _run(double, t_end=1.0, rtol=1e-8)
+    r = info.value.result
+    assert r.failure is None and r.t[-1] == pytest.approx(1.0, abs=1e-12)
+    assert "error estimate" in r.metadata["interrupted_during"]
+    assert "interrupted" in r.metadata["accuracy"]["error_estimate_unavailable"]
+    monkeypatch.undo()
+    again = _run(double, t_end=1.0, rtol=1e-8)
+    np.testing.assert_array_equal(again.q, r.q)

@@ -41,10 +41,17 @@ def note_facts(block, rows) -> None:
 
     if block.ndim != 2 or block.shape[1] == 0 or len(rows) != block.shape[0]:
         return
-    finite = np.isfinite(block).all(axis=1)
-    amax = np.abs(block).max(axis=1)
-    dmax = np.abs(block - block[:, :1]).max(axis=1)
-    _note([(v, bool(finite[i]), float(amax[i]), float(dmax[i])) for i, v in enumerate(rows)])
+    # from each row's max and min alone: max |v| = max(hi, -lo), and max |v - v0| = max(hi - v0,
+    # v0 - lo) exactly (rounding is monotonic and symmetric: the largest rounded difference is the
+    # rounded difference of the extreme); a NaN or an inf carries through both.  A row is all
+    # finite exactly when its max |v| is.
+    hi, lo = block.max(axis=1), block.min(axis=1)
+    v0 = block[:, 0]
+    amax = np.maximum(hi, -lo)
+    finite = np.isfinite(amax).tolist()
+    dmax = np.maximum(hi - v0, v0 - lo).tolist()
+    amax = amax.tolist()
+    _note([(v, finite[i], amax[i], dmax[i]) for i, v in enumerate(rows)])
 
 
 def note_plain(signals) -> bool:
@@ -66,8 +73,9 @@ def _note(facts) -> None:
 
     if len(_FACTS) + len(facts) > FACTS_KEPT:
         _FACTS.clear()
+    ref = weakref.ref
     for v, finite, amax, dmax in facts:
-        _FACTS[id(v)] = (weakref.ref(v), finite, amax, dmax)
+        _FACTS[id(v)] = (ref(v), finite, amax, dmax)
 
 
 def _facts(v):
@@ -130,7 +138,12 @@ def _check_states(r: Result) -> None:
 
     if r.q.size == 0 and r.qd.size == 0:
         return
-    if math.isfinite(np.add.reduce(r.q, axis=None)) and math.isfinite(np.add.reduce(r.qd, axis=None)):
+    b = r.q.base
+    if (b is not None and b is r.qd.base and type(b) is np.ndarray and b.ndim == 2 and b.flags.c_contiguous
+            and b.shape == (r.q.shape[0], r.q.shape[1] + r.qd.shape[1])):
+        if math.isfinite(np.add.reduce(b, axis=None)):
+            return                    # q and qd are the two halves of one block (a run's states): one sum
+    elif math.isfinite(np.add.reduce(r.q, axis=None)) and math.isfinite(np.add.reduce(r.qd, axis=None)):
         return                        # a finite sum: every value finite
     X = np.hstack([r.q, r.qd])
     bad = ~np.isfinite(X)

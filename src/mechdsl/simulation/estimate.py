@@ -31,7 +31,8 @@ from ..numbers import si_unit
 from .difference import compare, fill     # (the comparison, without CasADi: a warm prepared run shares it)
 from .accuracy import WARN_FACTOR  # noqa: F401  (the warning's threshold, with the rule of the drift)
 from .backends import backend
-from .backends.ode import kept_setup
+from .backends.crk import COMPANION_INTERRUPTED, loaded_runtime
+from .backends.ode import kept_setup, partner
 from .prepared import prepare
 from .problem import formulate
 from .registry import spec
@@ -139,9 +140,11 @@ def estimate(r, problem, solve, given=None) -> None:
         finally:
             r.stats["error_estimate_cpu_time"] = time.process_time() - cpu0      # besides the run's own cpu_time
         # the companion's work, besides the run's own steps and rhs_evals (benchmarks count both)
+        # a companion run in the run's own C call (backends/ode.Partner) says its seconds there
+        r.stats["error_estimate_cpu_time"] += (other.stats or {}).get("cpu_time") or 0.0
         r.stats["error_estimate_steps"] = (other.stats or {}).get("steps")
         r.stats["error_estimate_rhs_evals"] = (other.stats or {}).get("rhs_evals")
-    compare(r, other, factor, s, lambda c: _unit(problem.eom, c))
+    compare(r, other, factor, s, lambda c: _unit(problem.eom, c), rt=loaded_runtime())
 
 
 def _follow(r, problem, tight, factor) -> None:
@@ -219,11 +222,18 @@ def _kept_states(problem, tight):
         hit = None
     elif hit.setup is not None and hit.env == env:
         pv, xs = hit.start
+        pair = partner(problem.settings, hit.setup, pv, xs)     # the next run calls both at once
+        ready, pair.ready = pair.ready, None
+        if ready is COMPANION_INTERRUPTED:  # a Ctrl-C during the companion in the run's own C call
+            raise KeyboardInterrupt
+        if ready is not None:               # run with the run itself, in the same C call (the same bits)
+            return ready
         return hit.setup.states(pv.copy(), xs.copy())
     setup = kept_setup(problem.eom, tight, lambda: prepare(formulate(problem.eom, tight.validated())).setup)
     start = setup.start_of(tight)
     if hit is not None:
         hit.setup, hit.env, hit.start = setup, env, (start[0].copy(), start[1].copy())
+        partner(problem.settings, setup, *hit.start)
     return setup.states(*start)
 
 

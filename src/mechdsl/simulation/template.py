@@ -106,6 +106,9 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         if bar is not None:
             bar.close()
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    raw = r.stats.get("raw")
+    if type(raw) is dict and "companion_cpu_time" in raw:     # the estimate's companion ran in the same C call
+        cpu, wall = cpu - raw["companion_cpu_time"], wall - raw["companion_wall_time"]     # (its own, below)
     if problem.drive is not None and problem.kind != "ode":
         _record_inputs(r, problem.drive)
     if problem.drive is not None:

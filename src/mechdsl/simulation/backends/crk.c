@@ -95,6 +95,15 @@ static double slice_clock(void) {
   return (double)clock() / CLOCKS_PER_SEC;
 }
 
+/* CPU seconds of the process (crk_run_pair: the companion's share of the call) */
+static double cpu_clock(void) {
+#if defined(CLOCK_PROCESS_CPUTIME_ID) && !defined(_WIN32)
+  struct timespec ts;
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) == 0) return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#endif
+  return (double)clock() / CLOCKS_PER_SEC;
+}
+
 static const double P5_A[6 * 5] = {
     0.0, 0.0, 0.0,
     0.0, 0.0, 0.2,
@@ -870,6 +879,35 @@ int crk_run(const Fun *ode, int method, cint nx, const double *grid, cint ngrid,
                   drv, NULL, 0.0, NULL, NULL);
 }
 
+/* A run and, when it reached its last output time with CRK_OK, a second run of the same model
+   (the default error estimate's companion: its own Fun, method, grid, start, parameters and
+   tolerances; no inputs read from tables) in the same call: a small model's warm run pays one
+   call from Python for both (issue 24).  The first run is crk_run's, sliced by its Resume; the
+   second has a Resume of its own (its slice starts when it does).  *second: the second run's
+   status (CRK_YIELD: it stopped at its slice, the caller runs it again from the start), or -1
+   when it did not start (the first did not reach its end in this call): anything else says
+   that the first run reached its end with CRK_OK. */
+int crk_run_pair(const Fun *ode, int method, cint nx, const double *grid, cint ngrid, const double *x0, const double *u,
+                 const double *p, double rtol, double atol, double hmin, cint max_steps,
+                 double *X, double *stats, volatile cint *ctl, double *xfail, Resume *rs, Drive *drv,
+                 const Fun *ode2, int method2, const double *grid2, cint ngrid2, const double *x02, const double *u2,
+                 const double *p2, double rtol2, double atol2, double hmin2, cint max_steps2,
+                 double *X2, double *stats2, volatile cint *ctl2, double *xfail2, Resume *rs2, int *second,
+                 double *took) {
+  int st = crk_core(ode, method, nx, grid, ngrid, x0, u, p, rtol, atol, hmin, max_steps, X, stats, ctl, xfail, NULL, rs,
+                    drv, NULL, 0.0, NULL, NULL);
+  *second = -1;
+  took[0] = took[1] = 0.0;
+  if (st != CRK_OK || ctl[0] < ngrid || ctl[1]) return st;
+  double c0 = cpu_clock(), w0 = slice_clock();
+  *second = -2;                     /* (started: the first run reached its end) */
+  *second = crk_core(ode2, method2, nx, grid2, ngrid2, x02, u2, p2, rtol2, atol2, hmin2, max_steps2, X2, stats2, ctl2,
+                     xfail2, NULL, rs2, NULL, NULL, 0.0, NULL, NULL);
+  took[0] = cpu_clock() - c0;       /* the second run's CPU and wall seconds: reported as the estimate's */
+  took[1] = slice_clock() - w0;
+  return st;
+}
+
 /* crk_run with the first step taken from *h_io when it is positive (else the initial-step
    heuristic) and the step proposed after the last accepted step written back: a caller that
    advances in many short calls (an FMU's co-simulation steps, mechdsl.export) keeps the
@@ -996,6 +1034,35 @@ cint crk_run_batch(const Fun *ode, int method, cint nx, const double *grid, cint
   }
   free(xfail);
   return bad;
+}
+
+/* The default error estimate's comparison of a run with its companion (simulation/difference.py),
+   one pass over both: the run's output times t (nt) every k-th of which is the companion's u (nu
+   = (nt - 1) / k + 1), checked (|t[ik] - u[i]| <= tol and t strictly increasing: else 1 and
+   nothing else is written); per coordinate j < n of the rows (row strides sa, sb doubles) of the
+   run's a and the companion's b at the common times: d = |a - b| / factor (a non-finite d as
+   inf), out[j] its largest value, out[n + j] the first common-time index where it is, out[2n + j]
+   the largest |a| over all of the run's nt rows (NaN values skipped; NaN when all are).  The
+   same operations as numpy's on the same values: the same bits. */
+int crk_compare(const double *t, cint nt, const double *u, cint nu, cint k, double tol, const double *a, cint sa,
+                const double *b, cint sb, cint n, double factor, double *out) {
+  for (cint i = 1; i < nt; i++) if (!(t[i] > t[i - 1])) return 1;
+  for (cint i = 0; i < nu; i++) if (!(fabs(t[i * k] - u[i]) <= tol)) return 1;
+  for (cint j = 0; j < n; j++) {
+    double best = -1.0, qmax = NAN;
+    cint at = 0;
+    for (cint i = 0; i < nu; i++) {
+      double d = fabs(a[i * k * sa + j] - b[i * sb + j]) / factor;
+      if (!isfinite(d)) d = INFINITY;
+      if (d > best) { best = d; at = i; }
+    }
+    for (cint i = 0; i < nt; i++) {
+      double v = fabs(a[i * sa + j]);
+      if (v == v && !(v <= qmax)) qmax = v;
+    }
+    out[j] = best; out[n + j] = (double)at; out[2 * n + j] = qmax;
+  }
+  return 0;
 }
 
 /* `reps` evaluations of `f` at (t, x, u, p) into xdot (nx): the right-hand side's own cost,

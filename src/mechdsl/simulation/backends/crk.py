@@ -27,6 +27,7 @@ The outcome is a ``mechdsl.integrators.Run`` like every other integrator plug-in
 from __future__ import annotations
 
 import ctypes
+import os
 import threading
 from pathlib import Path
 
@@ -36,19 +37,18 @@ from ... import integrators as I
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
-from .crk_calls import CANCELLED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
-from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, program_fun, tables_in_loop
+from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
+from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
 
 
-def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
-                 payback=None):
-    """``call_loop`` as an integrators.Run (numpy arrays)."""
-    grid = np.ascontiguousarray(grid, float)
-    x0 = np.ascontiguousarray(np.ravel(x0), float)
-    c = call_loop(loop, method, grid, x0, np.ascontiguousarray(np.ravel(p), float),
-                  None if u is None else np.ascontiguousarray(np.ravel(u), float), rtol, atol, max_steps, hmin,
-                  progress, drive, payback)
-    run = I.Run(X=np.frombuffer(c.X, float).reshape(len(grid), x0.size), reached=c.reached, stats=c.raw,
+def _plain(grid, x0, p, u):
+    return (np.ascontiguousarray(grid, float), np.ascontiguousarray(np.ravel(x0), float),
+            np.ascontiguousarray(np.ravel(p), float), None if u is None else np.ascontiguousarray(np.ravel(u), float))
+
+
+def _as_run(c, npts: int, nx: int, max_steps, hmin) -> I.Run:
+    """A crk_calls.Call as an integrators.Run (numpy arrays)."""
+    run = I.Run(X=np.frombuffer(c.X, float).reshape(npts, nx), reached=c.reached, stats=c.raw,
                 interrupted=c.interrupted)
     if c.interrupted:
         run.error = "interrupted (Ctrl-C)"
@@ -57,6 +57,27 @@ def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, prog
         run.fail_time, run.fail_state = c.fail_time, np.array(c.fail_state)
     return run
 
+
+def run_compiled(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
+                 payback=None):
+    """``call_loop`` as an integrators.Run (numpy arrays)."""
+    grid, x0, p, u = _plain(grid, x0, p, u)
+    c = call_loop(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive, payback)
+    return _as_run(c, len(grid), x0.size, max_steps, hmin)
+
+
+def run_pair(loop, first: tuple, loop2, second: tuple, progress):
+    """``pair_loop`` as integrators.Runs: (the run, its companion's run, None or COMPANION_INTERRUPTED);
+    ``first`` and ``second``: (method, grid, x0, p, u, rtol, atol, max_steps, hmin)."""
+    def plain(a):
+        method, grid, x0, p, u, *rest = a
+        return (method, *_plain(grid, x0, p, u), *rest)
+    first, second = plain(first), plain(second)
+    c1, c2 = pair_loop(loop, first, loop2, second, progress)
+    run = _as_run(c1, len(first[1]), first[2].size, first[7], first[8])
+    if c2 is None or c2 is COMPANION_INTERRUPTED:
+        return run, c2
+    return run, _as_run(c2, len(second[1]), second[2].size, second[7], second[8])
 
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
 _LIBS: dict = {}
@@ -109,14 +130,30 @@ def runtime():
         return _RUNTIME["lib"]
 
 
+def loaded_runtime():
+    """The runtime library when a run of this process has loaded it already, else None (nothing
+    is compiled): the error estimate's comparison uses it (simulation/difference.py)."""
+    hit = _RUNTIME.get("lib")
+    return None if hit is None else hit[0]
+
+
 _COMPILER: dict = {}
+# os.environ's own dict where it has one (POSIX: bytes keys; os.environ.get costs about 1.5 us
+# through its Mapping layers, and every run asks twice, checking its kept setups): the same values
+_ENVIRON = getattr(os.environ, "_data", None)
+if not isinstance(_ENVIRON, dict) or os.name != "posix":
+    _ENVIRON = None
+_CC, _PATH = (b"CC", b"PATH") if _ENVIRON is not None else ("CC", "PATH")
+
+
+def _environ_strings():
+    return os.environ
 
 
 def compiler() -> str | None:
     """codegen.find_compiler, kept per $CC and $PATH (method = auto asks on every run)."""
-    import os
-
-    key = (os.environ.get("CC"), os.environ.get("PATH"))
+    env = _ENVIRON if _ENVIRON is not None else _environ_strings()
+    key = (env.get(_CC), env.get(_PATH))
     if key not in _COMPILER:
         _COMPILER.clear()
         _COMPILER[key] = find_compiler()

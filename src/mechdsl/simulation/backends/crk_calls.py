@@ -46,6 +46,11 @@ LOOP_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, ctypes.c_longlong, _VP, ctyp
                  ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP]
 
 
+# crk_run_pair's second run (after crk_run's arguments): no nx (the same model's) and no Drive
+PAIR_ARGTYPES = [ctypes.POINTER(Fun), ctypes.c_int, _VP, ctypes.c_longlong, _VP, _VP, _VP, ctypes.c_double,
+                 ctypes.c_double, ctypes.c_double, ctypes.c_longlong, _VP, _VP, _VP, _VP, _VP, _VP, _VP]
+
+
 def _ptr(a):
     return a.ctypes.data_as(_DP)       # (a numpy array)
 
@@ -173,6 +178,76 @@ def _doubles(v) -> array:
     return out
 
 
+class _Prepared:
+    """One crk_run call's buffers and arguments (kept alive with it): the output rows ``X``, the
+    small arrays in one buffer ``W`` (stats, ctl, xfail, the carried y and f, x0, p, u), the
+    Resume, the input tables' Drive."""
+
+    __slots__ = ("grid", "npts", "nx", "X", "W", "ctl", "rs", "args", "keep")
+
+
+def _prepare(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, drive=None) -> _Prepared:
+    c = _Prepared()
+    c.grid, c.npts = grid, len(grid)
+    x0, pc, uc = _doubles(x0), _doubles(p), _doubles(() if u is None else u)
+    c.nx = nx = len(x0)
+    c.X = array("d", [float("nan")]) * (c.npts * nx)
+    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
+    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
+    m, npar, nu = max(nx, 1), len(pc), len(uc)
+    c.W = W = array("d", bytes(8 * (6 + 3 * m + m + npar + nu)))
+    o = 6 + 3 * m
+    W[o:o + nx] = x0
+    W[o + m:o + m + npar] = pc
+    W[o + m + npar:o + m + npar + nu] = uc
+    a = W.buffer_info()[0]
+    c.ctl = ctypes.c_longlong.from_address(a + 32)
+    c.rs = rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
+    drv, c.keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
+    c.args = (loop.fun("ode"), CRK_METHODS[method][0], nx, address(grid), c.npts, a + 8 * o, a + 8 * (o + m + npar),
+              a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), c.X.buffer_info()[0], a,
+              a + 32, a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
+    return c
+
+
+def _slices(loop, c: _Prepared, progress, payback, status):
+    """(status, interrupted, the loop that ran last): ``c`` called until it does not yield
+    (``status``: of a call made already; None: none yet); between calls progress, Ctrl-C and the
+    pay-back switch."""
+    grid, ctl, rs, args = c.grid, c.ctl, c.rs, c.args
+    interrupted = False
+    try:
+        while True:
+            if status is None:
+                status = loop.run(*args)
+            if status != YIELD:
+                break
+            status = None
+            progress.update(float(grid[max(ctl.value, 1) - 1]))
+            if payback is not None and loop.engine == "interpreted":
+                better = payback.check(int(rs.nfev))
+                if better is not None:          # the rest of the run in compiled code
+                    loop, args = better, (better.fun("ode"),) + args[1:]
+    except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
+        status, interrupted = CANCELLED, True
+    progress.update(float(grid[max(ctl.value, 1) - 1]))
+    return status, interrupted, loop
+
+
+def _result(c: _Prepared, engine: str, status: int, interrupted: bool, payback=None) -> Call:
+    """The Call of ``c`` ended with ``status``."""
+    W, reached = c.W, c.ctl.value
+    raw = {"n_steps": int(W[0]), "n_rhs": int(W[1]), "n_reject": int(W[2]), "status": int(status),
+           "engine": engine}
+    if payback is not None:
+        payback.record(int(W[1]))
+        if payback.switched_at is not None and payback.switched_at >= 0:
+            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
+    failed = not interrupted and (status != 0 or reached < c.npts)
+    return Call(c.X, reached, status, raw, interrupted, float(W[3]) if failed else None,
+                list(W[6:6 + c.nx]) if failed else None)
+
+
 def call_loop(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progress, drive=None,
               payback=None) -> Call:
     """The run as C calls of SLICE seconds each in the calling thread (the state carried
@@ -182,50 +257,58 @@ def call_loop(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, progres
     no inputs): sequences of floats.  ``payback`` (payback.Payback, an interpreted run): between
     calls, the compiled loop once the interpreted evaluations have paid for its compile (the same
     bits: only the cost changes)."""
-    npts = len(grid)
-    x0, pc, uc = _doubles(x0), _doubles(p), _doubles(() if u is None else u)
-    nx = len(x0)
-    X = array("d", [float("nan")]) * (npts * nx)
-    # one buffer for the small arrays, each passed by its address: stats (4), the progress and
-    # cancel words ctl (2, int64), xfail (nx), the carried y and f (nx each), x0, p, u
-    m, npar, nu = max(nx, 1), len(pc), len(uc)
-    W = array("d", bytes(8 * (6 + 3 * m + m + npar + nu)))
-    o = 6 + 3 * m
-    W[o:o + nx] = x0
-    W[o + m:o + m + npar] = pc
-    W[o + m + npar:o + m + npar + nu] = uc
-    a = W.buffer_info()[0]
-    ctl = ctypes.c_longlong.from_address(a + 32)
-    rs = Resume(SLICE, 0, 0.0, 0.0, 0, 0, 0, 0, 0, a + 8 * (6 + m), a + 8 * (6 + 2 * m))
-    drv, keep = loop_drive(drive, float(grid[0]), float(grid[-1]), uc) if tables_in_loop(drive) else (None, ())
-    args = (loop.fun("ode"), CRK_METHODS[method][0], nx, address(grid), npts, a + 8 * o, a + 8 * (o + m + npar),
-            a + 8 * (o + m), float(rtol), float(atol), float(hmin), int(max_steps), X.buffer_info()[0], a, a + 32,
-            a + 48, ctypes.byref(rs), None if drv is None else ctypes.byref(drv))
-    interrupted = False
+    c = _prepare(loop, method, grid, x0, p, u, rtol, atol, max_steps, hmin, drive)
+    status, interrupted, loop = _slices(loop, c, progress, payback, None)
+    return _result(c, loop.engine, status, interrupted, payback)
+
+
+COMPANION_INTERRUPTED = "the companion run was interrupted (Ctrl-C)"     # pair_loop's second answer then
+
+
+def pair_loop(loop, first: tuple, loop2, second: tuple, progress):
+    """(the run's Call, its companion's Call or None; its raw counts with its own cpu_time and
+    wall_time, seconds of the call that were the companion's): call_loop of ``first`` = (method,
+    grid, x0, p, u, rtol, atol, max_steps, hmin) on ``loop`` and of ``second`` on ``loop2`` (the
+    same model in the same runtime, no input tables) in one C call when the first reaches its end
+    within its first slice (crk_run_pair; the same steps, so the same bits as two calls).  The
+    companion is None when it did not run to its end in that call (a long or failed run: the
+    caller runs it as usual), COMPANION_INTERRUPTED when a Ctrl-C came after the run had reached
+    its end (the caller says so as an interrupted estimate, as when the companion runs alone)."""
+    pair = getattr(loop.rt, "_pair", None)
+    if pair is None:
+        pair = loop.rt._pair = _declared_pair(loop.rt)
+    if pair is False or loop2.rt is not loop.rt:
+        return call_loop(loop, *first, progress), None
+    c1, c2 = _prepare(loop, *first), _prepare(loop2, *second)
+    which = ctypes.c_int(-1)
+    took = (ctypes.c_double * 2)()
+    a2 = c2.args
     try:
-        while True:
-            status = loop.run(*args)
-            if status != YIELD:
-                break
-            progress.update(float(grid[max(ctl.value, 1) - 1]))
-            if payback is not None and loop.engine == "interpreted":
-                better = payback.check(int(rs.nfev))
-                if better is not None:          # the rest of the run in compiled code
-                    loop, args = better, (better.fun("ode"),) + args[1:]
-    except KeyboardInterrupt:            # Ctrl-C between slices: the rows written so far are kept
-        status, interrupted = CANCELLED, True
-    reached = ctl.value
-    progress.update(float(grid[max(reached, 1) - 1]))
-    raw = {"n_steps": int(W[0]), "n_rhs": int(W[1]), "n_reject": int(W[2]), "status": int(status),
-           "engine": loop.engine}
-    if payback is not None:
-        payback.record(int(W[1]))
-        if payback.switched_at is not None and payback.switched_at >= 0:
-            raw["compiled_after"] = payback.switched_at       # evaluations made interpreted first
-    failed = not interrupted and (status != 0 or reached < npts)
-    del keep
-    return Call(X, reached, status, raw, interrupted, float(W[3]) if failed else None,
-                list(W[6:6 + nx]) if failed else None)
+        status = pair(*c1.args, a2[0], a2[1], *a2[3:17], ctypes.byref(which), took)
+    except KeyboardInterrupt:
+        if which.value != -1:            # during the companion: the run itself reached its end
+            progress.update(float(c1.grid[-1]))
+            return _result(c1, loop.engine, 0, False), COMPANION_INTERRUPTED
+        status, interrupted = CANCELLED, True      # during the run: the rows written are kept
+        progress.update(float(c1.grid[max(c1.ctl.value, 1) - 1]))
+    else:
+        status, interrupted, _ = _slices(loop, c1, progress, None, status)
+    run = _result(c1, loop.engine, status, interrupted)
+    other = None
+    if not interrupted and which.value == 0 and c2.ctl.value == c2.npts:
+        other = _result(c2, loop2.engine, 0, False)
+        other.raw["cpu_time"], other.raw["wall_time"] = took[0], took[1]
+    return run, other
+
+
+def _declared_pair(rt):
+    """The runtime's crk_run_pair (argument types declared), or False (a runtime built before it)."""
+    try:
+        fn = rt.crk_run_pair
+    except AttributeError:
+        return False
+    fn.restype, fn.argtypes = ctypes.c_int, LOOP_ARGTYPES + PAIR_ARGTYPES
+    return fn
 
 
 class Loop:

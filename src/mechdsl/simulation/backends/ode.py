@@ -10,6 +10,7 @@ docs/simulate.md (users) and docs/internals/numerics.md (design).
 from __future__ import annotations
 
 import copy
+import math
 import threading
 import time
 from typing import Any
@@ -35,6 +36,14 @@ from . import plugins as P
 from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, mapped, scipy_name
 
 
+class _Quiet:
+    """The progress of a companion run: nothing shown."""
+
+    def update(self, t: float) -> None:
+        pass
+
+
+_QUIET = _Quiet()
 MAX_STEPS_TOTAL = 2_000_000          # default max_steps = max(20000, this / output intervals)
 
 
@@ -101,6 +110,7 @@ class OdeSetup:
         self._mapper = None       # (recorder Function, its compiled code in the loop's library) or None
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
+        self._direct = None       # the compiled loop's call of a plain run, worked out once (_direct_call)
 
     @classmethod
     def build(cls, eom, s, drive=None) -> "OdeSetup":
@@ -207,11 +217,62 @@ class OdeSetup:
         t, X, run, failure = self.integrate(pv, xs, meta, progress)
         return self.record(t, X, pv, xs, meta, run, failure, self.loop_compiled, wall0)
 
+    def _direct_run(self, call, pv, xs, bar):
+        """The direct loop call of a run; with the error estimate's companion in the same C call
+        when estimate.py registered it for these settings (a Partner: its setup and start), its
+        States then left in ``partner.ready`` for the estimate (crk_calls.run_pair)."""
+        loop, method, grid, u, rtol, atol, max_steps, hmin = call
+        partner = PARTNERS.get(id(self.settings))
+        if partner is None or partner.settings is not self.settings:
+            return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
+        partner.ready = None
+        other = partner.setup._direct_call()
+        if not other or other[0].rt is not loop.rt:
+            return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
+        loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
+        run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                                   (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2), bar)
+        if second is crk.COMPANION_INTERRUPTED:       # the estimate raises it (estimate._kept_states)
+            partner.ready = second
+        elif second is not None:
+            ready = partner.setup._states_of(second, partner.xs)
+            if ready is not None:       # the call's seconds that were the companion's: the estimate's, not the run's
+                ready.stats.update(cpu_time=second.stats["cpu_time"], wall_time=second.stats["wall_time"])
+                run.stats.update(companion_cpu_time=second.stats["cpu_time"],
+                                 companion_wall_time=second.stats["wall_time"])
+            partner.ready = ready
+        return run
+
+    def _direct_call(self):
+        """(loop, method, grid, u, rtol, atol, max_steps, hmin) when a run of this setup is one
+        call of the compiled model's stepping loop, as ``_run`` and the loop's plug-in make it
+        (no inputs, tables, fixed step, integrator options or interpreted model that may switch
+        engines: payback.py); False otherwise.  Worked out once: a warm run skips the layers
+        between (the same call, the same bits)."""
+        if self._direct is None:
+            funcs, s = self.funcs, self.settings
+            loop = getattr(funcs, "loop", None)
+            plain = (isinstance(funcs, LoopFunctions) and funcs.drive is None and not self.eom.inputs
+                     and self.method is not None and spec(self.method).compiled_loop
+                     and not spec(self.method).fixed_step and s.fixed_step.dt is None and not self.extra
+                     and not self.drive.breakpoints(s.t_start, s.t_end).size and loop is not None
+                     and loop.engine == "compiled")
+            self._direct = (loop, self.method, self.grid, self.drive.vector(s.t_start), s.rtol, s.atol,
+                            self.max_steps, min_step(s.t_start, s.t_end)) if plain else False
+        return self._direct
+
     def states(self, pv, xs) -> "States":
         """The trajectory alone (no signals recorded, no metadata): what the default error
         estimate's companion run needs (simulation/estimate.py)."""
         if self.method is None:
             return States(self.grid.copy(), np.zeros((len(self.grid), 0)), None, {})
+        call = self._direct_call()
+        if call:                        # one call of the loop; a run that did not simply succeed goes the long way
+            loop, method, grid, u, rtol, atol, max_steps, hmin = call
+            done = self._states_of(crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin,
+                                                    _QUIET), xs)
+            if done is not None:
+                return done
         t, X, run, failure = self.integrate(pv, xs, {"notes": [], "warnings": []})
         bad = np.flatnonzero(~np.isfinite(X).all(axis=1))
         if bad.size:                    # as the template's check_finite cuts a run's states
@@ -221,6 +282,16 @@ class OdeSetup:
                 failure = Failure(float(self.grid[k]), "non-finite state", "a state became non-finite")
         return States(t, X[:, :self.eom.n], failure, _counts(self.method, run.stats))
 
+    def _states_of(self, run, xs) -> "States | None":
+        """``states``' answer from a direct loop call's Run that reached its end with every state
+        finite (as ``integrate`` and ``states`` make it), else None."""
+        if (run.error is None and not run.interrupted and run.reached == len(self.grid)
+                and math.isfinite(np.add.reduce(run.X, axis=None))):
+            X = run.X.copy()
+            X[0] = xs
+            return States(self.grid.copy(), X[:, :self.eom.n], None, crk.counts(run.stats))
+        return None
+
     def integrate(self, pv, xs, meta, progress=None):
         """(t, X, the integrator's Run, Failure or None): the states on the output times reached."""
         eom, s, drive, grid = self.eom, self.settings, self.drive, self.grid
@@ -229,8 +300,12 @@ class OdeSetup:
         uv = drive.vector(t0)
         bar = I.Progress(progress, t0, t1, label=f"{eom.name} ({method})")
         breaks = drive.breakpoints(t0, t1)
+        call = self._direct_call()
         try:
-            if breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
+            if call:                    # one call of the compiled loop, as _run would make it
+                loop, method, grid, u, rtol, atol, max_steps, hmin = call
+                run, fixed = self._direct_run(call, pv, xs, bar), None
+            elif breaks.size and getattr(funcs, "drive", None) is None:     # (the loop reads tables itself)
                 run, fixed = _run_pieces(method, funcs, grid, xs, pv, rtol, atol, max_steps, s.fixed_step.dt, extra,
                                          bar, eom, t0, t1, meta["notes"], 10 * s.budget, drive, breaks)
             else:
@@ -276,13 +351,17 @@ class OdeSetup:
                 if len(self._recorders) >= 4:
                     self._recorders.clear()
                 rec = self._recorders[pv.tobytes()] = Mon.signal_recorder(eom, pv, out_names, self._mapper)
+                # the first integrals' names (the search ran with the recorder's columns and is
+                # memoized in the workspace: the same names on every later run)
+                rec.integrals = Mon.integral_names(eom)
             signals = rec(t, X)
         record_inputs(drive, U, signals, meta)
         Mon.singularity_report(eom, signals, t, meta, s.ode.singularity_threshold)
         stats = {**{k: v for k, v in _counts(method, run.stats).items() if v is not None},
                  "points": int(len(t)), "wall_time": time.perf_counter() - wall0}
         stats.update(Mon.energy_drift_stats(signals))
-        stats.update(Mon.integral_drift(signals, eom))
+        stats.update(Mon.integral_drift_of(signals, rec.integrals) if not eom.inputs else
+                     Mon.integral_drift(signals, eom))
         stats["raw"] = run.stats
         if run.messages.strip():
             meta["integrator_messages"] = _dedup(run.messages)
@@ -359,6 +438,33 @@ def plain_copy(v):
                                                                         all(isinstance(x, (str, int, float)) for x in v)):
         return v
     return copy.deepcopy(v)
+
+
+class Partner:
+    """The default error estimate's companion of runs with the settings object ``settings``
+    (estimate.py registers it once its plan and setup are kept): its OdeSetup and start
+    (``pv``, ``xs``), run in the same C call as the run when both are direct loop calls;
+    ``ready``: the companion's States of the last run, for the estimate to take."""
+
+    __slots__ = ("settings", "setup", "pv", "xs", "ready")
+
+    def __init__(self, settings, setup, pv, xs):
+        self.settings, self.setup, self.pv, self.xs, self.ready = settings, setup, pv, xs, None
+
+
+PARTNERS: dict = {}       # id(settings of the run) -> Partner
+PARTNERS_KEPT = 16
+
+
+def partner(settings, setup, pv, xs) -> Partner:
+    """Register (or find) the companion ``setup`` at (pv, xs) of runs with ``settings``."""
+    hit = PARTNERS.get(id(settings))
+    if hit is not None and hit.settings is settings and hit.setup is setup:
+        return hit
+    if len(PARTNERS) >= PARTNERS_KEPT:
+        PARTNERS.pop(next(iter(PARTNERS)))
+    hit = PARTNERS[id(settings)] = Partner(settings, setup, pv.copy(), xs.copy())
+    return hit
 
 
 SETUPS_KEPT = 16          # OdeSetups kept for repeated runs (a warm Model, the error estimate's companion)
