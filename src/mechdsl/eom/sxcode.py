@@ -412,7 +412,7 @@ def _grouped(code: list, base: int) -> tuple[list, int]:
     registers used)."""
     import heapq
 
-    out_op = _VM_CODE["OUT"]
+    out_op = _VM_CODE["OUT"]            # outputs wait until nothing else is ready: one block of them
     n = len(code)
     defn: dict[int, int] = {}          # register -> instruction defining its current value
     deps: list[tuple] = []
@@ -434,7 +434,7 @@ def _grouped(code: list, base: int) -> tuple[list, int]:
     order, runs, cur = [], [], None
     while len(order) < n:
         if not ready.get(cur):
-            cur = max((k for k, v in ready.items() if v), key=lambda k: (len(ready[k]), -k))
+            cur = max((k for k, v in ready.items() if v), key=lambda k: (k != out_op, len(ready[k]), -k))
             runs.append(len(order))
         i = heapq.heappop(ready[cur])
         order.append(i)
