@@ -336,9 +336,10 @@ class Program:
     """An SX Function as vm.c's program: ``prog`` (a ctypes record the interpreter reads; this
     object keeps its arrays alive) and ``nreg``, the work memory it needs (doubles)."""
 
-    def __init__(self, f=None, arrays=None):
+    def __init__(self, f=None, arrays=None, grouped: bool = True):
         if arrays is None:
-            arrays = (*_kept(f, "prog", lambda: _program_arrays(f), _pack_prog, _unpack_prog), f.n_in(), f.n_out())
+            arrays = (*_kept(f, "prog" if grouped else "prog1", lambda: _program_arrays(f, grouped), _pack_prog,
+                             _unpack_prog), f.n_in(), f.n_out())
         code, consts, in_off, in_nnz, nreg, self.n_in, self.n_out = arrays
         self.ins, self.consts, self.in_off, self.in_nnz, self.nreg = code, consts, in_off, in_nnz, nreg
         self.prog = _Prog(self.ins.ctypes.data_as(ctypes.POINTER(ctypes.c_int)), self.ins.size // 4,
@@ -364,8 +365,9 @@ def _unpack_prog(data: bytes):
             int(extra["nreg"]))
 
 
-def _program_arrays(f):
-    """(instructions (4 ints each), constants, inputs' offsets, inputs' sizes, registers)."""
+def _program_arrays(f, grouped: bool = True):
+    """(instructions (4 ints each), constants, inputs' offsets, inputs' sizes, registers);
+    ``grouped``: rescheduled into blocks (``_grouped``), for Functions evaluated many times."""
     ins = instructions(f)
     nnz = [f.nnz_in(i) for i in range(f.n_in())]
     off = np.cumsum([0, *nnz])
@@ -388,7 +390,7 @@ def _program_arrays(f):
         else:
             code.append((_VM_CODE[op], base + o[0], where[a[0]], where[a[1]] if len(a) > 1 else 0))
             where[o[0]] = base + o[0]
-    code, nwork = _grouped(code, base)
+    code, nwork = _grouped(code, base) if grouped else (code, f.sz_w())
     code.append((_VM_CODE["END"], 0, 0, 0))
     return (np.ascontiguousarray(np.array(code, dtype=np.intc).ravel()), np.array(list(consts.values()), float),
             np.ascontiguousarray(off[:-1], dtype=np.int64), np.ascontiguousarray(nnz, dtype=np.int64),
@@ -396,88 +398,98 @@ def _program_arrays(f):
 
 
 # operations vm.c runs in blocks: one dispatch for a run of the same operation
+_OUT = _VM_CODE["OUT"]
 _BLOCKED = {_VM_CODE[n]: k for k, n in enumerate(("OUT", "ADD", "SUB", "MUL", "DIV"))}
 _BLOCK = len(VM_OPS)       # vm.c's V_BLOCK: (V_BLOCK, count, operation, 0), then count records
-_UNARY_CODES = frozenset(_VM_CODE[n] for n in UNARY)
+_ONE_OPERAND = frozenset(_VM_CODE[n] for n in UNARY) | {_OUT}
 
 
 def _grouped(code: list, base: int) -> tuple[list, int]:
     """``code`` (registers from ``base`` on written, CasADi's slot reuse) rescheduled so that
-    operations of one kind run in blocks, and its registers allocated again (fewest live).
+    operations of one kind run in blocks, and its registers allocated again (few live).
 
     The interpreter's cost was its dispatch (~3 ns an operation, one unpredictable indirect jump
-    each); a block of k operations is one dispatch and a counted loop.  Every operation keeps
-    its operands (the same values: the order only follows the data), so the bits are those of
-    CasADi's order (tests/test_sxcode.py).  Returns (instructions with block headers, work
-    registers used)."""
-    import heapq
-
-    out_op = _VM_CODE["OUT"]            # outputs wait until nothing else is ready: one block of them
+    each); a block of k operations is one dispatch and a counted loop.  The schedule: of the
+    operations whose operands are computed, run every one of a kind (and those it makes ready),
+    the kind with the most ready first, outputs last.  Every operation keeps its operands (the
+    same values: the order only follows the data), so the bits are those of CasADi's order
+    (tests/test_sxcode.py).  Returns (instructions with block headers, work registers used)."""
     n = len(code)
-    defn: dict[int, int] = {}          # register -> instruction defining its current value
-    deps: list[tuple] = []
+    defn: dict[int, int] = {}           # register -> instruction defining its current value
+    da, db = [0] * n, [None] * n        # operands: an instruction's index, or ~register (input, constant)
     users: list[list] = [[] for _ in range(n)]
     indeg = [0] * n
+    ops = [c[0] for c in code]
     for i, (op, o, a, b) in enumerate(code):
-        srcs = (a,) if op == out_op or op in _UNARY_CODES else (a, b)
-        d = tuple(defn.get(r, -1 - r) for r in srcs)     # -1 - r: an input or a constant register
-        deps.append(d)
-        for j in set(x for x in d if x >= 0):
-            users[j].append(i)
+        x = da[i] = defn.get(a, ~a)
+        if x >= 0:
+            users[x].append(i)
             indeg[i] += 1
-        if op != out_op:
+        if op not in _ONE_OPERAND:
+            y = db[i] = defn.get(b, ~b)
+            if y >= 0 and y != x:
+                users[y].append(i)
+                indeg[i] += 1
+        if op != _OUT:
             defn[o] = i
     ready: dict[int, list] = {}
     for i in range(n):
         if not indeg[i]:
-            ready.setdefault(code[i][0], []).append(i)
-    order, runs, cur = [], [], None
+            ready.setdefault(ops[i], []).append(i)
+    order, runs, cur, stack = [], [], None, []
     while len(order) < n:
-        if not ready.get(cur):
-            cur = max((k for k, v in ready.items() if v), key=lambda k: (k != out_op, len(ready[k]), -k))
+        if not stack:
+            cur = max((k for k, v in ready.items() if v), key=lambda k: (k != _OUT, len(ready[k]), -k))
             runs.append(len(order))
-        i = heapq.heappop(ready[cur])
+            stack = ready[cur]
+        i = stack.pop()
         order.append(i)
         for u in users[i]:
             indeg[u] -= 1
             if not indeg[u]:
-                heapq.heappush(ready.setdefault(code[u][0], []), u)
-    last = {}                           # value -> position of its last reader in the new order
+                ready[ops[u]].append(u) if ops[u] in ready else ready.setdefault(ops[u], [u])
+    last = [-1] * n                     # an instruction's value -> position of its last reader
     for pos, i in enumerate(order):
-        for d in deps[i]:
-            last[d] = pos
-    reg, free, top, new = {}, [], base, []
+        if da[i] >= 0:
+            last[da[i]] = pos
+        if db[i] is not None and db[i] >= 0:
+            last[db[i]] = pos
+    reg, free, top, new = [0] * n, [], base, []
     for pos, i in enumerate(order):
         op, o, a, b = code[i]
-        src = [reg[d] if d >= 0 else -1 - d for d in deps[i]]
-        for d in deps[i]:
-            if d >= 0 and last[d] == pos and d in reg:
-                heapq.heappush(free, reg.pop(d))
-        if op == out_op:
-            new.append((op, o, src[0], b))
+        x, y = da[i], db[i]
+        ra = reg[x] if x >= 0 else ~x
+        rb = (reg[y] if y >= 0 else ~y) if y is not None else 0
+        if x >= 0 and last[x] == pos:
+            free.append(ra)
+        if y is not None and y >= 0 and y != x and last[y] == pos:
+            free.append(rb)
+        if op == _OUT:
+            new.append((op, o, ra, b))
             continue
         if free:
-            r = heapq.heappop(free)
+            r = free.pop()
         else:
             r, top = top, top + 1
-        if i in last:
-            reg[i] = r
-        else:                           # never read: its register is free again at once
-            heapq.heappush(free, r)
-        new.append((op, r, src[0], src[1] if len(src) > 1 else 0))
+        reg[i] = r
+        if last[i] < 0:                 # never read: its register is free again at once
+            free.append(r)
+        new.append((op, r, ra, rb))
     out, bounds = [], runs + [n]
     for s, e in zip(bounds, bounds[1:]):
         op = new[s][0]
         if e - s > 1 and op in _BLOCKED:
             out.append((_BLOCK, e - s, _BLOCKED[op], 0))
-            out += [(0, *ins[1:]) for ins in new[s:e]]
+            out += [(0, r, x, y) for _, r, x, y in new[s:e]]
         else:
             out += new[s:e]
     return out, top - base
 
 
-def program(f) -> Program:
-    return Program(f)
+def program(f, grouped: bool = True) -> Program:
+    """``f`` as an interpreter program; ``grouped = False`` for a few evaluations (a recorder on
+    the output grid: rescheduling costs ~3.5 us an operation, what ~2000 evaluations save)."""
+    return Program(f, grouped=grouped)
 
 
 def c_unit(funcs, unit: str = "mechdsl_model.c") -> str:

@@ -168,7 +168,7 @@ class Mapped:
             self.rt, self.prog, self._loop = rt, None, loop
             self.fun = loop.funs[name]
         else:
-            self.rt, self.prog = rt, sxcode.program(f)
+            self.rt, self.prog = rt, sxcode.program(f, grouped=False)     # evaluated on the output grid only
             self.fun = program_fun(rt, self.prog)
         self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
         self.nout = f.nnz_out(0)
