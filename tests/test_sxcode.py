@@ -198,3 +198,29 @@ def test_c_size_and_chunks_grow_linearly_with_the_operations():
         assert max(b.count(";") for b in bodies) <= sxcode.CHUNK + 10
         per_op.append(len(src) / f.n_instructions())
     assert max(per_op) <= 1.25 * min(per_op), per_op
+
+
+@needs_cc
+def test_an_operation_repeated_on_the_same_values_is_computed_once(tmp_path, monkeypatch):
+    """x*y written twice is two instructions of CasADi's Function and one of the rescheduled
+    program (the same IEEE operation on the same values: the same bits), with the outputs of
+    CasADi's generated C."""
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    a, b = x * y, x * y                        # two nodes: CasADi keeps both
+    f = ca.Function("twice", [x, y], [ca.vertcat(a + 1, b - 2, ca.sin(a) / ca.sin(b))])
+    assert [op for op, *_ in sxcode.instructions(f)].count("MUL") == 2
+    code = sxcode.program(f).ins.reshape(-1)
+    ungrouped = sxcode.program(f, grouped=False).ins.reshape(-1)
+    mul = sxcode._VM_CODE["MUL"]
+    assert sum(1 for k in range(0, len(ungrouped), 4) if ungrouped[k] == mul) == 2
+    # the grouped program: MUL singles (a block needs two of a kind in a row)
+    singles = [k for k in range(0, len(code), 4) if code[k] == mul]
+    assert len(singles) == 1 and not any(kind == sxcode._BLOCKED[mul] for kind, _ in blocks(code))
+    loaded, note, path = compile_functions([f], jacobian=False, extra_flags=["-O1"])
+    assert loaded is not None, note
+    theirs = getattr(ctypes.CDLL(path), "twice")
+    vm = interpreter(f)
+    for xv, yv in ((0.3, -1.7), (2.0, 1e-300), (-0.0, 3.0)):
+        r = call(theirs, f, [xv], [yv])[0]
+        assert same_bits(r, interpret(vm, f, [xv], [yv])[0]), (xv, yv)
