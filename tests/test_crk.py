@@ -218,6 +218,36 @@ def test_engines_give_the_same_bits_and_the_size_decides(monkeypatch):
 
 
 @pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
+def test_the_stiffness_test_of_an_interpreted_model_runs_its_program_with_the_same_bits(monkeypatch):
+    """auto's stiffness test (choose.numeric_jacobian) evaluates the ode of a model the loop
+    interprets by the interpreter program its run uses (crk.interpreted_rows; the 200-link
+    chain's 801 evaluations): the Jacobian has the bits of CasADi's virtual machine, so the
+    choice and its numbers are the same."""
+    from mechdsl.eom.codegen import casadi_functions
+    from mechdsl.simulation import choose
+
+    e = chain(3)
+    funcs = casadi_functions(e, names=("ode",), sx=True)      # the Function the loop runs (crk.loop_ode)
+    f = funcs["ode"]
+    assert crk.interpreted_rows(funcs) is None                 # compiled: CasADi's map, nothing built
+    monkeypatch.setattr(crk, "COMPILE_OPS", 0)
+    rows = crk.interpreted_rows(funcs)
+    assert rows is not None
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        x0 = rng.normal(size=f.nnz_in(1))
+        pv = rng.uniform(0.5, 2.0, size=f.nnz_in(3))
+        u = np.zeros(f.nnz_in(2))
+        a = choose.numeric_jacobian(f, 0.3, x0, u, pv)
+        b = choose.numeric_jacobian(f, 0.3, x0, u, pv, rows)
+        assert np.abs(a).max() > 0 and np.array_equal(a.view(np.int64), b.view(np.int64))
+        monkeypatch.setattr(choose, "_CHOICES", {})
+        by_vm = choose.choose_method(e, funcs, x0, pv, 0.0, 5.0, 1e-8, u=u)
+        monkeypatch.setattr(choose, "_CHOICES", {})
+        assert choose.choose_method(e, funcs, x0, pv, 0.0, 5.0, 1e-8, u=u, rows=rows) == by_vm
+
+
+@pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
 def test_the_estimates_companion_keeps_the_interpreted_loop(monkeypatch):
     """A run whose model is interpreted in the stepping loop (above COMPILE_OPS) has its error
     estimate's companion in that loop too (issue 24: it ran as scipy's DOP853 stepped in Python,

@@ -66,6 +66,28 @@ def same_bits(a, b):
                                                                        np.where(np.isnan(b), 0, b).view(np.int64)))
 
 
+def interpreter(f):
+    """(vm_eval, vm_init, the Fun record) of ``f``'s interpreter program in the runtime."""
+    loop, _ = crk.build_loop({f.name(): f}, "t", "interpreted")
+    prog = loop.funs[f.name()]
+    vm_eval = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                               ctypes.c_void_p)(prog.eval)
+    vm_init = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(prog.init)
+    return vm_eval, vm_init, prog, loop
+
+
+def interpret(vm, f, *args):
+    vm_eval, vm_init, prog, _ = vm
+    w = np.zeros(prog.sz_w)
+    vm_init(prog.ctx, w.ctypes.data)
+    outs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
+    ins = [np.ascontiguousarray(a, float) for a in args]
+    arg = (ctypes.c_void_p * len(ins))(*[v.ctypes.data for v in ins])
+    res = (ctypes.c_void_p * len(outs))(*[o.ctypes.data for o in outs])
+    assert vm_eval(prog.ctx, arg, res, None, w.ctypes.data) == 0
+    return outs
+
+
 @needs_cc
 def test_chunked_c_and_the_interpreter_give_the_bits_of_casadis_generated_code(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
@@ -77,23 +99,13 @@ def test_chunked_c_and_the_interpreter_give_the_bits_of_casadis_generated_code(t
     assert loaded is not None, note
     lib = ctypes.CDLL(path)
     theirs, mine = lib.every, lib.mine
-    loop, _ = crk.build_loop({"every": f}, "t", "interpreted")
-    prog = loop.funs["every"]
-    vm_eval = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
-                               ctypes.c_void_p)(prog.eval)
-    vm_init = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)(prog.init)
+    vm = interpreter(f)
     rng = np.random.default_rng(5)
     n = 0
     for x, p in points(rng, 60):
         a = call(theirs, f, x, p)
         b = call(mine, f, x, p)
-        w = np.zeros(prog.sz_w)
-        vm_init(prog.ctx, w.ctypes.data)
-        outs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
-        ins = [np.ascontiguousarray(x, float), np.ascontiguousarray(p, float)]
-        arg = (ctypes.c_void_p * 2)(*[v.ctypes.data for v in ins])
-        res = (ctypes.c_void_p * 2)(*[o.ctypes.data for o in outs])
-        assert vm_eval(prog.ctx, arg, res, None, w.ctypes.data) == 0
+        outs = interpret(vm, f, x, p)
         for i in range(f.n_out()):
             assert same_bits(a[i], b[i]), (x, p, i, a[i], b[i])
             assert same_bits(a[i], outs[i]), (x, p, i, a[i], outs[i])
@@ -102,6 +114,48 @@ def test_chunked_c_and_the_interpreter_give_the_bits_of_casadis_generated_code(t
         assert np.allclose(a[0][ok], ref[ok], rtol=1e-13, atol=1e-300)
         n += ok.sum()
     assert n > 1000
+
+
+def blocks(code) -> list[tuple[int, int]]:
+    """(kind, count) of the blocks of an interpreter program (vm.c's V_BLOCK headers)."""
+    out, k = [], 0
+    while k < len(code):
+        if code[k] == sxcode._BLOCK:
+            out.append((int(code[k + 2]), int(code[k + 1])))
+            k += 4 * int(code[k + 1])
+        k += 4
+    return out
+
+
+@needs_cc
+def test_the_rescheduled_program_of_a_chain_gives_casadis_bits(tmp_path, monkeypatch):
+    """The interpreter runs a program rescheduled into blocks of one operation and with its
+    registers allocated again (sxcode._grouped): an 8-link chain's ode (sin, cos, x*x, -x, /,
+    outputs) gives the bits of CasADi's generated C at random states, and most of its
+    operations run in blocks."""
+    import mechdsl
+    from conftest import MODELS
+    from mechdsl.eom.codegen import casadi_functions
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    text = (MODELS / "nlink_pendulum.mech").read_text()
+    m = mechdsl.loads(re.sub(r"parameter Integer N = \d+", "parameter Integer N = 8", text))
+    f = casadi_functions(m.eom, names=("ode",))["ode"]
+    loaded, note, path = compile_functions([f], jacobian=False, extra_flags=["-O1"])
+    assert loaded is not None, note
+    theirs = getattr(ctypes.CDLL(path), f.name())
+    code = sxcode.program(f).ins
+    found = blocks(code)
+    in_blocks = sum(c for _, c in found)
+    assert len(found) > 10 and in_blocks > 0.5 * f.n_instructions(), (len(found), in_blocks)
+    vm = interpreter(f)
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        args = [rng.normal(size=f.nnz_in(i)) * 2 for i in range(f.n_in())]
+        a, b = call(theirs, f, *args), interpret(vm, f, *args)
+        for i in range(f.n_out()):
+            assert same_bits(a[i], b[i]), (i, a[i], b[i])
+        assert np.allclose(np.array(f.call(args)[0]).ravel(), a[0], rtol=1e-12, atol=1e-12)
 
 
 @needs_cc
@@ -144,3 +198,29 @@ def test_c_size_and_chunks_grow_linearly_with_the_operations():
         assert max(b.count(";") for b in bodies) <= sxcode.CHUNK + 10
         per_op.append(len(src) / f.n_instructions())
     assert max(per_op) <= 1.25 * min(per_op), per_op
+
+
+@needs_cc
+def test_an_operation_repeated_on_the_same_values_is_computed_once(tmp_path, monkeypatch):
+    """x*y written twice is two instructions of CasADi's Function and one of the rescheduled
+    program (the same IEEE operation on the same values: the same bits), with the outputs of
+    CasADi's generated C."""
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    a, b = x * y, x * y                        # two nodes: CasADi keeps both
+    f = ca.Function("twice", [x, y], [ca.vertcat(a + 1, b - 2, ca.sin(a) / ca.sin(b))])
+    assert [op for op, *_ in sxcode.instructions(f)].count("MUL") == 2
+    code = sxcode.program(f).ins.reshape(-1)
+    ungrouped = sxcode.program(f, grouped=False).ins.reshape(-1)
+    mul = sxcode._VM_CODE["MUL"]
+    assert sum(1 for k in range(0, len(ungrouped), 4) if ungrouped[k] == mul) == 2
+    # the grouped program: MUL singles (a block needs two of a kind in a row)
+    singles = [k for k in range(0, len(code), 4) if code[k] == mul]
+    assert len(singles) == 1 and not any(kind == sxcode._BLOCKED[mul] for kind, _ in blocks(code))
+    loaded, note, path = compile_functions([f], jacobian=False, extra_flags=["-O1"])
+    assert loaded is not None, note
+    theirs = getattr(ctypes.CDLL(path), "twice")
+    vm = interpreter(f)
+    for xv, yv in ((0.3, -1.7), (2.0, 1e-300), (-0.0, 3.0)):
+        r = call(theirs, f, [xv], [yv])[0]
+        assert same_bits(r, interpret(vm, f, [xv], [yv])[0]), (xv, yv)

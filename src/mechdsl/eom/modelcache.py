@@ -334,8 +334,24 @@ def pack_eom(eom) -> dict | None:
             return None
         else:
             plain[f.name] = v
-    functions = {k: f.serialize() for k, f in _functions(eom).items()}
+    functions = _texts(_functions(eom))
     return {"plain": plain, "sx": sx, "stream": ser.encode(), "pending": pending, "functions": functions}
+
+
+def _texts(funcs: dict) -> dict:
+    """key -> serialization of the Functions ``funcs`` (key -> Function): each Function once, and
+    shared with mechdsl.eom.sxcode's keys (the run's interpreter program, the compiled code),
+    which serialize the same Functions (~50 ms for the 200-link chain's ode)."""
+    from . import sxcode
+
+    texts: dict = {}
+    out = {}
+    for k, f in funcs.items():
+        t = texts.get(id(f))
+        if t is None:
+            t = texts[id(f)] = sxcode.text_of(f)
+        out[k] = t
+    return out
 
 
 def unpack_eom(data: dict, model):

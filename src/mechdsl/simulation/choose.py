@@ -25,14 +25,15 @@ _CHOICES: dict = {}
 _CHOICES_MAX = 64
 
 
-def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, dict]:
+def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U, rows=None) -> tuple[str, str, dict]:
     """method=auto: stiffness from the Jacobian's eigenvalues at the start.
 
     Rules (docs/internals/numerics.md): stiff (a decay rate much faster than the slowest
     time scale and than the horizon) -> cvodes-bdf; otherwise erk, which the ODE back end
     replaces by the stepping loop where it can (backends/crk.auto_choice).  The answer is kept
     for the same right-hand side, start, parameters and span (a repeated run decides nothing
-    again); it does not depend on rtol.
+    again); it does not depend on rtol.  ``rows``: evaluates ``funcs["ode"]`` at many points
+    with the same bits (see ``numeric_jacobian``), or None.
     """
     u = default_inputs(eom, u)
     if getattr(funcs, "tables_only", False):      # tables: the model's own ode at the inputs' values at t0
@@ -43,18 +44,18 @@ def choose_method(eom, funcs, x0, pv, t0, t1, rtol, u=NO_U) -> tuple[str, str, d
     hit = _CHOICES.get(key)
     if hit is not None and hit[0] is ode:
         return hit[1][0], hit[1][1], dict(hit[1][2])
-    out = _choose(ode, x0, pv, t0, t1, u)
+    out = _choose(ode, x0, pv, t0, t1, u, rows)
     if len(_CHOICES) >= _CHOICES_MAX:
         _CHOICES.pop(next(iter(_CHOICES)))
     _CHOICES[key] = (ode, out)       # the Function kept: its id stays unique
     return out[0], out[1], dict(out[2])
 
 
-def _choose(ode, x0, pv, t0, t1, u) -> tuple[str, str, dict]:
+def _choose(ode, x0, pv, t0, t1, u, rows=None) -> tuple[str, str, dict]:
     span = t1 - t0
     info: dict[str, Any] = {}
     try:
-        J = numeric_jacobian(ode, t0, x0, u, pv)
+        J = numeric_jacobian(ode, t0, x0, u, pv, rows)
         lam = jacobian_eigenvalues(J) if np.isfinite(J).all() else None
     except Exception:  # noqa: BLE001
         lam = None
@@ -77,12 +78,15 @@ def _choose(ode, x0, pv, t0, t1, u) -> tuple[str, str, dict]:
             f"benchmarks/integrators.py", info)
 
 
-def numeric_jacobian(ode, t0, x0, u, pv) -> np.ndarray:
+def numeric_jacobian(ode, t0, x0, u, pv, rows=None) -> np.ndarray:
     """d xdot / dx at (t0, x0) by central differences of ``ode`` (one mapped call of 4n
     evaluations, steps cbrt(eps) max(1, |x_j|)), not from a symbolic Jacobian: the dense
     Jacobian of the 200-link chain took 12-16 s to build and gcc 30 s, for a stiffness test
     that needs its eigenvalues to a few digits.  Where xdot = (qd, ...) (every model's ode) the
-    rows of qd are set exactly ([0, I]), so ``jacobian_eigenvalues`` can halve its work."""
+    rows of qd are set exactly ([0, I]), so ``jacobian_eigenvalues`` can halve its work.
+    ``rows(t0, X, u, pv)``: the values (nx, k) at the columns of X by another evaluator of
+    ``ode`` with the same bits (a large model's interpreter program, which its run then uses:
+    3-6x cheaper than CasADi's virtual machine), or None."""
     x0 = np.asarray(x0, float)
     nx = x0.size
     h = np.cbrt(np.finfo(float).eps) * np.maximum(1.0, np.abs(x0))
@@ -91,9 +95,12 @@ def numeric_jacobian(ode, t0, x0, u, pv) -> np.ndarray:
     X[idx, 1 + idx] += h
     X[idx, 1 + nx + idx] -= h
     k = X.shape[1]
-    with _MAPPED_LOCK:
-        F = _mapped(ode, k)(np.full((1, k), float(t0)), X, np.repeat(np.reshape(u, (-1, 1)), k, axis=1),
-                            np.repeat(np.reshape(pv, (-1, 1)), k, axis=1))
+    if rows is not None:
+        F = rows(float(t0), X, np.asarray(u, float), np.asarray(pv, float))
+    else:
+        with _MAPPED_LOCK:
+            F = _mapped(ode, k)(np.full((1, k), float(t0)), X, np.repeat(np.reshape(u, (-1, 1)), k, axis=1),
+                                np.repeat(np.reshape(pv, (-1, 1)), k, axis=1))
     F = np.reshape(F, (nx, k), order="F") if F.ndim == 1 else F
     J = (F[:, 1:1 + nx] - F[:, 1 + nx:]) / (2 * h)
     n = nx // 2

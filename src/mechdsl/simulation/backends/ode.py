@@ -138,7 +138,7 @@ class OdeSetup:
             return cls(eom, s, drive, grid, None, None, vm, post, meta, None, out_names)
         auto_compiled = None
         if method == "auto":
-            method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv)
+            method, reason, info = choose_method(eom, vm, xs, pv, t0, t1, rtol, u=uv, rows=crk.interpreted_rows(vm))
             meta["auto"] = info
             if method == "erk" and compiled is not False and functions is None:
                 method, reason, auto_compiled = _auto_compile(eom, vm, xs, pv, t0, t1, rtol, uv, reason, meta)

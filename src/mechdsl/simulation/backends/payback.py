@@ -3,8 +3,9 @@
 The stepping loop runs a model of more than ``crk.COMPILE_OPS`` operations in the interpreter
 (vm.c): its compile costs seconds of gcc (about 0.13 ms an operation at -O1, linear in the
 size: docs/performance.md, item 3), which a first run of a few seconds would not earn back.
-A model that keeps running interpreted pays about 2.4 ns an operation and evaluation more
-than compiled code (2.8 against 0.4 ns, the 200-link chain), so its compile has paid once it
+A model that keeps running interpreted pays about 1.2 ns an operation and evaluation more
+than compiled code (1.6 against 0.4 ns, the 200-link chain, with the interpreter's blocks of
+sxcode._grouped; 2.8 ns before them), so its compile has paid once it
 has been evaluated PAYBACK_EVALS times interpreted -- whatever its size, both costs being
 linear in it.  The rule is the rent-or-buy one: interpret until the interpretation has cost
 what the compile costs, then compile; the total is then at most twice the best choice made
@@ -27,7 +28,7 @@ from __future__ import annotations
 from ...eom import cachefiles, sxcode
 from . import crk
 
-PAYBACK_EVALS = 50_000      # interpreted evaluations after which the compile has paid (see above)
+PAYBACK_EVALS = 100_000     # interpreted evaluations after which the compile has paid (see above)
 
 _COUNTS: dict = {}          # key -> evaluations recorded (this process; the disk holds the same)
 

@@ -27,7 +27,9 @@ enum { V_END, V_OUT, V_ASSIGN, V_ADD, V_SUB, V_MUL, V_DIV, V_NEG, V_EXP, V_LOG, 
        V_TWICE, V_SIN, V_COS, V_TAN, V_ASIN, V_ACOS, V_ATAN, V_LT, V_LE, V_EQ, V_NE, V_NOT, V_AND, V_OR,
        V_FLOOR, V_CEIL, V_FMOD, V_FABS, V_SIGN, V_COPYSIGN, V_IF_ELSE_ZERO, V_ERF, V_FMIN, V_FMAX, V_INV,
        V_SINH, V_COSH, V_TANH, V_ASINH, V_ACOSH, V_ATANH, V_ATAN2, V_LOG1P, V_EXPM1, V_HYPOT, V_REMAINDER,
-       V_NOPS };
+       V_BLOCK, V_NOPS };
+/* a block's operations: the order of mechdsl.eom.sxcode._BLOCKED */
+enum { B_OUT, B_ADD, B_SUB, B_MUL, B_DIV };
 
 static double sign_of(double x) { return x < 0 ? -1. : x > 0 ? 1. : x; }
 /* fmin, fmax, hypot are commutative to gcc, which would swap their operands; on signed zeros
@@ -69,7 +71,8 @@ int vm_eval(const void *ctx, const double **arg, double **res, cint *iw, double 
     &&L_SQRT, &&L_SQ, &&L_TWICE, &&L_SIN, &&L_COS, &&L_TAN, &&L_ASIN, &&L_ACOS, &&L_ATAN, &&L_LT, &&L_LE,
     &&L_EQ, &&L_NE, &&L_NOT, &&L_AND, &&L_OR, &&L_FLOOR, &&L_CEIL, &&L_FMOD, &&L_FABS, &&L_SIGN,
     &&L_COPYSIGN, &&L_IF_ELSE_ZERO, &&L_ERF, &&L_FMIN, &&L_FMAX, &&L_INV, &&L_SINH, &&L_COSH, &&L_TANH,
-    &&L_ASINH, &&L_ACOSH, &&L_ATANH, &&L_ATAN2, &&L_LOG1P, &&L_EXPM1, &&L_HYPOT, &&L_REMAINDER};
+    &&L_ASINH, &&L_ACOSH, &&L_ATANH, &&L_ATAN2, &&L_LOG1P, &&L_EXPM1, &&L_HYPOT, &&L_REMAINDER,
+    &&L_BLOCK};
 #define CASE(name) L_##name:
 #define NEXT p += 4; goto *T[p[0]];
   goto *T[p[0]];
@@ -126,6 +129,20 @@ int vm_eval(const void *ctx, const double **arg, double **res, cint *iw, double 
   CASE(EXPM1) O = expm1(A); NEXT
   CASE(HYPOT) O = vm_hypot(A, B); NEXT
   CASE(REMAINDER) O = remainder(A, B); NEXT
+  CASE(BLOCK) {
+    /* (V_BLOCK, count, operation, 0), then count records (0, out, a, b): one dispatch for a run
+       of the same operation, in order (a record may read an earlier one's result) */
+    const int *q = p + 4, *e = q + 4 * (cint)p[1];
+    switch (p[2]) {
+    case B_OUT: for (; q < e; q += 4) { double *r = res[q[3]]; if (r) r[q[1]] = w[q[2]]; } break;
+    case B_ADD: for (; q < e; q += 4) w[q[1]] = w[q[2]] + w[q[3]]; break;
+    case B_SUB: for (; q < e; q += 4) w[q[1]] = w[q[2]] - w[q[3]]; break;
+    case B_MUL: for (; q < e; q += 4) w[q[1]] = w[q[2]] * w[q[3]]; break;
+    case B_DIV: for (; q < e; q += 4) w[q[1]] = w[q[2]] / w[q[3]]; break;
+    default: return 1;
+    }
+    p = e - 4;
+  } NEXT
   CASE(END) return 0;
 #if !defined(__GNUC__)
   default: return 1;
