@@ -194,6 +194,7 @@ def test_no_degree_of_freedom_and_moving_constraints():
         equilibria(moving)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_free_dumbbell_falls_with_g():
     """Two unit masses joined by a rigid rod of length 1, free in the vertical plane: the
     translations are symmetry directions of the constrained equations, the reference motion

@@ -58,6 +58,7 @@ def test_heavy_top_cyclic_momenta():
         assert np.ptp(v) < 1e-8 * max(1.0, np.max(np.abs(v))), name
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_heavy_top_texts_are_readable():
     fis = {fi.name: fi for fi in first_integrals(am.heavy_top())}
     assert fis["p_psi"].expression == "I3*(der(psi) + der(phi)*cos(theta))"

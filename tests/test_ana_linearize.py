@@ -29,6 +29,7 @@ def test_double_pendulum_frequencies():
     assert np.sort(np.abs(md.eigenvalues.imag)) == pytest.approx(np.repeat(np.sqrt(w2), 2), rel=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_symbolic_is_exact_and_agrees():
     eom = am.double_pendulum()
     lin = linearize(eom)
@@ -155,6 +156,7 @@ def test_accelerated_reference_linearization():
     assert lin.modes().frequencies == pytest.approx([0.0, math.sqrt(50.0)], abs=1e-12, rel=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_outputs_json_csv_plot(tmp_path):
     lin = linearize(am.double_pendulum())
     md = lin.modes()

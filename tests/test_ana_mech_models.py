@@ -40,6 +40,7 @@ end DPEquations;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("model", ["DPComponents", "DPEquations"])
 def test_point_mass_double_pendulum_from_text(model):
     m = mechdsl.loads(POINT_MASS_DP, model=model)
@@ -142,6 +143,7 @@ def test_kepler_model_scene():
     assert np.ptp(sv["p_(fs.x+fp.x)"]) < 1e-14
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_equilibrium_and_linearize(tmp_path, capsys):
     out = tmp_path / "eq.json"
     assert main(["equilibrium", str(MODELS / "bead_on_hoop.mech"), "--model", "BeadOnHoopLagrange",

@@ -55,6 +55,7 @@ def check_bounded_vs_drift(e):
     assert rk_end >= 5 * sv_all                  # and ends far above Verlet's bounded error
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_kepler_verlet_bounded_rk4_drifts_100_orbits():
     e = kepler_energy_errors(100)
     check_bounded_vs_drift(e)
@@ -87,6 +88,8 @@ def order(eom, method, T, dts):
     return [math.log2(errs[i] / errs[i + 1]) for i in range(len(errs) - 1)], errs
 
 
+# CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow_cases('gauss-legendre-4', 'stormer-verlet-2')
 @pytest.mark.parametrize("method,expected", [("stormer-verlet", 2), ("implicit-midpoint", 2),
                                              ("gauss-legendre", 4), ("rk4", 4)])
 def test_orders_on_nonseparable_double_pendulum(method, expected):
@@ -100,6 +103,7 @@ def test_order_explicit_verlet_on_pendulum():
     assert all(abs(r - 2) < 0.1 for r in rates), errs
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_nonseparable_energy_bounded():
     eom = am.double_pendulum(q0=(0.6, 0.3))
     T = 60.0
@@ -115,6 +119,7 @@ def test_nonseparable_energy_bounded():
     assert errs["rk4"][2] >= 3 * errs["rk4"][0]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_top_momenta_conserved_and_matches_reference():
     eom = am.heavy_top()
     T = 1.0

@@ -81,6 +81,7 @@ def test_corpus_is_large_enough():
     assert set(EXPECT) == {p.name for p in CORPUS.glob("*.mech")}, "EXPECT.txt names a file that does not exist"
 
 
+@pytest.mark.slow_cases('E303_nested_loops_too_long.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name", sorted(EXPECT))
 def test_corpus_file(name, capsys):
     path = CORPUS / name
@@ -207,6 +208,7 @@ def test_several_files_report_each(capsys):
 _SLOW = pytest.mark.slow
 
 
+@pytest.mark.slow_cases('E604_stop_time_string.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name", ["E107_missing_semicolon.mech", pytest.param("E201_several_undefined.mech", marks=_SLOW),
                                   "E002_non_utf8.mech",
                                   pytest.param("E104_nested_parentheses.mech", marks=_SLOW),

@@ -46,6 +46,7 @@ def test_bricard_has_one_dof_and_one_redundant_constraint():
     assert len(rep.redundant_names) == 1
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_bricard_simulates_on_all_constraints_with_constant_energy():
     r = simulate_dae(bricard_eom(), 2.0, rtol=1e-10, atol=1e-10, points=41, reactions=True)
     assert r.success, r.message

@@ -35,6 +35,7 @@ def nan_pendulum():
                            q0=[1.0, 0.0], qd0=[0.0, 0.0], constraint_names=["rod"])
 
 
+@pytest.mark.slow_cases('partitioning')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", ["projection", "baumgarte", "partitioning",
                                          pytest.param("ggl", marks=pytest.mark.slow)])
 def test_nonfinite_equations_fail_with_time_and_coordinate(formulation):

@@ -142,11 +142,13 @@ def front_end(data: str | bytes) -> None:
         check_diagnostics(e, text)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_shipped_models_pass():
     for text in MODELS:
         front_end(text)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @FUZZ
 @given(mutated_model())
 def test_mutated_models(text):
@@ -165,6 +167,7 @@ def test_random_bytes(data):
     front_end(data)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @FUZZ
 @given(st.text(max_size=400))
 def test_random_text(text):

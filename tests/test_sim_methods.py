@@ -64,6 +64,7 @@ def test_auto_explains_its_choice():
     assert s.metadata["auto"]["stiffness_ratio"] > 1e3
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_stiff_model_bdf_needs_far_fewer_steps_than_explicit():
     e = stiff_oscillator()
     bdf = simulate(e, 2.0, method="cvodes-bdf", rtol=1e-6, atol=1e-8, points=11)

@@ -80,6 +80,7 @@ def test_table_dataframe_and_sampler(dp):
     assert len(long) == 5 * 5 and {"run", "time", "m", "l", "j1.phi", "success"} <= set(long.columns)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_processes_match_vectorized_bit_for_bit(dp):
     grid = {"j1.phi": [0.5, 1.5, 2.5], "j2.phi": [0.0, 1.0]}
     a = dp.sweep(starts=grid, t_end=1.0, points=11, progress=False)
@@ -89,6 +90,7 @@ def test_processes_match_vectorized_bit_for_bit(dp):
         np.testing.assert_array_equal(a[v].values, b[v].values)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_dask_local_cluster_matches(dp):
     import distributed  # noqa: F401 - the test extra installs it
     grid = {"j1.phi": [0.5, 2.5]}
@@ -132,6 +134,7 @@ def test_bad_input_is_a_clear_error(dp, tmp_path):
         dp.sweep(params={"m": [1, 2]}, t_end=1, scheduler="vectorised")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_integer_parameter_needs_processes():
     m = mechdsl.load(mechdsl.examples.path("nlink_pendulum"))
     with pytest.raises(UsageError, match="Integer/Boolean parameter"):
@@ -140,6 +143,7 @@ def test_integer_parameter_needs_processes():
     assert ds.attrs["scheduler"] == "processes" and ds.attrs["n_failed"] == 0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_streamed_file_equals_memory(dp, tmp_path):
     import xarray as xr
     import h5netcdf  # noqa: F401 - the test extra installs it
@@ -163,6 +167,7 @@ def test_model_pickles_with_parameters_and_scene():
     np.testing.assert_array_equal(m.simulate(points=5).q, m2.simulate(points=5).q)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_flip_map_example_small(tmp_path):
     from mechdsl.cli import main
 
@@ -225,6 +230,7 @@ def test_results_larger_than_the_memory_limit_must_stream(dp, tmp_path):
     ds.close()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_basic_cli_does_not_import_the_sweep_libraries():
     import subprocess
     import sys

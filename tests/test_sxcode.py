@@ -127,6 +127,7 @@ def test_unknown_instructions_are_refused():
     assert sxcode.supported(every_op())
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_c_size_and_chunks_grow_linearly_with_the_operations():
     """The C of an N-link chain's ode: bytes per operation flat from N = 10 to 80, every chunk
     at most CHUNK operations (gcc's time then grows linearly; benchmarks/codegen_scaling.py)."""
