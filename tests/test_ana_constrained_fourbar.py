@@ -154,6 +154,7 @@ def test_four_bar_multipliers_are_the_hinge_force(model):
         assert np.allclose(R @ lam, F, rtol=0, atol=1e-9 * np.linalg.norm(F))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_tables(tmp_path, capsys):
     import json
 

@@ -80,6 +80,7 @@ def test_equilibria_bottom_stable_top_unstable(pend):
     assert json.loads(json.dumps(d))["tangent_basis"] == [{"plane.x": 1.0, "plane.y": 0.0}]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_reduced_linear_model_frequency(pend):
     lin = pend.linearize()
     assert lin.kind == "equilibrium" and lin.constrained
@@ -139,6 +140,7 @@ def test_redundant_constraint(twice):
     assert lin.K.shape == (1, 1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_prints_lambda(capsys):
     from mechdsl.cli import main
 

@@ -88,6 +88,7 @@ def test_other_methods_refuse_constraints(pend):
             pend.simulate(1.0, method=method, dt=0.01)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_rattle_without_constraints_is_stormer_verlet():
     import ana_models as am
     from ana_models import simulate_symplectic

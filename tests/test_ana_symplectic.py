@@ -68,6 +68,7 @@ def test_kepler_verlet_bounded_rk4_drifts_1000_orbits():
     assert e["rk"][2] >= 50 * e["sv"][1]          # 1000 orbits: RK4 ends two orders above Verlet
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_free_two_body_momenta_and_energy():
     eom = am.two_body(e=0.6)
     P = 2 * math.pi / math.sqrt(1.5)          # a = 1, mu = G (m1 + m2) = 1.5
@@ -88,8 +89,7 @@ def order(eom, method, T, dts):
     return [math.log2(errs[i] / errs[i + 1]) for i in range(len(errs) - 1)], errs
 
 
-# CPU budget: the cheaper tests of this file stay in the default run
-@pytest.mark.slow_cases('gauss-legendre-4', 'stormer-verlet-2')
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method,expected", [("stormer-verlet", 2), ("implicit-midpoint", 2),
                                              ("gauss-legendre", 4), ("rk4", 4)])
 def test_orders_on_nonseparable_double_pendulum(method, expected):
@@ -142,6 +142,7 @@ def test_rheonomic_hoop_conserves_jacobi_not_energy():
     assert np.allclose(r["H"], r["jacobi"], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_forced_damped_pendulum_against_reference():
     eom = am.pendulum(c=0.3, A=0.8, w=2.5, q0=0.4)
     qref, qdref = reference(eom, 3.0)

@@ -63,6 +63,7 @@ def test_box_outline_is_its_size_and_sphere_radius_is_its_parameter():
     assert sphere.radius == pytest.approx(0.1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_plane_detection():
     assert detect_view(np.zeros((3, 3, 2)) + np.array([1.0, 2.0, 0.0])[None, :, None], [0, 1]) == "xy"
     X = np.random.default_rng(0).normal(size=(4, 3, 3))
@@ -77,6 +78,7 @@ def test_plane_detection():
 # ----------------------------------------------------------------------------- frames
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_frames_change_over_time_and_the_clock_runs():
     m = _load("pendulum")
     r = m.simulate(1.0, points=11)
@@ -114,6 +116,7 @@ def test_frame_times_and_speed():
         frame_times(0.0, 1e6, 30, 1.0)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_draw_returns_a_figure_at_the_start_and_at_a_time():
     from matplotlib.figure import Figure
 
@@ -143,7 +146,7 @@ def test_model_without_bodies_is_drawn_as_bars(tmp_path):
 _DRAWN_SLOWLY = {"nfourbar", "andrews", "nlink_pendulum", "arm7"}
 
 
-@pytest.mark.slow_cases('pendulum_wall')  # CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow_cases('falling_rod', 'pendulum_wall')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in _DRAWN_SLOWLY else p
                                   for p in MODELS], ids=[p.stem for p in MODELS])
 def test_every_shipped_model_draws_moving_frames(path, tmp_path):

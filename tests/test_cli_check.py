@@ -27,6 +27,7 @@ def test_check_reports_formulation(capsys):
     assert "1 explicit constraint, 1 constraint equation -> DAE with multipliers" in out     # (one, not "equations")
 
 
+@pytest.mark.slow_cases('nfourbar.mech-model')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("emit", ["ast", "model", "source"])
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_emit_is_deterministic(path, emit, capsys):

@@ -125,6 +125,7 @@ def test_animate(capsys, tmp_path):
     assert doc["result"]["frames"] == 3 and doc["result"]["fps"] == 10
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_view(capsys, tmp_path):
     out = tmp_path / "p.html"
     rc, doc, err = run_json(capsys, "view", PENDULUM, "-o", str(out), "--t-end", "0.2", "--fps", "10", "--speed", "1")
@@ -213,12 +214,14 @@ def test_sweep(capsys, tmp_path):
     assert doc["files_written"] == [str(out), str(out.with_suffix(".json"))]     # the CSV and its sidecar
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_bench(capsys):
     rc, doc, _ = run_json(capsys, "bench", PENDULUM, "--scene", "Swing", "--t-end", "1", "--points", "11",
                           "--methods", "erk", "--tolerances", "1e-4", "--repeats", "1")
     assert rc == 0 and "Swing" in doc["result"]["target"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_examples_and_completion(capsys):
     rc, doc, _ = run_json(capsys, "examples")
     names = [e["name"] for e in doc["result"]["examples"]]
@@ -239,6 +242,7 @@ def test_quiet_prints_only_errors(capsys, tmp_path):
     assert "model Pendulum" in capsys.readouterr().out
 
 
+@pytest.mark.slow_cases('export---fmu')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("command", [
     ["animate", PENDULUM, "-o", "{tmp}/a.gif", "--t-end", "0.2", "--fps", "5", "--size", "64x64"],  # picks a speed
     ["view", PENDULUM, "-o", "{tmp}/v.html", "--t-end", "0.2", "--fps", "5"],

@@ -33,7 +33,6 @@ def test_version_imports_no_command_and_no_numpy():
     assert not {"numpy", "casadi", "lark", "mechdsl.commands.simulate", "mechdsl.commands.bench"} & names
 
 
-@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     """A warm run: scipy's version is read from its version.py; fileio names temporary files
     without secrets; codegen imports subprocess and tempfile only to compile."""

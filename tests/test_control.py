@@ -212,6 +212,7 @@ end Pushed;
     assert np.abs(at0 - xf).max() > 1e-3                 # the start time matters here
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_lqr_example_stabilizes_upright(monkeypatch):
     env = _run(_examples()[2], monkeypatch)
     reg, r = env["reg"], env["r"]

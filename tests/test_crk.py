@@ -200,6 +200,7 @@ def test_auto_choice_and_numbers_do_not_depend_on_what_the_cache_holds(tmp_path,
         assert np.array_equal(r.q, first.q) and np.array_equal(r.qd, first.qd)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
 def test_engines_give_the_same_bits_and_the_size_decides(monkeypatch):
     """The interpreted and the compiled model take the same steps to the last bit (the stepping

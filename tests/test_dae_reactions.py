@@ -40,6 +40,7 @@ def _accel(e, r, i):
     return qdd
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_crank_rocker_reactions_match_newton_euler():
     e = crank_rocker_eom()
     a, b, c, d = 0.4, 1.0, 0.8, 1.0

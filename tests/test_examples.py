@@ -172,6 +172,7 @@ def test_a_sweep_to_netcdf_from_an_empty_folder(swept):
 
 
 # issue 27: a sweep file from the installed package carries units, long names and provenance
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_sweep_file_carries_units_and_provenance(swept):
     ds, _ = swept
     units = {name: ds[name].attrs.get("units") for name in ("time", "theta", "der(theta)", "x", "E", "L")}

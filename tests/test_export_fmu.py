@@ -42,7 +42,6 @@ def fmus(tmp_path_factory):
     return get
 
 
-@pytest.mark.slow_cases('3')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("version", [2, 3])
 def test_pendulum_model_exchange_and_co_simulation_match_mech_simulate(fmus, version):
     m, path = fmus(f"pendulum{version}", "pendulum.mech", version)
@@ -100,7 +99,7 @@ def test_constrained_drift_stays_bounded_at_loose_tolerances(fmus):
         assert drift[1e3] > 50 * drift[0.0], (kind, drift)
 
 
-@pytest.mark.slow_cases('CoSimulation')  # CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("fmi_type", ["CoSimulation", "ModelExchange"])
 def test_contacts_bounce_to_rest(fmus, fmi_type):
     """The bouncing ball: impacts in the FMU's step (co-simulation), or at the events of fmpy's
@@ -146,6 +145,7 @@ def test_parameters_set_through_the_fmu_change_the_run_as_set_does(fmus):
     assert_agree(X, reference(m.with_params(L=0.5), 2.0, 0.01), "pendulum ME with L = 0.5")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_calculated_values_cannot_be_set(fmus):
     import fmpy
 
@@ -216,6 +216,7 @@ def _slave(path, name="cs"):
     return fmu, {v.name: v.valueReference for v in md.modelVariables}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_input_derivatives_drive_a_ramp_between_communication_points(fmus):
     """FMI 2 co-simulation (canInterpolateInputs): the master gives F and dF/dt at each
     communication point; the FMU follows the ramp F = 1 + 2 t inside the step, as mech simulate
@@ -241,6 +242,7 @@ def test_input_derivatives_drive_a_ramp_between_communication_points(fmus):
             assert np.max(np.abs(np.array(rows) - ref)) > 1e-4       # the ramp held: a different run
 
 
+@pytest.mark.slow_cases('four_bar-four_bar.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name,file", [("four_bar", "four_bar.mech"), ("bouncing_ball", "bouncing_ball.mech")])
 def test_fmu_state_get_set_and_serialize(fmus, name, file):
     """Co-simulation from a saved state repeats the run: the state taken at t = 0.5 (kept, and
@@ -407,6 +409,7 @@ def test_the_fmu_runs_from_c_alone(fmus, tmp_path):
     assert needed and all(n.startswith(("libc.so", "libm.so", "ld-linux")) for n in needed), needed   # the C library
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_export_is_deterministic(tmp_path):
     m = mechdsl.load(MODELS / "double_pendulum.mech")
     a, b = tmp_path / "a.fmu", tmp_path / "b.fmu"

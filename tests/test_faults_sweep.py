@@ -377,7 +377,7 @@ def test_the_heat_map_labels_its_axes_with_units(dp):
 # ------------------------------------------------------------------ samplers (issue 27)
 
 
-@pytest.mark.slow_cases('sobol')  # CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("make", [sample.sobol, sample.latin_hypercube])
 def test_quasi_random_samplers_are_reproducible_and_stratified(make):
     s = make({"m": (1.0, 2.0), "l": (0.5, 1.5)}, n=64, seed=3)

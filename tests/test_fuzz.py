@@ -155,6 +155,7 @@ def test_mutated_models(text):
     front_end(text)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @FUZZ
 @given(mutated_model(CORPUS))
 def test_mutated_corpus(text):

@@ -42,7 +42,7 @@ def first_error(err: str, path) -> tuple[str, int, int]:
 
 
 # CPU budget: the cheaper tests of this file stay in the default run
-@pytest.mark.slow_cases('double-name900k', 'nfourbar-N1000', 'nfourbar-N10000', 'pendulum-unit500k')
+@pytest.mark.slow_cases('andrews-qq100000', 'double-name900k', 'nfourbar-N1000', 'nfourbar-N10000', 'pendulum-unit500k')
 @pytest.mark.parametrize("model,old,new,code,line", [
     # a SystemError in the DOF report (an array of 100,000 coordinates)
     ("andrews.mech", '  coordinate Real Theta(start = 0, speed = 0, unit = "rad");\n',

@@ -151,6 +151,7 @@ def test_rapid_edits_are_analysed_once_and_start_checks_can_be_left_out():
         assert c.close() == 0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_lsp_without_pygls_says_how_to_install_it(tmp_path):
     import subprocess
     import sys

@@ -133,6 +133,7 @@ def test_warnings_of_the_front_end_are_kept(cache, tmp_path, monkeypatch):
     assert again.warnings == first.warnings
 
 
+@pytest.mark.slow_cases('flip', 'foreign-pickle', 'header')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("damage", ["truncate", "flip", "garbage", "empty", "header", "foreign-pickle"])
 def test_a_corrupt_cache_file_is_rebuilt(cache, tmp_path, monkeypatch, damage):
     model = MODELS / "double_pendulum.mech"

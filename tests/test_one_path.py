@@ -95,6 +95,7 @@ def test_an_unconstrained_models_functions_are_unchanged():
 # ------------------------------------------------------------------ defect 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_compiled_casadi_compiles_only_what_is_asked(tmp_path, monkeypatch):
     """Before: the first Function asked for compiled every Function of the model with first

@@ -408,6 +408,7 @@ def test_kinds_of_the_shipped_models():
                      "heavy_top": "canonical"}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_problem_and_metadata_do_not_depend_on_what_ran_before(monkeypatch):
     """is_conservative answered None for large models until someone had built Q: the problem
     dump (and a run's metadata) changed with the order of calls in the process."""

@@ -22,6 +22,7 @@ def reference():
     return e, r
 
 
+@pytest.mark.slow_cases('collocation', 'scipy-radau')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method", ALL)
 def test_every_method_runs_accurately_and_conserves_energy(method, reference):
     e, ref = reference

@@ -69,7 +69,7 @@ def test_existing_output_is_not_overwritten_without_permission(tmp_path):
     assert mine.read_text() == "time,mine\n0,1\n"
 
 
-@pytest.mark.slow_cases('.png-\\x89PNG')  # CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("suffix,magic", [(".png", b"\x89PNG"), (".svg", b"<?xml")])
 def test_plot_writes_file_atomically(tmp_path, suffix, magic):
     r = simulate(chain(2), 1.0, points=21)

@@ -84,6 +84,7 @@ end Central;
 """)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_circular_orbit_kepler_is_stable_with_the_orbital_frequency():
     """V = -k/r: r* = h^2/(m k) for the angular momentum h; radial frequency = orbital frequency."""
     m, k, h = 1.5, 2.0, 1.7
@@ -96,6 +97,7 @@ def test_circular_orbit_kepler_is_stable_with_the_orbital_frequency():
     assert np.max(np.abs(s.linear_eigenvalues.imag)) == pytest.approx(h / (m * r**2), rel=1e-8)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_steady_table_units_of_a_length_and_an_angle():
     """r in m, ph in deg: der(ph) in rad/s, p_ph = m r^2 ph' in kg.m2/s, V_R'' (r alone) in N/m."""
     from mechdsl.commands.equilibrium import format_steady, steady_units

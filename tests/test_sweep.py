@@ -80,7 +80,6 @@ def test_table_dataframe_and_sampler(dp):
     assert len(long) == 5 * 5 and {"run", "time", "m", "l", "j1.phi", "success"} <= set(long.columns)
 
 
-@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_processes_match_vectorized_bit_for_bit(dp):
     grid = {"j1.phi": [0.5, 1.5, 2.5], "j2.phi": [0.0, 1.0]}
     a = dp.sweep(starts=grid, t_end=1.0, points=11, progress=False)
@@ -200,6 +199,7 @@ def test_cli_csv_and_exit_codes(tmp_path):
     assert main(["sweep", path, "--model", "DoublePendulum", "--uniform", "m=1:2", "--samples", "0"]) == 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_ctrl_c_keeps_finished_runs(dp, tmp_path, monkeypatch):
     from sweep_util import interrupt_at_chunk
 
@@ -221,6 +221,7 @@ def test_vectorized_refused_for_a_dae_with_the_reason():
         m.sweep(params={m.parameter_names[0]: [1.0, 2.0]}, t_end=0.1, scheduler="vectorized")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_results_larger_than_the_memory_limit_must_stream(dp, tmp_path):
     with pytest.raises(UsageError, match="stream them to disk"):
         dp.sweep(params={"m": [1.0, 2.0]}, t_end=0.1, points=11, memory_limit=1000)

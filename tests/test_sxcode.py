@@ -66,6 +66,7 @@ def same_bits(a, b):
                                                                        np.where(np.isnan(b), 0, b).view(np.int64)))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_chunked_c_and_the_interpreter_give_the_bits_of_casadis_generated_code(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
