@@ -109,6 +109,30 @@ def chromium_path() -> str | None:
     return None
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """``@pytest.mark.slow_cases("id", ...)`` on a parametrized test: the cases with those ids
+    (the part in brackets of the test's name) are slow, the others stay in the default run (the
+    test budget, docs/internals.md "Testing").  Runs before ``-m`` deselects.  An id that names
+    no case of the test is an error, so a renamed case cannot drop out of the slow set unseen."""
+    seen: dict = {}
+    for item in items:
+        mark = item.get_closest_marker("slow_cases")
+        if mark is None:
+            continue
+        callspec = getattr(item, "callspec", None)
+        case = callspec.id if callspec is not None else None
+        key = (item.nodeid.split("[")[0], tuple(mark.args))
+        seen.setdefault(key, set()).add(case)
+        if case in mark.args:
+            item.add_marker(pytest.mark.slow)
+    for (name, wanted), cases in seen.items():
+        missing = [w for w in wanted if w not in cases]
+        # only when every case of the test was collected (not under -k or a test's node id)
+        if missing and not config.option.keyword and not any("::" in str(a) for a in config.args):
+            raise pytest.UsageError(f"{name}: slow_cases names no case {missing!r}")
+
+
 def pytest_unconfigure(config):
     shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
     shutil.rmtree(_SESSION_PYCACHE, ignore_errors=True)

@@ -79,6 +79,7 @@ def model():
     return mechdsl.load(MODELS / "four_bar.mech", model="FourBar")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_four_bar_equilibria_match_brute_force(model):
     eqs = model.equilibria()
     q0 = initialize(model.eom).q                  # the model's assembly branch
@@ -97,6 +98,7 @@ def test_four_bar_equilibria_match_brute_force(model):
         assert e.lambdas["close.fz"] == e.lambdas["close.tx"] == e.lambdas["close.ty"] == 0.0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_four_bar_reduced_model_is_the_one_dof_motion(model):
     """The reduced linear model against the one-dof motion along the brute-force curve:
     dq = Z dz with Z tangent to the curve; K_r = V''(th) (dth/dz)^2 at an equilibrium (the
@@ -152,6 +154,7 @@ def test_four_bar_multipliers_are_the_hinge_force(model):
         assert np.allclose(R @ lam, F, rtol=0, atol=1e-9 * np.linalg.norm(F))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_tables(tmp_path, capsys):
     import json
 

@@ -80,6 +80,7 @@ def test_equilibria_bottom_stable_top_unstable(pend):
     assert json.loads(json.dumps(d))["tangent_basis"] == [{"plane.x": 1.0, "plane.y": 0.0}]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_reduced_linear_model_frequency(pend):
     lin = pend.linearize()
     assert lin.kind == "equilibrium" and lin.constrained
@@ -139,6 +140,7 @@ def test_redundant_constraint(twice):
     assert lin.K.shape == (1, 1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_prints_lambda(capsys):
     from mechdsl.cli import main
 
@@ -194,6 +196,7 @@ def test_no_degree_of_freedom_and_moving_constraints():
         equilibria(moving)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_free_dumbbell_falls_with_g():
     """Two unit masses joined by a rigid rod of length 1, free in the vertical plane: the
     translations are symmetry directions of the constrained equations, the reference motion

@@ -33,6 +33,7 @@ def exact(t, th0=math.pi / 2):
     return np.stack([L_ * np.sin(th), -L_ * np.cos(th)], axis=-1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_pendulum_second_order_against_exact(pend):
     errs = []
     for dt in (0.01, 0.005):
@@ -44,6 +45,7 @@ def test_pendulum_second_order_against_exact(pend):
     assert 3.5 < errs[0] / errs[1] < 4.5            # order 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_pendulum_energy_error_bounded(pend):
     """400 s (170 periods) with a step of 0.02: the energy error oscillates, O(h^2), without drift."""
     res = {}
@@ -60,6 +62,7 @@ def test_pendulum_energy_error_bounded(pend):
     assert res[0.02] < 0.02 * G_ * L_
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_four_bar_non_separable(four_bar):
     """M(q) in joint angles, five loop equations of which three are redundant (dropped)."""
     ref = four_bar.simulate(2.0, rtol=1e-11, atol=1e-11, points=3, error_estimate="off")
@@ -85,6 +88,7 @@ def test_other_methods_refuse_constraints(pend):
             pend.simulate(1.0, method=method, dt=0.01)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_rattle_without_constraints_is_stormer_verlet():
     import ana_models as am
     from ana_models import simulate_symplectic

@@ -44,6 +44,7 @@ def minimal():
     return eom, ca.Function("geo", [q], [s, beta])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_equilibria_match_minimal_coordinates(loop_model):
     from mechdsl.analysis.equilibrium import equilibria
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import signal
 
+import pytest
+
 from mechdsl.api import load_model_ir
 from mechdsl.mechanics.printing import format_equations
 import mechdsl.examples
@@ -23,6 +25,7 @@ def test_a_slow_machine_prints_the_same_equations(monkeypatch):
     assert format_equations(model) == idle
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_operation_budget_is_deterministic():
     model = load_model_ir(os.path.join(MODELS, "double_pendulum.mech"))
     small = [format_equations(model, max_total_ops=50) for _ in range(2)]

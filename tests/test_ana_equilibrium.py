@@ -16,6 +16,7 @@ def by_values(eqs, **vals):
     raise AssertionError(f"no equilibrium at {vals}: {[e.values for e in eqs]}")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_four_equilibria_and_hessians():
     m, l, g = 1.3, 0.7, 9.81
     eqs = equilibria(am.double_pendulum(m, l, g))
@@ -120,6 +121,7 @@ def test_time_dependent_forcing_is_not_decided():
     assert "time" in eqs[0].notes[0]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_user_guesses_and_errors():
     eom = am.double_pendulum()
     eqs = equilibria(eom, guesses=[{"th1": 3.0}, np.array([0.1, 3.0])])

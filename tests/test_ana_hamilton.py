@@ -60,6 +60,7 @@ def test_singular_mass_matrix_at_start_is_reported():
         hamiltonian(am.heavy_top(q0=(0.0, 0.0, 0.0)))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_format_hamiltonian_hoop_text_and_latex():
     txt = format_hamiltonian(am.hoop())
     assert "p_theta = der(theta)*m*R^2" in txt.replace("m*R^2*der(theta)", "der(theta)*m*R^2")

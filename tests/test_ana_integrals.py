@@ -34,6 +34,7 @@ def values(eom, sx, t, q, qd):
     return np.array([float(f(q[i], qd[i], t[i], eom.param_values)) for i in range(len(t))])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_heavy_top_cyclic_momenta():
     I1, I3 = 0.3, 0.2
     eom = am.heavy_top(I1=I1, I3=I3)
@@ -58,12 +59,14 @@ def test_heavy_top_cyclic_momenta():
         assert np.ptp(v) < 1e-8 * max(1.0, np.max(np.abs(v))), name
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_heavy_top_texts_are_readable():
     fis = {fi.name: fi for fi in first_integrals(am.heavy_top())}
     assert fis["p_psi"].expression == "I3*(der(psi) + der(phi)*cos(theta))"
     assert fis["p_psi"].verified == "symbolic"       # sympy reduces dL/dpsi to 0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_two_body_translation_momenta():
     eom = am.two_body()
     fis = {fi.name: fi for fi in first_integrals(eom)}

@@ -12,6 +12,7 @@ from mechdsl.analysis.linearize import linearize
 from mechdsl.diagnostics import UsageError
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_frequencies():
     m, l, g = 0.7, 1.3, 9.81
     lin = linearize(am.double_pendulum(m, l, g))
@@ -29,6 +30,7 @@ def test_double_pendulum_frequencies():
     assert np.sort(np.abs(md.eigenvalues.imag)) == pytest.approx(np.repeat(np.sqrt(w2), 2), rel=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_symbolic_is_exact_and_agrees():
     eom = am.double_pendulum()
     lin = linearize(eom)
@@ -40,6 +42,7 @@ def test_double_pendulum_symbolic_is_exact_and_agrees():
     assert np.allclose(Ms, lin.M, atol=1e-12) and np.allclose(Ks, lin.K, atol=1e-12) and np.allclose(Cs, lin.C)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_symbolic_and_numeric_agree_off_equilibrium():
     eom = am.double_pendulum(q0=(1.0, -0.4), qd0=(0.3, 1.2))
     lin = linearize(eom, at="t=0.37")
@@ -85,6 +88,7 @@ def test_hoop_small_oscillations(w):
     assert np.max(md.eigenvalues.real) == pytest.approx(math.sqrt(w ** 2 - g / R), rel=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_hoop_slow_spin_bottom_frequency_and_symbolic():
     R, g, w = 1.0, 9.81, 2.0
     eom = am.hoop(R=R, g=g, w=w, q0=0.1)
@@ -155,6 +159,7 @@ def test_accelerated_reference_linearization():
     assert lin.modes().frequencies == pytest.approx([0.0, math.sqrt(50.0)], abs=1e-12, rel=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_outputs_json_csv_plot(tmp_path):
     lin = linearize(am.double_pendulum())
     md = lin.modes()
@@ -172,6 +177,7 @@ def test_outputs_json_csv_plot(tmp_path):
     assert full["kind"] == "equilibrium" and len(full["A"]) == 4
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_bad_requests():
     eom = am.double_pendulum()
     with pytest.raises(UsageError):

@@ -40,6 +40,7 @@ end DPEquations;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("model", ["DPComponents", "DPEquations"])
 def test_point_mass_double_pendulum_from_text(model):
     m = mechdsl.loads(POINT_MASS_DP, model=model)
@@ -60,6 +61,7 @@ def test_equation_layer_symbolic_route_is_ir_and_agrees():
         assert np.allclose(a, b, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_shipped_double_pendulum_uniform_rods():
     m = mechdsl.load(MODELS / "double_pendulum.mech", model="DoublePendulum")
     g, l = 9.81, 1.0
@@ -87,6 +89,7 @@ def test_bead_on_hoop(model):
     assert [f.name for f in fis] == ["jacobi"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_two_masses_spring_model():
     m = mechdsl.load(MODELS / "two_masses_spring.mech")
     p = m.parameters
@@ -108,6 +111,7 @@ def test_cart_pole_model_uniform_rod():
     assert lin.B[2:, 0] == pytest.approx(np.linalg.solve(lin.M, [1.0, 0.0]))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_heavy_top_model_momenta():
     m = mechdsl.load(MODELS / "heavy_top.mech", scene="Spin")
     p = m.parameters
@@ -126,6 +130,7 @@ def test_heavy_top_model_momenta():
     assert np.ptp(th) > 1e-3                           # it nutates
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_kepler_model_scene():
     m = mechdsl.load(MODELS / "kepler.mech", scene="Orbits")
     fis = {f.name for f in m.first_integrals()}
@@ -142,6 +147,7 @@ def test_kepler_model_scene():
     assert np.ptp(sv["p_(fs.x+fp.x)"]) < 1e-14
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_equilibrium_and_linearize(tmp_path, capsys):
     out = tmp_path / "eq.json"
     assert main(["equilibrium", str(MODELS / "bead_on_hoop.mech"), "--model", "BeadOnHoopLagrange",

@@ -84,6 +84,7 @@ def quat_height(e, idx, arm):
     return arm * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_quaternion_pendulum_equilibria_are_unit_and_distinct():
     e = pendulum(QUAT)
     eqs = equilibria(e)
@@ -98,6 +99,7 @@ def test_quaternion_pendulum_equilibria_are_unit_and_distinct():
     assert down[0].hessian_eigenvalues == pytest.approx([G * L, G * L], rel=1e-9)   # m g L, m = 1
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("joint", [QUAT, EULER_ZYX, EULER_XYX], ids=["quaternion", "zyx", "xyx-gimbal-lock"])
 def test_pendulum_modes_are_sqrt_g_over_L_twice(joint):
     e = pendulum(joint)
@@ -147,6 +149,7 @@ def test_cli_heavy_top_exits_0(cmd, capsys):
     assert "gimbal lock" in out
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("joint", [EULER_ZYX, QUAT], ids=["zyx", "quaternion"])
 def test_asymmetric_top_hanging_modes(joint):
     """Hanging asymmetric top: w_x^2 = m g l/(I1 + m l^2), w_y^2 = m g l/(I2 + m l^2) and a rigid
@@ -165,6 +168,7 @@ def test_asymmetric_top_hanging_modes(joint):
     assert list(md.kinds).count("rigid") == 1
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_quaternion_and_euler_agree_at_a_regular_state():
     """Tilted top at rest (not an equilibrium), linearized in both parametrizations about the
     same rotation with the same frozen state: the accelerations agree, and at the equilibrium

@@ -55,6 +55,7 @@ def check_bounded_vs_drift(e):
     assert rk_end >= 5 * sv_all                  # and ends far above Verlet's bounded error
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_kepler_verlet_bounded_rk4_drifts_100_orbits():
     e = kepler_energy_errors(100)
     check_bounded_vs_drift(e)
@@ -67,6 +68,7 @@ def test_kepler_verlet_bounded_rk4_drifts_1000_orbits():
     assert e["rk"][2] >= 50 * e["sv"][1]          # 1000 orbits: RK4 ends two orders above Verlet
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_free_two_body_momenta_and_energy():
     eom = am.two_body(e=0.6)
     P = 2 * math.pi / math.sqrt(1.5)          # a = 1, mu = G (m1 + m2) = 1.5
@@ -87,6 +89,7 @@ def order(eom, method, T, dts):
     return [math.log2(errs[i] / errs[i + 1]) for i in range(len(errs) - 1)], errs
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method,expected", [("stormer-verlet", 2), ("implicit-midpoint", 2),
                                              ("gauss-legendre", 4), ("rk4", 4)])
 def test_orders_on_nonseparable_double_pendulum(method, expected):
@@ -100,6 +103,7 @@ def test_order_explicit_verlet_on_pendulum():
     assert all(abs(r - 2) < 0.1 for r in rates), errs
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_nonseparable_energy_bounded():
     eom = am.double_pendulum(q0=(0.6, 0.3))
     T = 60.0
@@ -115,6 +119,7 @@ def test_nonseparable_energy_bounded():
     assert errs["rk4"][2] >= 3 * errs["rk4"][0]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_top_momenta_conserved_and_matches_reference():
     eom = am.heavy_top()
     T = 1.0
@@ -137,6 +142,7 @@ def test_rheonomic_hoop_conserves_jacobi_not_energy():
     assert np.allclose(r["H"], r["jacobi"], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_forced_damped_pendulum_against_reference():
     eom = am.pendulum(c=0.3, A=0.8, w=2.5, q0=0.4)
     qref, qdref = reference(eom, 3.0)

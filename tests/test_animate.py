@@ -63,6 +63,7 @@ def test_box_outline_is_its_size_and_sphere_radius_is_its_parameter():
     assert sphere.radius == pytest.approx(0.1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_plane_detection():
     assert detect_view(np.zeros((3, 3, 2)) + np.array([1.0, 2.0, 0.0])[None, :, None], [0, 1]) == "xy"
     X = np.random.default_rng(0).normal(size=(4, 3, 3))
@@ -77,6 +78,7 @@ def test_plane_detection():
 # ----------------------------------------------------------------------------- frames
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_frames_change_over_time_and_the_clock_runs():
     m = _load("pendulum")
     r = m.simulate(1.0, points=11)
@@ -87,6 +89,7 @@ def test_frames_change_over_time_and_the_clock_runs():
     assert anim.times == pytest.approx(np.linspace(0, 1, 11))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_impacts_flash_in_the_frames_right_after_them():
     m = _load("bouncing_ball")
     r = m.simulate(0.6, points=61)
@@ -113,6 +116,7 @@ def test_frame_times_and_speed():
         frame_times(0.0, 1e6, 30, 1.0)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_draw_returns_a_figure_at_the_start_and_at_a_time():
     from matplotlib.figure import Figure
 
@@ -142,6 +146,7 @@ def test_model_without_bodies_is_drawn_as_bars(tmp_path):
 _DRAWN_SLOWLY = {"nfourbar", "andrews", "nlink_pendulum", "arm7"}
 
 
+@pytest.mark.slow_cases('falling_rod', 'pendulum_wall')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in _DRAWN_SLOWLY else p
                                   for p in MODELS], ids=[p.stem for p in MODELS])
 def test_every_shipped_model_draws_moving_frames(path, tmp_path):
@@ -172,6 +177,7 @@ def test_every_shipped_model_animates_from_the_command_line(path, tmp_path, caps
     assert "wrote" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_html_page_is_self_contained_and_replaceable(tmp_path):
     out = tmp_path / "p.html"
     args = ["animate", str(MODEL_DIR / "pendulum.mech"), "-o", str(out), "--t-end", "0.2", "--fps", "10",
@@ -184,6 +190,7 @@ def test_html_page_is_self_contained_and_replaceable(tmp_path):
     assert main(args) == 0                               # our own file: replaced without --force
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_same_animation_twice_is_byte_identical(tmp_path):
     a, b = tmp_path / "a.gif", tmp_path / "b.gif"
     for out in (a, b):
@@ -265,6 +272,7 @@ end Bead;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_failed_run_is_animated_up_to_the_failure_and_says_so(tmp_path, capsys):
     src = tmp_path / "bead.mech"
     src.write_text(BEAD)
@@ -343,6 +351,7 @@ def test_pick_speed_speeds_long_runs_up_to_play_at_most_a_minute():
     assert len(frame_times(0.0, 628.3, 30)) == 943
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_long_run_animates_in_fast_motion(tmp_path, capsys):
     out = tmp_path / "p.html"
     assert main(["animate", str(MODEL_DIR / "pendulum.mech"), "--model", "Pendulum", "--t-end", "120", "--fps", "2",
@@ -352,6 +361,7 @@ def test_a_long_run_animates_in_fast_motion(tmp_path, capsys):
     assert "121 frames at 2 fps at speed 2, 120 s of model time" in cap.out
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_andrews_short_scene_animates_in_slow_motion(tmp_path, capsys):
     """`mech animate models/andrews.mech -o a.gif` (0.03 s; before: "end time 0.0 .. 0.0")."""
     from PIL import Image

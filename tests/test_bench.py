@@ -173,6 +173,7 @@ def test_failures_not_applicable_and_skipped_are_rows(tmp_path, setup):
     assert text.count("\n") == 6 and ",skipped," in text and ",n/a," in text
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_failed_runs_are_shown(tmp_path):
     """The stiff spring pendulum: fixed-step RK4 with dt = 0.01 blows up (benchmarks/stability)."""
     m = mechdsl.load(str(STIFF), scene="Swing")
@@ -186,6 +187,7 @@ def test_failed_runs_are_shown(tmp_path):
     assert all(p.stat().st_size > 1000 for p in files)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_outputs_written_atomically_and_rerun(tmp_path, setup):
     res = run_bench(setup, variants=parse_variants("erk,rk[dt=0.5]"), tolerances=[1e-4],
                     reference=exact_csv(tmp_path / "e.csv"), repeats=1)
@@ -206,6 +208,7 @@ def test_outputs_written_atomically_and_rerun(tmp_path, setup):
 # --------------------------------------------------------------------------- CLI
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_bench(tmp_path, capsys):
     out = tmp_path / "o"
     args = ["bench", str(PENDULUM), "--scene", "Swing", "--t-end", "2", "--points", "21", "--methods", "erk",
@@ -325,6 +328,7 @@ def test_no_stop_time_means_ten_seconds_as_for_simulate():
     assert st.t_end == pytest.approx(10.0, rel=1e-15) and "t_end = 10 s" in st.notes[0]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_andrews_reference_falls_back_to_a_method_that_works(capsys):
     """Before: the automatic reference (ggl+idas at 1e-13) hit IDA_CONV_FAIL at t = 0.0115 and
     the bench ended with a usage error (exit 2).  Now the next candidate replaces it."""
@@ -395,6 +399,7 @@ def test_reference_that_no_method_computes_is_a_located_simulation_error(tmp_pat
     assert "scipy-dop853 at tolerance 1e-08: failed at t = 0.5707" in err and "help:" in err
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_bench_defaults_on_a_small_model(capsys):
     """mech bench with defaults: the plan is chosen and said (cart_pole: about a second of CPU)."""
     assert main(["bench", str(MODELS / "cart_pole.mech")]) == 0

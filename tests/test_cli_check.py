@@ -10,6 +10,7 @@ from mechdsl.cli import main
 from conftest import MODELS, model_files
 
 
+@pytest.mark.slow_cases('nfourbar.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_check_passes(path, capsys):
     assert main(["check", str(path)]) == 0
@@ -26,6 +27,7 @@ def test_check_reports_formulation(capsys):
     assert "1 explicit constraint, 1 constraint equation -> DAE with multipliers" in out     # (one, not "equations")
 
 
+@pytest.mark.slow_cases('nfourbar.mech-model')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("emit", ["ast", "model", "source"])
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_emit_is_deterministic(path, emit, capsys):
@@ -35,6 +37,7 @@ def test_emit_is_deterministic(path, emit, capsys):
     assert capsys.readouterr().out == first
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("emit, shows", [("model", "q[3]"), ("eom", "M[q[3],q[1]] = ")])
 def test_emit_is_identical_across_processes(emit, shows):
     """Two processes with different hash seeds (set iteration order) print the same bytes."""

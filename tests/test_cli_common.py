@@ -69,6 +69,7 @@ end Slope;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_later_phase_error_is_located_at_the_model(tmp_path, capsys):
     """E903 (no equilibrium: V0 exp(-x/a) has no rest state) carries no position of its own:
     the command locates it at the model it worked on, so the error reads file:line:col."""

@@ -64,6 +64,7 @@ def test_a_failed_run_is_exit_1_with_its_result(capsys, tmp_path):
     assert doc["result"]["success"] is False and doc["result"]["failure"]["time"] < 10
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_check_ok_and_diagnostics(capsys):
     rc, doc, _ = run_json(capsys, "check", PENDULUM)
     assert rc == 0
@@ -79,6 +80,7 @@ def test_check_ok_and_diagnostics(capsys):
     assert f"{bad}:4:22: error[E201]" in err                  # the human form on stderr
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_model_error_and_usage_error_are_documents(capsys, tmp_path):
     rc, doc, _ = run_json(capsys, "simulate", str(tmp_path / "missing.mech"))
     assert rc == 1 and doc["diagnostics"][0]["code"] == "E001" and doc["diagnostics"][0]["line"] is None
@@ -102,6 +104,7 @@ def test_equations(capsys):
     assert rc == 0 and doc["result"]["form"] == "lagrange" and "theta" in doc["result"]["text"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_equilibrium_and_linearize(capsys, tmp_path):
     rc, doc, _ = run_json(capsys, "equilibrium", PENDULUM, "--model", "PendulumLagrange")
     res = doc["result"]
@@ -122,6 +125,7 @@ def test_animate(capsys, tmp_path):
     assert doc["result"]["frames"] == 3 and doc["result"]["fps"] == 10
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_view(capsys, tmp_path):
     out = tmp_path / "p.html"
     rc, doc, err = run_json(capsys, "view", PENDULUM, "-o", str(out), "--t-end", "0.2", "--fps", "10", "--speed", "1")
@@ -146,6 +150,7 @@ def test_a_failed_view_is_exit_1_with_its_result(capsys, tmp_path):
     assert doc["files_written"] == [str(tmp_path / "b.html")]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_export(capsys, tmp_path):
     out = tmp_path / "p.fmu"
     rc, doc, err = run_json(capsys, "export", PENDULUM, "--fmu", str(out), "--fmi-type", "cs")
@@ -160,6 +165,7 @@ def test_export(capsys, tmp_path):
     assert "wrote" in err
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_import(capsys, tmp_path):
     src = TESTS / "corpus" / "urdf" / "W025_loop_left_out.urdf"
     out = tmp_path / "loop.mech"
@@ -198,6 +204,7 @@ def test_the_schema_knows_the_result_of_every_command():
         assert f"result_{name}" in s["$defs"], name
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_sweep(capsys, tmp_path):
     out = tmp_path / "s.csv"
     rc, doc, _ = run_json(capsys, "sweep", PENDULUM, "--grid", "L=1:2:2", "--t-end", "0.2", "--points", "5",
@@ -207,12 +214,14 @@ def test_sweep(capsys, tmp_path):
     assert doc["files_written"] == [str(out), str(out.with_suffix(".json"))]     # the CSV and its sidecar
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_bench(capsys):
     rc, doc, _ = run_json(capsys, "bench", PENDULUM, "--scene", "Swing", "--t-end", "1", "--points", "11",
                           "--methods", "erk", "--tolerances", "1e-4", "--repeats", "1")
     assert rc == 0 and "Swing" in doc["result"]["target"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_examples_and_completion(capsys):
     rc, doc, _ = run_json(capsys, "examples")
     names = [e["name"] for e in doc["result"]["examples"]]
@@ -233,6 +242,7 @@ def test_quiet_prints_only_errors(capsys, tmp_path):
     assert "model Pendulum" in capsys.readouterr().out
 
 
+@pytest.mark.slow_cases('export---fmu')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("command", [
     ["animate", PENDULUM, "-o", "{tmp}/a.gif", "--t-end", "0.2", "--fps", "5", "--size", "64x64"],  # picks a speed
     ["view", PENDULUM, "-o", "{tmp}/v.html", "--t-end", "0.2", "--fps", "5"],
@@ -294,6 +304,7 @@ def test_the_log_handler_is_removed_after_a_command():
     assert logging.getLogger("mechdsl").handlers == before
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_json_from_a_process_keeps_stdout_clean(tmp_path):
     """In a real process, also what C code prints goes to stderr (descriptor 1 is redirected)."""
     r = subprocess.run([sys.executable, "-m", "mechdsl", "simulate", PENDULUM, "--t-end", "0.5", "--json",
@@ -322,6 +333,7 @@ def test_completion_scripts_know_every_command(capsys, tmp_path, shell):
         assert r.returncode == 0, r.stderr
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_schema_rejects_a_wrong_document(capsys):
     import jsonschema
 

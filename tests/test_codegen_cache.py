@@ -68,6 +68,7 @@ def test_cache_hit_is_verified(tmp_path):
     assert second["value"] == pytest.approx(ENERGY, rel=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_truncated_library_is_rebuilt(tmp_path):
     lib = Path(build(tmp_path)["lib"])
     data = lib.read_bytes()
@@ -78,6 +79,7 @@ def test_truncated_library_is_rebuilt(tmp_path):
     assert build(tmp_path)["note"].startswith("loaded compiled model from cache")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_other_library_under_the_right_name_is_rebuilt(tmp_path):
     lib = Path(build(tmp_path)["lib"])
     other = build(tmp_path / "other", other=True)
@@ -88,6 +90,7 @@ def test_other_library_under_the_right_name_is_rebuilt(tmp_path):
     assert again["value"] == pytest.approx(ENERGY, rel=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_library_without_recorded_hash_is_rebuilt(tmp_path):
     lib = Path(build(tmp_path)["lib"])
     lib.with_suffix(".sha256").unlink()

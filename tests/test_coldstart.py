@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from conftest import MODELS, drop_prepared_runs
 
@@ -50,6 +51,7 @@ def test_a_run_imports_neither_scipy_nor_secrets_nor_subprocess(tmp_path):
     assert unwanted & (names | prepared) - imported_by_numpy_and_casadi() == set()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_warm_compiled_run_starts_no_process(tmp_path):
     """Issue 12's command, compiled stepping loop loaded from the cache: the compiler's version
     is remembered (codegen.compiler_version) and its path found without shutil, so the run
@@ -66,6 +68,7 @@ def test_a_warm_compiled_run_starts_no_process(tmp_path):
     assert "mechdsl.model.ir" in names and "mechdsl.frontend.parser" not in names
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_warm_run_creates_no_dataclass(tmp_path):
     """Issue 12: the classes a warm run needs (ir's for the cached model, the EOM, settings,
     problem, result...) are made by mechdsl.model.records.record, not by @dataclass (an exec per

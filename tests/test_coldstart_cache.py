@@ -127,6 +127,7 @@ def test_stored_functions_of_one_text_are_read_once_and_keep_their_sxcode_key():
 # ----------------------------------------------------------------------------- a warm process
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_warm_run_loads_neither_openssl_nor_the_unit_parser(tmp_path):
     """The 12-link chain (coordinates in rad, outputs in m) with an output file: its cache keys,
     checks and CSV hash use CPython's SHA-256, its units need no parser."""

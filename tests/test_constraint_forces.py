@@ -45,6 +45,7 @@ def test_rolling_disk_on_an_incline():
     assert r.metadata["units"] == {"lambda[rolling]": "N", "lambda[contact]": "N"}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_two_bar_linkage_held_on_the_floor():
     """Equilibria: AB hanging (stable), the floor carries half of BC and the load,
     N = m2 g/2 + P = 14.905 N (reported 12.97 / 19.12 before); BC vertical (unstable),
@@ -168,6 +169,7 @@ def test_virtual_power_identity_at_random_states(src, out):
         assert a == pytest.approx(b, rel=1e-10, abs=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_equilibrium_table_says_each_numbers_unit(tmp_path, capsys):
     from mechdsl.cli import main
 

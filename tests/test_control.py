@@ -123,6 +123,7 @@ end Rod;
     assert xd[1] == pytest.approx(-4.0 * 9.81 * 0.5 * math.sin(0.5) / (4.0 / 3.0), rel=1e-13)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_swing_up_example_coarse(monkeypatch):
     """docs/control.md example 1 on a coarse grid: IPOPT converges, the pole ends upright and
     the replay through m.simulate matches the optimizer's states to its RK4 discretization."""
@@ -145,6 +146,7 @@ def test_swing_up_example_full(monkeypatch):
     assert np.abs(r.q[-1]).max() < 2e-4 and np.abs(r.qd[-1]).max() < 2e-4
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_shooting_on_the_simulators_integrator_replays_to_round_off(monkeypatch):
     """docs/control.md example 2 on a coarse grid: multiple shooting on m.integrator; the replay
     through m.simulate with the same method and tolerances reproduces the optimizer's states
@@ -210,6 +212,7 @@ end Pushed;
     assert np.abs(at0 - xf).max() > 1e-3                 # the start time matters here
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_lqr_example_stabilizes_upright(monkeypatch):
     env = _run(_examples()[2], monkeypatch)
     reg, r = env["reg"], env["r"]

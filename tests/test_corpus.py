@@ -81,6 +81,8 @@ def test_corpus_is_large_enough():
     assert set(EXPECT) == {p.name for p in CORPUS.glob("*.mech")}, "EXPECT.txt names a file that does not exist"
 
 
+# CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow_cases('E303_nested_loops_too_long.mech', 'E316_too_many_components.mech', 'E404_unknown_unit.mech')
 @pytest.mark.parametrize("name", sorted(EXPECT))
 def test_corpus_file(name, capsys):
     path = CORPUS / name
@@ -201,12 +203,14 @@ def test_several_files_report_each(capsys):
 # ----------------------------------------------------------------------------- end to end
 
 
-# The real program on a parse error, an undecodable file (the process's own stderr encoding) and
-# a later phase's error by default; the other files in the slow set (a process start each).
+# The real program on a parse error by default; an undecodable file (the process's own stderr
+# encoding), a later phase's error and the other files in the slow set (a process start each).
 # Every corpus file's diagnostics (codes, lines, columns) are checked in-process by test_corpus_file.
 _SLOW = pytest.mark.slow
 
 
+# the real program on a parse error stays in the default run (CPU budget)
+@pytest.mark.slow_cases("E002_non_utf8.mech", "E604_stop_time_string.mech")
 @pytest.mark.parametrize("name", ["E107_missing_semicolon.mech", pytest.param("E201_several_undefined.mech", marks=_SLOW),
                                   "E002_non_utf8.mech",
                                   pytest.param("E104_nested_parentheses.mech", marks=_SLOW),
@@ -225,6 +229,7 @@ def test_subprocess(name):
     assert re.fullmatch(rf"{re.escape(str(path))}:{line}:{col}: error\[{code}\]: .+", first)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_subprocess_missing_file(tmp_path):
     path = tmp_path / "missing.mech"
     proc = subprocess.run([sys.executable, "-m", "mechdsl", "check", str(path)], capture_output=True, text=True,

@@ -137,6 +137,7 @@ def test_registry_names_and_no_jacobian():
 # --------------------------------------------------------------------------- method auto: the stepping loop
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_auto_runs_the_stepping_loop_for_short_and_long_runs_and_says_why():
     """auto no longer weighs a compile against the run's length (a loose tolerance used to fall
     back to erk in the virtual machine, slower than a tight one): short and long runs, loose and
@@ -169,6 +170,7 @@ def _fresh(monkeypatch, folder):
     monkeypatch.setattr(crk, "_RUNTIME", {})
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.skipif(find_compiler() is None, reason="without a compiler auto is erk whatever the cache")
 def test_auto_choice_and_numbers_do_not_depend_on_what_the_cache_holds(tmp_path, monkeypatch):
     """Same model and options -> same method, engine, metadata and bits: in an empty cache (the
@@ -198,6 +200,7 @@ def test_auto_choice_and_numbers_do_not_depend_on_what_the_cache_holds(tmp_path,
         assert np.array_equal(r.q, first.q) and np.array_equal(r.qd, first.qd)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
 def test_engines_give_the_same_bits_and_the_size_decides(monkeypatch):
     """The interpreted and the compiled model take the same steps to the last bit (the stepping
@@ -271,6 +274,7 @@ def test_the_estimates_companion_keeps_the_interpreted_loop(monkeypatch):
     assert i.stats["error_estimate_rhs_evals"] == c.stats["error_estimate_rhs_evals"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
 def test_an_interpreted_model_compiles_once_it_has_paid_and_keeps_its_bits(monkeypatch, tmp_path):
     """Above COMPILE_OPS the loop interprets the model until its interpreted evaluations, counted
@@ -310,6 +314,7 @@ def test_rhs_cost_counts_instructions_and_the_linear_solve():
     assert crk.rhs_cost(mx) > 3 ** 3 + mx.n_instructions()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_no_compile_opts_out(tmp_path, monkeypatch, capsys):
     import json
 
@@ -328,6 +333,7 @@ def test_cli_no_compile_opts_out(tmp_path, monkeypatch, capsys):
     assert main(["simulate", str(model), "--compiled", "--no-compile"]) == 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cvodes_adams_compiled_holds_no_dense_jacobian(tmp_path, monkeypatch):
     """Functional iteration never evaluates the Jacobian: the library holds the forward
     derivative only (it used to compile the dense Jacobian: 774 kB of C at N = 12)."""
@@ -434,6 +440,7 @@ def test_compiled_false_runs_the_named_loop_method_in_python(method, monkeypatch
     np.testing.assert_allclose(r.q[:, 0], np.cos(3.0 * r.t), rtol=0, atol=1e-7)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_auto_whose_loop_cannot_be_built_says_erk_runs(monkeypatch, tmp_path):
     """auto picks the stepping loop, the build fails (a "compiler" that fails: `false`): the run is
     erk and its reason says so (it kept the reason of the loop it did not run).  (A cache path

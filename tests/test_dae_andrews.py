@@ -29,6 +29,7 @@ def test_default_formulation_matches_reference_to_1e7():
     assert len(r.t) == 31 and r.t[-1] == pytest.approx(0.03)
 
 
+@pytest.mark.slow_cases('baumgarte', 'partitioning')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_every_formulation_matches_reference(formulation):
     with warnings.catch_warnings(record=True):      # plain Baumgarte may exceed the drift bound

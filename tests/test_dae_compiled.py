@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import mechdsl
 from mechdsl.eom.codegen import find_compiler
@@ -9,6 +10,7 @@ from mechdsl.eom.codegen import find_compiler
 from conftest import MODELS
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_projection_erk_compiled_equals_virtual_machine():
     m = mechdsl.load(MODELS / "andrews.mech")
     vm = m.simulate(0.01, rtol=1e-8, atol=1e-8, method="erk", formulation="projection", points=5)

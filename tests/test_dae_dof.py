@@ -20,6 +20,7 @@ def test_counts_of_simple_models():
     assert _counts(dof_report(andrews_eom())) == (7, 6, 6, 1, 0)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_duplicated_constraint_is_redundant():
     q = ca.SX.sym("q", 2)
     qd = ca.SX.sym("qd", 2)
@@ -46,6 +47,7 @@ def test_bricard_has_one_dof_and_one_redundant_constraint():
     assert len(rep.redundant_names) == 1
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_bricard_simulates_on_all_constraints_with_constant_energy():
     r = simulate_dae(bricard_eom(), 2.0, rtol=1e-10, atol=1e-10, points=41, reactions=True)
     assert r.success, r.message
@@ -60,6 +62,7 @@ def test_bricard_simulates_on_all_constraints_with_constant_energy():
     assert np.ptp(r.q[:, 0]) > 0.1            # it does move
 
 
+@pytest.mark.slow_cases('partitioning')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", [f for f in FORMULATIONS if f != "augmented"])   # augmented crosses:
 def test_parallelogram_stops_at_the_singular_configuration(formulation):                  # test_dae_singular.py
     t_star = parallelogram_singular_time()

@@ -29,6 +29,8 @@ def _minimal_reference():
     return sol.y[:3].T, x2y2
 
 
+# CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow_cases('ggl', 'partitioning', 'projection')
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_dae_dumbbell_agrees_with_minimal_coordinates(formulation):
     q_min, x2y2 = _minimal_reference()

@@ -35,6 +35,7 @@ def nan_pendulum():
                            q0=[1.0, 0.0], qd0=[0.0, 0.0], constraint_names=["rod"])
 
 
+@pytest.mark.slow_cases('partitioning')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", ["projection", "baumgarte", "partitioning",
                                          pytest.param("ggl", marks=pytest.mark.slow)])
 def test_nonfinite_equations_fail_with_time_and_coordinate(formulation):
@@ -154,6 +155,7 @@ def test_a_jacobian_that_cannot_be_evaluated_is_a_failure_not_a_crash():
     assert not r.success and r.failure.time == pytest.approx(0.0, abs=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_constrained_run_that_needs_too_many_steps_fails_at_its_start():
     """four_bar.mech with g = 1e14: the swing's rate sqrt(g/l) ~ 3.5e6 1/s makes 0.05 s about
     2.8e4 periods; BDF at rtol 1e-8 takes at least 2 rtol^(-1/5) = 80 steps a period, 2.2e6

@@ -19,6 +19,7 @@ from dae_models import pendulum_eom, pendulum_exact
 from mechdsl.dae import RunInterrupted, simulate_dae
 
 
+@pytest.mark.slow_cases('partitioning', 'projection')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", ["projection", "baumgarte", "ggl", "partitioning"])
 def test_ctrl_c_stops_a_constrained_run_and_keeps_partial_results(formulation):
     eom = pendulum_eom(gravity=9.81, v0=(0.0, 0.0))
@@ -50,6 +51,7 @@ def test_ctrl_c_stops_a_constrained_run_and_keeps_partial_results(formulation):
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_sigint_to_a_process_stops_the_run():
     """A real SIGINT (as Ctrl-C in a terminal) to a process in a long GGL run (IDAS, where
     CasADi lost the interrupt inside the residual callback)."""

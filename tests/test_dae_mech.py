@@ -45,6 +45,7 @@ def test_pendulum_cartesian_a01_scene():
     assert np.max(r["constraint_drift"]) <= bound and np.max(r["velocity_drift"]) <= bound
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_slider_crank_mech_agrees_with_hand_derived_model():
     """models/slider_crank.mech through the mechanics stage against tests/dae_models.py's
     slider-crank written by hand (same data: r 0.1, l 0.3, masses 0.5/1/2, torque 0.5, no
@@ -77,6 +78,7 @@ def test_four_bar_mech_reports_its_singular_configuration():
     assert "F_close[1]" in r.signals
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_four_bar_mech_crank_rocker_turns_round():
     """The shipped crank-rocker never locks: the crank makes full turns, energy is kept and the
     loop stays closed."""

@@ -9,6 +9,7 @@ from mechdsl.dae import FORMULATIONS, simulate_dae
 from mechdsl.diagnostics import UsageError
 
 
+@pytest.mark.slow_cases('partitioning')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_rheonomic_constraint_matches_minimal_coordinates(formulation):
     """Rod of prescribed length L(t) = 1 + 0.2 sin 2t: g_t and g_tt enter by AD."""
@@ -44,6 +45,7 @@ def test_drift_over_the_bound_is_reported():
     assert r.stats["max_velocity_drift"] > r.stats["drift_bound"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_default_keeps_drift_within_bound_for_loose_tolerances():
     for tol in (1e-4, 1e-6, 1e-8):
         r = simulate_dae(pendulum_eom(gravity=9.81, v0=(0, 0)), 20.0, rtol=tol, atol=tol, points=51)
@@ -51,6 +53,7 @@ def test_default_keeps_drift_within_bound_for_loose_tolerances():
         assert np.max(r["constraint_drift"]) <= max(10 * tol, 1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_deterministic():
     a = simulate_dae(andrews_eom(), 0.01, rtol=1e-8, atol=1e-8, points=5, reactions=True)
     b = simulate_dae(andrews_eom(), 0.01, rtol=1e-8, atol=1e-8, points=5, reactions=True)

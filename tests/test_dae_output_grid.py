@@ -31,6 +31,8 @@ def _pair(eom, t_end, coarse, fine, **kw):
     return a, b, step
 
 
+# CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow_cases('projection-adams-1e-08', 'projection-auto-1e-13', 'projection-bdf-1e-09')
 @pytest.mark.parametrize("formulation, method, tol", [
     ("projection", "auto", 1e-13),       # main: 1.2e-7
     ("baumgarte", "auto", 1e-13),        # main: 2.6e-7
@@ -51,6 +53,7 @@ def test_andrews_results_do_not_depend_on_the_output_grid():
     assert np.max(np.abs(b.q[::step] - a.q)) <= 1e-12 * np.max(np.abs(a.q))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_outputs_between_checks_keep_the_drift_bound():
     """Output states between projections are recorded within the drift bound (projected for
     the record when needed), without changing the integration."""

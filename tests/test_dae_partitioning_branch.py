@@ -45,6 +45,7 @@ def _check_on_branch(r, msgs, pos_tol, energy_tol):
     assert r.stats["energy_drift"] < energy_tol
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a01_partitioning_20s_outputs_every_second_stays_on_branch():
     # the subject is the branch, checked against the exact solution: no error estimate needed
     r, msgs = _run(20.0, 21, error_estimate="off")   # the jump was between t = 11 s and 12 s (5.77 J, 1.93 m)
@@ -65,6 +66,7 @@ def test_a01_partitioning_50s_outputs_every_5s_stays_on_branch():
     _check_on_branch(r, msgs, pos_tol=1e-3, energy_tol=1e-3)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_energy_check_warns_when_a_conservative_run_jumps(monkeypatch):
     """With the branch checks switched off, the same run jumps branch (as on main); the energy
     check of a conservative model must then warn and say so in the statistics."""
@@ -80,6 +82,7 @@ def test_energy_check_warns_when_a_conservative_run_jumps(monkeypatch):
     assert r.metadata["accuracy"]["invariants"]["energy"]["warning"] is True
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method, jacobians", [("erk", False), ("bdf", True), ("adams", True)])
 def test_partitioning_runs_the_requested_method(method, jacobians):
     """main ran CVODES BDF whatever was asked and reported 'erk' for method = 'erk'."""
@@ -92,6 +95,7 @@ def test_partitioning_runs_the_requested_method(method, jacobians):
     assert np.max(np.hypot(r["x"] - x, r["y"] - y)) < 1e-5
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_partitioning_auto_method_is_named():
     r, _ = _run(1.0, 3)
     assert "BDF" in r.metadata["method"] and "partition" in r.metadata["method_reason"]

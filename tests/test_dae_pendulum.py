@@ -28,6 +28,7 @@ def test_cash_scene_matches_reference_at_t1():
     assert abs(r["lambda[rod]"][-1] - float(CASH["lam"])) < 1e-8
 
 
+@pytest.mark.slow_cases('partitioning')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_cash_scene_every_formulation(formulation):
     with warnings.catch_warnings(record=True):      # plain Baumgarte may exceed the drift bound
@@ -50,6 +51,7 @@ def _a01(t_end, points):
     return r, err, bound
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a01_200s():
     r, err, bound = _a01(200.0, 201)
     assert np.max(err) < 1e-3
@@ -57,6 +59,7 @@ def test_a01_200s():
     assert r.stats["drift_ok"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a01_energy_is_conserved():
     r, err, bound = _a01(50.0, 501)
     E = 0.5 * (r["der(x)"] ** 2 + r["der(y)"] ** 2) + 9.81 * r["y"]

@@ -40,6 +40,7 @@ def _accel(e, r, i):
     return qdd
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_crank_rocker_reactions_match_newton_euler():
     e = crank_rocker_eom()
     a, b, c, d = 0.4, 1.0, 0.8, 1.0
@@ -78,6 +79,7 @@ def test_crank_rocker_reactions_match_newton_euler():
         assert np.max(np.abs(lam - FC_local)) < 1e-8 * scale
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_slider_crank_reactions_match_newton_euler():
     e = slider_crank_eom()
     rr, l, (m1, m2, m3), tau = 0.3, 1.0, (1.0, 2.0, 0.5), 5.0
@@ -113,6 +115,7 @@ def test_slider_crank_reactions_match_newton_euler():
         assert np.max(np.abs(lam - F[4:6])) < 1e-8 * scale
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_multipliers_only_when_asked():
     r = simulate_dae(slider_crank_eom(), 0.2, points=3)
     assert not any(k.startswith("lambda[") or k.startswith("jB.") for k in r.signals)

@@ -78,6 +78,7 @@ def check_against_reference(model, r, N: int, angle_tol: float):
     return theta
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("N", [2, 3])
 def test_nfourbar_crosses_every_singular_configuration_like_the_one_dof_reference(N):
     model = nfourbar(N)
@@ -96,6 +97,7 @@ def test_nfourbar_crosses_every_singular_configuration_like_the_one_dof_referenc
     assert r.stats["min_singular_ratio"] < 1e-2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_energy_and_drift_stay_bounded_through_the_passages():
     r = nfourbar(3).simulate(rtol=1e-9, atol=1e-11, error_estimate="off")
     again = nfourbar(3).simulate(rtol=1e-9, atol=1e-11, error_estimate="off")
@@ -109,6 +111,7 @@ def test_energy_and_drift_stay_bounded_through_the_passages():
     assert r.stats["max_velocity_drift"] <= r.stats["drift_bound"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_accuracy_follows_the_tolerance():
     errs = []
     for tol in (1e-6, 1e-9):
@@ -133,6 +136,7 @@ def test_independent_parallelogram_crosses_its_flat_position():
     assert abs(first - t_star) < 2e-3
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_default_projection_still_refuses_at_the_first_passage():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -38,6 +38,7 @@ def test_model_displays_parameters_coordinates_counts_and_formulation():
     assert "| j1.phi | 1.5708 | rad |" in md and "| l | 1 | m |" in md
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_result_displays_summary_and_a_small_plot():
     r = _load("pendulum").simulate(1.0, points=21)
     h = r._repr_html_()
@@ -73,6 +74,7 @@ def test_lagrange_equation_of_the_pendulum_is_the_textbook_one():
     assert eqs._repr_latex_().startswith("$$\\begin{aligned}")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_lagrange_equations_agree_with_the_numeric_dynamics_at_random_states():
     import casadi as ca
 
@@ -112,6 +114,7 @@ def test_hamilton_equations_of_the_pendulum():
 # ----------------------------------------------------------------------------- tables
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_to_pandas_and_to_xarray_carry_units():
     import pandas  # noqa: F401 - the test extra installs it
     import xarray  # noqa: F401 - the test extra installs it
@@ -136,6 +139,7 @@ def _draw(fig):
     return fig.canvas.get_renderer()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_plot_puts_angles_and_lengths_on_separate_labelled_axes_with_legends_outside():
     r = _load("slider_crank").simulate(0.3, points=31)
     fig = r.plot(drift=True)
@@ -172,6 +176,7 @@ def test_plot_of_unknown_signal_is_a_usage_error():
     assert [a.get_ylabel() for a in fig.axes] == ["length [m]"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_plot_command_still_writes_a_file(tmp_path):
     from mechdsl.cli import main
 

@@ -4,6 +4,7 @@ import re
 import shlex
 
 import numpy as np
+import pytest
 
 from conftest import CHECKOUT
 
@@ -31,6 +32,7 @@ def _blocks(text):
     return re.findall(r"```\n(.*?)```", text, re.S)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_tutorial_shell_sessions_print_what_the_text_shows(tmp_path, monkeypatch, capsys):
     """Every `$ mech ...` line of the tutorial is run in order, in a folder where the reader's
     files are written as the text says (the model of step 1, the scene of step 5 appended, the
@@ -62,6 +64,7 @@ def test_tutorial_shell_sessions_print_what_the_text_shows(tmp_path, monkeypatch
     assert ran >= 5
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_tutorial_says_what_animate_draws(tmp_path, monkeypatch, capsys):
     """The T-and-V pendulum has no bodies (bars of the coordinates), the component one has (a
     drawing of the mechanism): the tutorial says which, and the command agrees."""

@@ -108,6 +108,7 @@ def _textmate_scopes(grammar: dict, text: str) -> list[str | None]:
     return scopes
 
 
+@pytest.mark.slow_cases('andrews.mech', 'arm7.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_textmate_grammar_covers_every_model(path):
     grammar = json.loads((CHECKOUT / "editors" / "mech.tmLanguage.json").read_text())

@@ -111,6 +111,7 @@ end Blow;
     assert ei.value.result is r
 
 
+@pytest.mark.slow_cases('double_pendulum.mech-kw2')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("file,kw", [
     ("pendulum_cartesian.mech", dict(model="PendulumCartesian")),          # a DAE
     ("bouncing_ball.mech", dict(scene="Bounce")),                          # contacts
@@ -140,6 +141,7 @@ def test_sweeps_carry_no_estimate_and_issue_no_warnings():
     assert np.isnan(ds["error_estimate"].values).all()                   # not asked: NaN, not 0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_sweeps_on_request_carry_each_runs_estimate(pendulum, tmp_path, capsys):
     """error_estimate="on": each run's estimate in the status table, the number a single run of
     the same values reports (each run with its own companion, not the vectorized back end)."""
@@ -161,6 +163,7 @@ def test_sweeps_on_request_carry_each_runs_estimate(pendulum, tmp_path, capsys):
     assert f"error estimate: largest {single[worst]:.2g} (run {worst}: L = {worst + 1:g})" in out
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_fixed_step_the_user_chose_warns_when_the_error_is_a_large_part_of_the_motion():
     """kepler.mech's Orbits scene (Stormer-Verlet, 400 steps an orbit, dt chosen): its energy
     stays bounded, but after 20 orbits the planet is 0.58 m off (the orbit's phase); rtol does

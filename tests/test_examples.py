@@ -100,6 +100,7 @@ def _mech(*args, cwd):
     return subprocess.run([*cmd, *args], cwd=cwd, capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_first_steps_in_an_empty_folder(tmp_path):
     """Issue 27's 'done': from an empty folder, `mech examples --copy ex`, `mech simulate
     ex/double_pendulum.mech -o dp.csv` and `mech simulate ex/pendulum.mech --json` work."""
@@ -125,6 +126,7 @@ def test_first_steps_in_an_empty_folder(tmp_path):
     assert "model Pendulum" in r.stderr          # the human summary went to stderr
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_readme_shows_the_installed_form_and_it_works(tmp_path):
     """README.md's command for an installed package (no checkout) runs as written in an empty folder."""
     import shlex
@@ -159,6 +161,7 @@ def swept(tmp_path_factory):
         yield ds.load(), r
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_sweep_to_netcdf_from_an_empty_folder(swept):
     ds, r = swept
     assert "3 runs, 3 succeeded" in r.stdout
@@ -169,6 +172,7 @@ def test_a_sweep_to_netcdf_from_an_empty_folder(swept):
 
 
 # issue 27: a sweep file from the installed package carries units, long names and provenance
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_sweep_file_carries_units_and_provenance(swept):
     ds, _ = swept
     units = {name: ds[name].attrs.get("units") for name in ("time", "theta", "der(theta)", "x", "E", "L")}
@@ -178,6 +182,7 @@ def test_the_sweep_file_carries_units_and_provenance(swept):
     assert ds.attrs.get("model_hash")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_lsp_answers_an_editor(tmp_path):
     """The installed `mech lsp` (the console script), started in an empty folder as an editor starts
     it: initialize, a copied example opened (its diagnostics: none), a hover, shutdown and exit."""

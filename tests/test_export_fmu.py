@@ -54,6 +54,7 @@ def test_pendulum_model_exchange_and_co_simulation_match_mech_simulate(fmus, ver
         assert np.ptp(res["E"]) < 1e-7
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_constrained_model_index1_ode_with_projection(fmus):
     """The four-bar (3 coordinates, 5 constraints of which 2 independent, two start values
     made consistent): both interfaces match; the states stay on the constraints."""
@@ -72,6 +73,7 @@ def test_constrained_model_index1_ode_with_projection(fmus):
         assert np.all(np.isfinite(res["F_close[1]"]))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_constrained_drift_stays_bounded_at_loose_tolerances(fmus):
     """The four-bar over 20 s at loose tolerances: the FMU projects when the drift passes half
     of mechdsl.drift_bound, so the constraints stay at the level of one step's error; with the
@@ -97,6 +99,7 @@ def test_constrained_drift_stays_bounded_at_loose_tolerances(fmus):
         assert drift[1e3] > 50 * drift[0.0], (kind, drift)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("fmi_type", ["CoSimulation", "ModelExchange"])
 def test_contacts_bounce_to_rest(fmus, fmi_type):
     """The bouncing ball: impacts in the FMU's step (co-simulation), or at the events of fmpy's
@@ -112,6 +115,7 @@ def test_contacts_bounce_to_rest(fmus, fmi_type):
     assert abs(X[-1, 1]) < 1e-9 and X[-1, 0] == pytest.approx(0.1, abs=1e-8)      # at rest on the floor
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_model_exchange_with_a_fixation_and_a_rod_landing_on_either_end(fmus):
     """FMI 2 model exchange of contacts: the rod that bounces on either end and settles flat
     (two contacts, simultaneous impacts), and the rod caught by a fixation at its time (a time
@@ -123,6 +127,7 @@ def test_model_exchange_with_a_fixation_and_a_rod_landing_on_either_end(fmus):
         assert_agree(X, ref, f"{name} model exchange")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_parameters_set_through_the_fmu_change_the_run_as_set_does(fmus):
     """A parameter (pendulum L), one that moves a start value (the ball's drop height h: the
     state's start is calculated) and one that dependent parameters follow (kepler's e: rp, vp)."""
@@ -140,6 +145,7 @@ def test_parameters_set_through_the_fmu_change_the_run_as_set_does(fmus):
     assert_agree(X, reference(m.with_params(L=0.5), 2.0, 0.01), "pendulum ME with L = 0.5")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_calculated_values_cannot_be_set(fmus):
     import fmpy
 
@@ -149,6 +155,7 @@ def test_calculated_values_cannot_be_set(fmus):
             fmpy.simulate_fmu(str(path), start_values=values, stop_time=0.1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_inputs_driven_through_the_fmu_as_input_does(fmus):
     """cart_pole's force F: a table held between samples (--input F=file.csv, zero-order hold)."""
     from mechdsl.simulation.drive import table
@@ -209,6 +216,7 @@ def _slave(path, name="cs"):
     return fmu, {v.name: v.valueReference for v in md.modelVariables}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_input_derivatives_drive_a_ramp_between_communication_points(fmus):
     """FMI 2 co-simulation (canInterpolateInputs): the master gives F and dF/dt at each
     communication point; the FMU follows the ramp F = 1 + 2 t inside the step, as mech simulate
@@ -234,6 +242,7 @@ def test_input_derivatives_drive_a_ramp_between_communication_points(fmus):
             assert np.max(np.abs(np.array(rows) - ref)) > 1e-4       # the ramp held: a different run
 
 
+@pytest.mark.slow_cases('four_bar-four_bar.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name,file", [("four_bar", "four_bar.mech"), ("bouncing_ball", "bouncing_ball.mech")])
 def test_fmu_state_get_set_and_serialize(fmus, name, file):
     """Co-simulation from a saved state repeats the run: the state taken at t = 0.5 (kept, and
@@ -324,6 +333,7 @@ def _directional(path, m, x, u=None):
     return J_ad, J_fd
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_directional_derivatives_against_finite_differences(fmus):
     rng = np.random.default_rng(29)
     for name, file in (("double_pendulum", "double_pendulum.mech"), ("cart_pole", "cart_pole.mech"),
@@ -368,6 +378,7 @@ int main(int argc, char **argv) {
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_fmu_runs_from_c_alone(fmus, tmp_path):
     """Built from the FMU's own sources with a plain C driver (no Python, CasADi or mechdsl)
     it gives fmpy's co-simulation numbers; the shipped binary needs only the C library."""
@@ -398,6 +409,7 @@ def test_the_fmu_runs_from_c_alone(fmus, tmp_path):
     assert needed and all(n.startswith(("libc.so", "libm.so", "ld-linux")) for n in needed), needed   # the C library
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_export_is_deterministic(tmp_path):
     m = mechdsl.load(MODELS / "double_pendulum.mech")
     a, b = tmp_path / "a.fmu", tmp_path / "b.fmu"
@@ -462,6 +474,7 @@ def test_bad_input_is_refused_and_nothing_is_written(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.fmu"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_command_line(tmp_path, capsys):
     from mechdsl.cli import main
 
@@ -478,6 +491,7 @@ def test_command_line(tmp_path, capsys):
     assert os.path.getsize(out) > 10_000
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_fmi3_event_indicator_variables_read_as_the_indicators(fmus):
     """FMI 3 model exchange of the falling rod (two contacts): the ``mechdsl.event_indicator[...]``
     variables read in one fmi3GetFloat64 call, in any order and mixed with a state, are the values

@@ -13,6 +13,7 @@ from mechdsl.eom.codegen import find_compiler
 
 
 
+@pytest.mark.slow_cases('True')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("compiled", [True, False])
 def test_fast_function_equals_the_plain_call(compiled):
     m = mechdsl.load(str(MODELS / "arm7.mech"))

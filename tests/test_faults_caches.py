@@ -58,6 +58,7 @@ def cache_key(cache: Path, path: Path) -> str:
 # ------------------------------------------------------------------ the model cache
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_swapped_model_cache_entry_is_not_served(tmp_path):
     """Another model's entry under this model's name printed "model Pendulum" for the double
     pendulum and wrote the pendulum's results, exit 0, on every run."""
@@ -76,6 +77,7 @@ def test_a_swapped_model_cache_entry_is_not_served(tmp_path):
     assert python(cache, code).stdout.strip() == "DoublePendulum"
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_every_cache_miss_says_why_under_mechdsl_debug(tmp_path):
     cache = tmp_path / "cache"
     p = run(cache, "simulate", MODELS / "pendulum.mech", "--t-end", "0.01", "--points", "3", "--no-progress",
@@ -101,6 +103,7 @@ def _integral_entries(cache: Path) -> list[Path]:
 
 # "swapped" (another model's entry, the case that gave wrong results) in the default run; the
 # other damages are the same contract, in the slow set (test budget, docs/internals.md)
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("damage", [pytest.param("empty", marks=pytest.mark.slow),
                                     pytest.param("garbage", marks=pytest.mark.slow), "swapped"])
 def test_a_bad_first_integrals_entry_is_rebuilt(tmp_path, damage):
@@ -152,6 +155,7 @@ def _plant_model_entry(cache: Path, key: str, marker: Path) -> Path:
     return path
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_cache_folder_others_can_write_is_never_read(tmp_path):
     cache = tmp_path / "cache"
     k = cache_key(cache, MODELS / "pendulum.mech")
@@ -165,6 +169,7 @@ def test_a_cache_folder_others_can_write_is_never_read(tmp_path):
     assert "model Pendulum" in p.stdout
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_cache_entry_others_can_write_is_never_read(tmp_path):
     cache = tmp_path / "cache"
     k = cache_key(cache, MODELS / "pendulum.mech")
@@ -198,6 +203,7 @@ def test_a_cache_owned_by_another_user_is_never_read(tmp_path, monkeypatch, capl
     assert len(said) == 1 and "owned by another user" in said[0], said
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_new_cache_folders_and_entries_are_private(tmp_path):
     """Created 0700 / 0600 whatever the umask, so a group-writable umask (002) does not make
     mechdsl refuse its own cache."""
@@ -251,6 +257,7 @@ def _plant_library(tmp_path: Path, lib: Path) -> None:
     lib.with_suffix(".sha256").write_text(hashlib.sha256(evil.read_bytes()).hexdigest() + "\n")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_a_planted_library_with_its_file_hash_is_not_loaded(tmp_path):
     cache, marker = tmp_path / "cache", tmp_path / "pwned"
@@ -262,6 +269,7 @@ def test_a_planted_library_with_its_file_hash_is_not_loaded(tmp_path):
     assert "rebuilt" in again["note"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_a_library_in_a_folder_others_can_write_is_not_loaded(tmp_path):
     cache, marker = tmp_path / "cache", tmp_path / "pwned"

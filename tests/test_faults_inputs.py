@@ -48,6 +48,7 @@ end Guides;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_door_on_two_coaxial_hinges_swings_as_on_one():
     """The second hinge adds only dependent rows: the door is a physical pendulum about the
     hinge line (I = m L^2/3, centre at L/2); its quarter period from 1.2 rad at rest is
@@ -143,6 +144,7 @@ def test_a_file_name_too_long_is_a_usage_error(tmp_path, capsys, cmd):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_full_standard_output_is_an_io_error():
     """`mech check ... >/dev/full`: exit 1 with one line on stderr, no traceback."""
     if not os.path.exists("/dev/full"):
@@ -170,6 +172,7 @@ def test_bad_scheduler_addresses_are_usage_errors(capsys, address, text):
     assert code == 2 and text in err and "internal error" not in err, err
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_port_that_speaks_another_protocol_is_refused_cheaply(capsys):
     """Dask read the junk's first 8 bytes as a frame length and tried to allocate 2.8 EiB."""
     import resource

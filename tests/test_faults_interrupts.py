@@ -157,6 +157,7 @@ API_CASES = [
 ]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method, extra, t_end", API_CASES)
 def test_ctrl_c_through_the_api_keeps_the_solution_up_to_there(method, extra, t_end):
     """Model.simulate / mechdsl.simulate: Ctrl-C (here interrupt_main, as a terminal's SIGINT)
@@ -198,6 +199,7 @@ def test_ctrl_c_through_the_api_keeps_the_solution_up_to_there(method, extra, t_
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_ctrl_c_in_a_contact_run_through_the_api():
     """The contact back end (free flight in the compiled loop or stepped in Python): the rows and
     events up to the interruption are kept."""

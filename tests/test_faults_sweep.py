@@ -69,6 +69,7 @@ def _interrupted(tmp_path, scheduler, out="-", n=64, chunk=4, timeout=600):
     return json.loads(stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("scheduler", ["vectorized", "processes"])
 def test_ctrl_c_stops_a_sweep_within_seconds_and_keeps_what_finished(tmp_path, scheduler):
     """The vectorized scheduler swallowed Ctrl-C (CasADi turns it into a RuntimeError, the
@@ -149,6 +150,7 @@ def dp():
 STARTS = {"j1.phi": [0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6]}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_killed_worker_loses_nothing(dp, tmp_path, monkeypatch):
     """A worker killed once (SIGKILL) ended the sweep in an internal error (BrokenProcessPool)
     and wrote nothing; its runs are retried on a fresh worker."""
@@ -163,6 +165,7 @@ def test_a_killed_worker_loses_nothing(dp, tmp_path, monkeypatch):
     ds.close()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_run_that_keeps_killing_its_worker_is_a_failed_row(dp, tmp_path, monkeypatch):
     _with_killer(tmp_path, monkeypatch, "always")
     ds = dp.sweep(starts=STARTS, t_end=0.2, points=3, scheduler="processes", workers=2, chunk_size=4,
@@ -183,6 +186,7 @@ def _fresh(dp, tmp_path, **kw):
                     out=str(tmp_path / "fresh.nc"), **kw)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_resume_continues_an_interrupted_sweep(dp, tmp_path, monkeypatch):
     from mechdsl.sweep import runs, schedulers
     from sweep_util import interrupt_at_chunk
@@ -208,6 +212,7 @@ def test_resume_continues_an_interrupted_sweep(dp, tmp_path, monkeypatch):
     ref.close()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_resume_refuses_another_model_settings_or_design(dp, tmp_path):
     out = tmp_path / "s.nc"
     dp.sweep(starts={"j1.phi": [0.1, 0.2]}, t_end=0.5, points=5, progress=False, out=str(out)).close()
@@ -241,6 +246,7 @@ KILL_DRIVER = textwrap.dedent(r"""
 
 
 # the default format in the default run; the CSV (same contract, its sidecar) in the slow set
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("suffix", [".nc", pytest.param(".csv", marks=pytest.mark.slow)])
 def test_a_killed_sweep_resumes_and_leaves_nothing_unreadable(dp, tmp_path, suffix):
     out = tmp_path / f"s{suffix}"
@@ -260,6 +266,7 @@ def test_a_killed_sweep_resumes_and_leaves_nothing_unreadable(dp, tmp_path, suff
     np.testing.assert_allclose(got["j1.phi"].values, ref["j1.phi"].values, rtol=1e-15, atol=0)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_leftovers_of_a_killed_sweep_go_with_the_next_run(dp, tmp_path):
     out = tmp_path / "s.nc"
     p = subprocess.run([sys.executable, "-c", KILL_DRIVER, str(DP), str(out)], capture_output=True, text=True,
@@ -323,6 +330,7 @@ def test_a_simulate_csv_and_its_sidecar_are_checked(tmp_path):
 # ------------------------------------------------------------------ units and provenance (issue 27)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_every_variable_has_its_unit_and_long_name_and_the_file_its_provenance(dp, tmp_path):
     out = tmp_path / "s.nc"
     ds = dp.sweep(params={"m": [1.0, 2.0]}, starts={"j1.phi": [0.1, 0.2]}, t_end=0.5, points=5, progress=False,
@@ -369,6 +377,7 @@ def test_the_heat_map_labels_its_axes_with_units(dp):
 # ------------------------------------------------------------------ samplers (issue 27)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("make", [sample.sobol, sample.latin_hypercube])
 def test_quasi_random_samplers_are_reproducible_and_stratified(make):
     s = make({"m": (1.0, 2.0), "l": (0.5, 1.5)}, n=64, seed=3)

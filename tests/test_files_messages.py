@@ -17,6 +17,7 @@ from mechdsl.diagnostics import UsageError
 from test_sim_cli import files  # noqa: F401 - the fixture: pendulum.mech and blowup.mech in a fresh folder
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("mask", [0o022, 0o077, 0o002])
 def test_created_files_follow_the_umask(files, mask):
     old = os.umask(mask)

@@ -90,6 +90,7 @@ def test_only_g_over_L_from_the_angle(pendulum):
     assert "only g/L can" in f.table()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_lengths_and_only_the_mass_ratio():
     m = mechdsl.loads(DOUBLE)
     truth = m.simulate(1.5, points=301, **TIGHT)
@@ -118,6 +119,7 @@ def _coverage(trials, seed):
     return np.array(z)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_standard_errors_cover_the_truth_fast():
     """Ten data sets: the sum of z^2 over 20 estimates lies in chi2(20)'s central 99.8%."""
     z = _coverage(10, seed=7)
@@ -215,6 +217,7 @@ def test_bad_tables_and_names(pendulum):
         pendulum.fit({"time": t, "x": t}, params=["L"], experiments=[{}, {}])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_fit_writes_json_and_plot(tmp_path, capsys):
     m = mechdsl.load(PENDULUM, model="Pendulum")
     r = m.simulate(2.0, points=101, **TIGHT)
@@ -253,6 +256,7 @@ def _pendulum_csv(tmp_path, seed=5, points=101):
     return _csv(tmp_path / "d.csv", "\n".join(rows) + "\n")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_fit_json_document(tmp_path, capsys):
     from cli_json import validate
 
@@ -273,6 +277,7 @@ def test_mech_fit_json_document(tmp_path, capsys):
     assert (d["code"], d["file"], d["line"], d["column"]) == ("E773", bad, 3, 5) and d["hint"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_fit_does_not_overwrite_without_force(tmp_path, capsys):
     data = _pendulum_csv(tmp_path, points=21)
     out, png = tmp_path / "fit.json", tmp_path / "fit.png"

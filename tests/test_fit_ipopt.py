@@ -22,6 +22,7 @@ def _close(a, b, rel):
     return all(abs(a[k] - b[k]) <= rel * abs(b[k]) for k in b)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_double_pendulum_same_estimates_as_lm():
     d = mechdsl.loads(DOUBLE)
     r = d.simulate(2.0, points=201, **TIGHT)
@@ -38,6 +39,7 @@ def test_double_pendulum_same_estimates_as_lm():
         assert abs(ip.estimates[n] - v) < 4 * ip.standard_errors[n], n
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_pendulum_parameters_and_a_start_value():
     m = mechdsl.load(MODELS / "pendulum.mech", model="Pendulum")
     r = m.simulate(2.0, points=101, **TIGHT)
@@ -49,6 +51,7 @@ def test_pendulum_parameters_and_a_start_value():
     assert ip.success and _close(ip.estimates, lm.estimates, 1e-7)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_declared_bound_holds_and_the_rest_is_optimal():
     """k's declared max (3.5) lies below the truth (4): IPOPT stops k on it, and c where a fit
     of c alone with k = 3.5 puts it."""

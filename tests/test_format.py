@@ -11,6 +11,7 @@ from mechdsl.frontend.format import comments, format_source
 from mechdsl.frontend.parser import parse
 
 
+@pytest.mark.slow_cases('andrews.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_shipped_models_keep_their_meaning_and_comments_and_format_once(path):
     text = path.read_text()

@@ -94,6 +94,7 @@ end Slide;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_block_sliding_on_a_contact_with_friction():
     """The contact's normal force N = m g cos(alpha) carries the friction mu N: the same stop time
     as the block on the guide, found by the contact simulator with the normal force it computes."""

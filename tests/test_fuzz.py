@@ -142,17 +142,20 @@ def front_end(data: str | bytes) -> None:
         check_diagnostics(e, text)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_shipped_models_pass():
     for text in MODELS:
         front_end(text)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @FUZZ
 @given(mutated_model())
 def test_mutated_models(text):
     front_end(text)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @FUZZ
 @given(mutated_model(CORPUS))
 def test_mutated_corpus(text):
@@ -165,6 +168,7 @@ def test_random_bytes(data):
     front_end(data)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @FUZZ
 @given(st.text(max_size=400))
 def test_random_text(text):

@@ -268,6 +268,7 @@ DEFAULT = settings(max_examples=10, deadline=None, derandomize=True, database=No
                    suppress_health_check=list(HealthCheck))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @DEFAULT
 @given(value_mutant())
 def test_pipeline_on_mutated_models(tmp_path_factory, mutant):

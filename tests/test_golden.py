@@ -77,6 +77,7 @@ def check_golden(golden: Path, actual: str, what: str, update: bool, changes: li
                     f"{_diff(expected, actual, name)}\nif the change is intended: {UPDATE}", pytrace=False)
 
 
+@pytest.mark.slow_cases('nfourbar-eom', 'nfourbar-model')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("form", FORMS)
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.stem)
 def test_golden(path, form, capsys, update_golden, golden_changes):

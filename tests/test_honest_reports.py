@@ -24,6 +24,7 @@ end Stiff;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_positive_eigenvalue_beside_a_stiff_spring_is_not_zero():
     """The constrained equilibrium at the bottom has the reduced Hessian eigenvalue m g / L = 5.962
     (and k along s): stable.  Before, a tolerance of 1e-9 x max|K| (1e12) called 5.962 a zero
@@ -191,6 +192,7 @@ def test_automatic_names_read_as_csv_and_integrals_print_in_the_models_names(tmp
     assert np.array_equal(r["L_(bob.x,bob.y)"], L)                     # the old name still reads
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_projection_runs_are_not_told_to_use_projection():
     """The energy warning advised `formulation = "projection"` to a run that already used it."""
     m = mechdsl.load(MODELS / "pendulum_cartesian.mech", model="PendulumCartesian")

@@ -62,6 +62,7 @@ def test_output_points_between_and_at_events():
     assert [e["time"] for e in r.events] == pytest.approx([e["time"] for e in coarse.events], abs=1e-13)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_pendulum_wall_compiled_against_elliptic_closed_form():
     th0, thw, e = -1.0, 0.3, 0.9

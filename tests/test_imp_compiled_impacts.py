@@ -50,6 +50,7 @@ def test_twenty_bounces_in_one_compiled_call(method):
     records_agree(c, p, 1e-12, 1e-11)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_pendulum_wall_impacts_in_c_equal_python():
     """A nonlinear gap (the bob's x against a wall): the projection after each impact is a

@@ -41,6 +41,7 @@ def run():
     return m.simulate(1.0, rtol=1e-10, atol=1e-12, points=2001, error_estimate="off")   # exact balances, no estimate
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_impacts_and_energy_balance(run):
     r = run
     assert r.success, r.message
@@ -54,6 +55,7 @@ def test_impacts_and_energy_balance(run):
     assert np.max(np.abs(balance)) < 1e-8
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_pin_force_accelerates_the_slider(run):
     r = run
     v = r["der(j3.s)"]

@@ -29,6 +29,7 @@ def first_impact(N, order, e=1.0):
     return r, t_hit, w
 
 
+@pytest.mark.slow_cases('5')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("N", [3, 5])
 def test_sequential_passes_momentum_through(N):
     r, t_hit, w = first_impact(N, "sequential")
@@ -59,6 +60,7 @@ def eom_pendulum_omega(w0, dt):
     return s.y[1, -1]
 
 
+@pytest.mark.slow_cases('3')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("N", [3, 5])
 def test_simultaneous_moves_the_chain_as_a_block(N):
     r, t_hit, w = first_impact(N, "simultaneous")

@@ -122,6 +122,7 @@ def test_singular_mass_matrix_is_a_failure_not_a_traceback():
     assert r.failure.time < 2.0 and len(r.t) < 21
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
     """A mass of 1e308 overflows the weight to inf: the contact run must fail at t = 0 naming the
     non-finite acceleration (it used to spin for ever in the one-step solver's step-size loop),
@@ -160,6 +161,7 @@ def test_overflowing_parameters_fail_at_once_with_the_coordinate(tmp_path):
     assert r.failure.cause == "non-finite right-hand side" and "fly.x" in r.failure.detail
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_run_that_needs_too_many_steps_fails_at_once(tmp_path):
     """pendulum_wall with a rod of 1e-14 m swings at sqrt(g cos(1) / L) = 2.3e7 rad/s: 0.05 s is
     1.8e5 periods, at least 1.8e6 steps, over the contact stepper's budget.  The run fails at its
@@ -213,6 +215,7 @@ def test_the_work_estimate_is_a_lower_bound(method, rtol):
     assert est <= r.stats["steps"] <= 4 * est + 5
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_accumulating_events_fail_instead_of_running_for_minutes(monkeypatch):
     """Fuzz mutant (issue 18): falling_rod.mech with g = 1e12.  The rod lands at 1.4e6 m/s and
     every rebound stays faster than rest_speed = 1e-3 m/s (gravity alone gives that speed in

@@ -96,6 +96,7 @@ def test_cradle_simultaneous_block():
     assert ev["impulse"] == pytest.approx([0.1 * (N - k) * 2 * v / N for k in range(1, N)], rel=1e-8)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_particle_on_sphere_leaves_at_two_thirds():
     m, r = run("particle_on_sphere.mech", "SlideOff")
     rel = [e for e in r.events if e["kind"] == "release"]

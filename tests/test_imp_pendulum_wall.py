@@ -42,6 +42,7 @@ def test_pendulum_wall_minimal_coordinates():
     assert np.min(r.q[k:np.searchsorted(r.t, times[1]), 0]) == pytest.approx(-amp, abs=2e-4)  # grid-limited
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_pendulum_wall_constrained_model():
     """x^2 + y^2 = L^2 as a bilateral constraint: the impact equations include its row (e = 0)."""
     eom = cartesian_pendulum(L, G, 1.0, TH0)

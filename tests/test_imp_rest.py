@@ -22,6 +22,7 @@ def rod():
     return mechdsl.load(str(MODELS / "falling_rod.mech"), scene="Drop")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_falling_rod_comes_to_rest_at_every_tolerance_with_fewer_events_when_looser(rod):
     counts = []
     for tol in (1e-8, 1e-6, 1e-5, 1e-4, 1e-3):

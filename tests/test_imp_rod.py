@@ -17,6 +17,7 @@ from mechdsl.impacts import Fixation, simulate_with_contacts
 L, M, G = 1.0, 2.0, 9.81
 
 
+@pytest.mark.slow_cases('0.5-0.6', '1.2-1.0')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("th, e", [(0.5, 0.6), (1.2, 1.0), (0.2, 0.0)])
 def test_rod_end_hits_floor(th, e):
     y0 = 1.0
@@ -46,6 +47,7 @@ def test_rod_end_hits_floor(th, e):
     assert vy == pytest.approx(-v + P / M, abs=1e-6)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_fixation_of_rod_end():
     v = 2.0
     eom = planar_rod(L, M, 0.0, phi0=0.0, y0=0.0, vy0=v)
@@ -73,6 +75,7 @@ def test_fixation_of_rod_end():
     assert r.q[before, 1] == pytest.approx(v * r.t[before], abs=1e-12)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_fixation_energy_is_kinetic_energy_of_lost_velocities():
     """Carnot: dT = -1/2 (q'+ - q'-)^T M (q'+ - q'-) for an impulsive constraint (e = 0)."""
     v = np.array([0.3, -1.1, 2.5])

@@ -11,6 +11,7 @@ from mechdsl.impacts import simulate_with_contacts
 R, G, M = 1.0, 9.81, 1.0
 
 
+@pytest.mark.slow_cases('0.02-0.0', '0.1-0.0')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("th0, v0", [(0.1, 0.0), (0.02, 0.0), (0.3, 1.0)])
 def test_particle_leaves_sphere_where_normal_force_vanishes(th0, v0):
     eom, sphere = particle_sphere(R, G, M, th0, speed0=v0)
@@ -41,6 +42,7 @@ def test_particle_leaves_sphere_where_normal_force_vanishes(th0, v0):
     assert np.max(np.abs(r["energy"] - r["energy"][0])) < 1e-8
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_particle_in_bowl_is_a_pendulum():
     th0 = 0.8
     eom, bowl = particle_sphere(R, G, M, th0, inside=True)

@@ -321,6 +321,7 @@ def test_an_output_may_use_an_input():
     assert r["push"] == pytest.approx(r["F"] + r["G"])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_hamilton_equations_of_a_model_with_an_input(capsys):
     """The cart-pole's force F is an input: Hamilton's equations show it as the generalized
     force on the cart, dp_x/dt = F (exactly: x is cyclic in T and V) - was an internal error."""

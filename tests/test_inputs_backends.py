@@ -181,6 +181,7 @@ SIGNAL_FAILURES = [(lambda t: 1.0 if t < 0.6 else [1.0, 2.0], "returned 2 values
 
 # every back end with both failures, less the constrained one's wrong-shape case (the same
 # contract as its ZeroDivisionError case, a second of CPU): that one in the slow set
+@pytest.mark.slow_cases('dae-ZeroDivisionError')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("kind, which, kw, signal, what", [
     pytest.param(kind, which, kw, signal, what, id=f"{kind}-{what}",
                  marks=[pytest.mark.slow] if (kind, what) == ("dae", "returned 2 values") else [])

@@ -73,6 +73,7 @@ def _qdd(m, x):
     return np.array(ode(0.0, x, [], m.parameter_values)).ravel()[n:]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_chain_of_link_instances_matches_sympy_mechanics():
     """Three Link instances joined by revolute joints == sympy.physics.mechanics (Kane) at random states."""
     m = mechdsl.loads(CHAIN, model="Chain")
@@ -104,6 +105,7 @@ def test_coupled_oscillator_instances_frequencies_closed_form():
     np.testing.assert_allclose(w, [math.sqrt(4.0), math.sqrt(4.0 + 2 * 3.0)], rtol=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_nested_instances_names_and_modifiers():
     m = mechdsl.loads(OSC, model="Nested")
     assert m.coordinates == ("left.a.x", "left.b.x", "right.a.x", "right.b.x")

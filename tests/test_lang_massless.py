@@ -96,6 +96,7 @@ end TwoBody;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_two_body_circular_orbit_from_vector_starts():
     """Relative circular orbit: the distance stays a and the relative position returns after
     the period 2 pi sqrt(a^3 / (G (M + m)))."""

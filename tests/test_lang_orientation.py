@@ -100,6 +100,7 @@ end F;
 """.replace("BODIES\n", BODIES)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_oriented_joints_place_bodies_as_scipy_composes_them():
     m = mechdsl.loads(ORIENTED)
     r = m.simulate(0.05, points=3)
@@ -143,6 +144,7 @@ def test_oriented_joints_dynamics_equal_the_constant_frame_workaround(seed):
     assert np.allclose(qdd, np.linalg.solve(Mf, bf).ravel(), rtol=1e-10)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_printed_equations_see_the_orientations():
     """The sympy route (mech equations) composes the joint frames too: its kinetic and potential
     energies equal the numeric ones at a random state."""
@@ -237,6 +239,7 @@ end K;
     assert c["bodies"] == 2 and c["joints"] == 2 and len(m.model.bodies) == 3 and len(m.model.joints) == 3
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_oriented_spherical_start_velocity_is_in_the_child_body_axes():
     """omega(start, frame = "body") on a Spherical joint whose child point is oriented is the child
     body's angular velocity in its own axes; frame = "world" is in world axes through the joint's rpy."""

@@ -41,6 +41,8 @@ def first_error(err: str, path) -> tuple[str, int, int]:
     return m[3], int(m[1]), int(m[2])
 
 
+# CPU budget: the cheaper tests of this file stay in the default run
+@pytest.mark.slow_cases('andrews-qq100000', 'double-name900k', 'nfourbar-N1000', 'nfourbar-N10000', 'pendulum-unit500k')
 @pytest.mark.parametrize("model,old,new,code,line", [
     # a SystemError in the DOF report (an array of 100,000 coordinates)
     ("andrews.mech", '  coordinate Real Theta(start = 0, speed = 0, unit = "rad");\n',
@@ -134,6 +136,7 @@ def test_every_limit_is_documented():
         assert f"`{lim.name}`" in text and f"{lim.default:,}" in text, lim.name
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_shipped_models_are_far_inside_the_budgets():
     # the defaults must never bite a real model: every shipped model passes with a quarter of them
     tight = {k: max(1, v // 4) for k, v in limits.DEFAULTS.items() if k not in ("nesting", "depth")}

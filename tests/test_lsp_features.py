@@ -79,6 +79,7 @@ def test_messages_hints_and_severities_are_mech_checks(name, capsys):
     assert printed and sorted(ours) == sorted(printed)
 
 
+@pytest.mark.slow_cases('nfourbar.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", model_files(), ids=lambda p: p.name)
 def test_shipped_models_have_no_errors(path):
     a, ds = lsp_diagnostics(path.read_text(), str(path))

@@ -53,13 +53,13 @@ def sweep(texts: list[str]) -> int:
 
 
 def test_truncations_and_corpus_fast_subset():
-    # about 40 texts (a prefix every 251 characters of three models, every 20th corpus file):
+    # about 24 texts (a prefix every 503 characters of three models, every 40th corpus file):
     # every text costs the server 17 requests; the full sweeps are the slow tests below
     texts = []
     for name in ("pendulum.mech", "coupled_pendulums.mech", "nfourbar.mech"):
-        texts += truncations(MODELS / name, 251)
-    texts += corpus_texts(every=20)
-    assert sweep(texts) > 40
+        texts += truncations(MODELS / name, 503)
+    texts += corpus_texts(every=40)
+    assert sweep(texts) > 20
 
 
 @pytest.mark.slow

@@ -128,6 +128,7 @@ def test_formatting_replaces_the_document_with_the_printers_text(server):
     assert edits[0]["range"] == {"start": {"line": 0, "character": 0}, "end": {"line": 3, "character": 0}}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_rapid_edits_are_analysed_once_and_start_checks_can_be_left_out():
     c = LspClient({"debounceMs": 2000, "startChecks": False})
     try:
@@ -150,6 +151,7 @@ def test_rapid_edits_are_analysed_once_and_start_checks_can_be_left_out():
         assert c.close() == 0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_lsp_without_pygls_says_how_to_install_it(tmp_path):
     import subprocess
     import sys
@@ -163,6 +165,7 @@ def test_mech_lsp_without_pygls_says_how_to_install_it(tmp_path):
     assert p.returncode == 2 and "pip install 'mechdsl[lsp]'" in p.stderr
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_pygls_is_imported_only_when_mech_lsp_runs():
     import subprocess
     import sys

@@ -52,6 +52,7 @@ def _ids(cells):
     return [" ".join(c) for c in cells]
 
 
+@pytest.mark.slow_cases('nfourbar-check')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("cmd", CHEAP, ids=_ids(CHEAP))
 @pytest.mark.parametrize("path", MODEL_FILES, ids=[p.stem for p in MODEL_FILES])
 def test_cheap_cell(path, cmd, capsys):

@@ -167,6 +167,7 @@ def _code_size(f):
     return len(re.sub(r"static const casadi_(int|real) [^;]*;", "", cg.dump(), flags=re.S))
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_c_code_grows_with_log_n():
     # CasADi nests mapaccum in base 8 (over groups of 8 links): 4x the links add at most one level
     small, big = derive(nlink(30)), derive(nlink(120))
@@ -177,6 +178,7 @@ def test_c_code_grows_with_log_n():
     assert loop_big <= 0.3 * unrolled_big
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_looped_only_where_it_pays():
     small = derive(nlink(12))
     assert looped_ode(small) is None        # small: the unrolled C is faster and compiles fast

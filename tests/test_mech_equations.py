@@ -51,6 +51,7 @@ def residual_check(model, seed=0):
         assert np.abs(r).max() < 1e-9 * max(1, np.abs(qdd).max()), r
 
 
+@pytest.mark.slow_cases('double_pendulum')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name", ["double_pendulum", "cart_pole", "bead_on_hoop", "two_masses_spring"])
 def test_printed_equations_hold(name):
     residual_check(load_ir(name))
@@ -70,6 +71,7 @@ def test_text_form_of_the_pendulum():
     assert "theta:  m*L^2*der(der(theta)) + L*g*m*sin(theta) = 0" in lines
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_text_latex_and_structure(capsys, tmp_path):
     assert main(["equations", os.path.join(MODELS, "double_pendulum.mech")]) == 0
     out = capsys.readouterr().out
@@ -99,6 +101,7 @@ def test_cli_hamiltonian_and_errors(capsys, tmp_path):
     assert "Traceback" not in capsys.readouterr().err
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_quaternion_equations_hold_up_to_the_norm_multiplier():
     """For a quaternion joint the printed Lagrange equations hold with a multiplier along q:
     their residual at the numeric accelerations is parallel to q."""

@@ -55,6 +55,7 @@ def m_bias(e):
 
 # N = 5 (sympy.mechanics' own derivation takes 1.8 s of CPU) is slow; by default N = 1 .. 4 against
 # sympy.mechanics, and test_nlink_routes_agree[6] checks six links between the three routes
+@pytest.mark.slow_cases('3', '4')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("N", [1, 2, 3, 4, pytest.param(5, marks=pytest.mark.slow)])
 def test_nlink_matches_sympy_mechanics(N):
     e = derive(nlink(N))

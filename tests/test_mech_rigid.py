@@ -93,6 +93,7 @@ def _simulate(e, x0, t_end, t_eval):
     return solve_ivp(rhs, (0, t_end), x0, t_eval=t_eval, rtol=1e-11, atol=1e-12, method="DOP853")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_three_integrations_agree():
     """R(t) of Euler's equations + R' = R [w] (reference), of the Euler-angle EOM and of the
     quaternion EOM agree; the quaternion norm drift stays tiny; energy is conserved."""

@@ -82,6 +82,7 @@ def test_warm_run_is_bit_identical_and_neither_parses_nor_derives(cache, tmp_pat
     assert warm == cold
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_structural_settings_are_part_of_the_key(cache, tmp_path, monkeypatch):
     model = MODELS / "nlink_pendulum.mech"
     cold4 = simulate_csv(model, tmp_path / "a.csv", "--set", "N=4")
@@ -132,6 +133,7 @@ def test_warnings_of_the_front_end_are_kept(cache, tmp_path, monkeypatch):
     assert again.warnings == first.warnings
 
 
+@pytest.mark.slow_cases('flip', 'foreign-pickle', 'header')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("damage", ["truncate", "flip", "garbage", "empty", "header", "foreign-pickle"])
 def test_a_corrupt_cache_file_is_rebuilt(cache, tmp_path, monkeypatch, damage):
     model = MODELS / "double_pendulum.mech"
@@ -223,6 +225,7 @@ def test_key_depends_on_text_target_items_and_limits():
     assert len({base, *others}) == len(others) + 1
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_warm_process_imports_neither_lark_nor_the_front_end_nor_the_mechanics(tmp_path):
     env = {**os.environ, "MECHDSL_CACHE": str(tmp_path / "cache")}
     cmd = [sys.executable, "-X", "importtime", "-m", "mechdsl", "simulate", str(MODELS / "pendulum.mech"),

@@ -42,6 +42,7 @@ def _kkt_accelerations(f, x, p, h=1e-6, h2=1e-4):
     return Minv @ (b - G.T @ lam)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_casadi_ode_of_a_closed_loop_is_the_runs_index1_ode():
     """four_bar.mech at its consistent start: the tree cut open accelerates at [12.50, -35.20,
     4.53], the run integrates [3.68, -2.97, 2.02] (the issue's numbers); casadi()["ode"] was
@@ -94,6 +95,7 @@ def test_an_unconstrained_models_functions_are_unchanged():
 # ------------------------------------------------------------------ defect 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_compiled_casadi_compiles_only_what_is_asked(tmp_path, monkeypatch):
     """Before: the first Function asked for compiled every Function of the model with first
@@ -199,6 +201,7 @@ def test_the_contact_entry_checks_as_model_simulate(kw):
     assert _refusal(lambda: simulate_with_contacts(m.eom, None, 0.1, **kw)) == want
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_entries_give_the_runs_of_model_simulate():
     """Same numbers and the same record of what ran."""
     from mechdsl.dae import simulate_dae
@@ -216,6 +219,7 @@ def test_the_entries_give_the_runs_of_model_simulate():
 # ------------------------------------------------------------------ one prepared problem
 
 
+@pytest.mark.slow_cases('four_bar.mech-None-kw1')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("file, scene, kw", [
     ("double_pendulum.mech", None, {"t_end": 1.0}),                  # ODE
     ("four_bar.mech", None, {"t_end": 0.5}),                         # DAE

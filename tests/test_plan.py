@@ -3,6 +3,8 @@
 use is not built (checked on the problem and on the functions the run built, not by timing)."""
 from __future__ import annotations
 
+import pytest
+
 import mechdsl
 from mechdsl.cli import main
 
@@ -51,6 +53,7 @@ def test_a_scene_that_records_no_reaction_builds_none(monkeypatch):
     assert sorted(set(built)) == ["crank_angle"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_scene_whose_output_uses_reactions_computes_them():
     m = mechdsl.loads(FOUR_BAR, scene="Swing")
     problem = m.problem(t_end=0.2, points=5)

@@ -401,6 +401,7 @@ def test_negative_mass_check_spares_products_of_inertia_and_declared_ranges():
     assert found[0].span.line == 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_loop_smaller_than_the_constraint_tolerance(tmp_path, capsys):
     """Fuzz mutant (issue 18): nfourbar.mech with rods of 1e-12 m and 1e-12 kg.  The constraints
     are held to max(10 atol, 1e-10) = 1e-9 m, a thousand times the mechanism: the run ran away

@@ -44,6 +44,7 @@ def test_long_sum_round_trips():
     assert to_source(parse(printed)) == printed
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_absurdly_long_sum_is_a_coded_error():
     from mechdsl.diagnostics import MechError
 

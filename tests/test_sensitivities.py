@@ -64,6 +64,7 @@ def double():
     return mechdsl.load(MODELS / "double_pendulum.mech", model="DoublePendulum")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_forward_against_central_differences_of_runs(double):
     """Fixed steps (rk, dt given): the run is a smooth function of the values, so central
     differences of Model.simulate are accurate to ~1e-10; the forward sensitivities agree to
@@ -171,6 +172,7 @@ def test_small_angle_period_dT_dL():
     assert dT_dL == pytest.approx(math.pi / math.sqrt(g * L), rel=1e-6)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_constrained_four_bar_through_the_formulated_problem():
     """The four-bar (three coordinates, two loop constraints): derivatives of the rocker angle,
     a speed and a reaction output with respect to link lengths and the crank's start angle and
@@ -189,6 +191,7 @@ def test_constrained_four_bar_through_the_formulated_problem():
     assert _rel(S["der(rocker_pivot.phi)", "der(crank_pivot.phi)"], fd) < 1e-6
 
 
+@pytest.mark.slow_cases('callable')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("signal", ["zoh", "linear", "callable"])
 def test_input_driven_runs(signal):
     """The cart-pole pushed by a zero-order-hold table (the run restarts at its samples: one

@@ -49,6 +49,7 @@ def files(tmp_path, monkeypatch):
     return tmp_path
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_simulate_writes_csv_json_plot_and_summary(tmp_path, files, capsys):
     out, png = tmp_path / "p.csv", tmp_path / "p.png"
     code = main(["simulate", "pendulum.mech", "--model", "Pendulum", "--t-end", "1", "--points", "6", "-o", str(out),

@@ -115,6 +115,7 @@ def test_structurally_singular_mass_matrix_is_a_model_error():
         casadi_functions(e)["ode"]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
     e = chain(2)
@@ -153,6 +154,7 @@ def test_compiled_functions_equal_virtual_machine(tmp_path, monkeypatch):
     assert lib == lib2 and note2.startswith("loaded compiled model from cache")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_cvodes_adams_compiles_no_jacobian(tmp_path, monkeypatch):
     """Functional iteration sets the Jacobian up but never evaluates it: the library holds the
@@ -201,6 +203,7 @@ def test_bound_fast_function_equals_plain_calls():
         FastFunction(f["ode"]).bind(q=1)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_concurrent_compilation_into_one_cache(tmp_path, monkeypatch):
     import threading
 

@@ -26,6 +26,7 @@ def test_singular_mass_matrix_is_reported_with_time(method, two):
     np.testing.assert_allclose(np.sin(r["s"]), r.t, atol=1e-6)
 
 
+@pytest.mark.slow_cases('erk', 'rk')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method", ["erk", "cvodes-bdf", "scipy-rk45", "rk"])
 def test_blow_up_is_reported_and_partial_results_are_exact(method):
     r = simulate(blowup(), 3.0, method=method, points=31)

@@ -34,6 +34,7 @@ def _four_bar_with_scene(tmp_path, settings: str) -> Path:
 # ------------------------------------------------------------------ failure 2: metadata names what ran
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_partitioning_runs_the_method_it_names():
     """Partitioning used to integrate with CVODES BDF whatever the method, labelled 'CasADi erk'."""
     m = mechdsl.load(MODELS / "four_bar.mech")
@@ -95,6 +96,7 @@ def test_cli_formulation_option_overrides_the_scene(tmp_path, capsys):
 # ------------------------------------------------------------------ failure 4 and 7: one statistics schema
 
 
+@pytest.mark.slow_cases('pendulum_cartesian.mech-kw2')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("file, kw", [
     ("double_pendulum.mech", {}),
     ("pendulum_cartesian.mech", {}),
@@ -342,6 +344,7 @@ def test_estimate_error_on_the_command_line(tmp_path, capsys):
     assert 0 < est["j1.phi"] < 1e-3
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_simulate_imports_only_what_it_needs(tmp_path):
     """Cold start: an ODE run loads neither the benchmark, contact, DAE nor analysis packages
     (bench alone cost ~0.6 s of a 1.35 s run)."""
@@ -381,6 +384,7 @@ def test_cli_honours_scene_compiled(tmp_path, capsys):
     assert meta["run"]["compiled"] is True and meta["options"]["compiled"] is True
 
 
+@pytest.mark.slow_cases('heavy_top.mech')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("file", ["pendulum.mech", "bouncing_ball.mech", "heavy_top.mech"])
 def test_cli_and_api_give_the_same_run_for_the_first_scene(file, tmp_path, capsys):
     out = tmp_path / "r.csv"
@@ -404,6 +408,7 @@ def test_kinds_of_the_shipped_models():
                      "heavy_top": "canonical"}
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_problem_and_metadata_do_not_depend_on_what_ran_before(monkeypatch):
     """is_conservative answered None for large models until someone had built Q: the problem
     dump (and a run's metadata) changed with the order of calls in the process."""

@@ -44,6 +44,7 @@ def test_compiled_recursive_route_matches_vm(tmp_path, monkeypatch):
         assert any("no C compiler" in w for w in c.metadata["warnings"])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_on_shipped_model_with_scene_and_sets(tmp_path, capsys):
     out = tmp_path / "swing.csv"
     code = main(["simulate", str(MODELS / "pendulum.mech"), "--scene", "Swing", "--t-end", "1", "--points", "11",

@@ -22,6 +22,7 @@ def reference():
     return e, r
 
 
+@pytest.mark.slow_cases('collocation', 'scipy-radau')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method", ALL)
 def test_every_method_runs_accurately_and_conserves_energy(method, reference):
     e, ref = reference
@@ -64,6 +65,7 @@ def test_auto_explains_its_choice():
     assert s.metadata["auto"]["stiffness_ratio"] > 1e3
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_stiff_model_bdf_needs_far_fewer_steps_than_explicit():
     e = stiff_oscillator()
     bdf = simulate(e, 2.0, method="cvodes-bdf", rtol=1e-6, atol=1e-8, points=11)

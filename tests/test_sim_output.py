@@ -25,6 +25,7 @@ def test_csv_columns_and_values(tmp_path):
     assert row[-1] == r["energy"][4]
 
 
+@pytest.mark.slow_cases('scipy-radau')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("method", ["auto", "cvodes-bdf", "scipy-radau", "rk"])
 def test_csv_is_byte_identical_across_runs(tmp_path, method):
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
@@ -68,6 +69,7 @@ def test_existing_output_is_not_overwritten_without_permission(tmp_path):
     assert mine.read_text() == "time,mine\n0,1\n"
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("suffix,magic", [(".png", b"\x89PNG"), (".svg", b"<?xml")])
 def test_plot_writes_file_atomically(tmp_path, suffix, magic):
     r = simulate(chain(2), 1.0, points=21)
@@ -76,6 +78,7 @@ def test_plot_writes_file_atomically(tmp_path, suffix, magic):
     assert [p.name for p in tmp_path.iterdir()] == [f"plot{suffix}"]       # no temporary files left
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_plot_of_failed_run_and_bad_suffix(tmp_path):
     from mechdsl.diagnostics import UsageError
     from sim_models import blowup

@@ -13,6 +13,7 @@ from conftest import run_stability_case
 CASES = ["cartesian", "andrews", "fourbar", "bricard"]
 
 
+@pytest.mark.slow_cases('bricard', 'cartesian', 'fourbar')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name", CASES)
 def test_stability_dae_small(name):
     run_stability_case(name, "small")

@@ -13,6 +13,7 @@ from conftest import run_stability_case
 CASES = ["stiff", "energy", "gimbal", "chaos"]
 
 
+@pytest.mark.slow_cases('chaos', 'energy', 'stiff')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("name", CASES)
 def test_stability_small(name):
     run_stability_case(name, "small")

@@ -14,6 +14,7 @@ from conftest import MODELS
 TOP = dict(m=1.0, l=0.5, g=9.81, I1=0.12, I3=0.2)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_heavy_top_slow_and_fast_precession():
     """m g l = phi' (I3 w3 - A phi' cos th), A = I1 + m l^2: two roots for a given nutation and spin."""
     model = mechdsl.load(MODELS / "heavy_top.mech", model="HeavyTop")
@@ -83,6 +84,7 @@ end Central;
 """)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_circular_orbit_kepler_is_stable_with_the_orbital_frequency():
     """V = -k/r: r* = h^2/(m k) for the angular momentum h; radial frequency = orbital frequency."""
     m, k, h = 1.5, 2.0, 1.7
@@ -95,6 +97,7 @@ def test_circular_orbit_kepler_is_stable_with_the_orbital_frequency():
     assert np.max(np.abs(s.linear_eigenvalues.imag)) == pytest.approx(h / (m * r**2), rel=1e-8)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_steady_table_units_of_a_length_and_an_angle():
     """r in m, ph in deg: der(ph) in rad/s, p_ph = m r^2 ph' in kg.m2/s, V_R'' (r alone) in N/m."""
     from mechdsl.commands.equilibrium import format_steady, steady_units
@@ -111,6 +114,7 @@ def test_steady_table_units_of_a_length_and_an_angle():
     assert steady_units([s], {}) == ({"r": "", "der(ph)": "", "p_ph": ""}, "")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_circular_orbit_in_an_inverse_cube_field_is_unstable():
     """V = -k/(2 r^2) ... falls as fast as the centrifugal term: take V = -k/r^3, unstable for any h."""
     m, k, h = 1.5, 2.0, 1.7
@@ -138,6 +142,7 @@ def test_no_ignorable_coordinate_is_a_model_error():
     assert info.value.diagnostics[0].code == "E912"
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_cli_steady(capsys, tmp_path):
     from mechdsl.cli import main
 

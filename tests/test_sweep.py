@@ -89,6 +89,7 @@ def test_processes_match_vectorized_bit_for_bit(dp):
         np.testing.assert_array_equal(a[v].values, b[v].values)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_dask_local_cluster_matches(dp):
     import distributed  # noqa: F401 - the test extra installs it
     grid = {"j1.phi": [0.5, 2.5]}
@@ -132,6 +133,7 @@ def test_bad_input_is_a_clear_error(dp, tmp_path):
         dp.sweep(params={"m": [1, 2]}, t_end=1, scheduler="vectorised")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_integer_parameter_needs_processes():
     m = mechdsl.load(mechdsl.examples.path("nlink_pendulum"))
     with pytest.raises(UsageError, match="Integer/Boolean parameter"):
@@ -140,6 +142,7 @@ def test_integer_parameter_needs_processes():
     assert ds.attrs["scheduler"] == "processes" and ds.attrs["n_failed"] == 0
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_streamed_file_equals_memory(dp, tmp_path):
     import xarray as xr
     import h5netcdf  # noqa: F401 - the test extra installs it
@@ -163,6 +166,7 @@ def test_model_pickles_with_parameters_and_scene():
     np.testing.assert_array_equal(m.simulate(points=5).q, m2.simulate(points=5).q)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_flip_map_example_small(tmp_path):
     from mechdsl.cli import main
 
@@ -195,6 +199,7 @@ def test_cli_csv_and_exit_codes(tmp_path):
     assert main(["sweep", path, "--model", "DoublePendulum", "--uniform", "m=1:2", "--samples", "0"]) == 2
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_ctrl_c_keeps_finished_runs(dp, tmp_path, monkeypatch):
     from sweep_util import interrupt_at_chunk
 
@@ -216,6 +221,7 @@ def test_vectorized_refused_for_a_dae_with_the_reason():
         m.sweep(params={m.parameter_names[0]: [1.0, 2.0]}, t_end=0.1, scheduler="vectorized")
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_results_larger_than_the_memory_limit_must_stream(dp, tmp_path):
     with pytest.raises(UsageError, match="stream them to disk"):
         dp.sweep(params={"m": [1.0, 2.0]}, t_end=0.1, points=11, memory_limit=1000)
@@ -225,6 +231,7 @@ def test_results_larger_than_the_memory_limit_must_stream(dp, tmp_path):
     ds.close()
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_basic_cli_does_not_import_the_sweep_libraries():
     import subprocess
     import sys

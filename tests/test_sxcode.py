@@ -88,6 +88,7 @@ def interpret(vm, f, *args):
     return outs
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_chunked_c_and_the_interpreter_give_the_bits_of_casadis_generated_code(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
@@ -181,6 +182,7 @@ def test_unknown_instructions_are_refused():
     assert sxcode.supported(every_op())
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_c_size_and_chunks_grow_linearly_with_the_operations():
     """The C of an N-link chain's ode: bytes per operation flat from N = 10 to 80, every chunk
     at most CHUNK operations (gcc's time then grows linearly; benchmarks/codegen_scaling.py)."""

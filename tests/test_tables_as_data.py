@@ -22,6 +22,7 @@ end Slider;
 """
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_a_million_sample_hold_runs_in_the_loop_and_matches_the_closed_form(tmp_path, monkeypatch):
     monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))

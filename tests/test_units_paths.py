@@ -179,6 +179,7 @@ def test_a_value_computed_from_parameters_with_units_is_not_converted_again():
     assert r["s"][-1] == pytest.approx(closed_form(T_END, 60.0)[()], rel=1e-9)
 
 
+@pytest.mark.slow_cases('deg(base/deg(1))')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("value", ["45", "deg(45)", "rad(pi/4)", "deg(90)/2", "base", "deg(base/deg(1))"])
 def test_explicit_units_in_the_file(value):
     """deg(x) and rad(x) in a .mech file: the number in that unit, an angle (as `45 deg` on the

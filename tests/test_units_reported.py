@@ -38,6 +38,7 @@ def test_si_unit(unit, si):
         assert f == pytest.approx(1.0, rel=1e-12) and d == parse_unit(unit)[1]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_a_model_declared_in_deg_and_cm_reports_rad_and_m(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "p.mech").write_text(MODEL)
@@ -120,6 +121,7 @@ def test_a_fixed_step_run_says_its_step_not_tolerances(tmp_path, monkeypatch, ca
     assert len(ran) == 1 and ran[0].endswith("step dt 0.01 s") and "rtol" not in ran[0]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_json_of_equilibrium_and_linearize_carries_units(tmp_path, capsys):
     """--json and -o OUT.json: each coordinate's unit, and the unit of the Hessian / M, C, K."""
     from cli_json import validate

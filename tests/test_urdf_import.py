@@ -149,6 +149,7 @@ def test_each_visual_is_a_shape_where_the_urdf_puts_it(arm):
     assert np.max(np.abs(got - expected)) < 5e-6          # (written with 6 digits: a drawing)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_planar_and_floating_joint_types(tmp_path):
     p = tmp_path / "p.urdf"
     p.write_text("""<robot name="p">

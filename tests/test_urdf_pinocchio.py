@@ -29,6 +29,7 @@ def pair(request):
     return Pair(ARMS[request.param])
 
 
+@pytest.mark.slow_cases('kinova', 'panda', 'z1')  # CPU budget: the cheaper tests of this file stay in the default run
 def test_joint_order_and_names_match_pinocchio(pair):
     """The coordinate of URDF joint J is J.phi (revolute, continuous) or J.s (prismatic)."""
     names = [pair.pin.names[j] for j in range(1, pair.pin.njoints) if pair.pin.joints[j].nv]
@@ -49,6 +50,7 @@ def _joints(path):
     return ET.parse(path).getroot().iter("joint")
 
 
+@pytest.mark.slow_cases('panda-0', 'z1-0')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("seed", range(4))
 def test_mass_matrix_bias_and_accelerations_agree(pair, seed):
     rng = np.random.default_rng(seed)

@@ -185,6 +185,7 @@ def test_the_text_keeps_the_urdf_numbers(synthetic):
     assert all(not b.shape for b in m.bodies)
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("rel_path", ["ur_description/urdf/ur5_robot.urdf", "panda_description/urdf/panda.urdf"])
 def test_arm_meshes_against_pinocchio(rel_path):
     pair = Pair(rel_path)

@@ -301,6 +301,7 @@ def test_a_model_without_bodies_is_viewed_as_bars():
     assert v.mode == "bars" and v.data["names"] == list(m.eom.coords)
 
 
+@pytest.mark.slow_cases('nfourbar')  # CPU budget: the cheaper tests of this file stay in the default run
 @pytest.mark.parametrize("path", MODELS, ids=[p.stem for p in MODELS])
 def test_every_shipped_model_views(path, tmp_path):
     """Three frames of each model from its start state nudged (no simulation)."""
@@ -320,6 +321,7 @@ def test_every_shipped_model_views(path, tmp_path):
 # ----------------------------------------------------------------------------- mech view
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_mech_view_writes_the_page_and_replaces_its_own(tmp_path, capsys):
     out = tmp_path / "arm.html"
     args = ["view", str(MODEL_DIR / "arm7.mech"), "-o", str(out), "--t-end", "0.5", "--fps", "20", "--speed", "1"]

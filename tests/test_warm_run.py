@@ -9,6 +9,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from conftest import MODELS, needs_cc
 
 RUN = ("import sys; from mechdsl.cli import main; code = main(sys.argv[1:]); "
@@ -59,6 +61,7 @@ def test_second_run_is_the_same_run_without_casadi(tmp_path):
     assert TIMES.sub("", out1).split("note:")[0] == TIMES.sub("", out2).split("note:")[0]
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 @needs_cc
 def test_other_options_or_text_are_other_runs(tmp_path):
     model = tmp_path / "chain.mech"

@@ -143,6 +143,7 @@ def test_dae_records_multiplier_columns_through_the_recorder():
     assert names.index("energy") < names.index("constraint_drift") < names.index(lam[0])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_one_cold_workspace_used_from_several_threads_at_once():
     """Four threads simulate one model whose workspace is empty (a structure no other test
     derives): every value is built concurrently, the first stored wins, and every thread's
@@ -169,6 +170,7 @@ def test_one_cold_workspace_used_from_several_threads_at_once():
             np.testing.assert_array_equal(r.signals[k], alone.signals[k])
 
 
+@pytest.mark.slow  # CPU budget: the cheaper tests of this file stay in the default run
 def test_the_workspace_dies_with_its_eom():
     import gc
     import weakref
