@@ -34,7 +34,7 @@ ITEMS = [
      "auto_wp.py", ["--repeats", "3"], ["--quick", "--models", "dp"]),
     ("2", "Small models: the default run against scipy DOP853 + Pinocchio's ABA",
      "N = 2 and 5 at most 0.1 of scipy + pin.aba; a warm 2-coordinate run at most 3x its right-hand-side work",
-     "nlink_run.py", ["--sizes", "2,5,10,30,100,200", "--repeats", "10"], ["--sizes", "2,5", "--repeats", "1"]),
+     "nlink_run.py", ["--sizes", "2,5,10,30,100,200", "--repeats", "30"], ["--sizes", "2,5", "--repeats", "1"]),
     ("3", "Generated C and its compile against the model's size",
      "C size and compile time linear in the number of links; a 7-joint arm in under 10 s of CPU and 500 MB",
      "codegen_scaling.py", [], ["--quick"]),
