@@ -44,7 +44,7 @@ ITEMS = [
      "first_run.py", ["--sizes", "12,50,200", "--runs", "3"], ["--sizes", "12", "--runs", "1"]),
     ("4", "Contact scenes across tolerances",
      "cost and events monotone in the tolerance; the events' losses within the energy available",
-     "contacts_tolerance.py", ["--repeats", "3"], ["--quick"]),
+     "contacts_tolerance.py", ["--repeats", "8"], ["--quick"]),
     ("5", "Ensembles: the default sweep against a hand-written map and mujoco.rollout",
      "per run at most 0.5x a hand `Function.map` and at least 4x better than `mujoco.rollout` at matched "
      "accuracy",
