@@ -78,93 +78,116 @@ _LENGTHS = {"rod": ("length L",), "disk": ("radius R",), "cylinder": ("radius R"
 
 
 def degenerate_problems(model: ir.Model, env: dict[str, float]) -> list[Diagnostic]:
-    out: list[Diagnostic] = []
+    """The diagnostics of values that make no physical sense once the parameters are known
+    (E510 not finite, E511 negative lengths, E512 zero directions, E513 unresolvable ones)."""
+    c = _Checks(env)
+    c.bodies(model.bodies)
+    c.shapes(getattr(model, "shapes", ()))
+    for j in model.joints:
+        if j.kind in ("revolute", "prismatic", "cylindrical", "planar"):
+            c.zero_direction("the axis", f"joint '{j.name}'", j.axis, j.span)
+    c.forces(model.forces)
+    c.contacts(model.contacts)
+    return c.out
 
-    def not_finite(what: str, owner: str, values, span) -> bool:
+
+class _Checks:
+    """The checks of degenerate_problems, collecting their diagnostics in ``out``."""
+
+    def __init__(self, env: dict[str, float]):
+        self.env, self.out = env, []
+
+    def not_finite(self, what: str, owner: str, values, span) -> bool:
         vals = [v for v in values if v is not None]
         if all(math.isfinite(v) for v in vals):
             return False
         shown = ", ".join(dict.fromkeys(f"{v:g}" for v in vals if not math.isfinite(v)))
-        out.append(Diagnostic("E510", f"{what} of {owner} is not finite ({shown})", span,
-                              "check the parameter values it uses for overflow (a product of huge numbers) "
-                              "and division by zero"))
+        self.out.append(Diagnostic("E510", f"{what} of {owner} is not finite ({shown})", span,
+                                   "check the parameter values it uses for overflow (a product of huge numbers) "
+                                   "and division by zero"))
         return True
 
-    def zero_direction(what: str, owner: str, vec, span) -> bool:
+    def zero_direction(self, what: str, owner: str, vec, span) -> bool:
         # a parametric direction is stored normalized, c / sqrt(c . c): judge the numerators c
-        vals = [_raw(_numerator(c), env) for c in vec]
+        vals = [_raw(_numerator(c), self.env) for c in vec]
         if any(v is None for v in vals):
             return False
-        if not_finite(what, owner, vals, span):
+        if self.not_finite(what, owner, vals, span):
             return True
         if all(v == 0 for v in vals):
-            out.append(Diagnostic("E512", f"{what} of {owner} is the zero vector", span,
-                                  "a direction needs a nonzero component, e.g. {0, 1, 0}; check the parameters "
-                                  "it is built from"))
+            self.out.append(Diagnostic("E512", f"{what} of {owner} is the zero vector", span,
+                                       "a direction needs a nonzero component, e.g. {0, 1, 0}; check the parameters "
+                                       "it is built from"))
             return True
         sizes = [abs(v) for v in vals if v != 0]
         if min(sizes) < DIRECTION_SPAN * max(sizes):
             # {1e32, 0, 1}: the small component's square is below the rounding of the large one's,
             # so the direction is the large one to double precision while its tiny tilt still
             # makes a near-singular inertia (the falling rod's Planar joint ran for hours)
-            out.append(Diagnostic("E513", f"the components of {what} of {owner} are more than "
-                                          f"{1 / DIRECTION_SPAN:g} times apart (largest/smallest nonzero = "
-                                          f"{max(sizes) / min(sizes):.3g}): the small ones are below what double "
-                                          "precision resolves against the large ones", span,
-                                  "set the tiny components to 0, or give the direction in numbers of comparable "
-                                  "size"))
+            self.out.append(Diagnostic("E513", f"the components of {what} of {owner} are more than "
+                                               f"{1 / DIRECTION_SPAN:g} times apart (largest/smallest nonzero = "
+                                               f"{max(sizes) / min(sizes):.3g}): the small ones are below what double "
+                                               "precision resolves against the large ones", span,
+                                       "set the tiny components to 0, or give the direction in numbers of "
+                                       "comparable size"))
             return True
         return False
 
-    def negative_lengths(kind: str, sizes, owner: str, span, hint: str) -> None:
+    def negative_lengths(self, kind: str, sizes, owner: str, span, hint: str) -> None:
         for name, e in zip(_LENGTHS.get(kind, ()), sizes):
-            v = _raw(e, env)
-            if v is None or not_finite(f"the {name}", owner, [v], span):
+            v = _raw(e, self.env)
+            if v is None or self.not_finite(f"the {name}", owner, [v], span):
                 continue
             if v < 0:
-                out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", span, hint))
+                self.out.append(Diagnostic("E511", f"the {name} of {owner} is negative ({v:g})", span, hint))
 
-    for b in model.bodies:
-        if b.kind not in ("point", "rigid"):
-            continue
-        owner = f"body '{b.name}'"
-        if not_finite("the mass", owner, [_raw(b.mass, env)], b.span):
-            continue
-        if b.kind == "rigid":
-            negative_lengths(b.shape, b.shape_size, owner, b.span,
-                             "lengths and radii are >= 0; reverse the body's axis instead of the sign of its length")
-            if b.shape in ("rod", "disk", "cylinder") and zero_direction("the axis", owner, b.axis, b.span):
-                continue                       # (its inertia, built from the axis, says nothing more)
-            not_finite("the inertia tensor", owner, [_raw(e, env) for row in b.inertia for e in row], b.span)
-    for sh in getattr(model, "shapes", ()):
-        owner = f"shape '{sh.name}'"
-        negative_lengths(sh.kind, sh.size, owner, sh.span, "lengths and radii are >= 0")
-        not_finite("the placement r", owner, [_raw(e, env) for e in sh.r], sh.span)
-        if sh.kind in ("rod", "disk", "cylinder"):
-            zero_direction("the axis", owner, sh.axis, sh.span)
-    for j in model.joints:
-        if j.kind in ("revolute", "prismatic", "cylindrical", "planar"):
-            zero_direction("the axis", f"joint '{j.name}'", j.axis, j.span)
-    for f in model.forces:
-        if isinstance(f, ir.SpringDamper):
-            not_finite("a coefficient (k, c, l0)", f"{f.kind} '{f.name}'",
-                       [_raw(e, env) for e in (f.k, f.c, f.l0)], f.span)
-            v = _raw(f.l0, env)
-            if v is not None and math.isfinite(v) and v < 0:
-                out.append(Diagnostic("E511", f"the rest length l0 of {f.kind} '{f.name}' is negative ({v:g})",
-                                      f.span, "a rest length is a distance: >= 0"))
-    for c in model.contacts:
-        owner = f"contact '{c.name}'"
-        for key in ("radius", "surface_radius", "offset", "e"):
-            e = c.get(key)
-            if isinstance(e, ir.Expr):
-                v = _raw(e, env)
-                if v is None or not_finite(f"'{key}'", owner, [v], c.span):
-                    continue
-                if key in ("radius", "surface_radius") and v < 0:
-                    out.append(Diagnostic("E511", f"the {key.replace('_', ' ')} of {owner} is negative ({v:g})",
-                                          c.span, "a radius is >= 0"))
-        normal = c.get("normal")
-        if c.kind == "plane" and isinstance(normal, tuple):
-            zero_direction("the normal", owner, normal, c.span)
-    return out
+    def bodies(self, bodies) -> None:
+        env = self.env
+        for b in bodies:
+            if b.kind not in ("point", "rigid"):
+                continue
+            owner = f"body '{b.name}'"
+            if self.not_finite("the mass", owner, [_raw(b.mass, env)], b.span):
+                continue
+            if b.kind == "rigid":
+                self.negative_lengths(b.shape, b.shape_size, owner, b.span,
+                                      "lengths and radii are >= 0; reverse the body's axis instead of the sign of "
+                                      "its length")
+                if b.shape in ("rod", "disk", "cylinder") and self.zero_direction("the axis", owner, b.axis, b.span):
+                    continue                       # (its inertia, built from the axis, says nothing more)
+                self.not_finite("the inertia tensor", owner, [_raw(e, env) for row in b.inertia for e in row],
+                                b.span)
+
+    def shapes(self, shapes) -> None:
+        for sh in shapes:
+            owner = f"shape '{sh.name}'"
+            self.negative_lengths(sh.kind, sh.size, owner, sh.span, "lengths and radii are >= 0")
+            self.not_finite("the placement r", owner, [_raw(e, self.env) for e in sh.r], sh.span)
+            if sh.kind in ("rod", "disk", "cylinder"):
+                self.zero_direction("the axis", owner, sh.axis, sh.span)
+
+    def forces(self, forces) -> None:
+        for f in forces:
+            if isinstance(f, ir.SpringDamper):
+                self.not_finite("a coefficient (k, c, l0)", f"{f.kind} '{f.name}'",
+                                [_raw(e, self.env) for e in (f.k, f.c, f.l0)], f.span)
+                v = _raw(f.l0, self.env)
+                if v is not None and math.isfinite(v) and v < 0:
+                    self.out.append(Diagnostic("E511", f"the rest length l0 of {f.kind} '{f.name}' is negative "
+                                                       f"({v:g})", f.span, "a rest length is a distance: >= 0"))
+
+    def contacts(self, contacts) -> None:
+        for c in contacts:
+            owner = f"contact '{c.name}'"
+            for key in ("radius", "surface_radius", "offset", "e"):
+                e = c.get(key)
+                if isinstance(e, ir.Expr):
+                    v = _raw(e, self.env)
+                    if v is None or self.not_finite(f"'{key}'", owner, [v], c.span):
+                        continue
+                    if key in ("radius", "surface_radius") and v < 0:
+                        self.out.append(Diagnostic("E511", f"the {key.replace('_', ' ')} of {owner} is negative "
+                                                           f"({v:g})", c.span, "a radius is >= 0"))
+            normal = c.get("normal")
+            if c.kind == "plane" and isinstance(normal, tuple):
+                self.zero_direction("the normal", owner, normal, c.span)
