@@ -65,28 +65,14 @@ def default_methods(kind: str) -> list[str]:
 
 
 def run(args) -> int:
-
-    from ..bench import (
-        Setup,
-        format_table,
-        parse_tolerances,
-        parse_variants,
-        run_bench,
-        write_chart,
-        write_tables,
-    )
+    from ..bench import Setup, parse_tolerances, parse_variants, run_bench
     from ..bench.runner import classify_setup
-    from ..output.fileio import check_writable, output_folder
     from ._common import load_model, target_line
 
     if args.repeats is not None and args.repeats < 1:
         raise UsageError("--repeats must be at least 1")
     tolerances = parse_tolerances(args.tolerances)
-    out = output_folder(args.output) if args.output else None
-    if out is not None:
-        names = ["bench.json", "bench.csv"] + ([] if args.no_chart else ["work_precision.png", "work_precision.svg"])
-        for n in names:
-            check_writable(out / n, overwrite=args.force)
+    out = _checked_output(args)
     model, x0 = load_model(args, starts_in_model=False)
     x0 = x0 or None
     print(target_line(args, model))
@@ -99,46 +85,70 @@ def run(args) -> int:
 
         ref_methods = split_top(args.reference_methods)
     log = None if args.out.quiet else (lambda s: print(s, file=sys.stderr, flush=True))
-    from ..bench.runner import DEFAULT_BUDGET
-
-    repeats = args.repeats or 3
-    budget = DEFAULT_BUDGET if args.budget is None else args.budget
-    sweep_budget = stop_after = None
-    methods = args.methods or default_methods(kind)
-    if args.reference == "auto":           # a file reference fixes the horizon and costs nothing to make
-        from ..bench.plan import default_plan, plan_methods
-
-        plan = default_plan(setup, t_end_given=args.t_end is not None, tolerances_given=args.tolerances is not None,
-                            repeats_given=args.repeats is not None, budget_given=args.budget is not None, log=log)
-        if not args.methods:
-            methods = plan_methods(plan, methods)
-        setup.t_end = plan.t_end
-        setup.notes += plan.notes
-        if plan.tolerances is not None:
-            tolerances = parse_tolerances(plan.tolerances)
-        repeats = plan.repeats or repeats
-        budget = plan.budget if plan.budget is not None else budget
-        sweep_budget, stop_after = plan.sweep_budget, plan.stop_after
-    variants = parse_variants(methods, args.formulations or None)
+    plan = _plan(args, setup, kind, log, tolerances)
+    variants = parse_variants(plan["methods"], args.formulations or None)
     if not args.methods:
         setup.notes.append(f"methods: the default set for a{'n' if kind == 'ode' else ''} {kind} model "
                            f"({', '.join(v.label for v in variants)}); give --methods for others")
     for n in setup.notes:
         if log:
             log(f"plan: {n}")
-    res = run_bench(setup, variants=variants, tolerances=tolerances, reference=args.reference,
-                    reference_methods=ref_methods, compare=args.compare, repeats=repeats, budget=budget,
-                    sweep_budget=sweep_budget, stop_after=stop_after, log=log)
-    print(format_table(res))
-    from ..bench.report import fastest_lines
+    res = run_bench(setup, variants=variants, tolerances=plan["tolerances"],
+                    reference=args.reference, reference_methods=ref_methods, compare=args.compare,
+                    repeats=plan["repeats"], budget=plan["budget"], sweep_budget=plan["sweep_budget"],
+                    stop_after=plan["stop_after"], log=log)
+    return _report(args, res, out, target_line(args, model))
 
-    print()
-    print("\n".join(fastest_lines(res)))
+
+def _checked_output(args):
+    """The output folder (None: none asked for), its files checked writable before any work."""
+    from ..output.fileio import check_writable, output_folder
+
+    out = output_folder(args.output) if args.output else None
+    if out is not None:
+        names = ["bench.json", "bench.csv"] + ([] if args.no_chart else ["work_precision.png", "work_precision.svg"])
+        for n in names:
+            check_writable(out / n, overwrite=args.force)
+    return out
+
+
+def _plan(args, setup, kind: str, log, tolerances: list[float]) -> dict:
+    """Methods, tolerances, repeats and budgets of the bench: the options given, the defaults,
+    and (``--reference auto``) the plan of bench/plan.py, which also sets the horizon and notes."""
+    from ..bench import parse_tolerances
+    from ..bench.runner import DEFAULT_BUDGET
+
+    plan = {"methods": args.methods or default_methods(kind), "tolerances": tolerances,
+            "repeats": args.repeats or 3, "budget": DEFAULT_BUDGET if args.budget is None else args.budget,
+            "sweep_budget": None, "stop_after": None}
+    if args.reference == "auto":           # a file reference fixes the horizon and costs nothing to make
+        from ..bench.plan import default_plan, plan_methods
+
+        p = default_plan(setup, t_end_given=args.t_end is not None, tolerances_given=args.tolerances is not None,
+                         repeats_given=args.repeats is not None, budget_given=args.budget is not None, log=log)
+        if not args.methods:
+            plan["methods"] = plan_methods(p, plan["methods"])
+        setup.t_end = p.t_end
+        setup.notes += p.notes
+        if p.tolerances is not None:
+            plan["tolerances"] = parse_tolerances(p.tolerances)
+        plan["repeats"] = p.repeats or plan["repeats"]
+        plan["budget"] = p.budget if p.budget is not None else plan["budget"]
+        plan["sweep_budget"], plan["stop_after"] = p.sweep_budget, p.stop_after
+    return plan
+
+
+def _report(args, res, out, target: str) -> int:
+    """Print the table and the fastest lines, write the files asked for; 130 if interrupted."""
     import json
 
-    from ..bench.report import to_json_text
+    from ..bench import format_table, write_chart, write_tables
+    from ..bench.report import fastest_lines, to_json_text
 
-    args.out.set(target=target_line(args, model), **json.loads(to_json_text(res, None)))
+    print(format_table(res))
+    print()
+    print("\n".join(fastest_lines(res)))
+    args.out.set(target=target, **json.loads(to_json_text(res, None)))
     if out is not None:
         written = write_tables(res, out, overwrite=args.force)
         if not args.no_chart:
