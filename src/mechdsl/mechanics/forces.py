@@ -73,90 +73,105 @@ def _is_zero(x) -> bool:
 
 
 def build_loads(model: ir.Model, kin: Kinematics, env) -> Loads:
-    tree = kin.tree
-    n = len(env.coords)
-    L = Loads(Q_gen=ca.SX.zeros(n, 1))
-    V, D = ca.SX(0), ca.SX(0)
-
-    def vec(v):
-        return ca.vertcat(*[ca.SX(env.translate(c)) for c in v])
-
-    masses = {}
-    for b in model.bodies:
-        if b.kind in ("point", "rigid"):
-            masses[b.name] = env.translate(b.mass)
-
+    b = _LoadBuilder(model, kin, env)
     f = None
     try:
         for f in model.forces:
-            if isinstance(f, ir.Gravity):
-                g = vec(f.g)
-                for b in model.bodies:
-                    if b.name not in masses:
-                        continue
-                    i, c = kin.com_link(b)
-                    m = masses[b.name]
-                    L.point_forces.append((i, c, m * g))
-                    V = V - m * ca.dot(g, kin.link_pos(i, c))
-            elif isinstance(f, ir.SpringDamper):
-                ia, ra = tree.point_in_link(f.a)
-                ib, rb = tree.point_in_link(f.b)
-                d = kin.link_pos(ib, rb) - kin.link_pos(ia, ra)
-                dd = kin.link_vel(ib, rb) - kin.link_vel(ia, ra)
-                k, c, l0 = (env.translate(x) for x in (f.k, f.c, f.l0))
-                l0_zero = isinstance(f.l0, ir.Const) and f.l0.value == 0
-                l = ca.norm_2(d)
-                F = ca.SX.zeros(3, 1)
-                if f.kind in ("spring", "spring-damper") and not _is_zero(ca.SX(k)):
-                    F = F - (k * d if l0_zero else k * (l - l0) * d / l)
-                    V = V + 0.5 * k * ((ca.dot(d, d) if l0_zero else (l - l0) ** 2))
-                if f.kind in ("damper", "spring-damper") and not _is_zero(ca.SX(c)):
-                    ldot = ca.dot(d, dd) / l
-                    F = F - c * ldot * d / l
-                    D = D + 0.5 * c * ldot ** 2
-                L.point_forces.append((ib, rb, F))
-                L.point_forces.append((ia, ra, -F))
-            elif isinstance(f, ir.Gravitation):
-                G = env.translate(f.G)
-                bodies = [model.body(b) for b in f.bodies]
-                cs = [kin.com_link(b) for b in bodies]
-                pos = [kin.link_pos(i, c) for i, c in cs]
-                for a in range(len(bodies)):
-                    for b in range(a + 1, len(bodies)):
-                        ma, mb = masses.get(bodies[a].name, 0), masses.get(bodies[b].name, 0)
-                        d = pos[b] - pos[a]
-                        r = ca.norm_2(d)
-                        F = -G * ma * mb * d / r ** 3          # on b
-                        L.point_forces.append((cs[b][0], cs[b][1], F))
-                        L.point_forces.append((cs[a][0], cs[a][1], -F))
-                        V = V - G * ma * mb / r
-            elif isinstance(f, ir.AppliedForce):
-                i, r = tree.point_in_link(f.point)
-                F = vec(f.F)
-                if f.frame != "world":
-                    F = ca.mtimes(kin.body_rot(f.frame), F)
-                L.point_forces.append((i, r, F))
-                L.applied.append(("force", i, r, F))
-            elif isinstance(f, ir.AppliedTorque):
-                i = tree.body_link[f.body]
-                tau = vec(f.tau)
-                if f.frame != "world":
-                    tau = ca.mtimes(kin.body_rot(f.frame), tau)
-                L.torques.append((i, tau))
-                L.applied.append(("torque", i, None, tau))
-            elif isinstance(f, ir.GeneralizedForce):
-                try:
-                    k = env.coords.index(f.coordinate)
-                except ValueError:
-                    raise MechError(Diagnostic("E720", f"generalized force '{f.name}' on unknown coordinate "
-                                                       f"'{f.coordinate}'", f.span)) from None
-                L.Q_gen[k] = L.Q_gen[k] + env.translate(f.Q)
-            else:
+            step = b.STEPS.get(type(f))
+            if step is None:
                 raise MechError(Diagnostic("E721", f"unsupported force '{getattr(f, 'name', f)}'"))
+            step(b, f)
     except MechError as e:      # a query without a place of its own (E725): at the force
         raise located(e, getattr(f, "span", None)) from None
-    L.V, L.D = V, D
-    return L
+    b.L.V, b.L.D = b.V, b.D
+    return b.L
+
+
+class _LoadBuilder:
+    """build_loads's state: the loads so far, the potential V and the dissipation D, one method
+    per kind of force (STEPS)."""
+
+    def __init__(self, model: ir.Model, kin: Kinematics, env):
+        self.model, self.kin, self.env, self.tree = model, kin, env, kin.tree
+        self.L = Loads(Q_gen=ca.SX.zeros(len(env.coords), 1))
+        self.V, self.D = ca.SX(0), ca.SX(0)
+        self.masses = {b.name: env.translate(b.mass) for b in model.bodies if b.kind in ("point", "rigid")}
+
+    def vec(self, v):
+        return ca.vertcat(*[ca.SX(self.env.translate(c)) for c in v])
+
+    def gravity(self, f) -> None:
+        kin, g = self.kin, self.vec(f.g)
+        for b in self.model.bodies:
+            if b.name not in self.masses:
+                continue
+            i, c = kin.com_link(b)
+            m = self.masses[b.name]
+            self.L.point_forces.append((i, c, m * g))
+            self.V = self.V - m * ca.dot(g, kin.link_pos(i, c))
+
+    def spring_damper(self, f) -> None:
+        kin = self.kin
+        ia, ra = self.tree.point_in_link(f.a)
+        ib, rb = self.tree.point_in_link(f.b)
+        d = kin.link_pos(ib, rb) - kin.link_pos(ia, ra)
+        dd = kin.link_vel(ib, rb) - kin.link_vel(ia, ra)
+        k, c, l0 = (self.env.translate(x) for x in (f.k, f.c, f.l0))
+        l0_zero = isinstance(f.l0, ir.Const) and f.l0.value == 0
+        l = ca.norm_2(d)
+        F = ca.SX.zeros(3, 1)
+        if f.kind in ("spring", "spring-damper") and not _is_zero(ca.SX(k)):
+            F = F - (k * d if l0_zero else k * (l - l0) * d / l)
+            self.V = self.V + 0.5 * k * ((ca.dot(d, d) if l0_zero else (l - l0) ** 2))
+        if f.kind in ("damper", "spring-damper") and not _is_zero(ca.SX(c)):
+            ldot = ca.dot(d, dd) / l
+            F = F - c * ldot * d / l
+            self.D = self.D + 0.5 * c * ldot ** 2
+        self.L.point_forces.append((ib, rb, F))
+        self.L.point_forces.append((ia, ra, -F))
+
+    def gravitation(self, f) -> None:
+        G = self.env.translate(f.G)
+        bodies = [self.model.body(b) for b in f.bodies]
+        cs = [self.kin.com_link(b) for b in bodies]
+        pos = [self.kin.link_pos(i, c) for i, c in cs]
+        for a in range(len(bodies)):
+            for b in range(a + 1, len(bodies)):
+                ma, mb = self.masses.get(bodies[a].name, 0), self.masses.get(bodies[b].name, 0)
+                d = pos[b] - pos[a]
+                r = ca.norm_2(d)
+                F = -G * ma * mb * d / r ** 3          # on b
+                self.L.point_forces.append((cs[b][0], cs[b][1], F))
+                self.L.point_forces.append((cs[a][0], cs[a][1], -F))
+                self.V = self.V - G * ma * mb / r
+
+    def applied_force(self, f) -> None:
+        i, r = self.tree.point_in_link(f.point)
+        F = self.vec(f.F)
+        if f.frame != "world":
+            F = ca.mtimes(self.kin.body_rot(f.frame), F)
+        self.L.point_forces.append((i, r, F))
+        self.L.applied.append(("force", i, r, F))
+
+    def applied_torque(self, f) -> None:
+        i = self.tree.body_link[f.body]
+        tau = self.vec(f.tau)
+        if f.frame != "world":
+            tau = ca.mtimes(self.kin.body_rot(f.frame), tau)
+        self.L.torques.append((i, tau))
+        self.L.applied.append(("torque", i, None, tau))
+
+    def generalized_force(self, f) -> None:
+        try:
+            k = self.env.coords.index(f.coordinate)
+        except ValueError:
+            raise MechError(Diagnostic("E720", f"generalized force '{f.name}' on unknown coordinate "
+                                               f"'{f.coordinate}'", f.span)) from None
+        self.L.Q_gen[k] = self.L.Q_gen[k] + self.env.translate(f.Q)
+
+    STEPS = {ir.Gravity: gravity, ir.SpringDamper: spring_damper, ir.Gravitation: gravitation,
+             ir.AppliedForce: applied_force, ir.AppliedTorque: applied_torque,
+             ir.GeneralizedForce: generalized_force}
 
 
 def located(err: MechError, span) -> MechError:
