@@ -327,95 +327,118 @@ _ARITH = {"+": V.add, "-": V.sub, "*": V.mul, "/": V.div}
 
 
 def _vector_func(name: str, args: list[Val], e: ast.Call) -> Val:
-    def need(n):
-        if len(args) != n:
-            fail("E304", f"{name}() takes {n} argument{'s' if n != 1 else ''}, got {len(args)}", e.span,
-                 "see docs/language.md for the built-in functions")
+    c = _Call(name, args, e)
+    entry = _BUILTINS.get(name)
+    if entry is None:
+        fail("E213", f"unknown function '{name}'", e.span, "see docs/language.md for the built-in functions")
+    arity, fn = entry
+    if arity is not None:
+        c.need(arity)
+    return fn(c)
 
-    def count(v: Val, what: str) -> int:
+
+class _Call:
+    """A call of a built-in vector function: its name, evaluated arguments and node, and the
+    checks the functions share (argument count, sizes)."""
+
+    def __init__(self, name: str, args: list[Val], e: ast.Call):
+        self.name, self.args, self.e = name, args, e
+
+    def need(self, n: int) -> None:
+        if len(self.args) != n:
+            fail("E304", f"{self.name}() takes {n} argument{'s' if n != 1 else ''}, got {len(self.args)}",
+                 self.e.span, "see docs/language.md for the built-in functions")
+
+    def count(self, v: Val, what: str) -> int:
         if isinstance(v, Scalar) and v.const is not None and float(v.const).is_integer() and v.const >= 0:
             if v.const > limits.get("arrays"):
-                fail("E303", f"{what} {X.fmt_num(v.const)} is too large (limit {limits.get('arrays')})", e.span,
+                fail("E303", f"{what} {X.fmt_num(v.const)} is too large (limit {limits.get('arrays')})", self.e.span,
                      "use a smaller size")
             return int(v.const)
-        fail("E307", f"{what} must be a non-negative Integer constant", e.span,
+        fail("E307", f"{what} must be a non-negative Integer constant", self.e.span,
              "use an integer literal or an Integer parameter")
         raise AssertionError
 
-    def check_total(dims: list[int]) -> list[int]:
+    def sizes(self, args, what: str = "a size") -> list[int]:
+        dims = [self.count(a, what) for a in args]
         if math.prod(dims) > limits.get("arrays"):
-            fail("E303", f"{name}() would build more than {limits.get('arrays')} elements", e.span,
+            fail("E303", f"{self.name}() would build more than {limits.get('arrays')} elements", self.e.span,
                  "use smaller sizes; " + limits.hint("arrays"))
         return dims
 
-    if name == "cross":
-        need(2)
-        return V.cross(args[0], args[1])
-    if name == "dot":
-        need(2)
-        return V.dot(args[0], args[1])
-    if name == "norm":
-        need(1)
-        return V.norm(args[0])
-    if name == "normalize":
-        need(1)
-        n = V.norm(args[0])
-        return V.div(args[0], n)
-    if name == "transpose":
-        need(1)
-        return V.transpose(args[0])
-    if name == "identity":
-        need(1)
-        n = check_total([count(args[0], "the size")] * 2)[0]
-        return Arr(tuple(Arr(tuple(V.const(1.0 if i == j else 0.0) for j in range(n))) for i in range(n)))
-    if name in ("zeros", "ones"):
-        if not args:
-            fail("E304", f"{name}() needs a size", e.span, f"e.g. {name}(3) or {name}(3, 3)")
-        dims = check_total([count(a, "a size") for a in args])
-        return _filled(V.const(0.0 if name == "zeros" else 1.0), dims)
-    if name == "fill":
-        if len(args) < 2:
-            fail("E304", "fill(value, n, ...) needs a value and a size", e.span, "e.g. fill(0.5, 3)")
-        return _filled(args[0], check_total([count(a, "a size") for a in args[1:]]))
-    if name == "sum":
-        need(1)
-        items: list[Val] = list(V.flatten(args[0])) if isinstance(args[0], Arr) else [args[0]]
-        if not items:
-            return V.const(0.0)
-        while len(items) > 1:  # balanced: long sums stay shallow
-            items = [V.add(items[i], items[i + 1]) if i + 1 < len(items) else items[i]
-                     for i in range(0, len(items), 2)]
-        return items[0]
-    if name == "skew":
-        need(1)
-        if V.shape_of(args[0]) != (3,):
-            fail("E301", "skew() needs a vector of 3", e.span, "e.g. skew({wx, wy, wz})")
-        x, y, z = args[0].items  # type: ignore[union-attr]
-        zero = V.const(0.0)
-        return Arr((Arr((zero, V.neg(z), y)), Arr((z, zero, V.neg(x))), Arr((V.neg(y), x, zero))))
-    if name == "diagonal":
-        need(1)
-        if len(V.shape_of(args[0])) != 1:
-            fail("E301", "diagonal() needs a vector", e.span, "e.g. diagonal({1, 2, 3})")
-        items = args[0].items  # type: ignore[union-attr]
-        n = len(items)
-        return Arr(tuple(Arr(tuple(items[i] if i == j else V.const(0.0) for j in range(n))) for i in range(n)))
-    if name == "rotation":
-        need(2)
-        from .components import as_expr, as_vec3, normalized, rodrigues
 
-        axis = normalized(as_vec3(args[0], "the rotation axis"), "the rotation axis")
-        ang = args[1]
-        if isinstance(ang, Scalar):
-            V.require_dimensionless(ang.dim, "a rotation angle", ang.approx)
-        R = rodrigues(axis, as_expr(ang, "the rotation angle"))
-        return Arr(tuple(Arr(tuple(Scalar(c, U.ONE) for c in row)) for row in R))
-    if name in ("rpy", "axis_angle"):
-        from .orientation import call_axis_angle, call_rpy
+def _identity(c: _Call) -> Val:
+    n = c.sizes([c.args[0]] * 2, "the size")[0]
+    return Arr(tuple(Arr(tuple(V.const(1.0 if i == j else 0.0) for j in range(n))) for i in range(n)))
 
-        return call_rpy(args) if name == "rpy" else call_axis_angle(args)
-    fail("E213", f"unknown function '{name}'", e.span, "see docs/language.md for the built-in functions")
-    raise AssertionError
+
+def _zeros_ones(c: _Call) -> Val:
+    if not c.args:
+        fail("E304", f"{c.name}() needs a size", c.e.span, f"e.g. {c.name}(3) or {c.name}(3, 3)")
+    return _filled(V.const(0.0 if c.name == "zeros" else 1.0), c.sizes(c.args))
+
+
+def _fill(c: _Call) -> Val:
+    if len(c.args) < 2:
+        fail("E304", "fill(value, n, ...) needs a value and a size", c.e.span, "e.g. fill(0.5, 3)")
+    return _filled(c.args[0], c.sizes(c.args[1:]))
+
+
+def _sum(c: _Call) -> Val:
+    a = c.args[0]
+    items: list[Val] = list(V.flatten(a)) if isinstance(a, Arr) else [a]
+    if not items:
+        return V.const(0.0)
+    while len(items) > 1:  # balanced: long sums stay shallow
+        items = [V.add(items[i], items[i + 1]) if i + 1 < len(items) else items[i]
+                 for i in range(0, len(items), 2)]
+    return items[0]
+
+
+def _skew(c: _Call) -> Val:
+    if V.shape_of(c.args[0]) != (3,):
+        fail("E301", "skew() needs a vector of 3", c.e.span, "e.g. skew({wx, wy, wz})")
+    x, y, z = c.args[0].items  # type: ignore[union-attr]
+    zero = V.const(0.0)
+    return Arr((Arr((zero, V.neg(z), y)), Arr((z, zero, V.neg(x))), Arr((V.neg(y), x, zero))))
+
+
+def _diagonal(c: _Call) -> Val:
+    if len(V.shape_of(c.args[0])) != 1:
+        fail("E301", "diagonal() needs a vector", c.e.span, "e.g. diagonal({1, 2, 3})")
+    items = c.args[0].items  # type: ignore[union-attr]
+    n = len(items)
+    return Arr(tuple(Arr(tuple(items[i] if i == j else V.const(0.0) for j in range(n))) for i in range(n)))
+
+
+def _rotation(c: _Call) -> Val:
+    from .components import as_expr, as_vec3, normalized, rodrigues
+
+    axis = normalized(as_vec3(c.args[0], "the rotation axis"), "the rotation axis")
+    ang = c.args[1]
+    if isinstance(ang, Scalar):
+        V.require_dimensionless(ang.dim, "a rotation angle", ang.approx)
+    R = rodrigues(axis, as_expr(ang, "the rotation angle"))
+    return Arr(tuple(Arr(tuple(Scalar(x, U.ONE) for x in row)) for row in R))
+
+
+def _orientation(c: _Call) -> Val:
+    from .orientation import call_axis_angle, call_rpy
+
+    return call_rpy(c.args) if c.name == "rpy" else call_axis_angle(c.args)
+
+
+# name -> (the number of arguments, checked first; None: the function checks), the function
+_BUILTINS = {
+    "cross": (2, lambda c: V.cross(c.args[0], c.args[1])),
+    "dot": (2, lambda c: V.dot(c.args[0], c.args[1])),
+    "norm": (1, lambda c: V.norm(c.args[0])),
+    "normalize": (1, lambda c: V.div(c.args[0], V.norm(c.args[0]))),
+    "transpose": (1, lambda c: V.transpose(c.args[0])),
+    "identity": (1, _identity), "zeros": (None, _zeros_ones), "ones": (None, _zeros_ones),
+    "fill": (None, _fill), "sum": (1, _sum), "skew": (1, _skew), "diagonal": (1, _diagonal),
+    "rotation": (2, _rotation), "rpy": (None, _orientation), "axis_angle": (None, _orientation),
+}
 
 
 def _filled(v: Val, dims: list[int]) -> Val:
