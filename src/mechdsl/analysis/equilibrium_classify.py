@@ -5,6 +5,8 @@ quaternion joints and Euler angles at gimbal lock; continuous families of equili
 directions."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from ..eom import multiplier_units
@@ -158,29 +160,13 @@ def classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equi
     n = eom.n
     N = st.symmetry
     k = N.shape[1]
-    acc = N @ alpha if k else np.zeros(n)
-    M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
-    if k and np.linalg.norm(M @ acc) <= 1e-8 * max(st.force_scale, 1e-300) and np.any(acc):
-        # no force along N: alpha is arbitrary where N carries no inertia; the reference is at rest
-        acc = np.zeros(n)
-        M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
-    Z = None
-    Kabs = np.abs(K)             # the sizes of the terms K adds up: what an eigenvalue is resolved against
-    if con is not None:
-        Kg = con.geometric_stiffness(q, lam)
-        Kabs = Kabs + np.abs(Kg)
-        K = K + Kg
-        Z = tangent_basis(con.G_active(q))
-        Mt, Ct, Kt, Nt = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ K @ Z, Z.T @ N
-    else:
-        Mt, Ct, Kt, Nt = M, C, K, N
-    R = active_basis(Mt, Ct, Kt)
-    Mt, Ct, Kt, Nt, inert = drop_inert(Mt, Ct, Kt, Nt)
+    L = _reduced(eom, st, pv, q, alpha, t, con, lam)
+    M, K, Kabs, Z, acc = L.M, L.K, L.Kabs, L.Z, L.acc
+    Mt, Ct, Kt, Nt, R, P, Kr = L.Mt, L.Ct, L.Kt, L.Nt, L.R, L.P, L.Kr
+    inert = L.inert
     if inert:
         notes = notes + [f"{inert} direction(s) carry neither inertia nor force here (the spin of a point "
                          "mass about its own axis): left out"]
-    P = complement(Nt)
-    Kr = P.T @ Kt @ P
     accel = bool(k) and np.linalg.norm(M @ acc) > 1e-8 * max(st.force_scale, 1e-300)
     if accel:
         kind = "accelerated-reference"
@@ -237,6 +223,38 @@ def classify(eom, st, pv, q, alpha, t, resid, notes, con=None, lam=None) -> Equi
                        hessian_eigenvalues=heig, kind=kind, residual=resid, reason=reason, hessian=K,
                        acceleration=acc if k else np.zeros(n), linear_eigenvalues=ev,
                        symmetry_directions=N if k else None, t=float(t), notes=list(notes), **extra)
+
+
+def _reduced(eom, st, pv, q, alpha, t, con, lam) -> SimpleNamespace:
+    """The linearization about ``q`` (M, C, K; K with the constraint forces' geometric
+    stiffness, Kabs the sizes of its terms; acc the reference acceleration along the symmetry
+    directions) and its reduction: onto the constraints' tangent space (Z; Mt, Ct, Kt, Nt), the
+    active directions (R), without inert ones (``inert`` of them), and the complement P of the
+    symmetry directions (Kr = P'Kt P)."""
+    n = eom.n
+    N = st.symmetry
+    k = N.shape[1]
+    acc = N @ alpha if k else np.zeros(n)
+    M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
+    if k and np.linalg.norm(M @ acc) <= 1e-8 * max(st.force_scale, 1e-300) and np.any(acc):
+        # no force along N: alpha is arbitrary where N carries no inertia; the reference is at rest
+        acc = np.zeros(n)
+        M, C, K, _, _ = second_order(eom, q, np.zeros(n), t, pv, acc=acc)
+    Z = None
+    Kabs = np.abs(K)             # the sizes of the terms K adds up: what an eigenvalue is resolved against
+    if con is not None:
+        Kg = con.geometric_stiffness(q, lam)
+        Kabs = Kabs + np.abs(Kg)
+        K = K + Kg
+        Z = tangent_basis(con.G_active(q))
+        Mt, Ct, Kt, Nt = Z.T @ M @ Z, Z.T @ C @ Z, Z.T @ K @ Z, Z.T @ N
+    else:
+        Mt, Ct, Kt, Nt = M, C, K, N
+    R = active_basis(Mt, Ct, Kt)
+    Mt, Ct, Kt, Nt, inert = drop_inert(Mt, Ct, Kt, Nt)
+    P = complement(Nt)
+    return SimpleNamespace(M=M, C=C, K=K, Kabs=Kabs, Z=Z, acc=acc, Mt=Mt, Ct=Ct, Kt=Kt, Nt=Nt, R=R, inert=inert,
+                           P=P, Kr=P.T @ Kt @ P)
 
 
 def _stability(st, ev, growth, lscale, heig, etol, potential, hu, *, massless, singular, circulatory, damping_ok,
