@@ -57,6 +57,19 @@ class ScalarDeclarations:
         if e.mod.value is None:
             fail("E212", f"parameter '{d.name}' has no value", d.name_span,
                  f"give it one: {d.type_name} {d.name} = ...;" if d.type_name != "Real" else f"parameter Real {d.name} = 1;")
+        val = self._parameter_value(e, dims, dim)
+        structural = d.type_name in ("Integer", "Boolean")
+        out_items = []
+        for idx, s in _enumerate(val, dims):
+            name = d.name + _suffix(idx)
+            out_items.append(self._structural_item(e, name, s, unit) if structural
+                             else self._real_item(e, name, s, factor, dim, unit))
+        return _reshape(out_items, dims)
+
+    def _parameter_value(self, e: Entry, dims: tuple[int, ...], dim) -> Val:
+        """The parameter's value, checked: a number or an array of the declared shape, constant,
+        of the declared dimension."""
+        d = e.decl
         val = self.eval(e.mod.value)
         if isinstance(val, (Str, CompRef)):
             fail("E301", f"parameter '{d.name}' must be a number, got {V.describe_shape(val)}", e.mod.value.span,
@@ -75,58 +88,60 @@ class ScalarDeclarations:
                      "parameters are constant; use an `output` or a `Real` variable instead")
             if dim is not None:
                 self.check_dim(s, dim, f"the value of '{d.name}'", e.mod.value.span)
-        structural = d.type_name in ("Integer", "Boolean")
-        out_items = []
-        for idx, s in _enumerate(val, dims):
-            name = d.name + _suffix(idx)
-            if structural:
-                if s.const is None:
-                    fail("E307", f"{d.type_name} parameter '{d.name}' must have a constant value", e.mod.value.span,
-                         "Integer and Boolean parameters are structural: use literals and other Integer parameters")
-                if d.type_name == "Integer" and not float(s.const).is_integer():
-                    fail("E307", f"Integer parameter '{d.name}' has non-integer value {X.fmt_num(s.const)}", e.mod.value.span,
-                         f"give a whole number, or declare it as parameter Real {d.name}")
-                if d.type_name == "Integer" and abs(s.const) > limits.get("integers"):
-                    fail("E315", f"Integer parameter '{name}' = {X.fmt_num(s.const)} is too large for a structural "
-                                 f"parameter (more than {limits.get('integers'):,} in magnitude)", e.mod.value.span,
-                         "Integer parameters size arrays and loops; " + limits.hint("integers"))
-                self._check_range(e, name, s.const)
-                e.params.append(ir.Parameter(name, float(s.const), None, unit, d.doc or "", True, d.name_span))
-                out_items.append(Scalar(ir.Const(float(s.const)), U.ONE if d.type_name == "Boolean" else ANY,
-                                        integer=d.type_name == "Integer", boolean=d.type_name == "Boolean"))
-                continue
-            # numbers are in the declared unit (alpha(unit = "deg") = 30: 30 degrees); a value computed
-            # from parameters with units (beta(unit = "deg") = alpha) is a quantity, already SI
-            binding = s.expr if factor == 1.0 or isinstance(s.dim, U.Dim) else X.mul(X.const(factor), s.expr)
-            try:
-                with _quiet_numpy():
-                    value = X.evaluate(binding, self.param_values)
-            except (ValueError, ZeroDivisionError, OverflowError, KeyError) as ex:
-                fail("E303", f"parameter '{name}' cannot be evaluated: {ex}", e.mod.value.span,
-                     "check the formula for division by zero and arguments outside a function's domain")
-            except TypeError:  # a complex number: a negative base to a fractional power
-                fail("E303", f"parameter '{name}' has no real value", e.mod.value.span,
-                     "a negative number raised to a fractional power is complex")
-            if not math.isfinite(value):
-                fail("E303", f"parameter '{name}' evaluates to {value}", e.mod.value.span,
-                     "check the formula for division by zero, overflow and arguments outside a function's domain")
-            lo, hi = self._check_range(e, name, value)
-            if e.kind == "input" and not isinstance(binding, ir.Const):
-                fail("E230", f"the default value of input '{name}' must be a constant number",
-                     e.mod.value.span, f"write input Real {d.name} = 0; (a default, used when nothing drives it)")
-            used = {n.name for n in X.leaves_of(binding, ir.Param)} & self.input_names
-            if e.kind == "parameter" and used:
-                bad = sorted(used)[0]
-                fail("E231", f"parameter '{name}' depends on input '{bad}'", e.mod.value.span,
-                     "inputs change during a run; parameters are constant: use the input in the equations or forces")
-            self.param_values[name] = value
-            if e.kind == "input":
-                self.input_names.add(name)
-            e.params.append(ir.Parameter(name, value, None if isinstance(binding, ir.Const) else binding,
-                                         unit, d.doc or "", False, d.name_span, input=e.kind == "input",
-                                         min=lo, max=hi))
-            out_items.append(Scalar(ir.Param(name), dim if dim is not None else None))
-        return _reshape(out_items, dims)
+        return val
+
+    def _structural_item(self, e: Entry, name: str, s: Scalar, unit) -> Val:
+        """An Integer or Boolean parameter's element: a constant, recorded as structural."""
+        d = e.decl
+        if s.const is None:
+            fail("E307", f"{d.type_name} parameter '{d.name}' must have a constant value", e.mod.value.span,
+                 "Integer and Boolean parameters are structural: use literals and other Integer parameters")
+        if d.type_name == "Integer" and not float(s.const).is_integer():
+            fail("E307", f"Integer parameter '{d.name}' has non-integer value {X.fmt_num(s.const)}", e.mod.value.span,
+                 f"give a whole number, or declare it as parameter Real {d.name}")
+        if d.type_name == "Integer" and abs(s.const) > limits.get("integers"):
+            fail("E315", f"Integer parameter '{name}' = {X.fmt_num(s.const)} is too large for a structural "
+                         f"parameter (more than {limits.get('integers'):,} in magnitude)", e.mod.value.span,
+                 "Integer parameters size arrays and loops; " + limits.hint("integers"))
+        self._check_range(e, name, s.const)
+        e.params.append(ir.Parameter(name, float(s.const), None, unit, d.doc or "", True, d.name_span))
+        return Scalar(ir.Const(float(s.const)), U.ONE if d.type_name == "Boolean" else ANY,
+                      integer=d.type_name == "Integer", boolean=d.type_name == "Boolean")
+
+    def _real_item(self, e: Entry, name: str, s: Scalar, factor: float, dim, unit) -> Val:
+        """A Real parameter's (or an input's default's) element: evaluated in SI, checked, recorded."""
+        d = e.decl
+        # numbers are in the declared unit (alpha(unit = "deg") = 30: 30 degrees); a value computed
+        # from parameters with units (beta(unit = "deg") = alpha) is a quantity, already SI
+        binding = s.expr if factor == 1.0 or isinstance(s.dim, U.Dim) else X.mul(X.const(factor), s.expr)
+        try:
+            with _quiet_numpy():
+                value = X.evaluate(binding, self.param_values)
+        except (ValueError, ZeroDivisionError, OverflowError, KeyError) as ex:
+            fail("E303", f"parameter '{name}' cannot be evaluated: {ex}", e.mod.value.span,
+                 "check the formula for division by zero and arguments outside a function's domain")
+        except TypeError:  # a complex number: a negative base to a fractional power
+            fail("E303", f"parameter '{name}' has no real value", e.mod.value.span,
+                 "a negative number raised to a fractional power is complex")
+        if not math.isfinite(value):
+            fail("E303", f"parameter '{name}' evaluates to {value}", e.mod.value.span,
+                 "check the formula for division by zero, overflow and arguments outside a function's domain")
+        lo, hi = self._check_range(e, name, value)
+        if e.kind == "input" and not isinstance(binding, ir.Const):
+            fail("E230", f"the default value of input '{name}' must be a constant number",
+                 e.mod.value.span, f"write input Real {d.name} = 0; (a default, used when nothing drives it)")
+        used = {n.name for n in X.leaves_of(binding, ir.Param)} & self.input_names
+        if e.kind == "parameter" and used:
+            bad = sorted(used)[0]
+            fail("E231", f"parameter '{name}' depends on input '{bad}'", e.mod.value.span,
+                 "inputs change during a run; parameters are constant: use the input in the equations or forces")
+        self.param_values[name] = value
+        if e.kind == "input":
+            self.input_names.add(name)
+        e.params.append(ir.Parameter(name, value, None if isinstance(binding, ir.Const) else binding,
+                                     unit, d.doc or "", False, d.name_span, input=e.kind == "input",
+                                     min=lo, max=hi))
+        return Scalar(ir.Param(name), dim if dim is not None else None)
 
     def _check_range(self, e: Entry, name: str, value: float) -> tuple[float | None, float | None]:
         """Check ``value`` against the declared min and max; returns them (None: not declared)."""
