@@ -171,8 +171,6 @@ def format_hamiltonian(model, latex: bool = False) -> str:
     simplify_small = simplify if n <= SIMPLIFY_MAX_N else (lambda e, angles=(): e)
     s = symbolic_hamilton(lg)
     P, pexpr, Msym, bsym, T0, small = s["P"], s["momenta"], s["M"], s["b"], s["T0"], s["small"]
-    L = lg.L
-    out = []
     title = getattr(model, "name", None) or (eom.name if eom is not None else "model")
     fmt = (lambda e: _latex(e, lg, P)) if latex else (lambda e: _text(e))
     qdname = (lambda c: r"\dot{" + _lname(c) + "}") if latex else (lambda c: f"der({c})")
@@ -223,6 +221,11 @@ def format_hamiltonian(model, latex: bool = False) -> str:
         lines.append(("constraints g(q, t) = 0, G = dg/dq (multipliers lambda; integrate with "
                       "method = rattle)" if not latex else r"constraints $g(q, t) = 0$, $G = \partial g/\partial q$",
                       cons))
+    return _render(lines, title, how, note, latex)
+
+
+def _render(lines, title: str, how: str, note: str, latex: bool) -> str:
+    """format_hamiltonian's sections ``lines`` ((heading, [(name, value)])) as text or LaTeX."""
     if latex:
         body = [r"\begin{aligned}"]
         for head, items in lines:
@@ -230,7 +233,7 @@ def format_hamiltonian(model, latex: bool = False) -> str:
             body += [f"{k} &= {v}\\\\" for k, v in items]
         body.append(r"\end{aligned}")
         return "% Hamiltonian of " + title + f" ({how}); {note}\n" + "\n".join(body) + "\n"
-    out.append(f"Hamiltonian of {title} ({how})")
+    out = [f"Hamiltonian of {title} ({how})"]
     for head, items in lines:
         out.append(f"  {head}:")
         w = max((len(k) for k, _ in items), default=0)
