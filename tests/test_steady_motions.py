@@ -164,3 +164,25 @@ def test_cli_steady(capsys, tmp_path):
     assert data["count"] == 2 and data["steady_motions"][0]["speeds"]["der(tip.phi)"] == pytest.approx(1.3694173, 1e-6)
     assert main(["equilibrium", top, "--model", "HeavyTop", "--steady", "tip.phi=1,p_tip.psi=4"]) == 2
     assert "ignorable" in capsys.readouterr().err
+
+
+def test_sleeping_top_at_the_euler_singularity_is_reported_not_a_crash(capsys):
+    """Pinning both spin rates finds the top upright (theta = 0) and hanging (theta = pi), where
+    phi and psi turn about one axis: the ignorables' block of M is singular, Routh's reduced
+    potential is undefined.  Found before: an internal error (LinAlgError) from the CLI.  The
+    motions are real (the residual of the equations at constant speeds is zero); their stability
+    is reported as not decided, with the reason."""
+    from mechdsl.cli import main
+
+    model = mechdsl.load(MODELS / "heavy_top.mech", model="HeavyTop")
+    found = steady_motions(model.eom, {"der(tip.phi)": 0.5, "der(tip.psi)": 0.5}, max_guesses=30)
+    thetas = sorted(abs(s.values["tip.theta"]) for s in found)
+    assert thetas == pytest.approx([0.0, math.pi], abs=1e-9)
+    for s in found:
+        assert s.stable is None and "singular" in s.reason and s.residual <= 1e-8
+    # p_psi = I3 (phi' cos theta + psi'): 0.2 * 1 upright
+    upright = min(found, key=lambda s: abs(s.values["tip.theta"]))
+    assert upright.momenta["p_tip.psi"] == pytest.approx(TOP["I3"] * 1.0, rel=1e-12)
+    assert main(["equilibrium", str(MODELS / "heavy_top.mech"), "--model", "HeavyTop",
+                 "--steady", "der(tip.phi)=0.5,der(tip.psi)=0.5"]) == 0
+    assert "not decided" in capsys.readouterr().out

@@ -90,8 +90,6 @@ def steady_motions(eom, pins: dict, *, ignorable=None, guesses=None, p=None, t: 
     non-ignorable coordinates, "der(<ignorable>)" or "p_<ignorable>".  ignorable: coordinate
     names (default: the cyclic coordinates).  guesses: {name: value} or a list of them (the
     same names as pins, and the other unknowns)."""
-    import casadi as ca
-
     require_ode(eom, "steady motions")
     pv = param_vector(eom, p)
     n = eom.n
@@ -101,30 +99,8 @@ def steady_motions(eom, pins: dict, *, ignorable=None, guesses=None, p=None, t: 
     kinds = _pins(eom, pins, ign, r_idx)
     pt = parts(eom)
     q0, qd0 = eom.start(pv)
-
-    # unknowns z = (r, w); residual rows: bias (n), pins (n_s)
-    z = ca.SX.sym("z", len(r_idx) + len(s_idx))
-    q_e = ca.SX(eom.q)
-    q_expr = ca.vertcat(*[z[r_idx.index(i)] if i in r_idx else ca.SX(q0[i]) for i in range(n)])
-    qd_expr = ca.vertcat(*[z[len(r_idx) + s_idx.index(i)] if i in s_idx else ca.SX(0) for i in range(n)])
-    mom = ca.gradient(eom.T, eom.qd)
-    sub = lambda e: ca.substitute(ca.substitute(e, q_e, q_expr), eom.qd, qd_expr)  # noqa: E731
-    bias = sub(ca.substitute(eom.bias, eom.t, ca.SX(t)))
-    mom_z = sub(ca.substitute(mom, eom.t, ca.SX(t)))
     st = structure(eom, pv)
-    fscale = max(st.force_scale, 1e-12)
-    rows, pin_vals = [bias / fscale], []
-    for name, (kind, k) in kinds.items():
-        val = float(pins[name])
-        pin_vals.append(val)
-        if kind == "coord":
-            rows.append(z[r_idx.index(k)] - val)
-        elif kind == "speed":
-            rows.append(z[len(r_idx) + s_idx.index(k)] - val)
-        else:
-            rows.append((mom_z[k] - val) / max(1.0, abs(val)))
-    res = ca.vertcat(*rows)
-    F = ca.Function("steady_res", [z, eom.p], [res, ca.jacobian(res, z)])
+    F = _residual_function(eom, pins, kinds, r_idx, s_idx, q0, t, max(st.force_scale, 1e-12))
 
     last: list = [None, None, None]          # x, residual, Jacobian: one call gives both
 
@@ -164,6 +140,34 @@ def steady_motions(eom, pins: dict, *, ignorable=None, guesses=None, p=None, t: 
         out.append(_classify(eom, pt, pv, t, x, r_idx, s_idx, ign, q0, float(np.max(np.abs(r)))))
     out.sort(key=lambda m: tuple(np.round(_z(m, r_idx, s_idx), 9)))
     return out
+
+
+def _residual_function(eom, pins: dict, kinds: dict, r_idx, s_idx, q0, t: float, fscale: float):
+    """The Function z, p -> (residual, its Jacobian) of the steady-motion equations in the
+    unknowns z = (the other coordinates r, the ignorables' speeds w): the bias forces at constant
+    speeds (n rows, over the force scale) and the pins (one row each)."""
+    import casadi as ca
+
+    n = eom.n
+    z = ca.SX.sym("z", len(r_idx) + len(s_idx))
+    q_e = ca.SX(eom.q)
+    q_expr = ca.vertcat(*[z[r_idx.index(i)] if i in r_idx else ca.SX(q0[i]) for i in range(n)])
+    qd_expr = ca.vertcat(*[z[len(r_idx) + s_idx.index(i)] if i in s_idx else ca.SX(0) for i in range(n)])
+    mom = ca.gradient(eom.T, eom.qd)
+    sub = lambda e: ca.substitute(ca.substitute(e, q_e, q_expr), eom.qd, qd_expr)  # noqa: E731
+    bias = sub(ca.substitute(eom.bias, eom.t, ca.SX(t)))
+    mom_z = sub(ca.substitute(mom, eom.t, ca.SX(t)))
+    rows = [bias / fscale]
+    for name, (kind, k) in kinds.items():
+        val = float(pins[name])
+        if kind == "coord":
+            rows.append(z[r_idx.index(k)] - val)
+        elif kind == "speed":
+            rows.append(z[len(r_idx) + s_idx.index(k)] - val)
+        else:
+            rows.append((mom_z[k] - val) / max(1.0, abs(val)))
+    res = ca.vertcat(*rows)
+    return ca.Function("steady_res", [z, eom.p], [res, ca.jacobian(res, z)])
 
 
 def _polish(f, jac, x, steps: int = 12):
@@ -308,6 +312,17 @@ def _classify(eom, pt, pv, t, x, r_idx, s_idx, ign, q0, resid) -> SteadyMotion:
     H, grad = (dense(v) for v in VR(q, t, pv, beta))
     Ared = dense(A(q, t, pv, beta))
     Hr = 0.5 * (H + H.T)
+    if not (np.all(np.isfinite(Hr)) and np.all(np.isfinite(grad)) and np.all(np.isfinite(Ared))):
+        # Routh's reduction divides by the ignorables' block of M: singular at a chart's singularity
+        return SteadyMotion(coords=tuple(eom.coords), q=q, qd=qd, ignorable=tuple(ign),
+                            momenta={f"p_{c}": float(b) for c, b in zip(ign, beta)}, stable=None,
+                            reason="not decided: the ignorable coordinates' block of the mass matrix is singular "
+                                   "here (a coordinate singularity, e.g. Euler angles with theta = 0, where two "
+                                   "angles turn about one axis), so Routh's reduced potential is not defined; "
+                                   "simulate near it, or use coordinates without this singularity",
+                            reduced_coords=tuple(eom.coords[i] for i in r_idx), reduced_hessian=np.full((nr, nr), np.nan),
+                            hessian_eigenvalues=np.zeros(0), linear_eigenvalues=np.zeros(0, complex), residual=resid,
+                            notes=["the reduced Hessian and linearization are not defined at this configuration"])
     heig = np.linalg.eigvalsh(Hr) if nr else np.zeros(0)
     lam = np.linalg.eigvals(Ared) if Ared.size else np.zeros(0, complex)
     hscale = max(float(np.max(np.abs(Hr), initial=0.0)), 1e-300)
