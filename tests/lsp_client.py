@@ -20,7 +20,7 @@ class LspClient:
         """``command``: how the server is started (default ``python -m mechdsl lsp``)."""
         self.proc = subprocess.Popen(list(command or [sys.executable, "-m", "mechdsl", "lsp"]),
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     env={**os.environ, **(env or {})}, cwd=cwd)
+                                     env={**os.environ, "PYTHONFAULTHANDLER": "1", **(env or {})}, cwd=cwd)
         self._id = 0
         self._answers: dict[int, queue.Queue] = {}
         self.notifications: list[dict] = []
@@ -149,8 +149,18 @@ class LspClient:
         try:
             return self.proc.wait(timeout=20)
         except subprocess.TimeoutExpired:
-            self.proc.kill()
-            raise AssertionError("the server did not end after exit") from None
+            # seen once under load (2026-11-28) and not reproduced: SIGABRT makes the server's
+            # faulthandler (PYTHONFAULTHANDLER) print every thread's stack, shown here
+            import signal
+
+            self.proc.send_signal(signal.SIGABRT)
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+            time.sleep(0.5)                      # the stderr reader files the last lines
+            stacks = b"".join(self.stderr).decode("utf-8", "replace")[-6000:]
+            raise AssertionError("the server did not end after exit; its threads:\n" + stacks) from None
 
 
 def offset(text: str, needle: str, nth: int = 0, delta: int = 0) -> int:
