@@ -363,17 +363,8 @@ def _solve_spd(M, b):
 
 
 def _solve_sym(W, r):
-    """Solve W x = r for a symmetric positive (semi)definite W; minimum norm when singular
-    (``_cho_solve(_cho(W), r, check_finite=False)`` inlined: the same LAPACK calls)."""
-    c, info = _POTRF(np.asarray(W, dtype=float), lower=1, clean=0)
-    if info > 0:
+    """Solve W x = r for a symmetric positive (semi)definite W; minimum norm when singular."""
+    try:
+        return _cho_solve(_cho(W), r, check_finite=False)
+    except np.linalg.LinAlgError:
         return np.linalg.lstsq(W, r, rcond=1e-12)[0]
-    if info < 0:
-        raise ValueError(f'LAPACK reported an illegal value in {-info}-th argument on entry to "POTRF".')
-    r = np.asarray(r, dtype=float)
-    if r.size == 0:
-        return np.empty_like(r)
-    x, info = _POTRS(c, r, lower=1)
-    if info != 0:
-        raise ValueError(f"illegal value in {-info}th argument of internal potrs")
-    return x
