@@ -34,7 +34,7 @@ SCENES = [("falling_rod.mech", "Drop"), ("bouncing_ball.mech", "Bounce"), ("newt
 GOAL = 1.2          # issue 24 item 4 (as item 1): a row costs at most this times the cheapest tighter row
 
 
-ROUND = 0.1         # s: a scene whose runs are shorter gets proportionally more rounds
+ROUND = 0.25        # s: a scene whose runs are shorter gets proportionally more rounds
 
 
 def measure(runs, repeats):
