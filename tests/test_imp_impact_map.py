@@ -140,3 +140,23 @@ def test_single_contact_shortcut_equals_the_general_solve(seed):
         assert one.impulses[0] == pytest.approx(0.0, abs=1e-15) and one.qd == pytest.approx(v, abs=1e-15)
     else:
         assert one.speeds_after[0] == pytest.approx(-e * u, rel=1e-10)
+
+
+def test_triangular_solves_of_the_general_path_solve_their_systems():
+    """The general path's G L^-T (BLAS trsv/trsm on the Cholesky factor, see impact_map._lower_solve)
+    for no row, one row and several rows: L X^T = R^T holds to round-off."""
+    from mechdsl.impacts.impact_map import _lower_solve
+    rng = np.random.default_rng(7)
+    for n, k in [(3, 0), (3, 1), (4, 2), (7, 5), (12, 3)]:
+        L = np.linalg.cholesky(spd(rng, n))
+        R = rng.normal(size=(k, n))
+        X = _lower_solve(L, R)
+        assert X.shape == (k, n)
+        assert L @ X.T == pytest.approx(R.T, abs=1e-12)
+
+
+def test_a_non_finite_mass_matrix_is_an_impact_error():
+    M = np.eye(3)
+    M[1, 1] = np.inf
+    with pytest.raises(ImpactError):
+        solve_impact(M, np.array([0.0, -1.0, 0.0]), np.array([[0.0, 1.0, 0.0], [1.0, 1.0, 0.0]]), [0.0, 0.0], [0.5, 0.5])

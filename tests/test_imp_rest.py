@@ -54,3 +54,26 @@ def test_a_bouncing_ball_at_a_loose_tolerance_closes_its_contact():
     assert len(fast) >= 5
     for e in fast:
         assert e["speed_after"] == pytest.approx(-0.8 * e["speed_before"], rel=1e-9)
+
+
+def test_the_estimate_covers_both_ends_landing_inside_the_touch_band(rod):
+    """At rtol 1e-6 the rod's ends land about 2e-5 s apart, inside the run's touch band (100 atol):
+    the run makes them one simultaneous impact, and so did the companion, whose estimate was 5x
+    below the true error.  The companion now resolves that instant with its own impacts, one after
+    another: the estimate is at least the error against a run at 1e-11 (an independent reference
+    for this purpose: the rod's ends land apart there), and the note names the instant."""
+    ref = rod.simulate(rtol=1e-11, atol=1e-11, error_estimate="off")
+    r = rod.simulate(rtol=1e-6, atol=1e-6)
+    assert "end_a, end_b" in [e["contact"] for e in r.events]          # the merged impact
+    assert "end_a, end_b" not in [e["contact"] for e in ref.events if e["time"] < 1.0]
+    acc = r.metadata["accuracy"]
+    j = list(r.coordinates).index(acc["error_estimate_coordinate"])
+    t, q = np.asarray(r.t), np.asarray(r.q)[:, j]
+    tr, qr = np.asarray(ref.t), np.asarray(ref.q)[:, j]
+    grid = np.r_[True, np.diff(t) > 0] & np.r_[np.diff(t) > 0, True]      # without the event rows
+    grid_r = np.r_[True, np.diff(tr) > 0] & np.r_[np.diff(tr) > 0, True]
+    assert t[grid] == pytest.approx(tr[grid_r])
+    true = float(np.max(np.abs(q[grid] - qr[grid_r])))
+    assert true > 1e-4                                       # the merge costs far more than rtol
+    assert acc["error_estimate"] >= true
+    assert "simultaneous impact" in acc["error_estimate_note"]

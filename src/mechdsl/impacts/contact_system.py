@@ -188,10 +188,25 @@ class ContactSystem:
                 return self.f_qdd(t, q, qd, self.p)[0], np.zeros(0)
             M, b = self.dyn(t, q, qd)
             return _solve_spd(M, b), np.zeros(0)
-        M, b = self.dyn(t, q, qd)
-        _, A, _, gam = self.cons(t, q, qd)
-        A, gam = A[rows], gam[rows]
-        cf = _cho(M)
+        n = self.n
+        M, b = self.f_dyn(t, q, qd, self.p)
+        _, A, _, gam = self.f_cons(t, q, qd, self.p)
+        A, gam = A.reshape(self.n_rows, n)[rows], gam[rows]
+        cf = _cho(M.reshape(n, n))
+        if self.f_fric is None:
+            # what the general path below computes, with its checks (non-finite input: ValueError,
+            # as _cho_solve raises it) and LAPACK calls, without the per-call wrapping: this runs
+            # for every right-hand side and every release-event evaluation of a phase with
+            # closed contacts (the same bits; tests/test_imp_batched_rows.py)
+            c = cf[0]
+            if not (np.isfinite(b).all() and np.isfinite(c).all() and np.isfinite(A).all()):
+                raise ValueError("array must not contain infs or NaNs")
+            a0, info = _POTRS(c, b, lower=1)
+            X, info2 = _POTRS(c, A.T, lower=1)
+            if info or info2:
+                raise ValueError(f"illegal value in {-(info or info2)}th argument of internal potrs")
+            lam = -_solve_sym(A @ X, A @ a0 + gam)
+            return a0 + X @ lam, lam
         a0 = _cho_solve(cf, b)
         X = _cho_solve(cf, A.T)
         B = self._friction_columns(t, q, qd, rows)

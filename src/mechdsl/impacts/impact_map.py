@@ -22,7 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
+from scipy.linalg import blas
 from scipy.optimize import nnls
 
 
@@ -61,8 +61,10 @@ def solve_impact(M, qd, G, gt, e, B=None, bt=None) -> ImpactSolution:
         if single is not None:
             return single
     L = np.linalg.cholesky(M)
-    Gt = sla.solve_triangular(L, G.T, lower=True).T   # G L^-T
-    Bt = sla.solve_triangular(L, B.T, lower=True).T
+    if not (np.all(np.isfinite(L)) and np.all(np.isfinite(G)) and np.all(np.isfinite(B))):
+        raise ImpactError("non-finite mass matrix or contact rows at the impact")
+    Gt = _lower_solve(L, G)                         # G L^-T
+    Bt = _lower_solve(L, B)
     # bilateral rows: w = w0 + N z, w0 in the row space of Bt
     if B.shape[0]:
         U, s, Vt = np.linalg.svd(Bt)
@@ -78,12 +80,28 @@ def solve_impact(M, qd, G, gt, e, B=None, bt=None) -> ImpactSolution:
     f = h - gt - G @ v - Gt @ w0
     z, lam = ldp(E, f)
     w = w0 + N @ z
-    v_plus = v + sla.solve_triangular(L.T, w, lower=False)
+    v_plus = v + blas.dtrsv(L.T, w, lower=0, trans=0, diag=0)      # L^-T w
     mu = np.zeros(B.shape[0])
     if B.shape[0]:
         mu = np.linalg.lstsq(B.T, M @ (v_plus - v) - G.T @ lam, rcond=None)[0]
     return ImpactSolution(qd=v_plus, impulses=lam, bilateral=mu, speeds_before=u_minus,
                           speeds_after=G @ v_plus + gt)
+
+
+def _lower_solve(L, R) -> np.ndarray:
+    """(L^-1 R^T)^T = R L^-T for the Cholesky factor L (C order) and rows R: BLAS trsv/trsm
+    on L^T, which is what scipy.linalg.solve_triangular(L, R.T, lower=True) computes through
+    LAPACK trtrs with one thread (bit for bit: trtrs is trsv for one column, trsm for more).
+    Not solve_triangular itself: OpenBLAS's trtrs wakes its worker threads for any size, and
+    each wake-up left a thread spinning for tens of milliseconds of CPU after a 3 x 3 solve
+    (the falling rod's CPU time doubled, and its cost depended on when its impacts fell);
+    BLAS trsv/trsm stay on the calling thread below OpenBLAS's size thresholds."""
+    k, n = R.shape
+    if k == 0 or n == 0:
+        return np.zeros((k, n))
+    if k == 1:
+        return blas.dtrsv(L.T, R[0], lower=0, trans=1, diag=0).reshape(1, n)
+    return blas.dtrsm(1.0, L.T, np.array(R.T, order="F"), side=0, lower=0, trans_a=1, diag=0).T
 
 
 def _single(M, v, g, gt, h, u_minus):

@@ -73,6 +73,52 @@ class _SegmentRun(Run):
         return None
 
 
+class _Strict(ContactRun):
+    """The companion's options where it resolves an instant itself: a contact touches only within
+    twice its event offset (the run's touch band, 100 atol, makes contacts that land a few
+    microseconds apart one simultaneous impact)."""
+
+    @property
+    def touch(self) -> float:
+        return max(1e-12, 2.0 * self.offset)
+
+
+class _Resolving(_SegmentRun):
+    """A segment that starts just before an instant where the run merged impacts the companion
+    resolves apart: it applies its own impacts (strict touch band) until every contact of the
+    merged impact has had one, then stops at its next event as a _SegmentRun does."""
+
+    LIMIT = 20          # events it applies at most
+
+    def __init__(self, *args, pending=(), **kw):
+        super().__init__(*args, **kw)
+        self.pending = set(pending)
+
+    def _record(self, ev):
+        super()._record(ev)
+        if ev["kind"] in ("impact", "close"):
+            self.pending -= {c.strip() for c in str(ev["contact"]).split(",")}
+
+    def _at_event(self, t, y_ev):
+        if self.pending and len(self.events) < self.LIMIT:
+            return Run._at_event(self, t, y_ev)
+        raise _Stop(t, y_ev)
+
+
+def merged(events, system, t: float, q: np.ndarray, band: float) -> list[str]:
+    """The contacts of the run's simultaneous impacts at an instant (``events``, state before
+    them ``q``) that were still open by more than ``band`` there: the run's touch band took them
+    into the impact; a run that resolves the band would see them land (slightly) later."""
+    names = [g.name for g in system.gaps]
+    gap = system.gap(t, q)
+    out = []
+    for ev in events:
+        cs = [c.strip() for c in str(ev["contact"]).split(",")]
+        if ev["kind"] == "impact" and len(cs) > 1:
+            out += [c for c in cs if c in names and gap[names.index(c)] > band and c not in out]
+    return out
+
+
 class Followed:
     """What the companion found: times and estimated errors (|differences|, per coordinate, not yet
     divided by the factor), the largest event-time difference, the work, a note when it stopped."""
@@ -83,6 +129,7 @@ class Followed:
         self.dt_event, self.dt_event_time = 0.0, None
         self.segments, self.steps, self.rhs_evals = 0, 0, 0
         self.note = None
+        self.resolved: list[tuple[float, list[str]]] = []     # instants the companion resolved itself
 
     def row(self, t: float, e: np.ndarray) -> None:
         self.rows(np.array([t], float), np.reshape(e, (1, -1)))
@@ -135,6 +182,7 @@ def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
     event offsets of the run)."""
     c = s.contacts
     opts = ContactRun(c, s.rtol, s.atol)
+    strict = _Strict(c, s.rtol, s.atol)
     method_cls, _ = events_method(s.method)
     gaps, fixes, functions = parts
     pv = parameter_vector(eom, s.p)
@@ -165,7 +213,16 @@ def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
         stop = s.t_end if last else min(s.t_end, t_next + MARGIN * (t_next - tk),
                                          inst[k + 1][0] if k + 1 < len(inst) else s.t_end)
         pts = grid[(grid >= tk) & (grid <= stop)]
-        run = _SegmentRun(system, opts, pts, method_cls, flight=fl)
+        apart = []
+        if k:        # the run's events at tk: impacts it merged that the companion resolves apart
+            _, before, _, evs = inst[k - 1]
+            apart = merged(evs, system, tk, q_of(before), strict.touch)
+        if apart:
+            out.resolved.append((tk, apart))
+            q0, qd0 = q_of(before), qd_of(before)
+            run = _Resolving(system, strict, pts, method_cls, flight=fl, pending=apart)
+        else:
+            run = _SegmentRun(system, opts, pts, method_cls, flight=fl)
         hit = None
         try:
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -205,5 +262,11 @@ def follow(eom, s, r, parts, stride: int = 1, band: float = 0.0) -> Followed:
         out.row(t_run, carried + _dropped(evs, system, band, c.rest_speed, q_of, qd_of))
         if abs(t_run - t_c) >= out.dt_event:
             out.dt_event, out.dt_event_time = abs(t_run - t_c), t_run
+    if out.resolved and out.note is None:
+        t0, names = out.resolved[0]
+        more = f" and {len(out.resolved) - 1} more instant(s)" if len(out.resolved) > 1 else ""
+        out.note = (f"at t = {t0:.6g} s{more} the run took contacts still open within its touch band into "
+                    f"one simultaneous impact ({', '.join(names)}); the estimate includes the companion's own "
+                    "impacts there, one after another")
     return out
 
