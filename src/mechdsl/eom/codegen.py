@@ -48,7 +48,7 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError
 from . import cachefiles
 from .cachefiles import cache_dir      # (also imported from here: mechdsl.eom.codegen.cache_dir)
-from .compiler import find_compiler  # noqa: F401  (the compiler search, without CasADi: also warm_run's)
+from .compiler import build_shared, find_compiler  # noqa: F401  (the compiler search, without CasADi: also warm_run's)
 from .specialize import shared_derivatives, specialize
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
@@ -712,35 +712,15 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
         cachefiles.hit("compiled-code", digest)
     else:
         log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
-        import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
-        import tempfile        # loads the cached library)
+        import tempfile        # (only a build needs it: a warm run loads the cached library)
 
         cachefiles.miss("compiled-code", digest, "not built yet" if private is None and problem is None
                         else problem or "the cache folder is not used")
         try:
             cachefiles.remove_stale_builds(private or d)
             with tempfile.TemporaryDirectory(dir=private or d, prefix=f".build-{os.getpid()}-") as tmp:
-                procs, objs = [], []
-                for i, (code, fl) in enumerate(zip(units, flags)):
-                    src = Path(tmp) / f"unit{i}.c"
-                    src.write_text(code)
-                    obj = Path(tmp) / f"unit{i}.o"
-                    objs.append(obj)
-                    # relative names in the build folder: the library does not embed the folder's
-                    # random name, so concurrent builds of one model give the same bytes (and hash)
-                    procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", src.name, "-o", obj.name], cwd=tmp,
-                                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
-                errors = []
-                for pr in procs:
-                    out, err = pr.communicate()
-                    if pr.returncode != 0:
-                        errors.append((err or out).strip())
-                out = Path(tmp) / "lib.so"
-                if not errors:
-                    r = subprocess.run([cc, "-shared", *(o.name for o in objs), "-o", out.name, "-lm"],
-                                       capture_output=True, text=True, cwd=tmp)
-                    if r.returncode != 0:
-                        errors.append((r.stderr or r.stdout).strip())
+                built, errors = build_shared(cc, units, flags, tmp)
+                out = Path(built) if built else None
                 if errors:
                     tail = " | ".join(errors[0].splitlines()[-3:])
                     if strict:

@@ -27,6 +27,7 @@ import ctypes
 import math
 import os
 import pickle
+import stat
 import sys
 import time
 from array import array
@@ -40,6 +41,7 @@ from ..eom.vmprog import Program, address
 from ..output.result import Result, csv_text
 from . import accuracy as A
 from .backends import crk_calls as C
+from .backends import runtime_lib
 from .difference import every_kth, report
 
 FORMAT = "mechdsl-warm-run 2"
@@ -144,7 +146,10 @@ def read(k: str) -> dict | None:
     for lib in (out["run"]["loop"], *((out["companion"]["loop"],) if out["companion"] else ())):
         for path in (lib["runtime"], lib.get("library")):
             try:
-                bad = path is not None and cachefiles.problem(os.stat(path), "file")
+                st = None if path is None else os.stat(path)
+                # (the runtime installed with mechdsl, runtime_lib.py: owned by whoever installed it)
+                bad = st is not None and (cachefiles.problem(st, "file") if os.path.dirname(path) != runtime_lib.PACKAGED
+                                          else "is not a regular file" if not stat.S_ISREG(st.st_mode) else None)
             except OSError:
                 bad = "is gone"
             if bad:

@@ -37,6 +37,7 @@ from ... import integrators as I
 from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
+from . import runtime_lib
 from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
 from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
 
@@ -79,16 +80,12 @@ def run_pair(loop, first: tuple, loop2, second: tuple, progress):
         return run, c2
     return run, _as_run(c2, len(second[1]), second[2].size, second[7], second[8])
 
-SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
+SOURCES = tuple(Path(p) for p in runtime_lib.SOURCES)
 _LIBS: dict = {}
 _LOCK = threading.Lock()
 _RUNTIME: dict = {}
 
-# crk.c, vm.c (compiled once per cache folder, in a first run): crk.c at -O1 takes gcc 0.36 s
-# (-Og 0.19 s, but its loop steps about 5 % slower: pendulum, 2544 steps, 5.55 ms against 5.3 ms;
-# every later run pays that, so the one-time compile keeps -O1); the interpreter of vm.c is 1.4x
-# faster at -O2.  Same bits at every level (no fast-math, no FMA contraction on x86-64).
-RUNTIME_FLAGS = (["-O1"], ["-O2"])
+RUNTIME_FLAGS = runtime_lib.RUNTIME_FLAGS       # (their reasons: runtime_lib.py)
 MODEL_FLAGS = ["-O1"]       # sxcode's chunks: within a few % of -O2 at 3/4 of its compile time
 COMPILE_OPS = 12_000        # models up to this many operations are compiled (about a second of gcc)
 
@@ -115,8 +112,14 @@ def runtime():
         return hit
     if find_compiler() is None:
         return None, "no C compiler"
-    loaded, note, path = compile_functions([], tag="crk", jacobian=False,
-                                           extra_units=tuple(p.read_text() for p in SOURCES),
+    units = runtime_lib.texts()
+    installed = runtime_lib.packaged(units)
+    if installed is not None:       # built when mechdsl was installed (runtime_lib.py): no gcc now
+        try:
+            return _keep((declare(ctypes.CDLL(installed)), ""))
+        except (OSError, AttributeError):
+            pass                    # (then built into the cache, as without it)
+    loaded, note, path = compile_functions([], tag="crk", jacobian=False, extra_units=units,
                                            extra_flags=RUNTIME_FLAGS)
     lib = None
     if loaded is not None:
@@ -124,7 +127,10 @@ def runtime():
             lib = declare(ctypes.CDLL(path))
         except (OSError, AttributeError) as e:
             lib, note = None, f"cannot load the stepping loop's library {path}: {e}"
-    out = (lib, note)
+    return _keep((lib, note))
+
+
+def _keep(out):
     with _LOCK:
         _RUNTIME.setdefault("lib", out)
         return _RUNTIME["lib"]
