@@ -291,6 +291,7 @@ def test_an_interpreted_model_compiles_once_it_has_paid_and_keeps_its_bits(monke
     monkeypatch.setattr(crk, "COMPILE_OPS", 0)
     monkeypatch.setattr(crk_calls, "SLICE", 1e-5)            # many slices: the switch lands inside the run
     monkeypatch.setattr(payback, "PAYBACK_EVALS", 10 ** 12)
+    monkeypatch.setattr(payback, "FIXED_OPS", 0)            # (the threshold: PAYBACK_EVALS itself)
     i = simulate(e, 20.0, **kw)                              # never paid: interpreted throughout
     monkeypatch.setattr(payback, "PAYBACK_EVALS", n + n // 2)
     first = simulate(e, 20.0, **kw)                          # paid half-way: compiled for the rest

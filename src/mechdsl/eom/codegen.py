@@ -615,9 +615,12 @@ def derivative_functions(funcs, order: int = 2) -> list:
     return out
 
 
+NOT_CACHED = "not in the cache (not compiled: cached_only)"
+
+
 def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
                       extra_units: tuple[str, ...] = (), extra_flags: list[str] | None = None,
-                      budget: int | None = None, strict: bool = False):
+                      budget: int | None = None, strict: bool = False, cached_only: bool = False):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
@@ -633,6 +636,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     the 20-link chain's Functions with second derivatives 7 GB); more is not compiled and the
     note says so.  ``strict``: a compile that cannot be done (no compiler, over the budget, a
     failed build) raises MechError (E804, E805) instead of returning None with a note.
+    ``cached_only``: load the library when the cache holds it, else return (None, NOT_CACHED,
+    None) without compiling (the stepping loop's pay-back rule, simulation/backends/payback.py).
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -710,6 +715,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     if private is None and lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
         cachefiles.hit("compiled-code", digest)
+    elif cached_only:
+        return None, NOT_CACHED, None
     else:
         log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
         import tempfile        # (only a build needs it: a warm run loads the cached library)

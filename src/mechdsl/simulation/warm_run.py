@@ -155,8 +155,22 @@ def read(k: str) -> dict | None:
             if bad:
                 cachefiles.miss("warm-run", k[:16], f"the library {path} {bad}")
                 return None
+    for c in (out["run"], out["companion"]):
+        pay = c and c.get("payback")
+        if pay and _evaluations(pay["path"]) >= pay["limit"]:
+            cachefiles.miss("warm-run", k[:16], "the interpreted model has paid for its compile (payback.py)")
+            return None
     cachefiles.hit("warm-run", k[:16])
     return out
+
+
+def _evaluations(path: str) -> int:
+    """The interpreted evaluations counted in the file ``path`` (payback.py's count)."""
+    data, _ = cachefiles.read_bytes(Path(path))
+    try:
+        return max(int(data.decode()), 0) if data is not None else 0
+    except ValueError:
+        return 0
 
 
 def _call(c: dict):
@@ -169,6 +183,9 @@ def _call(c: dict):
                       c["max_steps"], c["hmin"], _NoProgress())
     if run.interrupted:
         raise KeyboardInterrupt
+    pay = c.get("payback")
+    if pay:                             # an interpreted model counts towards its compile (payback.py)
+        cachefiles.write_bytes(Path(pay["path"]), str(_evaluations(pay["path"]) + int(run.raw["n_rhs"])).encode())
     if run.fail_time is not None or run.reached < len(c["grid"]):
         return None
     X = run.X

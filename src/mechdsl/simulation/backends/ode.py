@@ -32,6 +32,7 @@ from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
 from . import crk
+from . import payback
 from . import plugins as P
 from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, mapped, scipy_name
 
@@ -559,10 +560,16 @@ def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None, re
         F = record()
         if F is not None and sxcode.supported(F) and engine_for(F) == "compiled":
             extra = {"record": F}
-    loop, note = library(ode, tag=eom.name, engine=engine, extra=extra)
+    # a model not compiled yet runs interpreted until that has cost what its compile costs (payback.py)
+    rent = not compiled and engine == "compiled" and not payback.paid(ode)
+    loop, note = library(ode, tag=eom.name, engine=engine, extra=extra, rent=rent)
     if loop is None and extra:        # the recorder's code would not build: the loop alone
         extra = {}
-        loop, note = library(ode, tag=eom.name, engine=engine)
+        loop, note = library(ode, tag=eom.name, engine=engine, rent=rent)
+    if loop is not None and getattr(loop, "rented", False):
+        engine, extra = loop.engine, {}
+        meta["notes"].append(f"{meta['method']} stepping loop: the model runs interpreted until its evaluations "
+                             "have paid for its compile (the same bits as compiled)")
     if loop is None:
         instead = (f"{fallback} runs instead" if fallback else
                    f"{meta['method']} runs as scipy's same method stepped in Python")

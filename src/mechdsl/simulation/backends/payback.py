@@ -29,12 +29,34 @@ from ...eom import cachefiles, sxcode
 from . import crk
 
 PAYBACK_EVALS = 100_000     # interpreted evaluations after which the compile has paid (see above)
+# gcc's cost that does not grow with the model (its processes' start, the link, the recorder's
+# code compiled beside): about what 400 operations of the model cost it (at 0.13 ms an operation,
+# ~0.05 s; the 12-link chain, 1289 operations: 0.35-0.55 s with its recorder)
+FIXED_OPS = 400
+
+
+def threshold(ode) -> int:
+    """Interpreted evaluations of ``ode`` after which its compile has paid: PAYBACK_EVALS for a large
+    model, more for a small one, whose compile costs gcc's fixed part on top of its size (compile
+    ~ FIXED_OPS + ops, interpreting ~ ops an evaluation, in the same units): from the operation
+    count alone."""
+    ops = max(int(ode.n_instructions()) if ode.is_a("SXFunction") else 0, 1)
+    return PAYBACK_EVALS + PAYBACK_EVALS * FIXED_OPS // ops
+
+
+def paid(ode) -> bool:
+    """Whether the interpreted evaluations of ``ode`` recorded so far have paid for its compile."""
+    return recorded(ode) >= threshold(ode)
 
 _COUNTS: dict = {}          # key -> evaluations recorded (this process; the disk holds the same)
 
 
-def _path(ode):
+def count_path(ode):
+    """The cache file holding the interpreted evaluations of ``ode`` (a decimal number)."""
     return sxcode.entry_path(ode, "work")
+
+
+_path = count_path
 
 
 def recorded(ode) -> int:
@@ -73,6 +95,7 @@ class Payback:
     def __init__(self, ode, tag: str):
         self.ode, self.tag = ode, tag
         self.before = recorded(ode)
+        self.limit = threshold(ode)
         self.switched_at = None          # evaluations of the run when it went on compiled
 
     def _compiled(self):
@@ -81,7 +104,7 @@ class Payback:
 
     def compiled_now(self):
         """The compiled loop when the evaluations recorded before the run have paid for it."""
-        if self.before < PAYBACK_EVALS:
+        if self.before < self.limit:
             return None
         loop = self._compiled()
         if loop is not None:
@@ -91,7 +114,7 @@ class Payback:
     def check(self, nfev: int):
         """Between two slices of the run, ``nfev`` evaluations into it: the compiled loop to go on
         with, or None (not yet, or it could not be built: the run goes on interpreted)."""
-        if self.switched_at is not None or self.before + nfev < PAYBACK_EVALS:
+        if self.switched_at is not None or self.before + nfev < self.limit:
             return None
         loop = self._compiled()
         self.switched_at = nfev if loop is not None else -1     # -1: tried, no compiled loop
