@@ -48,6 +48,12 @@ def paid(ode) -> bool:
     """Whether the interpreted evaluations of ``ode`` recorded so far have paid for its compile."""
     return recorded(ode) >= threshold(ode)
 
+
+def buys(ode) -> bool:
+    """Whether a model small enough to compile up front is compiled now rather than rented: it has
+    paid, or this process has bought it (see _BOUGHT)."""
+    return (bool(_BOUGHT) and _key(ode) in _BOUGHT) or paid(ode)
+
 _COUNTS: dict = {}          # key -> evaluations recorded (this process; the disk holds the same)
 
 
@@ -89,13 +95,29 @@ def add(ode, nfev: int) -> None:
     cachefiles.write_bytes(path, str(_COUNTS[path]).encode())
 
 
-class Payback:
-    """The pay-back rule of one interpreted run of ``ode`` (see the module's text)."""
+# A model small enough to compile up front that runs interpreted because the cache does not hold
+# its code yet (``rented``: crk.build_loop) is bought (compiled) when the same run set-up runs it a
+# second time in a process: a loop of runs (a script, a fit, a benchmark) is where the compile pays
+# first, while a `mech simulate` process runs each set-up once (the run, its error estimate's
+# companion) and rents by the count on disk alone.
+_BOUGHT: set = set()        # keys of the rented models bought in this process
+BOUGHT = [0]                # len(_BOUGHT) as a cheap mark: the kept set-ups (backends/ode.setup_environment)
+#                             are built again, compiled, once it changes
 
-    def __init__(self, ode, tag: str):
-        self.ode, self.tag = ode, tag
+
+class Payback:
+    """The pay-back rule of one interpreted run of ``ode`` (see the module's text); ``rented``:
+    a model small enough to be compiled up front that runs interpreted because the cache does not
+    hold its code yet (RUNS_IN_PROCESS)."""
+
+    def __init__(self, ode, tag: str, rented: bool = False, again: bool = False):
+        self.ode, self.tag, self.rented = ode, tag, rented
         self.before = recorded(ode)
         self.limit = threshold(ode)
+        if rented and again:                # its set-up runs a second time in this process: buy now
+            self.limit = 0
+            _BOUGHT.add(_key(ode))
+            BOUGHT[0] = len(_BOUGHT)
         self.switched_at = None          # evaluations of the run when it went on compiled
 
     def _compiled(self):
@@ -124,3 +146,10 @@ class Payback:
         """The run is over after ``nfev`` evaluations: count those made interpreted."""
         done = nfev if self.switched_at is None or self.switched_at < 0 else self.switched_at
         add(self.ode, done)
+
+
+def _key(ode):
+    try:
+        return count_path(ode)
+    except Exception:  # noqa: BLE001 - no cache folder: this Function in this process
+        return id(ode)

@@ -1,0 +1,49 @@
+"""Rent or buy for every model (payback.py, issue 24 item 8): a model the cache has not compiled
+runs interpreted (vm.c) until its interpreted evaluations have paid for its compile, then
+compiled; the numbers are the same bits whichever engine ran.  Times: benchmarks/first_run.py."""
+import numpy as np
+import pytest
+
+from mechdsl.eom.codegen import casadi_functions, find_compiler
+from mechdsl.simulate import simulate
+from mechdsl.simulation.backends import crk, payback
+
+from sim_models import chain
+
+needs_cc = pytest.mark.skipif(find_compiler() is None, reason="the engines are C")
+
+
+def test_the_threshold_follows_the_operation_count():
+    small, large = (casadi_functions(chain(n), names=("ode",), sx=True)["ode"] for n in (2, 6))
+    assert small.n_instructions() < large.n_instructions()
+    # compile ~ FIXED_OPS + ops, interpreting ~ ops an evaluation: more evaluations pay a small model's compile
+    for f in (small, large):
+        ops = f.n_instructions()
+        assert payback.threshold(f) == payback.PAYBACK_EVALS + payback.PAYBACK_EVALS * payback.FIXED_OPS // ops
+    assert payback.threshold(small) > payback.threshold(large) > payback.PAYBACK_EVALS
+
+
+@needs_cc
+def test_a_new_small_model_runs_interpreted_until_paid_then_compiled_with_the_same_bits(tmp_path, monkeypatch):
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    monkeypatch.setattr(crk, "_LIBS", {})
+    e = chain(2)
+    kw = dict(rtol=1e-9, atol=1e-9, points=41, method="dop853", error_estimate="off")
+    first = simulate(e, 3.0, **kw)                      # empty cache: no gcc, the interpreter
+    assert first.metadata["loop_engine"] == "interpreted"
+    assert not list(tmp_path.glob("*.so"))              # nothing compiled for the model
+    assert any("paid for its compile" in n for n in first.metadata["notes"])
+    ode = crk.loop_ode(casadi_functions(e, names=("ode",)))
+    assert payback.recorded(ode) == first.stats["rhs_evals"]      # counted towards the compile
+    monkeypatch.setattr(payback, "PAYBACK_EVALS", first.stats["rhs_evals"] // 2)
+    monkeypatch.setattr(payback, "FIXED_OPS", 0)
+    monkeypatch.setattr(crk, "_LIBS", {})
+    from mechdsl.simulation.backends import ode as O
+    monkeypatch.setattr(O, "_SETUPS", {})
+    paid = simulate(e, 3.0, **kw)                       # paid: compiled from the start
+    assert paid.metadata["loop_engine"] == "compiled"
+    assert list(tmp_path.glob("*.so"))
+    forced = simulate(e, 3.0, **kw, compiled=True)
+    for r in (first, paid):
+        assert r.stats["steps"] == forced.stats["steps"] and r.stats["rhs_evals"] == forced.stats["rhs_evals"]
+        assert np.array_equal(r.q, forced.q) and np.array_equal(r.qd, forced.qd)     # the same bits
