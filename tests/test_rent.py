@@ -47,3 +47,24 @@ def test_a_new_small_model_runs_interpreted_until_paid_then_compiled_with_the_sa
     for r in (first, paid):
         assert r.stats["steps"] == forced.stats["steps"] and r.stats["rhs_evals"] == forced.stats["rhs_evals"]
         assert np.array_equal(r.q, forced.q) and np.array_equal(r.qd, forced.qd)     # the same bits
+
+
+@needs_cc
+def test_a_set_up_run_again_in_the_process_buys_and_one_run_with_its_estimate_does_not(tmp_path, monkeypatch):
+    from mechdsl.simulation.backends import ode as O
+
+    monkeypatch.setenv("MECHDSL_CACHE", str(tmp_path))
+    monkeypatch.setattr(crk, "_LIBS", {})
+    monkeypatch.setattr(O, "_SETUPS", {})
+    monkeypatch.setattr(payback, "_BOUGHT", set())
+    e = chain(2)
+    kw = dict(rtol=1e-8, atol=1e-8, points=21, method="dop853")         # with the default error estimate
+    one = simulate(e, 2.0, **kw)              # a `mech simulate` process: the run and its companion, once each
+    assert one.metadata["loop_engine"] == "interpreted" and not list(tmp_path.glob("*.so"))
+    again = simulate(e, 2.0, **kw)            # the same set-up again: bought (compiled) at this run
+    assert again.metadata["loop_engine"] == "compiled" and list(tmp_path.glob("*.so"))
+    later = simulate(e, 2.0, **kw)            # built again compiled (payback.BOUGHT), from the start
+    assert later.metadata["loop_engine"] == "compiled" and "compiled_after" not in later.stats["raw"]
+    for r in (again, later):
+        assert np.array_equal(r.q, one.q) and np.array_equal(r.qd, one.qd)
+        assert r.metadata["accuracy"]["error_estimate"] == one.metadata["accuracy"]["error_estimate"]
