@@ -211,7 +211,8 @@ def build_loop(funcs: dict, tag: str, engine: str, rent: bool = False):
     if rent and loaded is None and note == NOT_CACHED:
         loop, note = build_loop(funcs, tag, "interpreted")
         if loop is not None:
-            loop.rented = True
+            loop.rented = True      # (and what to compile when it is bought: the same library)
+            loop.rent_extra = {n: f for n, f in funcs.items() if n != "ode"}
         return loop, note
     if loaded is None:
         return None, note

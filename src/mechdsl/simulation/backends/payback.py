@@ -110,8 +110,8 @@ class Payback:
     a model small enough to be compiled up front that runs interpreted because the cache does not
     hold its code yet (RUNS_IN_PROCESS)."""
 
-    def __init__(self, ode, tag: str, rented: bool = False, again: bool = False):
-        self.ode, self.tag, self.rented = ode, tag, rented
+    def __init__(self, ode, tag: str, rented: bool = False, again: bool = False, extra: dict | None = None):
+        self.ode, self.tag, self.rented, self.extra = ode, tag, rented, extra
         self.before = recorded(ode)
         self.limit = threshold(ode)
         if rented and again:                # its set-up runs a second time in this process: buy now
@@ -121,7 +121,8 @@ class Payback:
         self.switched_at = None          # evaluations of the run when it went on compiled
 
     def _compiled(self):
-        loop, _ = crk.library(self.ode, tag=self.tag, engine="compiled")
+        # (a rented model: with the Functions its set-up compiles beside it, the library the next set-up loads)
+        loop, _ = crk.library(self.ode, tag=self.tag, engine="compiled", extra=self.extra)
         return loop
 
     def compiled_now(self):

@@ -89,7 +89,8 @@ class CrkPlugin(IntegratorPlugin):
         pay = None
         if loop is not None and loop.engine == "interpreted":     # too large to compile up front, or not yet:
             rented = getattr(loop, "rented", False)
-            pay = payback.Payback(ode, tag, rented, again=getattr(funcs, "rented_runs", 0) > 0)   # (payback.py)
+            pay = payback.Payback(ode, tag, rented, again=getattr(funcs, "rented_runs", 0) > 0,   # (payback.py)
+                                  extra=getattr(loop, "rent_extra", None))
             if rented and isinstance(funcs, crk.LoopFunctions):
                 funcs.rented_runs = getattr(funcs, "rented_runs", 0) + 1
             loop = pay.compiled_now() or loop

@@ -38,9 +38,14 @@ def texts() -> tuple[str, ...]:
 
 def key(units: tuple[str, ...] | None = None) -> str:
     """The first 24 hex digits of the SHA-256 of the sources and their flags."""
-    import hashlib      # (here: a warm run imports this module, and hashlib loads OpenSSL)
-
-    h = hashlib.sha256()
+    try:                # CPython's own SHA-256 (as mechdsl.digest): hashlib would load OpenSSL in a warm run
+        from _sha2 import sha256
+    except ImportError:
+        try:
+            from _sha256 import sha256
+        except ImportError:
+            from hashlib import sha256
+    h = sha256()
     for text, flags in zip(texts() if units is None else units, RUNTIME_FLAGS):
         h.update(text.encode())
         h.update(b"\0" + " ".join(flags).encode() + b"\0")
