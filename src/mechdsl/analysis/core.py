@@ -14,6 +14,7 @@ needs the model text.  The pieces:
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import field
 
 import numpy as np
@@ -337,6 +338,52 @@ def _quadratic_T(pt: Parts, pv, pr: Probe, L_scale: float) -> bool:
     return vanishes(diffs, L_scale, rel=1e-8) is not False
 
 
+_BLAS: list = []     # [(set_num_threads, get_num_threads) of numpy's OpenBLAS, or None]
+
+
+def _openblas():
+    """numpy's OpenBLAS thread setters (found among the libraries loaded, /proc/self/maps), or None."""
+    if not _BLAS:
+        found = None
+        try:
+            import ctypes
+
+            with open("/proc/self/maps") as f:
+                paths = sorted({line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line})
+            for path in paths:
+                lib = ctypes.CDLL(path)             # (loaded already: the same handle)
+                for name in ("scipy_openblas_{}_num_threads64_", "scipy_openblas_{}_num_threads",
+                             "openblas_{}_num_threads64_", "openblas_{}_num_threads"):
+                    set_, get = (getattr(lib, name.format(k), None) for k in ("set", "get"))
+                    if set_ is not None and get is not None:
+                        found = (set_, get)
+                        break
+                if found:
+                    break
+        except (OSError, ValueError, IndexError):
+            found = None
+        _BLAS.append(found)
+    return _BLAS[0]
+
+
+@contextmanager
+def one_blas_thread():
+    """numpy's BLAS on one thread for the block (restored after it).  The probes' SVDs are a few
+    hundred rows: OpenBLAS's threads cost more CPU than they save there (a 400 x 66 SVD: 55 ms of
+    CPU on two threads of a loaded machine against 2 ms on one; the 12-link chain's first run ~0.1 s),
+    and each thread computes whole entries, so the numbers are the same (tests/test_analysis_blas.py)."""
+    blas = _openblas()
+    before = blas[1]() if blas is not None else 1
+    if before <= 1:
+        yield
+        return
+    blas[0](1)
+    try:
+        yield
+    finally:
+        blas[0](before)
+
+
 def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
     """Orthonormal basis (columns) of the null space of J, in a deterministic orientation.
     A J with inf or nan entries (values that overflowed) has no basis to claim: none is
@@ -348,7 +395,8 @@ def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
     if J.size == 0 or not np.any(J):
         return np.eye(n)
     # thin SVD when J is tall (probes stack many rows): the full U would cost O(rows^2)
-    _, s, vt = np.linalg.svd(J, full_matrices=J.shape[0] < n)
+    with one_blas_thread():
+        _, s, vt = np.linalg.svd(J, full_matrices=J.shape[0] < n)
     rank = int(np.sum(s > rel * s[0]))
     N = vt[rank:].T.copy()
     return canonical_basis(N)
