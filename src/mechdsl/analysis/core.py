@@ -142,12 +142,19 @@ def at_states(f, pr: Probe, pv) -> list[list[np.ndarray]]:
     count = len(pr)
     if count == 0:
         return []
+    blocks = stacked_states(f, pr, pv)
+    widths = [f.size2_out(j) for j in range(f.n_out())]
+    return [[b[:, i * w:(i + 1) * w] for b, w in zip(blocks, widths)] for i in range(count)]
+
+
+def stacked_states(f, pr: Probe, pv) -> list[np.ndarray]:
+    """``f``'s outputs at every state of pr side by side, one dense block per output (rows x
+    states * columns; state i's value in the columns i*columns ... (i+1)*columns - 1)."""
+    count = len(pr)
     outs = f.map(count)(pr.q.T, pr.qd.T, pr.t.reshape(1, count), pv)
     if f.n_out() == 1:
         outs = [outs]
-    blocks = [dense(o) for o in outs]
-    widths = [f.size2_out(j) for j in range(f.n_out())]
-    return [[b[:, i * w:(i + 1) * w] for b, w in zip(blocks, widths)] for i in range(count)]
+    return [dense(o) for o in outs]
 
 
 def _is_structural_zero(x) -> bool:
