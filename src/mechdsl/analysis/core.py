@@ -275,7 +275,7 @@ def _structure(eom, pv) -> Structure:
     force_scales = np.maximum(per, floor)
 
     stiff = [float(np.max(np.abs(o[9]), initial=0.0)) for _, o in rows]
-    periodic = tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale) for k in range(n))
+    periodic = _periodic_all(pt, pv, pr, bias_scale, M_scale)
     angle_unit = _declared_angles(eom)
     quad = _quadratic_T(pt, pv, pr, L_scale)
     st = Structure(n=n, autonomous=auto, lagrangian_time_free=lag_tf, has_T1=has_T1, has_T0=has_T0,
@@ -304,13 +304,32 @@ def _zero_or_sym(expr, var) -> bool:
     return not ca.depends_on(ca.SX(expr), var)
 
 
-def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: float) -> bool:
+def _periodic_all(pt: Parts, pv, pr: Probe, bias_scale: float, M_scale: float) -> tuple[bool, ...]:
+    """``_periodic`` of every coordinate, M and bias evaluated in two mapped calls (the states and
+    the states shifted by 2 pi in each coordinate in turn: the same evaluations as one call each)."""
+    n, count = pt.n, min(4, len(pr))
+    if count == 0:
+        return tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale, [], []) for k in range(n))
+    f = pt.fn("M_bias")
+
+    def at(q, qd, t):
+        M, b = stacked_states(f, Probe(q, qd, t), pv)[:2]
+        return [(M[:, i * n:(i + 1) * n], b[:, i].ravel()) for i in range(len(t))]
+    base = at(pr.q[:count], pr.qd[:count], pr.t[:count])
+    shifts = np.zeros((n, count, n))
+    for k in range(n):
+        shifts[k, :, k] = 2 * math.pi
+    moved = at((pr.q[:count][None, :, :] + shifts).reshape(n * count, n), np.tile(pr.qd[:count], (n, 1)),
+               np.tile(pr.t[:count], n))
+    return tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale, base, moved[k * count:(k + 1) * count])
+                 for k in range(n))
+
+
+def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: float, base, moved) -> bool:
     shift = np.zeros(pt.n)
     shift[k] = 2 * math.pi
     diffs = []
-    for i in range(min(4, len(pr))):
-        M1, b1 = pt.M_bias(pr.q[i], pr.qd[i], pr.t[i], pv)
-        M2, b2 = pt.M_bias(pr.q[i] + shift, pr.qd[i], pr.t[i], pv)
+    for (M1, b1), (M2, b2) in zip(base, moved):
         diffs.append(np.concatenate([(b1 - b2) / bias_scale, ((M1 - M2) / M_scale).ravel()]))
     if pt.eom.m:    # constrained: g must be periodic in the coordinate too
         fg = pt.fn("g")

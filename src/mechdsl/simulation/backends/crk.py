@@ -209,7 +209,7 @@ def build_loop(funcs: dict, tag: str, engine: str, rent: bool = False):
     except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
         return None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})"
     if rent and loaded is None and note == NOT_CACHED:
-        loop, note = build_loop(funcs, tag, "interpreted")
+        loop, note = build_loop({"ode": funcs["ode"]}, tag, "interpreted")     # (the others: their own programs)
         if loop is not None:
             loop.rented = True      # (and what to compile when it is bought: the same library)
             loop.rent_extra = {n: f for n, f in funcs.items() if n != "ode"}
