@@ -8,16 +8,19 @@ and peak resident memory from the operating system (os.wait4: the process and th
 processes it waited for).  Five states of the cache folder ($MECHDSL_CACHE):
 
 - ``empty``: a new, empty folder (nothing compiled, nothing derived: a first run on a new
-  machine; the stepping loop's runtime library, crk.c + vm.c, is compiled in this run);
-- ``new model``: a folder where another model ran before (the runtime library built, the
-  chain never seen: parsed, derived and its code compiled in this run);
+  machine).  The stepping loop's runtime library (crk.c + vm.c) comes with the install
+  (hatch_build.py; with PYTHONPATH=src the checkout's copy, which ``pip install -e .`` builds
+  into src/mechdsl/simulation/backends/_runtime/; without it, it is compiled in this run);
+- ``new model``: a folder where another model ran before (the chain never seen: parsed and
+  derived in this run);
 - ``warm``: the same command a second time (everything read from the cache: the prepared warm
   run, simulation/warm_run.py, which imports no CasADi, when the run is short enough to keep);
-- ``third``: and a third time.  A model above crk.COMPILE_OPS operations (the 200-link chain)
-  runs interpreted until its interpreted evaluations, counted in the cache, have paid for its
-  compile (simulation/backends/payback.py): the run that crosses that line (the fourth, for
-  the 200-link chain's 5 s: ~27,700 evaluations a run against 100,000) pays gcc, the runs
-  after it are compiled; the warm and third runs of that chain are interpreted;
+- ``third``: and a third time.  A model the cache has not compiled runs interpreted until its
+  interpreted evaluations, counted in the cache, have paid for its compile
+  (simulation/backends/payback.py: 100,000 x (1 + 400 / operations) evaluations; the 12-link
+  chain, ~14,500 a 5 s run with its error estimate, pays in its tenth run, the 200-link chain,
+  ~27,700 against ~100,000, in its fourth): the run that crosses that line pays gcc, the runs
+  after it are compiled; so the empty, new-model, warm and third runs here are interpreted;
 - ``model cache``: the same command with the prepared run removed (the normal path: the model
   cache, the compiled library; what a warm run cost before prepared runs).
 

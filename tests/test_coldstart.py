@@ -59,7 +59,8 @@ def test_a_warm_compiled_run_starts_no_process(tmp_path):
     env = {**os.environ, "MECHDSL_CACHE": str(tmp_path)}
     args = ("simulate", str(MODELS / "double_pendulum.mech"), "--no-progress", "-o", str(tmp_path / "r.csv"),
             "--force")
-    imported(*args, env=env)                    # fills the model cache and compiles
+    imported(*args, "--compiled", env=env)      # fills the model cache and compiles (a run without
+    #                                             --compiled loads that library: crk.build_loop(rent=True))
     drop_prepared_runs(tmp_path)                # (the normal path: model cache and compiled library)
     r, names = imported(*args, env=env)
     assert r.returncode == 0, r.stderr[-2000:]

@@ -14,6 +14,7 @@ needs the model text.  The pieces:
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import field
 
 import numpy as np
@@ -141,12 +142,19 @@ def at_states(f, pr: Probe, pv) -> list[list[np.ndarray]]:
     count = len(pr)
     if count == 0:
         return []
+    blocks = stacked_states(f, pr, pv)
+    widths = [f.size2_out(j) for j in range(f.n_out())]
+    return [[b[:, i * w:(i + 1) * w] for b, w in zip(blocks, widths)] for i in range(count)]
+
+
+def stacked_states(f, pr: Probe, pv) -> list[np.ndarray]:
+    """``f``'s outputs at every state of pr side by side, one dense block per output (rows x
+    states * columns; state i's value in the columns i*columns ... (i+1)*columns - 1)."""
+    count = len(pr)
     outs = f.map(count)(pr.q.T, pr.qd.T, pr.t.reshape(1, count), pv)
     if f.n_out() == 1:
         outs = [outs]
-    blocks = [dense(o) for o in outs]
-    widths = [f.size2_out(j) for j in range(f.n_out())]
-    return [[b[:, i * w:(i + 1) * w] for b, w in zip(blocks, widths)] for i in range(count)]
+    return [dense(o) for o in outs]
 
 
 def _is_structural_zero(x) -> bool:
@@ -267,7 +275,7 @@ def _structure(eom, pv) -> Structure:
     force_scales = np.maximum(per, floor)
 
     stiff = [float(np.max(np.abs(o[9]), initial=0.0)) for _, o in rows]
-    periodic = tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale) for k in range(n))
+    periodic = _periodic_all(pt, pv, pr, bias_scale, M_scale)
     angle_unit = _declared_angles(eom)
     quad = _quadratic_T(pt, pv, pr, L_scale)
     st = Structure(n=n, autonomous=auto, lagrangian_time_free=lag_tf, has_T1=has_T1, has_T0=has_T0,
@@ -296,13 +304,32 @@ def _zero_or_sym(expr, var) -> bool:
     return not ca.depends_on(ca.SX(expr), var)
 
 
-def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: float) -> bool:
+def _periodic_all(pt: Parts, pv, pr: Probe, bias_scale: float, M_scale: float) -> tuple[bool, ...]:
+    """``_periodic`` of every coordinate, M and bias evaluated in two mapped calls (the states and
+    the states shifted by 2 pi in each coordinate in turn: the same evaluations as one call each)."""
+    n, count = pt.n, min(4, len(pr))
+    if count == 0:
+        return tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale, [], []) for k in range(n))
+    f = pt.fn("M_bias")
+
+    def at(q, qd, t):
+        M, b = stacked_states(f, Probe(q, qd, t), pv)[:2]
+        return [(M[:, i * n:(i + 1) * n], b[:, i].ravel()) for i in range(len(t))]
+    base = at(pr.q[:count], pr.qd[:count], pr.t[:count])
+    shifts = np.zeros((n, count, n))
+    for k in range(n):
+        shifts[k, :, k] = 2 * math.pi
+    moved = at((pr.q[:count][None, :, :] + shifts).reshape(n * count, n), np.tile(pr.qd[:count], (n, 1)),
+               np.tile(pr.t[:count], n))
+    return tuple(_periodic(pt, pv, pr, k, bias_scale, M_scale, base, moved[k * count:(k + 1) * count])
+                 for k in range(n))
+
+
+def _periodic(pt: Parts, pv, pr: Probe, k: int, bias_scale: float, M_scale: float, base, moved) -> bool:
     shift = np.zeros(pt.n)
     shift[k] = 2 * math.pi
     diffs = []
-    for i in range(min(4, len(pr))):
-        M1, b1 = pt.M_bias(pr.q[i], pr.qd[i], pr.t[i], pv)
-        M2, b2 = pt.M_bias(pr.q[i] + shift, pr.qd[i], pr.t[i], pv)
+    for (M1, b1), (M2, b2) in zip(base, moved):
         diffs.append(np.concatenate([(b1 - b2) / bias_scale, ((M1 - M2) / M_scale).ravel()]))
     if pt.eom.m:    # constrained: g must be periodic in the coordinate too
         fg = pt.fn("g")
@@ -337,6 +364,52 @@ def _quadratic_T(pt: Parts, pv, pr: Probe, L_scale: float) -> bool:
     return vanishes(diffs, L_scale, rel=1e-8) is not False
 
 
+_BLAS: list = []     # [(set_num_threads, get_num_threads) of numpy's OpenBLAS, or None]
+
+
+def _openblas():
+    """numpy's OpenBLAS thread setters (found among the libraries loaded, /proc/self/maps), or None."""
+    if not _BLAS:
+        found = None
+        try:
+            import ctypes
+
+            with open("/proc/self/maps") as f:
+                paths = sorted({line.split()[-1] for line in f if "openblas" in line.lower() and "/" in line})
+            for path in paths:
+                lib = ctypes.CDLL(path)             # (loaded already: the same handle)
+                for name in ("scipy_openblas_{}_num_threads64_", "scipy_openblas_{}_num_threads",
+                             "openblas_{}_num_threads64_", "openblas_{}_num_threads"):
+                    set_, get = (getattr(lib, name.format(k), None) for k in ("set", "get"))
+                    if set_ is not None and get is not None:
+                        found = (set_, get)
+                        break
+                if found:
+                    break
+        except (OSError, ValueError, IndexError):
+            found = None
+        _BLAS.append(found)
+    return _BLAS[0]
+
+
+@contextmanager
+def one_blas_thread():
+    """numpy's BLAS on one thread for the block (restored after it).  The probes' SVDs are a few
+    hundred rows: OpenBLAS's threads cost more CPU than they save there (a 400 x 66 SVD: 55 ms of
+    CPU on two threads of a loaded machine against 2 ms on one; the 12-link chain's first run ~0.1 s),
+    and each thread computes whole entries, so the numbers are the same (tests/test_analysis_blas.py)."""
+    blas = _openblas()
+    before = blas[1]() if blas is not None else 1
+    if before <= 1:
+        yield
+        return
+    blas[0](1)
+    try:
+        yield
+    finally:
+        blas[0](before)
+
+
 def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
     """Orthonormal basis (columns) of the null space of J, in a deterministic orientation.
     A J with inf or nan entries (values that overflowed) has no basis to claim: none is
@@ -348,7 +421,8 @@ def null_space(J: np.ndarray, rel: float = 1e-8) -> np.ndarray:
     if J.size == 0 or not np.any(J):
         return np.eye(n)
     # thin SVD when J is tall (probes stack many rows): the full U would cost O(rows^2)
-    _, s, vt = np.linalg.svd(J, full_matrices=J.shape[0] < n)
+    with one_blas_thread():
+        _, s, vt = np.linalg.svd(J, full_matrices=J.shape[0] < n)
     rank = int(np.sum(s > rel * s[0]))
     N = vt[rank:].T.copy()
     return canonical_basis(N)

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core import N_PROBE, Probe, at_states, null_space
+from .core import N_PROBE, Probe, null_space, stacked_states
 
 
 MAX_COORDS = 15
@@ -41,27 +41,29 @@ def rotation_symmetries(eom, pt, pv) -> list[np.ndarray]:
     pr = Probe.states(n, count=count)
     G = ca.jacobian(eom.g, eom.q) if m else ca.SX.zeros(0, n)
     f = ca.Function("rot_probe", pt.args, [ca.gradient(pt.L, eom.q), ca.gradient(pt.L, eom.qd), pt.Qtot, G])
-    blocks: list[list[np.ndarray]] = [[], [], []]
-    sizes = [0.0, 0.0, 0.0]        # the size of the terms (not of their difference, which may be noise)
+    # the states' rows at once (the same operations on the same values as state by state)
+    Lq, Lv, Q, G = stacked_states(f, pr, pv)
+    Lq, Lv, Q = Lq.T, Lv.T, Q.T                                  # (states, n)
+    G = G.reshape(m, count, n).transpose(1, 0, 2) if m else np.zeros((count, 0, n))
+    keep = (np.isfinite(Lq).all(axis=1) & np.isfinite(Lv).all(axis=1) & np.isfinite(Q).all(axis=1)
+            & np.isfinite(G).all(axis=(1, 2)))
+    Lq, Lv, Q, G, q, v = Lq[keep], Lv[keep], Q[keep], G[keep], pr.q[keep], pr.qd[keep]
     I, J = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-    for k, (Lq, Lv, Q, Gk) in enumerate(at_states(f, pr, pv)):
-        if not all(np.all(np.isfinite(v)) for v in (Lq, Lv, Q, Gk)):
-            continue
-        q, v = pr.q[k], pr.qd[k]
-        Lq, Lv, Q = Lq.ravel(), Lv.ravel(), Q.ravel()
-        with np.errstate(all="ignore"):     # huge values: products that overflow end the search below
-            finite = np.all(np.isfinite(Lq[J] * q[I] - Lq[I] * q[J] + Lv[J] * v[I] - Lv[I] * v[J]))
-        if not finite:
-            return []
+    with np.errstate(all="ignore"):     # huge values: products that overflow end the search
         # A_ji = a, A_ij = -a: (A q)_j = a q_i, (A q)_i = -a q_j
-        blocks[0].append(Lq[J] * q[I] - Lq[I] * q[J] + Lv[J] * v[I] - Lv[I] * v[J])
-        sizes[0] = max(sizes[0], float(np.max(np.abs(Lq) * np.max(np.abs(q)) + np.abs(Lv) * np.max(np.abs(v)))))
-        blocks[1].append(Q[J] * q[I] - Q[I] * q[J])
-        sizes[1] = max(sizes[1], float(np.max(np.abs(Q)) * np.max(np.abs(q))))
+        rows0 = Lq[:, J] * q[:, I] - Lq[:, I] * q[:, J] + Lv[:, J] * v[:, I] - Lv[:, I] * v[:, J]
+    if not np.all(np.isfinite(rows0)):
+        return []
+    # the size of the terms (not of their difference, which may be noise), over the states
+    qmax, vmax = np.max(np.abs(q), axis=1, initial=0.0), np.max(np.abs(v), axis=1, initial=0.0)
+    blocks = [rows0, Q[:, J] * q[:, I] - Q[:, I] * q[:, J],
+              (G[:, :, J] * q[:, None, I] - G[:, :, I] * q[:, None, J]).reshape(-1, len(pairs))]
+    sizes = [0.0, 0.0, 0.0]
+    if len(q):
+        sizes[0] = float(np.max(np.abs(Lq) * qmax[:, None] + np.abs(Lv) * vmax[:, None]))
+        sizes[1] = float(np.max(np.max(np.abs(Q), axis=1) * qmax))
         if m:
-            Gk = Gk.reshape(m, n)
-            blocks[2].extend(Gk[:, J] * q[I] - Gk[:, I] * q[J])
-            sizes[2] = max(sizes[2], float(np.max(np.abs(Gk)) * np.max(np.abs(q))))
+            sizes[2] = float(np.max(np.max(np.abs(G), axis=(1, 2)) * qmax))
     if len(blocks[0]) < 2:
         return []
     if sizes[0] == 0.0:
@@ -70,8 +72,8 @@ def rotation_symmetries(eom, pt, pv) -> list[np.ndarray]:
     # cancelling terms), so an exact symmetry gives exact zero rows and no singular value at all
     rows = []
     for b, size in zip(blocks, sizes):
-        if b and size > 0:
-            B = np.vstack(b) / size
+        if len(b) and size > 0:
+            B = b / size
             rows.append(np.where(np.abs(B) > REL, B, 0.0))
     S = np.vstack(rows)
     if len(S) < len(pairs):

@@ -48,7 +48,7 @@ import numpy as np
 from ..diagnostics import Diagnostic, MechError
 from . import cachefiles
 from .cachefiles import cache_dir      # (also imported from here: mechdsl.eom.codegen.cache_dir)
-from .compiler import find_compiler  # noqa: F401  (the compiler search, without CasADi: also warm_run's)
+from .compiler import build_shared, find_compiler  # noqa: F401  (the compiler search, without CasADi: also warm_run's)
 from .specialize import shared_derivatives, specialize
 
 STANDARD = ("ode", "ode_jacobian", "mass_matrix", "bias", "energy", "outputs", "constraints",
@@ -615,9 +615,12 @@ def derivative_functions(funcs, order: int = 2) -> list:
     return out
 
 
+NOT_CACHED = "not in the cache (not compiled: cached_only)"
+
+
 def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, derivatives: int = 0,
                       extra_units: tuple[str, ...] = (), extra_flags: list[str] | None = None,
-                      budget: int | None = None, strict: bool = False):
+                      budget: int | None = None, strict: bool = False, cached_only: bool = False):
     """Generate C for ``funcs`` (+ the Jacobian of any 'ode' unless jacobian=False), compile, load.
 
     ``jacobian="forward"``: only the forward derivative of 'ode' (CasADi assembles a Jacobian
@@ -633,6 +636,8 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     the 20-link chain's Functions with second derivatives 7 GB); more is not compiled and the
     note says so.  ``strict``: a compile that cannot be done (no compiler, over the budget, a
     failed build) raises MechError (E804, E805) instead of returning None with a note.
+    ``cached_only``: load the library when the cache holds it, else return (None, NOT_CACHED,
+    None) without compiling (the stepping loop's pay-back rule, simulation/backends/payback.py).
 
     Returns (dict name -> external Function or None, note or None, library path or None).
     The Functions and the Jacobians go into two translation units, each optimized by its own
@@ -710,37 +715,19 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     if private is None and lib.exists() and problem is None:
         note = f"loaded compiled model from cache {lib}"
         cachefiles.hit("compiled-code", digest)
+    elif cached_only:
+        return None, NOT_CACHED, None
     else:
         log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
-        import subprocess      # (subprocess and tempfile: only a build needs them; a warm run
-        import tempfile        # loads the cached library)
+        import tempfile        # (only a build needs it: a warm run loads the cached library)
 
         cachefiles.miss("compiled-code", digest, "not built yet" if private is None and problem is None
                         else problem or "the cache folder is not used")
         try:
             cachefiles.remove_stale_builds(private or d)
             with tempfile.TemporaryDirectory(dir=private or d, prefix=f".build-{os.getpid()}-") as tmp:
-                procs, objs = [], []
-                for i, (code, fl) in enumerate(zip(units, flags)):
-                    src = Path(tmp) / f"unit{i}.c"
-                    src.write_text(code)
-                    obj = Path(tmp) / f"unit{i}.o"
-                    objs.append(obj)
-                    # relative names in the build folder: the library does not embed the folder's
-                    # random name, so concurrent builds of one model give the same bytes (and hash)
-                    procs.append(subprocess.Popen([cc, *fl, "-fPIC", "-c", src.name, "-o", obj.name], cwd=tmp,
-                                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
-                errors = []
-                for pr in procs:
-                    out, err = pr.communicate()
-                    if pr.returncode != 0:
-                        errors.append((err or out).strip())
-                out = Path(tmp) / "lib.so"
-                if not errors:
-                    r = subprocess.run([cc, "-shared", *(o.name for o in objs), "-o", out.name, "-lm"],
-                                       capture_output=True, text=True, cwd=tmp)
-                    if r.returncode != 0:
-                        errors.append((r.stderr or r.stdout).strip())
+                built, errors = build_shared(cc, units, flags, tmp)
+                out = Path(built) if built else None
                 if errors:
                     tail = " | ".join(errors[0].splitlines()[-3:])
                     if strict:

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 from ..eom import vmprog
 
+from .backends import payback
 from .backends.ode import OdeSetup, peek_setup, plain_copy
 from .estimate import companion
 
@@ -43,6 +44,7 @@ def payload(prepared, r, units) -> tuple[dict | None, str]:
     if call is None or rec is None:
         return None, "not one call of the compiled stepping loop"
     rec["runtime"] = call["loop"]["runtime"]
+    _count_evaluations(call, setup)
     if list(r.signals) != rec["names"]:
         return None, "the recorded columns are not the recorder's"
     acc = m.get("accuracy") or {}
@@ -56,6 +58,7 @@ def payload(prepared, r, units) -> tuple[dict | None, str]:
         if comp is None:
             return None, "the companion is not one call of the compiled stepping loop"
         comp.update(factor=factor, how=how)
+        _count_evaluations(comp, other)
     elif s.error_estimate != "off":
         return None, "no error estimate"
     meta = {k: plain(plain_copy(v)) for k, v in m.items() if k not in NUMBERS}
@@ -102,6 +105,14 @@ def _doubles(v) -> array:
 
 def _number(v):
     return v if type(v) in (int, float) else float(v)
+
+
+def _count_evaluations(call: dict, setup) -> None:
+    """An interpreted loop call goes on counting its evaluations towards its compile (payback.py):
+    where (the count's file) and up to what, for warm_run."""
+    if call["loop"]["engine"] == "interpreted":
+        ode = setup.funcs.loop_ode
+        call["payback"] = {"path": str(payback.count_path(ode)), "limit": int(payback.threshold(ode))}
 
 
 def _plain_call(c: dict) -> dict:

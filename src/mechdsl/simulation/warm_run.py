@@ -27,6 +27,7 @@ import ctypes
 import math
 import os
 import pickle
+import stat
 import sys
 import time
 from array import array
@@ -40,6 +41,7 @@ from ..eom.vmprog import Program, address
 from ..output.result import Result, csv_text
 from . import accuracy as A
 from .backends import crk_calls as C
+from .backends import runtime_lib
 from .difference import every_kth, report
 
 FORMAT = "mechdsl-warm-run 2"
@@ -144,14 +146,31 @@ def read(k: str) -> dict | None:
     for lib in (out["run"]["loop"], *((out["companion"]["loop"],) if out["companion"] else ())):
         for path in (lib["runtime"], lib.get("library")):
             try:
-                bad = path is not None and cachefiles.problem(os.stat(path), "file")
+                st = None if path is None else os.stat(path)
+                # (the runtime installed with mechdsl, runtime_lib.py: owned by whoever installed it)
+                bad = st is not None and (cachefiles.problem(st, "file") if os.path.dirname(path) != runtime_lib.PACKAGED
+                                          else "is not a regular file" if not stat.S_ISREG(st.st_mode) else None)
             except OSError:
                 bad = "is gone"
             if bad:
                 cachefiles.miss("warm-run", k[:16], f"the library {path} {bad}")
                 return None
+    for c in (out["run"], out["companion"]):
+        pay = c and c.get("payback")
+        if pay and _evaluations(pay["path"]) >= pay["limit"]:
+            cachefiles.miss("warm-run", k[:16], "the interpreted model has paid for its compile (payback.py)")
+            return None
     cachefiles.hit("warm-run", k[:16])
     return out
+
+
+def _evaluations(path: str) -> int:
+    """The interpreted evaluations counted in the file ``path`` (payback.py's count)."""
+    data, _ = cachefiles.read_bytes(Path(path))
+    try:
+        return max(int(data.decode()), 0) if data is not None else 0
+    except ValueError:
+        return 0
 
 
 def _call(c: dict):
@@ -164,6 +183,9 @@ def _call(c: dict):
                       c["max_steps"], c["hmin"], _NoProgress())
     if run.interrupted:
         raise KeyboardInterrupt
+    pay = c.get("payback")
+    if pay:                             # an interpreted model counts towards its compile (payback.py)
+        cachefiles.write_bytes(Path(pay["path"]), str(_evaluations(pay["path"]) + int(run.raw["n_rhs"])).encode())
     if run.fail_time is not None or run.reached < len(c["grid"]):
         return None
     X = run.X

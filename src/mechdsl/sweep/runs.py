@@ -211,7 +211,10 @@ def _ensemble(prep, todo: list, runs: dict):
     funcs = setup.funcs
     if not isinstance(funcs, crk.LoopFunctions) or funcs.drive is not None or setup.extra:
         return None
-    loop, _ = crk.library(funcs.loop_ode, tag=setup.eom.name, engine=funcs.engine)
+    # a model run interpreted because the cache has not compiled it yet (payback.py): an ensemble is a
+    # loop of runs, where the compile pays first
+    engine = "compiled" if getattr(getattr(funcs, "loop", None), "rented", False) else funcs.engine
+    loop, _ = crk.library(funcs.loop_ode, tag=setup.eom.name, engine=engine)
     if loop is None:
         return None
     pay = None

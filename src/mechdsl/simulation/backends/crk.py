@@ -35,8 +35,9 @@ import numpy as np
 
 from ... import integrators as I
 from ...eom import sxcode
-from ...eom.codegen import compile_functions, find_compiler
+from ...eom.codegen import NOT_CACHED, compile_functions, find_compiler
 from ...interrupts import in_main_thread
+from . import runtime_lib
 from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
 from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
 
@@ -79,16 +80,12 @@ def run_pair(loop, first: tuple, loop2, second: tuple, progress):
         return run, c2
     return run, _as_run(c2, len(second[1]), second[2].size, second[7], second[8])
 
-SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
+SOURCES = tuple(Path(p) for p in runtime_lib.SOURCES)
 _LIBS: dict = {}
 _LOCK = threading.Lock()
 _RUNTIME: dict = {}
 
-# crk.c, vm.c (compiled once per cache folder, in a first run): crk.c at -O1 takes gcc 0.36 s
-# (-Og 0.19 s, but its loop steps about 5 % slower: pendulum, 2544 steps, 5.55 ms against 5.3 ms;
-# every later run pays that, so the one-time compile keeps -O1); the interpreter of vm.c is 1.4x
-# faster at -O2.  Same bits at every level (no fast-math, no FMA contraction on x86-64).
-RUNTIME_FLAGS = (["-O1"], ["-O2"])
+RUNTIME_FLAGS = runtime_lib.RUNTIME_FLAGS       # (their reasons: runtime_lib.py)
 MODEL_FLAGS = ["-O1"]       # sxcode's chunks: within a few % of -O2 at 3/4 of its compile time
 COMPILE_OPS = 12_000        # models up to this many operations are compiled (about a second of gcc)
 
@@ -115,8 +112,14 @@ def runtime():
         return hit
     if find_compiler() is None:
         return None, "no C compiler"
-    loaded, note, path = compile_functions([], tag="crk", jacobian=False,
-                                           extra_units=tuple(p.read_text() for p in SOURCES),
+    units = runtime_lib.texts()
+    installed = runtime_lib.packaged(units)
+    if installed is not None:       # built when mechdsl was installed (runtime_lib.py): no gcc now
+        try:
+            return _keep((declare(ctypes.CDLL(installed)), ""))
+        except (OSError, AttributeError):
+            pass                    # (then built into the cache, as without it)
+    loaded, note, path = compile_functions([], tag="crk", jacobian=False, extra_units=units,
                                            extra_flags=RUNTIME_FLAGS)
     lib = None
     if loaded is not None:
@@ -124,7 +127,10 @@ def runtime():
             lib = declare(ctypes.CDLL(path))
         except (OSError, AttributeError) as e:
             lib, note = None, f"cannot load the stepping loop's library {path}: {e}"
-    out = (lib, note)
+    return _keep((lib, note))
+
+
+def _keep(out):
     with _LOCK:
         _RUNTIME.setdefault("lib", out)
         return _RUNTIME["lib"]
@@ -172,9 +178,11 @@ def engine_for(f) -> str:
     return "compiled" if f.n_instructions() <= COMPILE_OPS else "interpreted"
 
 
-def build_loop(funcs: dict, tag: str, engine: str):
+def build_loop(funcs: dict, tag: str, engine: str, rent: bool = False):
     """(Loop or None, note) for the Functions ``funcs`` (name -> casadi.Function, each called by
-    its name) in ``engine``."""
+    its name) in ``engine``.  ``rent`` (engine compiled): when the cache does not hold their
+    library, the interpreted loop instead (``loop.rented``; the same bits), nothing compiled:
+    the pay-back rule of payback.py decides when it is built."""
     rt, note = runtime()
     if rt is None:
         return None, note
@@ -194,11 +202,18 @@ def build_loop(funcs: dict, tag: str, engine: str):
         # sxcode's sources in one translation unit (their helpers are guarded, their names
         # prefixed): one gcc process for the ode and its recorder instead of one each
         units = tuple(sxcode.c_source(f, n) for n, f in mine.items())
+        rent = rent and not theirs          # (the interpreter runs SX Functions only)
         loaded, note, path = compile_functions(theirs, tag=tag, jacobian=False,
                                                extra_units=("\n".join(units),) if units else (),
-                                               extra_flags=MODEL_FLAGS)
+                                               extra_flags=MODEL_FLAGS, cached_only=rent)
     except Exception as e:  # noqa: BLE001 - e.g. a Function CasADi cannot generate C for
         return None, f"cannot generate C for the model ({str(e).strip().splitlines()[-1][:200]})"
+    if rent and loaded is None and note == NOT_CACHED:
+        loop, note = build_loop({"ode": funcs["ode"]}, tag, "interpreted")     # (the others: their own programs)
+        if loop is not None:
+            loop.rented = True      # (and what to compile when it is bought: the same library)
+            loop.rent_extra = {n: f for n, f in funcs.items() if n != "ode"}
+        return loop, note
     if loaded is None:
         return None, note
     try:
@@ -324,18 +339,20 @@ def rhs_seconds(loop, x, u, p, reps: int) -> float:
     return dt / reps
 
 
-def library(ode, tag: str = "model", engine: str | None = None, extra: dict | None = None):
+def library(ode, tag: str = "model", engine: str | None = None, extra: dict | None = None, rent: bool = False):
     """(Loop or None, note) for the model Function ``ode`` (its engine: ``engine_for`` unless
     given); cached per Function and engine.  ``extra``: more Functions (name -> SX Function)
-    compiled into the same library (one compile: a run's recorder, OdeSetup), part of the key."""
+    compiled into the same library (one compile: a run's recorder, OdeSetup), part of the key.
+    ``rent``: see ``build_loop``."""
     engine = engine or engine_for(ode)
+    rent = rent and engine == "compiled"
     if not extra:
-        return cached_library((id(ode), engine), ode, {}, tag, engine)
-    key = (id(ode), engine, *((n, id(f)) for n, f in sorted(extra.items())))
-    return cached_library(key, ode, extra, tag, engine)
+        return cached_library((id(ode), engine, rent), ode, {}, tag, engine, rent)
+    key = (id(ode), engine, rent, *((n, id(f)) for n, f in sorted(extra.items())))
+    return cached_library(key, ode, extra, tag, engine, rent)
 
 
-def cached_library(key, ode, extra: dict, tag, engine):
+def cached_library(key, ode, extra: dict, tag, engine, rent: bool = False):
     """(Loop or None, note): ``ode`` (dense output) and the Functions ``extra`` (name ->
     Function) in ``engine``; cached in memory under ``key``."""
     with _LOCK:
@@ -343,7 +360,7 @@ def cached_library(key, ode, extra: dict, tag, engine):
     if hit is not None and hit[0] is ode:
         return hit[1], hit[2]
     try:
-        loop, note = build_loop({"ode": dense_ode(ode), **extra}, tag, engine)
+        loop, note = build_loop({"ode": dense_ode(ode), **extra}, tag, engine, rent)
     except sxcode.Unsupported as e:
         loop, note = None, f"cannot translate the model ({e})"
     with _LOCK:
@@ -499,7 +516,8 @@ def auto_choice(eom, funcs, x0, pv, t0, t1, rtol, u, rho=None) -> tuple[str | No
     method = loop_method(rtol)
     engine = engine_for(ode)
     info = {"rhs_operations": ops, "engine": engine}
-    why = (f"{ops} operations a right-hand side: compiled (at most {COMPILE_OPS}), cached on disk"
+    why = (f"{ops} operations a right-hand side: compiled (at most {COMPILE_OPS}), cached on disk (until the "
+           "model's interpreted evaluations have paid for its compile it runs interpreted in C, the same bits)"
            if engine == "compiled" else
            f"{ops} operations a right-hand side: interpreted in C (above {COMPILE_OPS}, a first run would "
            "spend seconds compiling; compiled once its interpreted evaluations have paid for that, "

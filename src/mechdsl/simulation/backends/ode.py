@@ -32,6 +32,7 @@ from ..registry import ODE_FAMILIES, ode_methods, spec
 from ..settings import DEFAULT_POINTS
 from . import Backend
 from . import crk
+from . import payback
 from . import plugins as P
 from .crk import LoopFunctions, auto_choice, compiled_mapped, compiler, engine_for, library, loop_ode, mapped, scipy_name
 
@@ -319,8 +320,8 @@ class OdeSetup:
         if engine and meta.get("loop_engine") and engine != meta["loop_engine"]:     # payback.py
             meta["loop_engine"] = engine
             after = run.stats.get("compiled_after")
-            meta["notes"].append("the model, too large to compile up front, has been evaluated interpreted long "
-                                 "enough to pay for its compile: " + (f"compiled after {after} evaluations of this run"
+            meta["notes"].append("the model, run interpreted (too large to compile up front, or not compiled yet), "
+                                 "has been evaluated long enough to pay for its compile: " + (f"compiled after {after} evaluations of this run"
                                                                       if after else "compiled") +
                                  " (the same bits as interpreted)")
         failure = None
@@ -528,9 +529,10 @@ def _frozen(s):
 def setup_environment() -> tuple:
     """What a setup depends on besides its equations and settings: whether there is a C
     compiler, the compile threshold and the loop's method rule (crk), and the caches its
-    Functions and compiled loop came from (a new cache, e.g. emptied by a test, builds anew)."""
+    Functions and compiled loop came from (a new cache, e.g. emptied by a test, builds anew), and
+    whether a model run interpreted until now is to be compiled (payback.bought)."""
     return (compiler(), crk.COMPILE_OPS, crk.DOPRI5_RTOL, id(crk._LIBS), id(crk._RUNTIME), id(codegen._SETS),
-            crk.library, codegen.compile_functions, codegen.find_compiler)
+            crk.library, codegen.compile_functions, codegen.find_compiler, payback.BOUGHT[0])
 
 
 class States:
@@ -559,10 +561,16 @@ def _compile_loop(eom, funcs, meta, fallback=None, compiled=None, drive=None, re
         F = record()
         if F is not None and sxcode.supported(F) and engine_for(F) == "compiled":
             extra = {"record": F}
-    loop, note = library(ode, tag=eom.name, engine=engine, extra=extra)
+    # a model not compiled yet runs interpreted until that has cost what its compile costs (payback.py)
+    rent = not compiled and engine == "compiled" and not payback.buys(ode)
+    loop, note = library(ode, tag=eom.name, engine=engine, extra=extra, rent=rent)
     if loop is None and extra:        # the recorder's code would not build: the loop alone
         extra = {}
-        loop, note = library(ode, tag=eom.name, engine=engine)
+        loop, note = library(ode, tag=eom.name, engine=engine, rent=rent)
+    if loop is not None and getattr(loop, "rented", False):
+        engine, extra = loop.engine, {}
+        meta["notes"].append(f"{meta['method']} stepping loop: the model runs interpreted until its evaluations "
+                             "have paid for its compile (the same bits as compiled)")
     if loop is None:
         instead = (f"{fallback} runs instead" if fallback else
                    f"{meta['method']} runs as scipy's same method stepped in Python")

@@ -87,8 +87,12 @@ class CrkPlugin(IntegratorPlugin):
         if loop is None:
             loop, _ = crk.library(ode, tag=tag, engine=getattr(funcs, "engine", None))
         pay = None
-        if loop is not None and loop.engine == "interpreted":     # too large to compile up front
-            pay = payback.Payback(ode, tag)                       # ... until it has paid (payback.py)
+        if loop is not None and loop.engine == "interpreted":     # too large to compile up front, or not yet:
+            rented = getattr(loop, "rented", False)
+            pay = payback.Payback(ode, tag, rented, again=getattr(funcs, "rented_runs", 0) > 0,   # (payback.py)
+                                  extra=getattr(loop, "rent_extra", None))
+            if rented and isinstance(funcs, crk.LoopFunctions):
+                funcs.rented_runs = getattr(funcs, "rented_runs", 0) + 1
             loop = pay.compiled_now() or loop
         if loop is None:
             rhs = FastFunction(funcs["ode"]).bind(u=np.zeros(0) if u is None else np.ravel(u), p=p)
