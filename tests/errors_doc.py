@@ -69,7 +69,9 @@ SECTIONS = [
                                 "merged into it), E508 and E509 at the link's `<inertial>`. Its warnings: W021 "
                                 "a mesh that cannot be read (an unknown format, a damaged file), or one not found "
                                 "with `--skip-missing-meshes` (that visual is not drawn), W025 a joint that "
-                                "closes a loop (left out: URDF describes trees), W029 a mimic that names no "
+                                "closes a loop (left out: URDF describes trees), W026 a joint axis with components "
+                                "below 1e-8 of its largest (an exporter's rounding such as `0 -1 6.12323e-17`, "
+                                "set to 0: a .mech file refuses such an axis with E513), W029 a mimic that names no "
                                 "movable joint (left out: the joint moves on its own), W509 an inertia that breaks "
                                 "the triangle inequality by rounding."),
     ("Data for a fit (E771-E773)", "`mech fit MODEL --data DATA.csv --fit NAME` and `Model.fit` ([fitting.md](fitting.md)) "

@@ -169,3 +169,29 @@ def test_planar_and_floating_joint_types(tmp_path):
 
 def test_the_output_is_deterministic(arm):
     assert convert(arm).text == convert(arm).text
+
+
+def test_an_axis_with_an_exporters_rounding_is_snapped_with_a_warning(tmp_path):
+    """iCub's torso joints have xyz="0 -1 6.12323e-17" (cos 90 deg): a .mech file refuses such an
+    axis (E513), so example-robot-data's iCub did not import.  The tiny component is set to 0 with
+    the warning W026, located at the <axis>; a real tilt (1e-3) is kept as it is."""
+    p = tmp_path / "t.urdf"
+    p.write_text("""<robot name="t">
+  <link name="base"/>
+  <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.02"/></inertial></link>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.02"/></inertial></link>
+  <joint name="yaw" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 -1 6.12323e-17"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="tilt" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 1 0.001"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+</robot>""")
+    imp = convert(p)
+    codes = [(d.code, d.span.line) for d in imp.diagnostics]
+    assert codes == [("W026", 5)], codes
+    assert "6.12323e-17" in imp.diagnostics[0].message and "yaw" in imp.diagnostics[0].message
+    m = mechdsl.loads(imp.text)
+    yaw = next(j for j in m.model.joints if j.name == "yaw")
+    tilt = next(j for j in m.model.joints if j.name == "tilt")
+    assert [float(c.value) for c in yaw.axis] == [0.0, -1.0, 0.0]
+    t = np.array([float(c.value) for c in tilt.axis])
+    assert t / np.linalg.norm(t) == pytest.approx(np.array([0, 1, 1e-3]) / np.sqrt(1 + 1e-6), abs=1e-15)

@@ -70,6 +70,7 @@ def convert(path: str | os.PathLike, *, floating: bool = False, measured_inertia
     remember_source(name, data.decode("utf-8", errors="replace"))
     robot = R.read_robot(data, name)
     diags = DiagnosticBag()
+    diags.extend(robot.warnings)
     st = T.build(robot, diags)
     diags.raise_if_errors()
     assert st is not None

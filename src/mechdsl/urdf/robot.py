@@ -90,6 +90,7 @@ class Robot:
     links: dict[str, Link]
     joints: list[Joint]
     el: Element
+    warnings: list = field(default_factory=list)     # the reader's warnings (W026)
 
     def span(self, el: Element) -> Span:
         return xmltree.span(self.file, el)
@@ -102,6 +103,23 @@ class _Reader:
 
     def bad(self, el: Element, message: str, help: str) -> None:
         self.diags.error("E022", message, xmltree.span(self.file, el), help)
+
+    def snapped(self, el: Element, name: str, axis: np.ndarray) -> np.ndarray:
+        """The unit ``axis`` with components below DIRECTION_SPAN of the largest set to 0 (W026):
+        an exporter's rounding (xyz="0 -1 6.12323e-17", cos 90 deg, in iCub's torso_yaw), which a
+        .mech file refuses (E513: double precision cannot resolve such a tilt)."""
+        from ..semantic.physical import DIRECTION_SPAN
+
+        big = float(np.max(np.abs(axis)))
+        tiny = (axis != 0) & (np.abs(axis) < DIRECTION_SPAN * big)
+        if not tiny.any():
+            return axis
+        shown = ", ".join(f"{v:.6g}" for v in axis[tiny])
+        self.diags.warning("W026", f"the axis of joint '{name}': component{'s' if tiny.sum() > 1 else ''} {shown} "
+                                   f"(below {DIRECTION_SPAN:g} of the largest) set to 0", xmltree.span(self.file, el),
+                           "an exporter's rounding, as read; write 0 in the URDF to silence this")
+        axis = np.where(tiny, 0.0, axis)
+        return axis / float(np.linalg.norm(axis))
 
     def numbers(self, el: Element, key: str, n: int, default=None) -> np.ndarray | None:
         text = el.get(key)
@@ -222,7 +240,7 @@ class _Reader:
                 self.bad(ae, f"the axis of joint '{name}' is the zero vector", "give a direction, e.g. xyz=\"0 0 1\"")
                 n = 1.0
                 axis = np.array([1.0, 0.0, 0.0])
-            axis = axis / n
+            axis = self.snapped(ae, name, axis / n)
         j = Joint(name, kind, pe.get("link"), ce.get("link"), self.pose(el), axis, el, pe, ce)
         j.limits = self.attributes(el.find("limit"), ("lower", "upper", "effort", "velocity"))
         j.dynamics = self.attributes(el.find("dynamics"), ("damping", "friction"))
@@ -269,4 +287,4 @@ def read_robot(data: bytes, file: str) -> Robot:
     if not links:
         raise MechError(Diagnostic("E021", "the robot has no <link>", xmltree.span(file, root),
                                    "a URDF robot is a tree of <link> elements connected by <joint> elements"))
-    return Robot(root.get("name") or "robot", file, links, joints, root)
+    return Robot(root.get("name") or "robot", file, links, joints, root, rd.diags.warnings)
