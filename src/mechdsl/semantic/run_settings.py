@@ -36,8 +36,7 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
         if not method.constrained:
             bad("method", f"= \"{method.name}\" ignores the constraints of {model.name}",
                 'use method = "rattle" (constrained Stormer-Verlet) or an adaptive method (docs/constraints.md)')
-    if model.contacts:
-        _contact_rules(out, spans, diags)
+    _contact_rules(out, spans, diags, bool(model.contacts))
     for name in ("tolerance", "rtol", "atol"):
         v = out.get(name)
         if isinstance(v, float) and not 0 < v < 1:
@@ -52,18 +51,21 @@ def check_run_settings(s: ast.SceneDef, out: dict[str, object], model: ir.Model)
     diags.raise_if_errors()
 
 
-def _contact_rules(out: dict[str, object], spans: dict, diags: DiagnosticBag) -> None:
-    """The contact back end's own rules (impacts/one_step.py, impacts/contact_run.py) for a model with
-    contacts: its method names (no `rk4`, no symplectic method), rest_speed and impact_order."""
+def _contact_rules(out: dict[str, object], spans: dict, diags: DiagnosticBag, contacts: bool) -> None:
+    """The contact back end's own rules (impacts/one_step.py, impacts/contact_run.py): rest_speed and
+    impact_order for any model (a bad value is refused where it is written, with or without
+    contacts), and for a model with contacts its method names (no `rk4`, no symplectic method)."""
     from ..diagnostics import UsageError
     from ..simulation.settings import ContactOptions
     from ..simulation.registry import events_method
 
-    rules = (("method", events_method), ("rest_speed", lambda v: ContactOptions(rest_speed=v).validated()),
-             ("impact_order", lambda v: ContactOptions(impact_order=v).validated()))
+    rules = ((("method", events_method),) if contacts else ()) + (
+        ("rest_speed", lambda v: ContactOptions(rest_speed=v).validated()),
+        ("impact_order", lambda v: ContactOptions(impact_order=v).validated()))
     for name, rule in rules:
         if out.get(name) is not None and name in spans:
             try:
                 rule(out[name].lower() if isinstance(out[name], str) else out[name])
             except UsageError as e:
-                diags.error("E604", f"{e} (this model has contacts)", spans[name], "see docs/contacts.md")
+                diags.error("E604", f"{e}" + (" (this model has contacts)" if contacts else ""), spans[name],
+                            "see docs/contacts.md")
