@@ -38,7 +38,7 @@ from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
 from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
-from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
+from .crk_calls import Fun, KeptPair, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
 
 
 def _plain(grid, x0, p, u):
@@ -78,6 +78,24 @@ def run_pair(loop, first: tuple, loop2, second: tuple, progress):
     if c2 is None or c2 is COMPANION_INTERRUPTED:
         return run, c2
     return run, _as_run(c2, len(second[1]), second[2].size, second[7], second[8])
+
+def kept_pair(loop, first: tuple, loop2, second: tuple):
+    """crk_calls.KeptPair of ``run_pair``'s arguments (numpy faces), or None."""
+    def plain(a):
+        method, grid, x0, p, u, *rest = a
+        return (method, *_plain(grid, x0, p, u), *rest)
+    return KeptPair.make(loop, plain(first), loop2, plain(second))
+
+
+def run_kept_pair(kp, x0, p, x02, p2, progress, first_limits, second_limits):
+    """``run_pair``'s answer from the KeptPair ``kp`` at these starts and parameters (1-D float
+    arrays); ``*_limits``: (max_steps, hmin) of each run, for their error texts."""
+    c1, c2 = kp.call(x0, p, x02, p2, progress)
+    run = _as_run(c1, kp.c1.npts, kp.c1.nx, *first_limits)
+    if c2 is None or c2 is COMPANION_INTERRUPTED:
+        return run, c2
+    return run, _as_run(c2, kp.c2.npts, kp.c2.nx, *second_limits)
+
 
 SOURCES = (Path(__file__).with_name("crk.c"), Path(__file__).with_name("vm.c"))
 _LIBS: dict = {}

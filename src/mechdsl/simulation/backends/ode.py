@@ -111,6 +111,7 @@ class OdeSetup:
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
         self._direct = None       # the compiled loop's call of a plain run, worked out once (_direct_call)
+        self._pairs = {}          # id(companion setup) -> (it, its _direct_call, crk.KeptPair or None)
 
     @classmethod
     def build(cls, eom, s, drive=None) -> "OdeSetup":
@@ -230,8 +231,21 @@ class OdeSetup:
         if not other or other[0].rt is not loop.rt:
             return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
         loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
-        run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
-                                   (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2), bar)
+        kept = self._pairs.get(id(partner.setup))
+        if kept is None or kept[0] is not partner.setup or kept[1] is not other:
+            kp = crk.kept_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                               (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2))
+            if len(self._pairs) >= 4:
+                self._pairs.clear()
+            kept = self._pairs[id(partner.setup)] = (partner.setup, other, kp)
+        kp = kept[2]
+        if kp is not None and kp.fits(xs, pv, partner.xs, partner.pv):   # the buffers kept for this pair (the same call)
+            run, second = crk.run_kept_pair(kp, xs, pv, partner.xs, partner.pv, bar, (max_steps, hmin),
+                                            (max_steps2, hmin2))
+        else:
+            run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                                       (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2),
+                                       bar)
         if second is crk.COMPANION_INTERRUPTED:       # the estimate raises it (estimate._kept_states)
             partner.ready = second
         elif second is not None:
