@@ -38,7 +38,7 @@ from ...eom import sxcode
 from ...eom.codegen import compile_functions, find_compiler
 from ...interrupts import in_main_thread
 from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
-from .crk_calls import Fun, KeptPair, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
+from .crk_calls import Fun, KeptPair, Loop, data_address, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
 
 
 def _plain(grid, x0, p, u):
@@ -260,9 +260,13 @@ class Mapped:
         rows (one evaluation per row of the same code), as (npts, entries); None when the
         Function does not have that shape (the caller then uses ``__call__``)."""
         npts = len(t)
-        if (self.where is not None or len(self.nnz_in) != 6 or self.nnz_in[1] != n or self.nnz_in[2] != n
-                or self.nnz_in[3] or self.nnz_in[5] or self.nnz_in[0] != 1 or p.size != self.nnz_in[4]
-                or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
+        kept = self._kept_strides.get((n, p.size))     # (strides, their address), or False: not this shape
+        if kept is None:
+            fits = (self.where is None and len(self.nnz_in) == 6 and self.nnz_in[1] == n and self.nnz_in[2] == n
+                    and not self.nnz_in[3] and not self.nnz_in[5] and self.nnz_in[0] == 1 and p.size == self.nnz_in[4])
+            st = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
+            kept = self._kept_strides[(n, p.size)] = (st, ctypes.addressof(st)) if fits else False
+        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
                 or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
                 or p.dtype != np.float64 or npts == 0):
             return None
@@ -272,13 +276,12 @@ class Mapped:
                                                      ctypes.c_longlong]
             self._by_address = (fn, ctypes.addressof(self.fun))
         fn, fun = self._by_address
-        st = self._kept_strides.get(n)
-        if st is None:
-            st = self._kept_strides[n] = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
-        out = np.empty((npts, max(self.nout, 1)))
-        x = X.ctypes.data
-        ptrs = (_VP * 6)(t.ctypes.data, x, x + 8 * n, None, p.ctypes.data if p.size else None, None)
-        status = fn(fun, npts, 6, ctypes.addressof(ptrs), ctypes.addressof(st), out.ctypes.data, out.shape[1])
+        st = kept[1]
+        nout = max(self.nout, 1)
+        out = np.empty((npts, nout))
+        x = data_address(X)
+        ptrs = (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None)
+        status = fn(fun, npts, 6, ctypes.addressof(ptrs), st, data_address(out), nout)
         if status:
             raise RuntimeError(f"evaluation failed (status {status})")
         return out[:, :self.nout]

@@ -9,7 +9,7 @@ from __future__ import annotations
 import ctypes
 from array import array
 
-from ...eom.vmprog import Program, address
+from ...eom.vmprog import Program, address, data_address  # noqa: F401  (crk.data_address)
 
 # method -> (id in crk.c, scipy class of the same algorithm)
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
