@@ -346,10 +346,15 @@ typedef struct {
   Drive *d;
 } Rhs;
 
+/* the arguments that do not change (t's place, u, p) are set once (rhs_begin) */
+static void rhs_begin(Rhs *r) {
+  r->k.arg[0] = &r->t; r->k.arg[2] = r->d ? r->d->u : r->u; r->k.arg[3] = r->p;
+}
+
 static int rhs(Rhs *r, double t, const double *x, double *f) {
   r->t = t;
   if (r->d) drive_at(r->d, t);
-  r->k.arg[0] = &r->t; r->k.arg[1] = x; r->k.arg[2] = r->d ? r->d->u : r->u; r->k.arg[3] = r->p;
+  r->k.arg[1] = x;
   r->k.res[0] = f;
   r->nfev++;
   return r->f->eval(r->f->ctx, r->k.arg, r->k.res, r->k.iw, r->k.w);
@@ -757,6 +762,7 @@ static int crk_core(const Fun *fun, int method, cint nx, const double *grid, cin
     return CRK_NOMEM;
   }
   r.u = u; r.p = p; r.nfev = 0; r.d = drv;
+  rhs_begin(&r);
   double *K = mem;                               /* extended x n stages */
   double *y = K + (cint)tab.extended * n, *ynew = y + n, *f = ynew + n, *yold = f + n;
   double *scale = yold + n, *tmp = scale + n, *F = tmp + n;   /* F: 7 x n for DOP853 dense output */
