@@ -31,10 +31,10 @@ def data_address(a) -> int:
     """The address of a numpy array's first element (``a.ctypes.data``): through the buffer
     protocol when the array is writable, contiguous and not empty (0.7 us against 2 us of
     numpy's ctypes attribute, paid several times a warm run), else numpy's."""
-    try:
+    f = a.flags
+    if f.c_contiguous and f.writeable and a.size:
         return _ADDRESSOF(_AT(a))
-    except (TypeError, ValueError, BufferError):
-        return a.ctypes.data
+    return a.ctypes.data
 
 
 def plain(a, code: str) -> array:

@@ -118,12 +118,12 @@ def every_kth(t, u, span: float) -> int | None:
 def _rows(a, n: int):
     """(address, row stride in doubles) of a (rows, n) float64 array whose rows are n contiguous
     doubles at a fixed stride, else None."""
-    import numpy as np
-
-    if (a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != n or a.strides[1] != 8 or a.strides[0] % 8
-            or a.strides[0] < 8 * n):
+    if a.ndim != 2 or a.dtype.char != "d":
         return None
-    return data_address(a), a.strides[0] // 8
+    s0, s1 = a.strides
+    if a.shape[1] != n or s1 != 8 or s0 % 8 or s0 < 8 * n:
+        return None
+    return data_address(a), s0 // 8
 
 
 def _in_c(rt, r, other, span, factor):
