@@ -168,6 +168,37 @@ def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monk
 
 
 @needs_cc
+def test_the_kept_pair_call_is_the_call_prepared_afresh(double):
+    """A setup keeps its run + companion C call prepared (crk_calls.KeptPair): a call from other
+    start values gives the bits of the call prepared afresh (crk.run_pair), and each call's rows
+    are its own (a later call writes fresh buffers, never an earlier Run's X)."""
+    for _ in range(3):
+        _run(double, t_end=1.0, rtol=1e-8)
+    s = next(v[1] for v in O._SETUPS.values() if v[0] is double.eom and v[1].settings.rtol == 1e-8
+             and v[1]._pairs)
+    partner_setup, other, kp = next(iter(s._pairs.values()))
+    assert kp is not None
+    loop, method, grid, u, rtol, atol, max_steps, hmin = s._direct_call()
+    loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
+    pv = next(iter(s._recorders))
+    pv = np.frombuffer(pv, float).copy()
+    first = None
+    for xs in (np.array([1.0, 0.5, 0.0, 0.0]), np.array([0.3, -0.2, 0.1, 0.0])):
+        kept, kept2 = crk.run_kept_pair(kp, xs, pv, xs, pv, crk.I.Progress(None, 0.0, 1.0), (max_steps, hmin),
+                                        (max_steps2, hmin2))
+        fresh, fresh2 = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                                     (method2, grid2, xs, pv, u2, rtol2, atol2, max_steps2, hmin2),
+                                     crk.I.Progress(None, 0.0, 1.0))
+        np.testing.assert_array_equal(kept.X, fresh.X)
+        np.testing.assert_array_equal(kept2.X, fresh2.X)
+        assert kept.stats["n_rhs"] == fresh.stats["n_rhs"] and kept2.stats["n_rhs"] == fresh2.stats["n_rhs"]
+        if first is None:
+            first, rows = kept, kept.X.copy()
+    assert not np.array_equal(first.X, kept.X)
+    np.testing.assert_array_equal(first.X, rows)          # the first call's rows untouched by the second
+
+
+@needs_cc
 @pytest.mark.parametrize("case", ["plain", "nan", "inf", "other grid"])
 def test_the_comparison_in_c_is_the_numpy_comparison(case):
     """difference.compare with the runtime (crk_compare: one pass in C) fills the same numbers as
