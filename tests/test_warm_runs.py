@@ -167,6 +167,62 @@ def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monk
     assert 0.0 <= raw["companion_cpu_time"] <= paired.stats["error_estimate_cpu_time"] + 1e-9
 
 
+@pytest.mark.parametrize("case", ["plain", "nan", "inf", "zeros", "signed zeros"])
+def test_the_facts_from_the_extremes_are_note_facts(case):
+    """accuracy.note_extremes (the recorder's columns and their extremes from its C pass) notes the
+    numbers note_facts' numpy pass notes, or nothing where numpy's order decides a zero's sign."""
+    from mechdsl.simulation import accuracy as A
+
+    rng = np.random.default_rng(3)
+    block = rng.normal(size=(4, 50))
+    if case == "nan":
+        block[1, 7] = np.nan
+    elif case == "inf":
+        block[2, 0], block[3, 9] = np.inf, -np.inf
+    elif case == "zeros":           # a kinetic energy from rest: its smallest value a zero
+        block[0] = np.abs(block[0])
+        block[0, 3] = 0.0
+    elif case == "signed zeros":    # zeros of both signs at an extreme (also a constant zero: -lo is -0)
+        block[1] = np.abs(block[1])
+        block[1, 2], block[1, 5] = 0.0, -0.0
+    rows = [block[i] for i in range(4)]
+    finite = np.isfinite(block).all(axis=1)
+    hi = [float(np.max(r)) if f else np.nan for r, f in zip(rows, finite | np.isinf(block).any(axis=1))]
+    lo = [float(np.min(r)) if f else np.nan for r, f in zip(rows, finite | np.isinf(block).any(axis=1))]
+    both = [bool(((r == 0) & np.signbit(r)).any() and ((r == 0) & ~np.signbit(r)).any()) for r in rows]
+    flags = [1.0 if b and (h == 0 or lo_ == 0) else 0.0 for b, h, lo_ in zip(both, hi, lo)]
+    A._FACTS.clear()
+    noted = A.note_extremes(block, rows, hi + lo + flags)
+    assert noted == (case != "signed zeros")
+    mine = {id(v): A._FACTS.get(id(v), (None,))[1:] for v in rows}
+    A._FACTS.clear()
+    A.note_facts(block, rows)
+    theirs = {id(v): A._FACTS[id(v)][1:] for v in rows}
+    if noted:
+        for k in theirs:       # (finite, max |v|, max |v - v0|): the same floats (nan as nan)
+            assert [x if x == x else "nan" for x in mine[k]] == [x if x == x else "nan" for x in theirs[k]]
+
+
+@needs_cc
+def test_the_recorders_columns_are_its_rows(double):
+    """Mapped.columns (crk_map_cols: the values by column and their extremes in one C pass) gives
+    the recorder's values of Mapped.states, and extremes that are the columns' max and min."""
+    for _ in range(2):
+        _run(double, t_end=1.0, rtol=1e-8)
+    s = next(v[1] for v in O._SETUPS.values() if v[0] is double.eom and v[1].settings.rtol == 1e-8
+             and v[1]._recorders)
+    pv, rec = next(iter(s._recorders.items()))
+    fast = dict(zip(rec.__code__.co_freevars, (c.cell_contents for c in rec.__closure__)))["fast"]
+    r = _run(double, t_end=1.0, rtol=1e-8)
+    X, pv = np.ascontiguousarray(np.c_[r.q, r.qd]), np.frombuffer(pv, float).copy()
+    vals, extremes = fast.columns(r.t, X, 2, pv)
+    rows = fast.states(r.t, X, 2, pv)
+    np.testing.assert_array_equal(vals, rows.T)
+    k = vals.shape[0]
+    assert extremes[:k] == vals.max(axis=1).tolist() and extremes[k:2 * k] == vals.min(axis=1).tolist()
+    assert extremes[2 * k:] == [0.0] * k
+
+
 @needs_cc
 def test_the_kept_pair_call_is_the_call_prepared_afresh(double):
     """A setup keeps its run + companion C call prepared (crk_calls.KeptPair): a call from other

@@ -1148,3 +1148,44 @@ int crk_map(const Fun *f, cint npts, cint nin, const double **args, const cint *
   work_free(&k);
   return status;
 }
+
+/* crk_map with the values by column: output entry e of point k at out[e * npts + k] (nout
+   entries), and each column's extremes for the recorder's drift and finiteness facts
+   (simulation/accuracy.note_extremes): facts[e] its largest value, facts[nout + e] its smallest
+   (NaN when the column holds one, as numpy's max and min), facts[2 nout + e] 1 when an extreme is
+   a zero while the column holds zeros of both signs (which zero numpy's reduction returns is
+   then its own order's: the caller asks numpy), else 0.  0, or the first failing evaluation's
+   status (the columns then hold the points before it). */
+int crk_map_cols(const Fun *f, cint npts, cint nin, const double **args, const cint *strides, double *out,
+                 cint nout, double *facts) {
+  Work k;
+  double *row = (double *)calloc((size_t)(nout > 0 ? nout : 1), sizeof(double));
+  if (!row || work_alloc(f, nin, 1, &k)) { free(row); work_free(&k); return CRK_NOMEM; }
+  int status = 0;
+  unsigned char *zeros = (unsigned char *)calloc((size_t)(nout > 0 ? nout : 1), 1);   /* bit 1: +0 seen, 2: -0 */
+  if (!zeros) { free(row); work_free(&k); return CRK_NOMEM; }
+  double *hi = facts, *lo = facts + nout;
+  int *nan = (int *)calloc((size_t)(nout > 0 ? nout : 1), sizeof(int));
+  if (!nan) { free(row); free(zeros); work_free(&k); return CRK_NOMEM; }
+  for (cint j = 0; j < npts && !status; j++) {
+    for (cint i = 0; i < nin; i++) k.arg[i] = args[i] ? args[i] + j * strides[i] : 0;
+    k.res[0] = row;
+    status = f->eval(f->ctx, k.arg, k.res, k.iw, k.w);
+    if (status) break;
+    for (cint e = 0; e < nout; e++) {
+      const double v = row[e];
+      out[e * npts + j] = v;
+      if (v != v) { nan[e] = 1; continue; }
+      if (v == 0.0) zeros[e] |= signbit(v) ? 2 : 1;
+      if (j == 0 || v > hi[e]) hi[e] = v;
+      if (j == 0 || v < lo[e]) lo[e] = v;
+    }
+  }
+  for (cint e = 0; e < nout; e++) {
+    if (nan[e] || npts == 0) { hi[e] = lo[e] = NAN; facts[2 * nout + e] = 0.0; continue; }
+    facts[2 * nout + e] = (zeros[e] == 3 && (hi[e] == 0.0 || lo[e] == 0.0)) ? 1.0 : 0.0;
+  }
+  free(row); free(zeros); free(nan);
+  work_free(&k);
+  return status;
+}

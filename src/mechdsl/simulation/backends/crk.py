@@ -260,12 +260,7 @@ class Mapped:
         rows (one evaluation per row of the same code), as (npts, entries); None when the
         Function does not have that shape (the caller then uses ``__call__``)."""
         npts = len(t)
-        kept = self._kept_strides.get((n, p.size))     # (strides, their address), or False: not this shape
-        if kept is None:
-            fits = (self.where is None and len(self.nnz_in) == 6 and self.nnz_in[1] == n and self.nnz_in[2] == n
-                    and not self.nnz_in[3] and not self.nnz_in[5] and self.nnz_in[0] == 1 and p.size == self.nnz_in[4])
-            st = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
-            kept = self._kept_strides[(n, p.size)] = (st, ctypes.addressof(st)) if fits else False
+        kept = self._shape(n, p)
         if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
                 or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
                 or p.dtype != np.float64 or npts == 0):
@@ -285,6 +280,50 @@ class Mapped:
         if status:
             raise RuntimeError(f"evaluation failed (status {status})")
         return out[:, :self.nout]
+
+    def _shape(self, n: int, p):
+        """(the strides of states' inputs, their address) when the Function has states' shape
+        for n coordinates and the parameters p, else False; worked out once per shape."""
+        kept = self._kept_strides.get((n, p.size))
+        if kept is None:
+            fits = (self.where is None and len(self.nnz_in) == 6 and self.nnz_in[1] == n and self.nnz_in[2] == n
+                    and not self.nnz_in[3] and not self.nnz_in[5] and self.nnz_in[0] == 1 and p.size == self.nnz_in[4])
+            st = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
+            kept = self._kept_strides[(n, p.size)] = (st, ctypes.addressof(st)) if fits else False
+        return kept
+
+    def columns(self, t, X, n: int, p):
+        """``states``' values by column, (entries, npts) C order, and each column's extremes from
+        the same pass (crk_map_cols: largest, smallest, ambiguous-zero flag, 3 x entries floats);
+        None when ``states`` would answer None or the runtime predates crk_map_cols."""
+        npts = len(t)
+        kept = self._shape(n, p)
+        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
+                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
+                or p.dtype != np.float64 or npts == 0 or self.nout < 1):
+            return None
+        fn = self.__dict__.get("_cols")
+        if fn is None:
+            try:
+                fn = self.rt["crk_map_cols"]
+            except AttributeError:
+                fn = False
+            else:
+                fn.restype, fn.argtypes = ctypes.c_int, [_VP, ctypes.c_longlong, ctypes.c_longlong, _VP, _VP, _VP,
+                                                         ctypes.c_longlong, _VP]
+            self._cols = fn
+        if fn is False:
+            return None
+        nout = self.nout
+        out = np.empty((nout, npts))
+        facts = np.empty(3 * nout)
+        x = data_address(X)
+        ptrs = (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None)
+        status = fn(ctypes.addressof(self.fun), npts, 6, ctypes.addressof(ptrs), kept[1], data_address(out), nout,
+                    data_address(facts))
+        if status:
+            raise RuntimeError(f"evaluation failed (status {status})")
+        return out, facts.tolist()
 
     def __call__(self, npts: int, rows) -> np.ndarray:
         """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its
