@@ -119,6 +119,13 @@ def test_plain_copy_is_deep():
     cp["a"][1]["b"].append(3)
     cp["c"]["d"] = 1
     assert meta == {"a": [1, {"b": [2.0, "x"]}], "t": (1, 2), "c": {"d": None}}
+    copy = O.plain_copier(meta)          # (the settings' plain form: its containers found once)
+    for _ in range(2):
+        cp = copy()
+        assert cp == meta
+        cp["a"][1]["b"].append(3)
+        cp["c"]["d"] = 1
+        assert meta == {"a": [1, {"b": [2.0, "x"]}], "t": (1, 2), "c": {"d": None}}
 
 
 def test_non_finite_signal_still_fails_the_run():

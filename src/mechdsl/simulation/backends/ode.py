@@ -454,6 +454,27 @@ def plain_copy(v):
     return copy.deepcopy(v)
 
 
+def plain_copier(v):
+    """A function of no arguments that returns ``plain_copy(v)`` of this value, which must not
+    change afterwards (a frozen settings object's plain form): its containers found once, each
+    copy is then dict.copy/list.copy of them (a third of plain_copy's cost on the settings)."""
+    if type(v) is dict:
+        subs = [(k, plain_copier(x)) for k, x in v.items() if type(x) not in _LEAVES]
+    elif type(v) is list:
+        subs = [(i, plain_copier(x)) for i, x in enumerate(v) if type(x) not in _LEAVES]
+    else:
+        return lambda: plain_copy(v)
+    if not subs:
+        return v.copy
+
+    def copy():
+        out = v.copy()
+        for k, f in subs:
+            out[k] = f()
+        return out
+    return copy
+
+
 class Partner:
     """The default error estimate's companion of runs with the settings object ``settings``
     (estimate.py registers it once its plan and setup are kept): its OdeSetup and start
