@@ -154,15 +154,16 @@ def test_non_finite_signal_still_fails_the_run():
 def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monkeypatch):
     """From the second warm run on, the default estimate's companion runs in the run's own C call
     (crk_run_pair, backends/ode.Partner): the same run, the same companion, so the same estimate
-    and the same work as the companion run on its own (Partners forgotten); its seconds are the
+    and the same work as the companion run on its own (no Partner kept on the setups); its seconds are the
     estimate's (error_estimate_cpu_time), not the run's."""
     runs = [_run(double, t_end=2.0, rtol=1e-8) for _ in range(3)]
     paired = runs[-1]
     assert "companion_cpu_time" in paired.stats["raw"]          # the pair ran
     from mechdsl.simulation import estimate as E
 
-    monkeypatch.setattr(O, "PARTNERS", {})
-    monkeypatch.setattr(E, "partner", lambda s, setup, pv, xs: O.Partner(s, setup, pv, xs))   # never registered
+    for _, setup in O._SETUPS.values():
+        monkeypatch.setattr(setup, "partner", None)
+    monkeypatch.setattr(E, "partner", lambda run, setup, pv, xs: O.Partner(setup, pv, xs))   # never registered
     alone = _run(double, t_end=2.0, rtol=1e-8)
     assert "companion_cpu_time" not in alone.stats["raw"]
     np.testing.assert_array_equal(paired.q, alone.q)

@@ -149,7 +149,7 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
     stopped = False
     try:
         thorough = _estimate_error(r, problem) if s.estimate_error else None
-        _default_estimate(r, problem, thorough)
+        _default_estimate(r, problem, thorough, setup)
     except KeyboardInterrupt:
         # Ctrl-C during the companion run(s): the run itself is complete and is what RunInterrupted
         # carries (never the companion's partial rows); it has no estimate, and says why
@@ -198,9 +198,11 @@ def _friction(eom, s) -> list:
     return list(notes)
 
 
-def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:
+def _default_estimate(r: Result, problem: Problem, thorough=None, setup=None) -> None:
     """metadata["accuracy"]["error_estimate"] of every run (simulation/estimate.py), unless turned
-    off; from the thorough run of estimate_error when there is one (no third run)."""
+    off; from the thorough run of estimate_error when there is one (no third run).  ``setup``:
+    the back end's setup the run used, when the problem came prepared (its runs' companion is
+    kept on it)."""
     s = problem.settings
     acc = r.metadata.setdefault("accuracy", {})
     if s.error_estimate == "off":
@@ -210,7 +212,7 @@ def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:
     elif len(r.t) < 2:
         acc.update(error_estimate=None, error_estimate_unavailable="fewer than two output times")
     else:
-        estimate(r, problem, solve, thorough)
+        estimate(r, problem, solve, thorough, run_setup=setup)
 
 
 def _record_inputs(r: Result, drive) -> None:

@@ -112,6 +112,7 @@ class OdeSetup:
         self.extra = dict(s.integrator_options or {})
         self._direct = None       # the compiled loop's call of a plain run, worked out once (_direct_call)
         self._pairs = {}          # id(companion setup) -> (it, its _direct_call, crk.KeptPair or None)
+        self.partner = None       # the error estimate's companion of these runs (Partner, estimate.py)
 
     @classmethod
     def build(cls, eom, s, drive=None) -> "OdeSetup":
@@ -220,11 +221,11 @@ class OdeSetup:
 
     def _direct_run(self, call, pv, xs, bar):
         """The direct loop call of a run; with the error estimate's companion in the same C call
-        when estimate.py registered it for these settings (a Partner: its setup and start), its
-        States then left in ``partner.ready`` for the estimate (crk_calls.run_pair)."""
+        when estimate.py registered it for this setup's runs (``self.partner``: its setup and
+        start), its States then left in ``partner.ready`` for the estimate (crk_calls.run_pair)."""
         loop, method, grid, u, rtol, atol, max_steps, hmin = call
-        partner = PARTNERS.get(id(self.settings))
-        if partner is None or partner.settings is not self.settings:
+        partner = self.partner
+        if partner is None:
             return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
         partner.ready = None
         other = partner.setup._direct_call()
@@ -476,29 +477,24 @@ def plain_copier(v):
 
 
 class Partner:
-    """The default error estimate's companion of runs with the settings object ``settings``
-    (estimate.py registers it once its plan and setup are kept): its OdeSetup and start
-    (``pv``, ``xs``), run in the same C call as the run when both are direct loop calls;
-    ``ready``: the companion's States of the last run, for the estimate to take."""
+    """The default error estimate's companion of a setup's runs (``OdeSetup.partner``, which
+    estimate.py sets once its plan and the companion's setup are kept): the companion's OdeSetup
+    and start (``pv``, ``xs``), run in the same C call as the run when both are direct loop
+    calls; ``ready``: the companion's States of the last run, for the estimate to take."""
 
-    __slots__ = ("settings", "setup", "pv", "xs", "ready")
+    __slots__ = ("setup", "pv", "xs", "ready")
 
-    def __init__(self, settings, setup, pv, xs):
-        self.settings, self.setup, self.pv, self.xs, self.ready = settings, setup, pv, xs, None
-
-
-PARTNERS: dict = {}       # id(settings of the run) -> Partner
-PARTNERS_KEPT = 16
+    def __init__(self, setup, pv, xs):
+        self.setup, self.pv, self.xs, self.ready = setup, pv, xs, None
 
 
-def partner(settings, setup, pv, xs) -> Partner:
-    """Register (or find) the companion ``setup`` at (pv, xs) of runs with ``settings``."""
-    hit = PARTNERS.get(id(settings))
-    if hit is not None and hit.settings is settings and hit.setup is setup:
+def partner(run_setup, setup, pv, xs) -> Partner:
+    """Register (or find) the companion ``setup`` at (pv, xs) of the runs of ``run_setup`` (an
+    OdeSetup: kept per settings by value, so its runs' companion is the same by value too)."""
+    hit = run_setup.partner
+    if hit is not None and hit.setup is setup:
         return hit
-    if len(PARTNERS) >= PARTNERS_KEPT:
-        PARTNERS.pop(next(iter(PARTNERS)))
-    hit = PARTNERS[id(settings)] = Partner(settings, setup, pv.copy(), xs.copy())
+    hit = run_setup.partner = Partner(setup, pv.copy(), xs.copy())
     return hit
 
 
