@@ -260,6 +260,13 @@ def test_the_kept_pair_call_is_the_call_prepared_afresh(double):
             first, rows = kept, kept.X.copy()
     assert not np.array_equal(first.X, kept.X)
     np.testing.assert_array_equal(first.X, rows)          # the first call's rows untouched by the second
+    # another thread in the kept call: this run prepares a pair call of its own (the same bits)
+    warm = _run(double, t_end=1.0, rtol=1e-8)
+    with kp.lock:
+        aside = _run(double, t_end=1.0, rtol=1e-8)
+    assert "companion_cpu_time" in aside.stats["raw"]
+    np.testing.assert_array_equal(aside.q, warm.q)
+    assert aside.metadata["accuracy"]["error_estimate"] == warm.metadata["accuracy"]["error_estimate"]
 
 
 @needs_cc

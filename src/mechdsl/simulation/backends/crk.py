@@ -89,8 +89,12 @@ def kept_pair(loop, first: tuple, loop2, second: tuple):
 
 def run_kept_pair(kp, x0, p, x02, p2, progress, first_limits, second_limits):
     """``run_pair``'s answer from the KeptPair ``kp`` at these starts and parameters (1-D float
-    arrays); ``*_limits``: (max_steps, hmin) of each run, for their error texts."""
-    c1, c2 = kp.call(x0, p, x02, p2, progress)
+    arrays); ``*_limits``: (max_steps, hmin) of each run, for their error texts.  None when
+    another thread is calling ``kp`` (run_pair then)."""
+    got = kp.call(x0, p, x02, p2, progress)
+    if got is None:
+        return None
+    c1, c2 = got
     run = _as_run(c1, kp.c1.npts, kp.c1.nx, *first_limits)
     if c2 is None or c2 is COMPANION_INTERRUPTED:
         return run, c2

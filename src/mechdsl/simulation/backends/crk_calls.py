@@ -7,6 +7,7 @@ is its numpy face), ``map_rows`` and ``loop_drive`` import numpy when called."""
 from __future__ import annotations
 
 import ctypes
+import threading
 from array import array
 
 from ...eom.vmprog import Program, address, data_address  # noqa: F401  (crk.data_address)
@@ -295,7 +296,7 @@ class KeptPair:
     and makes the same C call as ``pair_loop`` (the same steps, the same bits).  ``first`` and
     ``second`` as pair_loop's; built only where pair_loop would make the pair call (``make``)."""
 
-    __slots__ = ("loop", "loop2", "c1", "c2", "tail", "which", "took", "shapes")
+    __slots__ = ("loop", "loop2", "c1", "c2", "tail", "which", "took", "shapes", "lock")
 
     @classmethod
     def make(cls, loop, first: tuple, loop2, second: tuple):
@@ -313,6 +314,7 @@ class KeptPair:
         a2 = k.c2.args
         k.tail = (a2[0], a2[1], *a2[3:12])          # the companion's arguments before its X
         k.shapes = (k.c1.nx, len(first[3]), k.c2.nx, len(second[3]))
+        k.lock = threading.Lock()       # one call at a time on the kept buffers
         return k
 
     def fits(self, x0, p, x02, p2) -> bool:
@@ -333,15 +335,22 @@ class KeptPair:
         return x
 
     def call(self, x0, p, x02, p2, progress):
-        """(the run's Call, the companion's Call or None or COMPANION_INTERRUPTED), as pair_loop's."""
-        c1, c2 = self.c1, self.c2
-        self._renew(c1, x0, p)
-        x2 = self._renew(c2, x02, p2)
-        which, took = self.which, self.took
-        which.value = -1
-        a2 = c2.args
-        return _pair_call(self.loop, self.loop2, self.loop.rt._pair, c1, c2,
-                          (*c1.args, *self.tail, x2, *a2[13:17], ctypes.byref(which), took), which, took, progress)
+        """(the run's Call, the companion's Call or None or COMPANION_INTERRUPTED), as pair_loop's;
+        None when another thread is calling it (the caller prepares a call of its own)."""
+        if not self.lock.acquire(False):
+            return None
+        try:
+            c1, c2 = self.c1, self.c2
+            self._renew(c1, x0, p)
+            x2 = self._renew(c2, x02, p2)
+            which, took = self.which, self.took
+            which.value = -1
+            a2 = c2.args
+            return _pair_call(self.loop, self.loop2, self.loop.rt._pair, c1, c2,
+                              (*c1.args, *self.tail, x2, *a2[13:17], ctypes.byref(which), took), which, took,
+                              progress)
+        finally:
+            self.lock.release()
 
 
 def _pair_call(loop, loop2, pair, c1, c2, args, which, took, progress):

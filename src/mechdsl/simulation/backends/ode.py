@@ -240,9 +240,11 @@ class OdeSetup:
                 self._pairs.clear()
             kept = self._pairs[id(partner.setup)] = (partner.setup, other, kp)
         kp = kept[2]
+        got = None
         if kp is not None and kp.fits(xs, pv, partner.xs, partner.pv):   # the buffers kept for this pair (the same call)
-            run, second = crk.run_kept_pair(kp, xs, pv, partner.xs, partner.pv, bar, (max_steps, hmin),
-                                            (max_steps2, hmin2))
+            got = crk.run_kept_pair(kp, xs, pv, partner.xs, partner.pv, bar, (max_steps, hmin), (max_steps2, hmin2))
+        if got is not None:
+            run, second = got
         else:
             run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
                                        (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2),
