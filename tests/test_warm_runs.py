@@ -119,6 +119,13 @@ def test_plain_copy_is_deep():
     cp["a"][1]["b"].append(3)
     cp["c"]["d"] = 1
     assert meta == {"a": [1, {"b": [2.0, "x"]}], "t": (1, 2), "c": {"d": None}}
+    copy = O.plain_copier(meta)          # (the settings' plain form: its containers found once)
+    for _ in range(2):
+        cp = copy()
+        assert cp == meta
+        cp["a"][1]["b"].append(3)
+        cp["c"]["d"] = 1
+        assert meta == {"a": [1, {"b": [2.0, "x"]}], "t": (1, 2), "c": {"d": None}}
 
 
 def test_non_finite_signal_still_fails_the_run():
@@ -147,15 +154,16 @@ def test_non_finite_signal_still_fails_the_run():
 def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monkeypatch):
     """From the second warm run on, the default estimate's companion runs in the run's own C call
     (crk_run_pair, backends/ode.Partner): the same run, the same companion, so the same estimate
-    and the same work as the companion run on its own (Partners forgotten); its seconds are the
+    and the same work as the companion run on its own (no Partner kept on the setups); its seconds are the
     estimate's (error_estimate_cpu_time), not the run's."""
     runs = [_run(double, t_end=2.0, rtol=1e-8) for _ in range(3)]
     paired = runs[-1]
     assert "companion_cpu_time" in paired.stats["raw"]          # the pair ran
     from mechdsl.simulation import estimate as E
 
-    monkeypatch.setattr(O, "PARTNERS", {})
-    monkeypatch.setattr(E, "partner", lambda s, setup, pv, xs: O.Partner(s, setup, pv, xs))   # never registered
+    for _, setup in O._SETUPS.values():
+        monkeypatch.setattr(setup, "partner", None)
+    monkeypatch.setattr(E, "partner", lambda run, setup, pv, xs: O.Partner(setup, pv, xs))   # never registered
     alone = _run(double, t_end=2.0, rtol=1e-8)
     assert "companion_cpu_time" not in alone.stats["raw"]
     np.testing.assert_array_equal(paired.q, alone.q)
@@ -165,6 +173,100 @@ def test_the_companion_in_the_runs_own_call_gives_the_same_estimate(double, monk
         assert paired.stats[key] == alone.stats[key]
     raw = paired.stats["raw"]
     assert 0.0 <= raw["companion_cpu_time"] <= paired.stats["error_estimate_cpu_time"] + 1e-9
+
+
+@pytest.mark.parametrize("case", ["plain", "nan", "inf", "zeros", "signed zeros"])
+def test_the_facts_from_the_extremes_are_note_facts(case):
+    """accuracy.note_extremes (the recorder's columns and their extremes from its C pass) notes the
+    numbers note_facts' numpy pass notes, or nothing where numpy's order decides a zero's sign."""
+    from mechdsl.simulation import accuracy as A
+
+    rng = np.random.default_rng(3)
+    block = rng.normal(size=(4, 50))
+    if case == "nan":
+        block[1, 7] = np.nan
+    elif case == "inf":
+        block[2, 0], block[3, 9] = np.inf, -np.inf
+    elif case == "zeros":           # a kinetic energy from rest: its smallest value a zero
+        block[0] = np.abs(block[0])
+        block[0, 3] = 0.0
+    elif case == "signed zeros":    # zeros of both signs at an extreme (also a constant zero: -lo is -0)
+        block[1] = np.abs(block[1])
+        block[1, 2], block[1, 5] = 0.0, -0.0
+    rows = [block[i] for i in range(4)]
+    finite = np.isfinite(block).all(axis=1)
+    hi = [float(np.max(r)) if f else np.nan for r, f in zip(rows, finite | np.isinf(block).any(axis=1))]
+    lo = [float(np.min(r)) if f else np.nan for r, f in zip(rows, finite | np.isinf(block).any(axis=1))]
+    both = [bool(((r == 0) & np.signbit(r)).any() and ((r == 0) & ~np.signbit(r)).any()) for r in rows]
+    flags = [1.0 if b and (h == 0 or lo_ == 0) else 0.0 for b, h, lo_ in zip(both, hi, lo)]
+    A._FACTS.clear()
+    noted = A.note_extremes(block, rows, hi + lo + flags)
+    assert noted == (case != "signed zeros")
+    mine = {id(v): A._FACTS.get(id(v), (None,))[1:] for v in rows}
+    A._FACTS.clear()
+    A.note_facts(block, rows)
+    theirs = {id(v): A._FACTS[id(v)][1:] for v in rows}
+    if noted:
+        for k in theirs:       # (finite, max |v|, max |v - v0|): the same floats (nan as nan)
+            assert [x if x == x else "nan" for x in mine[k]] == [x if x == x else "nan" for x in theirs[k]]
+
+
+@needs_cc
+def test_the_recorders_columns_are_its_rows(double):
+    """Mapped.columns (crk_map_cols: the values by column and their extremes in one C pass) gives
+    the recorder's values of Mapped.states, and extremes that are the columns' max and min."""
+    for _ in range(2):
+        _run(double, t_end=1.0, rtol=1e-8)
+    s = next(v[1] for v in O._SETUPS.values() if v[0] is double.eom and v[1].settings.rtol == 1e-8
+             and v[1]._recorders)
+    pv, rec = next(iter(s._recorders.items()))
+    fast = dict(zip(rec.__code__.co_freevars, (c.cell_contents for c in rec.__closure__)))["fast"]
+    r = _run(double, t_end=1.0, rtol=1e-8)
+    X, pv = np.ascontiguousarray(np.c_[r.q, r.qd]), np.frombuffer(pv, float).copy()
+    vals, extremes = fast.columns(r.t, X, 2, pv)
+    rows = fast.states(r.t, X, 2, pv)
+    np.testing.assert_array_equal(vals, rows.T)
+    k = vals.shape[0]
+    assert extremes[:k] == vals.max(axis=1).tolist() and extremes[k:2 * k] == vals.min(axis=1).tolist()
+    assert extremes[2 * k:] == [0.0] * k
+
+
+@needs_cc
+def test_the_kept_pair_call_is_the_call_prepared_afresh(double):
+    """A setup keeps its run + companion C call prepared (crk_calls.KeptPair): a call from other
+    start values gives the bits of the call prepared afresh (crk.run_pair), and each call's rows
+    are its own (a later call writes fresh buffers, never an earlier Run's X)."""
+    for _ in range(3):
+        _run(double, t_end=1.0, rtol=1e-8)
+    s = next(v[1] for v in O._SETUPS.values() if v[0] is double.eom and v[1].settings.rtol == 1e-8
+             and v[1]._pairs)
+    partner_setup, other, kp = next(iter(s._pairs.values()))
+    assert kp is not None
+    loop, method, grid, u, rtol, atol, max_steps, hmin = s._direct_call()
+    loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
+    pv = next(iter(s._recorders))
+    pv = np.frombuffer(pv, float).copy()
+    first = None
+    for xs in (np.array([1.0, 0.5, 0.0, 0.0]), np.array([0.3, -0.2, 0.1, 0.0])):
+        kept, kept2 = crk.run_kept_pair(kp, xs, pv, xs, pv, crk.I.Progress(None, 0.0, 1.0), (max_steps, hmin),
+                                        (max_steps2, hmin2))
+        fresh, fresh2 = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                                     (method2, grid2, xs, pv, u2, rtol2, atol2, max_steps2, hmin2),
+                                     crk.I.Progress(None, 0.0, 1.0))
+        np.testing.assert_array_equal(kept.X, fresh.X)
+        np.testing.assert_array_equal(kept2.X, fresh2.X)
+        assert kept.stats["n_rhs"] == fresh.stats["n_rhs"] and kept2.stats["n_rhs"] == fresh2.stats["n_rhs"]
+        if first is None:
+            first, rows = kept, kept.X.copy()
+    assert not np.array_equal(first.X, kept.X)
+    np.testing.assert_array_equal(first.X, rows)          # the first call's rows untouched by the second
+    # another thread in the kept call: this run prepares a pair call of its own (the same bits)
+    warm = _run(double, t_end=1.0, rtol=1e-8)
+    with kp.lock:
+        aside = _run(double, t_end=1.0, rtol=1e-8)
+    assert "companion_cpu_time" in aside.stats["raw"]
+    np.testing.assert_array_equal(aside.q, warm.q)
+    assert aside.metadata["accuracy"]["error_estimate"] == warm.metadata["accuracy"]["error_estimate"]
 
 
 @needs_cc

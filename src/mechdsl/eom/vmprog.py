@@ -23,6 +23,20 @@ def address(a) -> int | None:
     return a.buffer_info()[0] if type(a) is array else a.ctypes.data
 
 
+_AT = ctypes.c_char.from_buffer
+_ADDRESSOF = ctypes.addressof
+
+
+def data_address(a) -> int:
+    """The address of a numpy array's first element (``a.ctypes.data``): through the buffer
+    protocol when the array is writable, contiguous and not empty (0.7 us against 2 us of
+    numpy's ctypes attribute, paid several times a warm run), else numpy's."""
+    f = a.flags
+    if f.c_contiguous and f.writeable and a.size:
+        return _ADDRESSOF(_AT(a))
+    return a.ctypes.data
+
+
 def plain(a, code: str) -> array:
     """``a`` (a numpy array or an array.array) as an array.array of ``code`` (a copy)."""
     out = array(code)

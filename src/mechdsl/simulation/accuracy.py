@@ -54,6 +54,38 @@ def note_facts(block, rows) -> None:
     _note([(v, finite[i], amax[i], dmax[i]) for i, v in enumerate(rows)])
 
 
+def note_extremes(block, rows, extremes) -> bool:
+    """note_facts' facts of the ``rows`` of ``block`` from each row's largest and smallest value
+    (``extremes``: the k largest, the k smallest, k ambiguous-zero flags, as crk_map_cols gives
+    them in the recorder's pass), the same numbers without a numpy pass over the block; False
+    (nothing noted: the caller uses note_facts) where numpy's own order would decide the sign of
+    a zero."""
+    k = len(rows)
+    if len(extremes) != 3 * k or any(extremes[2 * k:]):
+        return False
+    v0 = block[:, 0].tolist()
+    facts = []
+    for i, v in enumerate(rows):
+        hi, lo, x0 = extremes[i], extremes[k + i], v0[i]
+        amax, dmax = _maximum(hi, -lo), _maximum(hi - x0, x0 - lo)
+        if amax is None or dmax is None:
+            return False
+        facts.append((v, math.isfinite(amax), amax, dmax))
+    _note(facts)
+    return True
+
+
+def _maximum(a: float, b: float):
+    """numpy.maximum of two floats (a NaN wins), None for two zeros of opposite signs."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    if a == b and a == 0.0 and math.copysign(1.0, a) != math.copysign(1.0, b):
+        return None
+    return a if a >= b else b
+
+
 def note_plain(signals) -> bool:
     """Note the facts of the ``signals`` (array.arrays of floats, none empty) in plain Python, the
     same numbers as note_facts (max of exact differences and magnitudes); False when a value is

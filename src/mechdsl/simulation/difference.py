@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from ..eom.vmprog import data_address
+
 
 def compare(r, other, factor: float, s, unit_of, rt=None) -> None:
     """Fill r.metadata["accuracy"] from the companion ``other`` (times ``t``, coordinates ``q``,
@@ -116,12 +118,12 @@ def every_kth(t, u, span: float) -> int | None:
 def _rows(a, n: int):
     """(address, row stride in doubles) of a (rows, n) float64 array whose rows are n contiguous
     doubles at a fixed stride, else None."""
-    import numpy as np
-
-    if (a.dtype != np.float64 or a.ndim != 2 or a.shape[1] != n or a.strides[1] != 8 or a.strides[0] % 8
-            or a.strides[0] < 8 * n):
+    if a.ndim != 2 or a.dtype.char != "d":
         return None
-    return a.ctypes.data, a.strides[0] // 8
+    s0, s1 = a.strides
+    if a.shape[1] != n or s1 != 8 or s0 % 8 or s0 < 8 * n:
+        return None
+    return data_address(a), s0 // 8
 
 
 def _in_c(rt, r, other, span, factor):
@@ -144,8 +146,8 @@ def _in_c(rt, r, other, span, factor):
     k = (nt - 1) // (nu - 1)
     out = np.empty(3 * n)
     fn = _compare_fn(rt)
-    if fn is None or fn(t.ctypes.data, nt, u.ctypes.data, nu, k, 1e-12 * max(span, 1e-300), a[0], a[1], b[0], b[1],
-                        n, float(factor), out.ctypes.data):
+    if fn is None or fn(data_address(t), nt, data_address(u), nu, k, 1e-12 * max(span, 1e-300), a[0], a[1], b[0],
+                        b[1], n, float(factor), data_address(out)):
         return None
     return out[:n], out[n:2 * n], out[2 * n:], t[::k]
 

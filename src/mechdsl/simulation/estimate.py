@@ -112,9 +112,11 @@ def companion(problem, r):
                                          + (f", method {method})" if method != s.method and s.method != "auto" else ")"))
 
 
-def estimate(r, problem, solve, given=None) -> None:
+def estimate(r, problem, solve, given=None, run_setup=None) -> None:
     """Run the companion and fill r.metadata["accuracy"] (the run must have succeeded).  ``given``:
-    (a run already made at a tighter tolerance, its factor, what it is) to use instead."""
+    (a run already made at a tighter tolerance, its factor, what it is) to use instead.
+    ``run_setup``: the run's OdeSetup when known (a prepared problem): the companion is then
+    registered on it, to run in the same C call as its next runs (backends/ode.Partner)."""
     acc = r.metadata.setdefault("accuracy", {})
     s = problem.settings
     if given is not None:
@@ -132,7 +134,7 @@ def estimate(r, problem, solve, given=None) -> None:
         cpu0 = time.process_time()
         r.stats["error_estimate_cpu_time"] = None
         try:
-            other = _companion_run(problem, tight, solve)
+            other = _companion_run(problem, tight, solve, run_setup)
         except Exception as e:  # noqa: BLE001 - the run itself is fine; say why there is no estimate
             why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
             acc.update(error_estimate=None, error_estimate_unavailable=f"the companion run could not run: {why}")
@@ -211,7 +213,7 @@ def _kept_companion(problem, r):
     return plan
 
 
-def _kept_states(problem, tight):
+def _kept_states(problem, tight, run_setup=None):
     """The companion's trajectory (OdeSetup.states) with its setup and start values looked up
     once per kept plan (the environment checked on every run, as kept_setup checks it)."""
     from .backends.ode import setup_environment
@@ -222,7 +224,9 @@ def _kept_states(problem, tight):
         hit = None
     elif hit.setup is not None and hit.env == env:
         pv, xs = hit.start
-        pair = partner(problem.settings, hit.setup, pv, xs)     # the next run calls both at once
+        if run_setup is None or getattr(run_setup, "partner", False) is False:     # (not an OdeSetup)
+            return hit.setup.states(pv.copy(), xs.copy())
+        pair = partner(run_setup, hit.setup, pv, xs)     # the next run calls both at once
         ready, pair.ready = pair.ready, None
         if ready is COMPANION_INTERRUPTED:  # a Ctrl-C during the companion in the run's own C call
             raise KeyboardInterrupt
@@ -233,16 +237,17 @@ def _kept_states(problem, tight):
     start = setup.start_of(tight)
     if hit is not None:
         hit.setup, hit.env, hit.start = setup, env, (start[0].copy(), start[1].copy())
-        partner(problem.settings, setup, *hit.start)
+        if run_setup is not None and getattr(run_setup, "partner", False) is not False:
+            partner(run_setup, setup, *hit.start)
     return setup.states(*start)
 
 
-def _companion_run(problem, tight, solve):
+def _companion_run(problem, tight, solve, run_setup=None):
     """The companion run of ``problem`` with the settings ``tight``: an ODE problem's as its
     trajectory alone (OdeSetup.states: no signals recorded, no Result built; its setup kept
     for the next run of the same settings, backends/ode.kept_setup), others through ``solve``."""
     if _plain_ode(problem):
-        other = _kept_states(problem, tight)
+        other = _kept_states(problem, tight, run_setup)
         if other.failure is not None and other.failure.cause == "interrupted":
             raise KeyboardInterrupt           # as solve raises RunInterrupted for a run Ctrl-C stopped
         return other

@@ -28,7 +28,7 @@ from ..interrupts import interrupt_guard, was_interrupt
 from ..output.result import Result, RunInterrupted, versions
 from . import accuracy as A
 from .backends import backend, ignored_settings
-from .backends.ode import plain_copy, record_inputs
+from .backends.ode import plain_copier, record_inputs
 from .estimate import estimate
 from .prepared import Prepared, prepare
 from .record_dae import multiplier_column_units
@@ -122,14 +122,14 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
         _hold_warning(r, problem)
     meta.setdefault("notes", [])
     meta.setdefault("conservative", "energy" in problem.invariants)
-    unused, plain = _settings_facts(back, s)
+    unused, _, copy_plain = _settings_facts(back, s)
     if unused:
         meta["notes"].append(f"settings without effect on {back.noun} problem: " + ", ".join(unused))
     ran = back.describe(r)
     meta["run"] = {"problem": problem.kind, "backend": problem.backend, **ran,
                    "rtol": s.rtol, "atol": s.atol,
                    "compiled": _ran_compiled(meta, r.stats),
-                   "settings": plain_copy(plain)}
+                   "settings": copy_plain()}
     eom = problem.eom
     notes = _friction(eom, s)
     if notes:
@@ -149,7 +149,7 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
     stopped = False
     try:
         thorough = _estimate_error(r, problem) if s.estimate_error else None
-        _default_estimate(r, problem, thorough)
+        _default_estimate(r, problem, thorough, setup)
     except KeyboardInterrupt:
         # Ctrl-C during the companion run(s): the run itself is complete and is what RunInterrupted
         # carries (never the companion's partial rows); it has no estimate, and says why
@@ -167,13 +167,15 @@ def solve(problem: Problem | Prepared, progress=None) -> Result:
 _FACTS: dict = {}        # id(settings) -> (settings, its facts): a kept problem's runs share one settings object
 
 
-def _settings_facts(back, s) -> tuple[list, dict]:
-    """(the settings ``back`` does not use, the settings as plain data without x0 and p), worked
-    out once per settings object (the settings are frozen)."""
+def _settings_facts(back, s) -> tuple:
+    """(the settings ``back`` does not use, the settings as plain data without x0 and p, a function
+    returning a fresh plain_copy of that), worked out once per settings object (the settings are
+    frozen)."""
     hit = _FACTS.get(id(s))
     if hit is not None and hit[0] is s and hit[1] is back:
         return hit[2]
-    facts = (ignored_settings(back, s), {k: v for k, v in s.as_dict().items() if k not in ("x0", "p")})
+    plain = {k: v for k, v in s.as_dict().items() if k not in ("x0", "p")}
+    facts = (ignored_settings(back, s), plain, plain_copier(plain))
     if len(_FACTS) >= 16:
         _FACTS.pop(next(iter(_FACTS)))
     _FACTS[id(s)] = (s, back, facts)
@@ -196,9 +198,11 @@ def _friction(eom, s) -> list:
     return list(notes)
 
 
-def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:
+def _default_estimate(r: Result, problem: Problem, thorough=None, setup=None) -> None:
     """metadata["accuracy"]["error_estimate"] of every run (simulation/estimate.py), unless turned
-    off; from the thorough run of estimate_error when there is one (no third run)."""
+    off; from the thorough run of estimate_error when there is one (no third run).  ``setup``:
+    the back end's setup the run used, when the problem came prepared (its runs' companion is
+    kept on it)."""
     s = problem.settings
     acc = r.metadata.setdefault("accuracy", {})
     if s.error_estimate == "off":
@@ -208,7 +212,7 @@ def _default_estimate(r: Result, problem: Problem, thorough=None) -> None:
     elif len(r.t) < 2:
         acc.update(error_estimate=None, error_estimate_unavailable="fewer than two output times")
     else:
-        estimate(r, problem, solve, thorough)
+        estimate(r, problem, solve, thorough, run_setup=setup)
 
 
 def _record_inputs(r: Result, drive) -> None:

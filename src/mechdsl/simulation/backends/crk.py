@@ -39,7 +39,7 @@ from ...eom.codegen import NOT_CACHED, compile_functions, find_compiler
 from ...interrupts import in_main_thread
 from . import runtime_lib
 from .crk_calls import CANCELLED, COMPANION_INTERRUPTED, CRK_METHODS, STATUS, counts  # noqa: F401  (crk.X for the back ends)
-from .crk_calls import Fun, Loop, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
+from .crk_calls import Fun, KeptPair, Loop, data_address, _I64P, _VP, _ptr, call_loop, declare, map_rows, pair_loop, program_fun, tables_in_loop
 
 
 def _plain(grid, x0, p, u):
@@ -79,6 +79,29 @@ def run_pair(loop, first: tuple, loop2, second: tuple, progress):
     if c2 is None or c2 is COMPANION_INTERRUPTED:
         return run, c2
     return run, _as_run(c2, len(second[1]), second[2].size, second[7], second[8])
+
+
+def kept_pair(loop, first: tuple, loop2, second: tuple):
+    """crk_calls.KeptPair of ``run_pair``'s arguments (numpy faces), or None."""
+    def plain(a):
+        method, grid, x0, p, u, *rest = a
+        return (method, *_plain(grid, x0, p, u), *rest)
+    return KeptPair.make(loop, plain(first), loop2, plain(second))
+
+
+def run_kept_pair(kp, x0, p, x02, p2, progress, first_limits, second_limits):
+    """``run_pair``'s answer from the KeptPair ``kp`` at these starts and parameters (1-D float
+    arrays); ``*_limits``: (max_steps, hmin) of each run, for their error texts.  None when
+    another thread is calling ``kp`` (run_pair then)."""
+    got = kp.call(x0, p, x02, p2, progress)
+    if got is None:
+        return None
+    c1, c2 = got
+    run = _as_run(c1, kp.c1.npts, kp.c1.nx, *first_limits)
+    if c2 is None or c2 is COMPANION_INTERRUPTED:
+        return run, c2
+    return run, _as_run(c2, kp.c2.npts, kp.c2.nx, *second_limits)
+
 
 SOURCES = tuple(Path(p) for p in runtime_lib.SOURCES)
 _LIBS: dict = {}
@@ -257,9 +280,8 @@ class Mapped:
         rows (one evaluation per row of the same code), as (npts, entries); None when the
         Function does not have that shape (the caller then uses ``__call__``)."""
         npts = len(t)
-        if (self.where is not None or len(self.nnz_in) != 6 or self.nnz_in[1] != n or self.nnz_in[2] != n
-                or self.nnz_in[3] or self.nnz_in[5] or self.nnz_in[0] != 1 or p.size != self.nnz_in[4]
-                or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
+        kept = self._shape(n, p)
+        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
                 or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
                 or p.dtype != np.float64 or npts == 0):
             return None
@@ -269,16 +291,59 @@ class Mapped:
                                                      ctypes.c_longlong]
             self._by_address = (fn, ctypes.addressof(self.fun))
         fn, fun = self._by_address
-        st = self._kept_strides.get(n)
-        if st is None:
-            st = self._kept_strides[n] = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
-        out = np.empty((npts, max(self.nout, 1)))
-        x = X.ctypes.data
-        ptrs = (_VP * 6)(t.ctypes.data, x, x + 8 * n, None, p.ctypes.data if p.size else None, None)
-        status = fn(fun, npts, 6, ctypes.addressof(ptrs), ctypes.addressof(st), out.ctypes.data, out.shape[1])
+        st = kept[1]
+        nout = max(self.nout, 1)
+        out = np.empty((npts, nout))
+        x = data_address(X)
+        ptrs = (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None)
+        status = fn(fun, npts, 6, ctypes.addressof(ptrs), st, data_address(out), nout)
         if status:
             raise RuntimeError(f"evaluation failed (status {status})")
         return out[:, :self.nout]
+
+    def _shape(self, n: int, p):
+        """(the strides of states' inputs, their address) when the Function has states' shape
+        for n coordinates and the parameters p, else False; worked out once per shape."""
+        kept = self._kept_strides.get((n, p.size))
+        if kept is None:
+            fits = (self.where is None and len(self.nnz_in) == 6 and self.nnz_in[1] == n and self.nnz_in[2] == n
+                    and not self.nnz_in[3] and not self.nnz_in[5] and self.nnz_in[0] == 1 and p.size == self.nnz_in[4])
+            st = (ctypes.c_longlong * 6)(1, 2 * n, 2 * n, 0, 0, 0)
+            kept = self._kept_strides[(n, p.size)] = (st, ctypes.addressof(st)) if fits else False
+        return kept
+
+    def columns(self, t, X, n: int, p):
+        """``states``' values by column, (entries, npts) C order, and each column's extremes from
+        the same pass (crk_map_cols: largest, smallest, ambiguous-zero flag, 3 x entries floats);
+        None when ``states`` would answer None or the runtime predates crk_map_cols."""
+        npts = len(t)
+        kept = self._shape(n, p)
+        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
+                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
+                or p.dtype != np.float64 or npts == 0 or self.nout < 1):
+            return None
+        fn = self.__dict__.get("_cols")
+        if fn is None:
+            try:
+                fn = self.rt["crk_map_cols"]
+            except AttributeError:
+                fn = False
+            else:
+                fn.restype, fn.argtypes = ctypes.c_int, [_VP, ctypes.c_longlong, ctypes.c_longlong, _VP, _VP, _VP,
+                                                         ctypes.c_longlong, _VP]
+            self._cols = fn
+        if fn is False:
+            return None
+        nout = self.nout
+        out = np.empty((nout, npts))
+        facts = np.empty(3 * nout)
+        x = data_address(X)
+        ptrs = (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None)
+        status = fn(ctypes.addressof(self.fun), npts, 6, ctypes.addressof(ptrs), kept[1], data_address(out), nout,
+                    data_address(facts))
+        if status:
+            raise RuntimeError(f"evaluation failed (status {status})")
+        return out, facts.tolist()
 
     def __call__(self, npts: int, rows) -> np.ndarray:
         """Values (npts, entries of output 0, structural zeros included); ``rows``: per input an array of npts rows (its

@@ -7,9 +7,10 @@ is its numpy face), ``map_rows`` and ``loop_drive`` import numpy when called."""
 from __future__ import annotations
 
 import ctypes
+import threading
 from array import array
 
-from ...eom.vmprog import Program, address
+from ...eom.vmprog import Program, address, data_address  # noqa: F401  (crk.data_address)
 
 # method -> (id in crk.c, scipy class of the same algorithm)
 CRK_METHODS = {"dopri5": (0, "RK45"), "dop853": (1, "DOP853")}
@@ -283,8 +284,80 @@ def pair_loop(loop, first: tuple, loop2, second: tuple, progress):
     which = ctypes.c_int(-1)
     took = (ctypes.c_double * 2)()
     a2 = c2.args
+    return _pair_call(loop, loop2, pair, c1, c2, (*c1.args, a2[0], a2[1], *a2[3:17], ctypes.byref(which), took),
+                      which, took, progress)
+
+
+class KeptPair:
+    """``pair_loop``'s call of one run and its companion prepared once (the buffers, the Resumes and
+    every argument as ctypes takes it) for a setup's warm runs: each ``call`` writes the starts
+    and parameters into the kept buffers, resets the progress and cancel words and the Resumes,
+    gives each run fresh output rows (NaN where not reached: a Call's X is never written again)
+    and makes the same C call as ``pair_loop`` (the same steps, the same bits).  ``first`` and
+    ``second`` as pair_loop's; built only where pair_loop would make the pair call (``make``)."""
+
+    __slots__ = ("loop", "loop2", "c1", "c2", "tail", "which", "took", "shapes", "lock")
+
+    @classmethod
+    def make(cls, loop, first: tuple, loop2, second: tuple):
+        """A KeptPair, or None when pair_loop would not call both at once (another runtime, a
+        runtime without crk_run_pair, input tables)."""
+        pair = getattr(loop.rt, "_pair", None)
+        if pair is None:
+            pair = loop.rt._pair = _declared_pair(loop.rt)
+        if pair is False or loop2.rt is not loop.rt or len(first) > 9 or len(second) > 9:
+            return None
+        k = cls()
+        k.loop, k.loop2 = loop, loop2
+        k.c1, k.c2 = _prepare(loop, *first), _prepare(loop2, *second)
+        k.which, k.took = ctypes.c_int(-1), (ctypes.c_double * 2)()
+        a2 = k.c2.args
+        k.tail = (a2[0], a2[1], *a2[3:12])          # the companion's arguments before its X
+        k.shapes = (k.c1.nx, len(first[3]), k.c2.nx, len(second[3]))
+        k.lock = threading.Lock()       # one call at a time on the kept buffers
+        return k
+
+    def fits(self, x0, p, x02, p2) -> bool:
+        return self.shapes == (len(x0), len(p), len(x02), len(p2))
+
+    @staticmethod
+    def _renew(c: _Prepared, x0, p):
+        W, nx = c.W, c.nx
+        m = max(nx, 1)
+        o = 6 + 3 * m
+        W[o:o + nx] = _doubles(x0)
+        W[o + m:o + m + len(p)] = _doubles(p)
+        W[4] = W[5] = 0.0                       # ctl: progress and cancel words (int64 zeros)
+        c.rs.started = 0
+        c.X = array("d", [float("nan")]) * (c.npts * nx)
+        x = c.X.buffer_info()[0]
+        c.args = c.args[:12] + (x,) + c.args[13:]
+        return x
+
+    def call(self, x0, p, x02, p2, progress):
+        """(the run's Call, the companion's Call or None or COMPANION_INTERRUPTED), as pair_loop's;
+        None when another thread is calling it (the caller prepares a call of its own)."""
+        if not self.lock.acquire(False):
+            return None
+        try:
+            c1, c2 = self.c1, self.c2
+            self._renew(c1, x0, p)
+            x2 = self._renew(c2, x02, p2)
+            which, took = self.which, self.took
+            which.value = -1
+            a2 = c2.args
+            return _pair_call(self.loop, self.loop2, self.loop.rt._pair, c1, c2,
+                              (*c1.args, *self.tail, x2, *a2[13:17], ctypes.byref(which), took), which, took,
+                              progress)
+        finally:
+            self.lock.release()
+
+
+def _pair_call(loop, loop2, pair, c1, c2, args, which, took, progress):
+    """pair_loop's C call of the prepared ``c1`` and ``c2`` (``args``: every argument) and what
+    follows it: (the run's Call, the companion's Call or None or COMPANION_INTERRUPTED)."""
     try:
-        status = pair(*c1.args, a2[0], a2[1], *a2[3:17], ctypes.byref(which), took)
+        status = pair(*args)
     except KeyboardInterrupt:
         if which.value != -1:            # during the companion: the run itself reached its end
             progress.update(float(c1.grid[-1]))

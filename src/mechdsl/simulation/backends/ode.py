@@ -112,6 +112,8 @@ class OdeSetup:
         self.max_steps = default_max_steps(s, len(grid))
         self.extra = dict(s.integrator_options or {})
         self._direct = None       # the compiled loop's call of a plain run, worked out once (_direct_call)
+        self._pairs = {}          # id(companion setup) -> (it, its _direct_call, crk.KeptPair or None)
+        self.partner = None       # the error estimate's companion of these runs (Partner, estimate.py)
 
     @classmethod
     def build(cls, eom, s, drive=None) -> "OdeSetup":
@@ -220,19 +222,34 @@ class OdeSetup:
 
     def _direct_run(self, call, pv, xs, bar):
         """The direct loop call of a run; with the error estimate's companion in the same C call
-        when estimate.py registered it for these settings (a Partner: its setup and start), its
-        States then left in ``partner.ready`` for the estimate (crk_calls.run_pair)."""
+        when estimate.py registered it for this setup's runs (``self.partner``: its setup and
+        start), its States then left in ``partner.ready`` for the estimate (crk_calls.run_pair)."""
         loop, method, grid, u, rtol, atol, max_steps, hmin = call
-        partner = PARTNERS.get(id(self.settings))
-        if partner is None or partner.settings is not self.settings:
+        partner = self.partner
+        if partner is None:
             return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
         partner.ready = None
         other = partner.setup._direct_call()
         if not other or other[0].rt is not loop.rt:
             return crk.run_compiled(loop, method, grid, xs, pv, u, rtol, atol, max_steps, hmin, bar)
         loop2, method2, grid2, u2, rtol2, atol2, max_steps2, hmin2 = other
-        run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
-                                   (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2), bar)
+        kept = self._pairs.get(id(partner.setup))
+        if kept is None or kept[0] is not partner.setup or kept[1] is not other:
+            kp = crk.kept_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                               (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2))
+            if len(self._pairs) >= 4:
+                self._pairs.clear()
+            kept = self._pairs[id(partner.setup)] = (partner.setup, other, kp)
+        kp = kept[2]
+        got = None
+        if kp is not None and kp.fits(xs, pv, partner.xs, partner.pv):   # the buffers kept for this pair (the same call)
+            got = crk.run_kept_pair(kp, xs, pv, partner.xs, partner.pv, bar, (max_steps, hmin), (max_steps2, hmin2))
+        if got is not None:
+            run, second = got
+        else:
+            run, second = crk.run_pair(loop, (method, grid, xs, pv, u, rtol, atol, max_steps, hmin), loop2,
+                                       (method2, grid2, partner.xs, partner.pv, u2, rtol2, atol2, max_steps2, hmin2),
+                                       bar)
         if second is crk.COMPANION_INTERRUPTED:       # the estimate raises it (estimate._kept_states)
             partner.ready = second
         elif second is not None:
@@ -441,30 +458,46 @@ def plain_copy(v):
     return copy.deepcopy(v)
 
 
+def plain_copier(v):
+    """A function of no arguments that returns ``plain_copy(v)`` of this value, which must not
+    change afterwards (a frozen settings object's plain form): its containers found once, each
+    copy is then dict.copy/list.copy of them (a third of plain_copy's cost on the settings)."""
+    if type(v) is dict:
+        subs = [(k, plain_copier(x)) for k, x in v.items() if type(x) not in _LEAVES]
+    elif type(v) is list:
+        subs = [(i, plain_copier(x)) for i, x in enumerate(v) if type(x) not in _LEAVES]
+    else:
+        return lambda: plain_copy(v)
+    if not subs:
+        return v.copy
+
+    def copy():
+        out = v.copy()
+        for k, f in subs:
+            out[k] = f()
+        return out
+    return copy
+
+
 class Partner:
-    """The default error estimate's companion of runs with the settings object ``settings``
-    (estimate.py registers it once its plan and setup are kept): its OdeSetup and start
-    (``pv``, ``xs``), run in the same C call as the run when both are direct loop calls;
-    ``ready``: the companion's States of the last run, for the estimate to take."""
+    """The default error estimate's companion of a setup's runs (``OdeSetup.partner``, which
+    estimate.py sets once its plan and the companion's setup are kept): the companion's OdeSetup
+    and start (``pv``, ``xs``), run in the same C call as the run when both are direct loop
+    calls; ``ready``: the companion's States of the last run, for the estimate to take."""
 
-    __slots__ = ("settings", "setup", "pv", "xs", "ready")
+    __slots__ = ("setup", "pv", "xs", "ready")
 
-    def __init__(self, settings, setup, pv, xs):
-        self.settings, self.setup, self.pv, self.xs, self.ready = settings, setup, pv, xs, None
-
-
-PARTNERS: dict = {}       # id(settings of the run) -> Partner
-PARTNERS_KEPT = 16
+    def __init__(self, setup, pv, xs):
+        self.setup, self.pv, self.xs, self.ready = setup, pv, xs, None
 
 
-def partner(settings, setup, pv, xs) -> Partner:
-    """Register (or find) the companion ``setup`` at (pv, xs) of runs with ``settings``."""
-    hit = PARTNERS.get(id(settings))
-    if hit is not None and hit.settings is settings and hit.setup is setup:
+def partner(run_setup, setup, pv, xs) -> Partner:
+    """Register (or find) the companion ``setup`` at (pv, xs) of the runs of ``run_setup`` (an
+    OdeSetup: kept per settings by value, so its runs' companion is the same by value too)."""
+    hit = run_setup.partner
+    if hit is not None and hit.setup is setup:
         return hit
-    if len(PARTNERS) >= PARTNERS_KEPT:
-        PARTNERS.pop(next(iter(PARTNERS)))
-    hit = PARTNERS[id(settings)] = Partner(settings, setup, pv.copy(), xs.copy())
+    hit = run_setup.partner = Partner(setup, pv.copy(), xs.copy())
     return hit
 
 
