@@ -239,7 +239,11 @@ def test_prepared_equals_direct(file, scene, kw):
     assert a.signals.keys() == b.signals.keys()
     for k in a.signals:
         np.testing.assert_array_equal(a.signals[k], b.signals[k])
-    assert a.metadata["run"] == b.metadata["run"]
+    # what ran is the same, but for the engine: a model interprets until its evaluations paid
+    # for its compile (payback.py: the second run in a process may be the compiled one), with
+    # the same bits (the arrays above)
+    ra, rb = ({k: v for k, v in r.metadata["run"].items() if k != "compiled"} for r in (a, b))
+    assert ra == rb
 
 
 def test_prepared_at_other_values_equals_a_direct_run_and_builds_nothing(monkeypatch):
