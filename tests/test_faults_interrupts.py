@@ -244,9 +244,9 @@ def test_ctrl_c_during_the_error_estimate_keeps_the_run_not_the_companion(monkey
     m = mechdsl.load(MODELS / "double_pendulum.mech")
     real = E._companion_run
 
-    def companion_with_ctrl_c(problem, tight, solve):
+    def companion_with_ctrl_c(*args):
         _thread.interrupt_main()                   # the Ctrl-C arrives as the companion starts
-        return real(problem, tight, solve)
+        return real(*args)
 
     monkeypatch.setattr(E, "_companion_run", companion_with_ctrl_c)
     with pytest.raises(KeyboardInterrupt) as info:
