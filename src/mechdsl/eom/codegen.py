@@ -648,15 +648,73 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     ca = _ca()
     cc = find_compiler()
     if cc is None:
-        env_cc = os.environ.get("CC")
-        looked = (f"$CC = {env_cc!r} is not a program on PATH (CC names one program, without flags)" if env_cc
-                  else "looked for $CC, gcc, cc, clang")
+        return _no_compiler(funcs, strict)
+    units, flags, jac_kind = _units(ca, funcs, jacobian, derivatives, extra_units, extra_flags)
+    limit = COMPILE_BUDGET if budget is None else int(budget)
+    total = sum(len(code) for code in units)
+    if total > limit:
+        what = (f"{_names_of(funcs)}" + (f" with derivatives to order {derivatives}" if derivatives else "")
+                + f" are {total / 1e6:.3g} MB of C, over the compile budget of {limit / 1e6:.3g} MB")
         if strict:
-            raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)}: no C compiler found ({looked})",
-                                       help="install a C compiler (gcc, clang) or set $CC, or use the "
-                                            "virtual-machine Functions (compiled=False)"))
-        return None, (f"no C compiler found ({looked}); "
-                      "using the CasADi virtual machine instead of compiled code"), None
+            raise MechError(Diagnostic("E805", f"not compiled: {what}",
+                                       help="ask for fewer Functions or no derivatives, use the virtual-machine "
+                                            "Functions (compiled=False), or raise compile_budget (bytes of C)"))
+        return None, f"not compiled: {what} (compile_budget); using the CasADi virtual machine", None
+    version = compiler_version(cc)
+    key = "\n".join([*units, repr(flags), version, ca.__version__])
+    full = sha256(key.encode()).hexdigest()
+    digest = full[:24]
+    d = cache_dir()
+    # a library runs code when loaded: only from a folder no other user owns or can write
+    # (mechdsl.eom.cachefiles); otherwise it is built for this run alone in a private folder
+    private = None if cachefiles.trusted_folder(d, create=True) else _private_folder()
+    lib = (private or d) / f"{digest}.so"
+    size_kb = sum(len(c) for c in units) // 1000
+    problem = _cache_problem(lib, full) if private is None and lib.exists() else None
+    if private is None and lib.exists() and problem is None:
+        note = f"loaded compiled model from cache {lib}"
+        cachefiles.hit("compiled-code", digest)
+    elif cached_only:
+        return None, NOT_CACHED, None
+    else:
+        log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
+        cachefiles.miss("compiled-code", digest, "not built yet" if private is None and problem is None
+                        else problem or "the cache folder is not used")
+        failed = _compile_into(cc, units, flags, funcs, lib, full, private or d, private is None, strict)
+        if failed is not None:
+            return None, failed, None
+        note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
+                f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
+                + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
+        if problem:
+            note = f"the cached library {lib} {problem}: rebuilt; " + note
+    log.debug("%s", note)
+    loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
+    if private is not None:             # loaded (mapped): the files are not needed any more
+        import shutil
+
+        shutil.rmtree(private, ignore_errors=True)
+        note += " (a private folder for this run: the cache folder is not used)"
+    return loaded, note, str(lib)
+
+
+def _no_compiler(funcs, strict: bool):
+    """compile_functions's answer without a C compiler (E804 when ``strict``)."""
+    env_cc = os.environ.get("CC")
+    looked = (f"$CC = {env_cc!r} is not a program on PATH (CC names one program, without flags)" if env_cc
+              else "looked for $CC, gcc, cc, clang")
+    if strict:
+        raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)}: no C compiler found ({looked})",
+                                   help="install a C compiler (gcc, clang) or set $CC, or use the "
+                                        "virtual-machine Functions (compiled=False)"))
+    return None, (f"no C compiler found ({looked}); "
+                  "using the CasADi virtual machine instead of compiled code"), None
+
+
+def _units(ca, funcs, jacobian, derivatives: int, extra_units, extra_flags):
+    """(the translation units' C, each unit's flags, what the ode's Jacobian is compiled as or
+    None): the Functions as chunked C, their derivatives, the ode's Jacobian (or its forward
+    derivative when the Jacobian's C is too large), then the extra units."""
     from .sxcode import c_unit
 
     units = []
@@ -691,72 +749,37 @@ def compile_functions(funcs, tag: str = "model", jacobian: bool | str = True, de
     per_unit = extra_flags is not None and bool(extra_flags) and isinstance(extra_flags[0], (list, tuple))
     flags += [cflags_for(len(code)) if extra_flags is None or env_flags else
               list(extra_flags[i] if per_unit else extra_flags) for i, code in enumerate(extra_units)]
-    limit = COMPILE_BUDGET if budget is None else int(budget)
-    total = sum(len(code) for code in units)
-    if total > limit:
-        what = (f"{_names_of(funcs)}" + (f" with derivatives to order {derivatives}" if derivatives else "")
-                + f" are {total / 1e6:.3g} MB of C, over the compile budget of {limit / 1e6:.3g} MB")
+    return units, flags, jac_kind
+
+
+def _compile_into(cc: str, units, flags, funcs, lib: Path, full: str, folder: Path, shared: bool, strict: bool):
+    """Compile ``units`` into ``lib`` (built in a temporary folder in ``folder``, its hash recorded
+    first when ``shared``: the cache folder, then renamed into place); None, or why it failed
+    (E804 when ``strict``)."""
+    import tempfile        # (only a build needs it: a warm run loads the cached library)
+
+    try:
+        cachefiles.remove_stale_builds(folder)
+        with tempfile.TemporaryDirectory(dir=folder, prefix=f".build-{os.getpid()}-") as tmp:
+            built, errors = build_shared(cc, units, flags, tmp)
+            out = Path(built) if built else None
+            if errors:
+                tail = " | ".join(errors[0].splitlines()[-3:])
+                if strict:
+                    raise MechError(Diagnostic("E804", f"C compilation of {_names_of(funcs)} failed ({cc}): "
+                                                       f"{tail}", help="use the virtual-machine Functions "
+                                                                       "(compiled=False)"))
+                return f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine"
+            os.chmod(out, 0o600)
+            if shared:
+                _record_digest(out, lib, full)  # the hash first: a library in place always has its hash
+            os.replace(out, lib)
+    except OSError as e:
         if strict:
-            raise MechError(Diagnostic("E805", f"not compiled: {what}",
-                                       help="ask for fewer Functions or no derivatives, use the virtual-machine "
-                                            "Functions (compiled=False), or raise compile_budget (bytes of C)"))
-        return None, f"not compiled: {what} (compile_budget); using the CasADi virtual machine", None
-    version = compiler_version(cc)
-    key = "\n".join([*units, repr(flags), version, ca.__version__])
-    full = sha256(key.encode()).hexdigest()
-    digest = full[:24]
-    d = cache_dir()
-    # a library runs code when loaded: only from a folder no other user owns or can write
-    # (mechdsl.eom.cachefiles); otherwise it is built for this run alone in a private folder
-    private = None if cachefiles.trusted_folder(d, create=True) else _private_folder()
-    lib = (private or d) / f"{digest}.so"
-    size_kb = sum(len(c) for c in units) // 1000
-    problem = _cache_problem(lib, full) if private is None and lib.exists() else None
-    if private is None and lib.exists() and problem is None:
-        note = f"loaded compiled model from cache {lib}"
-        cachefiles.hit("compiled-code", digest)
-    elif cached_only:
-        return None, NOT_CACHED, None
-    else:
-        log.info("compiling %d kB of C with %s into %s", size_kb, Path(cc).name, lib)
-        import tempfile        # (only a build needs it: a warm run loads the cached library)
-
-        cachefiles.miss("compiled-code", digest, "not built yet" if private is None and problem is None
-                        else problem or "the cache folder is not used")
-        try:
-            cachefiles.remove_stale_builds(private or d)
-            with tempfile.TemporaryDirectory(dir=private or d, prefix=f".build-{os.getpid()}-") as tmp:
-                built, errors = build_shared(cc, units, flags, tmp)
-                out = Path(built) if built else None
-                if errors:
-                    tail = " | ".join(errors[0].splitlines()[-3:])
-                    if strict:
-                        raise MechError(Diagnostic("E804", f"C compilation of {_names_of(funcs)} failed ({cc}): "
-                                                           f"{tail}", help="use the virtual-machine Functions "
-                                                                           "(compiled=False)"))
-                    return None, f"C compilation failed ({cc}): {tail}; using the CasADi virtual machine", None
-                os.chmod(out, 0o600)
-                if private is None:
-                    _record_digest(out, lib, full)  # the hash first: a library in place always has its hash
-                os.replace(out, lib)
-        except OSError as e:
-            if strict:
-                raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)} into {private or d}: {e}",
-                                           help="check that the cache folder (MECHDSL_CACHE) is writable")) from None
-            return None, f"cannot compile into {private or d}: {e}; using the CasADi virtual machine", None
-        note = (f"compiled {size_kb} kB of C with {Path(cc).name} "
-                f"({', '.join(dict.fromkeys(' '.join(f) for f in flags))}) into {lib}"
-                + (f"; the ode Jacobian through its compiled {jac_kind}" if jac_kind else ""))
-        if problem:
-            note = f"the cached library {lib} {problem}: rebuilt; " + note
-    log.debug("%s", note)
-    loaded = {f.name(): ca.external(f.name(), str(lib)) for f in funcs}
-    if private is not None:             # loaded (mapped): the files are not needed any more
-        import shutil
-
-        shutil.rmtree(private, ignore_errors=True)
-        note += " (a private folder for this run: the cache folder is not used)"
-    return loaded, note, str(lib)
+            raise MechError(Diagnostic("E804", f"cannot compile {_names_of(funcs)} into {folder}: {e}",
+                                       help="check that the cache folder (MECHDSL_CACHE) is writable")) from None
+        return f"cannot compile into {folder}: {e}; using the CasADi virtual machine"
+    return None
 
 
 def _private_folder() -> Path:
