@@ -280,10 +280,8 @@ class Mapped:
         rows (one evaluation per row of the same code), as (npts, entries); None when the
         Function does not have that shape (the caller then uses ``__call__``)."""
         npts = len(t)
-        kept = self._shape(n, p)
-        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
-                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
-                or p.dtype != np.float64 or npts == 0):
+        at = self._rows(t, X, n, p)
+        if at is None:
             return None
         if self._by_address is None:
             fn = self.rt["crk_map"]          # a function pointer of its own: its argument types are these
@@ -291,15 +289,24 @@ class Mapped:
                                                      ctypes.c_longlong]
             self._by_address = (fn, ctypes.addressof(self.fun))
         fn, fun = self._by_address
-        st = kept[1]
         nout = max(self.nout, 1)
         out = np.empty((npts, nout))
-        x = data_address(X)
-        ptrs = (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None)
+        ptrs, st = at
         status = fn(fun, npts, 6, ctypes.addressof(ptrs), st, data_address(out), nout)
         if status:
             raise RuntimeError(f"evaluation failed (status {status})")
         return out[:, :self.nout]
+
+    def _rows(self, t, X, n: int, p):
+        """(the input pointers, the strides' address) for evaluating at the rows of X (states and
+        columns), or None when the Function or the arrays do not have that shape."""
+        kept = self._shape(n, p)
+        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (len(t), 2 * n)
+                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
+                or p.dtype != np.float64 or len(t) == 0):
+            return None
+        x = data_address(X)
+        return (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None), kept[1]
 
     def _shape(self, n: int, p):
         """(the strides of states' inputs, their address) when the Function has states' shape
@@ -317,10 +324,8 @@ class Mapped:
         the same pass (crk_map_cols: largest, smallest, ambiguous-zero flag, 3 x entries floats);
         None when ``states`` would answer None or the runtime predates crk_map_cols."""
         npts = len(t)
-        kept = self._shape(n, p)
-        if (not kept or X.dtype != np.float64 or not X.flags.c_contiguous or X.shape != (npts, 2 * n)
-                or t.dtype != np.float64 or not t.flags.c_contiguous or not p.flags.c_contiguous
-                or p.dtype != np.float64 or npts == 0 or self.nout < 1):
+        at = self._rows(t, X, n, p) if self.nout >= 1 else None
+        if at is None:
             return None
         fn = self.__dict__.get("_cols")
         if fn is None:
@@ -337,9 +342,8 @@ class Mapped:
         nout = self.nout
         out = np.empty((nout, npts))
         facts = np.empty(3 * nout)
-        x = data_address(X)
-        ptrs = (_VP * 6)(data_address(t), x, x + 8 * n, None, data_address(p) if p.size else None, None)
-        status = fn(ctypes.addressof(self.fun), npts, 6, ctypes.addressof(ptrs), kept[1], data_address(out), nout,
+        ptrs, st = at
+        status = fn(ctypes.addressof(self.fun), npts, 6, ctypes.addressof(ptrs), st, data_address(out), nout,
                     data_address(facts))
         if status:
             raise RuntimeError(f"evaluation failed (status {status})")
